@@ -1,0 +1,30 @@
+// The tessera command-line client.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+
+#include "client/render_command.h"
+#include "core/scene/scene_error.h"
+
+int main(int argc, char** argv) {
+  CLI::App app{"Tessera: a path-tracing render farm"};
+  app.require_subcommand(1);
+  std::string cmdline = "tessera";
+  for (int i = 1; i < argc; ++i) cmdline += std::string(" ") + argv[i];
+  auto render = tessera::add_render_command(app, cmdline);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  try {
+    return render();
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  } catch (const tessera::SceneError& e) {
+    std::fprintf(stderr, "tessera: error: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tessera: error: %s\n", e.what());
+    return 1;
+  }
+}

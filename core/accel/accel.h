@@ -1,0 +1,48 @@
+// Ray-scene intersection. The only interface the render kernel sees; Embree stays behind
+// it (embree_accel.cc is the only file that includes embree3/rtcore.h).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+
+#include "core/math/vec.h"
+#include "core/scene/scene.h"
+
+namespace tessera {
+
+struct Ray {
+  Vec3 o, d;
+  float tmin = 0, tmax = 1e30f;
+};
+
+struct Hit {
+  float t = 0;
+  float u = 0, v = 0;  // triangle barycentrics of vertices 1 and 2
+  Vec3 ng;             // unnormalised geometric normal (triangle winding / sphere outward)
+  uint32_t shape = 0;  // mesh index, or sphere index when is_sphere
+  uint32_t prim = 0;   // triangle index within the mesh
+  bool is_sphere = false;
+};
+
+class Accel {
+ public:
+  // Builds the acceleration structure; `scene` must outlive the Accel. Throws
+  // std::runtime_error if Embree reports an error.
+  explicit Accel(const Scene& scene);
+  ~Accel();
+  Accel(const Accel&) = delete;
+  Accel& operator=(const Accel&) = delete;
+
+  bool intersect(const Ray& ray, Hit* hit) const;
+  bool occluded(const Ray& ray) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Exact ray-sphere intersection in double precision: the nearest root in (tmin, tmax], or
+// a negative value if there is none. Exposed for tests.
+double intersect_sphere(const Vec3& center, float radius, const Ray& ray);
+
+}  // namespace tessera

@@ -1,0 +1,187 @@
+#include <embree3/rtcore.h>
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "core/accel/accel.h"
+
+namespace tessera {
+
+double intersect_sphere(const Vec3& center, float radius, const Ray& ray) {
+  // Ray Tracing Gems ch. 7 formulation: the discriminant is computed from the distance
+  // of the closest approach, which loses no precision when the ray starts far away.
+  const double fx = double(ray.o.x) - center.x, fy = double(ray.o.y) - center.y,
+               fz = double(ray.o.z) - center.z;
+  const double dx = ray.d.x, dy = ray.d.y, dz = ray.d.z;
+  const double a = dx * dx + dy * dy + dz * dz;
+  const double b = -(fx * dx + fy * dy + fz * dz);  // = -dot(f, d)
+  const double r2 = double(radius) * radius;
+  const double c = fx * fx + fy * fy + fz * fz - r2;
+  const double lx = fx + b / a * dx, ly = fy + b / a * dy, lz = fz + b / a * dz;
+  const double disc = a * (r2 - (lx * lx + ly * ly + lz * lz));
+  if (disc < 0) return -1;
+  const double q = b + std::copysign(std::sqrt(disc), b);
+  double t0 = q == 0 ? 0 : c / q, t1 = q / a;
+  if (t0 > t1) std::swap(t0, t1);
+  if (t0 > ray.tmin && t0 <= ray.tmax) return t0;
+  if (t1 > ray.tmin && t1 <= ray.tmax) return t1;
+  return -1;
+}
+
+namespace {
+
+// Embree calls this from C code, where an exception must not pass: record the first error
+// and let the constructor throw it after the build.
+void error_callback(void* user, RTCError code, const char* str) {
+  auto* first = static_cast<std::string*>(user);
+  if (first->empty()) *first = "Embree error " + std::to_string(int(code)) + ": " + (str ? str : "");
+}
+
+struct SphereData {
+  const Scene* scene;
+};
+
+void sphere_bounds(const RTCBoundsFunctionArguments* args) {
+  const Sphere& s = static_cast<const SphereData*>(args->geometryUserPtr)->scene->spheres[args->primID];
+  // Pad by a relative epsilon so float rounding never clips the exact double test.
+  const float r = s.radius * (1 + 1e-5f) + 1e-6f * max_component(abs(s.center));
+  args->bounds_o->lower_x = s.center.x - r;
+  args->bounds_o->lower_y = s.center.y - r;
+  args->bounds_o->lower_z = s.center.z - r;
+  args->bounds_o->upper_x = s.center.x + r;
+  args->bounds_o->upper_y = s.center.y + r;
+  args->bounds_o->upper_z = s.center.z + r;
+}
+
+void sphere_intersect(const RTCIntersectFunctionNArguments* args) {
+  if (!args->valid[0]) return;
+  RTCRayHit* rh = reinterpret_cast<RTCRayHit*>(args->rayhit);  // N == 1 (rtcIntersect1)
+  const Sphere& s = static_cast<const SphereData*>(args->geometryUserPtr)->scene->spheres[args->primID];
+  const Ray ray{{rh->ray.org_x, rh->ray.org_y, rh->ray.org_z},
+                {rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z}, rh->ray.tnear, rh->ray.tfar};
+  const double t = intersect_sphere(s.center, s.radius, Ray{ray.o, ray.d, ray.tmin, ray.tmax});
+  if (t < 0 || !(float(t) <= rh->ray.tfar)) return;
+  rh->ray.tfar = float(t);
+  const Vec3 p = ray.o + ray.d * float(t);
+  rh->hit.Ng_x = p.x - s.center.x;
+  rh->hit.Ng_y = p.y - s.center.y;
+  rh->hit.Ng_z = p.z - s.center.z;
+  rh->hit.u = rh->hit.v = 0;
+  rh->hit.primID = args->primID;
+  rh->hit.geomID = args->geomID;
+  rh->hit.instID[0] = args->context->instID[0];
+}
+
+void sphere_occluded(const RTCOccludedFunctionNArguments* args) {
+  if (!args->valid[0]) return;
+  RTCRay* r = reinterpret_cast<RTCRay*>(args->ray);
+  const Sphere& s = static_cast<const SphereData*>(args->geometryUserPtr)->scene->spheres[args->primID];
+  const Ray ray{{r->org_x, r->org_y, r->org_z}, {r->dir_x, r->dir_y, r->dir_z}, r->tnear, r->tfar};
+  if (intersect_sphere(s.center, s.radius, ray) >= 0) r->tfar = -std::numeric_limits<float>::infinity();
+}
+
+RTCRay to_rtc(const Ray& ray) {
+  RTCRay r;
+  r.org_x = ray.o.x; r.org_y = ray.o.y; r.org_z = ray.o.z;
+  r.dir_x = ray.d.x; r.dir_y = ray.d.y; r.dir_z = ray.d.z;
+  r.tnear = ray.tmin;
+  r.tfar = ray.tmax;
+  r.time = 0;
+  r.mask = 0xFFFFFFFFu;
+  r.id = 0;
+  r.flags = 0;
+  return r;
+}
+
+}  // namespace
+
+struct Accel::Impl {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  unsigned sphere_geom = RTC_INVALID_GEOMETRY_ID;
+  SphereData sphere_data{};
+  std::string error;
+  ~Impl() {
+    if (scene) rtcReleaseScene(scene);
+    if (device) rtcReleaseDevice(device);
+  }
+};
+
+Accel::Accel(const Scene& scene) : impl_(std::make_unique<Impl>()) {
+  impl_->device = rtcNewDevice(nullptr);
+  if (!impl_->device) throw std::runtime_error("cannot create Embree device (error " + std::to_string(int(rtcGetDeviceError(nullptr))) + ")");
+  rtcSetDeviceErrorFunction(impl_->device, error_callback, &impl_->error);
+  impl_->scene = rtcNewScene(impl_->device);
+  // ROBUST: watertight triangle tests, so rays along shared edges never leak.
+  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
+
+  for (size_t i = 0; i < scene.meshes.size(); ++i) {
+    const Mesh& m = scene.meshes[i];
+    RTCGeometry g = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    // Embree may read 16 bytes from the last vertex: pad by one.
+    float* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                           3 * sizeof(float), m.positions.size() + 1));
+    for (size_t k = 0; k < m.positions.size(); ++k) {
+      v[3 * k] = m.positions[k].x;
+      v[3 * k + 1] = m.positions[k].y;
+      v[3 * k + 2] = m.positions[k].z;
+    }
+    v[3 * m.positions.size()] = v[3 * m.positions.size() + 1] = v[3 * m.positions.size() + 2] = 0;
+    uint32_t* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                                   3 * sizeof(uint32_t), m.triangle_count()));
+    std::copy(m.indices.begin(), m.indices.end(), idx);
+    rtcCommitGeometry(g);
+    rtcAttachGeometryByID(impl_->scene, g, unsigned(i));  // geomID == mesh index
+    rtcReleaseGeometry(g);
+  }
+  if (!scene.spheres.empty()) {
+    impl_->sphere_data.scene = &scene;
+    RTCGeometry g = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_USER);
+    rtcSetGeometryUserPrimitiveCount(g, unsigned(scene.spheres.size()));
+    rtcSetGeometryUserData(g, &impl_->sphere_data);
+    rtcSetGeometryBoundsFunction(g, sphere_bounds, nullptr);
+    rtcSetGeometryIntersectFunction(g, sphere_intersect);
+    rtcSetGeometryOccludedFunction(g, sphere_occluded);
+    rtcCommitGeometry(g);
+    impl_->sphere_geom = unsigned(scene.meshes.size());
+    rtcAttachGeometryByID(impl_->scene, g, impl_->sphere_geom);
+    rtcReleaseGeometry(g);
+  }
+  rtcCommitScene(impl_->scene);
+  if (!impl_->error.empty()) throw std::runtime_error(impl_->error);
+}
+
+Accel::~Accel() = default;
+
+bool Accel::intersect(const Ray& ray, Hit* hit) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  RTCRayHit rh;
+  rh.ray = to_rtc(ray);
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(impl_->scene, &ctx, &rh);
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+  hit->t = rh.ray.tfar;
+  hit->u = rh.hit.u;
+  hit->v = rh.hit.v;
+  hit->ng = {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z};
+  hit->is_sphere = rh.hit.geomID == impl_->sphere_geom;
+  hit->shape = hit->is_sphere ? rh.hit.primID : rh.hit.geomID;
+  hit->prim = rh.hit.primID;
+  return true;
+}
+
+bool Accel::occluded(const Ray& ray) const {
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  RTCRay r = to_rtc(ray);
+  rtcOccluded1(impl_->scene, &ctx, &r);
+  return r.tfar < 0;
+}
+
+}  // namespace tessera

@@ -1,0 +1,32 @@
+// Scattering at a surface, in the local shading frame (z = normal, directions point away
+// from the surface). The kernel switches on Material::Kind; each kind's physics is in
+// bsdf.cc beside its sampling routine.
+//
+// Conventions: for reflection-only kinds the integrator flips the frame so that wo.z > 0
+// (surfaces are two-sided). Glass and refraction keep the outward normal, so wo.z < 0
+// means the path is inside the object.
+#pragma once
+
+#include "core/math/vec.h"
+#include "core/scene/scene.h"
+
+namespace tessera {
+
+struct BsdfSample {
+  Vec3 wi;
+  Rgb weight;       // f * |cos theta_i| / pdf: the throughput multiplier
+  float pdf = 0;    // solid-angle density (1 for delta lobes, as a marker)
+  float etap = 1;   // relative index crossed (1 for reflection)
+  bool delta = false;
+};
+
+// f(wo, wi) for non-delta kinds (zero for delta kinds).
+Rgb bsdf_eval(const Material& m, Vec3 wo, Vec3 wi);
+// Solid-angle density of bsdf_sample choosing wi, for non-delta kinds.
+float bsdf_pdf(const Material& m, Vec3 wo, Vec3 wi);
+// Draws wi. u1 picks between reflection and transmission; u2 the direction. Returns false
+// if the path ends here (black material, total internal reflection of a refraction-only
+// surface, a direction below the surface).
+bool bsdf_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out);
+
+}  // namespace tessera

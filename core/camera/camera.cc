@@ -1,0 +1,71 @@
+#include "core/camera/camera.h"
+
+#include <cmath>
+
+#include "core/sampling/warp.h"
+
+namespace tessera {
+
+Camera::Camera(const Scene& scene, const CameraSettings& s)
+    : inv_w_(1.0f / float(s.width)), inv_h_(1.0f / float(s.height)),
+      lens_radius_(s.lens_radius), focal_distance_(s.focal_distance) {
+  const CameraDesc& c = scene.camera;
+  const double deg = M_PI / 180.0;
+  const double tx = std::tan(c.xfov_deg * deg / 2);
+  double ty = c.yfov_deg ? std::tan(*c.yfov_deg * deg / 2) : tx / c.aspect_ratio.value_or(4.0 / 3.0);
+
+  if (s.framing == Framing::kCs184) {
+    // Eye on the line from the objects' centre along c, 1.5 diagonals away; +Y up.
+    Vec3 dir = c.present ? c.cs184_dir : Vec3{0, 0, 1};
+    if (std::fabs(dir.y) > 1 - 1e-6f) dir = normalize(Vec3{1e-5f, dir.y, 0});  // phi += 1e-5 (doc 2.2)
+    const Bounds b = scene.object_bounds();
+    const Vec3 target = b.empty() ? Vec3{} : b.center();
+    const float dist = b.empty() ? 1.0f : 1.5f * length(b.diagonal());
+    eye_ = target + dir * dist;
+    z_ = normalize(eye_ - target);
+    x_ = normalize(cross(Vec3{0, 1, 0}, z_));
+    y_ = normalize(cross(z_, x_));
+    // Fit to an 800x600 screen, then keep the pixel pitch for W x H (doc 2.3).
+    double fx = tx, fy = ty;
+    if (fx / fy < 4.0 / 3.0) fx = fy * 4.0 / 3.0;
+    if (fx / fy > 4.0 / 3.0) fy = fx * 3.0 / 4.0;
+    const double screen_dist = 600.0 / (2 * fy);
+    tan_h_ = float(s.width / (2 * screen_dist));
+    tan_v_ = float(s.height / (2 * screen_dist));
+    // The file's clip planes are absolute but the CS184 eye is placed relative to the
+    // scene's size: clipping would cut a scaled scene, so this framing does not clip.
+  } else {
+    eye_ = c.eye;
+    z_ = -c.forward;
+    x_ = normalize(cross(c.up, z_));
+    y_ = cross(z_, x_);
+    tan_v_ = float(ty);
+    tan_h_ = float(ty * s.width / s.height);
+    tmin_ = c.znear;
+    tmax_ = c.zfar;
+  }
+}
+
+Ray Camera::generate(float fx, float fy, Vec2 u_lens) const {
+  const Vec3 dc{(2 * fx * inv_w_ - 1) * tan_h_, (2 * fy * inv_h_ - 1) * tan_v_, -1};
+  Ray r;
+  r.tmin = tmin_;
+  if (lens_radius_ <= 0) {
+    const Vec3 d = x_ * dc.x + y_ * dc.y + z_ * dc.z;
+    const float len = length(d);
+    r.o = eye_;
+    r.d = d / len;
+    r.tmax = tmax_;
+    return r;
+  }
+  const Vec2 disk = square_to_concentric_disk(u_lens);
+  const Vec3 lens{lens_radius_ * disk.x, lens_radius_ * disk.y, 0};
+  const Vec3 focus = dc * focal_distance_;  // on the plane z_c = -F
+  const Vec3 d = focus - lens;
+  r.o = eye_ + x_ * lens.x + y_ * lens.y;
+  r.d = normalize(x_ * d.x + y_ * d.y + z_ * d.z);
+  r.tmax = tmax_;
+  return r;
+}
+
+}  // namespace tessera

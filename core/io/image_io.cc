@@ -1,0 +1,128 @@
+#include "core/io/image_io.h"
+
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStringAttribute.h>
+#include <stb/stb_image_write.h>
+
+#include <cmath>
+#include <cstdio>
+#include <stdexcept>
+
+namespace tessera {
+namespace {
+
+std::string temp_path(const std::string& path) { return path + ".tmp"; }
+
+void commit(const std::string& tmp, const std::string& path) {
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    throw std::runtime_error(path + ": cannot move the finished image into place");
+  }
+}
+
+bool ends_with(const std::string& s, const std::string& suffix) {
+  if (s.size() < suffix.size()) return false;
+  for (size_t i = 0; i < suffix.size(); ++i)
+    if (std::tolower(uint8_t(s[s.size() - suffix.size() + i])) != suffix[i]) return false;
+  return true;
+}
+
+}  // namespace
+
+uint8_t srgb_byte(float v) {
+  if (!(v > 0)) return 0;
+  if (v >= 1) return 255;
+  const float s = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1 / 2.4f) - 0.055f;
+  return uint8_t(std::lround(s * 255));
+}
+
+void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata) {
+  const int w = film.width(), h = film.height();
+  const size_t n = size_t(w) * h;
+  std::vector<float> r(n), g(n), b(n), spp(n), var(n);
+  for (size_t i = 0; i < n; ++i) {
+    const PixelSums& p = film.pixels()[i];
+    const Rgb m = p.mean();
+    r[i] = m.r;
+    g[i] = m.g;
+    b[i] = m.b;
+    spp[i] = float(p.n);
+    var[i] = float(p.mean_variance());
+  }
+  Imf::Header header(w, h);
+  header.compression() = Imf::ZIP_COMPRESSION;
+  for (const auto& [key, value] : metadata) header.insert("tessera/" + key, Imf::StringAttribute(value));
+  Imf::FrameBuffer fb;
+  const std::pair<const char*, std::vector<float>*> channels[] = {
+      {"R", &r}, {"G", &g}, {"B", &b}, {"spp", &spp}, {"variance", &var}};
+  for (const auto& [name, data] : channels) {
+    header.channels().insert(name, Imf::Channel(Imf::FLOAT));
+    fb.insert(name, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(data->data()), sizeof(float),
+                               sizeof(float) * size_t(w)));
+  }
+  const std::string tmp = temp_path(path);
+  try {
+    Imf::OutputFile file(tmp.c_str(), header);
+    file.setFrameBuffer(fb);
+    file.writePixels(h);
+  } catch (const std::exception& e) {
+    std::remove(tmp.c_str());
+    throw std::runtime_error(path + ": cannot write EXR: " + e.what());
+  }
+  commit(tmp, path);
+}
+
+void write_png(const std::string& path, const Film& film) {
+  const int w = film.width(), h = film.height();
+  std::vector<uint8_t> rgb(size_t(w) * h * 3);
+  for (size_t i = 0; i < size_t(w) * h; ++i) {
+    const Rgb m = film.pixels()[i].mean();
+    rgb[3 * i] = srgb_byte(m.r);
+    rgb[3 * i + 1] = srgb_byte(m.g);
+    rgb[3 * i + 2] = srgb_byte(m.b);
+  }
+  const std::string tmp = temp_path(path);
+  if (!stbi_write_png(tmp.c_str(), w, h, 3, rgb.data(), w * 3)) {
+    std::remove(tmp.c_str());
+    throw std::runtime_error(path + ": cannot write PNG");
+  }
+  commit(tmp, path);
+}
+
+void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata) {
+  if (ends_with(path, ".exr")) return write_exr(path, film, metadata);
+  if (ends_with(path, ".png")) return write_png(path, film);
+  throw std::runtime_error(path + ": unknown image format (use .exr or .png)");
+}
+
+ExrImage read_exr(const std::string& path) {
+  ExrImage img;
+  try {
+    Imf::InputFile file(path.c_str());
+    const Imath::Box2i dw = file.header().dataWindow();
+    img.width = dw.max.x - dw.min.x + 1;
+    img.height = dw.max.y - dw.min.y + 1;
+    Imf::FrameBuffer fb;
+    for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it) {
+      std::vector<float>& data = img.channels[it.name()];
+      data.resize(size_t(img.width) * img.height);
+      char* base = reinterpret_cast<char*>(data.data()) -
+                   (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y) * img.width) * ptrdiff_t(sizeof(float));
+      fb.insert(it.name(), Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(img.width)));
+    }
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+    for (auto it = file.header().begin(); it != file.header().end(); ++it)
+      if (const auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute()))
+        img.metadata[it.name()] = s->value();
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": cannot read EXR: " + e.what());
+  }
+  return img;
+}
+
+}  // namespace tessera

@@ -1,0 +1,32 @@
+// Writing films: OpenEXR (linear float RGB + spp + variance channels + metadata) and an
+// sRGB PNG preview. Both write to a temporary file and rename it into place, so a reader
+// never sees a half-written image.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/render/film.h"
+
+namespace tessera {
+
+using ImageMetadata = std::map<std::string, std::string>;
+
+// Throws std::runtime_error naming the path on failure.
+void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata);
+void write_png(const std::string& path, const Film& film);
+// Picks the format from the extension (.exr or .png); throws on anything else.
+void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata);
+
+struct ExrImage {
+  int width = 0, height = 0;
+  std::map<std::string, std::vector<float>> channels;  // row-major, row 0 at the top
+  ImageMetadata metadata;
+};
+ExrImage read_exr(const std::string& path);
+
+// sRGB transfer of a linear value, clamped to [0, 1], as an 8-bit code.
+uint8_t srgb_byte(float linear);
+
+}  // namespace tessera

@@ -1,0 +1,142 @@
+#include "core/light/lights.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "core/sampling/warp.h"
+
+namespace tessera {
+
+LightSet::LightSet(const Scene& scene) : scene_(scene), mesh_data_(scene.lights.size()) {
+  for (size_t i = 0; i < scene.lights.size(); ++i) {
+    const Light& l = scene.lights[i];
+    if (l.kind == Light::Kind::kAmbient) infinite_.push_back(i);
+    if (l.kind != Light::Kind::kMesh) continue;
+    const Mesh& m = scene.meshes[l.shape];
+    MeshLightData& d = mesh_data_[i];
+    double sum = 0;
+    std::vector<double> acc;
+    for (size_t t = 0; t < m.triangle_count(); ++t) {
+      const Vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]],
+                 c = m.positions[m.indices[3 * t + 2]];
+      sum += 0.5 * double(length(cross(b - a, c - a)));
+      acc.push_back(sum);
+    }
+    d.area = float(sum);
+    d.cdf.resize(acc.size());
+    for (size_t t = 0; t < acc.size(); ++t) d.cdf[t] = sum > 0 ? float(acc[t] / sum) : float(t + 1) / acc.size();
+  }
+}
+
+namespace {
+
+// Converts an area sample at q (normal n, `two_sided`) into a solid-angle sample from p.
+bool finish_area_sample(Vec3 p, Vec3 q, Vec3 n, float area_pdf, Rgb radiance, bool two_sided, LightSample* out) {
+  Vec3 d = q - p;
+  const float dist2 = dot(d, d);
+  if (!(dist2 > 0)) return false;
+  const float dist = std::sqrt(dist2);
+  d = d / dist;
+  const float cos_l = -dot(n, d);  // > 0 when p is in front of the emitter
+  if (cos_l <= 0 && !two_sided) return false;
+  const float c = std::fabs(cos_l);
+  if (c == 0) return false;
+  out->li = radiance;
+  out->wi = d;
+  out->point = q;
+  out->light_n = n;
+  out->dist = dist;
+  out->pdf = area_pdf * dist2 / c;
+  return std::isfinite(out->pdf);
+}
+
+}  // namespace
+
+bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) const {
+  const Light& l = scene_.lights[i];
+  switch (l.kind) {
+    case Light::Kind::kRect: {
+      const Vec3 q = l.position + l.edge_x * (u.x - 0.5f) + l.edge_y * (u.y - 0.5f);
+      return finish_area_sample(p, q, l.normal, 1 / l.area, l.color, false, out);
+    }
+    case Light::Kind::kMesh: {
+      const MeshLightData& d = mesh_data_[i];
+      if (d.cdf.empty() || !(d.area > 0)) return false;
+      const size_t t = std::min(size_t(std::upper_bound(d.cdf.begin(), d.cdf.end(), u_pick) - d.cdf.begin()),
+                                d.cdf.size() - 1);
+      const Mesh& m = scene_.meshes[l.shape];
+      const Vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]],
+                 c = m.positions[m.indices[3 * t + 2]];
+      const Vec2 bc = square_to_triangle(u);
+      const Vec3 q = a * (1 - bc.x - bc.y) + b * bc.x + c * bc.y;
+      const Vec3 n = cross(b - a, c - a);
+      const float len = length(n);
+      if (!(len > 0)) return false;
+      return finish_area_sample(p, q, n / len, 1 / d.area, l.color, l.two_sided, out);
+    }
+    case Light::Kind::kSphere: {
+      const Sphere& s = scene_.spheres[l.shape];
+      const Vec3 n = square_to_uniform_sphere(u);
+      const Vec3 q = s.center + n * s.radius;
+      return finish_area_sample(p, q, n, 1 / (4 * kPi * s.radius * s.radius), l.color, l.two_sided, out);
+    }
+    case Light::Kind::kPoint: {
+      Vec3 d = l.position - p;
+      const float dist = length(d);
+      if (!(dist > 0)) return false;
+      out->wi = d / dist;
+      out->dist = dist;
+      out->point = l.position;
+      out->pdf = 1;
+      out->li = l.color / (l.att_constant + l.att_linear * dist + l.att_quadratic * dist * dist);
+      return true;
+    }
+    case Light::Kind::kDirectional: {
+      out->wi = l.direction;
+      out->dist = std::numeric_limits<float>::infinity();
+      out->pdf = 1;
+      out->li = l.color;
+      return true;
+    }
+    case Light::Kind::kAmbient: {
+      const Vec3 h = square_to_uniform_hemisphere(u);  // about +z; +Y is up in the world
+      out->wi = {h.x, h.z, h.y};
+      out->dist = std::numeric_limits<float>::infinity();
+      out->pdf = kUniformHemispherePdf;
+      out->li = l.color;
+      return true;
+    }
+  }
+  return false;
+}
+
+float LightSet::pdf_area_hit(size_t i, Vec3 p, Vec3 q, Vec3 nq, float dist) const {
+  const Light& l = scene_.lights[i];
+  float area_pdf = 0;
+  switch (l.kind) {
+    case Light::Kind::kRect: area_pdf = 1 / l.area; break;
+    case Light::Kind::kMesh: area_pdf = mesh_data_[i].area > 0 ? 1 / mesh_data_[i].area : 0; break;
+    case Light::Kind::kSphere: {
+      const float r = scene_.spheres[l.shape].radius;
+      area_pdf = 1 / (4 * kPi * r * r);
+      break;
+    }
+    default: return 0;
+  }
+  const Vec3 d = (q - p) / dist;
+  const float c = std::fabs(dot(nq, d));
+  return c > 0 ? area_pdf * dist * dist / c : 0;
+}
+
+Rgb LightSet::infinite_le(size_t i, Vec3 dir) const {
+  const Light& l = scene_.lights[i];
+  return (l.kind == Light::Kind::kAmbient && dir.y > 0) ? l.color : Rgb(0);
+}
+
+float LightSet::infinite_pdf(size_t i, Vec3 dir) const {
+  const Light& l = scene_.lights[i];
+  return (l.kind == Light::Kind::kAmbient && dir.y > 0) ? kUniformHemispherePdf : 0;
+}
+
+}  // namespace tessera

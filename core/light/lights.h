@@ -1,0 +1,60 @@
+// Light sampling for next-event estimation, and the densities multiple importance
+// sampling needs when a BSDF-sampled ray finds an emitter by itself.
+//
+//   kind         emits                                   sampled by
+//   rect         `color` radiance from its front face    uniform area, pdf d^2/(A cos)
+//   mesh         material radiance (one or two sided)    triangle by area, uniform in it
+//   sphere       material radiance                       uniform area
+//   point        intensity `color` / (c + l d + q d^2)   delta
+//   directional  irradiance `color` at normal incidence  delta
+//   ambient      `color` radiance from the +Y hemisphere uniform hemisphere, 1/(2 pi)
+#pragma once
+
+#include <vector>
+
+#include "core/math/vec.h"
+#include "core/scene/scene.h"
+
+namespace tessera {
+
+struct LightSample {
+  Rgb li;           // incident radiance (or delta-light equivalent) arriving at p
+  Vec3 wi;          // unit direction from p toward the light
+  Vec3 point;       // sampled point on the light (finite lights)
+  Vec3 light_n;     // light surface normal at `point` (area lights)
+  float dist = 0;   // distance to `point`, infinity for infinite lights
+  float pdf = 0;    // solid-angle density, or 1 for delta lights
+};
+
+class LightSet {
+ public:
+  explicit LightSet(const Scene& scene);
+
+  size_t size() const { return scene_.lights.size(); }
+  const Light& light(size_t i) const { return scene_.lights[i]; }
+
+  // u_pick chooses the triangle of a mesh light; u the point. Returns false if this
+  // sample carries nothing (p behind a one-sided emitter, zero pdf).
+  bool sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) const;
+
+  // Solid-angle density with which sample() would pick the point q (normal nq) on area
+  // light i seen from p at distance dist.
+  float pdf_area_hit(size_t i, Vec3 p, Vec3 q, Vec3 nq, float dist) const;
+
+  // Radiance of the infinite lights along an escaped ray direction, and each one's pdf.
+  bool has_infinite() const { return !infinite_.empty(); }
+  const std::vector<size_t>& infinite_lights() const { return infinite_; }
+  Rgb infinite_le(size_t i, Vec3 dir) const;
+  float infinite_pdf(size_t i, Vec3 dir) const;
+
+ private:
+  struct MeshLightData {
+    std::vector<float> cdf;  // cumulative triangle areas, normalised to end at 1
+    float area = 0;
+  };
+  const Scene& scene_;
+  std::vector<MeshLightData> mesh_data_;  // per light (empty for non-mesh lights)
+  std::vector<size_t> infinite_;
+};
+
+}  // namespace tessera

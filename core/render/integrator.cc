@@ -1,0 +1,188 @@
+#include "core/render/integrator.h"
+
+#include <cmath>
+#include <limits>
+
+#include "core/bsdf/bsdf.h"
+#include "core/sampling/warp.h"
+
+namespace tessera {
+namespace {
+
+constexpr float kMachineEps = std::numeric_limits<float>::epsilon() * 0.5f;
+constexpr float gamma(int n) { return (n * kMachineEps) / (1 - n * kMachineEps); }
+// Embree's watertight test has its own rounding; widen pbrt's bound to cover it.
+constexpr float kOffsetSafety = 4.0f;
+
+}  // namespace
+
+SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& hit) {
+  SurfacePoint sp;
+  if (hit.is_sphere) {
+    const Sphere& s = scene.spheres[hit.shape];
+    // Project the hit onto the sphere in double: error is then a few ulps of |p|.
+    const double px = double(ray.o.x) + double(ray.d.x) * hit.t - s.center.x;
+    const double py = double(ray.o.y) + double(ray.d.y) * hit.t - s.center.y;
+    const double pz = double(ray.o.z) + double(ray.d.z) * hit.t - s.center.z;
+    const double len = std::sqrt(px * px + py * py + pz * pz);
+    const double k = len > 0 ? s.radius / len : 0;
+    sp.ng = len > 0 ? Vec3{float(px / len), float(py / len), float(pz / len)} : Vec3{0, 0, 1};
+    sp.p = Vec3{float(s.center.x + px * k), float(s.center.y + py * k), float(s.center.z + pz * k)};
+    sp.p_err = abs(sp.p) * gamma(5) + abs(s.center) * gamma(2);
+    sp.ns = sp.ng;
+    sp.material = s.material;
+    sp.light = s.light;
+    return sp;
+  }
+  const Mesh& m = scene.meshes[hit.shape];
+  const uint32_t i0 = m.indices[3 * hit.prim], i1 = m.indices[3 * hit.prim + 1], i2 = m.indices[3 * hit.prim + 2];
+  const Vec3 p0 = m.positions[i0], p1 = m.positions[i1], p2 = m.positions[i2];
+  const float b1 = hit.u, b2 = hit.v, b0 = 1 - b1 - b2;
+  sp.p = p0 * b0 + p1 * b1 + p2 * b2;
+  sp.p_err = (abs(p0 * b0) + abs(p1 * b1) + abs(p2 * b2)) * gamma(7);
+  Vec3 ng = cross(p1 - p0, p2 - p0);
+  float len = length(ng);
+  if (!(len > 0) || !std::isfinite(len)) {  // degenerate triangle: Embree's own normal
+    ng = hit.ng;
+    len = length(ng);
+  }
+  sp.ng = len > 0 ? ng / len : Vec3{0, 0, 1};
+  Vec3 ns = m.normals[i0] * b0 + m.normals[i1] * b1 + m.normals[i2] * b2;
+  const float ns_len = length(ns);
+  sp.ns = ns_len > 0 ? ns / ns_len : sp.ng;
+  sp.ns = face_forward(sp.ns, sp.ng);
+  sp.material = m.material;
+  sp.light = m.light;
+  return sp;
+}
+
+Vec3 offset_ray_origin(const SurfacePoint& sp, Vec3 w) {
+  const float d = dot(abs(sp.ng), sp.p_err) * kOffsetSafety;
+  Vec3 offset = sp.ng * d;
+  if (dot(w, sp.ng) < 0) offset = -offset;
+  Vec3 po = sp.p + offset;
+  for (int i = 0; i < 3; ++i) {  // round away from the surface
+    if (offset[i] > 0) po[i] = std::nextafter(po[i], std::numeric_limits<float>::infinity());
+    else if (offset[i] < 0) po[i] = std::nextafter(po[i], -std::numeric_limits<float>::infinity());
+  }
+  return po;
+}
+
+Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& lights, const RenderSettings& s)
+    : scene_(scene), accel_(accel), lights_(lights), max_depth_(s.max_depth),
+      light_samples_(std::max(1, s.light_samples)) {}
+
+Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng,
+                       Sampler& sampler, RayCounters& counters) const {
+  Rgb sum(0);
+  for (size_t i = 0; i < lights_.size(); ++i) {
+    const Light& light = lights_.light(i);
+    const int n = light.is_delta() ? 1 : light_samples_;
+    Rgb acc(0);
+    for (int j = 0; j < n; ++j) {
+      const float u_pick = light.kind == Light::Kind::kMesh ? sampler.next_1d() : 0.0f;
+      const Vec2 u = sampler.next_2d();
+      LightSample ls;
+      if (!lights_.sample(i, sp.p, u_pick, u, &ls) || ls.li.is_black()) continue;
+      if (dot(ls.wi, ng) <= 0) continue;  // below the geometric surface: no leaks
+      const Vec3 wi = frame.to_local(ls.wi);
+      const Rgb f = bsdf_eval(m, wo, wi);
+      if (f.is_black()) continue;
+      Ray shadow;
+      shadow.o = offset_ray_origin(sp, ls.wi);
+      shadow.d = ls.wi;
+      shadow.tmin = 0;
+      shadow.tmax = std::isinf(ls.dist) ? std::numeric_limits<float>::infinity()
+                                        : length(ls.point - shadow.o) * (1 - 1e-4f);
+      ++counters.shadow_rays;
+      if (accel_.occluded(shadow)) continue;
+      Rgb c = f * ls.li * (std::fabs(wi.z) / ls.pdf);
+      if (!light.is_delta()) c *= power_heuristic(float(n), ls.pdf, 1, bsdf_pdf(m, wo, wi));
+      acc += c;
+    }
+    sum += acc / float(n);
+  }
+  return sum;
+}
+
+Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const {
+  Rgb L(0), beta(1.0f);
+  bool specular = true;  // the previous vertex was the camera or a delta lobe
+  float prev_pdf = 0, eta_scale = 1;
+  SurfacePoint prev;
+  Hit prev_hit;
+  const float n_light = float(light_samples_);
+  for (int depth = 0;; ++depth) {
+    Hit hit;
+    ++counters.rays;
+    if (!accel_.intersect(ray, &hit)) {
+      for (size_t i : lights_.infinite_lights()) {
+        const Rgb le = lights_.infinite_le(i, ray.d);
+        if (le.is_black()) continue;
+        const float w = specular ? 1 : power_heuristic(1, prev_pdf, n_light, lights_.infinite_pdf(i, ray.d));
+        L += beta * le * w;
+      }
+      break;
+    }
+    // A ray leaving a flat triangle can never meet that triangle again: if it does, the
+    // origin offset failed (acne). Counted so the stability tests can assert zero.
+    if (depth > 0 && !hit.is_sphere && !prev_hit.is_sphere && hit.shape == prev_hit.shape && hit.prim == prev_hit.prim)
+      ++counters.self_hits;
+    prev_hit = hit;
+    const SurfacePoint sp = make_surface_point(scene_, ray, hit);
+    const Material& m = scene_.materials[sp.material];
+    const Vec3 wo_world = -ray.d;
+    if (m.kind == Material::Kind::kEmission) {  // emitters do not reflect: the path ends
+      if (m.two_sided_emission || dot(sp.ng, wo_world) > 0) {
+        float w = 1;
+        if (!specular && sp.light >= 0)
+          w = power_heuristic(1, prev_pdf, n_light, lights_.pdf_area_hit(size_t(sp.light), prev.p, sp.p, sp.ng, hit.t));
+        L += beta * m.radiance * w;
+      }
+      break;
+    }
+    if (depth >= max_depth_) break;
+
+    // Reflection-only surfaces are two-sided: shade on the side the ray came from.
+    // Dielectrics keep the outward normal to know whether the path is inside.
+    Vec3 ng = sp.ng, ns = sp.ns;
+    const bool dielectric = m.kind == Material::Kind::kGlass || m.kind == Material::Kind::kRefraction;
+    if (!dielectric && dot(ng, wo_world) < 0) {
+      ng = -ng;
+      ns = -ns;
+    }
+    const Frame frame(ns);
+    const Vec3 wo = frame.to_local(wo_world);
+    if (!m.is_delta()) L += beta * direct(sp, m, frame, wo, ng, sampler, counters);
+
+    const float u1 = sampler.next_1d();
+    const Vec2 u2 = sampler.next_2d();
+    BsdfSample bs;
+    if (!bsdf_sample(m, wo, u1, u2, &bs)) break;
+    const Vec3 wi = frame.to_world(bs.wi);
+    // A shading normal can send a reflection below the true surface: drop it.
+    if (!dielectric && dot(wi, ng) <= 0) break;
+    beta *= bs.weight;
+    if (beta.is_black() || !beta.is_finite()) break;
+    specular = bs.delta;
+    prev_pdf = bs.pdf;
+    prev = sp;
+    eta_scale *= bs.etap * bs.etap;
+
+    if (depth >= 2) {  // Russian roulette on the throughput, undoing the eta^2 scaling
+      const float rr = (beta * eta_scale).max();
+      if (rr < 1) {
+        const float q = std::max(0.0f, 1 - rr);
+        if (sampler.next_1d() < q) break;
+        beta = beta / (1 - q);
+      }
+    }
+    ray.o = offset_ray_origin(sp, wi);
+    ray.d = wi;
+    ray.tmin = 0;
+    ray.tmax = std::numeric_limits<float>::infinity();
+  }
+  return L;
+}
+
+}  // namespace tessera

@@ -1,0 +1,56 @@
+// Unidirectional path tracer with next-event estimation and multiple importance sampling
+// (power heuristic) at every non-delta vertex, Russian roulette, no clamping.
+//
+// max_depth follows CS184: a path may scatter at most max_depth times, delta bounces
+// included; 0 shows only emitters, 1 adds direct lighting (and one specular hop to an
+// emitter).
+#pragma once
+
+#include <cstdint>
+
+#include "core/accel/accel.h"
+#include "core/light/lights.h"
+#include "core/render/settings.h"
+#include "core/sampling/sampler.h"
+#include "core/scene/scene.h"
+
+namespace tessera {
+
+struct RayCounters {
+  uint64_t rays = 0;        // closest-hit queries
+  uint64_t shadow_rays = 0; // occlusion queries
+  uint64_t self_hits = 0;   // continuation rays that hit their own primitive at t ~ 0
+};
+
+// A ray-surface intersection prepared for shading.
+struct SurfacePoint {
+  Vec3 p;      // rebuilt from barycentrics (triangles) or projected onto the sphere
+  Vec3 p_err;  // conservative absolute error bound of p, per component
+  Vec3 ng;     // unit geometric normal (winding / outward)
+  Vec3 ns;     // unit shading normal, same hemisphere as ng
+  uint32_t material = 0;
+  int32_t light = -1;
+};
+
+SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& hit);
+// Origin for a ray leaving p toward w: pushed off the surface along ng by the error
+// bound, so it can neither start behind the surface nor hit it again.
+Vec3 offset_ray_origin(const SurfacePoint& sp, Vec3 w);
+
+class Integrator {
+ public:
+  Integrator(const Scene& scene, const Accel& accel, const LightSet& lights, const RenderSettings& settings);
+  Rgb radiance(Ray ray, Sampler& sampler, RayCounters& counters) const;
+
+ private:
+  Rgb direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng,
+             Sampler& sampler, RayCounters& counters) const;
+
+  const Scene& scene_;
+  const Accel& accel_;
+  const LightSet& lights_;
+  int max_depth_;
+  int light_samples_;
+};
+
+}  // namespace tessera

@@ -1,0 +1,50 @@
+#include "core/render/tile_renderer.h"
+
+#include "core/sampling/sampler.h"
+
+namespace tessera {
+
+TileRenderer::TileRenderer(const Scene& scene, const RenderSettings& settings)
+    : scene_(scene), settings_(settings), accel_(scene), lights_(scene), camera_(scene, settings.camera),
+      integrator_(scene, accel_, lights_, settings_) {}
+
+std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,
+                                            TileStats* stats) const {
+  std::vector<PixelSums> out(size_t(rect.area()));
+  const int width = settings_.camera.width, height = settings_.camera.height;
+  const bool lens = camera_.is_thin_lens();
+  TileStats local;
+  for (int y = 0; y < rect.h; ++y) {
+    for (int x = 0; x < rect.w; ++x) {
+      const size_t k = size_t(y) * rect.w + x;
+      if (active && !active[k]) continue;
+      const int px = rect.x + x, py = rect.y + y;  // image coordinates, row 0 at the top
+      const uint64_t pixel_id = uint64_t(py) * uint64_t(width) + uint64_t(px);
+      PixelSums sums;
+      for (uint32_t s = s0; s < s1; ++s) {
+        Sampler sampler(settings_.seed, pixel_id, s);
+        const Vec2 jitter = sampler.next_2d();
+        const Vec2 u_lens = lens ? sampler.next_2d() : Vec2{};
+        // The camera counts rows from the bottom (CS184 convention).
+        const Ray ray = camera_.generate(float(px) + jitter.x, float(height - 1 - py) + jitter.y, u_lens);
+        const Rgb L = integrator_.radiance(ray, sampler, local.rays);
+        ++local.samples;
+        if (!L.is_finite()) {
+          ++local.nan_samples;
+          continue;
+        }
+        const double lum = L.luminance();
+        sums.r += L.r;
+        sums.g += L.g;
+        sums.b += L.b;
+        sums.lum2 += lum * lum;
+        ++sums.n;
+      }
+      out[k] = sums;
+    }
+  }
+  if (stats) stats->add(local);
+  return out;
+}
+
+}  // namespace tessera

@@ -1,0 +1,54 @@
+// Renders sample ranges of pixel rectangles into fresh sums: the unit of work of both the
+// local renderer and a farm worker.
+#pragma once
+
+#include <atomic>
+#include <memory>
+#include <vector>
+
+#include "core/accel/accel.h"
+#include "core/camera/camera.h"
+#include "core/light/lights.h"
+#include "core/render/film.h"
+#include "core/render/integrator.h"
+#include "core/render/settings.h"
+#include "core/scene/scene.h"
+
+namespace tessera {
+
+struct TileStats {
+  uint64_t samples = 0;
+  uint64_t nan_samples = 0;  // NaN or Inf samples: dropped, counted, reported
+  RayCounters rays;
+  void add(const TileStats& o) {
+    samples += o.samples;
+    nan_samples += o.nan_samples;
+    rays.rays += o.rays.rays;
+    rays.shadow_rays += o.rays.shadow_rays;
+    rays.self_hits += o.rays.self_hits;
+  }
+};
+
+class TileRenderer {
+ public:
+  // Builds the acceleration structure; `scene` must outlive the renderer.
+  TileRenderer(const Scene& scene, const RenderSettings& settings);
+
+  // Samples [s0, s1) of each pixel of `rect` whose `active` flag is set (all when active
+  // is null; `active` is rect-sized, row-major). Returns rect-sized sums.
+  std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,
+                                TileStats* stats) const;
+
+  const Scene& scene() const { return scene_; }
+  const RenderSettings& settings() const { return settings_; }
+
+ private:
+  const Scene& scene_;
+  RenderSettings settings_;
+  Accel accel_;
+  LightSet lights_;
+  Camera camera_;
+  Integrator integrator_;
+};
+
+}  // namespace tessera

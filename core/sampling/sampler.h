@@ -1,0 +1,90 @@
+// Deterministic low-discrepancy sampler: every number is a pure function of
+// (seed, pixel, sample index, dimension).
+//
+// Each dimension (or pair of dimensions) is an Owen-scrambled Sobol (0,2)-sequence whose
+// sample order is shuffled per pixel and dimension ("padding", Burley 2020, "Practical
+// Hash-based Owen Scrambling"). This keeps the stratification of Sobol in every 2D
+// projection we use without the correlation of a single high-dimensional sequence, needs
+// no tables, and makes the value of a sample independent of which thread, tile or machine
+// draws it. That is what lets the farm merge buffers bit-identically.
+#pragma once
+
+#include <cstdint>
+
+#include "core/math/vec.h"
+
+namespace tessera {
+
+inline uint32_t reverse_bits(uint32_t x) {
+  x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+  x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+  x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
+  x = ((x >> 8) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8);
+  return (x >> 16) | (x << 16);
+}
+
+// 64-bit finaliser (splitmix64): a well-mixed hash of its input.
+inline uint64_t mix64(uint64_t z) {
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+
+inline uint32_t hash_seed(uint64_t a, uint64_t b, uint64_t c) {
+  return uint32_t(mix64(mix64(mix64(a) ^ b) ^ c) >> 32);
+}
+
+// Laine-Karras style permutation: bit i of the result depends only on bits <= i of x.
+inline uint32_t laine_karras_permutation(uint32_t x, uint32_t seed) {
+  x += seed;
+  x ^= x * 0x6c50b47cu;
+  x ^= x * 0xb82f1e52u;
+  x ^= x * 0xc7afe638u;
+  x ^= x * 0x8d22f6e6u;
+  return x;
+}
+
+// Owen (nested uniform) scrambling of a 32-bit fixed-point number in [0,1).
+inline uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed) {
+  return reverse_bits(laine_karras_permutation(reverse_bits(x), seed));
+}
+
+// Second Sobol dimension (the first is reverse_bits(i)).
+inline uint32_t sobol_dim1(uint32_t i) {
+  uint32_t v = 1u << 31, r = 0;
+  for (; i; i >>= 1, v ^= v >> 1)
+    if (i & 1) r ^= v;
+  return r;
+}
+
+// Largest float below 1: keeps u in [0,1).
+constexpr float kOneMinusEpsilon = 0x1.fffffep-1f;
+inline float to_unit_float(uint32_t x) { return std::min(float(x >> 8) * 0x1p-24f, kOneMinusEpsilon); }
+
+class Sampler {
+ public:
+  Sampler(uint64_t seed, uint64_t pixel, uint32_t sample_index)
+      : key_(mix64(seed * 0x9E3779B97F4A7C15ull + pixel)), index_(sample_index) {}
+
+  float next_1d() {
+    const uint32_t d = dim_++;
+    const uint32_t i = nested_uniform_scramble(index_, hash_seed(key_, d, 0x51));
+    return to_unit_float(nested_uniform_scramble(reverse_bits(i), hash_seed(key_, d, 0xA7)));
+  }
+
+  Vec2 next_2d() {
+    const uint32_t d = dim_++;
+    const uint32_t i = nested_uniform_scramble(index_, hash_seed(key_, d, 0x2F));
+    return {to_unit_float(nested_uniform_scramble(reverse_bits(i), hash_seed(key_, d, 0x3B))),
+            to_unit_float(nested_uniform_scramble(sobol_dim1(i), hash_seed(key_, d, 0xC9)))};
+  }
+
+  uint32_t dimension() const { return dim_; }
+
+ private:
+  uint64_t key_;
+  uint32_t index_;
+  uint32_t dim_ = 0;
+};
+
+}  // namespace tessera

@@ -1,0 +1,488 @@
+#include "core/scene/collada/collada_loader.h"
+
+#include <pugixml.hpp>
+
+#include <algorithm>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <unordered_map>
+
+#include "core/math/transform.h"
+#include "core/scene/scene_error.h"
+
+namespace tessera {
+namespace {
+
+class ColladaLoader {
+ public:
+  ColladaLoader(const std::string& text, std::string name) : text_(text), file_(std::move(name)) {}
+
+  Scene load() {
+    scene_.source = file_;
+    pugi::xml_parse_result res = doc_.load_buffer(text_.data(), text_.size(), pugi::parse_default);
+    if (!res)
+      throw SceneError(file_, "line " + std::to_string(line_of(res.offset)),
+                       std::string("XML parse error: ") + res.description());
+    pugi::xml_node root = doc_.child("COLLADA");
+    if (!root) throw SceneError(file_, "", "not a COLLADA document (no <COLLADA> root element)");
+    for (const pugi::xpath_node& n : root.select_nodes("//*[@id]"))
+      ids_.emplace(n.node().attribute("id").value(), n.node());  // first definition wins
+    global_ = up_axis_transform(root);
+    pugi::xml_node inst = root.child("scene").child("instance_visual_scene");
+    if (!inst) throw SceneError(file_, where(root), "no <scene>/<instance_visual_scene>");
+    pugi::xml_node vs = resolve(inst, "url", "visual_scene");
+    for (pugi::xml_node node : vs.children("node")) process_node(node, global_, 0);
+    scene_.finalize();
+    return std::move(scene_);
+  }
+
+ private:
+  // ---- diagnostics -------------------------------------------------------------------
+  size_t line_of(ptrdiff_t offset) const {
+    if (offset < 0) return 0;
+    const size_t end = std::min(size_t(offset), text_.size());
+    return 1 + size_t(std::count(text_.begin(), text_.begin() + ptrdiff_t(end), '\n'));
+  }
+  std::string where(pugi::xml_node n) const {
+    std::string s = "<" + std::string(n.name());
+    if (n.attribute("id")) s += " id=\"" + std::string(n.attribute("id").value()) + "\"";
+    s += "> (line " + std::to_string(line_of(n.offset_debug())) + ")";
+    return s;
+  }
+  [[noreturn]] void fail(pugi::xml_node n, const std::string& reason) const {
+    throw SceneError(file_, where(n), reason);
+  }
+
+  // ---- parsing helpers ---------------------------------------------------------------
+  std::vector<double> numbers(pugi::xml_node n) const {
+    std::vector<double> out;
+    const char* s = n.child_value();
+    while (*s) {
+      while (*s == ' ' || *s == '\n' || *s == '\t' || *s == '\r') ++s;
+      if (!*s) break;
+      char* end = nullptr;
+      errno = 0;
+      const double v = std::strtod(s, &end);
+      if (end == s) {
+        std::string tok(s, std::find_if(s, s + std::strlen(s), [](char c) { return std::isspace(uint8_t(c)); }));
+        fail(n, "'" + tok.substr(0, 32) + "' is not a number");
+      }
+      if (!std::isfinite(v)) fail(n, "non-finite number '" + std::string(s, size_t(end - s)) + "'");
+      out.push_back(v);
+      s = end;
+    }
+    return out;
+  }
+  std::vector<double> numbers_exact(pugi::xml_node n, size_t want) const {
+    std::vector<double> v = numbers(n);
+    if (v.size() < want)
+      fail(n, "expected " + std::to_string(want) + " numbers, found " + std::to_string(v.size()));
+    v.resize(want);
+    return v;
+  }
+  std::vector<uint32_t> indices(pugi::xml_node n) const {
+    std::vector<uint32_t> out;
+    const char* s = n.child_value();
+    while (*s) {
+      while (std::isspace(uint8_t(*s))) ++s;
+      if (!*s) break;
+      char* end = nullptr;
+      errno = 0;
+      const long long v = std::strtoll(s, &end, 10);
+      if (end == s || (*end && !std::isspace(uint8_t(*end))))
+        fail(n, "'" + std::string(s, std::min<size_t>(16, std::strlen(s))) + "' is not an index");
+      if (v < 0 || v > 0xFFFFFFFFll || errno == ERANGE) fail(n, "index " + std::string(s, size_t(end - s)) + " out of range");
+      out.push_back(uint32_t(v));
+      s = end;
+    }
+    return out;
+  }
+  Rgb color(pugi::xml_node parent, const char* child) const {
+    pugi::xml_node c = parent.child(child);
+    if (!c) fail(parent, std::string("missing <") + child + ">");
+    const std::vector<double> v = numbers_exact(c, 3);
+    return Rgb(float(v[0]), float(v[1]), float(v[2]));
+  }
+  double scalar(pugi::xml_node parent, const char* child, std::optional<double> fallback = {}) const {
+    pugi::xml_node c = parent.child(child);
+    if (!c) {
+      if (fallback) return *fallback;
+      fail(parent, std::string("missing <") + child + ">");
+    }
+    return numbers_exact(c, 1)[0];
+  }
+  pugi::xml_node resolve(pugi::xml_node from, const char* attr, const char* expect) const {
+    std::string url = from.attribute(attr).value();
+    if (url.empty()) fail(from, std::string("missing ") + attr + " attribute");
+    if (url[0] != '#') fail(from, "only local references (#id) are supported, got '" + url + "'");
+    auto it = ids_.find(url.substr(1));
+    if (it == ids_.end()) fail(from, "dangling reference '" + url + "'");
+    if (expect && std::string(it->second.name()) != expect)
+      fail(from, "'" + url + "' names a <" + it->second.name() + ">, expected <" + expect + ">");
+    return it->second;
+  }
+
+  // ---- document structure ------------------------------------------------------------
+  Mat4 up_axis_transform(pugi::xml_node root) const {
+    pugi::xml_node up = root.child("asset").child("up_axis");
+    if (!up) return Mat4();  // COLLADA's default is Y_UP
+    std::string s = up.child_value();
+    s.erase(std::remove_if(s.begin(), s.end(), [](char c) { return std::isspace(uint8_t(c)); }), s.end());
+    if (s == "Y_UP") return Mat4();
+    if (s == "Z_UP")  // (x, y, z) -> (-x, z, y): a proper rotation
+      return Mat4::from_row_major({-1, 0, 0, 0, 0, 0, 1, 0, 0, 1, 0, 0, 0, 0, 0, 1});
+    if (s == "X_UP")  // (x, y, z) -> (y, x, -z)
+      return Mat4::from_row_major({0, 1, 0, 0, 1, 0, 0, 0, 0, 0, -1, 0, 0, 0, 0, 1});
+    fail(up, "unknown up_axis '" + s + "' (expected X_UP, Y_UP or Z_UP)");
+  }
+
+  Mat4 local_transform(pugi::xml_node node) const {
+    Mat4 local;
+    for (pugi::xml_node e : node.children()) {
+      const std::string name = e.name();
+      if (name == "matrix") {
+        // Replaces what came before and ends the node's transform list (format doc 1.5);
+        // a short matrix reads its missing entries as 0.
+        std::vector<double> v = numbers(e);
+        if (v.size() > 16) fail(e, "more than 16 numbers in <matrix>");
+        std::array<double, 16> m{};
+        std::copy(v.begin(), v.end(), m.begin());
+        return Mat4::from_row_major(m);
+      }
+      if (name == "translate") {
+        auto v = numbers_exact(e, 3);
+        local = local * Mat4::translate(v[0], v[1], v[2]);
+      } else if (name == "scale") {
+        auto v = numbers_exact(e, 3);
+        local = local * Mat4::scale(v[0], v[1], v[2]);
+      } else if (name == "rotate") {
+        auto v = numbers_exact(e, 4);
+        local = local * Mat4::rotate(v[0], v[1], v[2], v[3]);
+      }
+    }
+    return local;
+  }
+
+  void process_node(pugi::xml_node node, const Mat4& parent, int depth) {
+    if (depth > 256) fail(node, "node hierarchy deeper than 256 levels");
+    const Mat4 world = parent * local_transform(node);
+    for (pugi::xml_node child : node.children("node")) process_node(child, world, depth + 1);
+    if (pugi::xml_node c = node.child("instance_camera")) {
+      add_camera(resolve(c, "url", "camera"), world);
+    } else if (pugi::xml_node l = node.child("instance_light")) {
+      add_light(resolve(l, "url", "light"), world, node);
+    } else if (pugi::xml_node g = node.child("instance_geometry")) {
+      add_geometry(resolve(g, "url", "geometry"), g, world, node);
+    }
+    // A node without instances is a pure group: legal COLLADA, nothing to add.
+  }
+
+  // ---- cameras -----------------------------------------------------------------------
+  void add_camera(pugi::xml_node cam, const Mat4& w) {
+    pugi::xml_node tc = cam.child("optics").child("technique_common");
+    if (tc.child("orthographic")) fail(cam, "orthographic cameras are not supported");
+    pugi::xml_node p = tc.child("perspective");
+    if (!p) fail(cam, "missing <optics>/<technique_common>/<perspective>");
+    CameraDesc& c = scene_.camera;
+    c = CameraDesc{};
+    c.present = true;
+    c.xfov_deg = scalar(p, "xfov", 50.0);
+    if (p.child("yfov")) c.yfov_deg = scalar(p, "yfov");
+    if (p.child("aspect_ratio")) c.aspect_ratio = scalar(p, "aspect_ratio");
+    c.znear = float(scalar(p, "znear", 0.001));
+    c.zfar = float(scalar(p, "zfar", 1000.0));
+    if (!(c.xfov_deg > 0 && c.xfov_deg < 180)) fail(p, "xfov must be in (0, 180) degrees");
+    if (c.yfov_deg && !(*c.yfov_deg > 0 && *c.yfov_deg < 180)) fail(p, "yfov must be in (0, 180) degrees");
+    if (c.aspect_ratio && !(*c.aspect_ratio > 0)) fail(p, "aspect_ratio must be positive");
+    if (!c.yfov_deg && !c.aspect_ratio) {
+      c.aspect_ratio = 4.0 / 3.0;
+      scene_.warnings.push_back(where(cam) + ": no yfov or aspect_ratio; assuming 4:3");
+    }
+    if (!(c.znear >= 0 && c.zfar > c.znear)) fail(p, "need 0 <= znear < zfar");
+    c.eye = w.point(0, 0, 0).to_float();
+    c.forward = normalize(w.vector(0, 0, -1).to_float());
+    c.up = normalize(w.vector(0, 1, 0).to_float());
+    // CS184 treats the point one unit ahead as a direction (format doc 2.2, a w=1 quirk).
+    c.cs184_dir = normalize(w.apply(0, 0, -1, 1).to_float());
+    if (!is_finite(c.forward) || !is_finite(c.up) || !is_finite(c.cs184_dir))
+      fail(cam, "camera node transform is degenerate");
+  }
+
+  // ---- lights ------------------------------------------------------------------------
+  void add_light(pugi::xml_node light, const Mat4& w, pugi::xml_node node) {
+    pugi::xml_node tech;
+    if (pugi::xml_node extra = light.child("extra"))
+      tech = extra.find_child_by_attribute("technique", "profile", "CGL");
+    if (!tech) tech = light.child("technique_common");
+    if (!tech) fail(light, "no <technique_common> or CGL technique");
+    pugi::xml_node type = tech.first_child();
+    while (type && type.type() != pugi::node_element) type = type.next_sibling();
+    if (!type) fail(tech, "empty light technique");
+    const std::string kind = type.name();
+    Light l;
+    l.name = node.attribute("id").value();
+    if (kind == "spot") {
+      scene_.warnings.push_back(where(type) + ": spot lights are not supported; ignored");
+      return;
+    }
+    l.color = color(type, "color");
+    if (kind == "point") {
+      l.kind = Light::Kind::kPoint;
+      l.position = w.point(0, 0, 0).to_float();
+      l.att_constant = float(scalar(type, "constant_attenuation", 1.0));
+      l.att_linear = float(scalar(type, "linear_attenuation", 0.0));
+      l.att_quadratic = float(scalar(type, "quadratic_attenuation", 0.0));
+      if (l.att_constant < 0 || l.att_linear < 0 || l.att_quadratic < 0 ||
+          l.att_constant + l.att_linear + l.att_quadratic <= 0)
+        fail(type, "attenuation coefficients must be non-negative and not all zero");
+    } else if (kind == "directional") {
+      l.kind = Light::Kind::kDirectional;
+      l.direction = -normalize(w.vector(0, 0, -1).to_float());
+    } else if (kind == "ambient") {
+      l.kind = Light::Kind::kAmbient;
+    } else if (kind == "area") {
+      l.kind = Light::Kind::kRect;
+      l.position = w.point(0, 0, 0).to_float();
+      l.edge_x = w.vector(-1, 0, 0).to_float();
+      l.edge_y = w.vector(0, 1, 0).to_float();
+      const Vec3 facing = w.vector(0, 0, -1).to_float();
+      const Vec3 c = cross(l.edge_x, l.edge_y);
+      l.area = length(c);
+      if (!(l.area > 0) || !std::isfinite(l.area)) fail(node, "area light has zero area");
+      l.normal = face_forward(c / l.area, facing);
+    } else {
+      fail(type, "unknown light type <" + kind + ">");
+    }
+    if (!is_finite(l.position) || !is_finite(l.direction)) fail(node, "light transform is degenerate");
+    scene_.lights.push_back(l);
+  }
+
+  // ---- materials ---------------------------------------------------------------------
+  uint32_t material_for(pugi::xml_node instance_geometry) {
+    pugi::xml_node im = instance_geometry.child("bind_material").child("technique_common").child("instance_material");
+    if (!im) return default_material();
+    pugi::xml_node mat = resolve(im, "target", "material");
+    const std::string id = mat.attribute("id").value();
+    if (auto it = materials_.find(id); it != materials_.end()) return it->second;
+    pugi::xml_node ie = mat.child("instance_effect");
+    if (!ie) fail(mat, "missing <instance_effect>");
+    Material m = parse_effect(resolve(ie, "url", "effect"));
+    m.name = id;
+    const uint32_t index = scene_.add_material(std::move(m));
+    materials_[id] = index;
+    return index;
+  }
+  uint32_t default_material() {
+    if (!default_material_) {
+      Material m;
+      m.name = "default-gray";
+      default_material_ = scene_.add_material(m);
+    }
+    return *default_material_;
+  }
+  Material parse_effect(pugi::xml_node effect) {
+    Material m;
+    pugi::xml_node cgl;
+    for (pugi::xml_node extra : effect.children("extra"))
+      if ((cgl = extra.find_child_by_attribute("technique", "profile", "CGL"))) break;
+    if (cgl) {
+      bool found = false;
+      for (pugi::xml_node k : cgl.children()) {
+        if (k.type() != pugi::node_element) continue;
+        const std::string kind = k.name();
+        m = Material{};
+        if (kind == "mirror") {
+          m.kind = Material::Kind::kMirror;
+          m.reflectance = color(k, "reflectance");
+        } else if (kind == "glass") {
+          m.kind = Material::Kind::kGlass;
+          m.reflectance = color(k, "reflectance");
+          m.transmittance = color(k, "transmittance");
+          m.ior = float(scalar(k, "ior"));
+        } else if (kind == "refraction") {
+          m.kind = Material::Kind::kRefraction;
+          m.transmittance = color(k, "transmittance");
+          m.ior = float(scalar(k, "ior"));
+        } else if (kind == "microfacet") {
+          m.kind = Material::Kind::kMicrofacet;
+          m.alpha = float(scalar(k, "alpha"));
+          m.eta = color(k, "eta");
+          m.k = color(k, "k");
+          if (!(m.alpha > 0)) fail(k, "microfacet alpha must be positive");
+        } else if (kind == "emission") {
+          m.kind = Material::Kind::kEmission;
+          m.radiance = color(k, "radiance");
+        } else {
+          fail(k, "unknown CGL material kind <" + kind + ">");
+        }
+        if ((m.kind == Material::Kind::kGlass || m.kind == Material::Kind::kRefraction) && !(m.ior > 0))
+          fail(k, "ior must be positive");
+        found = true;  // the last recognised kind wins (format doc 4.2)
+      }
+      if (!found) fail(cgl, "CGL technique names no material kind");
+      return m;
+    }
+    pugi::xml_node tech = effect.child("profile_COMMON").child("technique");
+    for (const char* shading : {"phong", "lambert", "blinn"}) {
+      pugi::xml_node s = tech.child(shading);
+      if (s && s.child("diffuse").child("color")) {
+        m.kind = Material::Kind::kDiffuse;
+        m.reflectance = color(s.child("diffuse"), "color");
+        return m;
+      }
+    }
+    return m;  // 0.5 gray diffuse
+  }
+
+  // ---- geometry ----------------------------------------------------------------------
+  void add_geometry(pugi::xml_node geom, pugi::xml_node instance, const Mat4& w, pugi::xml_node node) {
+    const uint32_t material = material_for(instance);
+    const std::string name = node.attribute("id").value();
+    if (pugi::xml_node mesh = geom.child("mesh")) {
+      add_mesh(mesh, w, material, name);
+      return;
+    }
+    pugi::xml_node sphere;
+    for (pugi::xml_node extra : geom.children("extra"))
+      if (pugi::xml_node t = extra.find_child_by_attribute("technique", "profile", "CGL"))
+        if ((sphere = t.child("sphere"))) break;
+    if (!sphere) fail(geom, "geometry has neither a <mesh> nor a CGL <sphere>");
+    const double r = scalar(sphere, "radius");
+    if (!(r > 0)) fail(sphere, "sphere radius must be positive");
+    Sphere s;
+    s.name = name;
+    s.center = w.point(0, 0, 0).to_float();
+    s.radius = float(r * dlength(w.vector(1, 0, 0)));
+    s.material = material;
+    if (!is_finite(s.center) || !(s.radius > 0) || !std::isfinite(s.radius))
+      fail(node, "sphere transform is degenerate");
+    scene_.spheres.push_back(s);
+  }
+
+  std::vector<double> float_array(pugi::xml_node source) const {
+    pugi::xml_node fa = source.child("float_array");
+    if (!fa) fail(source, "source has no <float_array>");
+    if (!fa.attribute("count")) fail(fa, "missing count attribute");
+    const long long count = fa.attribute("count").as_llong(-1);
+    if (count < 0) fail(fa, "bad count attribute");
+    std::vector<double> v = numbers(fa);
+    if (v.size() != size_t(count))
+      fail(fa, "count=\"" + std::to_string(count) + "\" but " + std::to_string(v.size()) + " numbers present");
+    return v;
+  }
+
+  void add_mesh(pugi::xml_node mesh, const Mat4& w, uint32_t material, const std::string& name) {
+    pugi::xml_node vertices = mesh.child("vertices");
+    if (!vertices) fail(mesh, "mesh has no <vertices>");
+    pugi::xml_node pos_input = vertices.find_child_by_attribute("input", "semantic", "POSITION");
+    if (!pos_input) fail(vertices, "no POSITION input");
+    const std::vector<double> p = float_array(resolve(pos_input, "source", "source"));
+    if (p.size() % 3) fail(vertices, "position count " + std::to_string(p.size()) + " is not a multiple of 3");
+    Mesh out;
+    out.name = name;
+    out.material = material;
+    out.positions.reserve(p.size() / 3);
+    for (size_t i = 0; i < p.size(); i += 3) {
+      const Vec3 v = w.point(p[i], p[i + 1], p[i + 2]).to_float();
+      if (!is_finite(v)) fail(vertices, "vertex " + std::to_string(i / 3) + " is not finite after transform");
+      out.positions.push_back(v);
+    }
+    const uint32_t vertex_count = uint32_t(out.positions.size());
+    bool any = false;
+    for (pugi::xml_node prim : mesh.children()) {
+      const std::string kind = prim.name();
+      if (kind != "polylist" && kind != "triangles" && kind != "polygons") continue;
+      any = true;
+      uint32_t stride = 0, vertex_offset = 0;
+      bool has_vertex = false;
+      for (pugi::xml_node in : prim.children("input")) {
+        const long long off = in.attribute("offset").as_llong(-1);
+        if (off < 0 || off > 64) fail(in, "bad or missing offset");
+        stride = std::max(stride, uint32_t(off) + 1);
+        if (std::string(in.attribute("semantic").value()) == "VERTEX") {
+          if (resolve(in, "source", nullptr) != vertices) fail(in, "VERTEX source is not the mesh's <vertices>");
+          vertex_offset = uint32_t(off);
+          has_vertex = true;
+        }
+      }
+      if (!has_vertex) fail(prim, "no VERTEX input");
+      const long long count = prim.attribute("count").as_llong(-1);
+      if (count < 0) fail(prim, "bad or missing count attribute");
+      std::vector<uint32_t> sizes, idx;
+      if (kind == "polygons") {
+        for (pugi::xml_node pp : prim.children("p")) {
+          std::vector<uint32_t> one = indices(pp);
+          if (one.size() % stride) fail(pp, "index count is not a multiple of the input stride");
+          sizes.push_back(uint32_t(one.size() / stride));
+          idx.insert(idx.end(), one.begin(), one.end());
+        }
+      } else {
+        pugi::xml_node pn = prim.child("p");
+        if (!pn && count > 0) fail(prim, "missing <p>");
+        idx = indices(pn);
+        if (kind == "polylist") {
+          pugi::xml_node vc = prim.child("vcount");
+          if (!vc) fail(prim, "missing <vcount>");
+          sizes = indices(vc);
+        } else {
+          sizes.assign(size_t(std::min<long long>(count, idx.size())), 3);
+        }
+      }
+      if (sizes.size() != size_t(count))
+        fail(prim, "count=\"" + std::to_string(count) + "\" but " + std::to_string(sizes.size()) + " polygons present");
+      uint64_t need = 0;
+      for (uint32_t s : sizes) {
+        if (s < 3) fail(prim, "polygon with " + std::to_string(s) + " vertices");
+        need += uint64_t(s) * stride;
+      }
+      if (need != idx.size())
+        fail(prim, "expected " + std::to_string(need) + " indices in <p>, found " + std::to_string(idx.size()));
+      size_t at = 0;
+      for (uint32_t s : sizes) {
+        auto vert = [&](uint32_t k) {
+          const uint32_t v = idx[at + size_t(k) * stride + vertex_offset];
+          if (v >= vertex_count)
+            fail(prim, "vertex index " + std::to_string(v) + " out of range (" + std::to_string(vertex_count) + " positions)");
+          return v;
+        };
+        for (uint32_t k = 1; k + 1 < s; ++k) {  // fan triangulation
+          out.indices.push_back(vert(0));
+          out.indices.push_back(vert(k));
+          out.indices.push_back(vert(k + 1));
+        }
+        at += size_t(s) * stride;
+      }
+    }
+    if (!any) fail(mesh, "mesh has no <polylist>, <triangles> or <polygons>");
+    scene_.meshes.push_back(std::move(out));
+  }
+
+  const std::string& text_;
+  std::string file_;
+  pugi::xml_document doc_;
+  std::unordered_map<std::string, pugi::xml_node> ids_;
+  std::unordered_map<std::string, uint32_t> materials_;
+  std::optional<uint32_t> default_material_;
+  Mat4 global_;
+  Scene scene_;
+};
+
+}  // namespace
+
+Scene load_collada_string(const std::string& text, const std::string& name) {
+  return ColladaLoader(text, name).load();
+}
+
+Scene load_collada_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw SceneError(path, "", "cannot open file");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return load_collada_string(ss.str(), path);
+}
+
+}  // namespace tessera

@@ -1,0 +1,103 @@
+#include "core/scene/scene.h"
+
+#include <cmath>
+
+namespace tessera {
+
+void Mesh::compute_normals() {
+  normals.assign(positions.size(), Vec3{});
+  for (size_t t = 0; t + 2 < indices.size(); t += 3) {
+    const uint32_t a = indices[t], b = indices[t + 1], c = indices[t + 2];
+    // Unnormalised cross product: weights each face by its area.
+    const Vec3 n = cross(positions[b] - positions[a], positions[c] - positions[a]);
+    normals[a] += n;
+    normals[b] += n;
+    normals[c] += n;
+  }
+  for (Vec3& n : normals) {
+    const float len = length(n);
+    n = len > 0 && std::isfinite(len) ? n / len : Vec3{};  // zero: use the geometric normal
+  }
+}
+
+size_t Scene::triangle_count() const {
+  size_t n = 0;
+  for (const Mesh& m : meshes) n += m.triangle_count();
+  return n;
+}
+
+Bounds Scene::object_bounds() const {
+  Bounds b;
+  for (const Mesh& m : meshes) {
+    if (m.light >= 0 && lights[m.light].kind == Light::Kind::kRect) continue;
+    for (uint32_t i : m.indices) b.extend(m.positions[i]);
+  }
+  for (const Sphere& s : spheres) {
+    b.extend(s.center - Vec3{s.radius, s.radius, s.radius});
+    b.extend(s.center + Vec3{s.radius, s.radius, s.radius});
+  }
+  return b;
+}
+
+uint32_t Scene::add_material(Material m) {
+  materials.push_back(std::move(m));
+  return uint32_t(materials.size() - 1);
+}
+
+void Scene::finalize() {
+  // Rect lights are also geometry: a one-sided emitter that camera rays see and that
+  // blocks other rays (format doc 3.3, with the physical radiance `color`).
+  for (size_t i = 0; i < lights.size(); ++i) {
+    Light& l = lights[i];
+    if (l.kind != Light::Kind::kRect) continue;
+    Material m;
+    m.kind = Material::Kind::kEmission;
+    m.name = l.name + "-emitter";
+    m.radiance = l.color;
+    m.two_sided_emission = false;
+    Mesh mesh;
+    mesh.name = l.name;
+    const Vec3 hx = l.edge_x * 0.5f, hy = l.edge_y * 0.5f;
+    mesh.positions = {l.position - hx - hy, l.position + hx - hy, l.position + hx + hy,
+                      l.position - hx + hy};
+    // Wind so the geometric normal is the facing direction.
+    if (dot(cross(l.edge_x, l.edge_y), l.normal) >= 0)
+      mesh.indices = {0, 1, 2, 0, 2, 3};
+    else
+      mesh.indices = {0, 2, 1, 0, 3, 2};
+    mesh.material = add_material(std::move(m));
+    mesh.light = int32_t(i);
+    l.shape = uint32_t(meshes.size());
+    meshes.push_back(std::move(mesh));
+  }
+  // Emission materials glow and are sampled as area lights.
+  for (size_t i = 0; i < meshes.size(); ++i) {
+    Mesh& mesh = meshes[i];
+    const Material& m = materials[mesh.material];
+    if (mesh.light >= 0 || m.kind != Material::Kind::kEmission || m.radiance.is_black()) continue;
+    Light l;
+    l.kind = Light::Kind::kMesh;
+    l.name = mesh.name;
+    l.color = m.radiance;
+    l.shape = uint32_t(i);
+    l.two_sided = m.two_sided_emission;
+    mesh.light = int32_t(lights.size());
+    lights.push_back(l);
+  }
+  for (size_t i = 0; i < spheres.size(); ++i) {
+    Sphere& s = spheres[i];
+    const Material& m = materials[s.material];
+    if (s.light >= 0 || m.kind != Material::Kind::kEmission || m.radiance.is_black()) continue;
+    Light l;
+    l.kind = Light::Kind::kSphere;
+    l.name = s.name;
+    l.color = m.radiance;
+    l.shape = uint32_t(i);
+    l.two_sided = m.two_sided_emission;
+    s.light = int32_t(lights.size());
+    lights.push_back(l);
+  }
+  for (Mesh& mesh : meshes) mesh.compute_normals();
+}
+
+}  // namespace tessera

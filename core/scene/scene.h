@@ -1,0 +1,111 @@
+// The renderer's scene model: what every loader (COLLADA, glTF) produces and every other
+// part of the core consumes. Plain data in world space, +Y up; no file-format concepts.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/math/vec.h"
+
+namespace tessera {
+
+// Material parameters. One struct with a kind tag rather than a class hierarchy: the
+// integrator switches on the kind, which keeps the hot loop free of virtual calls.
+struct Material {
+  enum class Kind : uint8_t { kDiffuse, kMirror, kGlass, kRefraction, kMicrofacet, kEmission };
+  Kind kind = Kind::kDiffuse;
+  std::string name;
+  Rgb reflectance{0.5f};    // diffuse albedo, mirror and glass reflectance
+  Rgb transmittance{1.0f};  // glass and refraction
+  float ior = 1.5f;         // glass and refraction: interior / exterior
+  float alpha = 0.25f;      // microfacet Beckmann roughness
+  Rgb eta{0.2f}, k{3.0f};   // microfacet conductor complex index, per channel
+  Rgb radiance{0.0f};       // emission
+  bool two_sided_emission = true;
+
+  bool is_delta() const {
+    return kind == Kind::kMirror || kind == Kind::kGlass || kind == Kind::kRefraction;
+  }
+  // True if no BSDF lobe exists: paths end here.
+  bool is_black() const { return kind == Kind::kEmission; }
+};
+
+struct Mesh {
+  std::string name;
+  std::vector<Vec3> positions;
+  std::vector<uint32_t> indices;  // 3 per triangle
+  std::vector<Vec3> normals;      // per vertex, area weighted; filled by compute_normals()
+  uint32_t material = 0;
+  int32_t light = -1;  // index into Scene::lights when the mesh emits
+
+  size_t triangle_count() const { return indices.size() / 3; }
+  void compute_normals();
+};
+
+struct Sphere {
+  std::string name;
+  Vec3 center;
+  float radius = 1;
+  uint32_t material = 0;
+  int32_t light = -1;
+};
+
+struct Light {
+  enum class Kind : uint8_t { kRect, kMesh, kSphere, kPoint, kDirectional, kAmbient };
+  Kind kind = Kind::kPoint;
+  std::string name;
+  Rgb color{1.0f};  // radiance (rect, mesh, sphere, ambient), intensity (point),
+                    // irradiance at normal incidence (directional)
+  // Rect: centre, full edge vectors, facing normal (emits toward it), area.
+  Vec3 position, edge_x, edge_y, normal;
+  float area = 0;
+  // Point: attenuation 1 / (c + l d + q d^2).
+  float att_constant = 1, att_linear = 0, att_quadratic = 0;
+  Vec3 direction;       // directional: unit vector toward the light
+  uint32_t shape = 0;   // kMesh: mesh index; kSphere: sphere index; kRect: its mesh
+  bool two_sided = false;
+
+  bool is_delta() const { return kind == Kind::kPoint || kind == Kind::kDirectional; }
+  bool is_infinite() const { return kind == Kind::kDirectional || kind == Kind::kAmbient; }
+};
+
+struct CameraDesc {
+  // The file's camera node world transform, decomposed: eye, forward, up (unit).
+  Vec3 eye{0, 0, 0}, forward{0, 0, -1}, up{0, 1, 0};
+  double xfov_deg = 50;                 // full horizontal field of view
+  std::optional<double> yfov_deg;       // full vertical, when the file gives it
+  std::optional<double> aspect_ratio;
+  float znear = 0.001f, zfar = 1000.0f;
+  Vec3 cs184_dir{0, 0, 1};  // CS184 framing direction c (format doc section 2.2)
+  bool present = false;
+};
+
+struct Bounds {
+  Vec3 lo{1e30f, 1e30f, 1e30f}, hi{-1e30f, -1e30f, -1e30f};
+  void extend(Vec3 p) { lo = min(lo, p); hi = max(hi, p); }
+  bool empty() const { return lo.x > hi.x; }
+  Vec3 center() const { return (lo + hi) * 0.5f; }
+  Vec3 diagonal() const { return hi - lo; }
+};
+
+struct Scene {
+  std::string source;  // file it came from
+  std::vector<Material> materials;
+  std::vector<Mesh> meshes;
+  std::vector<Sphere> spheres;
+  std::vector<Light> lights;
+  CameraDesc camera;
+  std::vector<std::string> warnings;
+
+  size_t triangle_count() const;
+  // Bounds of meshes and spheres that are objects (light shapes excluded), as CS184 frames.
+  Bounds object_bounds() const;
+  // Adds the emitter lights for emission materials and the visible rectangle of each rect
+  // light; computes normals. Loaders call it last.
+  void finalize();
+  uint32_t add_material(Material m);
+};
+
+}  // namespace tessera
