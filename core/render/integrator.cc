@@ -1,5 +1,6 @@
 #include "core/render/integrator.h"
 
+#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -13,6 +14,22 @@ constexpr float kMachineEps = std::numeric_limits<float>::epsilon() * 0.5f;
 constexpr float gamma(int n) { return (n * kMachineEps) / (1 - n * kMachineEps); }
 // Embree's watertight test has its own rounding; widen pbrt's bound to cover it.
 constexpr float kOffsetSafety = 4.0f;
+
+// std::nextafter is an out-of-line libm call; these are a few integer operations.
+float next_float_up(float v) {
+  if (std::isinf(v) && v > 0) return v;
+  if (v == -0.0f) v = 0.0f;
+  uint32_t bits = std::bit_cast<uint32_t>(v);
+  bits = v >= 0 ? bits + 1 : bits - 1;
+  return std::bit_cast<float>(bits);
+}
+float next_float_down(float v) {
+  if (std::isinf(v) && v < 0) return v;
+  if (v == 0.0f) v = -0.0f;
+  uint32_t bits = std::bit_cast<uint32_t>(v);
+  bits = v > 0 ? bits - 1 : bits + 1;
+  return std::bit_cast<float>(bits);
+}
 
 }  // namespace
 
@@ -62,8 +79,8 @@ Vec3 offset_ray_origin(const SurfacePoint& sp, Vec3 w) {
   if (dot(w, sp.ng) < 0) offset = -offset;
   Vec3 po = sp.p + offset;
   for (int i = 0; i < 3; ++i) {  // round away from the surface
-    if (offset[i] > 0) po[i] = std::nextafter(po[i], std::numeric_limits<float>::infinity());
-    else if (offset[i] < 0) po[i] = std::nextafter(po[i], -std::numeric_limits<float>::infinity());
+    if (offset[i] > 0) po[i] = next_float_up(po[i]);
+    else if (offset[i] < 0) po[i] = next_float_down(po[i]);
   }
   return po;
 }

@@ -30,10 +30,6 @@ inline uint64_t mix64(uint64_t z) {
   return z ^ (z >> 31);
 }
 
-inline uint32_t hash_seed(uint64_t a, uint64_t b, uint64_t c) {
-  return uint32_t(mix64(mix64(mix64(a) ^ b) ^ c) >> 32);
-}
-
 // Laine-Karras style permutation: bit i of the result depends only on bits <= i of x.
 inline uint32_t laine_karras_permutation(uint32_t x, uint32_t seed) {
   x += seed;
@@ -49,12 +45,28 @@ inline uint32_t nested_uniform_scramble(uint32_t x, uint32_t seed) {
   return reverse_bits(laine_karras_permutation(reverse_bits(x), seed));
 }
 
-// Second Sobol dimension (the first is reverse_bits(i)).
-inline uint32_t sobol_dim1(uint32_t i) {
+// Second Sobol dimension (the first is reverse_bits(i)), bit by bit: the definition.
+constexpr uint32_t sobol_dim1_reference(uint32_t i) {
   uint32_t v = 1u << 31, r = 0;
   for (; i; i >>= 1, v ^= v >> 1)
     if (i & 1) r ^= v;
   return r;
+}
+
+// The map is linear over GF(2), so it is the XOR of one table entry per input byte.
+// Shuffled indices use all 32 bits; this is 4 lookups instead of 32 iterations.
+struct SobolDim1Table {
+  uint32_t t[4][256];
+  constexpr SobolDim1Table() : t() {
+    for (int b = 0; b < 4; ++b)
+      for (uint32_t v = 0; v < 256; ++v) t[b][v] = sobol_dim1_reference(v << (8 * b));
+  }
+};
+inline constexpr SobolDim1Table kSobolDim1Table{};
+
+inline uint32_t sobol_dim1(uint32_t i) {
+  const auto& t = kSobolDim1Table.t;
+  return t[0][i & 255] ^ t[1][(i >> 8) & 255] ^ t[2][(i >> 16) & 255] ^ t[3][i >> 24];
 }
 
 // Largest float below 1: keeps u in [0,1).
@@ -67,21 +79,25 @@ class Sampler {
       : key_(mix64(seed * 0x9E3779B97F4A7C15ull + pixel)), index_(sample_index) {}
 
   float next_1d() {
-    const uint32_t d = dim_++;
-    const uint32_t i = nested_uniform_scramble(index_, hash_seed(key_, d, 0x51));
-    return to_unit_float(nested_uniform_scramble(reverse_bits(i), hash_seed(key_, d, 0xA7)));
+    const uint64_t h = dimension_hash();
+    const uint32_t i = nested_uniform_scramble(index_, uint32_t(h));
+    return to_unit_float(nested_uniform_scramble(reverse_bits(i), uint32_t(h >> 32)));
   }
 
   Vec2 next_2d() {
-    const uint32_t d = dim_++;
-    const uint32_t i = nested_uniform_scramble(index_, hash_seed(key_, d, 0x2F));
-    return {to_unit_float(nested_uniform_scramble(reverse_bits(i), hash_seed(key_, d, 0x3B))),
-            to_unit_float(nested_uniform_scramble(sobol_dim1(i), hash_seed(key_, d, 0xC9)))};
+    const uint64_t h = dimension_hash();
+    const uint64_t h2 = mix64(h);
+    const uint32_t i = nested_uniform_scramble(index_, uint32_t(h));
+    return {to_unit_float(nested_uniform_scramble(reverse_bits(i), uint32_t(h >> 32))),
+            to_unit_float(nested_uniform_scramble(sobol_dim1(i), uint32_t(h2)))};
   }
 
   uint32_t dimension() const { return dim_; }
 
  private:
+  // 64 well-mixed bits per (pixel key, dimension): the scrambling seeds.
+  uint64_t dimension_hash() { return mix64(key_ ^ (uint64_t(++dim_) * 0xD1B54A32D192ED03ull)); }
+
   uint64_t key_;
   uint32_t index_;
   uint32_t dim_ = 0;
