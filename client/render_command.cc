@@ -134,6 +134,7 @@ int run_render(const RenderArgs& a) {
                      {"shadow_rays", r.stats.rays.shadow_rays},
                      {"rays_per_second", rps},
                      {"nan_samples", r.stats.nan_samples},
+                     {"mean_luminance", r.film.mean_luminance()},
                      {"self_hits", r.stats.rays.self_hits}};
     std::ofstream f(a.stats_json);
     f << j.dump(2) << "\n";

@@ -19,3 +19,13 @@ Rgb Film::mean_radiance() const {
 }
 
 }  // namespace tessera
+
+namespace tessera {
+
+double Film::mean_luminance() const {
+  double sum = 0;
+  for (const PixelSums& p : pixels_) sum += p.n ? p.lum_sum() / p.n : 0;
+  return pixels_.empty() ? 0 : sum / double(pixels_.size());
+}
+
+}  // namespace tessera

@@ -1,0 +1,206 @@
+// Fresnel, Snell's law, total internal reflection, and sampling of every BSDF.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/bsdf/bsdf.h"
+#include "core/bsdf/fresnel.h"
+#include "core/bsdf/microfacet.h"
+#include "core/sampling/sampler.h"
+#include "tests/core/chi2.h"
+
+namespace tessera {
+namespace {
+
+constexpr double kAlpha = 1e-3;
+
+Vec3 dir(float theta) { return {std::sin(theta), 0, std::cos(theta)}; }
+
+TEST(Fresnel, NormalIncidenceIsTheSquaredIndexRatio) {
+  for (float n : {1.33f, 1.45f, 1.5f, 2.42f}) {
+    const float r0 = ((n - 1) / (n + 1)) * ((n - 1) / (n + 1));
+    EXPECT_NEAR(fresnel_dielectric(1, n), r0, 1e-6f);
+    EXPECT_NEAR(fresnel_dielectric(-1, n), r0, 1e-6f);  // same from inside
+  }
+}
+
+TEST(Fresnel, AtBrewstersAngleOnlyThePerpendicularPartReflects) {
+  const float n = 1.5f, theta_b = std::atan(n);
+  const float ci = std::cos(theta_b), st = std::sin(theta_b) / n, ct = std::sqrt(1 - st * st);
+  const float r_perp = (ci - n * ct) / (ci + n * ct);
+  EXPECT_NEAR(fresnel_dielectric(ci, n), 0.5f * r_perp * r_perp, 1e-6f);
+}
+
+TEST(Fresnel, KnownValueForGlassAt60Degrees) {
+  // n = 1.5, 60 degrees: Rs = 0.1770, Rp = 0.0017 (textbook values), F = 0.0894.
+  EXPECT_NEAR(fresnel_dielectric(0.5f, 1.5f), 0.5f * (0.17703f + 0.00170f), 2e-4f);
+}
+
+TEST(Fresnel, TotalInternalReflectionBeyondTheCriticalAngle) {
+  const float n = 1.5f, critical = std::asin(1 / n);
+  EXPECT_LT(fresnel_dielectric(-std::cos(critical - 0.01f), n), 1.0f);
+  EXPECT_EQ(fresnel_dielectric(-std::cos(critical + 0.01f), n), 1.0f);
+  Vec3 wt;
+  float etap;
+  // From inside: wo below the surface at more than the critical angle cannot refract.
+  const Vec3 wo_inside{std::sin(critical + 0.01f), 0, -std::cos(critical + 0.01f)};
+  EXPECT_FALSE(refract(wo_inside, Vec3{0, 0, 1}, n, &wt, &etap));
+}
+
+TEST(Fresnel, IndexOneIsInvisible) {
+  for (float t = 0; t < 1.5f; t += 0.1f) {
+    EXPECT_NEAR(fresnel_dielectric(std::cos(t), 1.0f), 0.0f, 1e-7f);
+    Vec3 wt;
+    float etap;
+    ASSERT_TRUE(refract(dir(t), Vec3{0, 0, 1}, 1.0f, &wt, &etap));
+    EXPECT_NEAR(wt.x, -dir(t).x, 1e-6f);
+    EXPECT_NEAR(wt.z, -dir(t).z, 1e-6f);
+  }
+}
+
+TEST(Snell, RefractedDirectionObeysSnellsLawBothWays) {
+  const float n = 1.45f;
+  for (float t = 0.05f; t < 1.5f; t += 0.1f) {
+    Vec3 wt;
+    float etap;
+    ASSERT_TRUE(refract(dir(t), Vec3{0, 0, 1}, n, &wt, &etap));
+    EXPECT_NEAR(length(wt), 1.0f, 1e-5f);
+    EXPECT_LT(wt.z, 0);
+    EXPECT_NEAR(std::sin(t), n * std::sqrt(wt.x * wt.x + wt.y * wt.y), 1e-5f);
+    EXPECT_FLOAT_EQ(etap, n);
+    Vec3 back;  // reciprocity: refracting the transmitted direction gives wo back
+    ASSERT_TRUE(refract(wt, Vec3{0, 0, 1}, n, &back, &etap));
+    EXPECT_NEAR(back.x, dir(t).x, 1e-5f);
+    EXPECT_NEAR(back.z, dir(t).z, 1e-5f);
+    EXPECT_FLOAT_EQ(etap, 1 / n);
+  }
+}
+
+TEST(Bsdf, GlassChoosesReflectionWithTheFresnelProbability) {
+  Material glass;
+  glass.kind = Material::Kind::kGlass;
+  glass.ior = 1.5f;
+  glass.reflectance = glass.transmittance = Rgb(1);
+  for (float t : {0.0f, 0.7f, 1.3f}) {
+    const Vec3 wo = dir(t);
+    const int n = 100000;
+    int reflected = 0;
+    for (int i = 0; i < n; ++i) {
+      BsdfSample s;
+      ASSERT_TRUE(bsdf_sample(glass, wo, (i + 0.5f) / n, Vec2{0.5f, 0.5f}, &s));
+      EXPECT_TRUE(s.delta);
+      if (s.wi.z > 0) {
+        ++reflected;
+        EXPECT_EQ(s.weight.r, 1.0f);
+      } else {
+        // Radiance crossing into the denser medium is scaled by 1 / eta^2.
+        EXPECT_NEAR(s.weight.r, 1 / (1.5f * 1.5f), 1e-6f);
+      }
+    }
+    EXPECT_NEAR(double(reflected) / n, fresnel_dielectric(wo.z, 1.5f), 1e-4);
+  }
+}
+
+TEST(Bsdf, GlassReflectsTotallyInsideBeyondTheCriticalAngle) {
+  Material glass;
+  glass.kind = Material::Kind::kGlass;
+  glass.ior = 1.5f;
+  const Vec3 wo{std::sin(0.9f), 0, -std::cos(0.9f)};  // inside, 51.6 deg > 41.8 deg
+  for (float u : {0.0f, 0.5f, 0.999f}) {
+    BsdfSample s;
+    ASSERT_TRUE(bsdf_sample(glass, wo, u, {}, &s));
+    EXPECT_LT(s.wi.z, 0);  // stays inside
+    EXPECT_NEAR(s.wi.x, -wo.x, 1e-6f);
+  }
+}
+
+TEST(Bsdf, RefractionOnlyEndsUnderTotalInternalReflection) {
+  Material m;
+  m.kind = Material::Kind::kRefraction;
+  m.ior = 1.45f;
+  BsdfSample s;
+  EXPECT_FALSE(bsdf_sample(m, Vec3{std::sin(1.2f), 0, -std::cos(1.2f)}, 0.5f, {}, &s));
+  EXPECT_TRUE(bsdf_sample(m, dir(1.2f), 0.5f, {}, &s));
+  EXPECT_LT(s.wi.z, 0);
+}
+
+TEST(Bsdf, MirrorReflectsAboutTheNormal) {
+  Material m;
+  m.kind = Material::Kind::kMirror;
+  m.reflectance = Rgb(1.0f, 0.8f, 0.4f);
+  BsdfSample s;
+  ASSERT_TRUE(bsdf_sample(m, Vec3{0.6f, 0, 0.8f}, 0, {}, &s));
+  EXPECT_FLOAT_EQ(s.wi.x, -0.6f);
+  EXPECT_FLOAT_EQ(s.wi.z, 0.8f);
+  EXPECT_FLOAT_EQ(s.weight.g, 0.8f);
+}
+
+TEST(Bsdf, DiffuseSamplingMatchesItsPdfAndWeightIsTheAlbedo) {
+  Material m;
+  m.reflectance = Rgb(0.6f);
+  const Vec3 wo = normalize(Vec3{0.3f, 0.2f, 0.9f});
+  const auto r = testing::chi2_directions(
+      [&](int i) -> std::optional<Vec3> {
+        Sampler sp(3, 0, uint32_t(i));
+        BsdfSample s;
+        if (!bsdf_sample(m, wo, sp.next_1d(), sp.next_2d(), &s)) return std::nullopt;
+        EXPECT_FLOAT_EQ(s.weight.r, 0.6f);
+        return s.wi;
+      },
+      [&](Vec3 wi) { return double(bsdf_pdf(m, wo, wi)); }, 200000);
+  EXPECT_GT(r.p_value, kAlpha) << r.describe();
+}
+
+class MicrofacetTest : public ::testing::TestWithParam<std::tuple<float, float>> {};
+
+TEST_P(MicrofacetTest, ImportanceSamplingMatchesItsPdf) {
+  const auto [alpha, theta] = GetParam();
+  Material m;
+  m.kind = Material::Kind::kMicrofacet;
+  m.alpha = alpha;
+  m.eta = Rgb(0.2f);
+  m.k = Rgb(3.9f);
+  const Vec3 wo = dir(theta);
+  const auto r = testing::chi2_directions(
+      [&](int i) -> std::optional<Vec3> {
+        Sampler sp(9, 0, uint32_t(i));
+        BsdfSample s;
+        const float u1 = sp.next_1d();
+        if (!bsdf_sample(m, wo, u1, sp.next_2d(), &s)) return std::nullopt;
+        // The weight is f cos / pdf, consistent with eval and pdf.
+        const Rgb f = bsdf_eval(m, wo, s.wi);
+        EXPECT_NEAR(s.weight.r, f.r * s.wi.z / bsdf_pdf(m, wo, s.wi), 1e-3f * std::max(1.0f, s.weight.r));
+        return s.wi;
+      },
+      [&](Vec3 wi) { return double(bsdf_pdf(m, wo, wi)); }, 300000, 40, 80);
+  EXPECT_GT(r.p_value, kAlpha) << r.describe();
+}
+
+INSTANTIATE_TEST_SUITE_P(AlphasAndAngles, MicrofacetTest,
+                         ::testing::Values(std::make_tuple(0.05f, 0.3f), std::make_tuple(0.25f, 0.0f),
+                                           std::make_tuple(0.25f, 1.0f), std::make_tuple(0.5f, 1.3f)));
+
+TEST(Microfacet, BeckmannProjectedAreaIsOne) {
+  // Integral of D(h) cos(theta_h) over the hemisphere is 1 (normalisation of D).
+  for (float alpha : {0.05f, 0.25f, 0.6f}) {
+    const Beckmann d(alpha);
+    double sum = 0;
+    const int nt = 4000;
+    for (int i = 0; i < nt; ++i) {
+      const double t = (i + 0.5) / nt * M_PI / 2;
+      const Vec3 h{float(std::sin(t)), 0, float(std::cos(t))};
+      sum += d.d(h) * std::cos(t) * std::sin(t) * (M_PI / 2 / nt) * 2 * M_PI;
+    }
+    EXPECT_NEAR(sum, 1.0, 2e-3) << alpha;
+  }
+}
+
+TEST(Microfacet, ConductorFresnelIsOneForAPerfectConductor) {
+  EXPECT_NEAR(fresnel_conductor(0.5f, 0.0f, 1e4f), 1.0f, 1e-3f);
+  // Gold-like eta/k at normal incidence: ((n-1)^2 + k^2) / ((n+1)^2 + k^2).
+  const float n = 0.2f, k = 3.0f;
+  EXPECT_NEAR(fresnel_conductor(1.0f, n, k), ((n - 1) * (n - 1) + k * k) / ((n + 1) * (n + 1) + k * k), 1e-5f);
+}
+
+}  // namespace
+}  // namespace tessera

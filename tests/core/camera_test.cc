@@ -1,0 +1,61 @@
+// Camera framing (CS184 section 2.2/2.3) and the thin lens.
+#include <gtest/gtest.h>
+
+#include "core/camera/camera.h"
+#include "core/scene/collada/collada_loader.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+namespace {
+
+TEST(Camera, Cs184FramingOfTheCornellBoxes) {
+  TESSERA_REQUIRE_SHARED_SCENE(path, "CBspheres.dae");
+  const Scene scene = load_collada_file(path);
+  CameraSettings cs;
+  cs.width = 480;
+  cs.height = 360;
+  const Camera cam(scene, cs);
+  // Format doc 2.2: eye (0, 0.75, 4.8023) looking -Z; 2.3: 30.68 x 23.25 degrees at 480x360.
+  EXPECT_NEAR(cam.eye().x, 0, 1e-3);
+  EXPECT_NEAR(cam.eye().y, 0.75, 1e-3);
+  EXPECT_NEAR(cam.eye().z, 4.8023, 2e-3);
+  EXPECT_NEAR(cam.forward().z, -1, 1e-5);
+  EXPECT_NEAR(2 * std::atan(cam.tan_half_hfov()) * 180 / M_PI, 30.68, 0.01);
+  EXPECT_NEAR(2 * std::atan(cam.tan_half_vfov()) * 180 / M_PI, 23.25, 0.01);
+  cs.width = 800;
+  cs.height = 600;
+  EXPECT_NEAR(2 * std::atan(Camera(scene, cs).tan_half_hfov()) * 180 / M_PI, 49.13, 0.01);
+}
+
+TEST(Camera, ThinLensRaysThroughOnePixelMeetOnTheFocalPlane) {
+  Scene scene;
+  scene.camera.present = true;
+  CameraSettings cs;
+  cs.framing = Framing::kFile;
+  cs.lens_radius = 0.2f;
+  cs.focal_distance = 3.0f;
+  const Camera cam(scene, cs);
+  Vec3 first;
+  for (int i = 0; i < 16; ++i) {
+    const Ray r = cam.generate(100.5f, 200.5f, Vec2{(i % 4 + 0.5f) / 4, (i / 4 + 0.5f) / 4});
+    const float t = -3.0f / r.d.z;  // the camera looks down -z from the origin
+    const Vec3 p = r.o + r.d * t;
+    if (i == 0) first = p;
+    EXPECT_NEAR(p.x, first.x, 1e-5f);
+    EXPECT_NEAR(p.y, first.y, 1e-5f);
+    EXPECT_LE(length(r.o), 0.2f + 1e-6f);
+  }
+}
+
+TEST(Camera, PinholeIsTheZeroApertureLimit) {
+  Scene scene;
+  scene.camera.present = true;
+  CameraSettings cs;
+  cs.framing = Framing::kFile;
+  const Ray a = Camera(scene, cs).generate(10, 20, {0.9f, 0.1f});
+  EXPECT_EQ(a.o.x, 0);
+  EXPECT_EQ(a.o.y, 0);
+}
+
+}  // namespace
+}  // namespace tessera

@@ -1,0 +1,263 @@
+// The CS184 COLLADA loader: what it finds in every shared scene, and a clear error for
+// every kind of bad input.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "core/scene/collada/collada_loader.h"
+#include "core/scene/load.h"
+#include "core/scene/scene_error.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+namespace {
+
+std::string read(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+size_t spheres_with(const Scene& s, Material::Kind k) {
+  size_t n = 0;
+  for (const Sphere& sp : s.spheres) n += s.materials[sp.material].kind == k;
+  return n;
+}
+
+const Sphere* sphere_near(const Scene& s, Vec3 c) {
+  for (const Sphere& sp : s.spheres)
+    if (length(sp.center - c) < 1e-4f) return &sp;
+  return nullptr;
+}
+
+void expect_cornell_walls(const Scene& s) {
+  size_t wall_tris = 0, wall_verts = 0;
+  for (const Mesh& m : s.meshes) {
+    if (m.light >= 0) continue;
+    if (m.triangle_count() == 2) {
+      wall_tris += 2;
+      wall_verts += m.positions.size();
+    }
+  }
+  EXPECT_EQ(wall_tris, 10u);
+  EXPECT_EQ(wall_verts, 20u);
+  const Bounds b = s.object_bounds();  // room x in [-1,1], y in [0,1.5], z in [-1,1]
+  EXPECT_NEAR(b.lo.x, -1, 1e-4);
+  EXPECT_NEAR(b.hi.x, 1, 1e-4);
+  EXPECT_NEAR(b.lo.y, 0, 1e-4);
+  EXPECT_NEAR(b.hi.y, 1.5, 1e-4);
+  EXPECT_NEAR(b.hi.z, 1, 1e-4);
+}
+
+void expect_cb_area_light(const Scene& s, float color) {
+  ASSERT_EQ(s.lights.size(), 1u);
+  const Light& l = s.lights[0];
+  EXPECT_EQ(l.kind, Light::Kind::kRect);  // the CGL area wins over the common point
+  EXPECT_NEAR(l.area, 0.48f, 1e-5);
+  EXPECT_NEAR(l.position.y, 1.49f, 1e-5);
+  EXPECT_NEAR(l.normal.y, -1, 1e-5);
+  EXPECT_NEAR(length(l.edge_x), 0.6f, 1e-5);
+  EXPECT_NEAR(std::fabs(l.edge_x.x), 0.6f, 1e-5);
+  EXPECT_NEAR(std::fabs(l.edge_y.z), 0.8f, 1e-5);
+  EXPECT_EQ(l.color.r, color);
+}
+
+TEST(ColladaShared, CBspheres) {
+  TESSERA_REQUIRE_SHARED_SCENE(path, "CBspheres.dae");
+  const Scene s = load_scene(path);
+  expect_cornell_walls(s);
+  expect_cb_area_light(s, 10);
+  ASSERT_EQ(s.spheres.size(), 2u);
+  const Sphere* glass = sphere_near(s, {0.4f, 0.3f, 0.3f});
+  const Sphere* mirror = sphere_near(s, {-0.4f, 0.3f, -0.3f});
+  ASSERT_TRUE(glass && mirror);
+  EXPECT_NEAR(glass->radius, 0.3f, 1e-6);
+  EXPECT_EQ(s.materials[glass->material].kind, Material::Kind::kGlass);
+  EXPECT_FLOAT_EQ(s.materials[glass->material].ior, 1.45f);
+  EXPECT_EQ(s.materials[mirror->material].kind, Material::Kind::kMirror);
+  EXPECT_EQ(s.triangle_count(), 12u);  // 10 wall triangles + the light's 2
+  EXPECT_TRUE(s.camera.present);
+  EXPECT_NEAR(s.camera.xfov_deg, 49.13434, 1e-9);
+}
+
+TEST(ColladaShared, CBspheresLambertian) {
+  TESSERA_REQUIRE_SHARED_SCENE(path, "CBspheres_lambertian.dae");
+  const Scene s = load_scene(path);
+  expect_cornell_walls(s);
+  expect_cb_area_light(s, 10);
+  ASSERT_EQ(spheres_with(s, Material::Kind::kDiffuse), 2u);
+  EXPECT_FLOAT_EQ(s.materials[s.spheres[0].material].reflectance.g, 0.8f);
+}
+
+TEST(ColladaShared, CBspheresRefract) {
+  TESSERA_REQUIRE_SHARED_SCENE(path, "CBspheres_refract.dae");
+  const Scene s = load_scene(path);
+  expect_cornell_walls(s);
+  EXPECT_EQ(spheres_with(s, Material::Kind::kRefraction), 1u);
+  EXPECT_EQ(spheres_with(s, Material::Kind::kMirror), 1u);
+}
+
+TEST(ColladaShared, CBempty) {
+  TESSERA_REQUIRE_SHARED_SCENE(path, "CBempty.dae");
+  const Scene s = load_scene(path);
+  expect_cornell_walls(s);
+  EXPECT_TRUE(s.spheres.empty());
+  ASSERT_EQ(s.lights.size(), 1u);
+  EXPECT_EQ(s.lights[0].kind, Light::Kind::kPoint);
+  EXPECT_EQ(s.lights[0].color.r, 5);
+  EXPECT_NEAR(s.lights[0].position.y, 1.49f, 1e-4);
+  EXPECT_NEAR(s.lights[0].position.z, 0.0043f, 1e-4);
+  EXPECT_EQ(s.triangle_count(), 10u);
+}
+
+TEST(ColladaShared, CBdragonKeepsItsUnusedVertex) {
+  TESSERA_REQUIRE_SHARED_SCENE(path, "CBdragon.dae");
+  const Scene s = load_scene(path);
+  expect_cb_area_light(s, 10);
+  const Mesh* dragon = nullptr;
+  for (const Mesh& m : s.meshes)
+    if (m.triangle_count() > 1000) dragon = &m;
+  ASSERT_TRUE(dragon);
+  EXPECT_EQ(dragon->triangle_count(), 74998u);
+  EXPECT_EQ(dragon->positions.size(), 37500u);
+  EXPECT_EQ(s.triangle_count(), 75008u + 2);
+  const Material& gold = s.materials[dragon->material];
+  EXPECT_EQ(gold.kind, Material::Kind::kMirror);
+  EXPECT_FLOAT_EQ(gold.reflectance.g, 0.8f);
+  EXPECT_FLOAT_EQ(gold.reflectance.b, 0.4f);
+}
+
+TEST(ColladaOwn, CornellSpheresUsesStandardTransformsAndFanTriangulation) {
+  const Scene s = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  ASSERT_EQ(s.lights.size(), 1u);
+  const Light& l = s.lights[0];
+  // translate 0 0.74 0, rotate -90 about x, scale 0.5 0.5 1: a 0.5 x 0.5 light facing down.
+  EXPECT_NEAR(l.position.y, 0.74f, 1e-6);
+  EXPECT_NEAR(l.normal.y, -1, 1e-6);
+  EXPECT_NEAR(l.area, 0.25f, 1e-6);
+  EXPECT_EQ(s.spheres.size(), 2u);
+  EXPECT_EQ(s.triangle_count(), 12u);  // 5 quads fanned into 2 triangles each, + light
+  EXPECT_EQ(spheres_with(s, Material::Kind::kGlass), 1u);
+}
+
+// ---- bad input: a one-line error naming the file, the element and the problem --------
+
+class BadCollada : public ::testing::Test {
+ protected:
+  std::string base = read(testing::source_path("scenes/cornell-spheres.dae"));
+  std::string replaced(const std::string& from, const std::string& to) {
+    std::string s = base;
+    const size_t at = s.find(from);
+    EXPECT_NE(at, std::string::npos) << from;
+    return s.replace(at, from.size(), to);
+  }
+  void expect_error(const std::string& text, const std::string& element, const std::string& reason) {
+    try {
+      load_collada_string(text, "bad.dae");
+      ADD_FAILURE() << "loaded without error; expected: " << reason;
+    } catch (const SceneError& e) {
+      const std::string what = e.what();
+      EXPECT_EQ(what.rfind("bad.dae: ", 0), 0u) << what;
+      EXPECT_NE(what.find(element), std::string::npos) << what;
+      EXPECT_NE(what.find(reason), std::string::npos) << what;
+      EXPECT_EQ(what.find('\n'), std::string::npos) << "one line: " << what;
+    }
+  }
+};
+
+TEST_F(BadCollada, TruncatedFile) { expect_error(base.substr(0, base.size() / 2), "line ", "XML parse error"); }
+
+TEST_F(BadCollada, GarbageBytes) {
+  std::string junk(4096, '\0');
+  for (size_t i = 0; i < junk.size(); ++i) junk[i] = char((i * 2654435761u) >> 13);
+  try {
+    load_collada_string(junk, "bad.dae");
+    ADD_FAILURE();
+  } catch (const SceneError& e) {
+    EXPECT_EQ(std::string(e.what()).rfind("bad.dae: ", 0), 0u);
+  }
+}
+
+TEST_F(BadCollada, NotCollada) { expect_error("<html><body/></html>", "", "not a COLLADA document"); }
+
+TEST_F(BadCollada, DanglingUrl) {
+  expect_error(replaced("url=\"#glass-effect\"", "url=\"#no-such-effect\""), "<instance_effect",
+               "dangling reference '#no-such-effect'");
+}
+
+TEST_F(BadCollada, WrongFloatArrayCount) {
+  expect_error(replaced("floor-positions-array\" count=\"12\"", "floor-positions-array\" count=\"13\""),
+               "<float_array id=\"floor-positions-array\">", "count=\"13\" but 12 numbers present");
+}
+
+TEST_F(BadCollada, WrongPolygonCount) {
+  expect_error(replaced("<polylist count=\"1\">", "<polylist count=\"2\">"), "<polylist", "count=\"2\" but 1 polygons");
+}
+
+TEST_F(BadCollada, IndexOutOfRange) {
+  expect_error(replaced("<p>0 1 2 3</p>", "<p>0 1 2 9</p>"), "<polylist", "vertex index 9 out of range (4 positions)");
+}
+
+TEST_F(BadCollada, NegativeIndex) { expect_error(replaced("<p>0 1 2 3</p>", "<p>0 1 -2 3</p>"), "<p>", "out of range"); }
+
+TEST_F(BadCollada, WrongIndexCount) {
+  expect_error(replaced("<p>0 1 2 3</p>", "<p>0 1 2</p>"), "<polylist", "expected 4 indices in <p>, found 3");
+}
+
+TEST_F(BadCollada, NaNCoordinate) {
+  const std::string t = replaced("count=\"12\">-1 -0.75 -1", "count=\"12\">nan -0.75 -1");
+  expect_error(t, "<float_array", "non-finite number 'nan'");
+}
+
+TEST_F(BadCollada, InfiniteCoordinate) {
+  expect_error(replaced("count=\"12\">-1 -0.75 -1", "count=\"12\">1e999 -0.75 -1"), "<float_array", "non-finite number");
+}
+
+TEST_F(BadCollada, NotANumber) {
+  expect_error(replaced("count=\"12\">-1 -0.75 -1", "count=\"12\">-1 abc -1"), "<float_array", "'abc' is not a number");
+}
+
+TEST_F(BadCollada, UnknownCglKind) {
+  expect_error(replaced("<mirror><reflectance>0.95 0.95 0.95</reflectance></mirror>", "<velvet/>"), "<velvet>",
+               "unknown CGL material kind <velvet>");
+}
+
+TEST_F(BadCollada, MissingCglParameter) {
+  expect_error(replaced("<ior>1.5</ior>", ""), "<glass>", "missing <ior>");
+}
+
+TEST_F(BadCollada, UnknownLightType) {
+  expect_error(replaced("<area><color>12 12 12</color></area>", "<laser><color>1 1 1</color></laser>"), "<laser>",
+               "unknown light type <laser>");
+}
+
+TEST_F(BadCollada, BadUpAxis) { expect_error(replaced("Y_UP", "W_UP"), "<up_axis>", "unknown up_axis 'W_UP'"); }
+
+TEST_F(BadCollada, TwoVertexPolygon) {
+  expect_error(replaced("<vcount>4</vcount><p>0 1 2 3</p>", "<vcount>2 2</vcount><p>0 1 2 3</p>").replace(
+                   base.find("<polylist count=\"1\">"), 20, "<polylist count=\"2\">"),
+               "<polylist", "polygon with 2 vertices");
+}
+
+TEST_F(BadCollada, OrthographicCamera) {
+  expect_error(replaced("<perspective>", "<orthographic/><perspective>"), "<camera", "orthographic cameras are not supported");
+}
+
+TEST_F(BadCollada, SphereWithoutRadius) {
+  expect_error(replaced("<radius>0.3</radius>", ""), "<sphere>", "missing <radius>");
+}
+
+TEST(ColladaFile, MissingFileAndUnknownExtension) {
+  EXPECT_THROW(load_scene("/nonexistent/scene.dae"), SceneError);
+  try {
+    load_scene(testing::source_path("README.md"));
+    ADD_FAILURE();
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("unknown scene format"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace tessera

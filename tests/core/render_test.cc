@@ -1,0 +1,245 @@
+// Whole-renderer physics and determinism.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+
+#include "core/render/local_renderer.h"
+#include "core/scene/load.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+namespace {
+
+struct Estimate {
+  double mean = 0, stderr_ = 0;  // mean over pixels of the per-pixel means, and its std. error
+};
+
+Estimate film_estimate(const Film& film) {
+  Estimate e;
+  double var = 0;
+  for (const PixelSums& p : film.pixels()) {
+    e.mean += p.lum_sum() / p.n;
+    var += p.mean_variance();
+  }
+  const double n = double(film.pixels().size());
+  e.mean /= n;
+  e.stderr_ = std::sqrt(var) / n;
+  return e;
+}
+
+RenderResult render(const Scene& scene, RenderSettings s, int threads = 2, int tile = 16) {
+  const TileRenderer r(scene, s);
+  return render_image(r, threads, tile);
+}
+
+// A sphere of albedo rho inside a uniform two-sided emitter of radiance 1: every point on
+// the sphere sees radiance 1 over its whole hemisphere, so it reflects exactly rho.
+Scene furnace(Material inner) {
+  Scene s;
+  s.materials.push_back(inner);
+  Material e;
+  e.kind = Material::Kind::kEmission;
+  e.radiance = Rgb(1);
+  e.two_sided_emission = true;
+  s.materials.push_back(e);
+  s.spheres.push_back(Sphere{"inner", {0, 0, 0}, 1, 0, -1});
+  s.spheres.push_back(Sphere{"enclosure", {0, 0, 0}, 10, 1, -1});
+  s.camera.present = true;
+  s.camera.eye = {0, 0, 4};
+  s.camera.xfov_deg = 40;
+  s.camera.aspect_ratio = 1;
+  s.finalize();
+  return s;
+}
+
+RenderSettings furnace_settings() {
+  RenderSettings s;
+  s.camera.framing = Framing::kFile;
+  s.camera.width = s.camera.height = 24;
+  s.spp = 64;
+  s.max_depth = 100;
+  s.light_samples = 2;
+  return s;
+}
+
+TEST(Furnace, WhiteDiffuseSphereReflectsExactlyTheEmittedRadiance) {
+  Material white;
+  white.reflectance = Rgb(1);
+  const RenderResult r = render(furnace(white), furnace_settings());
+  const Estimate e = film_estimate(r.film);
+  // NEE and BSDF sampling both contribute (MIS): the mean is 1 within the estimator's noise.
+  EXPECT_NEAR(e.mean, 1.0, 5 * e.stderr_ + 1e-6) << "stderr " << e.stderr_;
+  EXPECT_LT(e.stderr_, 0.01);
+  EXPECT_EQ(r.stats.nan_samples, 0u);
+}
+
+TEST(Furnace, GreyDiffuseSphereReflectsItsAlbedo) {
+  Material grey;
+  grey.reflectance = Rgb(0.5f);
+  RenderSettings s = furnace_settings();
+  s.camera.width = s.camera.height = 8;  // the central pixels all see the sphere
+  s.window = Rect{2, 2, 4, 4};
+  const Estimate e = film_estimate(render(furnace(grey), s).film);
+  EXPECT_NEAR(e.mean, 0.5, 5 * e.stderr_ + 1e-6) << "stderr " << e.stderr_;
+}
+
+TEST(Furnace, GlassSphereConservesEnergyOnEveryPath) {
+  Material glass;
+  glass.kind = Material::Kind::kGlass;
+  glass.ior = 1.5f;
+  glass.reflectance = glass.transmittance = Rgb(1);
+  const RenderResult r = render(furnace(glass), furnace_settings());
+  // Reflection weighs 1, entering 1/eta^2 and leaving eta^2: each sample is exactly 1
+  // up to rounding, however often it reflects inside.
+  for (const PixelSums& p : r.film.pixels()) ASSERT_NEAR(p.lum_sum() / p.n, 1.0, 1e-4);
+}
+
+TEST(Furnace, IndexOneGlassVanishes) {
+  Material clear;
+  clear.kind = Material::Kind::kGlass;
+  clear.ior = 1.0f;
+  const RenderResult r = render(furnace(clear), furnace_settings());
+  for (const PixelSums& p : r.film.pixels()) ASSERT_NEAR(p.lum_sum() / p.n, 1.0, 1e-5);
+}
+
+RenderSettings small_cornell() {
+  RenderSettings s;
+  s.camera.width = 64;
+  s.camera.height = 48;
+  s.spp = 12;
+  s.pass_spp = 5;  // passes of 5, 5, 2
+  s.max_depth = 8;
+  s.seed = 7;
+  return s;
+}
+
+// Bitwise equality of the sums (field by field: the struct has padding).
+bool same_bits(const PixelSums& a, const PixelSums& b) {
+  return std::memcmp(&a.r, &b.r, sizeof a.r) == 0 && std::memcmp(&a.g, &b.g, sizeof a.g) == 0 &&
+         std::memcmp(&a.b, &b.b, sizeof a.b) == 0 && std::memcmp(&a.lum2, &b.lum2, sizeof a.lum2) == 0 && a.n == b.n;
+}
+
+bool identical(const Film& a, const Film& b) {
+  if (a.pixels().size() != b.pixels().size()) return false;
+  for (size_t i = 0; i < a.pixels().size(); ++i)
+    if (!same_bits(a.pixels()[i], b.pixels()[i])) return false;
+  return true;
+}
+
+TEST(Determinism, IdenticalBitsForAnyThreadCountAndTileSize) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  const RenderSettings s = small_cornell();
+  const RenderResult a = render(scene, s, 1, 7), b = render(scene, s, 2, 16), c = render(scene, s, 3, 64);
+  EXPECT_TRUE(identical(a.film, b.film));
+  EXPECT_TRUE(identical(a.film, c.film));
+  RenderSettings other = s;
+  other.seed = 8;
+  EXPECT_FALSE(identical(a.film, render(scene, other).film));
+}
+
+TEST(Determinism, AdaptiveSamplingIsReproducibleAndStopsEarly) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s = small_cornell();
+  s.spp = 64;
+  s.adaptive = true;
+  s.adaptive_batch = 8;
+  s.adaptive_tolerance = 0.2f;
+  const RenderResult a = render(scene, s, 1, 5), b = render(scene, s, 2, 32);
+  EXPECT_TRUE(identical(a.film, b.film));
+  uint32_t min_n = 1u << 30, max_n = 0;
+  for (const PixelSums& p : a.film.pixels()) {
+    min_n = std::min(min_n, p.n);
+    max_n = std::max(max_n, p.n);
+    // Stops only where CS184 checks: after B+1, 2B+1, ... samples, or at the maximum.
+    ASSERT_TRUE(p.n == 64 || (p.n - 1) % 8 == 0) << p.n;
+  }
+  EXPECT_EQ(min_n, 9u);  // some pixels converge at the first check
+  EXPECT_EQ(max_n, 64u);
+}
+
+TEST(Determinism, WindowRendersTheSamePixelsAsTheWholeImage) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s = small_cornell();
+  const RenderResult whole = render(scene, s);
+  s.window = Rect{10, 20, 17, 9};
+  const RenderResult part = render(scene, s);
+  for (int y = 0; y < 9; ++y)
+    for (int x = 0; x < 17; ++x)
+      ASSERT_TRUE(same_bits(part.film.at(x, y), whole.film.at(10 + x, 20 + y))) << x << "," << y;
+}
+
+TEST(MaxDepth, ZeroShowsOnlyEmitters) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s = small_cornell();
+  s.max_depth = 0;
+  s.camera.width = 480;  // CS184 framing: only at 480x360 does the frame reach the light
+  s.camera.height = 360;
+  s.spp = 1;
+  const RenderResult r = render(scene, s);
+  int lit = 0;
+  for (const PixelSums& p : r.film.pixels()) {
+    const double v = p.lum_sum() / p.n;
+    ASSERT_LE(v, 12.0 + 1e-9);  // at most the light's radiance
+    if (v > 0) ++lit;
+  }
+  EXPECT_GT(lit, 0);
+  EXPECT_LT(lit, int(r.film.pixels().size()) / 20);  // the light is a small part of the frame
+}
+
+TEST(MaxDepth, EachBounceAddsLight) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s = small_cornell();
+  double prev = -1;
+  for (int m : {0, 1, 2, 4}) {
+    s.max_depth = m;
+    const double mean = film_estimate(render(scene, s).film).mean;
+    EXPECT_GT(mean, prev) << "max depth " << m;
+    prev = mean;
+  }
+}
+
+TEST(Robustness, NoSelfIntersectionsAndNoNaNsInTheCornellBox) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  const RenderResult r = render(scene, small_cornell());
+  EXPECT_EQ(r.stats.rays.self_hits, 0u);
+  EXPECT_EQ(r.stats.nan_samples, 0u);
+  EXPECT_GT(r.stats.rays.rays, r.stats.samples);
+}
+
+// Smoke renders at low sample counts against stored means from 1024 spp renders (same
+// settings). Tolerance: 5 standard errors of the low-spp estimate, plus the reference's
+// own error, which is 4x smaller still.
+struct SmokeCase {
+  const char* scene;
+  bool shared;
+  double reference;
+};
+
+void PrintTo(const SmokeCase& c, std::ostream* os) { *os << c.scene; }
+
+class Smoke : public ::testing::TestWithParam<SmokeCase> {};
+
+TEST_P(Smoke, MeanRadianceMatchesTheStoredValue) {
+  const SmokeCase c = GetParam();
+  std::string path = c.shared ? testing::shared_scene(c.scene) : testing::source_path(std::string("scenes/") + c.scene);
+  if (path.empty()) GTEST_SKIP() << "shared CS184 scene " << c.scene << " not found under " TESSERA_SHARED_DIR;
+  const Scene scene = load_scene(path);
+  RenderSettings s;
+  s.camera.width = 160;
+  s.camera.height = 120;
+  s.spp = 16;
+  s.max_depth = 16;
+  const RenderResult r = render(scene, s);
+  const Estimate e = film_estimate(r.film);
+  EXPECT_NEAR(e.mean, c.reference, 5 * e.stderr_ * 1.03) << "stderr " << e.stderr_;
+  EXPECT_EQ(r.stats.nan_samples, 0u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Scenes, Smoke,
+                         ::testing::Values(SmokeCase{"CBspheres.dae", true, SMOKE_CBSPHERES},
+                                           SmokeCase{"cornell-spheres.dae", false, SMOKE_CORNELL}),
+                         [](const auto& info) { return std::string(info.param.shared ? "CBspheres" : "cornell_spheres"); });
+
+}  // namespace
+}  // namespace tessera

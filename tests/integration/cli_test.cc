@@ -1,0 +1,103 @@
+// The `tessera` executable as a user runs it: outputs, metadata, stats, and errors.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "core/io/image_io.h"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CommandResult {
+  int code = -1;
+  std::string out, err;
+};
+
+CommandResult run(const std::string& args) {
+  const fs::path dir = fs::temp_directory_path() / ("tessera_cli_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const std::string out = (dir / "out.txt").string(), err = (dir / "err.txt").string();
+  const std::string cmd = std::string(TESSERA_BIN_DIR) + "/tessera " + args + " >" + out + " 2>" + err;
+  const int status = std::system(cmd.c_str());
+  CommandResult r;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  auto slurp = [](const std::string& p) {
+    std::ifstream f(p);
+    std::stringstream ss;
+    ss << f.rdbuf();
+    return ss.str();
+  };
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_cli_out_" + std::to_string(::getpid()));
+  std::string scene = std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-spheres.dae";
+  void SetUp() override { fs::create_directories(dir); }
+  void TearDown() override { fs::remove_all(dir); }
+};
+
+TEST_F(Cli, RendersExrWithSppVarianceAndMetadataAndAPngAndStats) {
+  const std::string exr = (dir / "a.exr").string(), png = (dir / "a.png").string(),
+                    json = (dir / "s.json").string();
+  const CommandResult r = run("render " + scene + " -s 4 -r 40 30 -m 3 --seed 5 -q -f " + exr + " -f " + png +
+                    " --stats-json " + json);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("samples/s"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("rays/s"), std::string::npos) << r.out;
+  const tessera::ExrImage img = tessera::read_exr(exr);
+  EXPECT_EQ(img.width, 40);
+  EXPECT_EQ(img.height, 30);
+  for (const char* ch : {"R", "G", "B", "spp", "variance"}) EXPECT_TRUE(img.channels.count(ch)) << ch;
+  for (float n : img.channels.at("spp")) ASSERT_EQ(n, 4.0f);
+  for (float v : img.channels.at("variance")) ASSERT_GE(v, 0.0f);
+  EXPECT_EQ(img.metadata.at("tessera/seed"), "5");
+  EXPECT_NE(img.metadata.at("tessera/flags").find("-m 3"), std::string::npos);
+  EXPECT_NE(img.metadata.at("tessera/scene").find("cornell-spheres.dae"), std::string::npos);
+  EXPECT_TRUE(img.metadata.count("tessera/render_seconds"));
+  EXPECT_GT(fs::file_size(png), 100u);
+  std::ifstream jf(json);
+  const nlohmann::json j = nlohmann::json::parse(jf);
+  EXPECT_EQ(j.at("samples").get<uint64_t>(), 40u * 30u * 4u);
+  EXPECT_GT(j.at("rays_per_second").get<double>(), 0);
+  EXPECT_EQ(j.at("nan_samples").get<uint64_t>(), 0u);
+}
+
+TEST_F(Cli, CellRenderingWritesOnlyTheCell) {
+  const std::string exr = (dir / "cell.exr").string();
+  const CommandResult r = run("render " + scene + " -s 2 -r 64 48 -p 8 4 16 12 -q -f " + exr);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const tessera::ExrImage img = tessera::read_exr(exr);
+  EXPECT_EQ(img.width, 16);
+  EXPECT_EQ(img.height, 12);
+}
+
+TEST_F(Cli, MalformedSceneGivesOneLineNamingTheFileAndExitsNonZero) {
+  const std::string bad = (dir / "broken.dae").string();
+  std::ofstream(bad) << "<COLLADA><scene><instance_visual_scene url=\"#nowhere\"/></scene></COLLADA>";
+  const CommandResult r = run("render " + bad + " -q -f " + (dir / "x.exr").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("broken.dae"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("dangling reference '#nowhere'"), std::string::npos) << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "x.exr"));
+}
+
+TEST_F(Cli, BadFlagsAreRefused) {
+  EXPECT_NE(run("render " + scene + " -r 0 10").code, 0);
+  EXPECT_NE(run("render " + scene + " -p 60 0 20 20 -r 64 48").code, 0);
+  EXPECT_NE(run("render " + scene + " --camera sideways").code, 0);
+  EXPECT_NE(run("render /no/such/file.dae").code, 0);
+  EXPECT_NE(run("render " + scene + " -q -s 1 -r 8 8 -f " + (dir / "x.bmp").string()).code, 0);
+}
+
+}  // namespace
