@@ -42,7 +42,8 @@ class ProgressPrinter {
  public:
   explicit ProgressPrinter(bool quiet) : quiet_(quiet), tty_(isatty(STDERR_FILENO)) {}
   void operator()(const RenderProgress& p) {
-    if (quiet_) return;
+    if (quiet_ || finished_) return;
+    finished_ = p.fraction >= 1;
     const double eta = p.fraction > 0 ? p.seconds * (1 - p.fraction) / p.fraction : 0;
     if (tty_) {
       const int width = 30, filled = int(std::lround(p.fraction * width));
@@ -60,6 +61,7 @@ class ProgressPrinter {
 
  private:
   bool quiet_, tty_;
+  bool finished_ = false;
   double last_ = -1e9;
 };
 
