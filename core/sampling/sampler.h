@@ -15,7 +15,7 @@
 
 namespace tessera {
 
-inline uint32_t reverse_bits(uint32_t x) {
+constexpr uint32_t reverse_bits(uint32_t x) {
   x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
   x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
   x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
@@ -55,11 +55,17 @@ constexpr uint32_t sobol_dim1_reference(uint32_t i) {
 
 // The map is linear over GF(2), so it is the XOR of one table entry per input byte.
 // Shuffled indices use all 32 bits; this is 4 lookups instead of 32 iterations.
+// The sampler works on bit-reversed values (see Sampler), so the table holds
+// reverse(sobol_dim1(reverse(x))), which is just as linear.
 struct SobolDim1Table {
   uint32_t t[4][256];
-  constexpr SobolDim1Table() : t() {
+  uint32_t rev[4][256];
+  constexpr SobolDim1Table() : t(), rev() {
     for (int b = 0; b < 4; ++b)
-      for (uint32_t v = 0; v < 256; ++v) t[b][v] = sobol_dim1_reference(v << (8 * b));
+      for (uint32_t v = 0; v < 256; ++v) {
+        t[b][v] = sobol_dim1_reference(v << (8 * b));
+        rev[b][v] = reverse_bits(sobol_dim1_reference(reverse_bits(v << (8 * b))));
+      }
   }
 };
 inline constexpr SobolDim1Table kSobolDim1Table{};
@@ -69,6 +75,12 @@ inline uint32_t sobol_dim1(uint32_t i) {
   return t[0][i & 255] ^ t[1][(i >> 8) & 255] ^ t[2][(i >> 16) & 255] ^ t[3][i >> 24];
 }
 
+// reverse_bits(sobol_dim1(reverse_bits(r))).
+inline uint32_t sobol_dim1_reversed(uint32_t r) {
+  const auto& t = kSobolDim1Table.rev;
+  return t[0][r & 255] ^ t[1][(r >> 8) & 255] ^ t[2][(r >> 16) & 255] ^ t[3][r >> 24];
+}
+
 // Largest float below 1: keeps u in [0,1).
 constexpr float kOneMinusEpsilon = 0x1.fffffep-1f;
 inline float to_unit_float(uint32_t x) { return std::min(float(x >> 8) * 0x1p-24f, kOneMinusEpsilon); }
@@ -76,20 +88,25 @@ inline float to_unit_float(uint32_t x) { return std::min(float(x >> 8) * 0x1p-24
 class Sampler {
  public:
   Sampler(uint64_t seed, uint64_t pixel, uint32_t sample_index)
-      : key_(mix64(seed * 0x9E3779B97F4A7C15ull + pixel)), index_(sample_index) {}
+      : key_(mix64(seed * 0x9E3779B97F4A7C15ull + pixel)), reversed_index_(reverse_bits(sample_index)) {}
 
+  // Written in the bit-reversed domain, where Owen scrambling is a plain
+  // Laine-Karras permutation. With r = LK(reverse(i)) the shuffled index is j = reverse(r);
+  // scrambled dimension 0 is reverse(LK(j)) and dimension 1 a table lookup on r. Equal to
+  // nested_uniform_scramble(sobol_d(nested_uniform_scramble(i, s0)), s_d) of the textbook
+  // form (tested), with 3 bit reversals per 2D draw instead of 6.
   float next_1d() {
     const uint64_t h = dimension_hash();
-    const uint32_t i = nested_uniform_scramble(index_, uint32_t(h));
-    return to_unit_float(nested_uniform_scramble(reverse_bits(i), uint32_t(h >> 32)));
+    const uint32_t r = laine_karras_permutation(reversed_index_, uint32_t(h));
+    return to_unit_float(reverse_bits(laine_karras_permutation(reverse_bits(r), uint32_t(h >> 32))));
   }
 
   Vec2 next_2d() {
     const uint64_t h = dimension_hash();
     const uint64_t h2 = mix64(h);
-    const uint32_t i = nested_uniform_scramble(index_, uint32_t(h));
-    return {to_unit_float(nested_uniform_scramble(reverse_bits(i), uint32_t(h >> 32))),
-            to_unit_float(nested_uniform_scramble(sobol_dim1(i), uint32_t(h2)))};
+    const uint32_t r = laine_karras_permutation(reversed_index_, uint32_t(h));
+    return {to_unit_float(reverse_bits(laine_karras_permutation(reverse_bits(r), uint32_t(h >> 32)))),
+            to_unit_float(reverse_bits(laine_karras_permutation(sobol_dim1_reversed(r), uint32_t(h2))))};
   }
 
   uint32_t dimension() const { return dim_; }
@@ -99,7 +116,7 @@ class Sampler {
   uint64_t dimension_hash() { return mix64(key_ ^ (uint64_t(++dim_) * 0xD1B54A32D192ED03ull)); }
 
   uint64_t key_;
-  uint32_t index_;
+  uint32_t reversed_index_;
   uint32_t dim_ = 0;
 };
 

@@ -22,6 +22,20 @@ TEST(Sampler, SobolTableMatchesTheBitByBitDefinition) {
   }
 }
 
+TEST(Sampler, ReversedDomainFormEqualsTheTextbookOwenScrambledSobol) {
+  std::mt19937 rng(3);
+  for (int k = 0; k < 10000; ++k) {
+    const uint32_t i = rng() & 0xFFFF, s0 = rng(), s1 = rng(), s2 = rng();
+    const uint32_t shuffled = nested_uniform_scramble(i, s0);
+    const uint32_t r = laine_karras_permutation(reverse_bits(i), s0);
+    ASSERT_EQ(reverse_bits(r), shuffled);
+    ASSERT_EQ(nested_uniform_scramble(reverse_bits(shuffled), s1),
+              reverse_bits(laine_karras_permutation(reverse_bits(r), s1)));
+    ASSERT_EQ(nested_uniform_scramble(sobol_dim1(shuffled), s2),
+              reverse_bits(laine_karras_permutation(sobol_dim1_reversed(r), s2)));
+  }
+}
+
 TEST(Sampler, IsAPureFunctionOfSeedPixelIndexAndDimension) {
   Sampler a(42, 1234, 17), b(42, 1234, 17), c(43, 1234, 17), d(42, 1235, 17);
   for (int k = 0; k < 8; ++k) {
