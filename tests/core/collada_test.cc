@@ -261,3 +261,147 @@ TEST(ColladaFile, MissingFileAndUnknownExtension) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Every construct of the format document that the shipped scenes do not use.
+const char* kEveryConstruct = R"(<?xml version="1.0"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+  <asset><up_axis>Z_UP</up_axis></asset>
+  <library_lights>
+    <light id="amb"><technique_common><ambient><color>0.1 0.2 0.3</color></ambient></technique_common></light>
+    <light id="sun"><technique_common><directional><color>2 2 2</color></directional></technique_common></light>
+    <light id="bulb"><technique_common><point><color>5 5 5</color><constant_attenuation>1</constant_attenuation>
+      <linear_attenuation>0.5</linear_attenuation><quadratic_attenuation>0.25</quadratic_attenuation></point></technique_common></light>
+    <light id="spot"><technique_common><spot><color>1 1 1</color></spot></technique_common></light>
+  </library_lights>
+  <library_cameras><camera id="cam"><optics><technique_common><perspective><yfov>30</yfov><aspect_ratio>2</aspect_ratio>
+    </perspective></technique_common></optics></camera></library_cameras>
+  <library_effects>
+    <effect id="metal"><extra><technique profile="CGL"><microfacet><alpha>0.1</alpha><eta>0.2 0.4 1.4</eta><k>3.9 2.4 1.8</k></microfacet></technique></extra></effect>
+    <effect id="prism"><extra><technique profile="CGL"><refraction><transmittance>1 0.9 0.8</transmittance><roughness>0</roughness><ior>1.7</ior></refraction></technique></extra></effect>
+    <effect id="lamp"><extra><technique profile="CGL"><emission><radiance>4 4 4</radiance></emission></technique></extra></effect>
+    <effect id="lastwins"><extra><technique profile="CGL"><mirror><reflectance>1 1 1</reflectance></mirror>
+      <glass><reflectance>1 1 1</reflectance><transmittance>1 1 1</transmittance><roughness>0</roughness><ior>1.3</ior></glass></technique></extra></effect>
+    <effect id="blinn"><profile_COMMON><technique sid="common"><blinn><diffuse><color>0.1 0.5 0.9 1</color></diffuse></blinn></technique></profile_COMMON></effect>
+  </library_effects>
+  <library_materials>
+    <material id="m-metal"><instance_effect url="#metal"/></material>
+    <material id="m-prism"><instance_effect url="#prism"/></material>
+    <material id="m-lamp"><instance_effect url="#lamp"/></material>
+    <material id="m-last"><instance_effect url="#lastwins"/></material>
+    <material id="m-blinn"><instance_effect url="#blinn"/></material>
+  </library_materials>
+  <library_geometries>
+    <geometry id="tri"><mesh>
+      <source id="tri-pos"><float_array id="tri-pos-a" count="9">0 0 0 1 0 0 0 1 0</float_array></source>
+      <source id="tri-n"><float_array id="tri-n-a" count="3">0 0 1</float_array></source>
+      <source id="tri-uv"><float_array id="tri-uv-a" count="2">0 0</float_array></source>
+      <vertices id="tri-v"><input semantic="POSITION" source="#tri-pos"/></vertices>
+      <triangles count="1"><input semantic="TEXCOORD" source="#tri-uv" offset="2"/><input semantic="NORMAL" source="#tri-n" offset="0"/>
+        <input semantic="VERTEX" source="#tri-v" offset="1"/><p>0 0 0  0 1 0  0 2 0</p></triangles>
+    </mesh></geometry>
+    <geometry id="pent"><mesh>
+      <source id="pent-pos"><float_array id="pent-pos-a" count="15">0 0 0 2 0 0 2 1 0 1 2 0 0 1 0</float_array></source>
+      <vertices id="pent-v"><input semantic="POSITION" source="#pent-pos"/></vertices>
+      <polylist count="1"><input semantic="VERTEX" source="#pent-v" offset="0"/><vcount>5</vcount><p>0 1 2 3 4</p></polylist>
+    </mesh></geometry>
+    <geometry id="ball"><extra><technique profile="CGL"><sphere><radius>0.5</radius></sphere></technique></extra></geometry>
+  </library_geometries>
+  <library_visual_scenes><visual_scene id="s">
+    <node id="group">
+      <translate>0 0 1</translate>
+      <node id="child"><rotate>0 0 1 90</rotate><scale>2 2 2</scale>
+        <instance_geometry url="#tri"><bind_material><technique_common><instance_material symbol="x" target="#m-metal"/></technique_common></bind_material></instance_geometry>
+      </node>
+    </node>
+    <node id="pentagon"><instance_geometry url="#pent"><bind_material><technique_common><instance_material symbol="x" target="#m-lamp"/></technique_common></bind_material></instance_geometry></node>
+    <node id="prismball"><matrix>1 0 0 3 0 1 0 0 0 0 1 0</matrix><instance_geometry url="#ball"><bind_material><technique_common><instance_material symbol="x" target="#m-prism"/></technique_common></bind_material></instance_geometry></node>
+    <node id="glassball"><translate>-3 0 0</translate><instance_geometry url="#ball"><bind_material><technique_common><instance_material symbol="x" target="#m-last"/></technique_common></bind_material></instance_geometry></node>
+    <node id="blueball"><translate>0 5 0</translate><instance_geometry url="#ball"><bind_material><technique_common><instance_material symbol="x" target="#m-blinn"/></technique_common></bind_material></instance_geometry></node>
+    <node id="plainball"><translate>0 -5 0</translate><instance_geometry url="#ball"/></node>
+    <node id="amb-node"><instance_light url="#amb"/></node>
+    <node id="sun-node"><rotate>1 0 0 45</rotate><instance_light url="#sun"/></node>
+    <node id="bulb-node"><translate>0 0 3</translate><instance_light url="#bulb"/></node>
+    <node id="spot-node"><instance_light url="#spot"/></node>
+    <node id="cam-node"><translate>0 -4 0</translate><rotate>1 0 0 90</rotate><instance_camera url="#cam"/></node>
+  </visual_scene></library_visual_scenes>
+  <scene><instance_visual_scene url="#s"/></scene>
+</COLLADA>)";
+
+TEST(ColladaConstructs, EveryConstructOfTheFormatDocument) {
+  const Scene s = load_collada_string(kEveryConstruct, "every.dae");
+  // Z_UP maps (x, y, z) -> (-x, z, y).
+  ASSERT_EQ(s.meshes.size(), 2u);
+  const Mesh& tri = s.meshes[0];
+  ASSERT_EQ(tri.triangle_count(), 1u);
+  // VERTEX at offset 1 of stride 3: indices 0 1 2. Vertex 1 = (1,0,0): scale 2 -> (2,0,0),
+  // rotate 90 about z -> (0,2,0), translate -> (0,2,1), then Z_UP -> (0,1,2).
+  EXPECT_NEAR(tri.positions[tri.indices[1]].x, 0, 1e-6);
+  EXPECT_NEAR(tri.positions[tri.indices[1]].y, 1, 1e-6);
+  EXPECT_NEAR(tri.positions[tri.indices[1]].z, 2, 1e-6);
+  const Material& metal = s.materials[tri.material];
+  EXPECT_EQ(metal.kind, Material::Kind::kMicrofacet);
+  EXPECT_FLOAT_EQ(metal.alpha, 0.1f);
+  EXPECT_FLOAT_EQ(metal.k.g, 2.4f);
+  // A pentagon fans into 3 triangles; its emission material makes it a mesh light.
+  const Mesh& pent = s.meshes[1];
+  EXPECT_EQ(pent.triangle_count(), 3u);
+  ASSERT_GE(pent.light, 0);
+  EXPECT_EQ(s.lights[size_t(pent.light)].kind, Light::Kind::kMesh);
+  EXPECT_EQ(s.lights[size_t(pent.light)].color.r, 4);
+
+  ASSERT_EQ(s.spheres.size(), 4u);
+  EXPECT_EQ(s.materials[s.spheres[0].material].kind, Material::Kind::kRefraction);
+  EXPECT_FLOAT_EQ(s.materials[s.spheres[0].material].ior, 1.7f);
+  EXPECT_NEAR(s.spheres[0].center.x, -3, 1e-6);  // 15-number matrix; missing entry reads 0
+  EXPECT_EQ(s.materials[s.spheres[1].material].kind, Material::Kind::kGlass);  // last kind wins
+  EXPECT_FLOAT_EQ(s.materials[s.spheres[1].material].ior, 1.3f);
+  EXPECT_FLOAT_EQ(s.materials[s.spheres[2].material].reflectance.b, 0.9f);  // blinn diffuse
+  EXPECT_FLOAT_EQ(s.materials[s.spheres[3].material].reflectance.r, 0.5f);  // no binding: gray
+
+  size_t ambient = 0, directional = 0, point = 0;
+  for (const Light& l : s.lights) {
+    if (l.kind == Light::Kind::kAmbient) {
+      ++ambient;
+      EXPECT_FLOAT_EQ(l.color.b, 0.3f);
+    }
+    if (l.kind == Light::Kind::kDirectional) {
+      ++directional;
+      // -(W (0,0,-1,0)): rotate 45 about x gives (0, 0.707, -0.707); negated, then Z_UP.
+      EXPECT_NEAR(l.direction.y, 0.7071, 1e-4);
+      EXPECT_NEAR(l.direction.z, -0.7071, 1e-4);
+    }
+    if (l.kind == Light::Kind::kPoint) {
+      ++point;
+      EXPECT_FLOAT_EQ(l.att_linear, 0.5f);
+      EXPECT_FLOAT_EQ(l.att_quadratic, 0.25f);
+      EXPECT_NEAR(l.position.y, 3, 1e-6);
+    }
+  }
+  EXPECT_EQ(ambient, 1u);
+  EXPECT_EQ(directional, 1u);
+  EXPECT_EQ(point, 1u);
+  ASSERT_EQ(s.warnings.size(), 1u);  // the spot light
+  EXPECT_NE(s.warnings[0].find("spot"), std::string::npos);
+
+  ASSERT_TRUE(s.camera.present);
+  EXPECT_DOUBLE_EQ(*s.camera.yfov_deg, 30);
+  // Camera at (0,-4,0) looking along +y after the rotation; Z_UP -> eye (0,0,-4), looking +z.
+  EXPECT_NEAR(s.camera.eye.z, -4, 1e-5);
+  EXPECT_NEAR(s.camera.forward.z, 1, 1e-5);
+}
+
+TEST(ColladaConstructs, XUpAxis) {
+  std::string text = kEveryConstruct;
+  text.replace(text.find("Z_UP"), 4, "X_UP");
+  const Scene s = load_collada_string(text, "x.dae");
+  // X_UP maps (x, y, z) -> (y, x, -z): the point light at (0, 0, 3) goes to (0, 0, -3).
+  for (const Light& l : s.lights) {
+    if (l.kind == Light::Kind::kPoint) EXPECT_NEAR(l.position.z, -3, 1e-6);
+  }
+}
+
+}  // namespace
+}  // namespace tessera

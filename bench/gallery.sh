@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# Regenerates docs/gallery/*.png: the two series that define this renderer.
+#   CBspheres at max ray depth 0 1 2 3 4 5 100 (64 spp, 4 samples per light)
+#   CBdragon, lens radius 0.1 focused at nose / middle / tail / back wall, then lens
+#   radius 0.05 0.10 0.15 0.20 focused on its middle.
+# Renders at 480x360 (CS184 framing fills the frame at that size) and stores 2x
+# box-downsampled PNGs. Needs ../shared/scenes/cs184 and a built tree (deploy/build.sh).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+SHARED=${SHARED:-../shared/scenes/cs184}
+BIN=${BIN:-build/bin/tessera}
+OUT=docs/gallery
+TMP=$(mktemp -d)
+trap 'rm -rf "$TMP"' EXIT
+mkdir -p "$OUT"
+
+shrink() {  # full-size PNG -> half-size PNG (box filter), via Debian's python3-pil
+  /usr/bin/python3 -c "import sys; from PIL import Image; Image.open(sys.argv[1]).reduce(2).save(sys.argv[2], optimize=True)" "$1" "$2"
+}
+render() {  # name, then tessera render arguments
+  local name=$1; shift
+  echo "+ tessera render $*" >&2
+  "$BIN" render "$@" -q -f "$TMP/$name.png" | tee -a "$TMP/log.txt"
+  shrink "$TMP/$name.png" "$OUT/$name.png"
+}
+
+for m in 0 1 2 3 4 5 100; do
+  render "cbspheres-m$m" "$SHARED/CBspheres.dae" -s 64 -l 4 -m "$m"
+done
+for focus in nose:5.00 middle:4.80 tail:4.53 wall:5.80; do
+  render "cbdragon-b0.1-${focus%%:*}" "$SHARED/CBdragon.dae" -s 64 -l 4 -m 8 -b 0.1 -d "${focus##*:}"
+done
+for b in 0.05 0.10 0.15 0.20; do
+  render "cbdragon-b$b-middle" "$SHARED/CBdragon.dae" -s 64 -l 4 -m 8 -b "$b" -d 4.80
+done
+cp "$TMP/log.txt" "$OUT/render-log.txt"
