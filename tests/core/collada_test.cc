@@ -399,7 +399,8 @@ TEST(ColladaConstructs, XUpAxis) {
   const Scene s = load_collada_string(text, "x.dae");
   // X_UP maps (x, y, z) -> (y, x, -z): the point light at (0, 0, 3) goes to (0, 0, -3).
   for (const Light& l : s.lights) {
-    if (l.kind == Light::Kind::kPoint) EXPECT_NEAR(l.position.z, -3, 1e-6);
+    if (l.kind != Light::Kind::kPoint) continue;
+    EXPECT_NEAR(l.position.z, -3, 1e-6);
   }
 }
 
