@@ -31,8 +31,12 @@ LightSet::LightSet(const Scene& scene) : scene_(scene), mesh_data_(scene.lights.
 
 namespace {
 
+constexpr float kEps = std::numeric_limits<float>::epsilon() * 0.5f;
+constexpr float gamma(int n) { return (n * kEps) / (1 - n * kEps); }
+
 // Converts an area sample at q (normal n, `two_sided`) into a solid-angle sample from p.
-bool finish_area_sample(Vec3 p, Vec3 q, Vec3 n, float area_pdf, Rgb radiance, bool two_sided, LightSample* out) {
+bool finish_area_sample(Vec3 p, Vec3 q, Vec3 q_err, Vec3 n, float area_pdf, Rgb radiance, bool two_sided,
+                        LightSample* out) {
   Vec3 d = q - p;
   const float dist2 = dot(d, d);
   if (!(dist2 > 0)) return false;
@@ -46,6 +50,7 @@ bool finish_area_sample(Vec3 p, Vec3 q, Vec3 n, float area_pdf, Rgb radiance, bo
   out->wi = d;
   out->point = q;
   out->light_n = n;
+  out->point_err = q_err;
   out->dist = dist;
   out->pdf = area_pdf * dist2 / c;
   return std::isfinite(out->pdf);
@@ -57,8 +62,10 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
   const Light& l = scene_.lights[i];
   switch (l.kind) {
     case Light::Kind::kRect: {
-      const Vec3 q = l.position + l.edge_x * (u.x - 0.5f) + l.edge_y * (u.y - 0.5f);
-      return finish_area_sample(p, q, l.normal, 1 / l.area, l.color, false, out);
+      const Vec3 ex = l.edge_x * (u.x - 0.5f), ey = l.edge_y * (u.y - 0.5f);
+      const Vec3 q = l.position + (ex + ey);
+      const Vec3 err = abs(q) * gamma(1) + (abs(ex) + abs(ey)) * gamma(3);
+      return finish_area_sample(p, q, err, l.normal, 1 / l.area, l.color, false, out);
     }
     case Light::Kind::kMesh: {
       const MeshLightData& d = mesh_data_[i];
@@ -69,17 +76,20 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
       const Vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]],
                  c = m.positions[m.indices[3 * t + 2]];
       const Vec2 bc = square_to_triangle(u);
-      const Vec3 q = a * (1 - bc.x - bc.y) + b * bc.x + c * bc.y;
+      const Vec3 e1 = (b - a) * bc.x, e2 = (c - a) * bc.y;
+      const Vec3 q = a + (e1 + e2);  // as make_surface_point: exact edges far from the origin
+      const Vec3 err = abs(q) * gamma(1) + (abs(e1) + abs(e2)) * gamma(4);
       const Vec3 n = cross(b - a, c - a);
       const float len = length(n);
       if (!(len > 0)) return false;
-      return finish_area_sample(p, q, n / len, 1 / d.area, l.color, l.two_sided, out);
+      return finish_area_sample(p, q, err, n / len, 1 / d.area, l.color, l.two_sided, out);
     }
     case Light::Kind::kSphere: {
       const Sphere& s = scene_.spheres[l.shape];
       const Vec3 n = square_to_uniform_sphere(u);
       const Vec3 q = s.center + n * s.radius;
-      return finish_area_sample(p, q, n, 1 / (4 * kPi * s.radius * s.radius), l.color, l.two_sided, out);
+      const Vec3 err = abs(q) * gamma(1) + abs(n * s.radius) * gamma(3);
+      return finish_area_sample(p, q, err, n, 1 / (4 * kPi * s.radius * s.radius), l.color, l.two_sided, out);
     }
     case Light::Kind::kPoint: {
       Vec3 d = l.position - p;

@@ -29,6 +29,7 @@ constexpr Vec3 operator*(Vec3 a, float s) { return {a.x * s, a.y * s, a.z * s}; 
 constexpr Vec3 operator*(float s, Vec3 a) { return a * s; }
 constexpr Vec3 operator/(Vec3 a, float s) { return a * (1.0f / s); }
 inline Vec3& operator+=(Vec3& a, Vec3 b) { return a = a + b; }
+constexpr bool operator==(Vec3 a, Vec3 b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
 constexpr float dot(Vec3 a, Vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 constexpr Vec3 cross(Vec3 a, Vec3 b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};

@@ -12,8 +12,8 @@ namespace {
 
 constexpr float kMachineEps = std::numeric_limits<float>::epsilon() * 0.5f;
 constexpr float gamma(int n) { return (n * kMachineEps) / (1 - n * kMachineEps); }
-// Embree's watertight test has its own rounding; widen pbrt's bound to cover it.
-constexpr float kOffsetSafety = 4.0f;
+// Margin over the error bound for Embree's own rounding in its plane test.
+constexpr float kOffsetSafety = 2.0f;
 
 // std::nextafter is an out-of-line libm call; these are a few integer operations.
 float next_float_up(float v) {
@@ -45,7 +45,8 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
     const double k = len > 0 ? s.radius / len : 0;
     sp.ng = len > 0 ? Vec3{float(px / len), float(py / len), float(pz / len)} : Vec3{0, 0, 1};
     sp.p = Vec3{float(s.center.x + px * k), float(s.center.y + py * k), float(s.center.z + pz * k)};
-    sp.p_err = abs(sp.p) * gamma(5) + abs(s.center) * gamma(2);
+    // Computed in double: the only error left is rounding each coordinate to float.
+    sp.p_err = abs(sp.p) * gamma(2);
     sp.ns = sp.ng;
     sp.material = s.material;
     sp.light = s.light;
@@ -55,8 +56,12 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
   const uint32_t i0 = m.indices[3 * hit.prim], i1 = m.indices[3 * hit.prim + 1], i2 = m.indices[3 * hit.prim + 2];
   const Vec3 p0 = m.positions[i0], p1 = m.positions[i1], p2 = m.positions[i2];
   const float b1 = hit.u, b2 = hit.v, b0 = 1 - b1 - b2;
-  sp.p = p0 * b0 + p1 * b1 + p2 * b2;
-  sp.p_err = (abs(p0 * b0) + abs(p1 * b1) + abs(p2 * b2)) * gamma(7);
+  // p0 + b1 e1 + b2 e2 rather than b0 p0 + b1 p1 + b2 p2: far from the origin the edges
+  // of a small triangle subtract exactly, so the error is one rounding of |p| plus the
+  // (small) error of the edge terms, not three roundings of terms as large as |p|.
+  const Vec3 e1 = p1 - p0, e2 = p2 - p0;
+  sp.p = p0 + (e1 * b1 + e2 * b2);
+  sp.p_err = abs(sp.p) * gamma(1) + (abs(e1 * b1) + abs(e2 * b2)) * gamma(4);
   Vec3 ng = cross(p1 - p0, p2 - p0);
   float len = length(ng);
   if (!(len > 0) || !std::isfinite(len)) {  // degenerate triangle: Embree's own normal
@@ -73,11 +78,11 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
   return sp;
 }
 
-Vec3 offset_ray_origin(const SurfacePoint& sp, Vec3 w) {
-  const float d = dot(abs(sp.ng), sp.p_err) * kOffsetSafety;
-  Vec3 offset = sp.ng * d;
-  if (dot(w, sp.ng) < 0) offset = -offset;
-  Vec3 po = sp.p + offset;
+Vec3 offset_point(Vec3 p, Vec3 p_err, Vec3 n, Vec3 w) {
+  const float d = dot(abs(n), p_err) * kOffsetSafety;
+  Vec3 offset = n * d;
+  if (dot(w, n) < 0) offset = -offset;
+  Vec3 po = p + offset;
   for (int i = 0; i < 3; ++i) {  // round away from the surface
     if (offset[i] > 0) po[i] = next_float_up(po[i]);
     else if (offset[i] < 0) po[i] = next_float_down(po[i]);
@@ -109,8 +114,13 @@ Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& f
       shadow.o = offset_ray_origin(sp, ls.wi);
       shadow.d = ls.wi;
       shadow.tmin = 0;
-      shadow.tmax = std::isinf(ls.dist) ? std::numeric_limits<float>::infinity()
-                                        : length(ls.point - shadow.o) * (1 - 1e-4f);
+      shadow.tmax = std::numeric_limits<float>::infinity();
+      if (!std::isinf(ls.dist)) {
+        // Both ends leave their surfaces (pbrt's SpawnRayTo): the light point is moved
+        // off the emitter toward p by its own error bound, so the ray cannot reach it.
+        const Vec3 target = ls.light_n == Vec3{} ? ls.point : offset_point(ls.point, ls.point_err, ls.light_n, -ls.wi);
+        shadow.tmax = length(target - shadow.o) * (1 - 1e-5f);
+      }
       ++counters.shadow_rays;
       if (accel_.occluded(shadow)) continue;
       Rgb c = f * ls.li * (std::fabs(wi.z) / ls.pdf);

@@ -33,9 +33,11 @@ struct SurfacePoint {
 };
 
 SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& hit);
-// Origin for a ray leaving p toward w: pushed off the surface along ng by the error
-// bound, so it can neither start behind the surface nor hit it again.
-Vec3 offset_ray_origin(const SurfacePoint& sp, Vec3 w);
+// A point p with error bound p_err on a surface with normal n, pushed off the surface along
+// n (to the side w points to) by the error bound, so that a ray between it and elsewhere
+// can neither start behind the surface nor hit it again.
+Vec3 offset_point(Vec3 p, Vec3 p_err, Vec3 n, Vec3 w);
+inline Vec3 offset_ray_origin(const SurfacePoint& sp, Vec3 w) { return offset_point(sp.p, sp.p_err, sp.ng, w); }
 
 class Integrator {
  public:

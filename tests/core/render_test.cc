@@ -243,3 +243,51 @@ INSTANTIATE_TEST_SUITE_P(Scenes, Smoke,
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// The same scene scaled by `s` about the origin, then moved by `t`.
+Scene transformed(Scene scene, float s, Vec3 t) {
+  for (Mesh& m : scene.meshes)
+    for (Vec3& p : m.positions) p = p * s + t;
+  for (Sphere& sp : scene.spheres) {
+    sp.center = sp.center * s + t;
+    sp.radius *= s;
+  }
+  for (Light& l : scene.lights) {
+    l.position = l.position * s + t;
+    l.edge_x = l.edge_x * s;
+    l.edge_y = l.edge_y * s;
+    l.area *= s * s;
+  }
+  return scene;
+}
+
+class ScaleInvariance : public ::testing::TestWithParam<std::pair<float, float>> {};
+
+// Ray offsets are relative to the coordinates' magnitude (docs/ray-offsets.md): the image
+// must not change with the scene's scale or distance from the origin, and no ray may hit
+// the triangle it left.
+TEST_P(ScaleInvariance, SameImageNoSelfHitsNoNaNs) {
+  const auto [scale, offset] = GetParam();
+  const Scene base = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s = small_cornell();
+  s.camera.width = 96;
+  s.camera.height = 72;
+  s.spp = 8;
+  const RenderResult ref = render(base, s);
+  const RenderResult r = render(transformed(base, scale, Vec3{offset, offset, offset}), s);
+  const Estimate a = film_estimate(ref.film), b = film_estimate(r.film);
+  EXPECT_NEAR(b.mean, a.mean, 0.01 * a.mean) << "scale " << scale << " offset " << offset;
+  EXPECT_EQ(r.stats.rays.self_hits, 0u);
+  EXPECT_EQ(r.stats.nan_samples, 0u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Scales, ScaleInvariance,
+                         ::testing::Values(std::make_pair(1e-4f, 0.0f), std::make_pair(1e-2f, 0.0f),
+                                           std::make_pair(1e2f, 0.0f), std::make_pair(1e4f, 0.0f),
+                                           std::make_pair(1.0f, 1e5f)));
+
+}  // namespace
+}  // namespace tessera
