@@ -70,17 +70,22 @@ int main(int argc, char** argv) {
   std::vector<std::string> scenes;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--spp" && i + 1 < argc) spp = std::atoi(argv[++i]);
-    else if (a == "--threads" && i + 1 < argc) threads = std::atoi(argv[++i]);
-    else if (a == "--json" && i + 1 < argc) json_path = argv[++i];
-    else scenes.push_back(a);
+    if (a == "--spp" && i + 1 < argc)
+      spp = std::atoi(argv[++i]);
+    else if (a == "--threads" && i + 1 < argc)
+      threads = std::atoi(argv[++i]);
+    else if (a == "--json" && i + 1 < argc)
+      json_path = argv[++i];
+    else
+      scenes.push_back(a);
   }
   if (scenes.empty()) {
     std::fprintf(stderr, "usage: tessera_bench [--spp N] [--threads N] [--json FILE] SCENE...\n");
     return 2;
   }
   nlohmann::json out = nlohmann::json::array();
-  std::printf("%-28s %8s %12s %12s %14s %8s\n", "scene (480x360)", "spp", "samples/s", "rays/s", "raw Embree/s", "ratio");
+  std::printf("%-28s %8s %12s %12s %14s %8s\n", "scene (480x360)", "spp", "samples/s", "rays/s", "raw Embree/s",
+              "ratio");
   for (const std::string& path : scenes) {
     const Scene scene = load_scene(path);
     const double raw = raw_rays_per_second(scene, threads);
@@ -94,9 +99,15 @@ int main(int argc, char** argv) {
     const std::string name = path.substr(path.find_last_of('/') + 1);
     std::printf("%-28s %8d %11.2fM %11.2fM %13.2fM %7.0f%%\n", name.c_str(), spp, sps / 1e6, rps / 1e6, raw / 1e6,
                 100 * rps / raw);
-    out.push_back({{"scene", name}, {"spp", spp}, {"threads", threads}, {"seconds", r.seconds},
-                   {"samples_per_second", sps}, {"rays_per_second", rps}, {"raw_embree_rays_per_second", raw},
-                   {"ratio", rps / raw}, {"rays_per_sample", rays / r.stats.samples}});
+    out.push_back({{"scene", name},
+                   {"spp", spp},
+                   {"threads", threads},
+                   {"seconds", r.seconds},
+                   {"samples_per_second", sps},
+                   {"rays_per_second", rps},
+                   {"raw_embree_rays_per_second", raw},
+                   {"ratio", rps / raw},
+                   {"rays_per_sample", rays / r.stats.samples}});
   }
   if (!json_path.empty()) std::ofstream(json_path) << out.dump(2) << "\n";
   return 0;

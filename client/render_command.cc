@@ -33,8 +33,10 @@ struct RenderArgs {
 
 std::string format_duration(double s) {
   char buf[32];
-  if (s < 60) std::snprintf(buf, sizeof buf, "%.1fs", s);
-  else std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
+  if (s < 60)
+    std::snprintf(buf, sizeof buf, "%.1fs", s);
+  else
+    std::snprintf(buf, sizeof buf, "%dm%02ds", int(s) / 60, int(s) % 60);
   return buf;
 }
 
@@ -48,8 +50,8 @@ class ProgressPrinter {
     if (tty_) {
       const int width = 30, filled = int(std::lround(p.fraction * width));
       std::fprintf(stderr, "\r[%s%s] %5.1f%%  pass %d/%d  %s elapsed  ETA %s   ", std::string(filled, '#').c_str(),
-                   std::string(width - filled, '.').c_str(), 100 * p.fraction, std::min(p.pass + 1, p.passes),
-                   p.passes, format_duration(p.seconds).c_str(), format_duration(eta).c_str());
+                   std::string(width - filled, '.').c_str(), 100 * p.fraction, std::min(p.pass + 1, p.passes), p.passes,
+                   format_duration(p.seconds).c_str(), format_duration(eta).c_str());
       if (p.fraction >= 1) std::fprintf(stderr, "\n");
     } else if (p.fraction >= 1 || p.seconds - last_ >= 5) {  // plain lines for logs
       last_ = p.seconds;
@@ -152,21 +154,40 @@ std::function<int()> add_render_command(CLI::App& app, const std::string& comman
   args->command_line = command_line;
   CLI::App* cmd = app.add_subcommand("render", "Render a scene in this process");
   cmd->add_option("scene", args->scene, "Scene file (.dae)")->required()->check(CLI::ExistingFile);
-  cmd->add_option("-s", args->spp, "Camera samples per pixel (a maximum with -a)")->capture_default_str()->check(CLI::Range(1, 1 << 24));
-  cmd->add_option("-l", args->light_samples, "Samples per area light per shading point")->capture_default_str()->check(CLI::Range(1, 1 << 16));
-  cmd->add_option("-m", args->max_depth, "Max ray depth: scattering events per path (0 = emitters only)")->capture_default_str()->check(CLI::Range(0, 1 << 16));
+  cmd->add_option("-s", args->spp, "Camera samples per pixel (a maximum with -a)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1 << 24));
+  cmd->add_option("-l", args->light_samples, "Samples per area light per shading point")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1 << 16));
+  cmd->add_option("-m", args->max_depth, "Max ray depth: scattering events per path (0 = emitters only)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1 << 16));
   cmd->add_option("-a", args->adaptive, "Adaptive sampling: BATCH TOLERANCE (off unless given)")->expected(2);
-  cmd->add_option("-r", args->resolution, "Output width and height; with CS184 framing also the field of view")->expected(2)->capture_default_str();
+  cmd->add_option("-r", args->resolution, "Output width and height; with CS184 framing also the field of view")
+      ->expected(2)
+      ->capture_default_str();
   cmd->add_option("-t", args->threads, "Threads (0 = all cores)")->capture_default_str()->check(CLI::Range(0, 1024));
-  cmd->add_option("-b", args->lens_radius, "Thin-lens radius (0 = pinhole)")->capture_default_str()->check(CLI::Range(0.0, 1e30));
-  cmd->add_option("-d", args->focal_distance, "Focal distance along the optical axis")->capture_default_str()->check(CLI::PositiveNumber);
-  cmd->add_option("-p", args->window, "Render only the cell X Y W H (lower-left pixel, y from the bottom)")->expected(4);
+  cmd->add_option("-b", args->lens_radius, "Thin-lens radius (0 = pinhole)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e30));
+  cmd->add_option("-d", args->focal_distance, "Focal distance along the optical axis")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
+  cmd->add_option("-p", args->window, "Render only the cell X Y W H (lower-left pixel, y from the bottom)")
+      ->expected(4);
   cmd->add_option("--seed", args->seed, "Random seed")->capture_default_str();
-  cmd->add_option("--camera", args->camera, "cs184 (framing of the CS184 renderer) or file (the file's camera)")->capture_default_str()->check(CLI::IsMember({"cs184", "file"}));
+  cmd->add_option("--camera", args->camera, "cs184 (framing of the CS184 renderer) or file (the file's camera)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"cs184", "file"}));
   cmd->add_option("-f", args->outputs, "Output image; .exr or .png; repeat for both (default SCENE.exr and SCENE.png)");
   cmd->add_option("--stats-json", args->stats_json, "Write timing figures as JSON");
-  cmd->add_option("--tile", args->tile, "Tile size in pixels (does not change the image)")->capture_default_str()->check(CLI::Range(1, 4096));
-  cmd->add_option("--pass-spp", args->pass_spp, "Samples per progressive pass")->capture_default_str()->check(CLI::Range(1, 1 << 24));
+  cmd->add_option("--tile", args->tile, "Tile size in pixels (does not change the image)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4096));
+  cmd->add_option("--pass-spp", args->pass_spp, "Samples per progressive pass")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1 << 24));
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
   return [args, cmd] {
     if (!cmd->parsed()) return -1;

@@ -12,8 +12,7 @@ namespace tessera {
 double intersect_sphere(const Vec3& center, float radius, const Ray& ray) {
   // Ray Tracing Gems ch. 7 formulation: the discriminant is computed from the distance
   // of the closest approach, which loses no precision when the ray starts far away.
-  const double fx = double(ray.o.x) - center.x, fy = double(ray.o.y) - center.y,
-               fz = double(ray.o.z) - center.z;
+  const double fx = double(ray.o.x) - center.x, fy = double(ray.o.y) - center.y, fz = double(ray.o.z) - center.z;
   const double dx = ray.d.x, dy = ray.d.y, dz = ray.d.z;
   const double a = dx * dx + dy * dy + dz * dz;
   const double b = -(fx * dx + fy * dy + fz * dz);  // = -dot(f, d)
@@ -60,7 +59,9 @@ void sphere_intersect(const RTCIntersectFunctionNArguments* args) {
   RTCRayHit* rh = reinterpret_cast<RTCRayHit*>(args->rayhit);  // N == 1 (rtcIntersect1)
   const Sphere& s = static_cast<const SphereData*>(args->geometryUserPtr)->scene->spheres[args->primID];
   const Ray ray{{rh->ray.org_x, rh->ray.org_y, rh->ray.org_z},
-                {rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z}, rh->ray.tnear, rh->ray.tfar};
+                {rh->ray.dir_x, rh->ray.dir_y, rh->ray.dir_z},
+                rh->ray.tnear,
+                rh->ray.tfar};
   const double t = intersect_sphere(s.center, s.radius, Ray{ray.o, ray.d, ray.tmin, ray.tmax});
   if (t < 0 || !(float(t) <= rh->ray.tfar)) return;
   rh->ray.tfar = float(t);
@@ -84,8 +85,12 @@ void sphere_occluded(const RTCOccludedFunctionNArguments* args) {
 
 RTCRay to_rtc(const Ray& ray) {
   RTCRay r;
-  r.org_x = ray.o.x; r.org_y = ray.o.y; r.org_z = ray.o.z;
-  r.dir_x = ray.d.x; r.dir_y = ray.d.y; r.dir_z = ray.d.z;
+  r.org_x = ray.o.x;
+  r.org_y = ray.o.y;
+  r.org_z = ray.o.z;
+  r.dir_x = ray.d.x;
+  r.dir_y = ray.d.y;
+  r.dir_z = ray.d.z;
   r.tnear = ray.tmin;
   r.tfar = ray.tmax;
   r.time = 0;
@@ -111,7 +116,9 @@ struct Accel::Impl {
 
 Accel::Accel(const Scene& scene) : impl_(std::make_unique<Impl>()) {
   impl_->device = rtcNewDevice(nullptr);
-  if (!impl_->device) throw std::runtime_error("cannot create Embree device (error " + std::to_string(int(rtcGetDeviceError(nullptr))) + ")");
+  if (!impl_->device)
+    throw std::runtime_error("cannot create Embree device (error " + std::to_string(int(rtcGetDeviceError(nullptr))) +
+                             ")");
   rtcSetDeviceErrorFunction(impl_->device, error_callback, &impl_->error);
   impl_->scene = rtcNewScene(impl_->device);
   // ROBUST: watertight triangle tests, so rays along shared edges never leak.

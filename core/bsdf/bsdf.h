@@ -14,9 +14,9 @@ namespace tessera {
 
 struct BsdfSample {
   Vec3 wi;
-  Rgb weight;       // f * |cos theta_i| / pdf: the throughput multiplier
-  float pdf = 0;    // solid-angle density (1 for delta lobes, as a marker)
-  float etap = 1;   // relative index crossed (1 for reflection)
+  Rgb weight;      // f * |cos theta_i| / pdf: the throughput multiplier
+  float pdf = 0;   // solid-angle density (1 for delta lobes, as a marker)
+  float etap = 1;  // relative index crossed (1 for reflection)
   bool delta = false;
 };
 

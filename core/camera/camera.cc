@@ -7,8 +7,10 @@
 namespace tessera {
 
 Camera::Camera(const Scene& scene, const CameraSettings& s)
-    : inv_w_(1.0f / float(s.width)), inv_h_(1.0f / float(s.height)),
-      lens_radius_(s.lens_radius), focal_distance_(s.focal_distance) {
+    : inv_w_(1.0f / float(s.width)),
+      inv_h_(1.0f / float(s.height)),
+      lens_radius_(s.lens_radius),
+      focal_distance_(s.focal_distance) {
   const CameraDesc& c = scene.camera;
   const double deg = M_PI / 180.0;
   const double tx = std::tan(c.xfov_deg * deg / 2);

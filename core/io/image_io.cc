@@ -61,8 +61,8 @@ void write_exr(const std::string& path, const Film& film, const ImageMetadata& m
       {"R", &r}, {"G", &g}, {"B", &b}, {"spp", &spp}, {"variance", &var}};
   for (const auto& [name, data] : channels) {
     header.channels().insert(name, Imf::Channel(Imf::FLOAT));
-    fb.insert(name, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(data->data()), sizeof(float),
-                               sizeof(float) * size_t(w)));
+    fb.insert(name,
+              Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(data->data()), sizeof(float), sizeof(float) * size_t(w)));
   }
   const std::string tmp = temp_path(path);
   try {

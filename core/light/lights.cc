@@ -70,8 +70,8 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
     case Light::Kind::kMesh: {
       const MeshLightData& d = mesh_data_[i];
       if (d.cdf.empty() || !(d.area > 0)) return false;
-      const size_t t = std::min(size_t(std::upper_bound(d.cdf.begin(), d.cdf.end(), u_pick) - d.cdf.begin()),
-                                d.cdf.size() - 1);
+      const size_t t =
+          std::min(size_t(std::upper_bound(d.cdf.begin(), d.cdf.end(), u_pick) - d.cdf.begin()), d.cdf.size() - 1);
       const Mesh& m = scene_.meshes[l.shape];
       const Vec3 a = m.positions[m.indices[3 * t]], b = m.positions[m.indices[3 * t + 1]],
                  c = m.positions[m.indices[3 * t + 2]];
@@ -125,14 +125,19 @@ float LightSet::pdf_area_hit(size_t i, Vec3 p, Vec3 q, Vec3 nq, float dist) cons
   const Light& l = scene_.lights[i];
   float area_pdf = 0;
   switch (l.kind) {
-    case Light::Kind::kRect: area_pdf = 1 / l.area; break;
-    case Light::Kind::kMesh: area_pdf = mesh_data_[i].area > 0 ? 1 / mesh_data_[i].area : 0; break;
+    case Light::Kind::kRect:
+      area_pdf = 1 / l.area;
+      break;
+    case Light::Kind::kMesh:
+      area_pdf = mesh_data_[i].area > 0 ? 1 / mesh_data_[i].area : 0;
+      break;
     case Light::Kind::kSphere: {
       const float r = scene_.spheres[l.shape].radius;
       area_pdf = 1 / (4 * kPi * r * r);
       break;
     }
-    default: return 0;
+    default:
+      return 0;
   }
   const Vec3 d = (q - p) / dist;
   const float c = std::fabs(dot(nq, d));

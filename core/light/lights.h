@@ -18,13 +18,13 @@
 namespace tessera {
 
 struct LightSample {
-  Rgb li;           // incident radiance (or delta-light equivalent) arriving at p
-  Vec3 wi;          // unit direction from p toward the light
-  Vec3 point;       // sampled point on the light (finite lights)
-  Vec3 light_n;     // light surface normal at `point` (area lights)
-  Vec3 point_err;   // absolute error bound of `point`, per component (area lights)
-  float dist = 0;   // distance to `point`, infinity for infinite lights
-  float pdf = 0;    // solid-angle density, or 1 for delta lights
+  Rgb li;          // incident radiance (or delta-light equivalent) arriving at p
+  Vec3 wi;         // unit direction from p toward the light
+  Vec3 point;      // sampled point on the light (finite lights)
+  Vec3 light_n;    // light surface normal at `point` (area lights)
+  Vec3 point_err;  // absolute error bound of `point`, per component (area lights)
+  float dist = 0;  // distance to `point`, infinity for infinite lights
+  float pdf = 0;   // solid-angle density, or 1 for delta lights
 };
 
 class LightSet {

@@ -21,7 +21,9 @@ inline double dlength(Dvec3 a) { return std::sqrt(a.x * a.x + a.y * a.y + a.z * 
 
 class Mat4 {
  public:
-  Mat4() { for (int i = 0; i < 4; ++i) m_[i][i] = 1; }
+  Mat4() {
+    for (int i = 0; i < 4; ++i) m_[i][i] = 1;
+  }
   // Row-major: m[row][col]; column vectors; the last column is the translation.
   static Mat4 from_row_major(const std::array<double, 16>& v) {
     Mat4 r;
@@ -30,12 +32,16 @@ class Mat4 {
   }
   static Mat4 translate(double x, double y, double z) {
     Mat4 r;
-    r.m_[0][3] = x; r.m_[1][3] = y; r.m_[2][3] = z;
+    r.m_[0][3] = x;
+    r.m_[1][3] = y;
+    r.m_[2][3] = z;
     return r;
   }
   static Mat4 scale(double x, double y, double z) {
     Mat4 r;
-    r.m_[0][0] = x; r.m_[1][1] = y; r.m_[2][2] = z;
+    r.m_[0][0] = x;
+    r.m_[1][1] = y;
+    r.m_[2][2] = z;
     return r;
   }
   // Rotation by `degrees` about the axis (x, y, z) (Rodrigues), as COLLADA's <rotate>.
@@ -43,11 +49,19 @@ class Mat4 {
     const double len = std::sqrt(x * x + y * y + z * z);
     Mat4 r;
     if (len == 0) return r;
-    x /= len; y /= len; z /= len;
+    x /= len;
+    y /= len;
+    z /= len;
     const double a = degrees * M_PI / 180.0, c = std::cos(a), s = std::sin(a), t = 1 - c;
-    r.m_[0][0] = t * x * x + c;     r.m_[0][1] = t * x * y - s * z; r.m_[0][2] = t * x * z + s * y;
-    r.m_[1][0] = t * x * y + s * z; r.m_[1][1] = t * y * y + c;     r.m_[1][2] = t * y * z - s * x;
-    r.m_[2][0] = t * x * z - s * y; r.m_[2][1] = t * y * z + s * x; r.m_[2][2] = t * z * z + c;
+    r.m_[0][0] = t * x * x + c;
+    r.m_[0][1] = t * x * y - s * z;
+    r.m_[0][2] = t * x * z + s * y;
+    r.m_[1][0] = t * x * y + s * z;
+    r.m_[1][1] = t * y * y + c;
+    r.m_[1][2] = t * y * z - s * x;
+    r.m_[2][0] = t * x * z - s * y;
+    r.m_[2][1] = t * y * z + s * x;
+    r.m_[2][2] = t * z * z + c;
     return r;
   }
   Mat4 operator*(const Mat4& o) const {
@@ -70,7 +84,11 @@ class Mat4 {
   Dvec3 point(double x, double y, double z) const {
     Dvec3 p = apply(x, y, z, 1);
     const double w = m_[3][0] * x + m_[3][1] * y + m_[3][2] * z + m_[3][3];
-    if (w != 1 && w != 0) { p.x /= w; p.y /= w; p.z /= w; }
+    if (w != 1 && w != 0) {
+      p.x /= w;
+      p.y /= w;
+      p.z /= w;
+    }
     return p;
   }
   Dvec3 vector(double x, double y, double z) const { return apply(x, y, z, 0); }

@@ -12,7 +12,9 @@ Rgb Film::mean_radiance() const {
   double r = 0, g = 0, b = 0;
   for (const PixelSums& p : pixels_) {
     const Rgb m = p.mean();
-    r += m.r; g += m.g; b += m.b;
+    r += m.r;
+    g += m.g;
+    b += m.b;
   }
   const double n = double(pixels_.size());
   return n ? Rgb(float(r / n), float(g / n), float(b / n)) : Rgb(0);

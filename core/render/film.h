@@ -20,7 +20,11 @@ struct PixelSums {
   uint32_t n = 0;   // samples kept (NaN/Inf samples are dropped and counted elsewhere)
 
   void add(const PixelSums& o) {
-    r += o.r; g += o.g; b += o.b; lum2 += o.lum2; n += o.n;
+    r += o.r;
+    g += o.g;
+    b += o.b;
+    lum2 += o.lum2;
+    n += o.n;
   }
   double lum_sum() const { return 0.2126 * r + 0.7152 * g + 0.0722 * b; }
   Rgb mean() const { return n ? Rgb(float(r / n), float(g / n), float(b / n)) : Rgb(0); }

@@ -84,14 +84,19 @@ Vec3 offset_point(Vec3 p, Vec3 p_err, Vec3 n, Vec3 w) {
   if (dot(w, n) < 0) offset = -offset;
   Vec3 po = p + offset;
   for (int i = 0; i < 3; ++i) {  // round away from the surface
-    if (offset[i] > 0) po[i] = next_float_up(po[i]);
-    else if (offset[i] < 0) po[i] = next_float_down(po[i]);
+    if (offset[i] > 0)
+      po[i] = next_float_up(po[i]);
+    else if (offset[i] < 0)
+      po[i] = next_float_down(po[i]);
   }
   return po;
 }
 
 Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& lights, const RenderSettings& s)
-    : scene_(scene), accel_(accel), lights_(lights), max_depth_(s.max_depth),
+    : scene_(scene),
+      accel_(accel),
+      lights_(lights),
+      max_depth_(s.max_depth),
       light_samples_(std::max(1, s.light_samples)) {}
 
 Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng,

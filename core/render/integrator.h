@@ -17,9 +17,9 @@
 namespace tessera {
 
 struct RayCounters {
-  uint64_t rays = 0;        // closest-hit queries
-  uint64_t shadow_rays = 0; // occlusion queries
-  uint64_t self_hits = 0;   // continuation rays that hit their own primitive at t ~ 0
+  uint64_t rays = 0;         // closest-hit queries
+  uint64_t shadow_rays = 0;  // occlusion queries
+  uint64_t self_hits = 0;    // continuation rays that hit their own primitive at t ~ 0
 };
 
 // A ray-surface intersection prepared for shading.
@@ -45,8 +45,8 @@ class Integrator {
   Rgb radiance(Ray ray, Sampler& sampler, RayCounters& counters) const;
 
  private:
-  Rgb direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng,
-             Sampler& sampler, RayCounters& counters) const;
+  Rgb direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng, Sampler& sampler,
+             RayCounters& counters) const;
 
   const Scene& scene_;
   const Accel& accel_;

@@ -26,7 +26,8 @@ RenderResult render_image(const TileRenderer& renderer, int threads, int tile_si
   std::vector<Rect> tiles;
   for (int y = window.y; y < window.y + window.h; y += tile_size)
     for (int x = window.x; x < window.x + window.w; x += tile_size)
-      tiles.push_back({x, y, std::min(tile_size, window.x + window.w - x), std::min(tile_size, window.y + window.h - y)});
+      tiles.push_back(
+          {x, y, std::min(tile_size, window.x + window.w - x), std::min(tile_size, window.y + window.h - y)});
 
   RenderResult result{Film(window), {}, 0};
   std::vector<uint8_t> active(size_t(window.area()), 1);

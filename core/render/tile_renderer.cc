@@ -5,7 +5,11 @@
 namespace tessera {
 
 TileRenderer::TileRenderer(const Scene& scene, const RenderSettings& settings)
-    : scene_(scene), settings_(settings), accel_(scene), lights_(scene), camera_(scene, settings.camera),
+    : scene_(scene),
+      settings_(settings),
+      accel_(scene),
+      lights_(scene),
+      camera_(scene, settings.camera),
       integrator_(scene, accel_, lights_, settings_) {}
 
 std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,

@@ -58,8 +58,7 @@ void Scene::finalize() {
     Mesh mesh;
     mesh.name = l.name;
     const Vec3 hx = l.edge_x * 0.5f, hy = l.edge_y * 0.5f;
-    mesh.positions = {l.position - hx - hy, l.position + hx - hy, l.position + hx + hy,
-                      l.position - hx + hy};
+    mesh.positions = {l.position - hx - hy, l.position + hx - hy, l.position + hx + hy, l.position - hx + hy};
     // Wind so the geometric normal is the facing direction.
     if (dot(cross(l.edge_x, l.edge_y), l.normal) >= 0)
       mesh.indices = {0, 1, 2, 0, 2, 3};
@@ -71,32 +70,23 @@ void Scene::finalize() {
     meshes.push_back(std::move(mesh));
   }
   // Emission materials glow and are sampled as area lights.
-  for (size_t i = 0; i < meshes.size(); ++i) {
-    Mesh& mesh = meshes[i];
-    const Material& m = materials[mesh.material];
-    if (mesh.light >= 0 || m.kind != Material::Kind::kEmission || m.radiance.is_black()) continue;
-    Light l;
-    l.kind = Light::Kind::kMesh;
-    l.name = mesh.name;
-    l.color = m.radiance;
-    l.shape = uint32_t(i);
-    l.two_sided = m.two_sided_emission;
-    mesh.light = int32_t(lights.size());
-    lights.push_back(l);
-  }
-  for (size_t i = 0; i < spheres.size(); ++i) {
-    Sphere& s = spheres[i];
-    const Material& m = materials[s.material];
-    if (s.light >= 0 || m.kind != Material::Kind::kEmission || m.radiance.is_black()) continue;
-    Light l;
-    l.kind = Light::Kind::kSphere;
-    l.name = s.name;
-    l.color = m.radiance;
-    l.shape = uint32_t(i);
-    l.two_sided = m.two_sided_emission;
-    s.light = int32_t(lights.size());
-    lights.push_back(l);
-  }
+  auto add_emitter = [this](auto& shapes, Light::Kind kind) {
+    for (size_t i = 0; i < shapes.size(); ++i) {
+      auto& shape = shapes[i];
+      const Material& m = materials[shape.material];
+      if (shape.light >= 0 || m.kind != Material::Kind::kEmission || m.radiance.is_black()) continue;
+      Light l;
+      l.kind = kind;
+      l.name = shape.name;
+      l.color = m.radiance;
+      l.shape = uint32_t(i);
+      l.two_sided = m.two_sided_emission;
+      shape.light = int32_t(lights.size());
+      lights.push_back(l);
+    }
+  };
+  add_emitter(meshes, Light::Kind::kMesh);
+  add_emitter(spheres, Light::Kind::kSphere);
   for (Mesh& mesh : meshes) mesh.compute_normals();
 }
 

@@ -25,9 +25,7 @@ struct Material {
   Rgb radiance{0.0f};       // emission
   bool two_sided_emission = true;
 
-  bool is_delta() const {
-    return kind == Kind::kMirror || kind == Kind::kGlass || kind == Kind::kRefraction;
-  }
+  bool is_delta() const { return kind == Kind::kMirror || kind == Kind::kGlass || kind == Kind::kRefraction; }
   // True if no BSDF lobe exists: paths end here.
   bool is_black() const { return kind == Kind::kEmission; }
 };
@@ -63,8 +61,8 @@ struct Light {
   float area = 0;
   // Point: attenuation 1 / (c + l d + q d^2).
   float att_constant = 1, att_linear = 0, att_quadratic = 0;
-  Vec3 direction;       // directional: unit vector toward the light
-  uint32_t shape = 0;   // kMesh: mesh index; kSphere: sphere index; kRect: its mesh
+  Vec3 direction;      // directional: unit vector toward the light
+  uint32_t shape = 0;  // kMesh: mesh index; kSphere: sphere index; kRect: its mesh
   bool two_sided = false;
 
   bool is_delta() const { return kind == Kind::kPoint || kind == Kind::kDirectional; }
@@ -74,8 +72,8 @@ struct Light {
 struct CameraDesc {
   // The file's camera node world transform, decomposed: eye, forward, up (unit).
   Vec3 eye{0, 0, 0}, forward{0, 0, -1}, up{0, 1, 0};
-  double xfov_deg = 50;                 // full horizontal field of view
-  std::optional<double> yfov_deg;       // full vertical, when the file gives it
+  double xfov_deg = 50;            // full horizontal field of view
+  std::optional<double> yfov_deg;  // full vertical, when the file gives it
   std::optional<double> aspect_ratio;
   float znear = 0.001f, zfar = 1000.0f;
   Vec3 cs184_dir{0, 0, 1};  // CS184 framing direction c (format doc section 2.2)
@@ -84,7 +82,10 @@ struct CameraDesc {
 
 struct Bounds {
   Vec3 lo{1e30f, 1e30f, 1e30f}, hi{-1e30f, -1e30f, -1e30f};
-  void extend(Vec3 p) { lo = min(lo, p); hi = max(hi, p); }
+  void extend(Vec3 p) {
+    lo = min(lo, p);
+    hi = max(hi, p);
+  }
   bool empty() const { return lo.x > hi.x; }
   Vec3 center() const { return (lo + hi) * 0.5f; }
   Vec3 diagonal() const { return hi - lo; }

@@ -10,7 +10,9 @@ class SceneError : public std::runtime_error {
  public:
   SceneError(std::string file, std::string element, std::string reason)
       : std::runtime_error(file + ": " + (element.empty() ? "" : element + ": ") + reason),
-        file_(std::move(file)), element_(std::move(element)), reason_(std::move(reason)) {}
+        file_(std::move(file)),
+        element_(std::move(element)),
+        reason_(std::move(reason)) {}
   const std::string& file() const { return file_; }
   const std::string& element() const { return element_; }
   const std::string& reason() const { return reason_; }

@@ -1,9 +1,10 @@
 // Fresnel, Snell's law, total internal reflection, and sampling of every BSDF.
+#include "core/bsdf/bsdf.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
 
-#include "core/bsdf/bsdf.h"
 #include "core/bsdf/fresnel.h"
 #include "core/bsdf/microfacet.h"
 #include "core/sampling/sampler.h"

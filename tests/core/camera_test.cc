@@ -1,7 +1,8 @@
 // Camera framing (CS184 section 2.2/2.3) and the thin lens.
+#include "core/camera/camera.h"
+
 #include <gtest/gtest.h>
 
-#include "core/camera/camera.h"
 #include "core/scene/collada/collada_loader.h"
 #include "tests/core/test_paths.h"
 

@@ -200,7 +200,9 @@ TEST_F(BadCollada, IndexOutOfRange) {
   expect_error(replaced("<p>0 1 2 3</p>", "<p>0 1 2 9</p>"), "<polylist", "vertex index 9 out of range (4 positions)");
 }
 
-TEST_F(BadCollada, NegativeIndex) { expect_error(replaced("<p>0 1 2 3</p>", "<p>0 1 -2 3</p>"), "<p>", "out of range"); }
+TEST_F(BadCollada, NegativeIndex) {
+  expect_error(replaced("<p>0 1 2 3</p>", "<p>0 1 -2 3</p>"), "<p>", "out of range");
+}
 
 TEST_F(BadCollada, WrongIndexCount) {
   expect_error(replaced("<p>0 1 2 3</p>", "<p>0 1 2</p>"), "<polylist", "expected 4 indices in <p>, found 3");
@@ -212,7 +214,8 @@ TEST_F(BadCollada, NaNCoordinate) {
 }
 
 TEST_F(BadCollada, InfiniteCoordinate) {
-  expect_error(replaced("count=\"12\">-1 -0.75 -1", "count=\"12\">1e999 -0.75 -1"), "<float_array", "non-finite number");
+  expect_error(replaced("count=\"12\">-1 -0.75 -1", "count=\"12\">1e999 -0.75 -1"), "<float_array",
+               "non-finite number");
 }
 
 TEST_F(BadCollada, NotANumber) {
@@ -224,9 +227,7 @@ TEST_F(BadCollada, UnknownCglKind) {
                "unknown CGL material kind <velvet>");
 }
 
-TEST_F(BadCollada, MissingCglParameter) {
-  expect_error(replaced("<ior>1.5</ior>", ""), "<glass>", "missing <ior>");
-}
+TEST_F(BadCollada, MissingCglParameter) { expect_error(replaced("<ior>1.5</ior>", ""), "<glass>", "missing <ior>"); }
 
 TEST_F(BadCollada, UnknownLightType) {
   expect_error(replaced("<area><color>12 12 12</color></area>", "<laser><color>1 1 1</color></laser>"), "<laser>",
@@ -236,13 +237,14 @@ TEST_F(BadCollada, UnknownLightType) {
 TEST_F(BadCollada, BadUpAxis) { expect_error(replaced("Y_UP", "W_UP"), "<up_axis>", "unknown up_axis 'W_UP'"); }
 
 TEST_F(BadCollada, TwoVertexPolygon) {
-  expect_error(replaced("<vcount>4</vcount><p>0 1 2 3</p>", "<vcount>2 2</vcount><p>0 1 2 3</p>").replace(
-                   base.find("<polylist count=\"1\">"), 20, "<polylist count=\"2\">"),
+  expect_error(replaced("<vcount>4</vcount><p>0 1 2 3</p>", "<vcount>2 2</vcount><p>0 1 2 3</p>")
+                   .replace(base.find("<polylist count=\"1\">"), 20, "<polylist count=\"2\">"),
                "<polylist", "polygon with 2 vertices");
 }
 
 TEST_F(BadCollada, OrthographicCamera) {
-  expect_error(replaced("<perspective>", "<orthographic/><perspective>"), "<camera", "orthographic cameras are not supported");
+  expect_error(replaced("<perspective>", "<orthographic/><perspective>"), "<camera",
+               "orthographic cameras are not supported");
 }
 
 TEST_F(BadCollada, SphereWithoutRadius) {

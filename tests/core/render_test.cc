@@ -239,7 +239,9 @@ TEST_P(Smoke, MeanRadianceMatchesTheStoredValue) {
 INSTANTIATE_TEST_SUITE_P(Scenes, Smoke,
                          ::testing::Values(SmokeCase{"CBspheres.dae", true, SMOKE_CBSPHERES},
                                            SmokeCase{"cornell-spheres.dae", false, SMOKE_CORNELL}),
-                         [](const auto& info) { return std::string(info.param.shared ? "CBspheres" : "cornell_spheres"); });
+                         [](const auto& info) {
+                           return std::string(info.param.shared ? "CBspheres" : "cornell_spheres");
+                         });
 
 }  // namespace
 }  // namespace tessera

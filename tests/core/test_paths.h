@@ -16,7 +16,8 @@ inline std::string shared_scene(const std::string& name) {
 
 }  // namespace tessera::testing
 
-#define TESSERA_REQUIRE_SHARED_SCENE(var, name)                                                        \
-  const std::string var = ::tessera::testing::shared_scene(name);                                      \
-  if (var.empty()) GTEST_SKIP() << "shared CS184 scene " << name << " not found under " TESSERA_SHARED_DIR \
-                                << "/scenes/cs184 (the ../shared folder is absent); skipping"
+#define TESSERA_REQUIRE_SHARED_SCENE(var, name)                                           \
+  const std::string var = ::tessera::testing::shared_scene(name);                         \
+  if (var.empty())                                                                        \
+  GTEST_SKIP() << "shared CS184 scene " << name << " not found under " TESSERA_SHARED_DIR \
+               << "/scenes/cs184 (the ../shared folder is absent); skipping"

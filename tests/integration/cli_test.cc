@@ -47,10 +47,9 @@ class Cli : public ::testing::Test {
 };
 
 TEST_F(Cli, RendersExrWithSppVarianceAndMetadataAndAPngAndStats) {
-  const std::string exr = (dir / "a.exr").string(), png = (dir / "a.png").string(),
-                    json = (dir / "s.json").string();
-  const CommandResult r = run("render " + scene + " -s 4 -r 40 30 -m 3 --seed 5 -q -f " + exr + " -f " + png +
-                    " --stats-json " + json);
+  const std::string exr = (dir / "a.exr").string(), png = (dir / "a.png").string(), json = (dir / "s.json").string();
+  const CommandResult r =
+      run("render " + scene + " -s 4 -r 40 30 -m 3 --seed 5 -q -f " + exr + " -f " + png + " --stats-json " + json);
   ASSERT_EQ(r.code, 0) << r.err;
   EXPECT_NE(r.out.find("samples/s"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("rays/s"), std::string::npos) << r.out;

@@ -1,13 +1,12 @@
 #include "core/scene/collada/collada_loader.h"
 
-#include <pugixml.hpp>
-
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <pugixml.hpp>
 #include <sstream>
 #include <unordered_map>
 
@@ -79,8 +78,7 @@ class ColladaLoader {
   }
   std::vector<double> numbers_exact(pugi::xml_node n, size_t want) const {
     std::vector<double> v = numbers(n);
-    if (v.size() < want)
-      fail(n, "expected " + std::to_string(want) + " numbers, found " + std::to_string(v.size()));
+    if (v.size() < want) fail(n, "expected " + std::to_string(want) + " numbers, found " + std::to_string(v.size()));
     v.resize(want);
     return v;
   }
@@ -95,7 +93,8 @@ class ColladaLoader {
       const long long v = std::strtoll(s, &end, 10);
       if (end == s || (*end && !std::isspace(uint8_t(*end))))
         fail(n, "'" + std::string(s, std::min<size_t>(16, std::strlen(s))) + "' is not an index");
-      if (v < 0 || v > 0xFFFFFFFFll || errno == ERANGE) fail(n, "index " + std::string(s, size_t(end - s)) + " out of range");
+      if (v < 0 || v > 0xFFFFFFFFll || errno == ERANGE)
+        fail(n, "index " + std::string(s, size_t(end - s)) + " out of range");
       out.push_back(uint32_t(v));
       s = end;
     }
@@ -446,7 +445,8 @@ class ColladaLoader {
         auto vert = [&](uint32_t k) {
           const uint32_t v = idx[at + size_t(k) * stride + vertex_offset];
           if (v >= vertex_count)
-            fail(prim, "vertex index " + std::to_string(v) + " out of range (" + std::to_string(vertex_count) + " positions)");
+            fail(prim, "vertex index " + std::to_string(v) + " out of range (" + std::to_string(vertex_count) +
+                           " positions)");
           return v;
         };
         for (uint32_t k = 1; k + 1 < s; ++k) {  // fan triangulation
@@ -473,9 +473,7 @@ class ColladaLoader {
 
 }  // namespace
 
-Scene load_collada_string(const std::string& text, const std::string& name) {
-  return ColladaLoader(text, name).load();
-}
+Scene load_collada_string(const std::string& text, const std::string& name) { return ColladaLoader(text, name).load(); }
 
 Scene load_collada_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
