@@ -1,0 +1,74 @@
+#include "server/grpc_services.h"
+
+namespace tessera {
+namespace {
+
+// Runs f, mapping the coordinator's errors to gRPC status codes.
+template <typename F>
+grpc::Status guarded(F&& f) {
+  try {
+    f();
+    return grpc::Status::OK;
+  } catch (const RequestError& e) {
+    const grpc::StatusCode code = e.code() == RequestError::Code::kNotFound ? grpc::StatusCode::NOT_FOUND
+                                  : e.code() == RequestError::Code::kFailedPrecondition
+                                      ? grpc::StatusCode::FAILED_PRECONDITION
+                                      : grpc::StatusCode::INVALID_ARGUMENT;
+    return grpc::Status(code, e.what());
+  } catch (const std::exception& e) {
+    return grpc::Status(grpc::StatusCode::INTERNAL, e.what());
+  }
+}
+
+}  // namespace
+
+grpc::Status ClientService::SubmitJob(grpc::ServerContext*, const v1::SubmitJobRequest* req, v1::JobId* out) {
+  return guarded([&] { out->set_id(c_.submit(*req)); });
+}
+grpc::Status ClientService::GetJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) {
+  return guarded([&] { *out = c_.status(req->id(), true); });
+}
+grpc::Status ClientService::ListJobs(grpc::ServerContext*, const v1::ListJobsRequest*, v1::JobList* out) {
+  return guarded([&] {
+    for (v1::JobStatus& s : c_.list()) *out->add_jobs() = std::move(s);
+  });
+}
+grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* req,
+                                     grpc::ServerWriter<v1::JobStatus>* w) {
+  return guarded([&] {
+    v1::JobStatus s = c_.status(req->id(), true);
+    while (!ctx->IsCancelled()) {
+      if (!w->Write(s)) return;
+      if (s.state() != v1::JobStatus::QUEUED && s.state() != v1::JobStatus::RUNNING) return;
+      s = c_.wait_for_change(req->id(), s.samples_done(), 0.5);
+    }
+  });
+}
+grpc::Status ClientService::CancelJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) {
+  return guarded([&] { *out = c_.cancel(req->id()); });
+}
+grpc::Status ClientService::FetchImage(grpc::ServerContext*, const v1::FetchImageRequest* req, v1::Image* out) {
+  return guarded([&] { *out = c_.image(req->id()); });
+}
+
+grpc::Status WorkerService::Register(grpc::ServerContext*, const v1::RegisterRequest* req, v1::RegisterResponse* out) {
+  return guarded([&] { *out = c_.register_worker(*req); });
+}
+grpc::Status WorkerService::GetTask(grpc::ServerContext*, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) {
+  return guarded([&] { *out = c_.get_task(req->worker_id()); });
+}
+grpc::Status WorkerService::FetchScene(grpc::ServerContext*, const v1::FetchSceneRequest* req, v1::SceneBundle* out) {
+  return guarded([&] { *out = c_.scene(req->scene_hash()); });
+}
+grpc::Status WorkerService::Heartbeat(grpc::ServerContext*, const v1::HeartbeatRequest* req,
+                                      v1::HeartbeatResponse* out) {
+  return guarded([&] { out->set_keep_going(c_.heartbeat(req->worker_id(), req->task_id())); });
+}
+grpc::Status WorkerService::SubmitResult(grpc::ServerContext*, const v1::TaskResult* req, v1::ResultAck* out) {
+  return guarded([&] { *out = c_.submit_result(*req); });
+}
+grpc::Status WorkerService::ReleaseTask(grpc::ServerContext*, const v1::ReleaseRequest* req, v1::ReleaseResponse*) {
+  return guarded([&] { c_.release(req->worker_id(), req->task_id()); });
+}
+
+}  // namespace tessera

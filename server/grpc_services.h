@@ -1,0 +1,38 @@
+// gRPC adapters over the Coordinator: translate messages and errors, nothing else.
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include "server/coordinator.h"
+
+namespace tessera {
+
+class ClientService final : public v1::Tessera::Service {
+ public:
+  explicit ClientService(Coordinator& c) : c_(c) {}
+  grpc::Status SubmitJob(grpc::ServerContext*, const v1::SubmitJobRequest* req, v1::JobId* out) override;
+  grpc::Status GetJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) override;
+  grpc::Status ListJobs(grpc::ServerContext*, const v1::ListJobsRequest*, v1::JobList* out) override;
+  grpc::Status WatchJob(grpc::ServerContext* ctx, const v1::JobId* req, grpc::ServerWriter<v1::JobStatus>* w) override;
+  grpc::Status CancelJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) override;
+  grpc::Status FetchImage(grpc::ServerContext*, const v1::FetchImageRequest* req, v1::Image* out) override;
+
+ private:
+  Coordinator& c_;
+};
+
+class WorkerService final : public v1::TesseraWorker::Service {
+ public:
+  explicit WorkerService(Coordinator& c) : c_(c) {}
+  grpc::Status Register(grpc::ServerContext*, const v1::RegisterRequest* req, v1::RegisterResponse* out) override;
+  grpc::Status GetTask(grpc::ServerContext*, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) override;
+  grpc::Status FetchScene(grpc::ServerContext*, const v1::FetchSceneRequest* req, v1::SceneBundle* out) override;
+  grpc::Status Heartbeat(grpc::ServerContext*, const v1::HeartbeatRequest* req, v1::HeartbeatResponse* out) override;
+  grpc::Status SubmitResult(grpc::ServerContext*, const v1::TaskResult* req, v1::ResultAck* out) override;
+  grpc::Status ReleaseTask(grpc::ServerContext*, const v1::ReleaseRequest* req, v1::ReleaseResponse* out) override;
+
+ private:
+  Coordinator& c_;
+};
+
+}  // namespace tessera

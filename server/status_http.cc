@@ -1,0 +1,171 @@
+#include "server/status_http.h"
+
+#include <google/protobuf/util/json_util.h>
+#include <httplib.h>
+
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+namespace tessera {
+namespace {
+
+nlohmann::json to_json(const google::protobuf::Message& m) {
+  google::protobuf::util::JsonPrintOptions opts;
+  opts.always_print_primitive_fields = true;
+  opts.preserve_proto_field_names = true;
+  std::string s;
+  (void)google::protobuf::util::MessageToJsonString(m, &s, opts);
+  return nlohmann::json::parse(s);
+}
+
+const char* kLivePage = R"HTML(<!doctype html>
+<html><head><meta charset="utf-8"><title>Tessera</title>
+<style>
+body{font-family:sans-serif;margin:1.5em;background:#111;color:#ddd}
+table{border-collapse:collapse}td,th{padding:2px 10px;text-align:left}
+.row{display:flex;gap:1.5em;align-items:flex-start}canvas,img{image-rendering:pixelated;border:1px solid #444}
+</style></head><body>
+<h2>Tessera</h2>
+<div id="summary"></div>
+<div class="row"><div><h3>Image</h3><img id="preview" alt="no image yet"></div>
+<div><h3>Tiles <small>(passes merged; white = finished)</small></h3><canvas id="heat"></canvas></div></div>
+<h3>Jobs</h3><table id="jobs"></table>
+<h3>Workers</h3><table id="workers"></table>
+<script>
+async function tick(){
+  const s = await (await fetch('/api/status')).json();
+  const jobs = s.jobs || [], workers = s.workers || [];
+  document.getElementById('summary').textContent =
+    `${jobs.length} jobs, ${workers.filter(w=>w.active).length} active workers, up ${s.uptime_seconds.toFixed(0)} s`;
+  document.getElementById('jobs').innerHTML = '<tr><th>id</th><th>name</th><th>state</th><th>samples</th><th>frame passes</th><th>ETA</th></tr>' +
+    jobs.map(j=>`<tr><td>${j.id}</td><td>${j.name}</td><td>${j.state}</td><td>${(100*j.samples_done/Math.max(1,j.samples_total)).toFixed(1)}%</td><td>${j.frame_passes_done}/${j.passes_total}</td><td>${j.eta_seconds.toFixed(0)} s</td></tr>`).join('');
+  document.getElementById('workers').innerHTML = '<tr><th>id</th><th>name</th><th>threads</th><th>samples/s</th><th>tasks</th></tr>' +
+    workers.map(w=>`<tr><td>${w.id}</td><td>${w.name}</td><td>${w.threads}</td><td>${(w.samples_per_second/1e6).toFixed(2)} M</td><td>${w.tasks_done}</td></tr>`).join('');
+  const job = jobs.find(j=>j.state==='RUNNING') || jobs[jobs.length-1];
+  if (!job) return;
+  document.getElementById('preview').src = `/jobs/${job.id}/preview.png?t=${Date.now()}`;
+  const d = await (await fetch(`/api/jobs/${job.id}`)).json();
+  const c = document.getElementById('heat'), ctx = c.getContext('2d');
+  c.width = d.settings.width; c.height = d.settings.height;
+  for (const t of d.tiles || []) {
+    const f = t.passes_done / Math.max(1, d.passes_total);
+    ctx.fillStyle = t.finished ? '#fff' : `hsl(${240 - 240*f},80%,${25+35*f}%)`;
+    ctx.fillRect(t.rect.x||0, t.rect.y||0, t.rect.w, t.rect.h);
+  }
+}
+tick(); setInterval(tick, 1000);
+</script></body></html>)HTML";
+
+}  // namespace
+
+StatusHttp::StatusHttp(Coordinator& c) : c_(c), server_(std::make_unique<httplib::Server>()) {
+  server_->Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {
+    res.set_content(status_json(), "application/json");
+  });
+  server_->Get(R"(/api/jobs/([A-Za-z0-9-]+))", [this](const httplib::Request& req, httplib::Response& res) {
+    try {
+      res.set_content(to_json(c_.status(req.matches[1], true)).dump(), "application/json");
+    } catch (const RequestError& e) {
+      res.status = 404;
+      res.set_content(nlohmann::json{{"error", e.what()}}.dump(), "application/json");
+    }
+  });
+  server_->Get("/metrics", [this](const httplib::Request&, httplib::Response& res) {
+    res.set_content(metrics_text(), "text/plain; version=0.0.4");
+  });
+  server_->Get(R"(/jobs/([A-Za-z0-9-]+)/preview.png)", [this](const httplib::Request& req, httplib::Response& res) {
+    try {
+      c_.status(req.matches[1], false);  // 404 for unknown jobs
+    } catch (const RequestError& e) {
+      res.status = 404;
+      res.set_content(e.what(), "text/plain");
+      return;
+    }
+    std::ifstream f(c_.image_path(req.matches[1], "preview.png"), std::ios::binary);
+    if (!f) {
+      res.status = 404;
+      res.set_content("no image yet", "text/plain");
+      return;
+    }
+    std::ostringstream ss;
+    ss << f.rdbuf();
+    res.set_header("Cache-Control", "no-store");
+    res.set_content(ss.str(), "image/png");
+  });
+  server_->Get("/", [](const httplib::Request&, httplib::Response& res) { res.set_content(kLivePage, "text/html"); });
+}
+
+StatusHttp::~StatusHttp() { stop(); }
+
+int StatusHttp::bind(const std::string& host, int port) {
+  const int bound = port == 0 ? server_->bind_to_any_port(host) : (server_->bind_to_port(host, port) ? port : -1);
+  if (bound <= 0) throw std::runtime_error("http: cannot bind " + host + ":" + std::to_string(port));
+  return bound;
+}
+
+void StatusHttp::start() {
+  thread_ = std::thread([this] { server_->listen_after_bind(); });
+}
+
+void StatusHttp::stop() {
+  if (server_) server_->stop();
+  if (thread_.joinable()) thread_.join();
+}
+
+std::string StatusHttp::status_json() const {
+  nlohmann::json j;
+  j["uptime_seconds"] = c_.uptime();
+  j["jobs"] = nlohmann::json::array();
+  for (const v1::JobStatus& s : c_.list()) j["jobs"].push_back(to_json(s));
+  j["workers"] = nlohmann::json::array();
+  const double now = c_.uptime();
+  (void)now;
+  for (const Coordinator::WorkerInfo& w : c_.workers()) {
+    j["workers"].push_back({{"id", w.id},
+                            {"name", w.name},
+                            {"threads", w.threads},
+                            {"samples_per_second", w.samples_per_second},
+                            {"tasks_done", w.tasks_done},
+                            {"current_task", w.current_task},
+                            {"active", w.current_task != 0}});
+  }
+  return j.dump();
+}
+
+std::string StatusHttp::metrics_text() const {
+  const CoordinatorCounters k = c_.counters();
+  std::ostringstream m;
+  auto counter = [&](const char* name, const char* help, double v) {
+    m << "# HELP " << name << ' ' << help << "\n# TYPE " << name << " counter\n" << name << ' ' << v << '\n';
+  };
+  auto gauge = [&](const char* name, const char* help, double v) {
+    m << "# HELP " << name << ' ' << help << "\n# TYPE " << name << " gauge\n" << name << ' ' << v << '\n';
+  };
+  counter("tessera_tasks_dispatched_total", "Tasks handed to workers.", double(k.tasks_dispatched));
+  counter("tessera_results_merged_total", "Tile results merged into films.", double(k.results_merged));
+  counter("tessera_results_duplicate_total", "Results dropped because their tile pass was already merged.",
+          double(k.results_duplicate));
+  counter("tessera_results_rejected_total", "Results refused as unknown or malformed.", double(k.results_rejected));
+  counter("tessera_leases_expired_total", "Leases that expired without a result.", double(k.leases_expired));
+  counter("tessera_leases_released_total", "Leases given back early by workers.", double(k.leases_released));
+  counter("tessera_samples_merged_total", "Camera samples merged.", double(k.samples_merged));
+  counter("tessera_jobs_submitted_total", "Jobs accepted.", double(k.jobs_submitted));
+  counter("tessera_jobs_refused_total", "Jobs refused at submit.", double(k.jobs_refused));
+  counter("tessera_images_written_total", "Progressive images written.", double(k.images_written));
+  counter("tessera_merge_seconds_total", "Time spent adding tile sums into films.", k.merge_seconds);
+  size_t counts[5] = {};
+  for (const v1::JobStatus& s : c_.list()) ++counts[std::min<size_t>(4, size_t(s.state()))];
+  m << "# HELP tessera_jobs Jobs by state.\n# TYPE tessera_jobs gauge\n";
+  const char* names[5] = {"queued", "running", "done", "cancelled", "failed"};
+  for (int i = 0; i < 5; ++i) m << "tessera_jobs{state=\"" << names[i] << "\"} " << counts[i] << '\n';
+  size_t busy = 0;
+  const auto workers = c_.workers();
+  for (const auto& w : workers) busy += w.current_task != 0;
+  gauge("tessera_workers", "Registered workers.", double(workers.size()));
+  gauge("tessera_workers_busy", "Workers holding a lease.", double(busy));
+  gauge("tessera_uptime_seconds", "Seconds since start.", c_.uptime());
+  return m.str();
+}
+
+}  // namespace tessera

@@ -1,0 +1,40 @@
+// The coordinator's HTTP status endpoint:
+//   /api/status          jobs and workers as JSON
+//   /api/jobs/<id>       one job with per-tile progress
+//   /metrics             Prometheus text format
+//   /jobs/<id>/preview.png   the latest progressive preview
+//   /                    a live page: the progressive image and a per-tile heat map
+#pragma once
+
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "server/coordinator.h"
+
+namespace httplib {
+class Server;
+}
+
+namespace tessera {
+
+class StatusHttp {
+ public:
+  explicit StatusHttp(Coordinator& coordinator);
+  ~StatusHttp();
+  // Binds host:port (port 0 picks one) and returns the port; throws on failure.
+  int bind(const std::string& host, int port);
+  void start();  // serves on a thread until stop()
+  void stop();
+
+  // Exposed for tests.
+  std::string status_json() const;
+  std::string metrics_text() const;
+
+ private:
+  Coordinator& c_;
+  std::unique_ptr<httplib::Server> server_;
+  std::thread thread_;
+};
+
+}  // namespace tessera
