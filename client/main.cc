@@ -2,6 +2,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 
+#include "client/farm_commands.h"
 #include "client/render_command.h"
 #include "core/scene/scene_error.h"
 
@@ -10,14 +11,17 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   std::string cmdline = "tessera";
   for (int i = 1; i < argc; ++i) cmdline += std::string(" ") + argv[i];
-  auto render = tessera::add_render_command(app, cmdline);
+  std::vector<std::function<int()>> commands{tessera::add_render_command(app, cmdline)};
+  for (auto& c : tessera::add_farm_commands(app)) commands.push_back(std::move(c));
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   }
   try {
-    return render();
+    for (auto& run : commands)
+      if (int rc = run(); rc >= 0) return rc;
+    return 1;
   } catch (const CLI::ParseError& e) {
     return app.exit(e);
   } catch (const tessera::SceneError& e) {

@@ -58,7 +58,6 @@ namespace {
 
 // A film snapshot to write outside the coordinator's lock.
 struct PendingImage {
-  Coordinator* owner = nullptr;
   std::string exr, png;
   std::unique_ptr<Film> film;
   ImageMetadata meta;
@@ -432,7 +431,10 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     ++counters_.results_merged;
     // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends.
     const uint64_t other = t.lease;
-    if (it != tasks_.end()) tasks_.erase(it);
+    if (it != tasks_.end()) {  // kept, so a repeat of this result is known as a duplicate
+      expired_.emplace(it->first, it->second);
+      tasks_.erase(it);
+    }
     if (other) {
       if (auto o = tasks_.find(other); o != tasks_.end()) {
         expired_.emplace(other, o->second);
@@ -455,7 +457,7 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     if (done || (frame > job.image_frame_passes && now - job.last_image >= options_.image_interval_seconds)) {
       job.image_frame_passes = frame;
       job.last_image = now;
-      pending = PendingImage{this, image_path(job.id, "image.exr"), image_path(job.id, "preview.png"),
+      pending = PendingImage{image_path(job.id, "image.exr"), image_path(job.id, "preview.png"),
                              std::make_unique<Film>(job.film), {}, ++job.image_seq};
       pending->meta = {{"job", job.id}, {"scene", job.name}, {"seed", std::to_string(job.settings.seed)},
                        {"frame_passes", std::to_string(frame)}, {"render_seconds", std::to_string(now - job.started)}};

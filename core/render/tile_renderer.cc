@@ -13,12 +13,13 @@ TileRenderer::TileRenderer(const Scene& scene, const RenderSettings& settings)
       integrator_(scene, accel_, lights_, settings_) {}
 
 std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,
-                                            TileStats* stats) const {
+                                            TileStats* stats, const std::atomic<bool>* cancel) const {
   std::vector<PixelSums> out(size_t(rect.area()));
   const int width = settings_.camera.width, height = settings_.camera.height;
   const bool lens = camera_.is_thin_lens();
   TileStats local;
   for (int y = 0; y < rect.h; ++y) {
+    if (cancel && cancel->load(std::memory_order_relaxed)) break;
     for (int x = 0; x < rect.w; ++x) {
       const size_t k = size_t(y) * rect.w + x;
       if (active && !active[k]) continue;

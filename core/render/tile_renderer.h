@@ -35,9 +35,10 @@ class TileRenderer {
   TileRenderer(const Scene& scene, const RenderSettings& settings);
 
   // Samples [s0, s1) of each pixel of `rect` whose `active` flag is set (all when active
-  // is null; `active` is rect-sized, row-major). Returns rect-sized sums.
-  std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,
-                                TileStats* stats) const;
+  // is null; `active` is rect-sized, row-major). Returns rect-sized sums. If `cancel`
+  // becomes true the render stops between rows and the result must be discarded.
+  std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active, TileStats* stats,
+                                const std::atomic<bool>* cancel = nullptr) const;
 
   const Scene& scene() const { return scene_; }
   const RenderSettings& settings() const { return settings_; }

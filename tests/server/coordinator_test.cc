@@ -1,0 +1,278 @@
+// The coordinator's logic driven in-process, with a fake clock: ordered merging, leases,
+// duplicates, hostile results, refusals.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+
+#include "core/io/image_io.h"
+#include "core/render/local_renderer.h"
+#include "core/scene/load.h"
+#include "server/coordinator.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+
+class FakeClock : public Clock {
+ public:
+  explicit FakeClock(double* t) : t_(t) {}
+  double now() const override { return *t_; }
+
+ private:
+  double* t_;
+};
+
+RenderSettings job_settings() {
+  RenderSettings s;
+  s.camera.width = 48;
+  s.camera.height = 36;
+  s.spp = 10;
+  s.pass_spp = 4;  // passes of 4, 4, 2
+  s.max_depth = 6;
+  s.seed = 3;
+  return s;
+}
+
+class CoordinatorTest : public ::testing::Test {
+ protected:
+  double t = 1000;
+  std::string dir = (fs::temp_directory_path() / ("tessera_coord_" + std::to_string(::getpid()))).string();
+  std::unique_ptr<Coordinator> c;
+  std::string scene_path = testing::source_path("scenes/cornell-spheres.dae");
+  Scene scene = load_scene(scene_path);
+
+  void SetUp() override {
+    CoordinatorOptions o;
+    o.data_dir = dir;
+    o.default_tile_size = 16;
+    o.lease_seconds = 5;
+    o.image_interval_seconds = 0;
+    c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  }
+  void TearDown() override { fs::remove_all(dir); }
+
+  v1::SubmitJobRequest request(const RenderSettings& s) {
+    v1::SubmitJobRequest r;
+    r.set_version(kProtocolVersion);
+    std::string main;
+    pack_scene(scene_path, &main, r.mutable_files());
+    r.set_main_file(main);
+    *r.mutable_settings() = to_proto(s);
+    return r;
+  }
+  uint64_t worker() {
+    v1::RegisterRequest r;
+    r.set_version(kProtocolVersion);
+    r.set_name("test");
+    return c->register_worker(r).worker_id();
+  }
+  v1::TaskResult render_task(const v1::Task& task, uint64_t worker_id) {
+    const TileRenderer r(scene, from_proto(task.settings()));
+    const Rect tile = from_proto(task.tile());
+    const auto* mask = task.active().empty() ? nullptr : reinterpret_cast<const uint8_t*>(task.active().data());
+    TileStats stats;
+    const auto sums = r.render(tile, task.sample_begin(), task.sample_end(), mask, &stats);
+    v1::TaskResult res;
+    res.set_worker_id(worker_id);
+    res.set_task_id(task.task_id());
+    res.set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
+    res.set_sums_zstd(encode_sums(sums));
+    res.set_samples(stats.samples);
+    res.set_render_seconds(0.01);
+    return res;
+  }
+  // Runs the job to the end with one worker, in task order.
+  void drain(uint64_t w) {
+    for (int guard = 0; guard < 100000; ++guard) {
+      const v1::GetTaskResponse r = c->get_task(w);
+      if (!r.has_task()) return;
+      ASSERT_TRUE(c->submit_result(render_task(r.task(), w)).accepted());
+    }
+  }
+  Film local(const RenderSettings& s) { return render_image(TileRenderer(scene, s), 2, 32).film; }
+};
+
+bool same_film_as_exr(const Film& film, const ExrImage& img) {
+  if (img.width != film.width() || img.height != film.height()) return false;
+  for (size_t i = 0; i < film.pixels().size(); ++i) {
+    const Rgb m = film.pixels()[i].mean();
+    if (std::memcmp(&m.r, &img.channels.at("R")[i], 4) || std::memcmp(&m.g, &img.channels.at("G")[i], 4) ||
+        std::memcmp(&m.b, &img.channels.at("B")[i], 4) || img.channels.at("spp")[i] != float(film.pixels()[i].n))
+      return false;
+  }
+  return true;
+}
+
+TEST_F(CoordinatorTest, MergedImageEqualsTheLocalRenderBitForBit) {
+  const RenderSettings s = job_settings();
+  const std::string id = c->submit(request(s));
+  drain(worker());
+  const v1::JobStatus st = c->status(id, true);
+  EXPECT_EQ(st.state(), v1::JobStatus::DONE);
+  EXPECT_EQ(st.samples_done(), 48u * 36u * 10u);
+  EXPECT_EQ(st.tiles_done(), st.tiles_total());
+  EXPECT_EQ(st.frame_passes_done(), 3u);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(c->image_path(id, "image.exr"))));
+}
+
+TEST_F(CoordinatorTest, OutOfOrderWorkersAndAdaptiveSamplingStillMatch) {
+  RenderSettings s = job_settings();
+  s.spp = 40;
+  s.adaptive = true;
+  s.adaptive_batch = 8;
+  s.adaptive_tolerance = 0.3f;
+  const std::string id = c->submit(request(s));
+  const uint64_t a = worker(), b = worker();
+  // Hold several tasks at once and answer them in reverse order.
+  for (int round = 0; round < 1000; ++round) {
+    std::vector<std::pair<v1::Task, uint64_t>> held;
+    for (uint64_t w : {a, b, a, b}) {
+      v1::GetTaskResponse r = c->get_task(w);
+      if (r.has_task()) held.emplace_back(r.task(), w);
+    }
+    if (held.empty()) break;
+    for (auto it = held.rbegin(); it != held.rend(); ++it)
+      ASSERT_TRUE(c->submit_result(render_task(it->first, it->second)).accepted());
+  }
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(c->image_path(id, "image.exr"))));
+}
+
+TEST_F(CoordinatorTest, DuplicateResultIsDropped) {
+  const std::string id = c->submit(request(job_settings()));
+  const uint64_t w = worker();
+  const v1::Task task = c->get_task(w).task();
+  const v1::TaskResult res = render_task(task, w);
+  EXPECT_TRUE(c->submit_result(res).accepted());
+  const v1::ResultAck again = c->submit_result(res);
+  EXPECT_FALSE(again.accepted());
+  EXPECT_TRUE(again.duplicate());
+  EXPECT_EQ(c->counters().results_duplicate, 1u);
+  EXPECT_EQ(c->status(id, false).samples_done(), uint64_t(task.tile().w() * task.tile().h() * 4));
+}
+
+TEST_F(CoordinatorTest, ExpiredLeaseGoesToAnotherWorkerAndTheLateResultIsNotMergedTwice) {
+  const RenderSettings s = job_settings();
+  const std::string id = c->submit(request(s));
+  const uint64_t slow = worker(), fast = worker();
+  const v1::Task first = c->get_task(slow).task();
+  t += 2;
+  EXPECT_TRUE(c->heartbeat(slow, first.task_id()));  // renewed to t + 5
+  t += 4;
+  EXPECT_EQ(c->expire_leases(), 0u);
+  t += 2;  // silent for 6 s > 5 s lease
+  EXPECT_EQ(c->expire_leases(), 1u);
+  EXPECT_FALSE(c->heartbeat(slow, first.task_id()));  // the slow worker is told to stop
+  // The same tile pass goes to the other worker (fewest passes first).
+  const v1::Task retry = c->get_task(fast).task();
+  EXPECT_EQ(retry.tile().x(), first.tile().x());
+  EXPECT_EQ(retry.tile().y(), first.tile().y());
+  EXPECT_EQ(retry.pass(), first.pass());
+  EXPECT_NE(retry.task_id(), first.task_id());
+  // The slow worker's result arrives after all: identical bits, merged once.
+  EXPECT_TRUE(c->submit_result(render_task(first, slow)).accepted());
+  const v1::ResultAck late = c->submit_result(render_task(retry, fast));
+  EXPECT_TRUE(late.duplicate());
+  drain(fast);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(c->image_path(id, "image.exr"))));
+}
+
+TEST_F(CoordinatorTest, HostileResultsAreRejectedAndCounted) {
+  c->submit(request(job_settings()));
+  const uint64_t w = worker();
+  const v1::Task task = c->get_task(w).task();
+  v1::TaskResult bad = render_task(task, w);
+  bad.set_task_id(999999);  // never issued
+  EXPECT_FALSE(c->submit_result(bad).accepted());
+  bad = render_task(task, w);
+  bad.set_sums_zstd("not zstd at all");
+  EXPECT_FALSE(c->submit_result(bad).accepted());
+  bad = render_task(task, w);
+  bad.set_raw_size(bad.raw_size() + 36);  // wrong size
+  EXPECT_FALSE(c->submit_result(bad).accepted());
+  // More samples per pixel than the pass has.
+  std::vector<PixelSums> sums(size_t(task.tile().w() * task.tile().h()));
+  for (PixelSums& p : sums) p.n = 1000;
+  bad.set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
+  bad.set_sums_zstd(encode_sums(sums));
+  EXPECT_FALSE(c->submit_result(bad).accepted());
+  EXPECT_EQ(c->counters().results_rejected, 4u);
+  EXPECT_TRUE(c->submit_result(render_task(task, w)).accepted());  // the real one still merges
+}
+
+TEST_F(CoordinatorTest, MalformedSceneIsRefusedAtSubmitAndOthersStillRun) {
+  v1::SubmitJobRequest bad = request(job_settings());
+  bad.mutable_files(0)->set_content("<COLLADA><scene><instance_visual_scene url=\"#gone\"/></scene></COLLADA>");
+  try {
+    c->submit(bad);
+    ADD_FAILURE();
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("cornell-spheres.dae: "), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("dangling reference '#gone'"), std::string::npos) << e.what();
+  }
+  v1::SubmitJobRequest traversal = request(job_settings());
+  traversal.mutable_files(0)->set_path("../../etc/x.dae");
+  traversal.set_main_file("../../etc/x.dae");
+  EXPECT_THROW(c->submit(traversal), RequestError);
+  v1::SubmitJobRequest zero = request(job_settings());
+  zero.mutable_settings()->set_spp(0);
+  EXPECT_THROW(c->submit(zero), RequestError);
+  v1::SubmitJobRequest old = request(job_settings());
+  old.set_version(99);
+  EXPECT_THROW(c->submit(old), RequestError);
+  EXPECT_EQ(c->counters().jobs_refused, 4u);
+  const std::string id = c->submit(request(job_settings()));
+  drain(worker());
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+}
+
+TEST_F(CoordinatorTest, CancelStopsDispatchAndKeepsWhatWasRendered) {
+  const std::string id = c->submit(request(job_settings()));
+  const uint64_t w = worker();
+  const v1::Task a = c->get_task(w).task();
+  ASSERT_TRUE(c->submit_result(render_task(a, w)).accepted());
+  const v1::Task b = c->get_task(w).task();
+  EXPECT_EQ(c->cancel(id).state(), v1::JobStatus::CANCELLED);
+  EXPECT_FALSE(c->heartbeat(w, b.task_id()));
+  EXPECT_FALSE(c->get_task(w).has_task());
+  const ExrImage img = read_exr(c->image_path(id, "image.exr"));
+  float spp = 0;
+  for (float n : img.channels.at("spp")) spp += n;
+  EXPECT_EQ(spp, float(a.tile().w() * a.tile().h() * 4));  // the merged tile is in the image
+}
+
+TEST_F(CoordinatorTest, HigherPriorityJobsGoFirst) {
+  const std::string low = c->submit(request(job_settings()));
+  v1::SubmitJobRequest r = request(job_settings());
+  r.set_priority(5);
+  const std::string high = c->submit(r);
+  EXPECT_EQ(c->get_task(worker()).task().job_id(), high);
+  (void)low;
+}
+
+TEST_F(CoordinatorTest, NoiseTargetStopsConvergedTilesEarlyAndReproducibly) {
+  RenderSettings s = job_settings();
+  s.spp = 64;
+  s.pass_spp = 8;
+  v1::SubmitJobRequest r = request(s);
+  r.set_noise_target(0.5);
+  const std::string a = c->submit(r), b = c->submit(r);
+  drain(worker());
+  const v1::JobStatus sa = c->status(a, true), sb = c->status(b, true);
+  EXPECT_EQ(sa.state(), v1::JobStatus::DONE);
+  EXPECT_LT(sa.samples_done(), sa.samples_total());  // some tiles stopped early
+  EXPECT_EQ(sa.samples_done(), sb.samples_done());   // and the same ones each time
+  for (const auto& tile : sa.tiles()) EXPECT_TRUE(tile.passes_done() == 8 || tile.relative_error() <= 0.5);
+}
+
+TEST_F(CoordinatorTest, UnknownWorkerMustRegisterAgain) {
+  EXPECT_THROW(c->get_task(12345), RequestError);
+}
+
+}  // namespace
+}  // namespace tessera

@@ -1,0 +1,37 @@
+// tessera-worker: renders tiles for a coordinator.
+#include <signal.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <cstdio>
+
+#include "worker/worker.h"
+
+namespace {
+std::atomic<bool> g_stop{false};
+void on_signal(int) { g_stop = true; }
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"tessera-worker: renders tiles for a Tessera coordinator"};
+  tessera::WorkerOptions opt;
+  app.add_option("--coordinator", opt.coordinator, "coordinator gRPC address HOST:PORT")->required();
+  app.add_option("--threads", opt.threads, "render threads (0 = every core)")->capture_default_str()->check(CLI::Range(0, 1024));
+  app.add_option("--cache", opt.cache_dir, "scene cache directory")->capture_default_str();
+  app.add_option("--name", opt.name, "name shown by the coordinator (default host:pid)");
+  app.add_flag("-v,--verbose", opt.verbose, "log connection events");
+  CLI11_PARSE(app, argc, argv);
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigaction(SIGTERM, &sa, nullptr);
+  sigaction(SIGINT, &sa, nullptr);
+  try {
+    tessera::Worker worker(opt);
+    worker.run(g_stop);
+    std::fprintf(stderr, "tessera-worker: stopped after %llu tasks\n", (unsigned long long)worker.tasks_done());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tessera-worker: error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}
