@@ -55,16 +55,14 @@ std::string json_of(const google::protobuf::Message& m) {
 
 const char* state_name(v1::JobStatus::State s) { return v1::JobStatus::State_Name(s).c_str(); }
 
-bool ended(const v1::JobStatus& s) {
-  return s.state() != v1::JobStatus::QUEUED && s.state() != v1::JobStatus::RUNNING;
-}
+bool ended(const v1::JobStatus& s) { return s.state() != v1::JobStatus::QUEUED && s.state() != v1::JobStatus::RUNNING; }
 
 std::string describe(const v1::JobStatus& s) {
   char buf[256];
-  std::snprintf(buf, sizeof buf, "%s  %-9s %5.1f%%  passes %u/%u  tiles %u/%u  workers %u  %s", s.id().c_str(),
-                state_name(s.state()), 100.0 * double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total())),
-                s.frame_passes_done(), s.passes_total(), s.tiles_done(), s.tiles_total(), s.active_workers(),
-                s.name().c_str());
+  std::snprintf(
+      buf, sizeof buf, "%s  %-9s %5.1f%%  passes %u/%u  tiles %u/%u  workers %u  %s", s.id().c_str(),
+      state_name(s.state()), 100.0 * double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total())),
+      s.frame_passes_done(), s.passes_total(), s.tiles_done(), s.tiles_total(), s.active_workers(), s.name().c_str());
   return buf;
 }
 
@@ -83,7 +81,8 @@ v1::JobStatus watch(v1::Tessera::Stub& stub, const std::string& id, const FarmAr
     char what[128];
     std::snprintf(what, sizeof what, "%s passes %u/%u tiles %u/%u workers %u", state_name(s.state()),
                   s.frame_passes_done(), s.passes_total(), s.tiles_done(), s.tiles_total(), s.active_workers());
-    const double fraction = ended(s) ? 1.0 : double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total()));
+    const double fraction =
+        ended(s) ? 1.0 : double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total()));
     bar.update(fraction, what, s.elapsed_seconds());
     if (ended(s)) break;
   }
@@ -173,8 +172,10 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
       v1::JobId id;
       check(stub->SubmitJob(ctx(120).get(), req, &id), a->farm);
       if (!a->wait) {
-        if (a->farm.json) std::printf("{\"id\": \"%s\"}\n", id.id().c_str());
-        else std::printf("%s\n", id.id().c_str());
+        if (a->farm.json)
+          std::printf("{\"id\": \"%s\"}\n", id.id().c_str());
+        else
+          std::printf("%s\n", id.id().c_str());
         return 0;
       }
       if (!a->farm.json) std::fprintf(stderr, "job %s submitted\n", id.id().c_str());
@@ -185,7 +186,7 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
         std::printf("%s\n", json_of(final).c_str());
       } else {
         std::printf("%s: %s in %.2f s, %llu samples -> ", id.id().c_str(), state_name(final.state()),
-                    final.elapsed_seconds(), (unsigned long long)final.samples_done());
+                    final.elapsed_seconds(), (unsigned long long) final.samples_done());
         for (size_t i = 0; i < outputs.size(); ++i) std::printf("%s%s", i ? ", " : "", outputs[i].c_str());
         std::printf("\n");
       }
@@ -213,10 +214,12 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
       req.set_id(*job);
       v1::JobStatus s;
       check(stub->GetJob(ctx().get(), req, &s), *a);
-      if (a->json) std::printf("%s\n", json_of(s).c_str());
-      else std::printf("%s\n  elapsed %s, eta %s, %llu of %llu samples\n", describe(s).c_str(),
-                       format_duration(s.elapsed_seconds()).c_str(), format_duration(s.eta_seconds()).c_str(),
-                       (unsigned long long)s.samples_done(), (unsigned long long)s.samples_total());
+      if (a->json)
+        std::printf("%s\n", json_of(s).c_str());
+      else
+        std::printf("%s\n  elapsed %s, eta %s, %llu of %llu samples\n", describe(s).c_str(),
+                    format_duration(s.elapsed_seconds()).c_str(), format_duration(s.eta_seconds()).c_str(),
+                    (unsigned long long)s.samples_done(), (unsigned long long)s.samples_total());
       return 0;
     }));
   }
@@ -228,7 +231,8 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
       if (!cmd->parsed()) return -1;
       v1::JobList list;
       check(connect(*a)->ListJobs(ctx().get(), v1::ListJobsRequest(), &list), *a);
-      if (a->json) std::printf("%s\n", json_of(list).c_str());
+      if (a->json)
+        std::printf("%s\n", json_of(list).c_str());
       else
         for (const auto& s : list.jobs()) std::printf("%s\n", describe(s).c_str());
       return 0;
@@ -243,8 +247,10 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
     runs.push_back(guard([a, job, cmd]() -> int {
       if (!cmd->parsed()) return -1;
       const v1::JobStatus s = watch(*connect(*a), *job, *a);
-      if (a->json) std::printf("%s\n", json_of(s).c_str());
-      else std::printf("%s\n", describe(s).c_str());
+      if (a->json)
+        std::printf("%s\n", json_of(s).c_str());
+      else
+        std::printf("%s\n", describe(s).c_str());
       return s.state() == v1::JobStatus::DONE ? 0 : 1;
     }));
   }
@@ -274,8 +280,10 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
       req.set_id(*job);
       v1::JobStatus s;
       check(connect(*a)->CancelJob(ctx().get(), req, &s), *a);
-      if (a->json) std::printf("%s\n", json_of(s).c_str());
-      else std::printf("%s\n", describe(s).c_str());
+      if (a->json)
+        std::printf("%s\n", json_of(s).c_str());
+      else
+        std::printf("%s\n", describe(s).c_str());
       return 0;
     }));
   }

@@ -1,6 +1,4 @@
 #include "client/render_command.h"
-#include "client/progress.h"
-#include "client/render_flags.h"
 
 #include <unistd.h>
 
@@ -10,6 +8,8 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 
+#include "client/progress.h"
+#include "client/render_flags.h"
 #include "core/io/image_io.h"
 #include "core/render/local_renderer.h"
 #include "core/scene/load.h"
@@ -58,8 +58,8 @@ int run_render(const RenderArgs& a) {
 
   const uint64_t rays = r.stats.rays.rays + r.stats.rays.shadow_rays;
   const double sps = r.stats.samples / std::max(r.seconds, 1e-9), rps = rays / std::max(r.seconds, 1e-9);
-  std::printf("%s: %dx%d, %llu samples in %.2f s: %.2f M samples/s, %.2f M rays/s", a.flags.scene.c_str(), r.film.width(),
-              r.film.height(), (unsigned long long)r.stats.samples, r.seconds, sps / 1e6, rps / 1e6);
+  std::printf("%s: %dx%d, %llu samples in %.2f s: %.2f M samples/s, %.2f M rays/s", a.flags.scene.c_str(),
+              r.film.width(), r.film.height(), (unsigned long long)r.stats.samples, r.seconds, sps / 1e6, rps / 1e6);
   if (r.stats.nan_samples) std::printf(", %llu NaN/Inf samples dropped", (unsigned long long)r.stats.nan_samples);
   std::printf(" -> ");
   for (size_t i = 0; i < outputs.size(); ++i) std::printf("%s%s", i ? ", " : "", outputs[i].c_str());

@@ -5,24 +5,33 @@ namespace tessera {
 void add_render_flags(CLI::App* cmd, RenderFlags& f) {
   cmd->add_option("scene", f.scene, "Scene file (.dae)")->required()->check(CLI::ExistingFile);
   cmd->add_option("-s", f.spp, "Camera samples per pixel (a maximum with -a)")
-      ->capture_default_str()->check(CLI::Range(1, 1 << 24));
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1 << 24));
   cmd->add_option("-l", f.light_samples, "Samples per area light per shading point")
-      ->capture_default_str()->check(CLI::Range(1, 1 << 16));
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1 << 16));
   cmd->add_option("-m", f.max_depth, "Max ray depth: scattering events per path (0 = emitters only)")
-      ->capture_default_str()->check(CLI::Range(0, 1 << 16));
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1 << 16));
   cmd->add_option("-a", f.adaptive, "Adaptive sampling: BATCH TOLERANCE (off unless given)")->expected(2);
   cmd->add_option("-r", f.resolution, "Output width and height; with CS184 framing also the field of view")
-      ->expected(2)->capture_default_str();
-  cmd->add_option("-b", f.lens_radius, "Thin-lens radius (0 = pinhole)")->capture_default_str()->check(CLI::Range(0.0, 1e30));
+      ->expected(2)
+      ->capture_default_str();
+  cmd->add_option("-b", f.lens_radius, "Thin-lens radius (0 = pinhole)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e30));
   cmd->add_option("-d", f.focal_distance, "Focal distance along the optical axis")
-      ->capture_default_str()->check(CLI::PositiveNumber);
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   cmd->add_option("-p", f.window, "Render only the cell X Y W H (lower-left pixel, y from the bottom)")->expected(4);
   cmd->add_option("--seed", f.seed, "Random seed")->capture_default_str();
   cmd->add_option("--camera", f.camera, "cs184 (framing of the CS184 renderer) or file (the file's camera)")
-      ->capture_default_str()->check(CLI::IsMember({"cs184", "file"}));
+      ->capture_default_str()
+      ->check(CLI::IsMember({"cs184", "file"}));
   cmd->add_option("-f", f.outputs, "Output image; .exr or .png; repeat for both (default SCENE.exr and SCENE.png)");
   cmd->add_option("--pass-spp", f.pass_spp, "Samples per progressive pass")
-      ->capture_default_str()->check(CLI::Range(1, 1 << 24));
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1 << 24));
 }
 
 RenderSettings to_settings(const RenderFlags& a) {

@@ -175,7 +175,8 @@ std::string unpack_bundle(const std::string& dir, const std::string& main_file,
   return (fs::path(dir) / main_file).string();
 }
 
-void pack_scene(const std::string& path, std::string* main_file, google::protobuf::RepeatedPtrField<v1::SceneFile>* files) {
+void pack_scene(const std::string& path, std::string* main_file,
+                google::protobuf::RepeatedPtrField<v1::SceneFile>* files) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw std::runtime_error(path + ": cannot open file");
   std::ostringstream ss;

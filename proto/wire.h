@@ -43,6 +43,7 @@ std::string unpack_bundle(const std::string& dir, const std::string& main_file,
                           const google::protobuf::RepeatedPtrField<v1::SceneFile>& files);
 // The files a scene needs, read from disk: the scene itself (and, for formats with
 // external resources, those).
-void pack_scene(const std::string& path, std::string* main_file, google::protobuf::RepeatedPtrField<v1::SceneFile>* files);
+void pack_scene(const std::string& path, std::string* main_file,
+                google::protobuf::RepeatedPtrField<v1::SceneFile>* files);
 
 }  // namespace tessera

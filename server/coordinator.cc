@@ -40,10 +40,10 @@ struct Coordinator::Job {
   uint32_t tiles_done = 0;
   uint32_t image_frame_passes = 0;  // frame passes in the last image written
   double last_image = -1e9;
-  uint64_t image_seq = 0;           // snapshots taken
-  uint64_t written_seq = 0;         // newest snapshot on disk
+  uint64_t image_seq = 0;    // snapshots taken
+  uint64_t written_seq = 0;  // newest snapshot on disk
   bool image_written = false;
-  std::mutex write_mu;              // one writer at a time per job
+  std::mutex write_mu;  // one writer at a time per job
 
   bool live() const { return st == v1::JobStatus::QUEUED || st == v1::JobStatus::RUNNING; }
   uint32_t frame_passes_done() const {
@@ -248,7 +248,8 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id) {
   expire_leases_locked(now);
   auto w = workers_.find(worker_id);
   if (w == workers_.end())
-    throw RequestError(RequestError::Code::kFailedPrecondition, "unknown worker " + std::to_string(worker_id) + "; register again");
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "unknown worker " + std::to_string(worker_id) + "; register again");
   w->second.last_seen = now;
   v1::GetTaskResponse resp;
   std::vector<Job*> order;
@@ -402,9 +403,12 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     const double now = clock_->now();
     auto it = tasks_.find(result.task_id());
     TaskRecord rec;
-    if (it != tasks_.end()) rec = it->second;
-    else if (auto e = expired_.find(result.task_id()); e != expired_.end()) rec = e->second;
-    else return ack;
+    if (it != tasks_.end())
+      rec = it->second;
+    else if (auto e = expired_.find(result.task_id()); e != expired_.end())
+      rec = e->second;
+    else
+      return ack;
     auto jit = jobs_.find(rec.job);
     if (jit == jobs_.end() || !jit->second->live()) return ack;
     Job& job = *jit->second;
@@ -457,13 +461,20 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     if (done || (frame > job.image_frame_passes && now - job.last_image >= options_.image_interval_seconds)) {
       job.image_frame_passes = frame;
       job.last_image = now;
-      pending = PendingImage{image_path(job.id, "image.exr"), image_path(job.id, "preview.png"),
-                             std::make_unique<Film>(job.film), {}, ++job.image_seq};
-      pending->meta = {{"job", job.id}, {"scene", job.name}, {"seed", std::to_string(job.settings.seed)},
-                       {"frame_passes", std::to_string(frame)}, {"render_seconds", std::to_string(now - job.started)}};
+      pending = PendingImage{image_path(job.id, "image.exr"),
+                             image_path(job.id, "preview.png"),
+                             std::make_unique<Film>(job.film),
+                             {},
+                             ++job.image_seq};
+      pending->meta = {{"job", job.id},
+                       {"scene", job.name},
+                       {"seed", std::to_string(job.settings.seed)},
+                       {"frame_passes", std::to_string(frame)},
+                       {"render_seconds", std::to_string(now - job.started)}};
     }
     if (done) {
-      for (auto e = expired_.begin(); e != expired_.end();) e = e->second.job == job.id ? expired_.erase(e) : std::next(e);
+      for (auto e = expired_.begin(); e != expired_.end();)
+        e = e->second.job == job.id ? expired_.erase(e) : std::next(e);
     }
     ack.set_accepted(true);
     changed_.notify_all();
@@ -499,7 +510,9 @@ void Coordinator::write_image(Job& job) {
   {
     std::lock_guard<std::mutex> lock(mu_);
     film = std::make_unique<Film>(job.film);
-    meta = {{"job", job.id}, {"scene", job.name}, {"seed", std::to_string(job.settings.seed)},
+    meta = {{"job", job.id},
+            {"scene", job.name},
+            {"seed", std::to_string(job.settings.seed)},
             {"frame_passes", std::to_string(job.frame_passes_done())}};
     seq = ++job.image_seq;
   }
@@ -521,8 +534,13 @@ v1::JobStatus Coordinator::cancel(const std::string& id) {
     if (!job->live()) return status_locked(*job, false);
     job->st = v1::JobStatus::CANCELLED;
     job->finished_at = clock_->now();
+    for (auto& [wid, w] : workers_) {
+      auto t = tasks_.find(w.current_task);
+      if (t != tasks_.end() && t->second.job == id) w.current_task = 0;
+    }
     for (auto it = tasks_.begin(); it != tasks_.end();) it = it->second.job == id ? tasks_.erase(it) : std::next(it);
-    for (auto it = expired_.begin(); it != expired_.end();) it = it->second.job == id ? expired_.erase(it) : std::next(it);
+    for (auto it = expired_.begin(); it != expired_.end();)
+      it = it->second.job == id ? expired_.erase(it) : std::next(it);
     changed_.notify_all();
   }
   write_image(*job);  // keep what was rendered

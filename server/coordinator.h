@@ -74,7 +74,7 @@ class Coordinator {
   v1::JobStatus status(const std::string& id, bool with_tiles) const;
   std::vector<v1::JobStatus> list() const;
   v1::JobStatus cancel(const std::string& id);
-  v1::Image image(const std::string& id);  // writes one if none was written yet
+  v1::Image image(const std::string& id);                                 // writes one if none was written yet
   std::string image_path(const std::string& id, const char* file) const;  // exr/png on disk
 
   // Worker side.

@@ -16,7 +16,9 @@ int main(int argc, char** argv) {
   CLI::App app{"tessera-worker: renders tiles for a Tessera coordinator"};
   tessera::WorkerOptions opt;
   app.add_option("--coordinator", opt.coordinator, "coordinator gRPC address HOST:PORT")->required();
-  app.add_option("--threads", opt.threads, "render threads (0 = every core)")->capture_default_str()->check(CLI::Range(0, 1024));
+  app.add_option("--threads", opt.threads, "render threads (0 = every core)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1024));
   app.add_option("--cache", opt.cache_dir, "scene cache directory")->capture_default_str();
   app.add_option("--name", opt.name, "name shown by the coordinator (default host:pid)");
   app.add_flag("-v,--verbose", opt.verbose, "log connection events");

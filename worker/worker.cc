@@ -20,8 +20,7 @@ namespace {
 
 std::unique_ptr<grpc::ClientContext> context(double seconds) {
   auto ctx = std::make_unique<grpc::ClientContext>();
-  ctx->set_deadline(std::chrono::system_clock::now() +
-                    std::chrono::milliseconds(int64_t(seconds * 1000)));
+  ctx->set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(int64_t(seconds * 1000)));
   return ctx;
 }
 
@@ -67,7 +66,8 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
       worker_id_ = resp.worker_id();
       heartbeat_ms_ = std::max(50u, resp.heartbeat_interval_ms());
       backoff_ = 0.1;
-      if (options_.verbose) std::fprintf(stderr, "tessera-worker: registered as %llu\n", (unsigned long long)worker_id_);
+      if (options_.verbose)
+        std::fprintf(stderr, "tessera-worker: registered as %llu\n", (unsigned long long)worker_id_);
       return true;
     }
     if (options_.verbose)
@@ -94,7 +94,8 @@ const Scene& Worker::scene_for(const std::string& hash) {
     v1::SceneBundle bundle;
     const grpc::Status st = stub_->FetchScene(context(120).get(), req, &bundle);
     if (!st.ok()) throw std::runtime_error("fetch scene " + hash + ": " + st.error_message());
-    if (bundle_hash(bundle.main_file(), bundle.files()) != hash) throw WireError("scene bundle does not match its hash");
+    if (bundle_hash(bundle.main_file(), bundle.files()) != hash)
+      throw WireError("scene bundle does not match its hash");
     main = unpack_bundle(dir.string(), bundle.main_file(), bundle.files());
     std::ofstream(marker) << bundle.main_file() << "\n";
   }
@@ -130,8 +131,8 @@ bool Worker::render(const v1::Task& task, std::vector<PixelSums>* sums, TileStat
     const int y0 = tile.h * i / n, y1 = tile.h * (i + 1) / n;
     pool.emplace_back([&, i, y0, y1] {
       const Rect strip{tile.x, tile.y + y0, tile.w, y1 - y0};
-      parts[size_t(i)] = r.render(strip, task.sample_begin(), task.sample_end(), mask ? mask + size_t(y0) * tile.w : nullptr,
-                                  &part_stats[size_t(i)], &abort);
+      parts[size_t(i)] = r.render(strip, task.sample_begin(), task.sample_end(),
+                                  mask ? mask + size_t(y0) * tile.w : nullptr, &part_stats[size_t(i)], &abort);
     });
   }
   for (std::thread& t : pool) t.join();

@@ -1,5 +1,7 @@
 // The coordinator's logic driven in-process, with a fake clock: ordered merging, leases,
 // duplicates, hostile results, refusals.
+#include "server/coordinator.h"
+
 #include <gtest/gtest.h>
 
 #include <cstring>
@@ -8,7 +10,6 @@
 #include "core/io/image_io.h"
 #include "core/render/local_renderer.h"
 #include "core/scene/load.h"
-#include "server/coordinator.h"
 #include "tests/core/test_paths.h"
 
 namespace tessera {
@@ -270,9 +271,7 @@ TEST_F(CoordinatorTest, NoiseTargetStopsConvergedTilesEarlyAndReproducibly) {
   for (const auto& tile : sa.tiles()) EXPECT_TRUE(tile.passes_done() == 8 || tile.relative_error() <= 0.5);
 }
 
-TEST_F(CoordinatorTest, UnknownWorkerMustRegisterAgain) {
-  EXPECT_THROW(c->get_task(12345), RequestError);
-}
+TEST_F(CoordinatorTest, UnknownWorkerMustRegisterAgain) { EXPECT_THROW(c->get_task(12345), RequestError); }
 
 }  // namespace
 }  // namespace tessera

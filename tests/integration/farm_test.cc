@@ -1,0 +1,277 @@
+// The render farm as a user runs it: a real coordinator and workers on 127.0.0.1 with
+// ports picked by the system, driven through the tessera CLI and the status endpoint.
+#include <gtest/gtest.h>
+#include <httplib.h>
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <sstream>
+#include <thread>
+
+#include "core/io/image_io.h"
+#include "tests/integration/process.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::Process;
+
+const std::string kBin = TESSERA_BIN_DIR;
+const std::string kScene = std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-spheres.dae";
+
+struct CommandResult {
+  int code = -1;
+  std::string out, err;
+};
+
+CommandResult run(const std::string& args, const fs::path& dir) {
+  const std::string out = (dir / "cmd.out").string(), err = (dir / "cmd.err").string();
+  const int status = std::system((kBin + "/tessera " + args + " >" + out + " 2>" + err).c_str());
+  auto slurp = [](const std::string& p) {
+    std::ifstream f(p);
+    std::stringstream ss;
+    ss << f.rdbuf();
+    return ss.str();
+  };
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
+}
+
+// Bitwise equality of every channel.
+void expect_same_pixels(const std::string& a_path, const std::string& b_path) {
+  const ExrImage a = read_exr(a_path), b = read_exr(b_path);
+  ASSERT_EQ(a.width, b.width);
+  ASSERT_EQ(a.height, b.height);
+  for (const char* ch : {"R", "G", "B", "spp", "variance"}) {
+    ASSERT_TRUE(a.channels.count(ch) && b.channels.count(ch)) << ch;
+    const auto &x = a.channels.at(ch), &y = b.channels.at(ch);
+    EXPECT_EQ(0, std::memcmp(x.data(), y.data(), x.size() * sizeof(float))) << "channel " << ch << " differs";
+  }
+}
+
+class Farm : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_farm_" + std::to_string(::getpid()) + "_" +
+                                              ::testing::UnitTest::GetInstance()->current_test_info()->name());
+  std::unique_ptr<Process> coordinator;
+  std::vector<std::unique_ptr<Process>> workers;
+  std::string grpc_addr;
+  int http_port = 0;
+
+  void SetUp() override { fs::create_directories(dir); }
+  void TearDown() override {
+    workers.clear();
+    coordinator.reset();
+    fs::remove_all(dir);
+  }
+  void start_coordinator(const std::string& listen = "127.0.0.1:0", const std::string& lease = "2") {
+    coordinator = std::make_unique<Process>(
+        kBin + "/tessera-coordinator",
+        std::vector<std::string>{"--listen", listen, "--http", "127.0.0.1:0", "--data", (dir / "data").string(),
+                                 "--lease-seconds", lease, "--tile", "16", "--image-interval", "0.2"},
+        (dir / "coordinator.err").string());
+    const std::string g = coordinator->read_line(), h = coordinator->read_line();
+    std::smatch m;
+    ASSERT_TRUE(std::regex_match(g, m, std::regex("grpc listening on (127\\.0\\.0\\.1:\\d+)"))) << g;
+    grpc_addr = m[1];
+    ASSERT_TRUE(std::regex_match(h, m, std::regex("http listening on 127\\.0\\.0\\.1:(\\d+)"))) << h;
+    http_port = std::stoi(m[1]);
+  }
+  Process& start_worker(int threads = 1) {
+    const std::string n = std::to_string(workers.size());
+    workers.push_back(std::make_unique<Process>(
+        kBin + "/tessera-worker",
+        std::vector<std::string>{"--coordinator", grpc_addr, "--threads", std::to_string(threads), "--cache",
+                                 (dir / ("cache" + n)).string(), "--name", "w" + n},
+        (dir / ("worker" + n + ".err")).string()));
+    return *workers.back();
+  }
+  nlohmann::json get_json(const std::string& path) {
+    httplib::Client cli("127.0.0.1", http_port);
+    auto res = cli.Get(path.c_str());
+    if (!res || res->status != 200) return nullptr;
+    return nlohmann::json::parse(res->body);
+  }
+  std::string local_render(const std::string& flags) {
+    const std::string out = (dir / "local.exr").string();
+    const CommandResult r = run("render " + kScene + " " + flags + " -q -f " + out, dir);
+    EXPECT_EQ(r.code, 0) << r.err;
+    return out;
+  }
+};
+
+const std::string kFlags = "-r 96 72 -s 24 --pass-spp 8 -m 6 --seed 11";
+
+TEST_F(Farm, OneTwoAndThreeWorkersGiveTheBytesOfTessearRender) {
+  const std::string local = local_render(kFlags);
+  start_coordinator();
+  for (int n = 1; n <= 3; ++n) {
+    start_worker();
+    const std::string out = (dir / ("farm" + std::to_string(n) + ".exr")).string();
+    const CommandResult r =
+        run("submit " + kScene + " " + kFlags + " --coordinator " + grpc_addr + " --wait -q -f " + out, dir);
+    ASSERT_EQ(r.code, 0) << r.err << r.out;
+    EXPECT_NE(r.out.find("DONE"), std::string::npos) << r.out;
+    expect_same_pixels(local, out);
+  }
+}
+
+TEST_F(Farm, WorkerKilledMidTileChangesNothing) {
+  const std::string flags = "-r 160 120 -s 32 --pass-spp 8 -m 6 --seed 5";
+  const std::string local = local_render(flags);
+  start_coordinator("127.0.0.1:0", "1");
+  Process& victim = start_worker();
+  start_worker();
+  const CommandResult sub = run("submit " + kScene + " " + flags + " --coordinator " + grpc_addr + " --json", dir);
+  ASSERT_EQ(sub.code, 0) << sub.err;
+  const std::string id = nlohmann::json::parse(sub.out).at("id");
+  // Kill the victim while it holds a lease, once some work has been merged.
+  bool killed = false;
+  for (int i = 0; i < 1000 && !killed; ++i) {
+    const nlohmann::json s = get_json("/api/status");
+    if (s != nullptr && !s["jobs"].empty() && std::stoull(s["jobs"][0]["samples_done"].get<std::string>()) > 0)
+      for (const auto& w : s["workers"])
+        if (w["name"] == "w0" && w["active"].get<bool>()) {
+          victim.signal(SIGKILL);
+          killed = true;
+        }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(killed);
+  const CommandResult w = run("watch " + id + " --coordinator " + grpc_addr + " --json", dir);
+  ASSERT_EQ(w.code, 0) << w.err;
+  const std::string out = (dir / "farm.exr").string();
+  ASSERT_EQ(run("fetch " + id + " -f " + out + " --coordinator " + grpc_addr, dir).code, 0);
+  expect_same_pixels(local, out);
+  httplib::Client cli("127.0.0.1", http_port);
+  const std::string metrics = cli.Get("/metrics")->body;
+  EXPECT_NE(metrics.find("tessera_results_merged_total"), std::string::npos);
+}
+
+TEST_F(Farm, CancelStopsWorkAndKeepsTheImage) {
+  start_coordinator();
+  start_worker();
+  const CommandResult sub = run("submit " + kScene + " -r 320 240 -s 4096 --coordinator " + grpc_addr, dir);
+  ASSERT_EQ(sub.code, 0) << sub.err;
+  const std::string id = sub.out.substr(0, sub.out.find('\n'));
+  nlohmann::json job;
+  for (int i = 0; i < 500; ++i) {  // wait for some samples
+    job = get_json("/api/jobs/" + id);
+    if (job != nullptr && std::stoull(job["samples_done"].get<std::string>()) > 0) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  const CommandResult c = run("cancel " + id + " --coordinator " + grpc_addr + " --json", dir);
+  ASSERT_EQ(c.code, 0) << c.err;
+  EXPECT_EQ(nlohmann::json::parse(c.out)["state"], "CANCELLED");
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  const nlohmann::json before = get_json("/api/status");
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  const nlohmann::json after = get_json("/api/status");
+  ASSERT_TRUE(before.is_object() && after.is_object()) << before << after;
+  ASSERT_EQ(after.at("jobs").size(), 1u) << after;
+  EXPECT_EQ(before.at("jobs").at(0).at("samples_done"), after.at("jobs").at(0).at("samples_done"));  // no more work
+  ASSERT_EQ(after.at("workers").size(), 1u) << after;
+  EXPECT_EQ(after.at("workers").at(0).at("active"), false);
+  const std::string out = (dir / "cancelled.exr").string();
+  ASSERT_EQ(run("fetch " + id + " -f " + out + " --coordinator " + grpc_addr, dir).code, 0);
+  const ExrImage img = read_exr(out);
+  float spp = 0;
+  for (float n : img.channels.at("spp")) spp += n;
+  EXPECT_GT(spp, 0);  // what was rendered before the cancel is kept
+}
+
+TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
+  start_coordinator();
+  start_worker();
+  const CommandResult r = run(
+      "submit " + kScene + " -r 64 48 -s 8 --coordinator " + grpc_addr + " --wait -q -f " + (dir / "x.png").string(),
+      dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json s = get_json("/api/status");
+  ASSERT_NE(s, nullptr);
+  ASSERT_EQ(s["jobs"].size(), 1u);
+  const std::string id = s["jobs"][0]["id"];
+  EXPECT_EQ(s["jobs"][0]["state"], "DONE");
+  EXPECT_EQ(s["workers"].size(), 1u);
+  EXPECT_GT(s["workers"][0]["samples_per_second"].get<double>(), 0);
+  const nlohmann::json j = get_json("/api/jobs/" + id);
+  EXPECT_EQ(j["tiles"].size(), size_t(4 * 3));  // 64x48 in 16-pixel tiles
+  EXPECT_EQ(get_json("/api/jobs/no-such-job"), nullptr);
+  httplib::Client cli("127.0.0.1", http_port);
+  // Prometheus text: comments, or `name{labels} value` with a numeric value.
+  const std::string metrics = cli.Get("/metrics")->body;
+  std::istringstream lines(metrics);
+  int samples = 0;
+  for (std::string line; std::getline(lines, line);) {
+    if (line.empty() || line[0] == '#') continue;
+    std::smatch m;
+    ASSERT_TRUE(std::regex_match(line, m, std::regex(R"(([a-z_]+)(\{[a-z_]+="[a-z]+"\})? (-?[0-9.e+-]+))"))) << line;
+    std::stod(m[3]);
+    ++samples;
+  }
+  EXPECT_GT(samples, 10);
+  EXPECT_NE(metrics.find("tessera_jobs{state=\"done\"} 1"), std::string::npos) << metrics;
+  const auto png = cli.Get(("/jobs/" + id + "/preview.png").c_str());
+  ASSERT_TRUE(png);
+  EXPECT_EQ(png->status, 200);
+  EXPECT_EQ(png->body.substr(1, 3), "PNG");
+  const auto page = cli.Get("/");
+  EXPECT_NE(page->body.find("<canvas"), std::string::npos);
+}
+
+TEST_F(Farm, MalformedSceneIsRefusedAtSubmitAndTheCoordinatorKeepsServing) {
+  start_coordinator();
+  start_worker();
+  const fs::path bad = dir / "broken.dae";
+  std::ofstream(bad) << "<COLLADA><asset><up_axis>Q_UP</up_axis></asset></COLLADA>";
+  const CommandResult r = run("submit " + bad.string() + " --coordinator " + grpc_addr, dir);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("broken.dae"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("unknown up_axis 'Q_UP'"), std::string::npos) << r.err;
+  const CommandResult ok = run(
+      "submit " + kScene + " -r 32 24 -s 4 --coordinator " + grpc_addr + " --wait -q -f " + (dir / "ok.exr").string(),
+      dir);
+  EXPECT_EQ(ok.code, 0) << ok.err;
+}
+
+TEST_F(Farm, WorkerStopsCleanlyOnSigtermAndGivesItsLeaseBack) {
+  start_coordinator();
+  Process& w = start_worker();
+  // One tile, one pass of 4096 spp: the worker is surely mid-tile when the signal comes.
+  ASSERT_EQ(
+      run("submit " + kScene + " -r 64 48 -s 4096 --pass-spp 4096 --tile 64 --coordinator " + grpc_addr, dir).code, 0);
+  for (int i = 0; i < 500; ++i) {
+    const nlohmann::json s = get_json("/api/status");
+    if (s != nullptr && !s["workers"].empty() && s["workers"][0]["active"].get<bool>()) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  const auto t0 = std::chrono::steady_clock::now();
+  w.signal(SIGTERM);
+  EXPECT_EQ(w.wait(10), 0);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 2.0);  // abandons, no wait
+  httplib::Client cli("127.0.0.1", http_port);
+  EXPECT_NE(cli.Get("/metrics")->body.find("tessera_leases_released_total 1"), std::string::npos);
+}
+
+TEST_F(Farm, WorkerReconnectsWhenTheCoordinatorComesBack) {
+  start_coordinator();
+  const std::string addr = grpc_addr;
+  start_worker();
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  coordinator->signal(SIGTERM);
+  ASSERT_EQ(coordinator->wait(10), 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  start_coordinator(addr);  // same port: the worker finds it again
+  ASSERT_EQ(grpc_addr, addr);
+  const CommandResult r = run("submit " + kScene + " -r 32 24 -s 4 --coordinator " + grpc_addr + " --wait -q -f " +
+                                  (dir / "again.exr").string(),
+                              dir);
+  EXPECT_EQ(r.code, 0) << r.err;
+}
+
+}  // namespace
+}  // namespace tessera
