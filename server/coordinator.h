@@ -43,7 +43,7 @@ struct CoordinatorOptions {
   uint32_t default_tile_size = 64;
   double lease_seconds = 10;
   double heartbeat_seconds = 2;
-  double image_interval_seconds = 2;  // progressive images at most this often
+  double image_interval_seconds = 5;  // progressive images at most this often
 };
 
 // A request the coordinator refuses, with a message for the client.
@@ -85,6 +85,9 @@ class Coordinator {
   v1::ResultAck submit_result(const v1::TaskResult& result);
   void release(uint64_t worker_id, uint64_t task_id);
 
+  // Waits up to `timeout` seconds for a change that may make work available (a job
+  // submitted, a tile pass merged, a lease ended): lets GetTask long-poll.
+  void wait_for_work(double timeout) const;
   // Expires overdue leases; get_task calls it too. Returns how many expired.
   size_t expire_leases();
   // Blocks until a job ends or `timeout` seconds pass; returns its status.

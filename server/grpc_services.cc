@@ -54,8 +54,17 @@ grpc::Status ClientService::FetchImage(grpc::ServerContext*, const v1::FetchImag
 grpc::Status WorkerService::Register(grpc::ServerContext*, const v1::RegisterRequest* req, v1::RegisterResponse* out) {
   return guarded([&] { *out = c_.register_worker(*req); });
 }
-grpc::Status WorkerService::GetTask(grpc::ServerContext*, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) {
-  return guarded([&] { *out = c_.get_task(req->worker_id()); });
+grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) {
+  // Long poll: an idle worker waits here (up to a second) and gets a new job's first task
+  // the moment it is submitted, instead of sleeping through a retry interval.
+  return guarded([&] {
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+    while (true) {
+      *out = c_.get_task(req->worker_id());
+      if (out->has_task() || ctx->IsCancelled() || std::chrono::steady_clock::now() >= until) return;
+      c_.wait_for_work(0.25);
+    }
+  });
 }
 grpc::Status WorkerService::FetchScene(grpc::ServerContext*, const v1::FetchSceneRequest* req, v1::SceneBundle* out) {
   return guarded([&] { *out = c_.scene(req->scene_hash()); });

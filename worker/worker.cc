@@ -4,9 +4,13 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <condition_variable>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <future>
+#include <mutex>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -145,43 +149,99 @@ bool Worker::render(const v1::Task& task, std::vector<PixelSums>* sums, TileStat
   return true;
 }
 
+void Worker::release(uint64_t task_id) {
+  v1::ReleaseRequest rel;
+  rel.set_worker_id(worker_id_);
+  rel.set_task_id(task_id);
+  v1::ReleaseResponse rr;
+  stub_->ReleaseTask(context(2).get(), rel, &rr);
+}
+
+std::optional<v1::Task> Worker::fetch_task(grpc::Status* status, uint32_t* retry_ms) {
+  v1::GetTaskRequest req;
+  req.set_worker_id(worker_id_);
+  v1::GetTaskResponse resp;
+  *status = stub_->GetTask(context(10).get(), req, &resp);
+  *retry_ms = resp.retry_after_ms();
+  if (!status->ok() || !resp.has_task()) return std::nullopt;
+  return resp.task();
+}
+
+bool Worker::submit(const v1::TaskResult& result, const std::atomic<bool>& stop) {
+  for (int attempt = 0; attempt < 5 && !stop; ++attempt) {
+    v1::ResultAck ack;
+    const grpc::Status rs = stub_->SubmitResult(context(30).get(), result, &ack);
+    if (rs.ok()) return true;
+    if (options_.verbose) std::fprintf(stderr, "tessera-worker: submit: %s\n", rs.error_message().c_str());
+    std::this_thread::sleep_for(std::chrono::milliseconds(100 << attempt));
+  }
+  return false;
+}
+
 void Worker::run(const std::atomic<bool>& stop) {
   if (!register_worker(stop)) return;
+  // While a tile renders, the next task is fetched and the previous result is sent, so
+  // the cores never wait for a round trip to the coordinator.
+  std::optional<v1::Task> next;
+  std::future<bool> sending;
   while (!stop) {
-    v1::GetTaskRequest req;
-    req.set_worker_id(worker_id_);
-    v1::GetTaskResponse resp;
-    const grpc::Status st = stub_->GetTask(context(10).get(), req, &resp);
-    if (!st.ok()) {
-      if (options_.verbose) std::fprintf(stderr, "tessera-worker: get task: %s\n", st.error_message().c_str());
-      // Unknown worker (the coordinator restarted) or unreachable: register again.
-      sleep_backoff(stop);
-      if (!register_worker(stop)) return;
-      continue;
+    std::optional<v1::Task> current = std::move(next);
+    next.reset();
+    if (!current) {
+      grpc::Status st;
+      uint32_t retry_ms = 0;
+      current = fetch_task(&st, &retry_ms);
+      if (!st.ok()) {
+        if (options_.verbose) std::fprintf(stderr, "tessera-worker: get task: %s\n", st.error_message().c_str());
+        // Unknown worker (the coordinator restarted) or unreachable: register again.
+        sleep_backoff(stop);
+        if (!register_worker(stop)) break;
+        continue;
+      }
+      backoff_ = 0.1;
+      if (!current) {
+        const auto until = now_seconds() + std::max(10u, retry_ms) / 1000.0;
+        while (!stop && now_seconds() < until) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        continue;
+      }
     }
-    backoff_ = 0.1;
-    if (!resp.has_task()) {
-      const auto until = now_seconds() + std::max(10u, resp.retry_after_ms()) / 1000.0;
-      while (!stop && now_seconds() < until) std::this_thread::sleep_for(std::chrono::milliseconds(10));
-      continue;
-    }
-    const v1::Task& task = resp.task();
-    std::atomic<bool> abort{false}, done{false};
-    // Heartbeats keep the lease while rendering; a "no" (cancelled, reassigned) or a stop
-    // request aborts the render.
+    const v1::Task& task = *current;
+    std::atomic<bool> abort{false};
+    std::atomic<uint64_t> prefetched{0};
+    bool done = false;
+    std::mutex mu;
+    std::condition_variable cv;
+    std::future<std::optional<v1::Task>> prefetch = std::async(std::launch::async, [&]() -> std::optional<v1::Task> {
+      grpc::Status st;
+      uint32_t retry_ms = 0;
+      std::optional<v1::Task> t = fetch_task(&st, &retry_ms);
+      if (t) prefetched = t->task_id();
+      return t;
+    });
+    // Heartbeats keep the leases (current and prefetched) while rendering; a "no" for the
+    // current task (cancelled, reassigned) or a stop request aborts the render. The
+    // thread wakes at once when the render ends.
     std::thread heart([&] {
-      double next = now_seconds() + heartbeat_ms_ / 1000.0;
+      std::unique_lock<std::mutex> lock(mu);
+      double due = now_seconds() + heartbeat_ms_ / 1000.0;
       while (!done) {
         if (stop) abort = true;
-        if (now_seconds() >= next) {
-          v1::HeartbeatRequest hb;
-          hb.set_worker_id(worker_id_);
-          hb.set_task_id(task.task_id());
-          v1::HeartbeatResponse hr;
-          if (stub_->Heartbeat(context(5).get(), hb, &hr).ok() && !hr.keep_going()) abort = true;
-          next = now_seconds() + heartbeat_ms_ / 1000.0;
+        if (now_seconds() >= due) {
+          lock.unlock();
+          for (uint64_t id : {task.task_id(), prefetched.load()}) {
+            if (!id) continue;
+            v1::HeartbeatRequest hb;
+            hb.set_worker_id(worker_id_);
+            hb.set_task_id(id);
+            v1::HeartbeatResponse hr;
+            if (stub_->Heartbeat(context(5).get(), hb, &hr).ok() && !hr.keep_going() && id == task.task_id())
+              abort = true;
+          }
+          due = now_seconds() + heartbeat_ms_ / 1000.0;
+          lock.lock();
+          continue;
         }
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        cv.wait_for(lock, std::chrono::milliseconds(10));  // also polls `stop` (set by a signal)
       }
     });
     std::vector<PixelSums> sums;
@@ -193,37 +253,36 @@ void Worker::run(const std::atomic<bool>& stop) {
     } catch (const std::exception& e) {
       std::fprintf(stderr, "tessera-worker: task %llu: %s\n", (unsigned long long)task.task_id(), e.what());
     }
-    done = true;
+    const double seconds = now_seconds() - t0;
+    {
+      std::lock_guard<std::mutex> lock(mu);
+      done = true;
+    }
+    cv.notify_all();
     heart.join();
     if (!ok) {  // abandoned: give the lease back so another worker starts at once
-      v1::ReleaseRequest rel;
-      rel.set_worker_id(worker_id_);
-      rel.set_task_id(task.task_id());
-      v1::ReleaseResponse rr;
-      stub_->ReleaseTask(context(2).get(), rel, &rr);
+      release(task.task_id());
+      next = prefetch.get();
       if (!stop) sleep_backoff(stop);
       continue;
     }
-    v1::TaskResult result;
-    result.set_worker_id(worker_id_);
-    result.set_task_id(task.task_id());
-    result.set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
-    result.set_sums_zstd(encode_sums(sums));
-    result.set_samples(stats.samples);
-    result.set_rays(stats.rays.rays + stats.rays.shadow_rays);
-    result.set_nan_samples(stats.nan_samples);
-    result.set_render_seconds(now_seconds() - t0);
-    for (int attempt = 0; attempt < 5 && !stop; ++attempt) {
-      v1::ResultAck ack;
-      const grpc::Status rs = stub_->SubmitResult(context(30).get(), result, &ack);
-      if (rs.ok()) {
-        ++tasks_done_;
-        break;
-      }
-      if (options_.verbose) std::fprintf(stderr, "tessera-worker: submit: %s\n", rs.error_message().c_str());
-      sleep_backoff(stop);
-    }
+    auto result = std::make_shared<v1::TaskResult>();
+    result->set_worker_id(worker_id_);
+    result->set_task_id(task.task_id());
+    result->set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
+    result->set_sums_zstd(encode_sums(sums));
+    result->set_samples(stats.samples);
+    result->set_rays(stats.rays.rays + stats.rays.shadow_rays);
+    result->set_nan_samples(stats.nan_samples);
+    result->set_render_seconds(seconds);
+    if (sending.valid() && sending.get()) ++tasks_done_;
+    sending = std::async(std::launch::async, [this, result, &stop] { return submit(*result, stop); });
+    // Only now wait for the prefetched task: when there is no work left it long-polls,
+    // and the result must not wait behind it.
+    next = prefetch.get();
   }
+  if (sending.valid() && sending.get()) ++tasks_done_;
+  if (next) release(next->task_id());
 }
 
 }  // namespace tessera

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "core/render/tile_renderer.h"
@@ -38,6 +39,9 @@ class Worker {
   // Renders the task's tile with every thread; returns false if aborted.
   bool render(const v1::Task& task, std::vector<PixelSums>* sums, TileStats* stats, const std::atomic<bool>& abort);
   void sleep_backoff(const std::atomic<bool>& stop);
+  std::optional<v1::Task> fetch_task(grpc::Status* status, uint32_t* retry_ms);
+  bool submit(const v1::TaskResult& result, const std::atomic<bool>& stop);  // retries
+  void release(uint64_t task_id);
 
   WorkerOptions options_;
   std::shared_ptr<grpc::Channel> channel_;

@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <mutex>
 #include <stdexcept>
 
 namespace tessera {
@@ -40,7 +41,7 @@ uint8_t srgb_byte(float v) {
   return uint8_t(std::lround(s * 255));
 }
 
-void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata) {
+void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata, bool fast) {
   const int w = film.width(), h = film.height();
   const size_t n = size_t(w) * h;
   std::vector<float> r(n), g(n), b(n), spp(n), var(n);
@@ -54,7 +55,7 @@ void write_exr(const std::string& path, const Film& film, const ImageMetadata& m
     var[i] = float(p.mean_variance());
   }
   Imf::Header header(w, h);
-  header.compression() = Imf::ZIP_COMPRESSION;
+  header.compression() = fast ? Imf::NO_COMPRESSION : Imf::ZIP_COMPRESSION;
   for (const auto& [key, value] : metadata) header.insert("tessera/" + key, Imf::StringAttribute(value));
   Imf::FrameBuffer fb;
   const std::pair<const char*, std::vector<float>*> channels[] = {
@@ -76,7 +77,7 @@ void write_exr(const std::string& path, const Film& film, const ImageMetadata& m
   commit(tmp, path);
 }
 
-void write_png(const std::string& path, const Film& film) {
+void write_png(const std::string& path, const Film& film, bool fast) {
   const int w = film.width(), h = film.height();
   std::vector<uint8_t> rgb(size_t(w) * h * 3);
   for (size_t i = 0; i < size_t(w) * h; ++i) {
@@ -86,7 +87,13 @@ void write_png(const std::string& path, const Film& film) {
     rgb[3 * i + 2] = srgb_byte(m.b);
   }
   const std::string tmp = temp_path(path);
-  if (!stbi_write_png(tmp.c_str(), w, h, 3, rgb.data(), w * 3)) {
+  // stb's compression level is a global: set and use it under one lock.
+  static std::mutex stb_mu;
+  std::unique_lock<std::mutex> lock(stb_mu);
+  stbi_write_png_compression_level = fast ? 1 : 8;
+  const int ok = stbi_write_png(tmp.c_str(), w, h, 3, rgb.data(), w * 3);
+  lock.unlock();
+  if (!ok) {
     std::remove(tmp.c_str());
     throw std::runtime_error(path + ": cannot write PNG");
   }

@@ -13,9 +13,10 @@ namespace tessera {
 
 using ImageMetadata = std::map<std::string, std::string>;
 
-// Throws std::runtime_error naming the path on failure.
-void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata);
-void write_png(const std::string& path, const Film& film);
+// Throws std::runtime_error naming the path on failure. `fast` trades file size for
+// speed (no EXR compression, light PNG compression): for frequent progressive images.
+void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata, bool fast = false);
+void write_png(const std::string& path, const Film& film, bool fast = false);
 // Picks the format from the extension (.exr or .png); throws on anything else.
 void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata);
 
