@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include "core/io/image_io.h"
@@ -32,6 +33,8 @@ struct Coordinator::Job {
   std::vector<Rect> tiles;
   std::vector<TileState> state;
   std::vector<uint8_t> active;  // per film pixel (adaptive sampling)
+  // Tiles ready for their next pass, fewest passes first: dispatch is O(log tiles).
+  std::set<std::pair<uint32_t, uint32_t>> ready;  // (next_pass, tile)
   std::vector<std::pair<uint32_t, uint32_t>> passes;
   v1::JobStatus::State st = v1::JobStatus::QUEUED;
   std::string error;
@@ -126,6 +129,7 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req) {
     for (int x = window.x; x < window.x + window.w; x += ts)
       job->tiles.push_back({x, y, std::min(ts, window.x + window.w - x), std::min(ts, window.y + window.h - y)});
   job->state.resize(job->tiles.size());
+  for (uint32_t i = 0; i < job->tiles.size(); ++i) job->ready.emplace(0, i);
   job->active.assign(size_t(window.area()), 1);
   job->passes = job->settings.passes();
   for (const auto& [s0, s1] : job->passes) job->samples_total += uint64_t(s1 - s0) * uint64_t(window.area());
@@ -225,7 +229,10 @@ size_t Coordinator::expire_leases_locked(double now) {
     auto job = jobs_.find(it->second.job);
     if (job != jobs_.end()) {
       Job::TileState& t = job->second->state[it->second.tile];
-      if (t.lease == it->first) t.lease = 0;
+      if (t.lease == it->first) {
+        t.lease = 0;
+        if (!t.finished) job->second->ready.emplace(t.next_pass, it->second.tile);
+      }
     }
     auto w = workers_.find(it->second.worker);
     if (w != workers_.end() && w->second.current_task == it->first) w->second.current_task = 0;
@@ -261,16 +268,12 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id) {
   });
   for (Job* job : order) {
     // The ready tile with the fewest passes: the frame refines evenly, pass by pass.
-    size_t best = job->tiles.size();
-    for (size_t i = 0; i < job->tiles.size(); ++i) {
-      const Job::TileState& t = job->state[i];
-      if (t.finished || t.lease) continue;
-      if (best == job->tiles.size() || t.next_pass < job->state[best].next_pass) best = i;
-    }
-    if (best == job->tiles.size()) continue;
+    if (job->ready.empty()) continue;
+    const uint32_t best = job->ready.begin()->second;
+    job->ready.erase(job->ready.begin());
     Job::TileState& t = job->state[best];
     const uint64_t task_id = next_task_++;
-    tasks_[task_id] = TaskRecord{job->id, uint32_t(best), t.next_pass, worker_id, now + options_.lease_seconds};
+    tasks_[task_id] = TaskRecord{job->id, best, t.next_pass, worker_id, now + options_.lease_seconds};
     t.lease = task_id;
     if (job->st == v1::JobStatus::QUEUED) {
       job->st = v1::JobStatus::RUNNING;
@@ -325,7 +328,10 @@ void Coordinator::release(uint64_t worker_id, uint64_t task_id) {
   if (it == tasks_.end() || it->second.worker != worker_id) return;
   if (auto job = jobs_.find(it->second.job); job != jobs_.end()) {
     Job::TileState& t = job->second->state[it->second.tile];
-    if (t.lease == task_id) t.lease = 0;
+    if (t.lease == task_id) {
+      t.lease = 0;
+      if (!t.finished) job->second->ready.emplace(t.next_pass, it->second.tile);
+    }
   }
   if (auto w = workers_.find(worker_id); w != workers_.end()) w->second.current_task = 0;
   expired_.emplace(task_id, it->second);
@@ -359,6 +365,8 @@ void Coordinator::finish_tile_pass(Job& job, uint32_t tile, double now) {
   if (t.next_pass >= job.passes.size() || !any_active || noise_met) {
     t.finished = true;
     ++job.tiles_done;
+  } else {
+    job.ready.emplace(t.next_pass, tile);
   }
   if (job.tiles_done == job.tiles.size()) {
     job.st = v1::JobStatus::DONE;
@@ -429,6 +437,7 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
       }
       samples += p.n;
     }
+    job.ready.erase({rec.pass, rec.tile});  // a late result for a tile waiting to be re-issued
     const auto t0 = std::chrono::steady_clock::now();
     job.film.add_tile(job.tiles[rec.tile], sums);
     counters_.merge_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -1,0 +1,172 @@
+// Coordinator load test: one coordinator (real gRPC and HTTP servers on 127.0.0.1) and
+// many simulated workers that return ready-made tile buffers instantly, so only the
+// coordinator's own cost is measured: merged tiles per second, and the status endpoint's
+// latency while it is under that load.
+//
+// Usage: tessera_coordinator_load [--workers N] [--threads N] [--seconds S] [--size W H] [--json FILE]
+#include <grpcpp/grpcpp.h>
+#include <httplib.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "server/grpc_services.h"
+#include "server/status_http.h"
+
+using namespace tessera;
+namespace fs = std::filesystem;
+
+namespace {
+double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, size_t(p * double(v.size())))];
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  int workers = 1000, threads = 8, width = 1920, height = 1080;
+  double seconds = 10;
+  std::string json_path, scene = std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-spheres.dae";
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--workers" && i + 1 < argc)
+      workers = std::atoi(argv[++i]);
+    else if (a == "--threads" && i + 1 < argc)
+      threads = std::atoi(argv[++i]);
+    else if (a == "--seconds" && i + 1 < argc)
+      seconds = std::atof(argv[++i]);
+    else if (a == "--json" && i + 1 < argc)
+      json_path = argv[++i];
+    else if (a == "--size" && i + 2 < argc) {
+      width = std::atoi(argv[++i]);
+      height = std::atoi(argv[++i]);
+    }
+  }
+  const fs::path data = fs::temp_directory_path() / ("tessera_load_" + std::to_string(getpid()));
+  CoordinatorOptions opt;
+  opt.data_dir = data.string();
+  opt.default_tile_size = 32;
+  opt.lease_seconds = 60;
+  Coordinator c(opt);
+  ClientService client(c);
+  WorkerService worker_service(c);
+  grpc::ServerBuilder b;
+  int port = 0;
+  b.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
+  b.RegisterService(&client);
+  b.RegisterService(&worker_service);
+  auto server = b.BuildAndStart();
+  StatusHttp http(c);
+  const int http_port = http.bind("127.0.0.1", 0);
+  http.start();
+
+  // A 1920 x 1080 frame (by default) in 32-pixel tiles, passes of 1 sample.
+  RenderSettings s;
+  s.camera.width = width;
+  s.camera.height = height;
+  s.spp = 1000;
+  s.pass_spp = 1;
+  v1::SubmitJobRequest req;
+  req.set_version(kProtocolVersion);
+  std::string main;
+  pack_scene(scene, &main, req.mutable_files());
+  req.set_main_file(main);
+  *req.mutable_settings() = to_proto(s);
+  c.submit(req);
+  std::vector<PixelSums> sums(32 * 32);  // every tile is 32x32 when the size divides by 32
+  for (size_t i = 0; i < sums.size(); ++i) sums[i] = PixelSums{0.1 * (i % 7), 0.2, 0.3, 0.04, 1};
+  const std::string payload = encode_sums(sums);
+
+  std::atomic<bool> stop{false};
+  std::atomic<uint64_t> merged{0}, rpcs{0};
+  std::vector<std::thread> pool;
+  const std::string target = "127.0.0.1:" + std::to_string(port);
+  for (int t = 0; t < threads; ++t) {
+    pool.emplace_back([&, t] {
+      auto stub = v1::TesseraWorker::NewStub(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()));
+      std::vector<uint64_t> ids;  // this thread's share of the simulated workers
+      for (int w = t; w < workers; w += threads) {
+        grpc::ClientContext ctx;
+        v1::RegisterRequest r;
+        r.set_version(kProtocolVersion);
+        r.set_name("sim" + std::to_string(w));
+        v1::RegisterResponse resp;
+        if (stub->Register(&ctx, r, &resp).ok()) ids.push_back(resp.worker_id());
+      }
+      for (size_t k = 0; !stop; k = (k + 1) % ids.size()) {
+        grpc::ClientContext c1;
+        v1::GetTaskRequest g;
+        g.set_worker_id(ids[k]);
+        v1::GetTaskResponse task;
+        if (!stub->GetTask(&c1, g, &task).ok() || !task.has_task()) continue;
+        grpc::ClientContext c2;
+        v1::TaskResult res;
+        res.set_worker_id(ids[k]);
+        res.set_task_id(task.task().task_id());
+        res.set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
+        res.set_sums_zstd(payload);
+        res.set_samples(1024);
+        res.set_render_seconds(0.05);
+        v1::ResultAck ack;
+        if (stub->SubmitResult(&c2, res, &ack).ok() && ack.accepted()) ++merged;
+        rpcs += 2;
+      }
+    });
+  }
+  // Status endpoint latency while loaded.
+  std::vector<double> status_ms, metrics_ms;
+  std::thread poller([&] {
+    httplib::Client cli("127.0.0.1", http_port);
+    while (!stop) {
+      double t0 = now();
+      if (cli.Get("/api/status")) status_ms.push_back((now() - t0) * 1e3);
+      t0 = now();
+      if (cli.Get("/metrics")) metrics_ms.push_back((now() - t0) * 1e3);
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+  });
+  std::this_thread::sleep_for(std::chrono::seconds(1));  // registration and warm-up
+  const uint64_t m0 = merged, r0 = rpcs;
+  status_ms.clear();
+  metrics_ms.clear();
+  const double t0 = now();
+  std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
+  const double elapsed = now() - t0;
+  const uint64_t m1 = merged, r1 = rpcs;
+  const std::vector<double> st = status_ms, mt = metrics_ms;
+  stop = true;
+  for (auto& t : pool) t.join();
+  poller.join();
+  http.stop();
+  server->Shutdown();
+  fs::remove_all(data);
+
+  const double tiles_per_s = double(m1 - m0) / elapsed;
+  std::printf("frame %dx%d, simulated workers %d (client threads %d), %.1f s\n", width, height, workers, threads,
+              elapsed);
+  std::printf("merged tiles/s %.0f  (32x32 tiles: %.1f M pixel-samples/s merged), worker RPCs/s %.0f\n", tiles_per_s,
+              tiles_per_s * 1024 / 1e6, double(r1 - r0) / elapsed);
+  std::printf("status /api/status latency ms: p50 %.2f p99 %.2f max %.2f (%zu requests)\n", percentile(st, 0.5),
+              percentile(st, 0.99), percentile(st, 1.0), st.size());
+  std::printf("status /metrics    latency ms: p50 %.2f p99 %.2f max %.2f\n", percentile(mt, 0.5), percentile(mt, 0.99),
+              percentile(mt, 1.0));
+  if (!json_path.empty())
+    std::ofstream(json_path) << nlohmann::json{{"workers", workers},
+                                               {"merged_tiles_per_second", tiles_per_s},
+                                               {"worker_rpcs_per_second", double(r1 - r0) / elapsed},
+                                               {"status_p50_ms", percentile(st, 0.5)},
+                                               {"status_p99_ms", percentile(st, 0.99)},
+                                               {"metrics_p50_ms", percentile(mt, 0.5)},
+                                               {"metrics_p99_ms", percentile(mt, 0.99)}}
+                                    .dump(2)
+                             << "\n";
+  return 0;
+}
