@@ -48,10 +48,11 @@ async function tick(){
   const d = await (await fetch(`/api/jobs/${job.id}`)).json();
   const c = document.getElementById('heat'), ctx = c.getContext('2d');
   c.width = d.settings.width; c.height = d.settings.height;
+  ctx.fillStyle = '#000'; ctx.fillRect(0, 0, c.width, c.height);
   for (const t of d.tiles || []) {
     const f = t.passes_done / Math.max(1, d.passes_total);
     ctx.fillStyle = t.finished ? '#fff' : `hsl(${240 - 240*f},80%,${25+35*f}%)`;
-    ctx.fillRect(t.rect.x||0, t.rect.y||0, t.rect.w, t.rect.h);
+    ctx.fillRect((t.rect.x||0) + 1, (t.rect.y||0) + 1, t.rect.w - 2, t.rect.h - 2);  // 1-px gaps show tiles
   }
 }
 tick(); setInterval(tick, 1000);
