@@ -102,6 +102,23 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
       out->li = l.color / (l.att_constant + l.att_linear * dist + l.att_quadratic * dist * dist);
       return true;
     }
+    case Light::Kind::kSpot: {
+      Vec3 d = l.position - p;
+      const float dist = length(d);
+      if (!(dist > 0)) return false;
+      out->wi = d / dist;
+      // KHR_lights_punctual's falloff: squared linear ramp in cos between the cones.
+      const float cd = dot(l.direction, -out->wi);
+      const float scale = 1 / std::max(0.001f, l.cos_inner - l.cos_outer);
+      float a = std::clamp((cd - l.cos_outer) * scale, 0.0f, 1.0f);
+      a *= a;
+      if (a <= 0) return false;
+      out->dist = dist;
+      out->point = l.position;
+      out->pdf = 1;
+      out->li = l.color * (a / (l.att_constant + l.att_linear * dist + l.att_quadratic * dist * dist));
+      return true;
+    }
     case Light::Kind::kDirectional: {
       out->wi = l.direction;
       out->dist = std::numeric_limits<float>::infinity();

@@ -73,6 +73,10 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
   const float ns_len = length(ns);
   sp.ns = ns_len > 0 ? ns / ns_len : sp.ng;
   sp.ns = face_forward(sp.ns, sp.ng);
+  if (!m.uvs.empty()) {
+    const Vec2 a = m.uvs[i0], b = m.uvs[i1], c = m.uvs[i2];
+    sp.uv = {a.x * b0 + b.x * b1 + c.x * b2, a.y * b0 + b.y * b1 + c.y * b2};
+  }
   sp.material = m.material;
   sp.light = m.light;
   return sp;
@@ -162,7 +166,14 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
       ++counters.self_hits;
     prev_hit = hit;
     const SurfacePoint sp = make_surface_point(scene_, ray, hit);
-    const Material& m = scene_.materials[sp.material];
+    const Material* mp = &scene_.materials[sp.material];
+    Material textured;  // only textured materials pay for a copy
+    if (mp->texture >= 0) {
+      textured = *mp;
+      textured.reflectance *= scene_.textures[size_t(mp->texture)].sample(sp.uv);
+      mp = &textured;
+    }
+    const Material& m = *mp;
     const Vec3 wo_world = -ray.d;
     if (m.kind == Material::Kind::kEmission) {  // emitters do not reflect: the path ends
       if (m.two_sided_emission || dot(sp.ng, wo_world) > 0) {

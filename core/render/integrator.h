@@ -28,6 +28,7 @@ struct SurfacePoint {
   Vec3 p_err;  // conservative absolute error bound of p, per component
   Vec3 ng;     // unit geometric normal (winding / outward)
   Vec3 ns;     // unit shading normal, same hemisphere as ng
+  Vec2 uv;     // texture coordinates (meshes with TEXCOORD_0)
   uint32_t material = 0;
   int32_t light = -1;
 };

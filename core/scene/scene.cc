@@ -1,5 +1,6 @@
 #include "core/scene/scene.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace tessera {
@@ -87,7 +88,41 @@ void Scene::finalize() {
   };
   add_emitter(meshes, Light::Kind::kMesh);
   add_emitter(spheres, Light::Kind::kSphere);
-  for (Mesh& mesh : meshes) mesh.compute_normals();
+  for (Mesh& mesh : meshes)
+    if (!mesh.file_normals) mesh.compute_normals();
+}
+
+namespace {
+
+int wrap(int i, int n, Texture::Wrap mode) {
+  switch (mode) {
+    case Texture::Wrap::kClamp:
+      return std::clamp(i, 0, n - 1);
+    case Texture::Wrap::kMirror: {
+      const int period = 2 * n;
+      int m = ((i % period) + period) % period;
+      return m < n ? m : period - 1 - m;
+    }
+    case Texture::Wrap::kRepeat:
+      break;
+  }
+  return ((i % n) + n) % n;
+}
+
+}  // namespace
+
+Rgb Texture::sample(Vec2 uv) const {
+  if (width <= 0 || height <= 0) return Rgb(1);
+  // Texel centres at (i + 0.5) / n, as OpenGL samples.
+  const float x = uv.x * float(width) - 0.5f, y = uv.y * float(height) - 0.5f;
+  if (!std::isfinite(x) || !std::isfinite(y)) return texels[0];
+  const float fx = std::floor(x), fy = std::floor(y);
+  const float tx = x - fx, ty = y - fy;
+  // Guard huge coordinates before converting to int.
+  const int ix = int(std::fmod(double(fx), 1 << 24)), iy = int(std::fmod(double(fy), 1 << 24));
+  auto at = [&](int i, int j) { return texels[size_t(wrap(j, height, wrap_t)) * width + size_t(wrap(i, width, wrap_s))]; };
+  return at(ix, iy) * ((1 - tx) * (1 - ty)) + at(ix + 1, iy) * (tx * (1 - ty)) + at(ix, iy + 1) * ((1 - tx) * ty) +
+         at(ix + 1, iy + 1) * (tx * ty);
 }
 
 }  // namespace tessera

@@ -24,6 +24,7 @@ struct Material {
   Rgb eta{0.2f}, k{3.0f};   // microfacet conductor complex index, per channel
   Rgb radiance{0.0f};       // emission
   bool two_sided_emission = true;
+  int32_t texture = -1;     // Scene::textures index multiplying `reflectance`, or -1
 
   bool is_delta() const { return kind == Kind::kMirror || kind == Kind::kGlass || kind == Kind::kRefraction; }
   // True if no BSDF lobe exists: paths end here.
@@ -34,7 +35,9 @@ struct Mesh {
   std::string name;
   std::vector<Vec3> positions;
   std::vector<uint32_t> indices;  // 3 per triangle
-  std::vector<Vec3> normals;      // per vertex, area weighted; filled by compute_normals()
+  std::vector<Vec3> normals;      // per vertex: from the file, or area weighted (compute_normals)
+  std::vector<Vec2> uvs;          // per vertex texture coordinates, or empty
+  bool file_normals = false;      // `normals` came from the file: keep them
   uint32_t material = 0;
   int32_t light = -1;  // index into Scene::lights when the mesh emits
 
@@ -51,7 +54,7 @@ struct Sphere {
 };
 
 struct Light {
-  enum class Kind : uint8_t { kRect, kMesh, kSphere, kPoint, kDirectional, kAmbient };
+  enum class Kind : uint8_t { kRect, kMesh, kSphere, kPoint, kSpot, kDirectional, kAmbient };
   Kind kind = Kind::kPoint;
   std::string name;
   Rgb color{1.0f};  // radiance (rect, mesh, sphere, ambient), intensity (point),
@@ -61,12 +64,22 @@ struct Light {
   float area = 0;
   // Point: attenuation 1 / (c + l d + q d^2).
   float att_constant = 1, att_linear = 0, att_quadratic = 0;
-  Vec3 direction;      // directional: unit vector toward the light
+  Vec3 direction;  // directional: unit vector toward the light; spot: the way it shines
+  float cos_inner = 1, cos_outer = 0;  // spot: full intensity inside the inner cone, none outside
   uint32_t shape = 0;  // kMesh: mesh index; kSphere: sphere index; kRect: its mesh
   bool two_sided = false;
 
-  bool is_delta() const { return kind == Kind::kPoint || kind == Kind::kDirectional; }
+  bool is_delta() const { return kind == Kind::kPoint || kind == Kind::kSpot || kind == Kind::kDirectional; }
   bool is_infinite() const { return kind == Kind::kDirectional || kind == Kind::kAmbient; }
+};
+
+// An RGB texture in linear values, bilinearly filtered, with glTF's wrap modes.
+struct Texture {
+  enum class Wrap : uint8_t { kRepeat, kClamp, kMirror };
+  int width = 0, height = 0;
+  std::vector<Rgb> texels;  // row-major, row 0 at v = 0
+  Wrap wrap_s = Wrap::kRepeat, wrap_t = Wrap::kRepeat;
+  Rgb sample(Vec2 uv) const;
 };
 
 struct CameraDesc {
@@ -97,6 +110,7 @@ struct Scene {
   std::vector<Mesh> meshes;
   std::vector<Sphere> spheres;
   std::vector<Light> lights;
+  std::vector<Texture> textures;
   CameraDesc camera;
   std::vector<std::string> warnings;
 

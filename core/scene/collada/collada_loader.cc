@@ -47,9 +47,11 @@ class ColladaLoader {
     return 1 + size_t(std::count(text_.begin(), text_.begin() + ptrdiff_t(end), '\n'));
   }
   std::string where(pugi::xml_node n) const {
-    std::string s = "<" + std::string(n.name());
-    if (n.attribute("id")) s += " id=\"" + std::string(n.attribute("id").value()) + "\"";
-    s += "> (line " + std::to_string(line_of(n.offset_debug())) + ")";
+    // Built by appends: `"<" + std::string(...)` trips GCC 12's false -Wrestrict (PR 105329).
+    std::string s("<");
+    s.append(n.name());
+    if (n.attribute("id")) s.append(" id=\"").append(n.attribute("id").value()).append("\"");
+    s.append("> (line ").append(std::to_string(line_of(n.offset_debug()))).append(")");
     return s;
   }
   [[noreturn]] void fail(pugi::xml_node n, const std::string& reason) const {
