@@ -1,5 +1,7 @@
 #include "client/render_flags.h"
 
+#include <filesystem>
+
 namespace tessera {
 
 void add_render_flags(CLI::App* cmd, RenderFlags& f) {
@@ -54,7 +56,9 @@ RenderSettings to_settings(const RenderFlags& a) {
     throw CLI::ValidationError("-r", "width and height must be in 1..65536");
   s.camera.lens_radius = a.lens_radius;
   s.camera.focal_distance = a.focal_distance;
-  s.camera.framing = a.camera == "file" ? Framing::kFile : Framing::kCs184;
+  const auto ext = std::filesystem::path(a.scene).extension().string();
+  const bool dae = ext == ".dae" || ext == ".DAE";
+  s.camera.framing = a.camera == "file" || (a.camera == "auto" && !dae) ? Framing::kFile : Framing::kCs184;
   if (!a.window.empty()) {
     // CS184 -p x y dx dy: lower-left pixel (x, y) with y counted from the bottom.
     const int x = a.window[0], y = a.window[1], w = a.window[2], h = a.window[3];

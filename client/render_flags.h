@@ -17,7 +17,7 @@ struct RenderFlags {
   std::vector<int> window;
   float lens_radius = 0, focal_distance = 4.7f;
   uint64_t seed = 0;
-  std::string camera = "cs184";
+  std::string camera = "auto";  // cs184 for .dae, the file's own camera for glTF
   std::vector<std::string> outputs;
 };
 

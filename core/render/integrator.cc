@@ -84,14 +84,14 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
 
 Vec3 offset_point(Vec3 p, Vec3 p_err, Vec3 n, Vec3 w) {
   const float d = dot(abs(n), p_err) * kOffsetSafety;
-  Vec3 offset = n * d;
-  if (dot(w, n) < 0) offset = -offset;
-  Vec3 po = p + offset;
-  for (int i = 0; i < 3; ++i) {  // round away from the surface
-    if (offset[i] > 0)
-      po[i] = next_float_up(po[i]);
-    else if (offset[i] < 0)
-      po[i] = next_float_down(po[i]);
+  const Vec3 side = dot(w, n) < 0 ? -n : n;
+  Vec3 po = p + side * d;
+  // Round one ulp further away in every component the normal has. This matters when
+  // the bound is zero: a point on a coordinate plane (a floor at y = 0) is exact, and
+  // without the nudge the ray would start on the surface, where Embree reports t = 0.
+  for (int i = 0; i < 3; ++i) {
+    if (side[i] > 0) po[i] = next_float_up(po[i]);
+    else if (side[i] < 0) po[i] = next_float_down(po[i]);
   }
   return po;
 }

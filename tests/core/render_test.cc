@@ -291,5 +291,21 @@ INSTANTIATE_TEST_SUITE_P(Scales, ScaleInvariance,
                                            std::make_pair(1e2f, 0.0f), std::make_pair(1e4f, 0.0f),
                                            std::make_pair(1.0f, 1e5f)));
 
+// Surfaces lying exactly on coordinate planes: their hit points are exact (zero error
+// bound), and a ray must still leave them. Regression: origins were not moved at all
+// and every shadow ray from a floor at y = 0 hit the floor at t = 0.
+TEST(Robustness, SurfacesOnCoordinatePlanesAreLit) {
+  const Scene base = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s = small_cornell();
+  s.camera.width = 96;
+  s.camera.height = 72;
+  s.spp = 8;
+  const Estimate a = film_estimate(render(base, s).film);
+  // Floor to y = 0, back wall to z = 0, left wall to x = 0.
+  const RenderResult r = render(transformed(base, 1.0f, Vec3{1.0f, 0.75f, 1.0f}), s);
+  EXPECT_NEAR(film_estimate(r.film).mean, a.mean, 0.01 * a.mean);
+  EXPECT_EQ(r.stats.rays.self_hits, 0u);
+}
+
 }  // namespace
 }  // namespace tessera

@@ -1,0 +1,653 @@
+#include "core/scene/gltf/gltf_loader.h"
+
+#include <stb/stb_image.h>
+#include <tiny_gltf.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+
+#include "core/math/transform.h"
+#include "core/scene/scene_error.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr uint64_t kMaxBufferBytes = uint64_t(1) << 30;  // per buffer and per file
+constexpr uint64_t kMaxImagePixels = uint64_t(1) << 26;  // 64 M texels
+constexpr int kMaxNodeDepth = 256;
+// 1 W = 683 lm at 555 nm: KHR_lights_punctual's photometric units to our radiometric RGB.
+constexpr double kLumensPerWatt = 683.0;
+
+const std::set<std::string> kSupportedExtensions = {"KHR_lights_punctual", "KHR_materials_transmission",
+                                                    "KHR_materials_ior", "KHR_materials_emissive_strength"};
+
+std::string read_file(const std::string& path, const std::string& file_for_errors) {
+  std::error_code ec;
+  const auto size = fs::file_size(path, ec);
+  if (ec) throw SceneError(file_for_errors, "", "cannot open file");
+  if (size > kMaxBufferBytes) throw SceneError(file_for_errors, "", "file larger than the 1 GiB limit");
+  std::ifstream in(path, std::ios::binary);
+  std::string s(size, '\0');
+  in.read(s.data(), std::streamsize(size));
+  if (!in) throw SceneError(file_for_errors, "", "cannot read file");
+  return s;
+}
+
+// Filesystem access for tinygltf: only files inside the scene's folder, none too large.
+struct FsGuard {
+  fs::path base;
+  std::string scene;
+};
+
+bool guarded_exists(const std::string& path, void* user) {
+  (void)user;
+  std::error_code ec;
+  return fs::exists(path, ec);
+}
+std::string guarded_expand(const std::string& path, void*) { return path; }
+bool guarded_read(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
+  const FsGuard& g = *static_cast<FsGuard*>(user);
+  std::error_code ec;
+  const fs::path p = fs::weakly_canonical(path, ec);
+  const std::string base = g.base.string() + "/";
+  if (ec || p.string().compare(0, base.size(), base) != 0) {
+    *err = "'" + path + "' is outside the scene's folder";
+    return false;
+  }
+  const auto size = fs::file_size(p, ec);
+  if (ec) {
+    *err = "cannot open '" + path + "'";
+    return false;
+  }
+  if (size > kMaxBufferBytes) {
+    *err = "'" + path + "' is larger than the 1 GiB limit";
+    return false;
+  }
+  std::ifstream in(p, std::ios::binary);
+  out->resize(size);
+  in.read(reinterpret_cast<char*>(out->data()), std::streamsize(size));
+  if (!in) {
+    *err = "cannot read '" + path + "'";
+    return false;
+  }
+  return true;
+}
+bool guarded_write(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+  *err = "writing is not allowed";
+  return false;
+}
+
+// Decodes embedded or external images with stb, refusing absurd sizes before allocating.
+bool load_image(tinygltf::Image* image, const int index, std::string* err, std::string*, int, int,
+                const unsigned char* bytes, int size, void*) {
+  int w = 0, h = 0, comp = 0;
+  if (!stbi_info_from_memory(bytes, size, &w, &h, &comp)) {
+    *err = "images[" + std::to_string(index) + "]: not a readable PNG or JPEG";
+    return false;
+  }
+  if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels) {
+    *err = "images[" + std::to_string(index) + "]: " + std::to_string(w) + "x" + std::to_string(h) +
+           " is over the 64 M texel limit";
+    return false;
+  }
+  unsigned char* data = stbi_load_from_memory(bytes, size, &w, &h, &comp, 4);
+  if (!data) {
+    *err = "images[" + std::to_string(index) + "]: " + stbi_failure_reason();
+    return false;
+  }
+  image->width = w;
+  image->height = h;
+  image->component = 4;
+  image->bits = 8;
+  image->pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
+  image->image.assign(data, data + size_t(w) * size_t(h) * 4);
+  stbi_image_free(data);
+  return true;
+}
+
+float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f); }
+
+class GltfLoader {
+ public:
+  explicit GltfLoader(std::string path) : path_(std::move(path)) {}
+
+  Scene load() {
+    scene_.source = path_;
+    const std::string bytes = read_file(path_, path_);
+    const bool binary = bytes.size() >= 4 && bytes.compare(0, 4, "glTF") == 0;
+    prevalidate(binary ? glb_json(bytes) : bytes);
+
+    tinygltf::TinyGLTF loader;
+    FsGuard guard{fs::weakly_canonical(fs::absolute(path_).parent_path()), path_};
+    tinygltf::FsCallbacks cb{guarded_exists, guarded_expand, guarded_read, guarded_write, &guard};
+    loader.SetFsCallbacks(cb);
+    loader.SetImageLoader(load_image, nullptr);
+    std::string err, warn;
+    const std::string base = fs::absolute(path_).parent_path().string();
+    const bool ok = binary ? loader.LoadBinaryFromMemory(&model_, &err, &warn,
+                                                         reinterpret_cast<const unsigned char*>(bytes.data()),
+                                                         unsigned(bytes.size()), base)
+                           : loader.LoadASCIIFromString(&model_, &err, &warn, bytes.data(), unsigned(bytes.size()), base);
+    if (!ok) throw SceneError(path_, "", first_line(err.empty() ? "glTF parse error" : err));
+    if (!warn.empty()) scene_.warnings.push_back(path_ + ": " + first_line(warn));
+    for (const std::string& ext : model_.extensionsUsed)
+      if (!kSupportedExtensions.count(ext))
+        scene_.warnings.push_back(path_ + ": optional extension '" + ext + "' is not supported; ignored");
+
+    std::vector<int> roots;
+    if (!model_.scenes.empty()) {
+      const int s = model_.defaultScene >= 0 ? model_.defaultScene : 0;
+      if (s >= int(model_.scenes.size())) fail("scene", "defaultScene " + std::to_string(s) + " does not exist");
+      roots = model_.scenes[size_t(s)].nodes;
+    } else {  // no scenes: every node that is nobody's child
+      std::vector<bool> child(model_.nodes.size());
+      for (const auto& n : model_.nodes)
+        for (int c : n.children)
+          if (c >= 0 && size_t(c) < child.size()) child[size_t(c)] = true;
+      for (size_t i = 0; i < child.size(); ++i)
+        if (!child[i]) roots.push_back(int(i));
+    }
+    std::vector<int> path;
+    for (int r : roots) visit(r, Mat4(), path);
+    if (scene_.meshes.empty() && scene_.spheres.empty()) fail("scene", "no triangles to render");
+    if (!scene_.camera.present) frame_bounds();
+    scene_.finalize();
+    return std::move(scene_);
+  }
+
+ private:
+  [[noreturn]] void fail(const std::string& element, const std::string& reason) const {
+    throw SceneError(path_, element, reason);
+  }
+  static std::string first_line(const std::string& s) {
+    std::string t = s.substr(0, s.find('\n'));
+    while (!t.empty() && (t.back() == '\r' || t.back() == ' ')) t.pop_back();
+    return t;
+  }
+
+  std::string glb_json(const std::string& b) const {
+    auto u32 = [&](size_t at) {
+      uint32_t v;
+      std::memcpy(&v, b.data() + at, 4);
+      return v;
+    };
+    if (b.size() < 20) fail("GLB header", "file too short");
+    if (u32(4) != 2) fail("GLB header", "version " + std::to_string(u32(4)) + " (expected 2)");
+    if (u32(8) > b.size()) fail("GLB header", "declares " + std::to_string(u32(8)) + " bytes, file has " + std::to_string(b.size()));
+    const uint32_t json_len = u32(12);
+    if (u32(16) != 0x4E4F534Au) fail("GLB chunk 0", "is not JSON");
+    if (uint64_t(json_len) + 20 > b.size()) fail("GLB chunk 0", "length " + std::to_string(json_len) + " runs past the end of the file");
+    return b.substr(20, json_len);
+  }
+
+  // Checks that tinygltf does not do, before it allocates anything.
+  void prevalidate(const std::string& json_text) {
+    nlohmann::json j;
+    try {
+      j = nlohmann::json::parse(json_text);
+    } catch (const nlohmann::json::parse_error& e) {
+      fail("JSON", first_line(e.what()));
+    }
+    if (!j.is_object()) fail("JSON", "top level is not an object");
+    if (j.contains("extensionsRequired") && j["extensionsRequired"].is_array())
+      for (const auto& e : j["extensionsRequired"])
+        if (e.is_string() && !kSupportedExtensions.count(e.get<std::string>()))
+          fail("extensionsRequired", "required extension '" + e.get<std::string>() + "' is not supported");
+    if (j.contains("buffers") && j["buffers"].is_array())
+      for (size_t i = 0; i < j["buffers"].size(); ++i) {
+        const auto& b = j["buffers"][i];
+        if (!b.is_object() || !b.contains("byteLength") || !b["byteLength"].is_number())
+          fail("buffers[" + std::to_string(i) + "]", "missing byteLength");
+        const double len = b["byteLength"].get<double>();
+        if (!(len >= 0) || len > double(kMaxBufferBytes))
+          fail("buffers[" + std::to_string(i) + "]", "byteLength " + b["byteLength"].dump() + " is over the 1 GiB limit");
+      }
+  }
+
+  // ---- accessors ---------------------------------------------------------------------
+  // Reads an accessor as floats (n components per element), checking every bound.
+  std::vector<float> read_floats(int index, int want_components, const std::string& what) {
+    const std::string el = "accessors[" + std::to_string(index) + "] (" + what + ")";
+    if (index < 0 || size_t(index) >= model_.accessors.size()) fail(what, "accessor " + std::to_string(index) + " does not exist");
+    const tinygltf::Accessor& a = model_.accessors[size_t(index)];
+    const int comps = tinygltf::GetNumComponentsInType(uint32_t(a.type));
+    if (comps != want_components) fail(el, "has " + std::to_string(comps) + " components, expected " + std::to_string(want_components));
+    if (a.count > (size_t(1) << 28)) fail(el, "count " + std::to_string(a.count) + " is too large");
+    std::vector<float> out(a.count * size_t(comps), 0.0f);
+    if (a.bufferView >= 0) read_view(a.bufferView, a.byteOffset, a.componentType, a.normalized, a.count, comps, el, out.data());
+    if (a.sparse.isSparse) {
+      const auto& sp = a.sparse;
+      if (sp.count < 0 || size_t(sp.count) > a.count) fail(el, "sparse count out of range");
+      std::vector<float> idx(size_t(sp.count)), val(size_t(sp.count) * comps);
+      read_view(sp.indices.bufferView, size_t(std::max(0, sp.indices.byteOffset)), sp.indices.componentType, false,
+                size_t(sp.count), 1, el + " sparse indices", idx.data());
+      read_view(sp.values.bufferView, size_t(std::max(0, sp.values.byteOffset)), a.componentType, a.normalized,
+                size_t(sp.count), comps, el + " sparse values", val.data());
+      for (size_t k = 0; k < idx.size(); ++k) {
+        const double i = idx[k];
+        if (!(i >= 0 && i < double(a.count))) fail(el, "sparse index " + std::to_string(i) + " out of range");
+        std::copy(val.begin() + long(k * comps), val.begin() + long((k + 1) * comps), out.begin() + long(size_t(i) * comps));
+      }
+    }
+    for (float v : out)
+      if (!std::isfinite(v)) fail(el, "contains a NaN or infinite value");
+    return out;
+  }
+
+  void read_view(int view_index, size_t offset, int type, bool normalized, size_t count, int comps,
+                 const std::string& el, float* out) {
+    if (view_index < 0 || size_t(view_index) >= model_.bufferViews.size())
+      fail(el, "bufferView " + std::to_string(view_index) + " does not exist");
+    const tinygltf::BufferView& v = model_.bufferViews[size_t(view_index)];
+    if (v.buffer < 0 || size_t(v.buffer) >= model_.buffers.size()) fail(el, "buffer " + std::to_string(v.buffer) + " does not exist");
+    const std::vector<unsigned char>& data = model_.buffers[size_t(v.buffer)].data;
+    const int csize = tinygltf::GetComponentSizeInBytes(uint32_t(type));
+    if (csize <= 0) fail(el, "unknown component type " + std::to_string(type));
+    const uint64_t elem = uint64_t(csize) * uint64_t(comps);
+    const uint64_t stride = v.byteStride ? v.byteStride : elem;
+    if (stride < elem) fail(el, "byteStride " + std::to_string(v.byteStride) + " is smaller than an element");
+    if (uint64_t(v.byteOffset) + v.byteLength > data.size())
+      fail(el, "bufferView " + std::to_string(view_index) + " runs past the end of its buffer (" +
+                   std::to_string(v.byteOffset + v.byteLength) + " > " + std::to_string(data.size()) + " bytes)");
+    if (count > 0 && uint64_t(offset) + stride * (count - 1) + elem > v.byteLength)
+      fail(el, "byteOffset " + std::to_string(offset) + " with " + std::to_string(count) +
+                   " elements runs past the end of bufferView " + std::to_string(view_index));
+    const unsigned char* base = data.data() + v.byteOffset + offset;
+    for (size_t i = 0; i < count; ++i)
+      for (int c = 0; c < comps; ++c) {
+        const unsigned char* p = base + i * stride + size_t(c) * size_t(csize);
+        float f = 0;
+        switch (type) {
+          case TINYGLTF_COMPONENT_TYPE_BYTE: {
+            int8_t x;
+            std::memcpy(&x, p, 1);
+            f = normalized ? std::max(float(x) / 127.0f, -1.0f) : float(x);
+            break;
+          }
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: f = normalized ? float(*p) / 255.0f : float(*p); break;
+          case TINYGLTF_COMPONENT_TYPE_SHORT: {
+            int16_t x;
+            std::memcpy(&x, p, 2);
+            f = normalized ? std::max(float(x) / 32767.0f, -1.0f) : float(x);
+            break;
+          }
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+            uint16_t x;
+            std::memcpy(&x, p, 2);
+            f = normalized ? float(x) / 65535.0f : float(x);
+            break;
+          }
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+            uint32_t x;
+            std::memcpy(&x, p, 4);
+            f = float(x);
+            if (x > (1u << 24)) f = float(double(x));  // indices beyond float precision are range-checked below
+            break;
+          }
+          case TINYGLTF_COMPONENT_TYPE_FLOAT: std::memcpy(&f, p, 4); break;
+          default: fail(el, "component type " + std::to_string(type) + " is not allowed here");
+        }
+        out[i * size_t(comps) + size_t(c)] = f;
+      }
+  }
+
+  std::vector<uint32_t> read_indices(int index, size_t vertex_count, const std::string& what) {
+    const std::string el = "accessors[" + std::to_string(index) + "] (" + what + ")";
+    if (index < 0 || size_t(index) >= model_.accessors.size()) fail(what, "accessor " + std::to_string(index) + " does not exist");
+    const tinygltf::Accessor& a = model_.accessors[size_t(index)];
+    if (a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+        a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+      fail(el, "indices must be unsigned byte, short or int");
+    if (a.bufferView < 0) fail(el, "indices need a bufferView");
+    // Exact integer reads (floats lose precision past 2^24).
+    const tinygltf::BufferView& v = model_.bufferViews.at(size_t(a.bufferView));
+    std::vector<float> check(a.count);  // bounds-checks the view, and reads small ones
+    read_view(a.bufferView, a.byteOffset, a.componentType, false, a.count, 1, el, check.data());
+    const int csize = tinygltf::GetComponentSizeInBytes(uint32_t(a.componentType));
+    const size_t stride = v.byteStride ? v.byteStride : size_t(csize);
+    const unsigned char* base = model_.buffers[size_t(v.buffer)].data.data() + v.byteOffset + a.byteOffset;
+    std::vector<uint32_t> out(a.count);
+    for (size_t i = 0; i < a.count; ++i) {
+      uint32_t x = 0;
+      std::memcpy(&x, base + i * stride, size_t(csize));
+      if (x >= vertex_count) fail(el, "index " + std::to_string(x) + " out of range (" + std::to_string(vertex_count) + " vertices)");
+      out[i] = x;
+    }
+    return out;
+  }
+
+  // ---- nodes -------------------------------------------------------------------------
+  Mat4 local_matrix(const tinygltf::Node& n, const std::string& el) const {
+    if (!n.matrix.empty()) {
+      if (n.matrix.size() != 16) fail(el, "matrix needs 16 numbers");
+      std::array<double, 16> m{};
+      for (int r = 0; r < 4; ++r)
+        for (int c = 0; c < 4; ++c) m[size_t(r * 4 + c)] = n.matrix[size_t(c * 4 + r)];  // glTF is column-major
+      return Mat4::from_row_major(m);
+    }
+    Mat4 t, r, s;
+    if (!n.translation.empty()) {
+      if (n.translation.size() != 3) fail(el, "translation needs 3 numbers");
+      t = Mat4::translate(n.translation[0], n.translation[1], n.translation[2]);
+    }
+    if (!n.rotation.empty()) {
+      if (n.rotation.size() != 4) fail(el, "rotation needs 4 numbers");
+      double x = n.rotation[0], y = n.rotation[1], z = n.rotation[2], w = n.rotation[3];
+      const double len = std::sqrt(x * x + y * y + z * z + w * w);
+      if (!(len > 0)) fail(el, "rotation quaternion is zero");
+      x /= len, y /= len, z /= len, w /= len;
+      r = Mat4::from_row_major({1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), 0,
+                                2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), 0,
+                                2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), 0, 0, 0, 0, 1});
+    }
+    if (!n.scale.empty()) {
+      if (n.scale.size() != 3) fail(el, "scale needs 3 numbers");
+      s = Mat4::scale(n.scale[0], n.scale[1], n.scale[2]);
+    }
+    return t * r * s;
+  }
+
+  void visit(int index, const Mat4& parent, std::vector<int>& path) {
+    const std::string el = "nodes[" + std::to_string(index) + "]";
+    if (index < 0 || size_t(index) >= model_.nodes.size()) fail(el, "does not exist");
+    if (std::find(path.begin(), path.end(), index) != path.end()) fail(el, "the node graph has a cycle through this node");
+    if (path.size() >= kMaxNodeDepth) fail(el, "node hierarchy deeper than 256 levels");
+    const tinygltf::Node& n = model_.nodes[size_t(index)];
+    const Mat4 world = parent * local_matrix(n, el);
+    path.push_back(index);
+    if (n.mesh >= 0) add_mesh(n.mesh, world, el);
+    if (n.camera >= 0) add_camera(n.camera, world, el);
+    if (auto it = n.extensions.find("KHR_lights_punctual"); it != n.extensions.end()) {
+      if (!it->second.Has("light") || !it->second.Get("light").IsInt()) fail(el, "KHR_lights_punctual without a light index");
+      add_light(it->second.Get("light").GetNumberAsInt(), world, el);
+    }
+    for (int c : n.children) visit(c, world, path);
+    path.pop_back();
+  }
+
+  void add_mesh(int index, const Mat4& w, const std::string& node_el) {
+    if (size_t(index) >= model_.meshes.size()) fail(node_el, "mesh " + std::to_string(index) + " does not exist");
+    const tinygltf::Mesh& mesh = model_.meshes[size_t(index)];
+    // det < 0 mirrors the mesh: swap winding so geometric normals stay outward.
+    const double det = w(0, 0) * (w(1, 1) * w(2, 2) - w(1, 2) * w(2, 1)) - w(0, 1) * (w(1, 0) * w(2, 2) - w(1, 2) * w(2, 0)) +
+                       w(0, 2) * (w(1, 0) * w(2, 1) - w(1, 1) * w(2, 0));
+    for (size_t p = 0; p < mesh.primitives.size(); ++p) {
+      const tinygltf::Primitive& prim = mesh.primitives[p];
+      const std::string el = "meshes[" + std::to_string(index) + "].primitives[" + std::to_string(p) + "]";
+      static const char* kModes[] = {"POINTS", "LINES", "LINE_LOOP", "LINE_STRIP", "TRIANGLES", "TRIANGLE_STRIP", "TRIANGLE_FAN"};
+      const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
+      if (mode != TINYGLTF_MODE_TRIANGLES)
+        fail(el, std::string("mode ") + (mode >= 0 && mode < 7 ? kModes[mode] : std::to_string(mode).c_str()) +
+                     " is not supported (only TRIANGLES)");
+      auto pos = prim.attributes.find("POSITION");
+      if (pos == prim.attributes.end()) fail(el, "has no POSITION attribute");
+      const std::vector<float> p3 = read_floats(pos->second, 3, el + " POSITION");
+      Mesh out;
+      out.name = mesh.name.empty() ? "mesh" + std::to_string(index) : mesh.name;
+      const size_t nv = p3.size() / 3;
+      out.positions.resize(nv);
+      for (size_t i = 0; i < nv; ++i) {
+        out.positions[i] = w.point(p3[3 * i], p3[3 * i + 1], p3[3 * i + 2]).to_float();
+        if (!is_finite(out.positions[i])) fail(el, "vertex " + std::to_string(i) + " is not finite after transform");
+      }
+      if (prim.indices >= 0) {
+        out.indices = read_indices(prim.indices, nv, el + " indices");
+      } else {
+        out.indices.resize(nv);
+        for (size_t i = 0; i < nv; ++i) out.indices[i] = uint32_t(i);
+      }
+      if (out.indices.size() % 3) fail(el, std::to_string(out.indices.size()) + " indices is not a multiple of 3");
+      if (det < 0)
+        for (size_t t = 0; t < out.indices.size(); t += 3) std::swap(out.indices[t + 1], out.indices[t + 2]);
+      if (auto nrm = prim.attributes.find("NORMAL"); nrm != prim.attributes.end()) {
+        const std::vector<float> n3 = read_floats(nrm->second, 3, el + " NORMAL");
+        if (n3.size() != p3.size()) fail(el, "NORMAL count differs from POSITION count");
+        const Mat4 nt = normal_matrix(w);
+        out.normals.resize(nv);
+        for (size_t i = 0; i < nv; ++i) {
+          const Vec3 v = nt.vector(n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]).to_float();
+          const float len = length(v);
+          out.normals[i] = len > 0 && std::isfinite(len) ? v / len : Vec3{};
+        }
+        out.file_normals = true;
+      }
+      if (auto uv = prim.attributes.find("TEXCOORD_0"); uv != prim.attributes.end()) {
+        const std::vector<float> t2 = read_floats(uv->second, 2, el + " TEXCOORD_0");
+        if (t2.size() / 2 != nv) fail(el, "TEXCOORD_0 count differs from POSITION count");
+        out.uvs.resize(nv);
+        for (size_t i = 0; i < nv; ++i) out.uvs[i] = {t2[2 * i], t2[2 * i + 1]};
+      }
+      out.material = material(prim.material);
+      if (!out.indices.empty()) scene_.meshes.push_back(std::move(out));
+    }
+  }
+
+  static Mat4 normal_matrix(const Mat4& w) {
+    // Inverse transpose of the upper 3x3 (the cofactor matrix: same direction, no divide).
+    std::array<double, 16> c{};
+    for (int r = 0; r < 3; ++r)
+      for (int k = 0; k < 3; ++k) {
+        const int r1 = (r + 1) % 3, r2 = (r + 2) % 3, k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        c[size_t(r * 4 + k)] = w(r1, k1) * w(r2, k2) - w(r1, k2) * w(r2, k1);
+      }
+    c[15] = 1;
+    return Mat4::from_row_major(c);
+  }
+
+  // ---- materials (docs/gltf.md) --------------------------------------------------------
+  uint32_t material(int index) {
+    if (auto it = materials_.find(index); it != materials_.end()) return it->second;
+    Material m;
+    std::string el = "materials[" + std::to_string(index) + "]";
+    Rgb base(1.0f);
+    double metallic = 1, roughness = 1, transmission = 0, ior = 1.5, strength = 1;
+    Rgb emissive(0.0f);
+    bool double_sided = false;
+    int texture = -1;
+    if (index >= 0) {
+      if (size_t(index) >= model_.materials.size()) fail(el, "does not exist");
+      const tinygltf::Material& g = model_.materials[size_t(index)];
+      m.name = g.name;
+      const auto& pbr = g.pbrMetallicRoughness;
+      if (pbr.baseColorFactor.size() >= 3) base = Rgb(float(pbr.baseColorFactor[0]), float(pbr.baseColorFactor[1]), float(pbr.baseColorFactor[2]));
+      metallic = pbr.metallicFactor;
+      roughness = pbr.roughnessFactor;
+      if (g.emissiveFactor.size() >= 3) emissive = Rgb(float(g.emissiveFactor[0]), float(g.emissiveFactor[1]), float(g.emissiveFactor[2]));
+      double_sided = g.doubleSided;
+      auto number = [&](const char* ext, const char* key, double* out) {
+        auto it = g.extensions.find(ext);
+        if (it != g.extensions.end() && it->second.Has(key) && it->second.Get(key).IsNumber())
+          *out = it->second.Get(key).GetNumberAsDouble();
+      };
+      number("KHR_materials_transmission", "transmissionFactor", &transmission);
+      number("KHR_materials_ior", "ior", &ior);
+      number("KHR_materials_emissive_strength", "emissiveStrength", &strength);
+      if (pbr.baseColorTexture.index >= 0) texture = load_texture(pbr.baseColorTexture.index, el);
+      if (pbr.baseColorTexture.texCoord > 0) warn_once(el + ": baseColorTexture uses TEXCOORD_" + std::to_string(pbr.baseColorTexture.texCoord) + "; TEXCOORD_0 is used");
+      if (pbr.metallicRoughnessTexture.index >= 0) warn_once(el + ": metallicRoughnessTexture is not supported; the factors are used");
+      if (g.emissiveTexture.index >= 0) warn_once(el + ": emissiveTexture is not supported; emissiveFactor is used");
+      if (g.normalTexture.index >= 0) warn_once(el + ": normalTexture is not supported; ignored");
+      if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty()) warn_once(el + ": alphaMode " + g.alphaMode + " is rendered opaque");
+    }
+    for (double* v : {&metallic, &roughness, &transmission})
+      if (!std::isfinite(*v)) *v = 0;
+    metallic = std::clamp(metallic, 0.0, 1.0);
+    roughness = std::clamp(roughness, 0.0, 1.0);
+    transmission = std::clamp(transmission, 0.0, 1.0);
+    const Rgb radiance = emissive * float(strength);
+    auto between = [](double v) { return v > 0.02 && v < 0.98; };
+    if (!radiance.is_black()) {
+      m.kind = Material::Kind::kEmission;  // emitters do not reflect (docs/gltf.md)
+      m.radiance = radiance;
+      m.two_sided_emission = double_sided;
+    } else if (transmission >= 0.5) {
+      m.kind = Material::Kind::kGlass;
+      m.ior = float(ior);
+      m.reflectance = Rgb(1.0f);
+      m.transmittance = base;
+      if (!(m.ior >= 1.0f && m.ior < 10)) fail(el, "KHR_materials_ior ior " + std::to_string(ior) + " out of range");
+      if (roughness > 0.02) warn_once(el + ": rough transmission rendered as smooth glass");
+      if (between(transmission)) warn_once(el + ": transmission " + std::to_string(transmission) + " rounded to 1 (glass)");
+    } else if (metallic >= 0.5) {
+      // F0 = base colour. Our conductor takes eta and k: with eta = 1, F0 = k^2 / (4 + k^2).
+      if (roughness < 0.02) {
+        m.kind = Material::Kind::kMirror;
+        m.reflectance = base;
+      } else {
+        m.kind = Material::Kind::kMicrofacet;
+        m.alpha = float(roughness * roughness);  // glTF's alpha = roughness^2
+        m.eta = Rgb(1.0f);
+        auto k_of = [](float f0) {
+          f0 = std::clamp(f0, 0.0f, 0.999f);
+          return 2 * std::sqrt(f0 / (1 - f0));
+        };
+        m.k = Rgb(k_of(base.r), k_of(base.g), k_of(base.b));
+      }
+      if (between(metallic)) warn_once(el + ": metallic " + std::to_string(metallic) + " rounded to 1 (metal)");
+      if (texture >= 0) warn_once(el + ": base colour texture on a metal is not supported; baseColorFactor is used");
+      texture = -1;
+    } else {
+      m.kind = Material::Kind::kDiffuse;
+      m.reflectance = base;
+      m.texture = texture;
+      if (between(metallic)) warn_once(el + ": metallic " + std::to_string(metallic) + " rounded to 0 (diffuse)");
+      if (transmission > 0.02) warn_once(el + ": transmission " + std::to_string(transmission) + " rounded to 0 (opaque)");
+    }
+    const uint32_t id = scene_.add_material(std::move(m));
+    materials_[index] = id;
+    return id;
+  }
+
+  int load_texture(int index, const std::string& el) {
+    if (index < 0 || size_t(index) >= model_.textures.size()) fail(el, "texture " + std::to_string(index) + " does not exist");
+    if (auto it = textures_.find(index); it != textures_.end()) return it->second;
+    const tinygltf::Texture& t = model_.textures[size_t(index)];
+    const std::string tel = "textures[" + std::to_string(index) + "]";
+    if (t.source < 0 || size_t(t.source) >= model_.images.size()) fail(tel, "image " + std::to_string(t.source) + " does not exist");
+    const tinygltf::Image& img = model_.images[size_t(t.source)];
+    if (img.width <= 0 || img.height <= 0 || img.image.size() < size_t(img.width) * size_t(img.height) * 4)
+      fail(tel, "image " + std::to_string(t.source) + " has no pixel data");
+    Texture tex;
+    tex.width = img.width;
+    tex.height = img.height;
+    tex.texels.resize(size_t(img.width) * size_t(img.height));
+    for (size_t i = 0; i < tex.texels.size(); ++i)  // base colour textures are sRGB-encoded
+      tex.texels[i] = Rgb(srgb_to_linear(img.image[4 * i] / 255.0f), srgb_to_linear(img.image[4 * i + 1] / 255.0f),
+                          srgb_to_linear(img.image[4 * i + 2] / 255.0f));
+    if (t.sampler >= 0) {
+      if (size_t(t.sampler) >= model_.samplers.size()) fail(tel, "sampler " + std::to_string(t.sampler) + " does not exist");
+      auto wrap = [&](int mode) {
+        switch (mode) {
+          case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE: return Texture::Wrap::kClamp;
+          case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT: return Texture::Wrap::kMirror;
+          default: return Texture::Wrap::kRepeat;
+        }
+      };
+      tex.wrap_s = wrap(model_.samplers[size_t(t.sampler)].wrapS);
+      tex.wrap_t = wrap(model_.samplers[size_t(t.sampler)].wrapT);
+    }
+    scene_.textures.push_back(std::move(tex));
+    return textures_[index] = int(scene_.textures.size() - 1);
+  }
+
+  // ---- cameras and lights ------------------------------------------------------------
+  void add_camera(int index, const Mat4& w, const std::string& node_el) {
+    if (size_t(index) >= model_.cameras.size()) fail(node_el, "camera " + std::to_string(index) + " does not exist");
+    if (scene_.camera.present) return;  // the first camera in the scene's node order wins
+    const tinygltf::Camera& c = model_.cameras[size_t(index)];
+    const std::string el = "cameras[" + std::to_string(index) + "]";
+    if (c.type == "orthographic") fail(el, "orthographic cameras are not supported (use a perspective camera)");
+    if (c.type != "perspective") fail(el, "unknown camera type '" + c.type + "'");
+    const double yfov = c.perspective.yfov * 180 / M_PI;
+    if (!(yfov > 0 && yfov < 180)) fail(el, "yfov must be in (0, pi)");
+    CameraDesc& d = scene_.camera;
+    d.present = true;
+    d.yfov_deg = yfov;
+    if (c.perspective.aspectRatio > 0) d.aspect_ratio = c.perspective.aspectRatio;
+    d.xfov_deg = 2 * std::atan(std::tan(c.perspective.yfov / 2) * d.aspect_ratio.value_or(4.0 / 3.0)) * 180 / M_PI;
+    d.znear = float(c.perspective.znear > 0 ? c.perspective.znear : 0.001);
+    d.zfar = float(c.perspective.zfar > c.perspective.znear ? c.perspective.zfar : 1e30);
+    d.eye = w.point(0, 0, 0).to_float();
+    d.forward = normalize(w.vector(0, 0, -1).to_float());
+    d.up = normalize(w.vector(0, 1, 0).to_float());
+    d.cs184_dir = -d.forward;
+    if (!is_finite(d.forward) || !is_finite(d.up)) fail(node_el, "camera transform is degenerate");
+  }
+
+  void add_light(int index, const Mat4& w, const std::string& node_el) {
+    if (index < 0 || size_t(index) >= model_.lights.size()) fail(node_el, "light " + std::to_string(index) + " does not exist");
+    const tinygltf::Light& g = model_.lights[size_t(index)];
+    const std::string el = "KHR_lights_punctual.lights[" + std::to_string(index) + "]";
+    Rgb color(1.0f);
+    if (g.color.size() >= 3) color = Rgb(float(g.color[0]), float(g.color[1]), float(g.color[2]));
+    if (!(g.intensity >= 0) || !std::isfinite(g.intensity)) fail(el, "intensity must be >= 0");
+    Light l;
+    l.name = g.name.empty() ? "light" + std::to_string(index) : g.name;
+    // Point and spot intensity is in candela (lm/sr), directional in lux (lm/m^2):
+    // divided by 683 lm/W they become W/sr and W/m^2.
+    l.color = color * float(g.intensity / kLumensPerWatt);
+    if (g.type == "directional") {
+      l.kind = Light::Kind::kDirectional;
+      l.direction = -normalize(w.vector(0, 0, -1).to_float());
+    } else if (g.type == "point" || g.type == "spot") {
+      l.kind = g.type == "point" ? Light::Kind::kPoint : Light::Kind::kSpot;
+      l.position = w.point(0, 0, 0).to_float();
+      l.att_constant = 0;
+      l.att_linear = 0;
+      l.att_quadratic = 1;  // physical inverse square
+      if (g.type == "spot") {
+        l.direction = normalize(w.vector(0, 0, -1).to_float());
+        if (!(g.spot.outerConeAngle > g.spot.innerConeAngle && g.spot.innerConeAngle >= 0 && g.spot.outerConeAngle <= M_PI / 2 + 1e-6))
+          fail(el, "needs 0 <= innerConeAngle < outerConeAngle <= pi/2");
+        l.cos_inner = float(std::cos(g.spot.innerConeAngle));
+        l.cos_outer = float(std::cos(g.spot.outerConeAngle));
+      }
+      if (g.range > 0) warn_once(el + ": range is ignored (inverse-square falloff)");
+    } else {
+      fail(el, "unknown light type '" + g.type + "'");
+    }
+    if (!is_finite(l.position) || !is_finite(l.direction)) fail(node_el, "light transform is degenerate");
+    scene_.lights.push_back(l);
+  }
+
+  // A camera that frames the scene: looking down -Z at the bounds' centre, 40 degrees
+  // vertical field of view, far enough back to see the bounding sphere.
+  void frame_bounds() {
+    const Bounds b = scene_.object_bounds();
+    const Vec3 c = b.center();
+    const float r = 0.5f * length(b.diagonal());
+    CameraDesc& d = scene_.camera;
+    d.present = true;
+    d.yfov_deg = 40;
+    d.eye = c + Vec3{0, 0, r / std::sin(20 * kPi / 180) * 1.05f};
+    d.forward = {0, 0, -1};
+    d.up = {0, 1, 0};
+    d.cs184_dir = {0, 0, 1};
+    scene_.warnings.push_back(path_ + ": no camera; framing the scene's bounds from +Z");
+  }
+
+  void warn_once(const std::string& w) {
+    if (warned_.insert(w).second) scene_.warnings.push_back(path_ + ": " + w);
+  }
+
+  std::string path_;
+  tinygltf::Model model_;
+  Scene scene_;
+  std::map<int, uint32_t> materials_;
+  std::map<int, int> textures_;
+  std::set<std::string> warned_;
+};
+
+}  // namespace
+
+Scene load_gltf_file(const std::string& path) { return GltfLoader(path).load(); }
+
+}  // namespace tessera

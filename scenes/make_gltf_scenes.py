@@ -1,0 +1,180 @@
+#!/usr/bin/env python3
+"""Writes Tessera's own glTF scenes (standard library only):
+
+  cornell-spheres.gltf  the default scene of cornell-spheres.dae in glTF: same box, colours,
+                        light (an emissive quad) and spheres (as fine meshes); its camera is
+                        the one CS184 framing gives the .dae at 480x360.
+  dof-row.gltf          five spheres in a row receding from the camera over a textured
+                        floor, lit by a KHR_lights_punctual point and directional light:
+                        for depth of field with -b and -d.
+
+Run: python3 scenes/make_gltf_scenes.py   (rewrites both files beside this script)
+"""
+import base64
+import json
+import math
+import os
+import struct
+import zlib
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+class Builder:
+    def __init__(self):
+        self.blob = bytearray()
+        self.g = {"asset": {"version": "2.0", "generator": "tessera scenes/make_gltf_scenes.py"},
+                  "scene": 0, "scenes": [{"nodes": []}], "nodes": [], "meshes": [], "materials": [],
+                  "accessors": [], "bufferViews": [], "buffers": []}
+
+    def _view(self, data, target):
+        while len(self.blob) % 4:
+            self.blob.append(0)
+        self.g["bufferViews"].append({"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(data), "target": target})
+        self.blob += data
+        return len(self.g["bufferViews"]) - 1
+
+    def _accessor(self, values, comps, ctype, fmt, target, minmax=False):
+        data = struct.pack("<%d%s" % (len(values), fmt), *values)
+        acc = {"bufferView": self._view(data, target), "componentType": ctype, "count": len(values) // comps,
+               "type": {1: "SCALAR", 2: "VEC2", 3: "VEC3"}[comps]}
+        if minmax:
+            acc["min"] = [min(values[i::comps]) for i in range(comps)]
+            acc["max"] = [max(values[i::comps]) for i in range(comps)]
+        self.g["accessors"].append(acc)
+        return len(self.g["accessors"]) - 1
+
+    def material(self, m):
+        self.g["materials"].append(m)
+        return len(self.g["materials"]) - 1
+
+    def mesh(self, name, positions, indices, material, normals=None, uvs=None, translation=None):
+        attrs = {"POSITION": self._accessor(positions, 3, 5126, "f", 34962, True)}
+        if normals:
+            attrs["NORMAL"] = self._accessor(normals, 3, 5126, "f", 34962)
+        if uvs:
+            attrs["TEXCOORD_0"] = self._accessor(uvs, 2, 5126, "f", 34962)
+        big = max(indices) > 65535
+        idx = self._accessor(indices, 1, 5125 if big else 5123, "I" if big else "H", 34963)
+        self.g["meshes"].append({"name": name, "primitives": [{"attributes": attrs, "indices": idx, "material": material}]})
+        node = {"name": name, "mesh": len(self.g["meshes"]) - 1}
+        if translation:
+            node["translation"] = translation
+        self.node(node)
+
+    def node(self, node):
+        self.g["nodes"].append(node)
+        self.g["scenes"][0]["nodes"].append(len(self.g["nodes"]) - 1)
+
+    def write(self, path):
+        self.g["buffers"] = [{"byteLength": len(self.blob),
+                              "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(self.blob)).decode()}]
+        with open(path, "w") as f:
+            json.dump(self.g, f, separators=(",", ":"))
+            f.write("\n")
+
+
+def quad(p0, p1, p2, p3):
+    return [c for p in (p0, p1, p2, p3) for c in p], [0, 1, 2, 0, 2, 3]
+
+
+def uv_sphere(radius, seg=96, rings=48):
+    pos, nrm, idx = [], [], []
+    for r in range(rings + 1):
+        th = math.pi * r / rings
+        for s in range(seg + 1):
+            ph = 2 * math.pi * s / seg
+            n = (math.sin(th) * math.cos(ph), math.cos(th), -math.sin(th) * math.sin(ph))
+            nrm += n
+            pos += [radius * c for c in n]
+    for r in range(rings):
+        for s in range(seg):
+            a, b = r * (seg + 1) + s, (r + 1) * (seg + 1) + s
+            if r > 0:
+                idx += [a, b, a + 1]          # counter-clockwise seen from outside
+            if r < rings - 1:
+                idx += [a + 1, b, b + 1]
+    return pos, nrm, idx
+
+
+def cornell():
+    b = Builder()
+    lam = lambda c: b.material({"pbrMetallicRoughness": {"baseColorFactor": c + [1], "metallicFactor": 0, "roughnessFactor": 1}})
+    white, red, green = lam([0.73, 0.73, 0.73]), lam([0.63, 0.065, 0.05]), lam([0.14, 0.45, 0.091])
+    h = 0.75
+    # The same quads as cornell-spheres.dae (winding normals face into the room).
+    walls = {"floor": ([-1, -h, -1], [-1, -h, 1], [1, -h, 1], [1, -h, -1], white),
+             "ceiling": ([-1, h, -1], [1, h, -1], [1, h, 1], [-1, h, 1], white),
+             "backWall": ([-1, -h, -1], [1, -h, -1], [1, h, -1], [-1, h, -1], white),
+             "leftWall": ([-1, -h, -1], [-1, h, -1], [-1, h, 1], [-1, -h, 1], red),
+             "rightWall": ([1, -h, -1], [1, -h, 1], [1, h, 1], [1, h, -1], green)}
+    for name, (p0, p1, p2, p3, m) in walls.items():
+        pos, idx = quad(p0, p1, p2, p3)
+        b.mesh(name, pos, idx, m)
+    light = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0},
+                        "emissiveFactor": [1, 1, 1], "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 12}}})
+    # 0.5 x 0.5 at y = 0.74, facing down (one-sided, like the CGL area light).
+    pos, idx = quad([-0.25, 0.74, -0.25], [0.25, 0.74, -0.25], [0.25, 0.74, 0.25], [-0.25, 0.74, 0.25])
+    b.mesh("light", pos, idx, light)
+    mirror = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0.95, 0.95, 0.95, 1], "metallicFactor": 1, "roughnessFactor": 0}})
+    glass = b.material({"pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0, "roughnessFactor": 0},
+                        "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1.5}}})
+    pos, nrm, idx = uv_sphere(0.3)
+    b.mesh("mirrorSphere", pos, idx, mirror, nrm, translation=[-0.42, -0.449, -0.3])
+    b.mesh("glassSphere", pos, idx, glass, nrm, translation=[0.42, -0.449, 0.3])
+    # CS184 framing of the .dae at 480x360: eye 1.5 box diagonals from the centre, and the
+    # 800x600 view's pixel pitch (tan(vfov/2) = 360 / (2 * 875)).
+    d = 1.5 * math.sqrt(4 + 2.25 + 4)
+    b.g["cameras"] = [{"type": "perspective", "perspective": {"yfov": 2 * math.atan(360 / 1750), "aspectRatio": 4 / 3,
+                                                               "znear": 0.01, "zfar": 100}}]
+    b.node({"name": "camera", "camera": 0, "translation": [0, 0, d]})
+    b.g["extensionsUsed"] = ["KHR_materials_emissive_strength", "KHR_materials_transmission", "KHR_materials_ior"]
+    b.write(os.path.join(HERE, "cornell-spheres.gltf"))
+
+
+def checker_png(n=8, cell=16):
+    size = n * cell
+    rows = b""
+    for y in range(size):
+        row = bytearray([0])
+        for x in range(size):
+            v = 200 if ((x // cell) + (y // cell)) % 2 == 0 else 60
+            row += bytes([v, v, v])
+        rows += bytes(row)
+    chunk = lambda t, d: struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d) & 0xFFFFFFFF)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", size, size, 8, 2, 0, 0, 0)) +
+            chunk(b"IDAT", zlib.compress(rows, 9)) + chunk(b"IEND", b""))
+
+
+def dof_row():
+    b = Builder()
+    b.g["images"] = [{"uri": "data:image/png;base64," + base64.b64encode(checker_png()).decode()}]
+    b.g["samplers"] = [{"wrapS": 10497, "wrapT": 10497}]
+    b.g["textures"] = [{"source": 0, "sampler": 0}]
+    floor = b.material({"pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "baseColorTexture": {"index": 0},
+                                                 "metallicFactor": 0, "roughnessFactor": 1}})
+    # A 40 x 40 floor with the checker repeated 10 times (uv 0..10).
+    pos, idx = quad([-20, 0, -30], [-20, 0, 10], [20, 0, 10], [20, 0, -30])
+    b.mesh("floor", pos, idx, floor, [0, 1, 0] * 4, [0, 0, 0, 10, 10, 10, 10, 0])
+    colours = [[0.8, 0.1, 0.1], [0.9, 0.6, 0.1], [0.2, 0.7, 0.2], [0.1, 0.3, 0.8], [0.6, 0.2, 0.7]]
+    pos, nrm, idx = uv_sphere(0.5, 64, 32)
+    for i, c in enumerate(colours):
+        m = b.material({"pbrMetallicRoughness": {"baseColorFactor": c + [1], "metallicFactor": 0, "roughnessFactor": 1}})
+        b.mesh("sphere%d" % i, pos, idx, m, nrm, translation=[-1.5 + 0.9 * i, 0.5, 2 - 3 * i])  # z 2, -1, -4, -7, -10
+    gold = b.material({"pbrMetallicRoughness": {"baseColorFactor": [1.0, 0.8, 0.4, 1], "metallicFactor": 1, "roughnessFactor": 0.3}})
+    b.mesh("goldSphere", pos, idx, gold, nrm, translation=[1.6, 0.5, -2.5])
+    b.g["extensionsUsed"] = ["KHR_lights_punctual"]
+    b.g["extensions"] = {"KHR_lights_punctual": {"lights": [
+        {"type": "directional", "color": [1.0, 0.95, 0.85], "intensity": 1500},       # lux
+        {"type": "point", "color": [1, 1, 1], "intensity": 8000}]}}                  # candela
+    b.node({"name": "sun", "rotation": [-0.3826834, 0.2, 0, 0.9238795], "extensions": {"KHR_lights_punctual": {"light": 0}}})
+    b.node({"name": "lamp", "translation": [0, 6, 0], "extensions": {"KHR_lights_punctual": {"light": 1}}})
+    b.g["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.6, "aspectRatio": 1.5, "znear": 0.05, "zfar": 100}}]
+    # Eye at (0, 1.2, 6) looking down -z, tilted slightly toward the floor.
+    b.node({"name": "camera", "camera": 0, "translation": [0, 1.2, 6], "rotation": [-0.0499792, 0, 0, 0.9987503]})
+    b.write(os.path.join(HERE, "dof-row.gltf"))
+
+
+if __name__ == "__main__":
+    cornell()
+    dof_row()
