@@ -167,9 +167,20 @@ class GltfLoader {
   [[noreturn]] void fail(const std::string& element, const std::string& reason) const {
     throw SceneError(path_, element, reason);
   }
+  // tinygltf's messages span lines: join them into one.
   static std::string first_line(const std::string& s) {
-    std::string t = s.substr(0, s.find('\n'));
-    while (!t.empty() && (t.back() == '\r' || t.back() == ' ')) t.pop_back();
+    std::string t;
+    for (char c : s) {
+      if (c == '\r') continue;
+      if (c == '\n') {
+        while (!t.empty() && t.back() == ' ') t.pop_back();
+        if (!t.empty() && t.back() != ':' && t.back() != ';') t += ';';
+        t += ' ';
+      } else {
+        t += c;
+      }
+    }
+    while (!t.empty() && (t.back() == ' ' || t.back() == ';')) t.pop_back();
     return t;
   }
 
@@ -207,8 +218,11 @@ class GltfLoader {
         if (!b.is_object() || !b.contains("byteLength") || !b["byteLength"].is_number())
           fail("buffers[" + std::to_string(i) + "]", "missing byteLength");
         const double len = b["byteLength"].get<double>();
-        if (!(len >= 0) || len > double(kMaxBufferBytes))
-          fail("buffers[" + std::to_string(i) + "]", "byteLength " + b["byteLength"].dump() + " is over the 1 GiB limit");
+        if (!(len >= 0) || len > double(kMaxBufferBytes)) {
+          char shown[64];
+          std::snprintf(shown, sizeof shown, "%.0f", len);
+          fail("buffers[" + std::to_string(i) + "]", std::string("byteLength ") + shown + " is over the 1 GiB limit");
+        }
       }
   }
 

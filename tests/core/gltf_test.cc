@@ -1,0 +1,408 @@
+// The glTF loader: what it makes of valid files, and a clear error (never a crash or a
+// huge allocation) for hostile ones.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "core/scene/gltf/gltf_loader.h"
+#include "core/scene/load.h"
+#include "core/scene/scene_error.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+std::string base64(const std::string& in) {
+  static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  int val = 0, bits = -6;
+  for (unsigned char c : in) {
+    val = (val << 8) + c;
+    bits += 8;
+    while (bits >= 0) {
+      out.push_back(t[(val >> bits) & 0x3F]);
+      bits -= 6;
+    }
+  }
+  if (bits > -6) out.push_back(t[((val << 8) >> (bits + 8)) & 0x3F]);
+  while (out.size() % 4) out.push_back('=');
+  return out;
+}
+
+template <typename T>
+void put(std::string& blob, std::initializer_list<T> values) {
+  for (T v : values) blob.append(reinterpret_cast<const char*>(&v), sizeof v);
+}
+
+// One triangle (positions, normals, uvs, ushort indices) in a buffer, a node, a camera.
+struct Doc {
+  json j;
+  std::string blob;
+  Doc() {
+    put<float>(blob, {0, 0, 0, 1, 0, 0, 0, 1, 0});  // positions, 36 bytes at 0
+    put<float>(blob, {0, 0, 1, 0, 0, 1, 0, 0, 1});  // normals, 36 bytes at 36
+    put<uint8_t>(blob, {0, 0, 255, 0, 0, 255, 0, 0});  // normalized ubyte uvs, 6 bytes (+2 pad) at 72
+    put<uint16_t>(blob, {0, 1, 2, 0});              // indices, 6 bytes (+2 pad) at 80
+    j = {{"asset", {{"version", "2.0"}}},
+         {"scene", 0},
+         {"scenes", {{{"nodes", {0, 1}}}}},
+         {"nodes", {{{"mesh", 0}}, {{"camera", 0}, {"translation", {0.25, 0.25, 3}}}}},
+         {"cameras", {{{"type", "perspective"}, {"perspective", {{"yfov", 0.5}, {"znear", 0.1}}}}}},
+         {"meshes",
+          {{{"primitives",
+             {{{"attributes", {{"POSITION", 0}, {"NORMAL", 1}, {"TEXCOORD_0", 2}}}, {"indices", 3}, {"material", 0}}}}}}},
+         {"materials", {{{"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.6, 0.7, 1}}, {"metallicFactor", 0}}}}}},
+         {"accessors",
+          {{{"bufferView", 0}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"}},
+           {{"bufferView", 1}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"}},
+           {{"bufferView", 2}, {"componentType", 5121}, {"normalized", true}, {"count", 3}, {"type", "VEC2"}},
+           {{"bufferView", 3}, {"componentType", 5123}, {"count", 3}, {"type", "SCALAR"}}}},
+         {"bufferViews",
+          {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 36}},
+           {{"buffer", 0}, {"byteOffset", 36}, {"byteLength", 36}},
+           {{"buffer", 0}, {"byteOffset", 72}, {"byteLength", 6}},
+           {{"buffer", 0}, {"byteOffset", 80}, {"byteLength", 6}}}},
+         {"buffers", {{{"byteLength", 88}}}}};
+  }
+  void embed() { j["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64(blob); }
+};
+
+class Gltf : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_gltf_" + std::to_string(::getpid()));
+  void SetUp() override { fs::create_directories(dir); }
+  void TearDown() override { fs::remove_all(dir); }
+  std::string write(const std::string& name, const std::string& content) {
+    const fs::path p = dir / name;
+    std::ofstream(p, std::ios::binary) << content;
+    return p.string();
+  }
+  std::string write(Doc d, bool embed = true) {
+    if (embed) d.embed();
+    return write("scene.gltf", d.j.dump());
+  }
+  Scene load(Doc d) { return load_gltf_file(write(std::move(d))); }
+  void expect_error(const std::string& path, const std::string& reason) {
+    try {
+      load_scene(path);
+      ADD_FAILURE() << "loaded without error; expected: " << reason;
+    } catch (const SceneError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(fs::path(path).filename().string()), std::string::npos) << what;
+      EXPECT_NE(what.find(reason), std::string::npos) << what;
+      EXPECT_EQ(what.find('\n'), std::string::npos) << "one line: " << what;
+    }
+  }
+  void expect_error(Doc d, const std::string& reason) { expect_error(write(std::move(d)), reason); }
+};
+
+TEST_F(Gltf, EmbeddedBuffersNormalsUvsAndIndices) {
+  const Scene s = load(Doc());
+  ASSERT_EQ(s.meshes.size(), 1u);
+  const Mesh& m = s.meshes[0];
+  EXPECT_EQ(m.triangle_count(), 1u);
+  EXPECT_TRUE(m.file_normals);
+  EXPECT_FLOAT_EQ(m.normals[0].z, 1);
+  ASSERT_EQ(m.uvs.size(), 3u);
+  EXPECT_FLOAT_EQ(m.uvs[1].x, 1);  // normalized ubyte 255 -> 1
+  EXPECT_EQ(s.materials[m.material].kind, Material::Kind::kDiffuse);
+  EXPECT_FLOAT_EQ(s.materials[m.material].reflectance.b, 0.7f);
+  ASSERT_TRUE(s.camera.present);
+  EXPECT_NEAR(*s.camera.yfov_deg, 0.5 * 180 / M_PI, 1e-9);
+  EXPECT_FLOAT_EQ(s.camera.eye.z, 3);
+}
+
+TEST_F(Gltf, ExternalBufferAndGlb) {
+  Doc d;
+  d.j["buffers"][0]["uri"] = "tri.bin";
+  write("tri.bin", d.blob);
+  EXPECT_EQ(load_gltf_file(write(d, false)).triangle_count(), 1u);
+  // The same as a .glb: header, JSON chunk, BIN chunk.
+  Doc g;
+  g.j["buffers"][0].erase("uri");
+  std::string js = g.j.dump();
+  while (js.size() % 4) js.push_back(' ');
+  std::string bin = g.blob;
+  std::string glb = "glTF";
+  put<uint32_t>(glb, {2, uint32_t(12 + 8 + js.size() + 8 + bin.size()), uint32_t(js.size()), 0x4E4F534Au});
+  glb += js;
+  put<uint32_t>(glb, {uint32_t(bin.size()), 0x004E4942u});
+  glb += bin;
+  EXPECT_EQ(load_scene(write("tri.glb", glb)).triangle_count(), 1u);
+}
+
+TEST_F(Gltf, NodeTransformsMatrixAndTrs) {
+  Doc d;
+  d.j["nodes"][0]["translation"] = {1, 2, 3};
+  d.j["nodes"][0]["rotation"] = {0, 0, 0.7071068, 0.7071068};  // 90 degrees about z
+  d.j["nodes"][0]["scale"] = {2, 2, 2};
+  const Scene a = load(d);
+  // Vertex (1,0,0): scale -> (2,0,0), rotate -> (0,2,0), translate -> (1,4,3).
+  EXPECT_NEAR(a.meshes[0].positions[1].x, 1, 1e-5);
+  EXPECT_NEAR(a.meshes[0].positions[1].y, 4, 1e-5);
+  EXPECT_NEAR(a.meshes[0].normals[0].z, 1, 1e-5);
+  Doc m;
+  m.j["nodes"][0]["matrix"] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 5, 6, 7, 1};  // column-major translation
+  EXPECT_NEAR(load(m).meshes[0].positions[0].x, 5, 1e-6);
+  Doc mirror;  // a negative scale keeps the winding outward: normals stay consistent
+  mirror.j["nodes"][0]["scale"] = {-1, 1, 1};
+  const Scene ms = load(mirror);
+  const Mesh& mm = ms.meshes[0];
+  const Vec3 ng = cross(mm.positions[mm.indices[1]] - mm.positions[mm.indices[0]],
+                        mm.positions[mm.indices[2]] - mm.positions[mm.indices[0]]);
+  EXPECT_GT(ng.z, 0);
+}
+
+TEST_F(Gltf, NonIndexedSparseAndOtherComponentTypes) {
+  Doc d;
+  d.j["meshes"][0]["primitives"][0].erase("indices");
+  // Sparse: replace vertex 2's position with (0, 5, 0).
+  put<uint8_t>(d.blob, {2, 0, 0, 0});  // sparse index (ubyte) at 88
+  put<float>(d.blob, {0, 5, 0});       // sparse value at 92
+  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", 88}, {"byteLength", 1}});
+  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", 92}, {"byteLength", 12}});
+  d.j["buffers"][0]["byteLength"] = 104;
+  d.j["accessors"][0]["sparse"] = {{"count", 1},
+                                   {"indices", {{"bufferView", 4}, {"componentType", 5121}}},
+                                   {"values", {{"bufferView", 5}}}};
+  const Scene s = load(d);
+  EXPECT_EQ(s.meshes[0].indices, (std::vector<uint32_t>{0, 1, 2}));
+  EXPECT_FLOAT_EQ(s.meshes[0].positions[2].y, 5);
+}
+
+TEST_F(Gltf, MaterialMapping) {
+  Doc d;
+  auto mat = [&](json m) {
+    d.j["materials"][0] = m;
+    return load(d);
+  };
+  const auto kind = [](const Scene& s) { return s.materials[s.meshes[0].material].kind; };
+  Scene s = mat({{"pbrMetallicRoughness", {{"baseColorFactor", {1, 0.8, 0.4, 1}}, {"metallicFactor", 1}, {"roughnessFactor", 0}}}});
+  EXPECT_EQ(kind(s), Material::Kind::kMirror);
+  EXPECT_FLOAT_EQ(s.materials[0].reflectance.b, 0.4f);
+  s = mat({{"pbrMetallicRoughness", {{"baseColorFactor", {0.8, 0.8, 0.8, 1}}, {"metallicFactor", 1}, {"roughnessFactor", 0.5}}}});
+  ASSERT_EQ(kind(s), Material::Kind::kMicrofacet);
+  EXPECT_FLOAT_EQ(s.materials[0].alpha, 0.25f);  // roughness^2
+  const float k = s.materials[0].k.r;             // F0 = k^2 / (4 + k^2) = 0.8 at eta = 1
+  EXPECT_NEAR(k * k / (4 + k * k), 0.8f, 1e-5);
+  s = mat({{"pbrMetallicRoughness", {{"metallicFactor", 0}}},
+           {"extensions", {{"KHR_materials_transmission", {{"transmissionFactor", 1}}}, {"KHR_materials_ior", {{"ior", 1.33}}}}}});
+  ASSERT_EQ(kind(s), Material::Kind::kGlass);
+  EXPECT_FLOAT_EQ(s.materials[0].ior, 1.33f);
+  s = mat({{"emissiveFactor", {1, 0.5, 0.25}}, {"doubleSided", true},
+           {"extensions", {{"KHR_materials_emissive_strength", {{"emissiveStrength", 8}}}}}});
+  ASSERT_EQ(kind(s), Material::Kind::kEmission);
+  EXPECT_FLOAT_EQ(s.materials[0].radiance.g, 4);
+  ASSERT_EQ(s.lights.size(), 1u);  // emitters are sampled as area lights
+  EXPECT_EQ(s.lights[0].kind, Light::Kind::kMesh);
+  EXPECT_TRUE(s.lights[0].two_sided);
+  // In-between values follow the documented rounding, with a warning, never silently.
+  s = mat({{"pbrMetallicRoughness", {{"metallicFactor", 0.3}}}});
+  EXPECT_EQ(kind(s), Material::Kind::kDiffuse);
+  ASSERT_FALSE(s.warnings.empty());
+  EXPECT_NE(s.warnings.back().find("metallic 0.3"), std::string::npos) << s.warnings.back();
+  s = mat({{"pbrMetallicRoughness", {{"metallicFactor", 0.7}, {"roughnessFactor", 0.4}}}});
+  EXPECT_EQ(kind(s), Material::Kind::kMicrofacet);
+  EXPECT_NE(s.warnings.back().find("metallic 0.7"), std::string::npos);
+  // No material: the spec's default, metallic 1 and roughness 1.
+  d.j["meshes"][0]["primitives"][0].erase("material");
+  EXPECT_EQ(kind(load(d)), Material::Kind::kMicrofacet);
+}
+
+TEST_F(Gltf, BaseColourTextureWithSamplerWrapModes) {
+  // A 2x1 PNG: red, then blue (sRGB 255 -> linear 1).
+  const unsigned char png[] = {0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x48, 0x44, 0x52, 0x00, 0x00, 0x00, 0x02, 0x00, 0x00, 0x00, 0x01, 0x08, 0x02, 0x00, 0x00, 0x00, 0x7b, 0x40, 0xe8, 0xdd, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x44, 0x41, 0x54, 0x78, 0x9c, 0x63, 0xf8, 0xcf, 0x00, 0x04, 0xff, 0x01, 0x07, 0x00, 0x01, 0xff, 0xe2, 0x23, 0x9e, 0x59, 0x00, 0x00, 0x00, 0x00, 0x49, 0x45, 0x4e, 0x44, 0xae, 0x42, 0x60, 0x82};
+  Doc d;
+  d.j["images"] = {{{"uri", "data:image/png;base64," + base64(std::string(reinterpret_cast<const char*>(png), sizeof png))}}};
+  d.j["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33648}}};  // clamp, mirrored
+  d.j["textures"] = {{{"source", 0}, {"sampler", 0}}};
+  d.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+  const Scene s = load(d);
+  ASSERT_EQ(s.textures.size(), 1u);
+  const Texture& t = s.textures[0];
+  EXPECT_EQ(t.wrap_s, Texture::Wrap::kClamp);
+  EXPECT_EQ(t.wrap_t, Texture::Wrap::kMirror);
+  EXPECT_EQ(s.materials[s.meshes[0].material].texture, 0);
+  EXPECT_NEAR(t.sample({0.25f, 0.5f}).r, 1, 1e-6);  // texel centre of the red texel
+  EXPECT_NEAR(t.sample({0.75f, 0.5f}).b, 1, 1e-6);
+  EXPECT_NEAR(t.sample({7.0f, 0.5f}).b, 1, 1e-6);   // clamped to the right edge
+  EXPECT_NEAR(t.sample({-3.0f, 0.5f}).r, 1, 1e-6);  // clamped to the left edge
+}
+
+TEST(TextureWrap, RepeatMirrorAndClamp) {
+  Texture t;
+  t.width = 4;
+  t.height = 1;
+  t.texels = {Rgb(0), Rgb(1), Rgb(2), Rgb(3)};
+  auto at = [&](float u) { return t.sample({u, 0.5f}).r; };
+  EXPECT_FLOAT_EQ(at(0.125f), 0);
+  EXPECT_FLOAT_EQ(at(1.125f), 0);  // repeat
+  EXPECT_FLOAT_EQ(at(0.875f), 3);
+  t.wrap_s = Texture::Wrap::kMirror;
+  EXPECT_FLOAT_EQ(at(1.125f), 3);  // mirrored: the first texel past 1 is the last one
+  t.wrap_s = Texture::Wrap::kClamp;
+  EXPECT_FLOAT_EQ(at(5.0f), 3);
+}
+
+TEST_F(Gltf, PunctualLightsInRadiometricUnits) {
+  Doc d;
+  d.j["extensionsUsed"] = {"KHR_lights_punctual"};
+  d.j["extensions"]["KHR_lights_punctual"]["lights"] = {
+      {{"type", "point"}, {"intensity", 683}, {"color", {1, 0.5, 1}}},
+      {{"type", "directional"}, {"intensity", 1366}},
+      {{"type", "spot"}, {"intensity", 68.3}, {"spot", {{"innerConeAngle", 0.2}, {"outerConeAngle", 0.4}}}}};
+  for (int i = 0; i < 3; ++i)
+    d.j["nodes"].push_back({{"translation", {0, 2, 0}}, {"extensions", {{"KHR_lights_punctual", {{"light", i}}}}}});
+  d.j["scenes"][0]["nodes"] = {0, 1, 2, 3, 4};
+  const Scene s = load(d);
+  ASSERT_EQ(s.lights.size(), 3u);
+  EXPECT_EQ(s.lights[0].kind, Light::Kind::kPoint);
+  EXPECT_FLOAT_EQ(s.lights[0].color.r, 1);  // 683 cd = 1 W/sr
+  EXPECT_FLOAT_EQ(s.lights[0].color.g, 0.5f);
+  EXPECT_FLOAT_EQ(s.lights[0].att_quadratic, 1);
+  EXPECT_EQ(s.lights[1].kind, Light::Kind::kDirectional);
+  EXPECT_FLOAT_EQ(s.lights[1].color.r, 2);  // 1366 lux = 2 W/m^2
+  EXPECT_NEAR(s.lights[1].direction.z, 1, 1e-6);  // shines down -z: the light is toward +z
+  EXPECT_EQ(s.lights[2].kind, Light::Kind::kSpot);
+  EXPECT_FLOAT_EQ(s.lights[2].cos_outer, std::cos(0.4f));
+}
+
+TEST_F(Gltf, NoCameraFramesTheBounds) {
+  Doc d;
+  d.j["scenes"][0]["nodes"] = {0};
+  const Scene s = load(d);
+  ASSERT_TRUE(s.camera.present);
+  EXPECT_GT(s.camera.eye.z, 1);
+  EXPECT_NE(s.warnings.back().find("no camera"), std::string::npos);
+}
+
+TEST_F(Gltf, OptionalUnsupportedExtensionIsAWarningOnce) {
+  Doc d;
+  d.j["extensionsUsed"] = {"KHR_materials_clearcoat", "KHR_materials_clearcoat"};
+  const Scene s = load(d);
+  int n = 0;
+  for (const auto& w : s.warnings) n += w.find("'KHR_materials_clearcoat' is not supported") != std::string::npos;
+  EXPECT_GE(n, 1);
+}
+
+// ---- refused, with a clear message ---------------------------------------------------
+
+TEST_F(Gltf, RequiredUnsupportedExtensionIsRefusedByName) {
+  Doc d;
+  d.j["extensionsUsed"] = {"KHR_draco_mesh_compression"};
+  d.j["extensionsRequired"] = {"KHR_draco_mesh_compression"};
+  expect_error(d, "required extension 'KHR_draco_mesh_compression' is not supported");
+}
+
+TEST_F(Gltf, NonTriangleModeIsRefused) {
+  Doc d;
+  d.j["meshes"][0]["primitives"][0]["mode"] = 1;
+  expect_error(d, "mode LINES is not supported (only TRIANGLES)");
+}
+
+TEST_F(Gltf, OrthographicCameraIsRefused) {
+  Doc d;
+  d.j["cameras"][0] = {{"type", "orthographic"}, {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.1}, {"zfar", 10}}}};
+  expect_error(d, "orthographic cameras are not supported");
+}
+
+TEST_F(Gltf, AccessorOffsetPastTheBufferView) {
+  Doc d;
+  d.j["accessors"][0]["byteOffset"] = 8;
+  expect_error(d, "runs past the end of bufferView 0");
+}
+
+TEST_F(Gltf, BufferViewPastTheBuffer) {
+  Doc d;
+  d.j["bufferViews"][1]["byteLength"] = 4000;
+  expect_error(d, "runs past the end of its buffer");
+}
+
+TEST_F(Gltf, IndexOutOfRange) {
+  Doc d;
+  std::memcpy(d.blob.data() + 82, "\x09\x00", 2);  // second index = 9 with 3 vertices
+  expect_error(d, "index 9 out of range (3 vertices)");
+}
+
+TEST_F(Gltf, BufferShorterThanDeclared) {
+  Doc d;
+  d.j["buffers"][0]["uri"] = "short.bin";
+  write("short.bin", d.blob.substr(0, 40));
+  expect_error(write(d, false), "short.bin");
+}
+
+TEST_F(Gltf, BrokenBase64) {
+  Doc d;
+  d.embed();
+  std::string uri = d.j["buffers"][0]["uri"];
+  uri.replace(uri.size() - 20, 10, "!!**??%%^^");
+  d.j["buffers"][0]["uri"] = uri;
+  try {
+    load_gltf_file(write("scene.gltf", d.j.dump()));
+    ADD_FAILURE() << "broken base64 loaded";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("scene.gltf"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(Gltf, TenGigabyteByteLengthIsRefusedBeforeAllocating) {
+  Doc d;
+  d.j["buffers"][0]["byteLength"] = 10737418240.0;
+  expect_error(d, "byteLength 10737418240 is over the 1 GiB limit");
+}
+
+TEST_F(Gltf, CyclicNodeGraph) {
+  Doc d;
+  d.j["nodes"][0]["children"] = {2};
+  d.j["nodes"].push_back({{"children", {0}}});
+  expect_error(d, "the node graph has a cycle");
+}
+
+TEST_F(Gltf, SelfParentNode) {
+  Doc d;
+  d.j["nodes"][0]["children"] = {0};
+  expect_error(d, "nodes[0]: the node graph has a cycle");
+}
+
+TEST_F(Gltf, UriOutsideTheScenesFolderIsRefused) {
+  Doc d;
+  write("secret.bin", d.blob);
+  fs::create_directories(dir / "sub");
+  d.j["buffers"][0]["uri"] = "../secret.bin";
+  const std::string path = (dir / "sub" / "scene.gltf").string();
+  std::ofstream(path) << d.j.dump();
+  expect_error(path, "outside the scene's folder");
+}
+
+TEST_F(Gltf, GarbageAndTruncatedFiles) {
+  expect_error(write("junk.gltf", std::string(100, '\x07')), "JSON");
+  Doc d;
+  d.embed();
+  const std::string full = d.j.dump();
+  expect_error(write("cut.gltf", full.substr(0, full.size() / 2)), "JSON");
+  std::string glb = "glTF";
+  put<uint32_t>(glb, {2, 1000000, 50, 0x4E4F534Au});
+  expect_error(write("cut.glb", glb), "GLB header");
+}
+
+TEST_F(Gltf, NaNPositionIsRefused) {
+  Doc d;
+  const float nan = std::nanf("");
+  std::memcpy(d.blob.data() + 4, &nan, 4);
+  expect_error(d, "NaN or infinite");
+}
+
+TEST_F(Gltf, AccessorWithTheWrongShape) {
+  Doc d;
+  d.j["accessors"][0]["type"] = "VEC2";
+  expect_error(d, "has 2 components, expected 3");
+}
+
+}  // namespace
+}  // namespace tessera
