@@ -6,6 +6,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 
 namespace tessera {
@@ -175,17 +177,79 @@ std::string unpack_bundle(const std::string& dir, const std::string& main_file,
   return (fs::path(dir) / main_file).string();
 }
 
-void pack_scene(const std::string& path, std::string* main_file,
-                google::protobuf::RepeatedPtrField<v1::SceneFile>* files) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw std::runtime_error(path + ": cannot open file");
+namespace {
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  if (!in) throw std::runtime_error(p.string() + ": cannot open file");
   std::ostringstream ss;
   ss << in.rdbuf();
+  return ss.str();
+}
+
+std::string percent_decode(const std::string& s) {
+  std::string out;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(uint8_t(s[i + 1])) && std::isxdigit(uint8_t(s[i + 2]))) {
+      out.push_back(char(std::stoi(s.substr(i + 1, 2), nullptr, 16)));
+      i += 2;
+    } else {
+      out.push_back(s[i]);
+    }
+  }
+  return out;
+}
+
+// The external files (buffers, images) a glTF document names, as relative paths.
+std::vector<std::string> gltf_references(const std::string& path, const std::string& bytes) {
+  std::string json_text = bytes;
+  if (bytes.size() >= 20 && bytes.compare(0, 4, "glTF") == 0) {  // .glb: the JSON chunk
+    uint32_t len;
+    std::memcpy(&len, bytes.data() + 12, 4);
+    if (uint64_t(len) + 20 > bytes.size())
+      throw std::runtime_error(path + ": GLB chunk 0 runs past the end of the file");
+    json_text = bytes.substr(20, len);
+  }
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(json_text);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": JSON: " + e.what());
+  }
+  std::vector<std::string> out;
+  for (const char* key : {"buffers", "images"}) {
+    if (!j.contains(key) || !j[key].is_array()) continue;
+    for (const auto& item : j[key]) {
+      if (!item.is_object() || !item.contains("uri") || !item["uri"].is_string()) continue;
+      const std::string uri = item["uri"];
+      if (uri.rfind("data:", 0) == 0) continue;
+      out.push_back(percent_decode(uri));
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+void pack_scene(const std::string& path, std::string* main_file,
+                google::protobuf::RepeatedPtrField<v1::SceneFile>* files) {
+  const std::string bytes = slurp(path);
   *main_file = fs::path(path).filename().string();
   v1::SceneFile* f = files->Add();
   f->set_path(*main_file);
-  f->set_content(ss.str());
-  // CS184 COLLADA scenes are self-contained; formats with external buffers add them here.
+  f->set_content(bytes);
+  // CS184 COLLADA scenes are self-contained; glTF names buffers and images beside it.
+  std::string ext = fs::path(path).extension().string();
+  for (char& c : ext) c = char(std::tolower(uint8_t(c)));
+  if (ext != ".gltf" && ext != ".glb") return;
+  std::set<std::string> seen;
+  for (const std::string& rel : gltf_references(path, bytes)) {
+    if (!safe_relative(rel)) throw std::runtime_error(path + ": '" + rel + "' is not a path inside the scene's folder");
+    if (!seen.insert(rel).second) continue;
+    v1::SceneFile* extra = files->Add();
+    extra->set_path(rel);
+    extra->set_content(slurp(fs::path(path).parent_path() / rel));
+  }
 }
 
 }  // namespace tessera

@@ -45,10 +45,10 @@ struct Doc {
   json j;
   std::string blob;
   Doc() {
-    put<float>(blob, {0, 0, 0, 1, 0, 0, 0, 1, 0});  // positions, 36 bytes at 0
-    put<float>(blob, {0, 0, 1, 0, 0, 1, 0, 0, 1});  // normals, 36 bytes at 36
+    put<float>(blob, {0, 0, 0, 1, 0, 0, 0, 1, 0});     // positions, 36 bytes at 0
+    put<float>(blob, {0, 0, 1, 0, 0, 1, 0, 0, 1});     // normals, 36 bytes at 36
     put<uint8_t>(blob, {0, 0, 255, 0, 0, 255, 0, 0});  // normalized ubyte uvs, 6 bytes (+2 pad) at 72
-    put<uint16_t>(blob, {0, 1, 2, 0});              // indices, 6 bytes (+2 pad) at 80
+    put<uint16_t>(blob, {0, 1, 2, 0});                 // indices, 6 bytes (+2 pad) at 80
     j = {{"asset", {{"version", "2.0"}}},
          {"scene", 0},
          {"scenes", {{{"nodes", {0, 1}}}}},
@@ -56,7 +56,9 @@ struct Doc {
          {"cameras", {{{"type", "perspective"}, {"perspective", {{"yfov", 0.5}, {"znear", 0.1}}}}}},
          {"meshes",
           {{{"primitives",
-             {{{"attributes", {{"POSITION", 0}, {"NORMAL", 1}, {"TEXCOORD_0", 2}}}, {"indices", 3}, {"material", 0}}}}}}},
+             {{{"attributes", {{"POSITION", 0}, {"NORMAL", 1}, {"TEXCOORD_0", 2}}},
+               {"indices", 3},
+               {"material", 0}}}}}}},
          {"materials", {{{"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.6, 0.7, 1}}, {"metallicFactor", 0}}}}}},
          {"accessors",
           {{{"bufferView", 0}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"}},
@@ -168,9 +170,8 @@ TEST_F(Gltf, NonIndexedSparseAndOtherComponentTypes) {
   d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", 88}, {"byteLength", 1}});
   d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", 92}, {"byteLength", 12}});
   d.j["buffers"][0]["byteLength"] = 104;
-  d.j["accessors"][0]["sparse"] = {{"count", 1},
-                                   {"indices", {{"bufferView", 4}, {"componentType", 5121}}},
-                                   {"values", {{"bufferView", 5}}}};
+  d.j["accessors"][0]["sparse"] = {
+      {"count", 1}, {"indices", {{"bufferView", 4}, {"componentType", 5121}}}, {"values", {{"bufferView", 5}}}};
   const Scene s = load(d);
   EXPECT_EQ(s.meshes[0].indices, (std::vector<uint32_t>{0, 1, 2}));
   EXPECT_FLOAT_EQ(s.meshes[0].positions[2].y, 5);
@@ -183,19 +184,23 @@ TEST_F(Gltf, MaterialMapping) {
     return load(d);
   };
   const auto kind = [](const Scene& s) { return s.materials[s.meshes[0].material].kind; };
-  Scene s = mat({{"pbrMetallicRoughness", {{"baseColorFactor", {1, 0.8, 0.4, 1}}, {"metallicFactor", 1}, {"roughnessFactor", 0}}}});
+  Scene s = mat({{"pbrMetallicRoughness",
+                  {{"baseColorFactor", {1, 0.8, 0.4, 1}}, {"metallicFactor", 1}, {"roughnessFactor", 0}}}});
   EXPECT_EQ(kind(s), Material::Kind::kMirror);
   EXPECT_FLOAT_EQ(s.materials[0].reflectance.b, 0.4f);
-  s = mat({{"pbrMetallicRoughness", {{"baseColorFactor", {0.8, 0.8, 0.8, 1}}, {"metallicFactor", 1}, {"roughnessFactor", 0.5}}}});
+  s = mat({{"pbrMetallicRoughness",
+            {{"baseColorFactor", {0.8, 0.8, 0.8, 1}}, {"metallicFactor", 1}, {"roughnessFactor", 0.5}}}});
   ASSERT_EQ(kind(s), Material::Kind::kMicrofacet);
   EXPECT_FLOAT_EQ(s.materials[0].alpha, 0.25f);  // roughness^2
-  const float k = s.materials[0].k.r;             // F0 = k^2 / (4 + k^2) = 0.8 at eta = 1
+  const float k = s.materials[0].k.r;            // F0 = k^2 / (4 + k^2) = 0.8 at eta = 1
   EXPECT_NEAR(k * k / (4 + k * k), 0.8f, 1e-5);
   s = mat({{"pbrMetallicRoughness", {{"metallicFactor", 0}}},
-           {"extensions", {{"KHR_materials_transmission", {{"transmissionFactor", 1}}}, {"KHR_materials_ior", {{"ior", 1.33}}}}}});
+           {"extensions",
+            {{"KHR_materials_transmission", {{"transmissionFactor", 1}}}, {"KHR_materials_ior", {{"ior", 1.33}}}}}});
   ASSERT_EQ(kind(s), Material::Kind::kGlass);
   EXPECT_FLOAT_EQ(s.materials[0].ior, 1.33f);
-  s = mat({{"emissiveFactor", {1, 0.5, 0.25}}, {"doubleSided", true},
+  s = mat({{"emissiveFactor", {1, 0.5, 0.25}},
+           {"doubleSided", true},
            {"extensions", {{"KHR_materials_emissive_strength", {{"emissiveStrength", 8}}}}}});
   ASSERT_EQ(kind(s), Material::Kind::kEmission);
   EXPECT_FLOAT_EQ(s.materials[0].radiance.g, 4);
@@ -217,9 +222,14 @@ TEST_F(Gltf, MaterialMapping) {
 
 TEST_F(Gltf, BaseColourTextureWithSamplerWrapModes) {
   // A 2x1 PNG: red, then blue (sRGB 255 -> linear 1).
-  const unsigned char png[] = {0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x48, 0x44, 0x52, 0x00, 0x00, 0x00, 0x02, 0x00, 0x00, 0x00, 0x01, 0x08, 0x02, 0x00, 0x00, 0x00, 0x7b, 0x40, 0xe8, 0xdd, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x44, 0x41, 0x54, 0x78, 0x9c, 0x63, 0xf8, 0xcf, 0x00, 0x04, 0xff, 0x01, 0x07, 0x00, 0x01, 0xff, 0xe2, 0x23, 0x9e, 0x59, 0x00, 0x00, 0x00, 0x00, 0x49, 0x45, 0x4e, 0x44, 0xae, 0x42, 0x60, 0x82};
+  const unsigned char png[] = {0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x48,
+                               0x44, 0x52, 0x00, 0x00, 0x00, 0x02, 0x00, 0x00, 0x00, 0x01, 0x08, 0x02, 0x00, 0x00,
+                               0x00, 0x7b, 0x40, 0xe8, 0xdd, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x44, 0x41, 0x54, 0x78,
+                               0x9c, 0x63, 0xf8, 0xcf, 0x00, 0x04, 0xff, 0x01, 0x07, 0x00, 0x01, 0xff, 0xe2, 0x23,
+                               0x9e, 0x59, 0x00, 0x00, 0x00, 0x00, 0x49, 0x45, 0x4e, 0x44, 0xae, 0x42, 0x60, 0x82};
   Doc d;
-  d.j["images"] = {{{"uri", "data:image/png;base64," + base64(std::string(reinterpret_cast<const char*>(png), sizeof png))}}};
+  d.j["images"] = {
+      {{"uri", "data:image/png;base64," + base64(std::string(reinterpret_cast<const char*>(png), sizeof png))}}};
   d.j["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33648}}};  // clamp, mirrored
   d.j["textures"] = {{{"source", 0}, {"sampler", 0}}};
   d.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
@@ -267,7 +277,7 @@ TEST_F(Gltf, PunctualLightsInRadiometricUnits) {
   EXPECT_FLOAT_EQ(s.lights[0].color.g, 0.5f);
   EXPECT_FLOAT_EQ(s.lights[0].att_quadratic, 1);
   EXPECT_EQ(s.lights[1].kind, Light::Kind::kDirectional);
-  EXPECT_FLOAT_EQ(s.lights[1].color.r, 2);  // 1366 lux = 2 W/m^2
+  EXPECT_FLOAT_EQ(s.lights[1].color.r, 2);        // 1366 lux = 2 W/m^2
   EXPECT_NEAR(s.lights[1].direction.z, 1, 1e-6);  // shines down -z: the light is toward +z
   EXPECT_EQ(s.lights[2].kind, Light::Kind::kSpot);
   EXPECT_FLOAT_EQ(s.lights[2].cos_outer, std::cos(0.4f));
@@ -308,7 +318,8 @@ TEST_F(Gltf, NonTriangleModeIsRefused) {
 
 TEST_F(Gltf, OrthographicCameraIsRefused) {
   Doc d;
-  d.j["cameras"][0] = {{"type", "orthographic"}, {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.1}, {"zfar", 10}}}};
+  d.j["cameras"][0] = {{"type", "orthographic"},
+                       {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.1}, {"zfar", 10}}}};
   expect_error(d, "orthographic cameras are not supported");
 }
 

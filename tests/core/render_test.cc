@@ -309,3 +309,44 @@ TEST(Robustness, SurfacesOnCoordinatePlanesAreLit) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// The default scene in both formats: the glTF file has fine sphere meshes, an emissive
+// quad for the light and the camera CS184 framing gives the .dae at 480x360, so the two
+// images must agree within noise, region by region.
+TEST(Formats, ColladaAndGltfCornellSpheresGiveTheSameImage) {
+  RenderSettings s;
+  s.camera.width = 480;
+  s.camera.height = 360;
+  s.spp = 4;
+  s.max_depth = 8;
+  const Scene dae = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  const Scene gltf = load_scene(testing::source_path("scenes/cornell-spheres.gltf"));
+  const RenderResult a = render(dae, s);
+  s.camera.framing = Framing::kFile;
+  const RenderResult b = render(gltf, s);
+  const int nx = 4, ny = 3;
+  for (int ry = 0; ry < ny; ++ry)
+    for (int rx = 0; rx < nx; ++rx) {
+      double ma = 0, mb = 0, va = 0, vb = 0;
+      int n = 0;
+      for (int y = ry * 360 / ny; y < (ry + 1) * 360 / ny; ++y)
+        for (int x = rx * 480 / nx; x < (rx + 1) * 480 / nx; ++x, ++n) {
+          const PixelSums &pa = a.film.at(x, y), &pb = b.film.at(x, y);
+          ma += pa.lum_sum() / pa.n;
+          mb += pb.lum_sum() / pb.n;
+          va += pa.mean_variance();
+          vb += pb.mean_variance();
+        }
+      ma /= n;
+      mb /= n;
+      const double sigma = std::sqrt(va + vb) / n;
+      // 5 standard errors, plus 1% for the spheres' tessellation.
+      EXPECT_NEAR(ma, mb, 5 * sigma + 0.01 * ma) << "region " << rx << "," << ry << " sigma " << sigma;
+    }
+}
+
+}  // namespace
+}  // namespace tessera

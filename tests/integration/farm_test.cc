@@ -119,6 +119,20 @@ TEST_F(Farm, OneTwoAndThreeWorkersGiveTheBytesOfTessearRender) {
   }
 }
 
+TEST_F(Farm, GltfSceneThroughTheFarmMatchesTheLocalRender) {
+  const std::string scene = std::string(TESSERA_SOURCE_DIR) + "/scenes/dof-row.gltf";
+  const std::string flags = "-r 96 64 -s 8 --pass-spp 4 -b 0.1 -d 7";
+  const std::string local = (dir / "local.exr").string();
+  ASSERT_EQ(run("render " + scene + " " + flags + " -q -f " + local, dir).code, 0);
+  start_coordinator();
+  start_worker(2);
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r =
+      run("submit " + scene + " " + flags + " --coordinator " + grpc_addr + " --wait -q -f " + out, dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+}
+
 TEST_F(Farm, WorkerKilledMidTileChangesNothing) {
   const std::string flags = "-r 160 120 -s 32 --pass-spp 8 -m 6 --seed 5";
   const std::string local = local_render(flags);

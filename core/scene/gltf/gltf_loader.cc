@@ -132,10 +132,10 @@ class GltfLoader {
     loader.SetImageLoader(load_image, nullptr);
     std::string err, warn;
     const std::string base = fs::absolute(path_).parent_path().string();
-    const bool ok = binary ? loader.LoadBinaryFromMemory(&model_, &err, &warn,
-                                                         reinterpret_cast<const unsigned char*>(bytes.data()),
-                                                         unsigned(bytes.size()), base)
-                           : loader.LoadASCIIFromString(&model_, &err, &warn, bytes.data(), unsigned(bytes.size()), base);
+    const bool ok =
+        binary ? loader.LoadBinaryFromMemory(&model_, &err, &warn, reinterpret_cast<const unsigned char*>(bytes.data()),
+                                             unsigned(bytes.size()), base)
+               : loader.LoadASCIIFromString(&model_, &err, &warn, bytes.data(), unsigned(bytes.size()), base);
     if (!ok) throw SceneError(path_, "", first_line(err.empty() ? "glTF parse error" : err));
     if (!warn.empty()) scene_.warnings.push_back(path_ + ": " + first_line(warn));
     for (const std::string& ext : model_.extensionsUsed)
@@ -192,10 +192,12 @@ class GltfLoader {
     };
     if (b.size() < 20) fail("GLB header", "file too short");
     if (u32(4) != 2) fail("GLB header", "version " + std::to_string(u32(4)) + " (expected 2)");
-    if (u32(8) > b.size()) fail("GLB header", "declares " + std::to_string(u32(8)) + " bytes, file has " + std::to_string(b.size()));
+    if (u32(8) > b.size())
+      fail("GLB header", "declares " + std::to_string(u32(8)) + " bytes, file has " + std::to_string(b.size()));
     const uint32_t json_len = u32(12);
     if (u32(16) != 0x4E4F534Au) fail("GLB chunk 0", "is not JSON");
-    if (uint64_t(json_len) + 20 > b.size()) fail("GLB chunk 0", "length " + std::to_string(json_len) + " runs past the end of the file");
+    if (uint64_t(json_len) + 20 > b.size())
+      fail("GLB chunk 0", "length " + std::to_string(json_len) + " runs past the end of the file");
     return b.substr(20, json_len);
   }
 
@@ -230,13 +232,16 @@ class GltfLoader {
   // Reads an accessor as floats (n components per element), checking every bound.
   std::vector<float> read_floats(int index, int want_components, const std::string& what) {
     const std::string el = "accessors[" + std::to_string(index) + "] (" + what + ")";
-    if (index < 0 || size_t(index) >= model_.accessors.size()) fail(what, "accessor " + std::to_string(index) + " does not exist");
+    if (index < 0 || size_t(index) >= model_.accessors.size())
+      fail(what, "accessor " + std::to_string(index) + " does not exist");
     const tinygltf::Accessor& a = model_.accessors[size_t(index)];
     const int comps = tinygltf::GetNumComponentsInType(uint32_t(a.type));
-    if (comps != want_components) fail(el, "has " + std::to_string(comps) + " components, expected " + std::to_string(want_components));
+    if (comps != want_components)
+      fail(el, "has " + std::to_string(comps) + " components, expected " + std::to_string(want_components));
     if (a.count > (size_t(1) << 28)) fail(el, "count " + std::to_string(a.count) + " is too large");
     std::vector<float> out(a.count * size_t(comps), 0.0f);
-    if (a.bufferView >= 0) read_view(a.bufferView, a.byteOffset, a.componentType, a.normalized, a.count, comps, el, out.data());
+    if (a.bufferView >= 0)
+      read_view(a.bufferView, a.byteOffset, a.componentType, a.normalized, a.count, comps, el, out.data());
     if (a.sparse.isSparse) {
       const auto& sp = a.sparse;
       if (sp.count < 0 || size_t(sp.count) > a.count) fail(el, "sparse count out of range");
@@ -248,7 +253,8 @@ class GltfLoader {
       for (size_t k = 0; k < idx.size(); ++k) {
         const double i = idx[k];
         if (!(i >= 0 && i < double(a.count))) fail(el, "sparse index " + std::to_string(i) + " out of range");
-        std::copy(val.begin() + long(k * comps), val.begin() + long((k + 1) * comps), out.begin() + long(size_t(i) * comps));
+        std::copy(val.begin() + long(k * comps), val.begin() + long((k + 1) * comps),
+                  out.begin() + long(size_t(i) * comps));
       }
     }
     for (float v : out)
@@ -261,7 +267,8 @@ class GltfLoader {
     if (view_index < 0 || size_t(view_index) >= model_.bufferViews.size())
       fail(el, "bufferView " + std::to_string(view_index) + " does not exist");
     const tinygltf::BufferView& v = model_.bufferViews[size_t(view_index)];
-    if (v.buffer < 0 || size_t(v.buffer) >= model_.buffers.size()) fail(el, "buffer " + std::to_string(v.buffer) + " does not exist");
+    if (v.buffer < 0 || size_t(v.buffer) >= model_.buffers.size())
+      fail(el, "buffer " + std::to_string(v.buffer) + " does not exist");
     const std::vector<unsigned char>& data = model_.buffers[size_t(v.buffer)].data;
     const int csize = tinygltf::GetComponentSizeInBytes(uint32_t(type));
     if (csize <= 0) fail(el, "unknown component type " + std::to_string(type));
@@ -286,7 +293,9 @@ class GltfLoader {
             f = normalized ? std::max(float(x) / 127.0f, -1.0f) : float(x);
             break;
           }
-          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: f = normalized ? float(*p) / 255.0f : float(*p); break;
+          case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+            f = normalized ? float(*p) / 255.0f : float(*p);
+            break;
           case TINYGLTF_COMPONENT_TYPE_SHORT: {
             int16_t x;
             std::memcpy(&x, p, 2);
@@ -306,8 +315,11 @@ class GltfLoader {
             if (x > (1u << 24)) f = float(double(x));  // indices beyond float precision are range-checked below
             break;
           }
-          case TINYGLTF_COMPONENT_TYPE_FLOAT: std::memcpy(&f, p, 4); break;
-          default: fail(el, "component type " + std::to_string(type) + " is not allowed here");
+          case TINYGLTF_COMPONENT_TYPE_FLOAT:
+            std::memcpy(&f, p, 4);
+            break;
+          default:
+            fail(el, "component type " + std::to_string(type) + " is not allowed here");
         }
         out[i * size_t(comps) + size_t(c)] = f;
       }
@@ -315,9 +327,11 @@ class GltfLoader {
 
   std::vector<uint32_t> read_indices(int index, size_t vertex_count, const std::string& what) {
     const std::string el = "accessors[" + std::to_string(index) + "] (" + what + ")";
-    if (index < 0 || size_t(index) >= model_.accessors.size()) fail(what, "accessor " + std::to_string(index) + " does not exist");
+    if (index < 0 || size_t(index) >= model_.accessors.size())
+      fail(what, "accessor " + std::to_string(index) + " does not exist");
     const tinygltf::Accessor& a = model_.accessors[size_t(index)];
-    if (a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+    if (a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+        a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
         a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
       fail(el, "indices must be unsigned byte, short or int");
     if (a.bufferView < 0) fail(el, "indices need a bufferView");
@@ -332,7 +346,8 @@ class GltfLoader {
     for (size_t i = 0; i < a.count; ++i) {
       uint32_t x = 0;
       std::memcpy(&x, base + i * stride, size_t(csize));
-      if (x >= vertex_count) fail(el, "index " + std::to_string(x) + " out of range (" + std::to_string(vertex_count) + " vertices)");
+      if (x >= vertex_count)
+        fail(el, "index " + std::to_string(x) + " out of range (" + std::to_string(vertex_count) + " vertices)");
       out[i] = x;
     }
     return out;
@@ -372,7 +387,8 @@ class GltfLoader {
   void visit(int index, const Mat4& parent, std::vector<int>& path) {
     const std::string el = "nodes[" + std::to_string(index) + "]";
     if (index < 0 || size_t(index) >= model_.nodes.size()) fail(el, "does not exist");
-    if (std::find(path.begin(), path.end(), index) != path.end()) fail(el, "the node graph has a cycle through this node");
+    if (std::find(path.begin(), path.end(), index) != path.end())
+      fail(el, "the node graph has a cycle through this node");
     if (path.size() >= kMaxNodeDepth) fail(el, "node hierarchy deeper than 256 levels");
     const tinygltf::Node& n = model_.nodes[size_t(index)];
     const Mat4 world = parent * local_matrix(n, el);
@@ -380,7 +396,8 @@ class GltfLoader {
     if (n.mesh >= 0) add_mesh(n.mesh, world, el);
     if (n.camera >= 0) add_camera(n.camera, world, el);
     if (auto it = n.extensions.find("KHR_lights_punctual"); it != n.extensions.end()) {
-      if (!it->second.Has("light") || !it->second.Get("light").IsInt()) fail(el, "KHR_lights_punctual without a light index");
+      if (!it->second.Has("light") || !it->second.Get("light").IsInt())
+        fail(el, "KHR_lights_punctual without a light index");
       add_light(it->second.Get("light").GetNumberAsInt(), world, el);
     }
     for (int c : n.children) visit(c, world, path);
@@ -391,12 +408,14 @@ class GltfLoader {
     if (size_t(index) >= model_.meshes.size()) fail(node_el, "mesh " + std::to_string(index) + " does not exist");
     const tinygltf::Mesh& mesh = model_.meshes[size_t(index)];
     // det < 0 mirrors the mesh: swap winding so geometric normals stay outward.
-    const double det = w(0, 0) * (w(1, 1) * w(2, 2) - w(1, 2) * w(2, 1)) - w(0, 1) * (w(1, 0) * w(2, 2) - w(1, 2) * w(2, 0)) +
+    const double det = w(0, 0) * (w(1, 1) * w(2, 2) - w(1, 2) * w(2, 1)) -
+                       w(0, 1) * (w(1, 0) * w(2, 2) - w(1, 2) * w(2, 0)) +
                        w(0, 2) * (w(1, 0) * w(2, 1) - w(1, 1) * w(2, 0));
     for (size_t p = 0; p < mesh.primitives.size(); ++p) {
       const tinygltf::Primitive& prim = mesh.primitives[p];
       const std::string el = "meshes[" + std::to_string(index) + "].primitives[" + std::to_string(p) + "]";
-      static const char* kModes[] = {"POINTS", "LINES", "LINE_LOOP", "LINE_STRIP", "TRIANGLES", "TRIANGLE_STRIP", "TRIANGLE_FAN"};
+      static const char* kModes[] = {"POINTS",    "LINES",          "LINE_LOOP",   "LINE_STRIP",
+                                     "TRIANGLES", "TRIANGLE_STRIP", "TRIANGLE_FAN"};
       const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
       if (mode != TINYGLTF_MODE_TRIANGLES)
         fail(el, std::string("mode ") + (mode >= 0 && mode < 7 ? kModes[mode] : std::to_string(mode).c_str()) +
@@ -471,10 +490,12 @@ class GltfLoader {
       const tinygltf::Material& g = model_.materials[size_t(index)];
       m.name = g.name;
       const auto& pbr = g.pbrMetallicRoughness;
-      if (pbr.baseColorFactor.size() >= 3) base = Rgb(float(pbr.baseColorFactor[0]), float(pbr.baseColorFactor[1]), float(pbr.baseColorFactor[2]));
+      if (pbr.baseColorFactor.size() >= 3)
+        base = Rgb(float(pbr.baseColorFactor[0]), float(pbr.baseColorFactor[1]), float(pbr.baseColorFactor[2]));
       metallic = pbr.metallicFactor;
       roughness = pbr.roughnessFactor;
-      if (g.emissiveFactor.size() >= 3) emissive = Rgb(float(g.emissiveFactor[0]), float(g.emissiveFactor[1]), float(g.emissiveFactor[2]));
+      if (g.emissiveFactor.size() >= 3)
+        emissive = Rgb(float(g.emissiveFactor[0]), float(g.emissiveFactor[1]), float(g.emissiveFactor[2]));
       double_sided = g.doubleSided;
       auto number = [&](const char* ext, const char* key, double* out) {
         auto it = g.extensions.find(ext);
@@ -485,11 +506,15 @@ class GltfLoader {
       number("KHR_materials_ior", "ior", &ior);
       number("KHR_materials_emissive_strength", "emissiveStrength", &strength);
       if (pbr.baseColorTexture.index >= 0) texture = load_texture(pbr.baseColorTexture.index, el);
-      if (pbr.baseColorTexture.texCoord > 0) warn_once(el + ": baseColorTexture uses TEXCOORD_" + std::to_string(pbr.baseColorTexture.texCoord) + "; TEXCOORD_0 is used");
-      if (pbr.metallicRoughnessTexture.index >= 0) warn_once(el + ": metallicRoughnessTexture is not supported; the factors are used");
+      if (pbr.baseColorTexture.texCoord > 0)
+        warn_once(el + ": baseColorTexture uses TEXCOORD_" + std::to_string(pbr.baseColorTexture.texCoord) +
+                  "; TEXCOORD_0 is used");
+      if (pbr.metallicRoughnessTexture.index >= 0)
+        warn_once(el + ": metallicRoughnessTexture is not supported; the factors are used");
       if (g.emissiveTexture.index >= 0) warn_once(el + ": emissiveTexture is not supported; emissiveFactor is used");
       if (g.normalTexture.index >= 0) warn_once(el + ": normalTexture is not supported; ignored");
-      if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty()) warn_once(el + ": alphaMode " + g.alphaMode + " is rendered opaque");
+      if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty())
+        warn_once(el + ": alphaMode " + g.alphaMode + " is rendered opaque");
     }
     for (double* v : {&metallic, &roughness, &transmission})
       if (!std::isfinite(*v)) *v = 0;
@@ -509,7 +534,8 @@ class GltfLoader {
       m.transmittance = base;
       if (!(m.ior >= 1.0f && m.ior < 10)) fail(el, "KHR_materials_ior ior " + std::to_string(ior) + " out of range");
       if (roughness > 0.02) warn_once(el + ": rough transmission rendered as smooth glass");
-      if (between(transmission)) warn_once(el + ": transmission " + std::to_string(transmission) + " rounded to 1 (glass)");
+      if (between(transmission))
+        warn_once(el + ": transmission " + std::to_string(transmission) + " rounded to 1 (glass)");
     } else if (metallic >= 0.5) {
       // F0 = base colour. Our conductor takes eta and k: with eta = 1, F0 = k^2 / (4 + k^2).
       if (roughness < 0.02) {
@@ -533,7 +559,8 @@ class GltfLoader {
       m.reflectance = base;
       m.texture = texture;
       if (between(metallic)) warn_once(el + ": metallic " + std::to_string(metallic) + " rounded to 0 (diffuse)");
-      if (transmission > 0.02) warn_once(el + ": transmission " + std::to_string(transmission) + " rounded to 0 (opaque)");
+      if (transmission > 0.02)
+        warn_once(el + ": transmission " + std::to_string(transmission) + " rounded to 0 (opaque)");
     }
     const uint32_t id = scene_.add_material(std::move(m));
     materials_[index] = id;
@@ -541,11 +568,13 @@ class GltfLoader {
   }
 
   int load_texture(int index, const std::string& el) {
-    if (index < 0 || size_t(index) >= model_.textures.size()) fail(el, "texture " + std::to_string(index) + " does not exist");
+    if (index < 0 || size_t(index) >= model_.textures.size())
+      fail(el, "texture " + std::to_string(index) + " does not exist");
     if (auto it = textures_.find(index); it != textures_.end()) return it->second;
     const tinygltf::Texture& t = model_.textures[size_t(index)];
     const std::string tel = "textures[" + std::to_string(index) + "]";
-    if (t.source < 0 || size_t(t.source) >= model_.images.size()) fail(tel, "image " + std::to_string(t.source) + " does not exist");
+    if (t.source < 0 || size_t(t.source) >= model_.images.size())
+      fail(tel, "image " + std::to_string(t.source) + " does not exist");
     const tinygltf::Image& img = model_.images[size_t(t.source)];
     if (img.width <= 0 || img.height <= 0 || img.image.size() < size_t(img.width) * size_t(img.height) * 4)
       fail(tel, "image " + std::to_string(t.source) + " has no pixel data");
@@ -557,12 +586,16 @@ class GltfLoader {
       tex.texels[i] = Rgb(srgb_to_linear(img.image[4 * i] / 255.0f), srgb_to_linear(img.image[4 * i + 1] / 255.0f),
                           srgb_to_linear(img.image[4 * i + 2] / 255.0f));
     if (t.sampler >= 0) {
-      if (size_t(t.sampler) >= model_.samplers.size()) fail(tel, "sampler " + std::to_string(t.sampler) + " does not exist");
+      if (size_t(t.sampler) >= model_.samplers.size())
+        fail(tel, "sampler " + std::to_string(t.sampler) + " does not exist");
       auto wrap = [&](int mode) {
         switch (mode) {
-          case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE: return Texture::Wrap::kClamp;
-          case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT: return Texture::Wrap::kMirror;
-          default: return Texture::Wrap::kRepeat;
+          case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE:
+            return Texture::Wrap::kClamp;
+          case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT:
+            return Texture::Wrap::kMirror;
+          default:
+            return Texture::Wrap::kRepeat;
         }
       };
       tex.wrap_s = wrap(model_.samplers[size_t(t.sampler)].wrapS);
@@ -597,7 +630,8 @@ class GltfLoader {
   }
 
   void add_light(int index, const Mat4& w, const std::string& node_el) {
-    if (index < 0 || size_t(index) >= model_.lights.size()) fail(node_el, "light " + std::to_string(index) + " does not exist");
+    if (index < 0 || size_t(index) >= model_.lights.size())
+      fail(node_el, "light " + std::to_string(index) + " does not exist");
     const tinygltf::Light& g = model_.lights[size_t(index)];
     const std::string el = "KHR_lights_punctual.lights[" + std::to_string(index) + "]";
     Rgb color(1.0f);
@@ -619,7 +653,8 @@ class GltfLoader {
       l.att_quadratic = 1;  // physical inverse square
       if (g.type == "spot") {
         l.direction = normalize(w.vector(0, 0, -1).to_float());
-        if (!(g.spot.outerConeAngle > g.spot.innerConeAngle && g.spot.innerConeAngle >= 0 && g.spot.outerConeAngle <= M_PI / 2 + 1e-6))
+        if (!(g.spot.outerConeAngle > g.spot.innerConeAngle && g.spot.innerConeAngle >= 0 &&
+              g.spot.outerConeAngle <= M_PI / 2 + 1e-6))
           fail(el, "needs 0 <= innerConeAngle < outerConeAngle <= pi/2");
         l.cos_inner = float(std::cos(g.spot.innerConeAngle));
         l.cos_outer = float(std::cos(g.spot.outerConeAngle));

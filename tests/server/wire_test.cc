@@ -1,0 +1,119 @@
+// The wire helpers: scene bundles (with a glTF's external files), sums codec, settings.
+#include "wire.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "core/scene/load.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+
+class Wire : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_wire_" + std::to_string(::getpid()));
+  void SetUp() override { fs::create_directories(dir / "src" / "data"); }
+  void TearDown() override { fs::remove_all(dir); }
+};
+
+TEST_F(Wire, GltfBundleCarriesItsExternalFilesAndLoadsElsewhere) {
+  // dof-row.gltf with its buffer moved out to data/my buffer.bin (percent-encoded URI).
+  std::ifstream in(testing::source_path("scenes/dof-row.gltf"));
+  nlohmann::json j = nlohmann::json::parse(in);
+  const std::string uri = j["buffers"][0]["uri"];
+  const std::string b64 = uri.substr(uri.find(',') + 1);
+  std::string bin;
+  {  // decode base64 with the standard alphabet
+    int val = 0, bits = -8;
+    for (char c : b64) {
+      const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+      const char* p = std::strchr(t, c);
+      if (!p || c == '\0') break;
+      val = (val << 6) + int(p - t);
+      bits += 6;
+      if (bits >= 0) {
+        bin.push_back(char((val >> bits) & 0xFF));
+        bits -= 8;
+      }
+    }
+  }
+  ASSERT_EQ(bin.size(), j["buffers"][0]["byteLength"].get<size_t>());
+  std::ofstream(dir / "src" / "data" / "my buffer.bin", std::ios::binary) << bin;
+  j["buffers"][0]["uri"] = "data/my%20buffer.bin";
+  std::ofstream(dir / "src" / "row.gltf") << j.dump();
+
+  v1::SubmitJobRequest req;
+  std::string main;
+  pack_scene((dir / "src" / "row.gltf").string(), &main, req.mutable_files());
+  EXPECT_EQ(main, "row.gltf");
+  ASSERT_EQ(req.files_size(), 2);  // the scene and its buffer; the texture is embedded
+  EXPECT_EQ(req.files(1).path(), "data/my buffer.bin");
+  const std::string hash = bundle_hash(main, req.files());
+  EXPECT_EQ(hash.size(), 32u);
+  const std::string unpacked = unpack_bundle((dir / "dst").string(), main, req.files());
+  EXPECT_EQ(load_scene(unpacked).triangle_count(),
+            load_scene(testing::source_path("scenes/dof-row.gltf")).triangle_count());
+}
+
+TEST_F(Wire, BundlesRefusePathsOutsideTheirFolder) {
+  nlohmann::json j = {{"asset", {{"version", "2.0"}}}, {"buffers", {{{"byteLength", 4}, {"uri", "../escape.bin"}}}}};
+  std::ofstream(dir / "src" / "bad.gltf") << j.dump();
+  v1::SubmitJobRequest req;
+  std::string main;
+  EXPECT_THROW(pack_scene((dir / "src" / "bad.gltf").string(), &main, req.mutable_files()), std::runtime_error);
+  google::protobuf::RepeatedPtrField<v1::SceneFile> files;
+  v1::SceneFile* f = files.Add();
+  f->set_path("/etc/passwd");
+  EXPECT_THROW(unpack_bundle((dir / "x").string(), "/etc/passwd", files), WireError);
+  f->set_path("a/../../b.dae");
+  EXPECT_THROW(unpack_bundle((dir / "x").string(), "a/../../b.dae", files), WireError);
+}
+
+TEST(WireCodec, SumsRoundTripExactlyAndHostileDataIsRefused) {
+  std::vector<PixelSums> sums(37);
+  for (size_t i = 0; i < sums.size(); ++i) sums[i] = PixelSums{0.1 * double(i), 1.0 / 3, -0.0, 1e-300, uint32_t(i)};
+  const std::string enc = encode_sums(sums);
+  const std::vector<PixelSums> dec = decode_sums(enc, sums.size());
+  for (size_t i = 0; i < sums.size(); ++i) {
+    EXPECT_EQ(std::memcmp(&dec[i].r, &sums[i].r, 8), 0);
+    EXPECT_EQ(std::memcmp(&dec[i].g, &sums[i].g, 8), 0);
+    EXPECT_EQ(dec[i].n, sums[i].n);
+  }
+  EXPECT_THROW(decode_sums(enc, sums.size() + 1), WireError);  // size mismatch
+  EXPECT_THROW(decode_sums("garbage", 1), WireError);
+  sums[3].r = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(decode_sums(encode_sums(sums), sums.size()), WireError);
+}
+
+TEST(WireSettings, RoundTripAndRangeChecks) {
+  RenderSettings s;
+  s.spp = 99;
+  s.adaptive = true;
+  s.seed = 1234567890123ull;
+  s.camera.lens_radius = 0.1f;
+  s.window = Rect{2, 3, 4, 5};
+  const RenderSettings r = from_proto(to_proto(s));
+  EXPECT_EQ(r.spp, 99);
+  EXPECT_TRUE(r.adaptive);
+  EXPECT_EQ(r.seed, s.seed);
+  EXPECT_FLOAT_EQ(r.camera.lens_radius, 0.1f);
+  EXPECT_EQ(r.window.h, 5);
+  v1::RenderSettings p = to_proto(s);
+  p.set_width(0);
+  EXPECT_THROW(from_proto(p), WireError);
+  p = to_proto(s);
+  p.set_lens_radius(-1);
+  EXPECT_THROW(from_proto(p), WireError);
+  p = to_proto(s);
+  p.mutable_window()->set_x(100000);
+  EXPECT_THROW(from_proto(p), WireError);
+}
+
+}  // namespace
+}  // namespace tessera
