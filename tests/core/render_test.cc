@@ -6,62 +6,18 @@
 
 #include "core/render/local_renderer.h"
 #include "core/scene/load.h"
+#include "tests/core/render_helpers.h"
 #include "tests/core/test_paths.h"
 
 namespace tessera {
 namespace {
 
-struct Estimate {
-  double mean = 0, stderr_ = 0;  // mean over pixels of the per-pixel means, and its std. error
-};
-
-Estimate film_estimate(const Film& film) {
-  Estimate e;
-  double var = 0;
-  for (const PixelSums& p : film.pixels()) {
-    e.mean += p.lum_sum() / p.n;
-    var += p.mean_variance();
-  }
-  const double n = double(film.pixels().size());
-  e.mean /= n;
-  e.stderr_ = std::sqrt(var) / n;
-  return e;
-}
-
-RenderResult render(const Scene& scene, RenderSettings s, int threads = 2, int tile = 16) {
-  const TileRenderer r(scene, s);
-  return render_image(r, threads, tile);
-}
-
-// A sphere of albedo rho inside a uniform two-sided emitter of radiance 1: every point on
-// the sphere sees radiance 1 over its whole hemisphere, so it reflects exactly rho.
-Scene furnace(Material inner) {
-  Scene s;
-  s.materials.push_back(inner);
-  Material e;
-  e.kind = Material::Kind::kEmission;
-  e.radiance = Rgb(1);
-  e.two_sided_emission = true;
-  s.materials.push_back(e);
-  s.spheres.push_back(Sphere{"inner", {0, 0, 0}, 1, 0, -1});
-  s.spheres.push_back(Sphere{"enclosure", {0, 0, 0}, 10, 1, -1});
-  s.camera.present = true;
-  s.camera.eye = {0, 0, 4};
-  s.camera.xfov_deg = 40;
-  s.camera.aspect_ratio = 1;
-  s.finalize();
-  return s;
-}
-
-RenderSettings furnace_settings() {
-  RenderSettings s;
-  s.camera.framing = Framing::kFile;
-  s.camera.width = s.camera.height = 24;
-  s.spp = 64;
-  s.max_depth = 100;
-  s.light_samples = 2;
-  return s;
-}
+using testing::Estimate;
+using testing::film_estimate;
+using testing::furnace;
+using testing::furnace_settings;
+using testing::render;
+using testing::transformed;
 
 TEST(Furnace, WhiteDiffuseSphereReflectsExactlyTheEmittedRadiance) {
   Material white;
@@ -248,23 +204,6 @@ INSTANTIATE_TEST_SUITE_P(Scenes, Smoke,
 
 namespace tessera {
 namespace {
-
-// The same scene scaled by `s` about the origin, then moved by `t`.
-Scene transformed(Scene scene, float s, Vec3 t) {
-  for (Mesh& m : scene.meshes)
-    for (Vec3& p : m.positions) p = p * s + t;
-  for (Sphere& sp : scene.spheres) {
-    sp.center = sp.center * s + t;
-    sp.radius *= s;
-  }
-  for (Light& l : scene.lights) {
-    l.position = l.position * s + t;
-    l.edge_x = l.edge_x * s;
-    l.edge_y = l.edge_y * s;
-    l.area *= s * s;
-  }
-  return scene;
-}
 
 class ScaleInvariance : public ::testing::TestWithParam<std::pair<float, float>> {};
 

@@ -1,0 +1,80 @@
+// Helpers shared by the whole-renderer tests.
+#pragma once
+
+#include <cmath>
+
+#include "core/render/local_renderer.h"
+#include "core/scene/scene.h"
+
+namespace tessera::testing {
+
+struct Estimate {
+  double mean = 0, stderr_ = 0;  // mean over pixels of the per-pixel means, and its std. error
+};
+
+inline Estimate film_estimate(const Film& film) {
+  Estimate e;
+  double var = 0;
+  for (const PixelSums& p : film.pixels()) {
+    e.mean += p.lum_sum() / p.n;
+    var += p.mean_variance();
+  }
+  const double n = double(film.pixels().size());
+  e.mean /= n;
+  e.stderr_ = std::sqrt(var) / n;
+  return e;
+}
+
+inline RenderResult render(const Scene& scene, RenderSettings s, int threads = 2, int tile = 16) {
+  const TileRenderer r(scene, s);
+  return render_image(r, threads, tile);
+}
+
+// A sphere of albedo rho inside a uniform two-sided emitter of radiance 1: every point on
+// the sphere sees radiance 1 over its whole hemisphere, so it reflects exactly rho.
+inline Scene furnace(Material inner) {
+  Scene s;
+  s.materials.push_back(inner);
+  Material e;
+  e.kind = Material::Kind::kEmission;
+  e.radiance = Rgb(1);
+  e.two_sided_emission = true;
+  s.materials.push_back(e);
+  s.spheres.push_back(Sphere{"inner", {0, 0, 0}, 1, 0, -1});
+  s.spheres.push_back(Sphere{"enclosure", {0, 0, 0}, 10, 1, -1});
+  s.camera.present = true;
+  s.camera.eye = {0, 0, 4};
+  s.camera.xfov_deg = 40;
+  s.camera.aspect_ratio = 1;
+  s.finalize();
+  return s;
+}
+
+inline RenderSettings furnace_settings() {
+  RenderSettings s;
+  s.camera.framing = Framing::kFile;
+  s.camera.width = s.camera.height = 24;
+  s.spp = 64;
+  s.max_depth = 100;
+  s.light_samples = 2;
+  return s;
+}
+
+// The same scene scaled by `s` about the origin, then moved by `t`.
+inline Scene transformed(Scene scene, float s, Vec3 t) {
+  for (Mesh& m : scene.meshes)
+    for (Vec3& p : m.positions) p = p * s + t;
+  for (Sphere& sp : scene.spheres) {
+    sp.center = sp.center * s + t;
+    sp.radius *= s;
+  }
+  for (Light& l : scene.lights) {
+    l.position = l.position * s + t;
+    l.edge_x = l.edge_x * s;
+    l.edge_y = l.edge_y * s;
+    l.area *= s * s;
+  }
+  return scene;
+}
+
+}  // namespace tessera::testing
