@@ -23,6 +23,7 @@ struct RenderArgs {
   int threads = 0, tile = 32;
   std::string stats_json;
   bool quiet = false;
+  bool no_nee = false, no_mis = false;
   std::string command_line;
 };
 
@@ -40,7 +41,9 @@ class ProgressPrinter {
 };
 
 int run_render(const RenderArgs& a) {
-  const RenderSettings s = to_settings(a.flags);
+  RenderSettings s = to_settings(a.flags);
+  s.nee = !a.no_nee;
+  s.mis = !a.no_mis;
   const std::vector<std::string> outputs = output_paths(a.flags);
 
   const Scene scene = load_scene(a.flags.scene);
@@ -100,6 +103,8 @@ std::function<int()> add_render_command(CLI::App& app, const std::string& comman
       ->capture_default_str()
       ->check(CLI::Range(1, 4096));
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
+  cmd->add_flag("--no-nee", args->no_nee, "Benchmarking: no next-event estimation (BSDF sampling only)");
+  cmd->add_flag("--no-mis", args->no_mis, "Benchmarking: light sampling without MIS");
   return [args, cmd] {
     if (!cmd->parsed()) return -1;
     return run_render(*args);

@@ -133,7 +133,7 @@ Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& f
       ++counters.shadow_rays;
       if (accel_.occluded(shadow)) continue;
       Rgb c = f * ls.li * (std::fabs(wi.z) / ls.pdf);
-      if (!light.is_delta()) c *= power_heuristic(float(n), ls.pdf, 1, bsdf_pdf(m, wo, wi));
+      if (!light.is_delta() && mis_) c *= power_heuristic(float(n), ls.pdf, 1, bsdf_pdf(m, wo, wi));
       acc += c;
     }
     sum += acc / float(n);
@@ -155,7 +155,9 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
       for (size_t i : lights_.infinite_lights()) {
         const Rgb le = lights_.infinite_le(i, ray.d);
         if (le.is_black()) continue;
-        const float w = specular ? 1 : power_heuristic(1, prev_pdf, n_light, lights_.infinite_pdf(i, ray.d));
+        const float w = specular || !nee_ ? 1
+                        : mis_    ? power_heuristic(1, prev_pdf, n_light, lights_.infinite_pdf(i, ray.d))
+                                  : 0;  // light sampling alone accounts for it
         L += beta * le * w;
       }
       break;
@@ -178,8 +180,9 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
     if (m.kind == Material::Kind::kEmission) {  // emitters do not reflect: the path ends
       if (m.two_sided_emission || dot(sp.ng, wo_world) > 0) {
         float w = 1;
-        if (!specular && sp.light >= 0)
-          w = power_heuristic(1, prev_pdf, n_light, lights_.pdf_area_hit(size_t(sp.light), prev.p, sp.p, sp.ng, hit.t));
+        if (!specular && sp.light >= 0 && nee_)
+          w = mis_ ? power_heuristic(1, prev_pdf, n_light, lights_.pdf_area_hit(size_t(sp.light), prev.p, sp.p, sp.ng, hit.t))
+                   : 0;  // light sampling alone accounts for it
         L += beta * m.radiance * w;
       }
       break;
@@ -196,7 +199,7 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
     }
     const Frame frame(ns);
     const Vec3 wo = frame.to_local(wo_world);
-    if (!m.is_delta()) L += beta * direct(sp, m, frame, wo, ng, sampler, counters);
+    if (nee_ && !m.is_delta()) L += beta * direct(sp, m, frame, wo, ng, sampler, counters);
 
     const float u1 = sampler.next_1d();
     const Vec2 u2 = sampler.next_2d();

@@ -54,6 +54,7 @@ class Integrator {
   const LightSet& lights_;
   int max_depth_;
   int light_samples_;
+  bool nee_, mis_;
 };
 
 }  // namespace tessera

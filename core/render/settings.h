@@ -26,6 +26,11 @@ struct RenderSettings {
   float adaptive_tolerance = 0.05f;
   uint64_t seed = 0;
   int pass_spp = 16;  // samples per progressive pass (the merge unit of the farm)
+  // Estimator switches, for measuring what each technique costs and buys (bench/). Both
+  // variants stay unbiased: without NEE emitters are found by BSDF sampling alone; without
+  // MIS area lights are found by light sampling alone.
+  bool nee = true;
+  bool mis = true;
   CameraSettings camera;
   Rect window;  // the part of the image rendered (-p); whole image when empty
 

@@ -289,3 +289,28 @@ TEST(Formats, ColladaAndGltfCornellSpheresGiveTheSameImage) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Light sampling alone, BSDF sampling alone and their MIS combination estimate the same
+// integral: the three means agree within their standard errors.
+TEST(Estimators, WithoutNeeAndWithoutMisTheMeanIsUnchanged) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s;
+  s.camera.width = 160;
+  s.camera.height = 120;
+  s.spp = 8;
+  s.max_depth = 6;
+  const testing::Estimate full = testing::film_estimate(testing::render(scene, s).film);
+  s.mis = false;
+  const testing::Estimate no_mis = testing::film_estimate(testing::render(scene, s).film);
+  s.mis = true;
+  s.nee = false;
+  const testing::Estimate no_nee = testing::film_estimate(testing::render(scene, s).film);
+  EXPECT_NEAR(no_mis.mean, full.mean, 5 * std::hypot(no_mis.stderr_, full.stderr_));
+  EXPECT_NEAR(no_nee.mean, full.mean, 5 * std::hypot(no_nee.stderr_, full.stderr_));
+}
+
+}  // namespace
+}  // namespace tessera
