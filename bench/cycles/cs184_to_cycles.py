@@ -6,7 +6,8 @@ Run inside Blender 3.4 (Debian's):
 
 Blender's COLLADA importer drops the CGL spheres, lights and materials, so this reads the
 file itself, with Tessera's semantics (docs/cs184-compat.md): Z_UP/Y_UP, node matrices,
-polylists and triangles, CGL spheres (as 256x128 smooth UV spheres), the CGL area light
+polylists and triangles (smooth shaded, as CS184's vertex normals), CGL spheres (as
+256x128 smooth UV spheres), the CGL area light
 as a one-sided emissive rectangle of radiance `color`, diffuse / mirror (sharp glossy) /
 glass (sharp, same ior) / refraction materials, and CS184's camera framing and field of
 view. Cycles: Standard view transform, 1 px box filter, no denoising, no clamping, no
@@ -238,7 +239,8 @@ def main():
     c = Collada(o["scene"])
     lo, hi = Vector((1e30,) * 3), Vector((-1e30,) * 3)
     for (verts, faces), spec, name in c.meshes:
-        add_object(name, verts, faces, node_material(name, spec))
+        # CS184 shades meshes with area-weighted vertex normals: smooth shading.
+        add_object(name, verts, faces, node_material(name, spec), smooth=True)
         for f in faces:
             for i in f:
                 lo = Vector(map(min, lo, verts[i]))
