@@ -2,6 +2,7 @@
 
 #include <bit>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 
 #include "core/bsdf/bsdf.h"
@@ -90,8 +91,10 @@ Vec3 offset_point(Vec3 p, Vec3 p_err, Vec3 n, Vec3 w) {
   // the bound is zero: a point on a coordinate plane (a floor at y = 0) is exact, and
   // without the nudge the ray would start on the surface, where Embree reports t = 0.
   for (int i = 0; i < 3; ++i) {
-    if (side[i] > 0) po[i] = next_float_up(po[i]);
-    else if (side[i] < 0) po[i] = next_float_down(po[i]);
+    if (side[i] > 0)
+      po[i] = next_float_up(po[i]);
+    else if (side[i] < 0)
+      po[i] = next_float_down(po[i]);
   }
   return po;
 }
@@ -101,7 +104,9 @@ Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& l
       accel_(accel),
       lights_(lights),
       max_depth_(s.max_depth),
-      light_samples_(std::max(1, s.light_samples)) {}
+      light_samples_(std::max(1, s.light_samples)),
+      nee_(s.nee),
+      mis_(s.mis) {}
 
 Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng,
                        Sampler& sampler, RayCounters& counters) const {
@@ -156,8 +161,8 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
         const Rgb le = lights_.infinite_le(i, ray.d);
         if (le.is_black()) continue;
         const float w = specular || !nee_ ? 1
-                        : mis_    ? power_heuristic(1, prev_pdf, n_light, lights_.infinite_pdf(i, ray.d))
-                                  : 0;  // light sampling alone accounts for it
+                        : mis_            ? power_heuristic(1, prev_pdf, n_light, lights_.infinite_pdf(i, ray.d))
+                                          : 0;  // light sampling alone accounts for it
         L += beta * le * w;
       }
       break;
@@ -181,7 +186,8 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
       if (m.two_sided_emission || dot(sp.ng, wo_world) > 0) {
         float w = 1;
         if (!specular && sp.light >= 0 && nee_)
-          w = mis_ ? power_heuristic(1, prev_pdf, n_light, lights_.pdf_area_hit(size_t(sp.light), prev.p, sp.p, sp.ng, hit.t))
+          w = mis_ ? power_heuristic(1, prev_pdf, n_light,
+                                     lights_.pdf_area_hit(size_t(sp.light), prev.p, sp.p, sp.ng, hit.t))
                    : 0;  // light sampling alone accounts for it
         L += beta * m.radiance * w;
       }

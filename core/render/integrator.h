@@ -54,7 +54,7 @@ class Integrator {
   const LightSet& lights_;
   int max_depth_;
   int light_samples_;
-  bool nee_, mis_;
+  bool nee_ = true, mis_ = true;
 };
 
 }  // namespace tessera

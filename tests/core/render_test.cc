@@ -295,6 +295,18 @@ namespace {
 
 // Light sampling alone, BSDF sampling alone and their MIS combination estimate the same
 // integral: the three means agree within their standard errors.
+TEST(Estimators, SwitchesReachTheIntegrator) {
+  // Regression: the switches were once left uninitialised, and NEE was on or off at random.
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s;
+  s.camera.width = 32;
+  s.camera.height = 24;
+  s.spp = 2;
+  for (int run = 0; run < 3; ++run) EXPECT_GT(testing::render(scene, s).stats.rays.shadow_rays, 0u);
+  s.nee = false;
+  EXPECT_EQ(testing::render(scene, s).stats.rays.shadow_rays, 0u);
+}
+
 TEST(Estimators, WithoutNeeAndWithoutMisTheMeanIsUnchanged) {
   const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
   RenderSettings s;
