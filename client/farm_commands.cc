@@ -1,6 +1,5 @@
 #include "client/farm_commands.h"
 
-#include <google/protobuf/util/json_util.h>
 #include <grpcpp/grpcpp.h>
 
 #include <fstream>
@@ -44,14 +43,7 @@ std::unique_ptr<grpc::ClientContext> ctx(double seconds = 30) {
   return c;
 }
 
-std::string json_of(const google::protobuf::Message& m) {
-  google::protobuf::util::JsonPrintOptions o;
-  o.always_print_primitive_fields = true;
-  o.preserve_proto_field_names = true;
-  std::string s;
-  (void)google::protobuf::util::MessageToJsonString(m, &s, o);
-  return s;
-}
+std::string json_of(const google::protobuf::Message& m) { return proto_json(m); }
 
 const char* state_name(v1::JobStatus::State s) { return v1::JobStatus::State_Name(s).c_str(); }
 

@@ -1,5 +1,6 @@
 #include "wire.h"
 
+#include <google/protobuf/util/json_util.h>
 #include <xxhash.h>
 #include <zstd.h>
 
@@ -78,6 +79,15 @@ v1::Rect to_proto(const Rect& r) {
 Rect from_proto(const v1::Rect& r) {
   if (r.x() > 65536 || r.y() > 65536 || r.w() > 65536 || r.h() > 65536) throw WireError("rectangle out of range");
   return Rect{int(r.x()), int(r.y()), int(r.w()), int(r.h())};
+}
+
+std::string proto_json(const google::protobuf::Message& m) {
+  google::protobuf::util::JsonPrintOptions o;
+  o.always_print_primitive_fields = true;
+  o.preserve_proto_field_names = true;
+  std::string s;
+  (void)google::protobuf::util::MessageToJsonString(m, &s, o);
+  return s;
 }
 
 std::string encode_sums(const std::vector<PixelSums>& sums) {

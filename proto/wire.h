@@ -30,6 +30,10 @@ RenderSettings from_proto(const v1::RenderSettings& p);
 v1::Rect to_proto(const Rect& r);
 Rect from_proto(const v1::Rect& r);
 
+// A message as JSON with proto field names and every field present (the CLI's --json and
+// the status endpoint).
+std::string proto_json(const google::protobuf::Message& m);
+
 // Tile sums <-> zstd-compressed little-endian bytes (36 per pixel).
 std::string encode_sums(const std::vector<PixelSums>& sums);
 // Throws WireError unless the data decodes to exactly `pixels` pixels.

@@ -1,6 +1,5 @@
 #include "server/status_http.h"
 
-#include <google/protobuf/util/json_util.h>
 #include <httplib.h>
 
 #include <fstream>
@@ -10,14 +9,7 @@
 namespace tessera {
 namespace {
 
-nlohmann::json to_json(const google::protobuf::Message& m) {
-  google::protobuf::util::JsonPrintOptions opts;
-  opts.always_print_primitive_fields = true;
-  opts.preserve_proto_field_names = true;
-  std::string s;
-  (void)google::protobuf::util::MessageToJsonString(m, &s, opts);
-  return nlohmann::json::parse(s);
-}
+nlohmann::json to_json(const google::protobuf::Message& m) { return nlohmann::json::parse(proto_json(m)); }
 
 const char* kLivePage = R"HTML(<!doctype html>
 <html><head><meta charset="utf-8"><title>Tessera</title>
@@ -120,8 +112,6 @@ std::string StatusHttp::status_json() const {
   j["jobs"] = nlohmann::json::array();
   for (const v1::JobStatus& s : c_.list()) j["jobs"].push_back(to_json(s));
   j["workers"] = nlohmann::json::array();
-  const double now = c_.uptime();
-  (void)now;
   for (const Coordinator::WorkerInfo& w : c_.workers()) {
     j["workers"].push_back({{"id", w.id},
                             {"name", w.name},
