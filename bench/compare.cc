@@ -51,7 +51,8 @@ int main(int argc, char** argv) {
               sr[c] += r.channels.at(ch[c])[size_t(y) * r.width + x];
             }
         const double k = double(w) * h;
-        out["regions"][name] = {{"image", {sa[0] / k, sa[1] / k, sa[2] / k}}, {"reference", {sr[0] / k, sr[1] / k, sr[2] / k}}};
+        out["regions"][name] = {{"image", {sa[0] / k, sa[1] / k, sa[2] / k}},
+                                {"reference", {sr[0] / k, sr[1] / k, sr[2] / k}}};
       }
     }
     std::printf("%s\n", out.dump().c_str());

@@ -120,7 +120,9 @@ Rgb Texture::sample(Vec2 uv) const {
   const float tx = x - fx, ty = y - fy;
   // Guard huge coordinates before converting to int.
   const int ix = int(std::fmod(double(fx), 1 << 24)), iy = int(std::fmod(double(fy), 1 << 24));
-  auto at = [&](int i, int j) { return texels[size_t(wrap(j, height, wrap_t)) * width + size_t(wrap(i, width, wrap_s))]; };
+  auto at = [&](int i, int j) {
+    return texels[size_t(wrap(j, height, wrap_t)) * width + size_t(wrap(i, width, wrap_s))];
+  };
   return at(ix, iy) * ((1 - tx) * (1 - ty)) + at(ix + 1, iy) * (tx * (1 - ty)) + at(ix, iy + 1) * ((1 - tx) * ty) +
          at(ix + 1, iy + 1) * (tx * ty);
 }

@@ -24,7 +24,7 @@ struct Material {
   Rgb eta{0.2f}, k{3.0f};   // microfacet conductor complex index, per channel
   Rgb radiance{0.0f};       // emission
   bool two_sided_emission = true;
-  int32_t texture = -1;     // Scene::textures index multiplying `reflectance`, or -1
+  int32_t texture = -1;  // Scene::textures index multiplying `reflectance`, or -1
 
   bool is_delta() const { return kind == Kind::kMirror || kind == Kind::kGlass || kind == Kind::kRefraction; }
   // True if no BSDF lobe exists: paths end here.
@@ -64,9 +64,9 @@ struct Light {
   float area = 0;
   // Point: attenuation 1 / (c + l d + q d^2).
   float att_constant = 1, att_linear = 0, att_quadratic = 0;
-  Vec3 direction;  // directional: unit vector toward the light; spot: the way it shines
+  Vec3 direction;                      // directional: unit vector toward the light; spot: the way it shines
   float cos_inner = 1, cos_outer = 0;  // spot: full intensity inside the inner cone, none outside
-  uint32_t shape = 0;  // kMesh: mesh index; kSphere: sphere index; kRect: its mesh
+  uint32_t shape = 0;                  // kMesh: mesh index; kSphere: sphere index; kRect: its mesh
   bool two_sided = false;
 
   bool is_delta() const { return kind == Kind::kPoint || kind == Kind::kSpot || kind == Kind::kDirectional; }

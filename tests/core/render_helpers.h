@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cmath>
+#include <vector>
 
 #include "core/render/local_renderer.h"
 #include "core/scene/scene.h"
@@ -30,9 +31,10 @@ inline RenderResult render(const Scene& scene, RenderSettings s, int threads = 2
   return render_image(r, threads, tile);
 }
 
-// A sphere of albedo rho inside a uniform two-sided emitter of radiance 1: every point on
-// the sphere sees radiance 1 over its whole hemisphere, so it reflects exactly rho.
-inline Scene furnace(Material inner) {
+// Spheres of material `inner` inside a two-sided emitter of radiance 1 (a sphere of radius
+// `enclosure` about the origin), seen from (0, 0, eye_z).
+inline Scene furnace_with(std::vector<Sphere> spheres, Material inner, float enclosure = 20, float eye_z = 5,
+                          double xfov = 50) {
   Scene s;
   s.materials.push_back(inner);
   Material e;
@@ -40,15 +42,19 @@ inline Scene furnace(Material inner) {
   e.radiance = Rgb(1);
   e.two_sided_emission = true;
   s.materials.push_back(e);
-  s.spheres.push_back(Sphere{"inner", {0, 0, 0}, 1, 0, -1});
-  s.spheres.push_back(Sphere{"enclosure", {0, 0, 0}, 10, 1, -1});
+  s.spheres = std::move(spheres);
+  s.spheres.push_back(Sphere{"enclosure", {0, 0, 0}, enclosure, 1, -1});
   s.camera.present = true;
-  s.camera.eye = {0, 0, 4};
-  s.camera.xfov_deg = 40;
+  s.camera.eye = {0, 0, eye_z};
+  s.camera.xfov_deg = xfov;
   s.camera.aspect_ratio = 1;
   s.finalize();
   return s;
 }
+
+// A unit sphere of albedo rho inside the emitter: every point on it sees radiance 1 over
+// its whole hemisphere, so it reflects exactly rho.
+inline Scene furnace(Material inner) { return furnace_with({Sphere{"inner", {0, 0, 0}, 1, 0, -1}}, inner, 10, 4, 40); }
 
 inline RenderSettings furnace_settings() {
   RenderSettings s;

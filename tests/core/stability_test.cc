@@ -16,6 +16,7 @@ namespace {
 
 using testing::film_estimate;
 using testing::furnace_settings;
+using testing::furnace_with;
 using testing::render;
 
 Material glass(float ior) {
@@ -24,24 +25,6 @@ Material glass(float ior) {
   m.ior = ior;
   m.reflectance = m.transmittance = Rgb(1);
   return m;
-}
-
-// Spheres (material 0) inside a two-sided emitter of radiance 1 (material 1).
-Scene furnace_with(std::vector<Sphere> spheres, Material inner) {
-  Scene s;
-  s.materials.push_back(inner);
-  Material e;
-  e.kind = Material::Kind::kEmission;
-  e.radiance = Rgb(1);
-  s.materials.push_back(e);
-  s.spheres = std::move(spheres);
-  s.spheres.push_back(Sphere{"enclosure", {0, 0, 0}, 20, 1, -1});
-  s.camera.present = true;
-  s.camera.eye = {0, 0, 5};
-  s.camera.xfov_deg = 50;
-  s.camera.aspect_ratio = 1;
-  s.finalize();
-  return s;
 }
 
 // Lossless glass in a white furnace returns exactly the emitted radiance on every path:
