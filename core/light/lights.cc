@@ -34,68 +34,6 @@ namespace {
 constexpr float kEps = std::numeric_limits<float>::epsilon() * 0.5f;
 constexpr float gamma(int n) { return (n * kEps) / (1 - n * kEps); }
 
-// The rectangle light as seen from p, for sampling it by solid angle (Urena, Fajardo and
-// King 2013, "An Area-Preserving Parametrization for Spherical Rectangles", as in
-// pbrt-v4). Computed in double: the setup subtracts nearly equal angles.
-struct SphericalRect {
-  bool valid = false;  // false: p behind the light, a sheared rectangle, or a solid angle too
-                       // small for the parametrization to be accurate (area sampling instead)
-  double solid_angle = 0;
-  double x0, x1, y0, y1, z0, b0, b1, k;
-  Vec3 x, y, z;  // local frame: x, y along the edges, z away from the light's front
-};
-
-double angle_between(const double* a, const double* b) {  // unit vectors, stable near 0 and pi
-  const double d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-  auto len = [](double u, double v, double w) { return std::sqrt(u * u + v * v + w * w); };
-  return d < 0 ? M_PI - 2 * std::asin(std::min(1.0, len(a[0] + b[0], a[1] + b[1], a[2] + b[2]) / 2))
-               : 2 * std::asin(std::min(1.0, len(b[0] - a[0], b[1] - a[1], b[2] - a[2]) / 2));
-}
-
-SphericalRect spherical_rect(const Light& l, Vec3 p) {
-  SphericalRect r;
-  const double exl = length(l.edge_x), eyl = length(l.edge_y);
-  r.x = l.edge_x / float(exl);
-  r.y = l.edge_y / float(eyl);
-  if (std::fabs(dot(r.x, r.y)) > 1e-4f) return r;  // not a rectangle
-  r.z = cross(r.x, r.y);
-  const Vec3 corner = l.position - l.edge_x * 0.5f - l.edge_y * 0.5f;
-  const double dx = double(corner.x) - p.x, dy = double(corner.y) - p.y, dz = double(corner.z) - p.z;
-  const auto proj = [&](Vec3 a) { return dx * a.x + dy * a.y + dz * a.z; };
-  r.z0 = proj(r.z);
-  if (dot(r.z, l.normal) * r.z0 >= 0) return r;  // p is not in front of the emitting face
-  if (r.z0 > 0) {
-    r.z = -r.z;
-    r.z0 = -r.z0;
-  }
-  r.x0 = proj(r.x);
-  r.y0 = proj(r.y);
-  r.x1 = r.x0 + exl;
-  r.y1 = r.y0 + eyl;
-  // Normals of the planes through p and each edge: cross products of corner directions.
-  auto unit = [](double a, double b, double c, double* out) {
-    const double n = std::sqrt(a * a + b * b + c * c);
-    out[0] = a / n, out[1] = b / n, out[2] = c / n;
-  };
-  double n0[3], n1[3], n2[3], n3[3], m[3];
-  unit(0, r.z0, -r.y0, n0);  // cross(v00, v10)
-  unit(-r.z0, 0, r.x1, n1);  // cross(v10, v11)
-  unit(0, -r.z0, r.y1, n2);  // cross(v11, v01)
-  unit(r.z0, 0, -r.x0, n3);  // cross(v01, v00)
-  auto neg = [&](const double* a) {
-    m[0] = -a[0], m[1] = -a[1], m[2] = -a[2];
-    return m;
-  };
-  const double g0 = angle_between(neg(n0), n1), g1 = angle_between(neg(n1), n2);
-  const double g2 = angle_between(neg(n2), n3), g3 = angle_between(neg(n3), n0);
-  r.solid_angle = g0 + g1 + g2 + g3 - 2 * M_PI;
-  r.b0 = n0[2];
-  r.b1 = n2[2];
-  r.k = 2 * M_PI - g2 - g3;
-  r.valid = std::isfinite(r.solid_angle) && r.solid_angle > 1e-3;
-  return r;
-}
-
 // Converts an area sample at q (normal n, `two_sided`) into a solid-angle sample from p.
 bool finish_area_sample(Vec3 p, Vec3 q, Vec3 q_err, Vec3 n, float area_pdf, Rgb radiance, bool two_sided,
                         LightSample* out) {
@@ -124,24 +62,6 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
   const Light& l = scene_.lights[i];
   switch (l.kind) {
     case Light::Kind::kRect: {
-      const SphericalRect r = spherical_rect(l, p);
-      if (r.valid) {  // uniform in solid angle: pdf 1 / solid angle
-        const double au = u.x * r.solid_angle + r.k;
-        const double fu = (std::cos(au) * r.b0 - r.b1) / std::sin(au);
-        double cu = std::copysign(1 / std::sqrt(fu * fu + r.b0 * r.b0), fu);
-        cu = std::clamp(cu, -0.9999999, 0.9999999);
-        const double xu = std::clamp(-(cu * r.z0) / std::sqrt(std::max(0.0, 1 - cu * cu)), r.x0, r.x1);
-        const double dd = std::sqrt(xu * xu + r.z0 * r.z0);
-        const double h0 = r.y0 / std::sqrt(dd * dd + r.y0 * r.y0), h1 = r.y1 / std::sqrt(dd * dd + r.y1 * r.y1);
-        const double hv = h0 + u.y * (h1 - h0), hv2 = hv * hv;
-        const double yv = hv2 < 1 - 1e-9 ? hv * dd / std::sqrt(1 - hv2) : r.y1;
-        const Vec3 offset = r.x * float(xu) + r.y * float(yv) + r.z * float(r.z0);
-        const Vec3 q = p + offset;
-        if (!finish_area_sample(p, q, abs(q) * gamma(2) + abs(offset) * gamma(4), l.normal, 1, l.color, false, out))
-          return false;
-        out->pdf = float(1 / r.solid_angle);
-        return true;
-      }
       const Vec3 ex = l.edge_x * (u.x - 0.5f), ey = l.edge_y * (u.y - 0.5f);
       const Vec3 q = l.position + (ex + ey);
       const Vec3 err = abs(q) * gamma(1) + (abs(ex) + abs(ey)) * gamma(3);
@@ -222,12 +142,9 @@ float LightSet::pdf_area_hit(size_t i, Vec3 p, Vec3 q, Vec3 nq, float dist) cons
   const Light& l = scene_.lights[i];
   float area_pdf = 0;
   switch (l.kind) {
-    case Light::Kind::kRect: {
-      const SphericalRect r = spherical_rect(l, p);
-      if (r.valid) return float(1 / r.solid_angle);  // as sample() chooses, from the same p
+    case Light::Kind::kRect:
       area_pdf = 1 / l.area;
       break;
-    }
     case Light::Kind::kMesh:
       area_pdf = mesh_data_[i].area > 0 ? 1 / mesh_data_[i].area : 0;
       break;

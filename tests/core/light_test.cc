@@ -43,8 +43,8 @@ Scene rect_scene() {
 
 class RectSampling : public ::testing::TestWithParam<Vec3> {};
 
-// The rectangle is sampled uniformly in solid angle where it subtends enough of it, by
-// area otherwise; either way the directions must follow pdf_area_hit, which MIS uses.
+// Directions toward the rectangle (sampled uniformly by area) follow pdf_area_hit, the
+// density MIS uses.
 TEST_P(RectSampling, MatchesItsSolidAnglePdf) {
   const Scene scene = rect_scene();
   const LightSet lights(scene);
@@ -114,7 +114,7 @@ TEST_P(RectIrradiance, EstimatorMatchesQuadrature) {
 INSTANTIATE_TEST_SUITE_P(Positions, RectIrradiance,
                          ::testing::Values(Vec3{0.1f, 0.2f, 0.3f}, Vec3{0.05f, 0.97f, 0.1f},
                                            Vec3{1.5f, 0.9f, -0.4f},     // off to the side, grazing
-                                           Vec3{0.3f, -30.0f, 0.2f}));  // far: the area-sampling fallback
+                                           Vec3{0.3f, -30.0f, 0.2f}));  // far: a speck
 
 TEST(AreaLight, RectEmitsOnlyFromItsFront) {
   const Scene scene = rect_scene();
