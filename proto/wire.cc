@@ -81,6 +81,14 @@ Rect from_proto(const v1::Rect& r) {
   return Rect{int(r.x()), int(r.y()), int(r.w()), int(r.h())};
 }
 
+std::string read_file_bytes(const std::string& p) {
+  std::ifstream in(p, std::ios::binary);
+  if (!in) throw std::runtime_error(p + ": cannot open file");
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
 std::string proto_json(const google::protobuf::Message& m) {
   google::protobuf::util::JsonPrintOptions o;
   o.always_print_primitive_fields = true;
@@ -189,14 +197,6 @@ std::string unpack_bundle(const std::string& dir, const std::string& main_file,
 
 namespace {
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  if (!in) throw std::runtime_error(p.string() + ": cannot open file");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
 std::string percent_decode(const std::string& s) {
   std::string out;
   for (size_t i = 0; i < s.size(); ++i) {
@@ -243,7 +243,7 @@ std::vector<std::string> gltf_references(const std::string& path, const std::str
 
 void pack_scene(const std::string& path, std::string* main_file,
                 google::protobuf::RepeatedPtrField<v1::SceneFile>* files) {
-  const std::string bytes = slurp(path);
+  const std::string bytes = read_file_bytes(path);
   *main_file = fs::path(path).filename().string();
   v1::SceneFile* f = files->Add();
   f->set_path(*main_file);
@@ -258,7 +258,7 @@ void pack_scene(const std::string& path, std::string* main_file,
     if (!seen.insert(rel).second) continue;
     v1::SceneFile* extra = files->Add();
     extra->set_path(rel);
-    extra->set_content(slurp(fs::path(path).parent_path() / rel));
+    extra->set_content(read_file_bytes((fs::path(path).parent_path() / rel).string()));
   }
 }
 

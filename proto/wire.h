@@ -30,6 +30,9 @@ RenderSettings from_proto(const v1::RenderSettings& p);
 v1::Rect to_proto(const Rect& r);
 Rect from_proto(const v1::Rect& r);
 
+// A whole file's bytes; throws std::runtime_error naming the path.
+std::string read_file_bytes(const std::string& path);
+
 // A message as JSON with proto field names and every field present (the CLI's --json and
 // the status endpoint).
 std::string proto_json(const google::protobuf::Message& m);

@@ -57,18 +57,6 @@ struct Coordinator::Job {
   }
 };
 
-namespace {
-
-// A film snapshot to write outside the coordinator's lock.
-struct PendingImage {
-  std::string exr, png;
-  std::unique_ptr<Film> film;
-  ImageMetadata meta;
-  uint64_t seq = 0;
-};
-
-}  // namespace
-
 Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> clock)
     : options_(std::move(options)), clock_(std::move(clock)) {
   started_ = clock_->now();
@@ -210,13 +198,30 @@ v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& req
   w.id = next_worker_++;
   w.name = req.name().substr(0, 256);
   w.threads = req.threads();
-  w.registered_at = w.last_seen = clock_->now();
+  w.last_seen = clock_->now();
   workers_[w.id] = w;
   v1::RegisterResponse r;
   r.set_worker_id(w.id);
   r.set_heartbeat_interval_ms(uint32_t(options_.heartbeat_seconds * 1000));
   r.set_lease_ms(uint32_t(options_.lease_seconds * 1000));
   return r;
+}
+
+std::map<uint64_t, Coordinator::TaskRecord>::iterator Coordinator::end_lease_locked(
+    std::map<uint64_t, TaskRecord>::iterator it, bool requeue) {
+  const uint64_t id = it->first;
+  const TaskRecord& rec = it->second;
+  if (auto job = jobs_.find(rec.job); job != jobs_.end()) {
+    Job::TileState& t = job->second->state[rec.tile];
+    if (t.lease == id) {
+      t.lease = 0;
+      if (requeue && !t.finished) job->second->ready.emplace(t.next_pass, rec.tile);
+    }
+  }
+  if (auto w = workers_.find(rec.worker); w != workers_.end() && w->second.current_task == id)
+    w->second.current_task = 0;
+  expired_.emplace(id, rec);
+  return tasks_.erase(it);
 }
 
 size_t Coordinator::expire_leases_locked(double now) {
@@ -226,18 +231,7 @@ size_t Coordinator::expire_leases_locked(double now) {
       ++it;
       continue;
     }
-    auto job = jobs_.find(it->second.job);
-    if (job != jobs_.end()) {
-      Job::TileState& t = job->second->state[it->second.tile];
-      if (t.lease == it->first) {
-        t.lease = 0;
-        if (!t.finished) job->second->ready.emplace(t.next_pass, it->second.tile);
-      }
-    }
-    auto w = workers_.find(it->second.worker);
-    if (w != workers_.end() && w->second.current_task == it->first) w->second.current_task = 0;
-    expired_.emplace(it->first, it->second);
-    it = tasks_.erase(it);
+    it = end_lease_locked(it, true);
     ++n;
   }
   counters_.leases_expired += n;
@@ -326,16 +320,7 @@ void Coordinator::release(uint64_t worker_id, uint64_t task_id) {
   std::lock_guard<std::mutex> lock(mu_);
   auto it = tasks_.find(task_id);
   if (it == tasks_.end() || it->second.worker != worker_id) return;
-  if (auto job = jobs_.find(it->second.job); job != jobs_.end()) {
-    Job::TileState& t = job->second->state[it->second.tile];
-    if (t.lease == task_id) {
-      t.lease = 0;
-      if (!t.finished) job->second->ready.emplace(t.next_pass, it->second.tile);
-    }
-  }
-  if (auto w = workers_.find(worker_id); w != workers_.end()) w->second.current_task = 0;
-  expired_.emplace(task_id, it->second);
-  tasks_.erase(it);
+  end_lease_locked(it, true);
   ++counters_.leases_released;
   changed_.notify_all();
 }
@@ -407,7 +392,7 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     ++counters_.results_rejected;
     return ack;
   }
-  std::optional<PendingImage> pending;
+  std::optional<ImageSnapshot> pending;
   {
     std::lock_guard<std::mutex> lock(mu_);
     const double now = clock_->now();
@@ -444,24 +429,16 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     job.samples_done += samples;
     counters_.samples_merged += samples;
     ++counters_.results_merged;
-    // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends.
+    // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends
+    // (its record kept, so a repeat of this result is known as a duplicate).
     const uint64_t other = t.lease;
-    if (it != tasks_.end()) {  // kept, so a repeat of this result is known as a duplicate
-      expired_.emplace(it->first, it->second);
-      tasks_.erase(it);
-    }
-    if (other) {
-      if (auto o = tasks_.find(other); o != tasks_.end()) {
-        expired_.emplace(other, o->second);
-        tasks_.erase(o);
-      }
-    }
+    if (it != tasks_.end()) end_lease_locked(it, false);
+    if (auto o = tasks_.find(other); other && o != tasks_.end()) end_lease_locked(o, false);
     finish_tile_pass(job, rec.tile, now);
     if (auto w = workers_.find(result.worker_id()); w != workers_.end()) {
       WorkerInfo& wi = w->second;
       wi.last_seen = now;
       ++wi.tasks_done;
-      if (wi.current_task == result.task_id()) wi.current_task = 0;
       if (result.render_seconds() > 0) {
         const double rate = double(result.samples()) / result.render_seconds();
         wi.samples_per_second = wi.samples_per_second > 0 ? 0.8 * wi.samples_per_second + 0.2 * rate : rate;
@@ -472,16 +449,7 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     if (done || (frame > job.image_frame_passes && now - job.last_image >= options_.image_interval_seconds)) {
       job.image_frame_passes = frame;
       job.last_image = now;
-      pending = PendingImage{image_path(job.id, "image.exr"),
-                             image_path(job.id, "preview.png"),
-                             std::make_unique<Film>(job.film),
-                             {},
-                             ++job.image_seq};
-      pending->meta = {{"job", job.id},
-                       {"scene", job.name},
-                       {"seed", std::to_string(job.settings.seed)},
-                       {"frame_passes", std::to_string(frame)},
-                       {"render_seconds", std::to_string(now - job.started)}};
+      pending = snapshot_locked(job);
     }
     if (done) {
       for (auto e = expired_.begin(); e != expired_.end();)
@@ -490,24 +458,7 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     ack.set_accepted(true);
     changed_.notify_all();
   }
-  if (pending) {
-    Job* job;
-    {
-      std::lock_guard<std::mutex> lock(mu_);
-      job = jobs_.at(pending->meta.at("job")).get();
-    }
-    std::lock_guard<std::mutex> wl(job->write_mu);
-    if (pending->seq > job->written_seq) {
-      // Fast encoding for every image, the final one too: it is on the critical path
-      // between the last tile and the client's download (~60 ms saved at 480x360).
-      write_exr(pending->exr, *pending->film, pending->meta, true);
-      write_png(pending->png, *pending->film, true);
-      job->written_seq = pending->seq;
-      std::lock_guard<std::mutex> lock(mu_);
-      job->image_written = true;
-      ++counters_.images_written;
-    }
-  }
+  if (pending) write_snapshot(*pending);
   return ack;
 }
 
@@ -515,28 +466,38 @@ std::string Coordinator::image_path(const std::string& id, const char* file) con
   return (fs::path(options_.data_dir) / "jobs" / id / file).string();
 }
 
-void Coordinator::write_image(Job& job) {
-  // mu_ is not held; take a snapshot under it.
-  std::unique_ptr<Film> film;
-  ImageMetadata meta;
-  uint64_t seq;
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    film = std::make_unique<Film>(job.film);
-    meta = {{"job", job.id},
-            {"scene", job.name},
-            {"seed", std::to_string(job.settings.seed)},
-            {"frame_passes", std::to_string(job.frame_passes_done())}};
-    seq = ++job.image_seq;
-  }
+Coordinator::ImageSnapshot Coordinator::snapshot_locked(Job& job) {
+  ImageSnapshot snap{&job, std::make_unique<Film>(job.film), {}, ++job.image_seq};
+  snap.meta = {{"job", job.id},
+               {"scene", job.name},
+               {"seed", std::to_string(job.settings.seed)},
+               {"frame_passes", std::to_string(job.frame_passes_done())}};
+  if (job.started > 0)
+    snap.meta["render_seconds"] = std::to_string((job.live() ? clock_->now() : job.finished_at) - job.started);
+  return snap;
+}
+
+void Coordinator::write_snapshot(const ImageSnapshot& snap) {
+  Job& job = *snap.job;  // jobs are never removed
   std::lock_guard<std::mutex> wl(job.write_mu);
-  if (seq <= job.written_seq) return;
-  write_exr(image_path(job.id, "image.exr"), *film, meta, true);
-  write_png(image_path(job.id, "preview.png"), *film, true);
-  job.written_seq = seq;
+  if (snap.seq <= job.written_seq) return;  // a newer snapshot is already on disk
+  // Fast encoding for every image, the final one too: it is on the critical path between
+  // the last tile and the client's download (~60 ms saved at 480x360).
+  write_exr(image_path(job.id, "image.exr"), *snap.film, snap.meta, true);
+  write_png(image_path(job.id, "preview.png"), *snap.film, true);
+  job.written_seq = snap.seq;
   std::lock_guard<std::mutex> lock(mu_);
   job.image_written = true;
   ++counters_.images_written;
+}
+
+void Coordinator::write_image(Job& job) {
+  ImageSnapshot snap;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    snap = snapshot_locked(job);
+  }
+  write_snapshot(snap);
 }
 
 v1::JobStatus Coordinator::cancel(const std::string& id) {
@@ -547,11 +508,8 @@ v1::JobStatus Coordinator::cancel(const std::string& id) {
     if (!job->live()) return status_locked(*job, false);
     job->st = v1::JobStatus::CANCELLED;
     job->finished_at = clock_->now();
-    for (auto& [wid, w] : workers_) {
-      auto t = tasks_.find(w.current_task);
-      if (t != tasks_.end() && t->second.job == id) w.current_task = 0;
-    }
-    for (auto it = tasks_.begin(); it != tasks_.end();) it = it->second.job == id ? tasks_.erase(it) : std::next(it);
+    for (auto it = tasks_.begin(); it != tasks_.end();)
+      it = it->second.job == id ? end_lease_locked(it, false) : std::next(it);
     for (auto it = expired_.begin(); it != expired_.end();)
       it = it->second.job == id ? expired_.erase(it) : std::next(it);
     changed_.notify_all();
@@ -572,14 +530,8 @@ v1::Image Coordinator::image(const std::string& id) {
   if (!written) write_image(*job);
   v1::Image img;
   std::lock_guard<std::mutex> wl(job->write_mu);
-  auto slurp = [](const std::string& p) {
-    std::ifstream f(p, std::ios::binary);
-    std::ostringstream ss;
-    ss << f.rdbuf();
-    return ss.str();
-  };
-  img.set_exr(slurp(image_path(id, "image.exr")));
-  img.set_png(slurp(image_path(id, "preview.png")));
+  img.set_exr(read_file_bytes(image_path(id, "image.exr")));
+  img.set_png(read_file_bytes(image_path(id, "preview.png")));
   std::lock_guard<std::mutex> lock(mu_);
   img.set_frame_passes_done(job->image_frame_passes);
   return img;

@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "core/io/image_io.h"
 #include "core/render/film.h"
 #include "core/render/settings.h"
 #include "wire.h"
@@ -97,7 +98,7 @@ class Coordinator {
     uint64_t id = 0;
     std::string name;
     uint32_t threads = 0;
-    double registered_at = 0, last_seen = 0;
+    double last_seen = 0;
     double samples_per_second = 0;  // smoothed over results
     uint64_t tasks_done = 0;
     uint64_t current_task = 0;
@@ -118,9 +119,20 @@ class Coordinator {
 
   Job* find(const std::string& id) const;  // mu_ held
   v1::JobStatus status_locked(const Job& job, bool with_tiles) const;
+  // A film snapshot to write outside the lock, newest-wins by sequence number.
+  struct ImageSnapshot {
+    Job* job = nullptr;
+    std::unique_ptr<Film> film;
+    ImageMetadata meta;
+    uint64_t seq = 0;
+  };
   void finish_tile_pass(Job& job, uint32_t tile, double now);
-  void maybe_write_image(Job& job, bool force);
-  void write_image(Job& job);
+  ImageSnapshot snapshot_locked(Job& job);
+  void write_snapshot(const ImageSnapshot& snap);  // mu_ not held
+  void write_image(Job& job);                      // mu_ not held: snapshot, then write
+  // Ends a lease: the tile loses it (and, with `requeue`, waits for its next worker), the
+  // worker is no longer busy with it, and its record is kept so a late result is known.
+  std::map<uint64_t, TaskRecord>::iterator end_lease_locked(std::map<uint64_t, TaskRecord>::iterator it, bool requeue);
   size_t expire_leases_locked(double now);
 
   CoordinatorOptions options_;
