@@ -58,6 +58,24 @@ std::string describe(const v1::JobStatus& s) {
   return buf;
 }
 
+// Every job, as JSON or one line each (`tessera jobs`, `tessera status`).
+int list_jobs(const FarmArgs& a) {
+  v1::JobList list;
+  check(connect(a)->ListJobs(ctx().get(), v1::ListJobsRequest(), &list), a);
+  if (a.json)
+    std::printf("%s\n", json_of(list).c_str());
+  else
+    for (const auto& s : list.jobs()) std::printf("%s\n", describe(s).c_str());
+  return 0;
+}
+
+void print_status(const v1::JobStatus& s, const FarmArgs& a) {
+  if (a.json)
+    std::printf("%s\n", json_of(s).c_str());
+  else
+    std::printf("%s\n", describe(s).c_str());
+}
+
 // Streams progress until the job ends; returns its final status.
 v1::JobStatus watch(v1::Tessera::Stub& stub, const std::string& id, const FarmArgs& a) {
   grpc::ClientContext c;
@@ -193,19 +211,11 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
     common(cmd, *a);
     runs.push_back(guard([a, job, cmd]() -> int {
       if (!cmd->parsed()) return -1;
-      auto stub = connect(*a);
-      if (job->empty()) {
-        v1::JobList list;
-        check(stub->ListJobs(ctx().get(), v1::ListJobsRequest(), &list), *a);
-        if (a->json) std::printf("%s\n", json_of(list).c_str());
-        for (const auto& s : list.jobs())
-          if (!a->json) std::printf("%s\n", describe(s).c_str());
-        return 0;
-      }
+      if (job->empty()) return list_jobs(*a);
       v1::JobId req;
       req.set_id(*job);
       v1::JobStatus s;
-      check(stub->GetJob(ctx().get(), req, &s), *a);
+      check(connect(*a)->GetJob(ctx().get(), req, &s), *a);
       if (a->json)
         std::printf("%s\n", json_of(s).c_str());
       else
@@ -219,16 +229,7 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
     auto a = std::make_shared<FarmArgs>();
     CLI::App* cmd = app.add_subcommand("jobs", "List jobs");
     common(cmd, *a);
-    runs.push_back(guard([a, cmd]() -> int {
-      if (!cmd->parsed()) return -1;
-      v1::JobList list;
-      check(connect(*a)->ListJobs(ctx().get(), v1::ListJobsRequest(), &list), *a);
-      if (a->json)
-        std::printf("%s\n", json_of(list).c_str());
-      else
-        for (const auto& s : list.jobs()) std::printf("%s\n", describe(s).c_str());
-      return 0;
-    }));
+    runs.push_back(guard([a, cmd]() -> int { return cmd->parsed() ? list_jobs(*a) : -1; }));
   }
   {  // watch JOB
     auto a = std::make_shared<FarmArgs>();
@@ -239,10 +240,7 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
     runs.push_back(guard([a, job, cmd]() -> int {
       if (!cmd->parsed()) return -1;
       const v1::JobStatus s = watch(*connect(*a), *job, *a);
-      if (a->json)
-        std::printf("%s\n", json_of(s).c_str());
-      else
-        std::printf("%s\n", describe(s).c_str());
+      print_status(s, *a);
       return s.state() == v1::JobStatus::DONE ? 0 : 1;
     }));
   }
@@ -272,10 +270,7 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
       req.set_id(*job);
       v1::JobStatus s;
       check(connect(*a)->CancelJob(ctx().get(), req, &s), *a);
-      if (a->json)
-        std::printf("%s\n", json_of(s).c_str());
-      else
-        std::printf("%s\n", describe(s).c_str());
+      print_status(s, *a);
       return 0;
     }));
   }

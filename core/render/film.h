@@ -50,8 +50,7 @@ class Film {
   const std::vector<PixelSums>& pixels() const { return pixels_; }
   // Adds a tile's sums (rect in image coordinates, sums row-major over the rect).
   void add_tile(const Rect& rect, const std::vector<PixelSums>& sums);
-  Rgb mean_radiance() const;      // average over the film of per-pixel means
-  double mean_luminance() const;  // the same for luminance, in double
+  double mean_luminance() const;  // average over the film of per-pixel mean luminance
 
  private:
   Rect window_;

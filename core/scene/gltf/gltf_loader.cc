@@ -262,8 +262,14 @@ class GltfLoader {
     return out;
   }
 
-  void read_view(int view_index, size_t offset, int type, bool normalized, size_t count, int comps,
-                 const std::string& el, float* out) {
+  // Where `count` elements of `comps` components of `type` start in a buffer view, after
+  // checking that every byte of them lies inside the view and the view inside its buffer.
+  struct ViewSpan {
+    const unsigned char* base;
+    size_t stride;
+    int csize;
+  };
+  ViewSpan checked_view(int view_index, size_t offset, int type, size_t count, int comps, const std::string& el) {
     if (view_index < 0 || size_t(view_index) >= model_.bufferViews.size())
       fail(el, "bufferView " + std::to_string(view_index) + " does not exist");
     const tinygltf::BufferView& v = model_.bufferViews[size_t(view_index)];
@@ -281,7 +287,12 @@ class GltfLoader {
     if (count > 0 && uint64_t(offset) + stride * (count - 1) + elem > v.byteLength)
       fail(el, "byteOffset " + std::to_string(offset) + " with " + std::to_string(count) +
                    " elements runs past the end of bufferView " + std::to_string(view_index));
-    const unsigned char* base = data.data() + v.byteOffset + offset;
+    return {data.data() + v.byteOffset + offset, size_t(stride), csize};
+  }
+
+  void read_view(int view_index, size_t offset, int type, bool normalized, size_t count, int comps,
+                 const std::string& el, float* out) {
+    const auto [base, stride, csize] = checked_view(view_index, offset, type, count, comps, el);
     for (size_t i = 0; i < count; ++i)
       for (int c = 0; c < comps; ++c) {
         const unsigned char* p = base + i * stride + size_t(c) * size_t(csize);
@@ -312,7 +323,6 @@ class GltfLoader {
             uint32_t x;
             std::memcpy(&x, p, 4);
             f = float(x);
-            if (x > (1u << 24)) f = float(double(x));  // indices beyond float precision are range-checked below
             break;
           }
           case TINYGLTF_COMPONENT_TYPE_FLOAT:
@@ -335,13 +345,8 @@ class GltfLoader {
         a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
       fail(el, "indices must be unsigned byte, short or int");
     if (a.bufferView < 0) fail(el, "indices need a bufferView");
-    // Exact integer reads (floats lose precision past 2^24).
-    const tinygltf::BufferView& v = model_.bufferViews.at(size_t(a.bufferView));
-    std::vector<float> check(a.count);  // bounds-checks the view, and reads small ones
-    read_view(a.bufferView, a.byteOffset, a.componentType, false, a.count, 1, el, check.data());
-    const int csize = tinygltf::GetComponentSizeInBytes(uint32_t(a.componentType));
-    const size_t stride = v.byteStride ? v.byteStride : size_t(csize);
-    const unsigned char* base = model_.buffers[size_t(v.buffer)].data.data() + v.byteOffset + a.byteOffset;
+    // Read as integers, not through read_view's floats, which lose precision past 2^24.
+    const auto [base, stride, csize] = checked_view(a.bufferView, a.byteOffset, a.componentType, a.count, 1, el);
     std::vector<uint32_t> out(a.count);
     for (size_t i = 0; i < a.count; ++i) {
       uint32_t x = 0;
