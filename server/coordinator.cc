@@ -43,10 +43,11 @@ struct Coordinator::Job {
   uint32_t tiles_done = 0;
   uint32_t image_frame_passes = 0;  // frame passes in the last image written
   double last_image = -1e9;
+  uint64_t merges = 0;       // results merged into the film: its version
   uint64_t image_seq = 0;    // snapshots taken
-  uint64_t written_seq = 0;  // newest snapshot on disk
-  bool image_written = false;
-  std::mutex write_mu;  // one writer at a time per job
+  std::mutex write_mu;       // one writer at a time per job; guards the two below
+  uint64_t written_seq = 0;  // newest snapshot on disk (0: none yet)
+  uint64_t written_merges = 0;  // the film version it holds
 
   bool live() const { return st == v1::JobStatus::QUEUED || st == v1::JobStatus::RUNNING; }
   uint32_t frame_passes_done() const {
@@ -425,6 +426,7 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     job.ready.erase({rec.pass, rec.tile});  // a late result for a tile waiting to be re-issued
     const auto t0 = std::chrono::steady_clock::now();
     job.film.add_tile(job.tiles[rec.tile], sums);
+    ++job.merges;
     counters_.merge_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     job.samples_done += samples;
     counters_.samples_merged += samples;
@@ -467,7 +469,7 @@ std::string Coordinator::image_path(const std::string& id, const char* file) con
 }
 
 Coordinator::ImageSnapshot Coordinator::snapshot_locked(Job& job) {
-  ImageSnapshot snap{&job, std::make_unique<Film>(job.film), {}, ++job.image_seq};
+  ImageSnapshot snap{&job, std::make_unique<Film>(job.film), {}, ++job.image_seq, job.merges};
   snap.meta = {{"job", job.id},
                {"scene", job.name},
                {"seed", std::to_string(job.settings.seed)},
@@ -478,6 +480,7 @@ Coordinator::ImageSnapshot Coordinator::snapshot_locked(Job& job) {
 }
 
 void Coordinator::write_snapshot(const ImageSnapshot& snap) {
+  if (options_.before_image_write) options_.before_image_write();
   Job& job = *snap.job;  // jobs are never removed
   std::lock_guard<std::mutex> wl(job.write_mu);
   if (snap.seq <= job.written_seq) return;  // a newer snapshot is already on disk
@@ -486,8 +489,8 @@ void Coordinator::write_snapshot(const ImageSnapshot& snap) {
   write_exr(image_path(job.id, "image.exr"), *snap.film, snap.meta, true);
   write_png(image_path(job.id, "preview.png"), *snap.film, true);
   job.written_seq = snap.seq;
+  job.written_merges = snap.merges;
   std::lock_guard<std::mutex> lock(mu_);
-  job.image_written = true;
   ++counters_.images_written;
 }
 
@@ -521,13 +524,23 @@ v1::JobStatus Coordinator::cancel(const std::string& id) {
 
 v1::Image Coordinator::image(const std::string& id) {
   Job* job;
-  bool written;
+  bool live;
+  uint64_t merges;
   {
     std::lock_guard<std::mutex> lock(mu_);
     job = find(id);
-    written = job->image_written;
+    live = job->live();
+    merges = job->merges;
   }
-  if (!written) write_image(*job);
+  // A live job gets its latest image. An ended job's film no longer changes, and the file
+  // must hold all of it: the merge (or cancel) that ended the job writes its last snapshot
+  // after releasing mu_, so a client that saw the end can get here first.
+  bool current;
+  {
+    std::lock_guard<std::mutex> wl(job->write_mu);
+    current = job->written_seq > 0 && (live || job->written_merges == merges);
+  }
+  if (!current) write_image(*job);
   v1::Image img;
   std::lock_guard<std::mutex> wl(job->write_mu);
   img.set_exr(read_file_bytes(image_path(id, "image.exr")));

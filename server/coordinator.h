@@ -45,6 +45,8 @@ struct CoordinatorOptions {
   double lease_seconds = 10;
   double heartbeat_seconds = 2;
   double image_interval_seconds = 5;  // progressive images at most this often
+  // Test seam: runs between an image snapshot leaving the lock and its write.
+  std::function<void()> before_image_write;
 };
 
 // A request the coordinator refuses, with a message for the client.
@@ -125,6 +127,7 @@ class Coordinator {
     std::unique_ptr<Film> film;
     ImageMetadata meta;
     uint64_t seq = 0;
+    uint64_t merges = 0;  // the film version copied
   };
   void finish_tile_pass(Job& job, uint32_t tile, double now);
   ImageSnapshot snapshot_locked(Job& job);

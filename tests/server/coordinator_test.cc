@@ -4,8 +4,12 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <thread>
 
 #include "core/io/image_io.h"
 #include "core/render/local_renderer.h"
@@ -245,6 +249,51 @@ TEST_F(CoordinatorTest, CancelStopsDispatchAndKeepsWhatWasRendered) {
   float spp = 0;
   for (float n : img.channels.at("spp")) spp += n;
   EXPECT_EQ(spp, float(a.tile().w() * a.tile().h() * 4));  // the merged tile is in the image
+}
+
+// Regression: the merge that ends a job writes its final image after releasing the lock,
+// so a client that saw DONE and fetched at once got the previous progressive image (seen
+// in CI as a farm image with fewer samples than the local one). The seam holds the merging
+// thread inside that window.
+TEST_F(CoordinatorTest, ImageFetchedAsSoonAsTheJobEndsHoldsEverySample) {
+  std::atomic<std::thread::id> slow;
+  CoordinatorOptions o;
+  o.data_dir = dir;
+  o.default_tile_size = 16;
+  o.image_interval_seconds = 0;
+  o.before_image_write = [&] {
+    if (std::this_thread::get_id() == slow.load()) std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  };
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  RenderSettings s = job_settings();
+  s.spp = 4;
+  s.pass_spp = 2;  // two passes: the first one ends in a progressive image
+  const uint64_t w = worker();
+  auto lease_all = [&] {
+    std::vector<v1::TaskResult> results;
+    for (v1::GetTaskResponse r = c->get_task(w); r.has_task(); r = c->get_task(w))
+      results.push_back(render_task(r.task(), w));
+    return results;
+  };
+  const std::string id = c->submit(request(s));
+  for (const v1::TaskResult& r : lease_all()) ASSERT_TRUE(c->submit_result(r).accepted());
+  ASSERT_EQ(c->status(id, false).frame_passes_done(), 1u);
+  ASSERT_GE(c->counters().images_written, 1u);
+  const std::vector<v1::TaskResult> second = lease_all();
+  for (size_t i = 0; i + 1 < second.size(); ++i) ASSERT_TRUE(c->submit_result(second[i]).accepted());
+  std::thread last([&] {
+    slow = std::this_thread::get_id();
+    c->submit_result(second.back());
+  });
+  while (c->status(id, false).state() != v1::JobStatus::DONE) std::this_thread::yield();
+  const v1::Image img = c->image(id);
+  last.join();
+  const std::string path = dir + "/fetched.exr";
+  std::ofstream(path, std::ios::binary) << img.exr();
+  const ExrImage fetched = read_exr(path);
+  EXPECT_TRUE(same_film_as_exr(local(s), fetched));
+  // The late final write does not replace the newer image with an older one.
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(c->image_path(id, "image.exr"))));
 }
 
 TEST_F(CoordinatorTest, HigherPriorityJobsGoFirst) {
