@@ -18,9 +18,11 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
   const int width = settings_.camera.width, height = settings_.camera.height;
   const bool lens = camera_.is_thin_lens();
   TileStats local;
-  for (int y = 0; y < rect.h; ++y) {
-    if (cancel && cancel->load(std::memory_order_relaxed)) break;
+  // Checked per pixel, not per row: a row of a many-sample pass can take seconds.
+  auto cancelled = [cancel] { return cancel && cancel->load(std::memory_order_relaxed); };
+  for (int y = 0; y < rect.h && !cancelled(); ++y) {
     for (int x = 0; x < rect.w; ++x) {
+      if (cancelled()) break;
       const size_t k = size_t(y) * rect.w + x;
       if (active && !active[k]) continue;
       const int px = rect.x + x, py = rect.y + y;  // image coordinates, row 0 at the top
