@@ -43,10 +43,10 @@ struct Coordinator::Job {
   uint32_t tiles_done = 0;
   uint32_t image_frame_passes = 0;  // frame passes in the last image written
   double last_image = -1e9;
-  uint64_t merges = 0;       // results merged into the film: its version
-  uint64_t image_seq = 0;    // snapshots taken
-  std::mutex write_mu;       // one writer at a time per job; guards the two below
-  uint64_t written_seq = 0;  // newest snapshot on disk (0: none yet)
+  uint64_t merges = 0;          // results merged into the film: its version
+  uint64_t image_seq = 0;       // snapshots taken
+  std::mutex write_mu;          // one writer at a time per job; guards the two below
+  uint64_t written_seq = 0;     // newest snapshot on disk (0: none yet)
   uint64_t written_merges = 0;  // the film version it holds
 
   bool live() const { return st == v1::JobStatus::QUEUED || st == v1::JobStatus::RUNNING; }

@@ -49,14 +49,15 @@ class CoordinatorTest : public ::testing::Test {
   std::string scene_path = testing::source_path("scenes/cornell-spheres.dae");
   Scene scene = load_scene(scene_path);
 
-  void SetUp() override {
+  CoordinatorOptions options() const {
     CoordinatorOptions o;
     o.data_dir = dir;
     o.default_tile_size = 16;
     o.lease_seconds = 5;
     o.image_interval_seconds = 0;
-    c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+    return o;
   }
+  void SetUp() override { c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t)); }
   void TearDown() override { fs::remove_all(dir); }
 
   v1::SubmitJobRequest request(const RenderSettings& s) {
@@ -257,10 +258,7 @@ TEST_F(CoordinatorTest, CancelStopsDispatchAndKeepsWhatWasRendered) {
 // thread inside that window.
 TEST_F(CoordinatorTest, ImageFetchedAsSoonAsTheJobEndsHoldsEverySample) {
   std::atomic<std::thread::id> slow;
-  CoordinatorOptions o;
-  o.data_dir = dir;
-  o.default_tile_size = 16;
-  o.image_interval_seconds = 0;
+  CoordinatorOptions o = options();
   o.before_image_write = [&] {
     if (std::this_thread::get_id() == slow.load()) std::this_thread::sleep_for(std::chrono::milliseconds(300));
   };
