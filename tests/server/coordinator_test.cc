@@ -112,6 +112,17 @@ bool same_film_as_exr(const Film& film, const ExrImage& img) {
   return true;
 }
 
+// FNV-1a over the EXR's R, G, B and spp channels.
+uint64_t exr_hash(const ExrImage& img) {
+  uint64_t h = 1469598103934665603ull;
+  for (const char* c : {"R", "G", "B", "spp"})
+    for (float v : img.channels.at(c)) {
+      const auto* b = reinterpret_cast<const unsigned char*>(&v);
+      for (size_t i = 0; i < sizeof v; ++i) h = (h ^ b[i]) * 1099511628211ull;
+    }
+  return h;
+}
+
 TEST_F(CoordinatorTest, MergedImageEqualsTheLocalRenderBitForBit) {
   const RenderSettings s = job_settings();
   const std::string id = c->submit(request(s));
@@ -316,6 +327,8 @@ TEST_F(CoordinatorTest, NoiseTargetStopsConvergedTilesEarlyAndReproducibly) {
   EXPECT_LT(sa.samples_done(), sa.samples_total());  // some tiles stopped early
   EXPECT_EQ(sa.samples_done(), sb.samples_done());   // and the same ones each time
   for (const auto& tile : sa.tiles()) EXPECT_TRUE(tile.passes_done() == 8 || tile.relative_error() <= 0.5);
+  // The image as it was before the frame plan took over the schedule (commit fba7d1d).
+  EXPECT_EQ(exr_hash(read_exr(c->image_path(a, "image.exr"))), 3625336713443161310ull);
 }
 
 TEST_F(CoordinatorTest, UnknownWorkerMustRegisterAgain) { EXPECT_THROW(c->get_task(12345), RequestError); }

@@ -1,0 +1,92 @@
+// Golden images: the film bits of small renders, pinned as hashes.
+//
+// The hashes were taken from `tessera render`'s code path before the frame plan replaced
+// the pass-by-pass local renderer (commit fba7d1d): a schedule change that alters one bit of
+// one pixel fails here. They depend on the compiler's floating-point code generation, so a
+// compiler upgrade may change them all at once; then re-derive them from a build of the
+// commit above, never from the code under test.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <cstring>
+
+#include "core/scene/load.h"
+#include "tests/core/render_helpers.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+namespace {
+
+// FNV-1a over every pixel's r, g, b, lum2 and n (field by field: the struct has padding).
+uint64_t film_hash(const Film& film) {
+  uint64_t h = 1469598103934665603ull;
+  auto add = [&](const void* p, size_t n) {
+    const auto* b = static_cast<const unsigned char*>(p);
+    for (size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 1099511628211ull;
+  };
+  for (const PixelSums& p : film.pixels()) {
+    add(&p.r, 8);
+    add(&p.g, 8);
+    add(&p.b, 8);
+    add(&p.lum2, 8);
+    add(&p.n, 4);
+  }
+  return h;
+}
+
+RenderSettings base() {
+  RenderSettings s;
+  s.camera.width = 64;
+  s.camera.height = 48;
+  s.spp = 12;
+  s.pass_spp = 5;
+  s.max_depth = 8;
+  s.seed = 7;
+  return s;
+}
+
+struct Golden {
+  const char* name;
+  const char* scene;
+  RenderSettings settings;
+  uint64_t hash;
+};
+
+std::vector<Golden> goldens() {
+  std::vector<Golden> g;
+  g.push_back({"plain", "scenes/cornell-spheres.dae", base(), 0x9f9a1d498f8de913ull});
+  RenderSettings adaptive = base();
+  adaptive.spp = 64;
+  adaptive.adaptive = true;
+  adaptive.adaptive_batch = 8;
+  adaptive.adaptive_tolerance = 0.2f;
+  g.push_back({"adaptive", "scenes/cornell-spheres.dae", adaptive, 0xf55bff7cb75973a3ull});
+  RenderSettings lens = base();
+  lens.camera.lens_radius = 0.1f;
+  lens.camera.focal_distance = 4.5f;
+  g.push_back({"thin_lens", "scenes/cornell-spheres.dae", lens, 0x977c11147bcf2409ull});
+  RenderSettings window = base();
+  window.window = Rect{10, 7, 23, 19};
+  g.push_back({"window", "scenes/cornell-spheres.dae", window, 0xd74514ebe323f83bull});
+  RenderSettings estimators = base();
+  estimators.nee = false;
+  g.push_back({"no_nee", "scenes/cornell-spheres.dae", estimators, 0xa8dcf954eb37cd57ull});
+  estimators.nee = true;
+  estimators.mis = false;
+  g.push_back({"no_mis", "scenes/cornell-spheres.dae", estimators, 0x91051827a971783bull});
+  RenderSettings gltf = base();
+  gltf.camera.framing = Framing::kFile;
+  g.push_back({"gltf", "scenes/dof-row.gltf", gltf, 0x4e957504d6bfc02cull});
+  return g;
+}
+
+TEST(Golden, FilmsKeepTheirBits) {
+  for (const Golden& g : goldens()) {
+    const Scene scene = load_scene(testing::source_path(g.scene));
+    const uint64_t h = film_hash(testing::render(scene, g.settings).film);
+    EXPECT_EQ(h, g.hash) << g.name << ": 0x" << std::hex << h;
+  }
+}
+
+}  // namespace
+}  // namespace tessera
