@@ -53,7 +53,6 @@ int main(int argc, char** argv) {
   const fs::path data = fs::temp_directory_path() / ("tessera_load_" + std::to_string(getpid()));
   CoordinatorOptions opt;
   opt.data_dir = data.string();
-  opt.default_tile_size = 32;
   opt.lease_seconds = 60;
   Coordinator c(opt);
   ClientService client(c);

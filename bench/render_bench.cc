@@ -93,7 +93,7 @@ int main(int argc, char** argv) {
     s.spp = spp;
     s.max_depth = 16;
     const TileRenderer renderer(scene, s);
-    const RenderResult r = render_image(renderer, threads, 32);
+    const RenderResult r = render_image(renderer, threads);
     const double rays = double(r.stats.rays.rays + r.stats.rays.shadow_rays);
     const double sps = r.stats.samples / r.seconds, rps = rays / r.seconds;
     const std::string name = path.substr(path.find_last_of('/') + 1);

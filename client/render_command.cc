@@ -20,10 +20,9 @@ namespace {
 
 struct RenderArgs {
   RenderFlags flags;
-  int threads = 0, tile = 32;
+  int threads = 0;
   std::string stats_json;
   bool quiet = false;
-  bool no_nee = false, no_mis = false;
   std::string command_line;
 };
 
@@ -32,7 +31,7 @@ class ProgressPrinter {
   explicit ProgressPrinter(bool quiet) : bar_(quiet) {}
   void operator()(const RenderProgress& p) {
     char what[64];
-    std::snprintf(what, sizeof what, "pass %d/%d", std::min(p.pass + 1, p.passes), p.passes);
+    std::snprintf(what, sizeof what, "passes %u/%u", p.frame_passes, p.passes);
     bar_.update(p.fraction, what, p.seconds);
   }
 
@@ -41,19 +40,17 @@ class ProgressPrinter {
 };
 
 int run_render(const RenderArgs& a) {
-  RenderSettings s = to_settings(a.flags);
-  s.nee = !a.no_nee;
-  s.mis = !a.no_mis;
+  const RenderSettings s = to_settings(a.flags);
   const std::vector<std::string> outputs = output_paths(a.flags);
 
   const Scene scene = load_scene(a.flags.scene);
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "tessera: warning: %s\n", w.c_str());
   const TileRenderer renderer(scene, s);
   ProgressPrinter printer(a.quiet);
-  const RenderResult r = render_image(renderer, a.threads, a.tile, std::ref(printer));
+  const RenderResult r = render_image(renderer, a.threads, std::ref(printer));
 
   ImageMetadata meta{{"scene", a.flags.scene},
-                     {"seed", std::to_string(a.flags.seed)},
+                     {"seed", std::to_string(s.seed)},
                      {"flags", a.command_line},
                      {"render_seconds", std::to_string(r.seconds)},
                      {"nan_samples", std::to_string(r.stats.nan_samples)}};
@@ -72,7 +69,7 @@ int run_render(const RenderArgs& a) {
     nlohmann::json j{{"scene", a.flags.scene},
                      {"width", r.film.width()},
                      {"height", r.film.height()},
-                     {"spp", a.flags.spp},
+                     {"spp", s.spp},
                      {"seconds", r.seconds},
                      {"samples", r.stats.samples},
                      {"samples_per_second", sps},
@@ -99,12 +96,7 @@ std::function<int()> add_render_command(CLI::App& app, const std::string& comman
   add_render_flags(cmd, args->flags);
   cmd->add_option("-t", args->threads, "Threads (0 = all cores)")->capture_default_str()->check(CLI::Range(0, 1024));
   cmd->add_option("--stats-json", args->stats_json, "Write timing figures as JSON");
-  cmd->add_option("--tile", args->tile, "Tile size in pixels (does not change the image)")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 4096));
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
-  cmd->add_flag("--no-nee", args->no_nee, "Benchmarking: no next-event estimation (BSDF sampling only)");
-  cmd->add_flag("--no-mis", args->no_mis, "Benchmarking: light sampling without MIS");
   return [args, cmd] {
     if (!cmd->parsed()) return -1;
     return run_render(*args);

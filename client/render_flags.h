@@ -1,4 +1,5 @@
-// The render flags shared by `tessera render` and `tessera submit`.
+// The render flags shared by `tessera render` and `tessera submit`. Most bind straight to
+// RenderSettings fields (documented there); the few below need converting.
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -11,18 +12,18 @@ namespace tessera {
 
 struct RenderFlags {
   std::string scene;
-  int spp = 64, light_samples = 1, max_depth = 16, pass_spp = 16;
-  std::vector<double> adaptive;
-  std::vector<int> resolution{480, 360};
-  std::vector<int> window;
-  float lens_radius = 0, focal_distance = 4.7f;
-  uint64_t seed = 0;
-  std::string camera = "auto";  // cs184 for .dae, the file's own camera for glTF
+  RenderSettings settings;
+  std::vector<double> adaptive;           // -a BATCH TOLERANCE
+  std::vector<int> resolution{480, 360};  // -r W H
+  std::vector<int> window;                // -p X Y W H, lower-left pixel, Y from the bottom (CS184)
+  std::string camera = "auto";            // cs184 for .dae, the file's own camera for glTF
+  bool no_nee = false, no_mis = false;
   std::vector<std::string> outputs;
 };
 
 void add_render_flags(CLI::App* cmd, RenderFlags& f);
-// Validates and converts; throws CLI::ValidationError naming the flag.
+// Converts and validates (RenderSettings::validate()); throws CLI::ValidationError naming
+// the flag, or SceneError for a scene of unknown format.
 RenderSettings to_settings(const RenderFlags& f);
 // -f values, or SCENE.exr and SCENE.png in the current folder.
 std::vector<std::string> output_paths(const RenderFlags& f);

@@ -1,19 +1,12 @@
 #include "wire.h"
 
 #include <google/protobuf/util/json_util.h>
-#include <xxhash.h>
 #include <zstd.h>
 
+#include <cmath>
 #include <cstring>
-#include <filesystem>
-#include <fstream>
-#include <nlohmann/json.hpp>
-#include <set>
-#include <sstream>
 
 namespace tessera {
-
-namespace fs = std::filesystem;
 
 v1::RenderSettings to_proto(const RenderSettings& s) {
   v1::RenderSettings p;
@@ -31,39 +24,40 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   p.set_focal_distance(s.camera.focal_distance);
   p.set_framing(s.camera.framing == Framing::kFile ? v1::RenderSettings::FILE : v1::RenderSettings::CS184);
   *p.mutable_window() = to_proto(s.window);
+  p.set_tile_size(uint32_t(s.tile_size));
+  p.set_noise_target(s.noise_target);
+  p.set_no_nee(!s.nee);
+  p.set_no_mis(!s.mis);
   return p;
 }
 
 RenderSettings from_proto(const v1::RenderSettings& p) {
-  auto check = [](bool ok, const char* what) {
-    if (!ok) throw WireError(std::string("render settings: ") + what);
-  };
-  check(p.spp() >= 1 && p.spp() <= (1u << 24), "spp must be in 1..16777216");
-  check(p.light_samples() >= 1 && p.light_samples() <= (1u << 16), "light samples must be in 1..65536");
-  check(p.max_depth() <= (1u << 16), "max depth too large");
-  check(p.width() >= 1 && p.width() <= 65536 && p.height() >= 1 && p.height() <= 65536, "size must be in 1..65536");
-  check(p.pass_spp() >= 1 && p.pass_spp() <= (1u << 24), "pass spp must be in 1..16777216");
-  check(!p.adaptive() || (p.adaptive_batch() >= 1 && p.adaptive_tolerance() >= 0), "bad adaptive parameters");
-  check(std::isfinite(p.lens_radius()) && p.lens_radius() >= 0, "lens radius must be >= 0");
-  check(std::isfinite(p.focal_distance()) && p.focal_distance() > 0, "focal distance must be > 0");
+  // Unsigned wire values past INT_MAX would wrap: clamp so validate() sees them too large.
+  auto i = [](uint32_t v) { return int(std::min<uint32_t>(v, uint32_t(INT32_MAX))); };
   RenderSettings s;
-  s.spp = int(p.spp());
-  s.light_samples = int(p.light_samples());
-  s.max_depth = int(p.max_depth());
+  s.spp = i(p.spp());
+  s.light_samples = i(p.light_samples());
+  s.max_depth = i(p.max_depth());
   s.adaptive = p.adaptive();
-  s.adaptive_batch = int(p.adaptive_batch());
+  s.adaptive_batch = i(p.adaptive_batch());
   s.adaptive_tolerance = p.adaptive_tolerance();
   s.seed = p.seed();
-  s.pass_spp = int(p.pass_spp());
-  s.camera.width = int(p.width());
-  s.camera.height = int(p.height());
+  s.pass_spp = i(p.pass_spp());
+  s.camera.width = i(p.width());
+  s.camera.height = i(p.height());
   s.camera.lens_radius = p.lens_radius();
   s.camera.focal_distance = p.focal_distance();
   s.camera.framing = p.framing() == v1::RenderSettings::FILE ? Framing::kFile : Framing::kCs184;
-  s.window = from_proto(p.window());
-  if (s.window.area() > 0)
-    check(int64_t(s.window.x) + s.window.w <= s.camera.width && int64_t(s.window.y) + s.window.h <= s.camera.height,
-          "window outside the image");
+  s.window = Rect{i(p.window().x()), i(p.window().y()), i(p.window().w()), i(p.window().h())};
+  s.tile_size = i(p.tile_size());
+  s.noise_target = p.noise_target();
+  s.nee = !p.no_nee();
+  s.mis = !p.no_mis();
+  try {
+    s.validate();
+  } catch (const SettingsError& e) {
+    throw WireError(std::string("render settings: ") + e.what());
+  }
   return s;
 }
 
@@ -77,16 +71,9 @@ v1::Rect to_proto(const Rect& r) {
 }
 
 Rect from_proto(const v1::Rect& r) {
-  if (r.x() > 65536 || r.y() > 65536 || r.w() > 65536 || r.h() > 65536) throw WireError("rectangle out of range");
+  constexpr uint32_t kMax = RenderSettings::kMaxImageSide;
+  if (r.x() > kMax || r.y() > kMax || r.w() > kMax || r.h() > kMax) throw WireError("rectangle out of range");
   return Rect{int(r.x()), int(r.y()), int(r.w()), int(r.h())};
-}
-
-std::string read_file_bytes(const std::string& p) {
-  std::ifstream in(p, std::ios::binary);
-  if (!in) throw std::runtime_error(p + ": cannot open file");
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
 }
 
 std::string proto_json(const google::protobuf::Message& m) {
@@ -139,127 +126,6 @@ std::vector<PixelSums> decode_sums(const std::string& compressed, size_t pixels)
     in += kBytesPerPixel;
   }
   return sums;
-}
-
-std::string bundle_hash(const std::string& main_file, const google::protobuf::RepeatedPtrField<v1::SceneFile>& files) {
-  XXH3_state_t* st = XXH3_createState();
-  XXH3_128bits_reset(st);
-  auto add = [&](const std::string& s) {
-    const uint64_t n = s.size();
-    XXH3_128bits_update(st, &n, sizeof n);
-    XXH3_128bits_update(st, s.data(), s.size());
-  };
-  add(main_file);
-  for (const v1::SceneFile& f : files) {
-    add(f.path());
-    add(f.content());
-  }
-  const XXH128_hash_t h = XXH3_128bits_digest(st);
-  XXH3_freeState(st);
-  char buf[33];
-  std::snprintf(buf, sizeof buf, "%016llx%016llx", (unsigned long long)h.high64, (unsigned long long)h.low64);
-  return buf;
-}
-
-namespace {
-
-bool safe_relative(const std::string& p) {
-  if (p.empty() || p.size() > 1024 || p[0] == '/' || p.find('\0') != std::string::npos) return false;
-  for (const auto& part : fs::path(p))
-    if (part == ".." || part == ".") return false;
-  return true;
-}
-
-}  // namespace
-
-std::string unpack_bundle(const std::string& dir, const std::string& main_file,
-                          const google::protobuf::RepeatedPtrField<v1::SceneFile>& files) {
-  bool has_main = false;
-  for (const v1::SceneFile& f : files) {
-    if (!safe_relative(f.path())) throw WireError("scene bundle: unsafe file path '" + f.path() + "'");
-    has_main |= f.path() == main_file;
-  }
-  if (!has_main) throw WireError("scene bundle: main file '" + main_file + "' is not among its files");
-  fs::create_directories(dir);
-  for (const v1::SceneFile& f : files) {
-    const fs::path p = fs::path(dir) / f.path();
-    fs::create_directories(p.parent_path());
-    const std::string tmp = p.string() + ".tmp";
-    {
-      std::ofstream out(tmp, std::ios::binary);
-      out.write(f.content().data(), std::streamsize(f.content().size()));
-      if (!out) throw std::runtime_error(p.string() + ": cannot write");
-    }
-    fs::rename(tmp, p);
-  }
-  return (fs::path(dir) / main_file).string();
-}
-
-namespace {
-
-std::string percent_decode(const std::string& s) {
-  std::string out;
-  for (size_t i = 0; i < s.size(); ++i) {
-    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(uint8_t(s[i + 1])) && std::isxdigit(uint8_t(s[i + 2]))) {
-      out.push_back(char(std::stoi(s.substr(i + 1, 2), nullptr, 16)));
-      i += 2;
-    } else {
-      out.push_back(s[i]);
-    }
-  }
-  return out;
-}
-
-// The external files (buffers, images) a glTF document names, as relative paths.
-std::vector<std::string> gltf_references(const std::string& path, const std::string& bytes) {
-  std::string json_text = bytes;
-  if (bytes.size() >= 20 && bytes.compare(0, 4, "glTF") == 0) {  // .glb: the JSON chunk
-    uint32_t len;
-    std::memcpy(&len, bytes.data() + 12, 4);
-    if (uint64_t(len) + 20 > bytes.size())
-      throw std::runtime_error(path + ": GLB chunk 0 runs past the end of the file");
-    json_text = bytes.substr(20, len);
-  }
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(json_text);
-  } catch (const std::exception& e) {
-    throw std::runtime_error(path + ": JSON: " + e.what());
-  }
-  std::vector<std::string> out;
-  for (const char* key : {"buffers", "images"}) {
-    if (!j.contains(key) || !j[key].is_array()) continue;
-    for (const auto& item : j[key]) {
-      if (!item.is_object() || !item.contains("uri") || !item["uri"].is_string()) continue;
-      const std::string uri = item["uri"];
-      if (uri.rfind("data:", 0) == 0) continue;
-      out.push_back(percent_decode(uri));
-    }
-  }
-  return out;
-}
-
-}  // namespace
-
-void pack_scene(const std::string& path, std::string* main_file,
-                google::protobuf::RepeatedPtrField<v1::SceneFile>* files) {
-  const std::string bytes = read_file_bytes(path);
-  *main_file = fs::path(path).filename().string();
-  v1::SceneFile* f = files->Add();
-  f->set_path(*main_file);
-  f->set_content(bytes);
-  // CS184 COLLADA scenes are self-contained; glTF names buffers and images beside it.
-  std::string ext = fs::path(path).extension().string();
-  for (char& c : ext) c = char(std::tolower(uint8_t(c)));
-  if (ext != ".gltf" && ext != ".glb") return;
-  std::set<std::string> seen;
-  for (const std::string& rel : gltf_references(path, bytes)) {
-    if (!safe_relative(rel)) throw std::runtime_error(path + ": '" + rel + "' is not a path inside the scene's folder");
-    if (!seen.insert(rel).second) continue;
-    v1::SceneFile* extra = files->Add();
-    extra->set_path(rel);
-    extra->set_content(read_file_bytes((fs::path(path).parent_path() / rel).string()));
-  }
 }
 
 }  // namespace tessera

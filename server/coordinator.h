@@ -1,50 +1,40 @@
-// The coordinator's state machine, free of gRPC and HTTP so tests can drive it directly.
-//
-// A job's frame is cut into tiles; a task is one tile for one pass. A tile's pass k+1 is
-// handed out only after its pass k was merged, so every pixel's sums are added in pass
-// order and the image is bit-identical to `tessera render` (see docs/architecture.md).
-// Tasks are leased: a lease not renewed by heartbeats expires and the task goes to another
-// worker. Results are identified by task id; a result for a (tile, pass) already merged
-// is a duplicate and is dropped.
+// The coordinator, free of gRPC and HTTP so tests drive it directly. It wires together:
+//   SceneStore      scenes by content hash, checked at submit    (scene_store.h)
+//   Job + FramePlan each job's schedule, film and progress       (job.h, core/render/frame_plan.h)
+//   LeaseTable      which worker renders which task, until when  (lease_table.h)
+//   WorkerRegistry  who is there, and how fast                   (worker_registry.h)
+//   ImageSink       where progressive images go                  (image_sink.h)
+// A task is one tile of one job for one pass, leased to one worker. The frame plan makes
+// the merged image bit-identical to `tessera render`; the coordinator adds leases, job
+// priorities and images. One mutex guards everything but scene checks and image writes.
 #pragma once
 
-#include <chrono>
 #include <condition_variable>
 #include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <random>
 #include <string>
 #include <vector>
 
-#include "core/io/image_io.h"
-#include "core/render/film.h"
-#include "core/render/settings.h"
-#include "wire.h"
+#include "server/clock.h"
+#include "server/image_sink.h"
+#include "server/job.h"
+#include "server/lease_table.h"
+#include "server/scene_store.h"
+#include "server/worker_registry.h"
 
 namespace tessera {
 
-// Time source, a seam for tests.
-class Clock {
- public:
-  virtual ~Clock() = default;
-  virtual double now() const = 0;  // seconds
-};
-
-class SteadyClock : public Clock {
- public:
-  double now() const override {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-  }
-};
-
 struct CoordinatorOptions {
   std::string data_dir = "tessera-data";
-  uint32_t default_tile_size = 64;
   double lease_seconds = 10;
   double heartbeat_seconds = 2;
   double image_interval_seconds = 5;  // progressive images at most this often
+  // A worker not heard from for this long is forgotten (it registers again if it returns).
+  double worker_timeout_seconds = 60;
   // Test seam: runs between an image snapshot leaving the lock and its write.
   std::function<void()> before_image_write;
 };
@@ -63,22 +53,23 @@ class RequestError : public std::runtime_error {
 struct CoordinatorCounters {
   uint64_t tasks_dispatched = 0, results_merged = 0, results_duplicate = 0, results_rejected = 0;
   uint64_t leases_expired = 0, leases_released = 0, samples_merged = 0, jobs_submitted = 0, jobs_refused = 0;
-  uint64_t images_written = 0;
+  uint64_t images_written = 0, image_errors = 0;
   double merge_seconds = 0;
 };
 
 class Coordinator {
  public:
-  Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> clock = std::make_unique<SteadyClock>());
+  // Images go to `sink`, or to <data_dir>/jobs/<id>/ when it is null.
+  explicit Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> clock = std::make_unique<SteadyClock>(),
+                       std::unique_ptr<ImageSink> sink = nullptr);
   ~Coordinator();
 
   // Client side. Throw RequestError.
   std::string submit(const v1::SubmitJobRequest& request);
   v1::JobStatus status(const std::string& id, bool with_tiles) const;
-  std::vector<v1::JobStatus> list() const;
+  std::vector<v1::JobStatus> list() const;  // in submission order
   v1::JobStatus cancel(const std::string& id);
-  v1::Image image(const std::string& id);                                 // writes one if none was written yet
-  std::string image_path(const std::string& id, const char* file) const;  // exr/png on disk
+  v1::Image image(const std::string& id);  // an ended job's image holds its whole film
 
   // Worker side.
   v1::RegisterResponse register_worker(const v1::RegisterRequest& request);
@@ -91,37 +82,19 @@ class Coordinator {
   // Waits up to `timeout` seconds for a change that may make work available (a job
   // submitted, a tile pass merged, a lease ended): lets GetTask long-poll.
   void wait_for_work(double timeout) const;
-  // Expires overdue leases; get_task calls it too. Returns how many expired.
+  // Expires overdue leases and forgets silent workers; get_task calls it too. Returns how
+  // many leases expired.
   size_t expire_leases();
-  // Blocks until a job ends or `timeout` seconds pass; returns its status.
+  // Blocks until a job ends, its samples change from `last_samples`, or `timeout` passes.
   v1::JobStatus wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const;
 
-  struct WorkerInfo {
-    uint64_t id = 0;
-    std::string name;
-    uint32_t threads = 0;
-    double last_seen = 0;
-    double samples_per_second = 0;  // smoothed over results
-    uint64_t tasks_done = 0;
-    uint64_t current_task = 0;
-  };
   std::vector<WorkerInfo> workers() const;
   CoordinatorCounters counters() const;
   double uptime() const;
   const CoordinatorOptions& options() const { return options_; }
 
  private:
-  struct Job;
-  struct TaskRecord {
-    std::string job;
-    uint32_t tile = 0, pass = 0;
-    uint64_t worker = 0;
-    double deadline = 0;
-  };
-
-  Job* find(const std::string& id) const;  // mu_ held
-  v1::JobStatus status_locked(const Job& job, bool with_tiles) const;
-  // A film snapshot to write outside the lock, newest-wins by sequence number.
+  // A film to write outside the lock, newest-wins by sequence number.
   struct ImageSnapshot {
     Job* job = nullptr;
     std::unique_ptr<Film> film;
@@ -129,27 +102,33 @@ class Coordinator {
     uint64_t seq = 0;
     uint64_t merges = 0;  // the film version copied
   };
-  void finish_tile_pass(Job& job, uint32_t tile, double now);
+
+  Job* find(const std::string& id) const;  // mu_ held; throws kNotFound
+  uint32_t workers_on(const Job& job) const { return leases_.workers_on(job.id); }
   ImageSnapshot snapshot_locked(Job& job);
   void write_snapshot(const ImageSnapshot& snap);  // mu_ not held
   void write_image(Job& job);                      // mu_ not held: snapshot, then write
-  // Ends a lease: the tile loses it (and, with `requeue`, waits for its next worker), the
-  // worker is no longer busy with it, and its record is kept so a late result is known.
-  std::map<uint64_t, TaskRecord>::iterator end_lease_locked(std::map<uint64_t, TaskRecord>::iterator it, bool requeue);
-  size_t expire_leases_locked(double now);
+  // Ends a live lease: the tile loses it (and, with `requeue`, is ready again), the worker
+  // holds one lease fewer; the lease stays known so a late result is recognised.
+  void end_lease_locked(uint64_t id, bool requeue);
+  void lease_ended_locked(uint64_t id, const Lease& lease, bool requeue);
+  size_t expire_locked(double now);
+  // After a merge: the job's end, the worker's speed, and maybe a progressive image.
+  std::optional<ImageSnapshot> after_merge_locked(Job& job, const v1::TaskResult& result, double now);
+  std::string new_job_id_locked();
 
   CoordinatorOptions options_;
   std::unique_ptr<Clock> clock_;
+  std::unique_ptr<ImageSink> sink_;
+  SceneStore scenes_;
   double started_ = 0;
   mutable std::mutex mu_;
   mutable std::condition_variable changed_;
-  std::map<std::string, std::unique_ptr<Job>> jobs_;
-  std::map<std::string, v1::SceneBundle> scenes_;  // by content hash
-  std::map<uint64_t, TaskRecord> tasks_;           // live leases by task id
-  std::map<uint64_t, TaskRecord> expired_;         // ended leases of live jobs: late results
-                                                   // are still merged if nobody else's was
-  std::map<uint64_t, WorkerInfo> workers_;
-  uint64_t next_task_ = 1, next_worker_ = 1, next_job_ = 1;
+  std::map<std::string, std::unique_ptr<Job>> jobs_;  // jobs are never removed
+  LeaseTable leases_;
+  WorkerRegistry workers_;
+  uint64_t next_job_ = 1;
+  std::mt19937_64 ids_{std::random_device{}()};
   CoordinatorCounters counters_;
 };
 

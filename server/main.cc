@@ -36,9 +36,6 @@ int main(int argc, char** argv) {
   app.add_option("--lease-seconds", opt.lease_seconds, "lease length; a silent worker's task moves on after it")
       ->capture_default_str()
       ->check(CLI::Range(0.1, 3600.0));
-  app.add_option("--tile", opt.default_tile_size, "default tile size in pixels")
-      ->capture_default_str()
-      ->check(CLI::Range(1, 4096));
   app.add_option("--image-interval", opt.image_interval_seconds, "write progressive images at most this often (s)")
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);

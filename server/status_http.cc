@@ -2,7 +2,6 @@
 
 #include <httplib.h>
 
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -68,23 +67,21 @@ StatusHttp::StatusHttp(Coordinator& c) : c_(c), server_(std::make_unique<httplib
     res.set_content(metrics_text(), "text/plain; version=0.0.4");
   });
   server_->Get(R"(/jobs/([A-Za-z0-9-]+)/preview.png)", [this](const httplib::Request& req, httplib::Response& res) {
+    std::string png;
     try {
-      c_.status(req.matches[1], false);  // 404 for unknown jobs
+      png = c_.image(req.matches[1]).png();
     } catch (const RequestError& e) {
       res.status = 404;
       res.set_content(e.what(), "text/plain");
       return;
     }
-    std::ifstream f(c_.image_path(req.matches[1], "preview.png"), std::ios::binary);
-    if (!f) {
+    if (png.empty()) {
       res.status = 404;
       res.set_content("no image yet", "text/plain");
       return;
     }
-    std::ostringstream ss;
-    ss << f.rdbuf();
     res.set_header("Cache-Control", "no-store");
-    res.set_content(ss.str(), "image/png");
+    res.set_content(png, "image/png");
   });
   server_->Get("/", [](const httplib::Request&, httplib::Response& res) { res.set_content(kLivePage, "text/html"); });
 }
@@ -112,14 +109,14 @@ std::string StatusHttp::status_json() const {
   j["jobs"] = nlohmann::json::array();
   for (const v1::JobStatus& s : c_.list()) j["jobs"].push_back(to_json(s));
   j["workers"] = nlohmann::json::array();
-  for (const Coordinator::WorkerInfo& w : c_.workers()) {
+  for (const WorkerInfo& w : c_.workers()) {
     j["workers"].push_back({{"id", w.id},
                             {"name", w.name},
                             {"threads", w.threads},
                             {"samples_per_second", w.samples_per_second},
                             {"tasks_done", w.tasks_done},
-                            {"current_task", w.current_task},
-                            {"active", w.current_task != 0}});
+                            {"leases", w.leases},
+                            {"active", w.leases != 0}});
   }
   return j.dump();
 }
@@ -144,6 +141,7 @@ std::string StatusHttp::metrics_text() const {
   counter("tessera_jobs_submitted_total", "Jobs accepted.", double(k.jobs_submitted));
   counter("tessera_jobs_refused_total", "Jobs refused at submit.", double(k.jobs_refused));
   counter("tessera_images_written_total", "Progressive images written.", double(k.images_written));
+  counter("tessera_image_errors_total", "Progressive image writes that failed.", double(k.image_errors));
   counter("tessera_merge_seconds_total", "Time spent adding tile sums into films.", k.merge_seconds);
   size_t counts[5] = {};
   for (const v1::JobStatus& s : c_.list()) ++counts[std::min<size_t>(4, size_t(s.state()))];
@@ -152,8 +150,8 @@ std::string StatusHttp::metrics_text() const {
   for (int i = 0; i < 5; ++i) m << "tessera_jobs{state=\"" << names[i] << "\"} " << counts[i] << '\n';
   size_t busy = 0;
   const auto workers = c_.workers();
-  for (const auto& w : workers) busy += w.current_task != 0;
-  gauge("tessera_workers", "Registered workers.", double(workers.size()));
+  for (const auto& w : workers) busy += w.leases != 0;
+  gauge("tessera_workers", "Live workers (heard from within the worker timeout).", double(workers.size()));
   gauge("tessera_workers_busy", "Workers holding a lease.", double(busy));
   gauge("tessera_uptime_seconds", "Seconds since start.", c_.uptime());
   return m.str();

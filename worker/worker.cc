@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "core/scene/load.h"
+#include "scene_bundle.h"
 
 namespace tessera {
 

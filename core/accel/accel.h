@@ -5,15 +5,11 @@
 #include <cstdint>
 #include <memory>
 
+#include "core/math/ray.h"
 #include "core/math/vec.h"
 #include "core/scene/scene.h"
 
 namespace tessera {
-
-struct Ray {
-  Vec3 o, d;
-  float tmin = 0, tmax = 1e30f;
-};
 
 struct Hit {
   float t = 0;

@@ -9,7 +9,7 @@
 //                   kFile: the file's own camera pose and field of view
 #pragma once
 
-#include "core/accel/accel.h"
+#include "core/math/ray.h"
 #include "core/math/vec.h"
 #include "core/scene/scene.h"
 

@@ -6,11 +6,12 @@
 // same bits.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
+#include "core/math/rect.h"
 #include "core/math/vec.h"
-#include "core/render/settings.h"
 
 namespace tessera {
 

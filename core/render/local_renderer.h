@@ -1,16 +1,19 @@
-// Renders a whole frame in this process: passes in order, tiles of a pass in parallel.
+// `tessera render`: a frame plan and a thread pool in this process. Each render thread
+// takes a ready task from the plan, renders it, and merges it; there is no barrier between
+// passes (a tile's next pass is ready as soon as its last one is merged).
 #pragma once
 
 #include <functional>
 
 #include "core/render/film.h"
+#include "core/render/frame_plan.h"
 #include "core/render/tile_renderer.h"
 
 namespace tessera {
 
 struct RenderProgress {
-  int pass = 0, passes = 0;
-  double fraction = 0;  // of the work scheduled (adaptive sampling may end early)
+  uint32_t frame_passes = 0, passes = 0;  // passes complete over the whole frame, of
+  double fraction = 0;                    // of the work scheduled (adaptive sampling may end early)
   uint64_t samples = 0;
   double seconds = 0;
 };
@@ -22,12 +25,8 @@ struct RenderResult {
   double seconds = 0;
 };
 
-// threads <= 0 uses every core. The callback runs on the calling thread.
-RenderResult render_image(const TileRenderer& renderer, int threads, int tile_size,
-                          const ProgressCallback& progress = nullptr);
-
-// CS184 adaptive stopping (format doc 7.1, dividing by the true count): a pixel stops when
-// the 95% confidence half-width of its luminance is within tolerance x mean.
-bool pixel_converged(const PixelSums& p, float tolerance);
+// threads <= 0 uses every core. The callback runs on the calling thread, about every
+// quarter second and once at the end.
+RenderResult render_image(const TileRenderer& renderer, int threads, const ProgressCallback& progress = nullptr);
 
 }  // namespace tessera

@@ -1,8 +1,41 @@
 #include "core/render/settings.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace tessera {
+
+namespace {
+
+void require(bool ok, const char* flag, const std::string& reason) {
+  if (!ok) throw SettingsError(flag, reason);
+}
+
+std::string range(int64_t lo, int64_t hi) { return "must be in " + std::to_string(lo) + ".." + std::to_string(hi); }
+
+}  // namespace
+
+void RenderSettings::validate() const {
+  require(spp >= 1 && spp <= kMaxSpp, "-s", range(1, kMaxSpp));
+  require(light_samples >= 1 && light_samples <= kMaxLightSamples, "-l", range(1, kMaxLightSamples));
+  require(max_depth >= 0 && max_depth <= kMaxDepth, "-m", range(0, kMaxDepth));
+  if (adaptive)
+    require(adaptive_batch >= 1 && adaptive_batch <= kMaxSpp && std::isfinite(adaptive_tolerance) &&
+                adaptive_tolerance >= 0,
+            "-a", "batch " + range(1, kMaxSpp) + " and tolerance must be >= 0");
+  require(pass_spp >= 1 && pass_spp <= kMaxSpp, "--pass-spp", range(1, kMaxSpp));
+  require(tile_size >= 1 && tile_size <= kMaxTileSize, "--tile", range(1, kMaxTileSize));
+  require(std::isfinite(noise_target) && noise_target >= 0 && noise_target <= kMaxNoiseTarget, "--noise-target",
+          "must be in 0..1e9");
+  require(camera.width >= 1 && camera.width <= kMaxImageSide && camera.height >= 1 && camera.height <= kMaxImageSide,
+          "-r", "width and height " + range(1, kMaxImageSide));
+  require(std::isfinite(camera.lens_radius) && camera.lens_radius >= 0, "-b", "lens radius must be >= 0");
+  require(std::isfinite(camera.focal_distance) && camera.focal_distance > 0, "-d", "focal distance must be > 0");
+  if (window.area() > 0)
+    require(window.x >= 0 && window.y >= 0 && window.w >= 1 && window.h >= 1 &&
+                int64_t(window.x) + window.w <= camera.width && int64_t(window.y) + window.h <= camera.height,
+            "-p", "the cell must lie inside the -r image");
+}
 
 std::vector<std::pair<uint32_t, uint32_t>> RenderSettings::passes() const {
   std::vector<std::pair<uint32_t, uint32_t>> out;

@@ -1,39 +1,68 @@
-// Everything that determines a rendered image besides the scene. Two renders with equal
-// settings and scene produce bit-identical films, whatever the threads or tiling.
+// Everything besides the scene that fixes the image: the one owner of render settings.
+// The CLI binds its flags to these fields, the wire protocol carries every one of them, and
+// `validate()` is the one range check for both. Two renders with equal settings and scene
+// produce bit-identical films, whatever the threads, workers or machines.
 #pragma once
 
 #include <cstdint>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "core/camera/camera.h"
+#include "core/math/rect.h"
 
 namespace tessera {
 
-// A rectangle of pixels, in image coordinates (row 0 is the top row).
-struct Rect {
-  int x = 0, y = 0, w = 0, h = 0;
-  int64_t area() const { return int64_t(w) * h; }
+// A setting out of range: names the setting by its command-line flag.
+class SettingsError : public std::invalid_argument {
+ public:
+  SettingsError(std::string flag, const std::string& reason)
+      : std::invalid_argument(flag + ": " + reason), flag_(std::move(flag)) {}
+  const std::string& flag() const { return flag_; }
+
+ private:
+  std::string flag_;
 };
 
 struct RenderSettings {
-  int spp = 64;           // -s: camera samples per pixel (a maximum with -a)
-  int light_samples = 1;  // -l: samples per non-delta light per shading point
-  int max_depth = 16;     // -m: scattering events per path (0 = emitters only)
-  bool adaptive = false;  // -a given
+  // Limits, named once: far beyond any sensible render, small enough that sample counts
+  // fit 32 bits per pixel and image sizes fit the wire's 16-bit-safe coordinates.
+  static constexpr int kMaxSpp = 1 << 24;
+  static constexpr int kMaxLightSamples = 1 << 16;
+  static constexpr int kMaxDepth = 1 << 16;
+  static constexpr int kMaxImageSide = 65536;
+  static constexpr int kMaxTileSize = 4096;
+  static constexpr double kMaxNoiseTarget = 1e9;
+
+  int spp = 64;           // -s: camera samples per pixel (a maximum with -a or --noise-target)
+  int light_samples = 1;  // -l: samples per area (or ambient) light per shading point
+  int max_depth = 16;     // -m: scattering events per path, delta bounces included; 0 = emitters only
+  // -a BATCH TOLERANCE: CS184 adaptive sampling. After BATCH+1, 2*BATCH+1, ... samples a
+  // pixel stops once the 95% interval of its luminance is within TOLERANCE x mean.
+  bool adaptive = false;
   int adaptive_batch = 32;
   float adaptive_tolerance = 0.05f;
-  uint64_t seed = 0;
-  int pass_spp = 16;  // samples per progressive pass (the merge unit of the farm)
-  // Estimator switches, for measuring what each technique costs and buys (bench/). Both
+  uint64_t seed = 0;  // --seed: every random number is a function of it
+  int pass_spp = 16;  // --pass-spp: samples per progressive pass (the unit merged in order)
+  // --tile: side of the square tiles the frame is cut into. It never changes the image,
+  // except with a noise target, which is judged per tile.
+  int tile_size = 32;
+  // --noise-target: > 0 stops refining a tile once its estimated relative error (the
+  // relMSE the accuracy benchmarks use, from the film's own variance) is below it, after
+  // at least two passes. Reproducible: decided from merged sums at pass boundaries.
+  double noise_target = 0;
+  // --no-nee / --no-mis: for measuring what each technique costs and buys (bench/). Both
   // variants stay unbiased: without NEE emitters are found by BSDF sampling alone; without
   // MIS area lights are found by light sampling alone.
   bool nee = true;
   bool mis = true;
-  CameraSettings camera;
-  Rect window;  // the part of the image rendered (-p); whole image when empty
+  CameraSettings camera;  // -r, -b, -d, --camera: documented in core/camera/camera.h
+  Rect window;            // -p: the part of the image rendered; the whole image when empty
 
+  // Throws SettingsError for the first setting out of range.
+  void validate() const;
   Rect effective_window() const { return window.area() > 0 ? window : Rect{0, 0, camera.width, camera.height}; }
   // The sample-index ranges of the passes. Films are merged pass by pass in this order.
   // With -a B, passes end where CS184 checks convergence: after B+1, 2B+1, ... samples.

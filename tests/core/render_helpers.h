@@ -27,8 +27,9 @@ inline Estimate film_estimate(const Film& film) {
 }
 
 inline RenderResult render(const Scene& scene, RenderSettings s, int threads = 2, int tile = 16) {
+  s.tile_size = tile;
   const TileRenderer r(scene, s);
-  return render_image(r, threads, tile);
+  return render_image(r, threads);
 }
 
 // Spheres of material `inner` inside a two-sided emitter of radiance 1 (a sphere of radius

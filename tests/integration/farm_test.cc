@@ -71,7 +71,7 @@ class Farm : public ::testing::Test {
     coordinator = std::make_unique<Process>(
         kBin + "/tessera-coordinator",
         std::vector<std::string>{"--listen", listen, "--http", "127.0.0.1:0", "--data", (dir / "data").string(),
-                                 "--lease-seconds", lease, "--tile", "16", "--image-interval", "0.2"},
+                                 "--lease-seconds", lease, "--image-interval", "0.2"},
         (dir / "coordinator.err").string());
     const std::string g = coordinator->read_line(), h = coordinator->read_line();
     std::smatch m;
@@ -103,7 +103,7 @@ class Farm : public ::testing::Test {
   }
 };
 
-const std::string kFlags = "-r 96 72 -s 24 --pass-spp 8 -m 6 --seed 11";
+const std::string kFlags = "-r 96 72 -s 24 --pass-spp 8 -m 6 --seed 11 --tile 16";
 
 TEST_F(Farm, OneTwoAndThreeWorkersGiveTheBytesOfTessearRender) {
   const std::string local = local_render(kFlags);
@@ -117,6 +117,24 @@ TEST_F(Farm, OneTwoAndThreeWorkersGiveTheBytesOfTessearRender) {
     EXPECT_NE(r.out.find("DONE"), std::string::npos) << r.out;
     expect_same_pixels(local, out);
   }
+}
+
+// Every render setting crosses the wire: a noise target (judged per tile, so the tile size
+// matters too) and the estimator switches give the farm exactly `tessera render`'s image.
+TEST_F(Farm, NoiseTargetAndEstimatorSwitchesGiveTheLocalImage) {
+  const std::string flags = "-r 96 72 -s 64 --pass-spp 8 -m 6 --tile 24 --noise-target 0.2 --no-mis";
+  const std::string local = local_render(flags);
+  start_coordinator();
+  start_worker(2);
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r =
+      run("submit " + kScene + " " + flags + " --coordinator " + grpc_addr + " --wait -q --json -f " + out, dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json status = nlohmann::json::parse(r.out);
+  EXPECT_LT(std::stoull(status["samples_done"].get<std::string>()),
+            std::stoull(status["samples_total"].get<std::string>()));  // tiles stopped early
+  EXPECT_TRUE(status["settings"]["no_mis"].get<bool>());
+  expect_same_pixels(local, out);
 }
 
 TEST_F(Farm, GltfSceneThroughTheFarmMatchesTheLocalRender) {
@@ -200,9 +218,9 @@ TEST_F(Farm, CancelStopsWorkAndKeepsTheImage) {
 TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   start_coordinator();
   start_worker();
-  const CommandResult r = run(
-      "submit " + kScene + " -r 64 48 -s 8 --coordinator " + grpc_addr + " --wait -q -f " + (dir / "x.png").string(),
-      dir);
+  const CommandResult r = run("submit " + kScene + " -r 64 48 -s 8 --tile 16 --coordinator " + grpc_addr +
+                                  " --wait -q -f " + (dir / "x.png").string(),
+                              dir);
   ASSERT_EQ(r.code, 0) << r.err;
   const nlohmann::json s = get_json("/api/status");
   ASSERT_NE(s, nullptr);

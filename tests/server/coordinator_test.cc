@@ -38,6 +38,7 @@ RenderSettings job_settings() {
   s.pass_spp = 4;  // passes of 4, 4, 2
   s.max_depth = 6;
   s.seed = 3;
+  s.tile_size = 16;
   return s;
 }
 
@@ -52,11 +53,11 @@ class CoordinatorTest : public ::testing::Test {
   CoordinatorOptions options() const {
     CoordinatorOptions o;
     o.data_dir = dir;
-    o.default_tile_size = 16;
     o.lease_seconds = 5;
     o.image_interval_seconds = 0;
     return o;
   }
+  std::string image_path(const std::string& id, const char* file) const { return dir + "/jobs/" + id + "/" + file; }
   void SetUp() override { c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t)); }
   void TearDown() override { fs::remove_all(dir); }
 
@@ -98,7 +99,7 @@ class CoordinatorTest : public ::testing::Test {
       ASSERT_TRUE(c->submit_result(render_task(r.task(), w)).accepted());
     }
   }
-  Film local(const RenderSettings& s) { return render_image(TileRenderer(scene, s), 2, 32).film; }
+  Film local(const RenderSettings& s) { return render_image(TileRenderer(scene, s), 2).film; }
 };
 
 bool same_film_as_exr(const Film& film, const ExrImage& img) {
@@ -132,7 +133,7 @@ TEST_F(CoordinatorTest, MergedImageEqualsTheLocalRenderBitForBit) {
   EXPECT_EQ(st.samples_done(), 48u * 36u * 10u);
   EXPECT_EQ(st.tiles_done(), st.tiles_total());
   EXPECT_EQ(st.frame_passes_done(), 3u);
-  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(c->image_path(id, "image.exr"))));
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
 }
 
 TEST_F(CoordinatorTest, OutOfOrderWorkersAndAdaptiveSamplingStillMatch) {
@@ -155,7 +156,7 @@ TEST_F(CoordinatorTest, OutOfOrderWorkersAndAdaptiveSamplingStillMatch) {
       ASSERT_TRUE(c->submit_result(render_task(it->first, it->second)).accepted());
   }
   EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
-  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(c->image_path(id, "image.exr"))));
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
 }
 
 TEST_F(CoordinatorTest, DuplicateResultIsDropped) {
@@ -195,7 +196,7 @@ TEST_F(CoordinatorTest, ExpiredLeaseGoesToAnotherWorkerAndTheLateResultIsNotMerg
   EXPECT_TRUE(late.duplicate());
   drain(fast);
   EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
-  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(c->image_path(id, "image.exr"))));
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
 }
 
 TEST_F(CoordinatorTest, HostileResultsAreRejectedAndCounted) {
@@ -257,7 +258,7 @@ TEST_F(CoordinatorTest, CancelStopsDispatchAndKeepsWhatWasRendered) {
   EXPECT_EQ(c->cancel(id).state(), v1::JobStatus::CANCELLED);
   EXPECT_FALSE(c->heartbeat(w, b.task_id()));
   EXPECT_FALSE(c->get_task(w).has_task());
-  const ExrImage img = read_exr(c->image_path(id, "image.exr"));
+  const ExrImage img = read_exr(image_path(id, "image.exr"));
   float spp = 0;
   for (float n : img.channels.at("spp")) spp += n;
   EXPECT_EQ(spp, float(a.tile().w() * a.tile().h() * 4));  // the merged tile is in the image
@@ -302,7 +303,7 @@ TEST_F(CoordinatorTest, ImageFetchedAsSoonAsTheJobEndsHoldsEverySample) {
   const ExrImage fetched = read_exr(path);
   EXPECT_TRUE(same_film_as_exr(local(s), fetched));
   // The late final write does not replace the newer image with an older one.
-  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(c->image_path(id, "image.exr"))));
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
 }
 
 TEST_F(CoordinatorTest, HigherPriorityJobsGoFirst) {
@@ -318,8 +319,8 @@ TEST_F(CoordinatorTest, NoiseTargetStopsConvergedTilesEarlyAndReproducibly) {
   RenderSettings s = job_settings();
   s.spp = 64;
   s.pass_spp = 8;
-  v1::SubmitJobRequest r = request(s);
-  r.set_noise_target(0.5);
+  s.noise_target = 0.5;
+  const v1::SubmitJobRequest r = request(s);
   const std::string a = c->submit(r), b = c->submit(r);
   drain(worker());
   const v1::JobStatus sa = c->status(a, true), sb = c->status(b, true);
@@ -328,7 +329,34 @@ TEST_F(CoordinatorTest, NoiseTargetStopsConvergedTilesEarlyAndReproducibly) {
   EXPECT_EQ(sa.samples_done(), sb.samples_done());   // and the same ones each time
   for (const auto& tile : sa.tiles()) EXPECT_TRUE(tile.passes_done() == 8 || tile.relative_error() <= 0.5);
   // The image as it was before the frame plan took over the schedule (commit fba7d1d).
-  EXPECT_EQ(exr_hash(read_exr(c->image_path(a, "image.exr"))), 3625336713443161310ull);
+  EXPECT_EQ(exr_hash(read_exr(image_path(a, "image.exr"))), 3625336713443161310ull);
+  // `tessera render --noise-target` is the same frame plan: the same tiles stop, bit for bit.
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(a, "image.exr"))));
+}
+
+// The image sink is a seam: with films kept in memory the coordinator needs no disk for
+// images, and the merged film equals the local render in every bit of every sum.
+TEST_F(CoordinatorTest, ImagesGoToTheSinkAndHoldTheLocalFilmsExactBits) {
+  auto sink = std::make_unique<MemoryImageSink>();
+  MemoryImageSink* images = sink.get();
+  c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t), std::move(sink));
+  RenderSettings s = job_settings();
+  s.adaptive = true;
+  s.adaptive_batch = 4;
+  s.adaptive_tolerance = 0.3f;
+  const std::string id = c->submit(request(s));
+  drain(worker());
+  ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  const Film merged = images->film(id), expected = local(s);
+  ASSERT_EQ(merged.pixels().size(), expected.pixels().size());
+  for (size_t i = 0; i < merged.pixels().size(); ++i) {
+    const PixelSums &a = merged.pixels()[i], &b = expected.pixels()[i];
+    ASSERT_TRUE(std::memcmp(&a.r, &b.r, 8) == 0 && std::memcmp(&a.g, &b.g, 8) == 0 && std::memcmp(&a.b, &b.b, 8) == 0 &&
+                std::memcmp(&a.lum2, &b.lum2, 8) == 0 && a.n == b.n)
+        << "pixel " << i;
+  }
+  EXPECT_EQ(images->metadata(id).at("job"), id);
+  EXPECT_GE(images->writes(id), 1);
 }
 
 TEST_F(CoordinatorTest, UnknownWorkerMustRegisterAgain) { EXPECT_THROW(c->get_task(12345), RequestError); }

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/scene/load.h"
+#include "scene_bundle.h"
 #include "tests/core/test_paths.h"
 
 namespace tessera {

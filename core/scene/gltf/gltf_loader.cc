@@ -113,11 +113,50 @@ bool load_image(tinygltf::Image* image, const int index, std::string* err, std::
   return true;
 }
 
+std::string percent_decode(const std::string& s) {
+  std::string out;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(uint8_t(s[i + 1])) && std::isxdigit(uint8_t(s[i + 2]))) {
+      out.push_back(char(std::stoi(s.substr(i + 1, 2), nullptr, 16)));
+      i += 2;
+    } else {
+      out.push_back(s[i]);
+    }
+  }
+  return out;
+}
+
 float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f); }
 
 class GltfLoader {
  public:
   explicit GltfLoader(std::string path) : path_(std::move(path)) {}
+
+  // The external files (buffers, images) the document names, as paths relative to its
+  // folder, percent-decoded; data: URIs are inside the file.
+  std::vector<std::string> external_files() const {
+    const std::string bytes = read_file(path_, path_);
+    const bool binary = bytes.size() >= 4 && bytes.compare(0, 4, "glTF") == 0;
+    nlohmann::json j;
+    try {
+      j = nlohmann::json::parse(binary ? glb_json(bytes) : bytes);
+    } catch (const nlohmann::json::parse_error& e) {
+      fail("JSON", first_line(e.what()));
+    }
+    std::vector<std::string> out;
+    std::set<std::string> seen;
+    for (const char* key : {"buffers", "images"}) {
+      if (!j.is_object() || !j.contains(key) || !j[key].is_array()) continue;
+      for (const auto& item : j[key]) {
+        if (!item.is_object() || !item.contains("uri") || !item["uri"].is_string()) continue;
+        const std::string uri = item["uri"];
+        if (uri.rfind("data:", 0) == 0) continue;
+        const std::string rel = percent_decode(uri);
+        if (seen.insert(rel).second) out.push_back(rel);
+      }
+    }
+    return out;
+  }
 
   Scene load() {
     scene_.source = path_;
@@ -703,5 +742,7 @@ class GltfLoader {
 }  // namespace
 
 Scene load_gltf_file(const std::string& path) { return GltfLoader(path).load(); }
+
+std::vector<std::string> gltf_external_files(const std::string& path) { return GltfLoader(path).external_files(); }
 
 }  // namespace tessera

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "core/scene/scene.h"
 
@@ -10,5 +11,7 @@ namespace tessera {
 
 // Throws SceneError naming the file, the element (e.g. "accessors[3]") and the problem.
 Scene load_gltf_file(const std::string& path);
+// The buffers and images the file names outside itself, relative to its folder.
+std::vector<std::string> gltf_external_files(const std::string& path);
 
 }  // namespace tessera

@@ -1,0 +1,50 @@
+// The farm subcommands (`submit`, `status`, `jobs`, `watch`, `fetch`, `cancel`) as one
+// function each over a coordinator stub: farm_commands.cc binds them to flags, tests call
+// them against an in-process coordinator. Each returns the process exit code and throws
+// FarmError for what the user must be told (an unreachable coordinator, a refused job).
+#pragma once
+
+#include <cstdio>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "client/render_flags.h"
+#include "tessera.grpc.pb.h"
+
+namespace tessera {
+
+class FarmError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct FarmContext {
+  std::string coordinator = "127.0.0.1:7878";  // for messages; the stub is already connected
+  bool json = false;                           // machine-readable output
+  bool quiet = false;                          // no progress bar
+  std::FILE* out = stdout;
+  std::FILE* err = stderr;
+};
+
+std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::string& address);
+
+struct SubmitRequest {
+  RenderFlags flags;
+  int priority = 0;
+  std::string name;
+  bool wait = false;  // show progress until the job ends, then download the image to -f
+};
+int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& request, const FarmContext& c);
+// One job with its times, or every job when `job` is empty.
+int show_status(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c);
+int list_jobs(v1::Tessera::StubInterface& stub, const FarmContext& c);
+// Shows progress until the job ends; exit code 0 when it is DONE.
+int watch_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c);
+// The job's latest image, to each output (.exr or .png), written atomically.
+int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const std::vector<std::string>& outputs,
+                const FarmContext& c);
+int cancel_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c);
+
+}  // namespace tessera

@@ -1,0 +1,120 @@
+#include "core/render/frame_plan.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tessera {
+
+bool pixel_converged(const PixelSums& p, float tolerance) {
+  if (p.n < 2) return false;
+  const double mu = p.lum_sum() / p.n;
+  const double half_width = 1.96 * std::sqrt(p.sample_variance() / p.n);
+  return half_width <= tolerance * mu;
+}
+
+FramePlan::FramePlan(const RenderSettings& settings)
+    : settings_(settings), film_(settings.effective_window()), passes_(settings.passes()) {
+  const Rect w = film_.window();
+  const int ts = std::max(1, settings.tile_size);
+  for (int y = w.y; y < w.y + w.h; y += ts)
+    for (int x = w.x; x < w.x + w.w; x += ts)
+      tiles_.push_back({x, y, std::min(ts, w.x + w.w - x), std::min(ts, w.y + w.h - y)});
+  progress_.resize(tiles_.size());
+  active_.assign(size_t(w.area()), 1);
+  for (uint32_t t = 0; t < tiles_.size(); ++t) ready_.emplace(0, t);
+  for (const auto& [s0, s1] : passes_) samples_total_ += uint64_t(s1 - s0) * uint64_t(w.area());
+  work_total_ = double(samples_total_);
+  if (passes_.empty()) tiles_done_ = uint32_t(tiles_.size());  // nothing to render
+}
+
+std::optional<TileTask> FramePlan::take() {
+  if (ready_.empty()) return std::nullopt;
+  const uint32_t t = ready_.begin()->second;
+  ready_.erase(ready_.begin());
+  TileTask task;
+  task.tile = t;
+  task.pass = progress_[t].passes_done;
+  task.rect = tiles_[t];
+  task.sample_begin = passes_[task.pass].first;
+  task.sample_end = passes_[task.pass].second;
+  if (settings_.adaptive) {
+    const Rect& r = task.rect;
+    const Rect& w = film_.window();
+    task.active.resize(size_t(r.area()));
+    for (int y = 0; y < r.h; ++y)
+      std::copy_n(&active_[size_t(r.y - w.y + y) * w.w + (r.x - w.x)], r.w, &task.active[size_t(y) * r.w]);
+  }
+  return task;
+}
+
+void FramePlan::put_back(uint32_t tile) {
+  if (tile < tiles_.size() && !progress_[tile].finished) ready_.emplace(progress_[tile].passes_done, tile);
+}
+
+bool FramePlan::wants(uint32_t tile, uint32_t pass) const {
+  return tile < tiles_.size() && !progress_[tile].finished && progress_[tile].passes_done == pass;
+}
+
+FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const std::vector<PixelSums>& sums, uint64_t* samples) {
+  if (!wants(tile, pass)) return Merge::kDuplicate;
+  const Rect& r = tiles_[tile];
+  if (sums.size() != size_t(r.area())) return Merge::kInvalid;
+  const uint32_t pass_len = passes_[pass].second - passes_[pass].first;
+  uint64_t n = 0;
+  for (const PixelSums& p : sums) {
+    if (p.n > pass_len) return Merge::kInvalid;
+    n += p.n;
+  }
+  ready_.erase({pass, tile});  // a late result for a tile waiting to be re-issued
+  film_.add_tile(r, sums);
+  ++merges_;
+  samples_merged_ += n;
+  work_done_ += double(pass_len) * double(r.area());
+  if (samples) *samples = n;
+  finish_pass(tile);
+  return Merge::kMerged;
+}
+
+void FramePlan::finish_pass(uint32_t tile) {
+  TileProgress& t = progress_[tile];
+  ++t.passes_done;
+  const Rect& r = tiles_[tile];
+  const Rect& win = film_.window();
+  // Estimated relative error of the tile: sqrt of mean var/(mean^2 + 0.01), the relMSE
+  // the accuracy benchmarks use, predicted from the film's own variance.
+  double rel = 0;
+  bool any_active = false;
+  for (int y = 0; y < r.h; ++y)
+    for (int x = 0; x < r.w; ++x) {
+      const size_t k = size_t(r.y - win.y + y) * win.w + (r.x - win.x + x);
+      const PixelSums& p = film_.pixels()[k];
+      const double mu = p.n ? p.lum_sum() / p.n : 0;
+      rel += p.mean_variance() / (mu * mu + 0.01);
+      if (settings_.adaptive && active_[k] && pixel_converged(p, settings_.adaptive_tolerance)) active_[k] = 0;
+      any_active |= active_[k] != 0;
+    }
+  t.relative_error = float(std::sqrt(rel / double(std::max<int64_t>(1, r.area()))));
+  const bool noise_met = settings_.noise_target > 0 && t.passes_done >= 2 && t.relative_error <= settings_.noise_target;
+  if (t.passes_done >= passes_.size() || !any_active || noise_met) {
+    t.finished = true;
+    ++tiles_done_;
+    for (uint32_t p = t.passes_done; p < passes_.size(); ++p)  // work that will not be done
+      work_total_ -= double(passes_[p].second - passes_[p].first) * double(r.area());
+  } else {
+    ready_.emplace(t.passes_done, tile);
+  }
+}
+
+uint32_t FramePlan::frame_passes_done() const {
+  uint32_t m = uint32_t(passes_.size());
+  for (const TileProgress& t : progress_)
+    if (!t.finished) m = std::min(m, t.passes_done);
+  return m;
+}
+
+double FramePlan::fraction_done() const {
+  if (done()) return 1;
+  return work_total_ > 0 ? std::min(1.0, work_done_ / work_total_) : 0;
+}
+
+}  // namespace tessera

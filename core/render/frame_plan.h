@@ -1,0 +1,93 @@
+// The schedule of one frame, shared by `tessera render` and the coordinator: the one place
+// that decides which samples of which pixels are rendered, and in which order they are
+// added into the film.
+//
+// The frame is cut into tiles and the samples into passes (RenderSettings::passes()). A
+// task is one tile for one pass. A tile's pass k+1 becomes ready only when its pass k was
+// merged, so every pixel's sums are added in pass order, and the film's bits do not depend
+// on threads, workers, task order or timing. After each merge the tile's pixels are
+// checked for convergence (-a) and the tile against the noise target (--noise-target),
+// from merged sums only, so those decisions are reproducible too.
+//
+// Not thread-safe: the local renderer and the coordinator each hold it under their lock.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <set>
+#include <utility>
+#include <vector>
+
+#include "core/render/film.h"
+#include "core/render/settings.h"
+
+namespace tessera {
+
+// Samples [sample_begin, sample_end) of the active pixels of one tile.
+struct TileTask {
+  uint32_t tile = 0, pass = 0;
+  Rect rect;
+  uint32_t sample_begin = 0, sample_end = 0;
+  std::vector<uint8_t> active;  // rect-sized, row-major; empty: every pixel
+};
+
+struct TileProgress {
+  uint32_t passes_done = 0;
+  bool finished = false;
+  float relative_error = 1;  // estimated from the merged film after the last pass
+};
+
+class FramePlan {
+ public:
+  enum class Merge { kMerged, kDuplicate, kInvalid };
+
+  // `settings` must be valid (RenderSettings::validate()).
+  explicit FramePlan(const RenderSettings& settings);
+
+  // The ready tile with the fewest passes merged (the frame refines evenly), taken out of
+  // the ready set; nothing when every unfinished tile is taken.
+  std::optional<TileTask> take();
+  // A taken tile's task was abandoned (its lease ended without a result): ready again.
+  void put_back(uint32_t tile);
+  // Whether a result for (tile, pass) would be merged now (tile and pass in range).
+  bool wants(uint32_t tile, uint32_t pass) const;
+  // Adds a task's sums into the film and advances the tile. kDuplicate: that pass of the
+  // tile was already merged (or the tile is finished); kInvalid: the sums do not fit the
+  // task (size, or more samples in a pixel than the pass has). Nothing changes unless
+  // kMerged. `samples` receives the samples merged.
+  Merge merge(uint32_t tile, uint32_t pass, const std::vector<PixelSums>& sums, uint64_t* samples = nullptr);
+
+  bool done() const { return tiles_done_ == tiles_.size(); }
+  const Film& film() const { return film_; }
+  const RenderSettings& settings() const { return settings_; }
+  const std::vector<Rect>& tiles() const { return tiles_; }
+  const std::vector<std::pair<uint32_t, uint32_t>>& passes() const { return passes_; }
+  const TileProgress& progress(uint32_t tile) const { return progress_[tile]; }
+  uint32_t tiles_done() const { return tiles_done_; }
+  uint32_t frame_passes_done() const;  // passes every unfinished tile has merged
+  uint64_t samples_merged() const { return samples_merged_; }
+  uint64_t samples_total() const { return samples_total_; }  // an upper bound (-a, noise target)
+  uint64_t merges() const { return merges_; }                // the film's version
+  // Fraction of the scheduled work done, 1 when done (adaptive sampling may end early).
+  double fraction_done() const;
+
+ private:
+  void finish_pass(uint32_t tile);
+
+  RenderSettings settings_;
+  Film film_;
+  std::vector<Rect> tiles_;
+  std::vector<std::pair<uint32_t, uint32_t>> passes_;
+  std::vector<TileProgress> progress_;
+  std::vector<uint8_t> active_;                    // per film pixel (adaptive sampling)
+  std::set<std::pair<uint32_t, uint32_t>> ready_;  // (passes merged, tile): O(log tiles)
+  uint32_t tiles_done_ = 0;
+  uint64_t samples_merged_ = 0, samples_total_ = 0, merges_ = 0;
+  double work_done_ = 0, work_total_ = 0;  // pixel-samples scheduled
+};
+
+// CS184 adaptive stopping (format doc 7.1, dividing by the true count): a pixel stops when
+// the 95% confidence half-width of its luminance is within tolerance x mean.
+bool pixel_converged(const PixelSums& p, float tolerance);
+
+}  // namespace tessera

@@ -1,0 +1,40 @@
+// A job: a scene, its frame plan, and what the coordinator knows of its progress.
+#pragma once
+
+#include <cstdint>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "core/render/frame_plan.h"
+#include "wire.h"
+
+namespace tessera {
+
+struct Job {
+  Job(std::string id, const RenderSettings& settings) : id(std::move(id)), plan(settings) {}
+
+  std::string id, name, scene_hash;
+  int32_t priority = 0;
+  uint64_t seq = 0;  // submission order
+  v1::RenderSettings settings_proto;
+  FramePlan plan;
+  std::vector<uint64_t> tile_lease;  // the live task id of each tile, 0 = none
+  v1::JobStatus::State state = v1::JobStatus::QUEUED;
+  std::string error;
+  double submitted = 0, started = 0, finished_at = 0;
+
+  // Progressive images: a snapshot is taken under the coordinator's lock, written outside.
+  uint32_t image_frame_passes = 0;  // frame passes in the last image taken
+  double last_image = -1e9;
+  uint64_t image_seq = 0;       // snapshots taken
+  std::mutex write_mu;          // one writer at a time; guards the two below
+  uint64_t written_seq = 0;     // newest snapshot written (0: none yet)
+  uint64_t written_merges = 0;  // the film version it holds
+
+  bool live() const { return state == v1::JobStatus::QUEUED || state == v1::JobStatus::RUNNING; }
+  // `now` for the elapsed time; `workers` with live leases on it.
+  v1::JobStatus status(double now, uint32_t workers, bool with_tiles) const;
+};
+
+}  // namespace tessera

@@ -1,0 +1,66 @@
+#include "server/lease_table.h"
+
+#include <set>
+
+namespace tessera {
+
+uint64_t LeaseTable::grant(Lease lease) {
+  const uint64_t id = next_++;
+  live_.emplace(id, std::move(lease));
+  return id;
+}
+
+const Lease* LeaseTable::live(uint64_t id) const {
+  auto it = live_.find(id);
+  return it == live_.end() ? nullptr : &it->second;
+}
+
+const Lease* LeaseTable::known(uint64_t id) const {
+  if (const Lease* l = live(id)) return l;
+  auto it = ended_.find(id);
+  return it == ended_.end() ? nullptr : &it->second;
+}
+
+bool LeaseTable::renew(uint64_t id, uint64_t worker, double deadline) {
+  auto it = live_.find(id);
+  if (it == live_.end() || it->second.worker != worker) return false;
+  it->second.deadline = deadline;
+  return true;
+}
+
+std::optional<Lease> LeaseTable::end(uint64_t id) {
+  auto it = live_.find(id);
+  if (it == live_.end()) return std::nullopt;
+  Lease l = it->second;
+  ended_.emplace(id, l);
+  live_.erase(it);
+  return l;
+}
+
+std::vector<std::pair<uint64_t, Lease>> LeaseTable::expire(double now) {
+  std::vector<std::pair<uint64_t, Lease>> out;
+  for (auto it = live_.begin(); it != live_.end();) {
+    if (it->second.deadline >= now) {
+      ++it;
+      continue;
+    }
+    out.emplace_back(it->first, it->second);
+    ended_.insert(*it);
+    it = live_.erase(it);
+  }
+  return out;
+}
+
+void LeaseTable::forget_job(const std::string& job) {
+  for (auto* m : {&live_, &ended_})
+    for (auto it = m->begin(); it != m->end();) it = it->second.job == job ? m->erase(it) : std::next(it);
+}
+
+uint32_t LeaseTable::workers_on(const std::string& job) const {
+  std::set<uint64_t> w;
+  for (const auto& [id, l] : live_)
+    if (l.job == job) w.insert(l.worker);
+  return uint32_t(w.size());
+}
+
+}  // namespace tessera

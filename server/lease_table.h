@@ -1,0 +1,44 @@
+// Leases: which worker renders which task, until when. A lease not renewed by heartbeats
+// expires. Ended leases are remembered while their job lives, so that a late result is
+// still recognised (and merged if nobody else's was).
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace tessera {
+
+struct Lease {
+  std::string job;
+  uint32_t tile = 0, pass = 0;
+  uint64_t worker = 0;
+  double deadline = 0;
+};
+
+class LeaseTable {
+ public:
+  uint64_t grant(Lease lease);  // returns the new task id
+  const Lease* live(uint64_t id) const;
+  // A live or ended lease: whoever returns its result first is merged.
+  const Lease* known(uint64_t id) const;
+  // Extends a live lease of this worker; false if it is not live or not the worker's.
+  bool renew(uint64_t id, uint64_t worker, double deadline);
+  // Ends a live lease (kept as known); nothing if it is not live.
+  std::optional<Lease> end(uint64_t id);
+  // Ends every live lease past its deadline; returns them with their ids.
+  std::vector<std::pair<uint64_t, Lease>> expire(double now);
+  // Ends every live lease of the job, and forgets all its leases.
+  void forget_job(const std::string& job);
+  // Live leases of a job: how many distinct workers hold them.
+  uint32_t workers_on(const std::string& job) const;
+  size_t live_count() const { return live_.size(); }
+
+ private:
+  std::map<uint64_t, Lease> live_, ended_;
+  uint64_t next_ = 1;
+};
+
+}  // namespace tessera

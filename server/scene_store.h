@@ -1,0 +1,30 @@
+// Scenes by content hash: checked when submitted, kept on disk for the coordinator's own
+// check and in memory for the workers that fetch them.
+#pragma once
+
+#include <map>
+#include <mutex>
+#include <string>
+
+#include "scene_bundle.h"
+
+namespace tessera {
+
+class SceneStore {
+ public:
+  explicit SceneStore(std::string dir);
+  // Unpacks the bundle under <dir>/<hash> and loads it as a worker will, so a bad scene is
+  // refused here and never reaches a worker. Returns the content hash. Throws WireError
+  // (unsafe bundle) or SceneError naming the file as the user knows it, not by its path
+  // here; a refused scene leaves nothing on disk. Thread-safe.
+  std::string add(const std::string& main_file, const SceneFiles& files);
+  // Throws std::out_of_range for an unknown hash.
+  v1::SceneBundle get(const std::string& hash) const;
+
+ private:
+  std::string dir_;
+  mutable std::mutex mu_;
+  std::map<std::string, v1::SceneBundle> scenes_;
+};
+
+}  // namespace tessera

@@ -1,0 +1,37 @@
+// The workers the coordinator knows: registered, and heard from recently.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace tessera {
+
+struct WorkerInfo {
+  uint64_t id = 0;
+  std::string name;
+  uint32_t threads = 0;
+  double last_seen = 0;
+  double samples_per_second = 0;  // smoothed over results
+  uint64_t tasks_done = 0;
+  uint32_t leases = 0;  // live leases held
+};
+
+class WorkerRegistry {
+ public:
+  WorkerInfo& add(const std::string& name, uint32_t threads, double now);
+  WorkerInfo* find(uint64_t id);
+  // Forgets workers not heard from for `timeout` seconds; returns their ids. (A forgotten
+  // worker that comes back is told to register again.)
+  std::vector<uint64_t> forget_silent(double now, double timeout);
+  std::vector<WorkerInfo> list() const;
+  // A finished task: its render rate feeds the worker's smoothed speed.
+  void record_result(uint64_t id, uint64_t samples, double seconds, double now);
+
+ private:
+  std::map<uint64_t, WorkerInfo> workers_;
+  uint64_t next_ = 1;
+};
+
+}  // namespace tessera
