@@ -4,17 +4,13 @@
 #include <unistd.h>
 
 #include <chrono>
-#include <condition_variable>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <future>
-#include <mutex>
-#include <optional>
-#include <sstream>
 #include <thread>
 
 #include "core/scene/load.h"
+#include "core/util/thread_pool.h"
 #include "scene_bundle.h"
 
 namespace tessera {
@@ -34,6 +30,31 @@ double now_seconds() {
 }
 
 }  // namespace
+
+struct Worker::Prepared {
+  std::shared_ptr<Scene> scene;  // outlives the renderer, which refers to it
+  std::unique_ptr<TileRenderer> renderer;
+};
+
+struct Worker::Held {
+  v1::Task task;
+  std::shared_ptr<const Prepared> prepared;
+  Rect rect;
+  const uint8_t* mask = nullptr;  // into task.active; null: every pixel
+  int next_row = 0, rows_done = 0;
+  std::vector<PixelSums> sums;
+  TileStats stats;
+  std::atomic<bool> cancel{false};
+  double first_row = 0, last_row = 0;  // steady seconds
+  double busy = 0;                     // thread-seconds spent on it
+  double row_samples(int row) const {  // for queue sizing
+    const uint32_t n = task.sample_end() - task.sample_begin();
+    if (!mask) return double(rect.w) * n;
+    int active = 0;
+    for (int x = 0; x < rect.w; ++x) active += mask[size_t(row) * rect.w + x] != 0;
+    return double(active) * n;
+  }
+};
 
 Worker::Worker(WorkerOptions options) : options_(std::move(options)) {
   if (options_.threads <= 0) options_.threads = int(std::max(1u, std::thread::hardware_concurrency()));
@@ -72,7 +93,7 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
       heartbeat_ms_ = std::max(50u, resp.heartbeat_interval_ms());
       backoff_ = 0.1;
       if (options_.verbose)
-        std::fprintf(stderr, "tessera-worker: registered as %llu\n", (unsigned long long)worker_id_);
+        std::fprintf(stderr, "tessera-worker: registered as %llu\n", (unsigned long long)worker_id_.load());
       return true;
     }
     if (options_.verbose)
@@ -104,50 +125,157 @@ const Scene& Worker::scene_for(const std::string& hash) {
     main = unpack_bundle(dir.string(), bundle.main_file(), bundle.files());
     std::ofstream(marker) << bundle.main_file() << "\n";
   }
-  auto scene = std::make_unique<Scene>(load_scene(main));
-  const Scene& ref = *scene;
-  scenes_[hash] = std::move(scene);
-  return ref;
+  auto scene = std::make_shared<Scene>(load_scene(main));
+  return *(scenes_[hash] = std::move(scene));
 }
 
-const TileRenderer& Worker::renderer_for(const v1::Task& task) {
+std::shared_ptr<const Worker::Prepared> Worker::prepare(const v1::Task& task) {
   const std::string key = task.scene_hash() + task.settings().SerializeAsString();
-  if (renderer_ && key == renderer_key_) return *renderer_;
-  renderer_.reset();
-  const Scene& scene = scene_for(task.scene_hash());
-  renderer_ = std::make_unique<TileRenderer>(scene, from_proto(task.settings()));
-  renderer_key_ = key;
-  return *renderer_;
+  if (auto it = prepared_.find(key); it != prepared_.end()) return it->second;
+  auto p = std::make_shared<Prepared>();
+  scene_for(task.scene_hash());
+  p->scene = scenes_.at(task.scene_hash());
+  p->renderer = std::make_unique<TileRenderer>(*p->scene, from_proto(task.settings()));
+  // A few renderers stay built (jobs alternate by priority); tasks in flight hold theirs.
+  prepared_[key] = p;
+  prepared_order_.push_back(key);
+  if (prepared_order_.size() > 4) {
+    prepared_.erase(prepared_order_.front());
+    prepared_order_.pop_front();
+  }
+  return p;
 }
 
-bool Worker::render(const v1::Task& task, std::vector<PixelSums>* sums, TileStats* stats,
-                    const std::atomic<bool>& abort) {
-  const TileRenderer& r = renderer_for(task);
-  const Rect tile = from_proto(task.tile());
-  if (!task.active().empty() && task.active().size() != size_t(tile.area())) throw WireError("active mask size");
-  const uint8_t* mask = task.active().empty() ? nullptr : reinterpret_cast<const uint8_t*>(task.active().data());
-  // Horizontal strips, one per thread; pixels are independent, so the concatenation is
-  // exactly the tile rendered in one piece.
-  const int n = std::max(1, std::min(options_.threads, tile.h));
-  std::vector<std::vector<PixelSums>> parts(static_cast<size_t>(n));
-  std::vector<TileStats> part_stats(static_cast<size_t>(n));
-  std::vector<std::thread> pool;
-  for (int i = 0; i < n; ++i) {
-    const int y0 = tile.h * i / n, y1 = tile.h * (i + 1) / n;
-    pool.emplace_back([&, i, y0, y1] {
-      const Rect strip{tile.x, tile.y + y0, tile.w, y1 - y0};
-      parts[size_t(i)] = r.render(strip, task.sample_begin(), task.sample_end(),
-                                  mask ? mask + size_t(y0) * tile.w : nullptr, &part_stats[size_t(i)], &abort);
-    });
+bool Worker::wants_more_locked() const {
+  if (held_.size() >= size_t(options_.max_tasks)) return false;
+  if (queued_rows_ < 2 * uint64_t(options_.threads)) return true;
+  const double rate = samples_per_thread_second_ * options_.threads;
+  return rate > 0 && queued_samples_ < rate * options_.lookahead_seconds;
+}
+
+void Worker::render_loop() {
+  std::unique_lock<std::mutex> lock(mu_);
+  while (true) {
+    work_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
+    if (stopping_) return;
+    const std::shared_ptr<Held> h = queue_.front();
+    const int row = h->next_row++;
+    if (h->next_row == h->rect.h) queue_.pop_front();
+    --queued_rows_;
+    queued_samples_ -= h->row_samples(row);
+    more_.notify_one();
+    lock.unlock();
+    const double t0 = now_seconds();
+    TileStats stats;
+    const Rect r{h->rect.x, h->rect.y + row, h->rect.w, 1};
+    const std::vector<PixelSums> sums =
+        h->prepared->renderer->render(r, h->task.sample_begin(), h->task.sample_end(),
+                                      h->mask ? h->mask + size_t(row) * h->rect.w : nullptr, &stats, &h->cancel);
+    const double t1 = now_seconds();
+    lock.lock();
+    busy_thread_seconds_ += t1 - t0;
+    h->busy += t1 - t0;
+    h->first_row = h->rows_done == 0 ? t0 : std::min(h->first_row, t0);
+    h->last_row = std::max(h->last_row, t1);
+    std::copy(sums.begin(), sums.end(), h->sums.begin() + ptrdiff_t(row) * h->rect.w);
+    h->stats.add(stats);
+    if (++h->rows_done == h->rect.h && !h->cancel) {
+      if (h->busy > 0) {
+        const double rate = double(h->stats.samples) / h->busy;
+        samples_per_thread_second_ =
+            samples_per_thread_second_ > 0 ? 0.7 * samples_per_thread_second_ + 0.3 * rate : rate;
+      }
+      outbox_.push_back(h);
+      outbox_cv_.notify_one();
+    }
   }
-  for (std::thread& t : pool) t.join();
-  if (abort) return false;
-  sums->clear();
-  for (int i = 0; i < n; ++i) {
-    sums->insert(sums->end(), parts[size_t(i)].begin(), parts[size_t(i)].end());
-    stats->add(part_stats[size_t(i)]);
+}
+
+void Worker::send_loop() {
+  std::unique_lock<std::mutex> lock(mu_);
+  while (true) {
+    outbox_cv_.wait(lock, [this] { return stopping_ || !outbox_.empty(); });
+    if (outbox_.empty()) return;  // stopping, and everything finished was sent
+    const std::shared_ptr<Held> h = outbox_.front();
+    outbox_.pop_front();
+    v1::TaskResult result;
+    result.set_worker_id(worker_id_);
+    result.set_task_id(h->task.task_id());
+    result.set_busy_thread_seconds(busy_thread_seconds_);
+    result.set_thread_seconds(options_.threads * (now_seconds() - registered_at_));
+    lock.unlock();
+    result.set_raw_size(uint32_t(h->sums.size() * kBytesPerPixel));
+    result.set_sums_zstd(encode_sums(h->sums));
+    result.set_samples(h->stats.samples);
+    result.set_rays(h->stats.rays.rays + h->stats.rays.shadow_rays);
+    result.set_nan_samples(h->stats.nan_samples);
+    result.set_render_seconds(h->last_row - h->first_row);
+    bool sent = false;
+    for (int attempt = 0; attempt < 5 && !sent; ++attempt) {
+      v1::ResultAck ack;
+      const grpc::Status st = stub_->SubmitResult(context(30).get(), result, &ack);
+      sent = st.ok();
+      if (!sent) {
+        if (options_.verbose) std::fprintf(stderr, "tessera-worker: submit: %s\n", st.error_message().c_str());
+        std::this_thread::sleep_for(std::chrono::milliseconds(100 << attempt));
+      }
+    }
+    lock.lock();
+    if (sent) ++tasks_done_;
+    held_.erase(h->task.task_id());  // unsent: its lease expires and another worker renders it
+    more_.notify_one();
   }
-  return true;
+}
+
+void Worker::drop_locked(uint64_t task_id) {
+  auto it = held_.find(task_id);
+  if (it == held_.end()) return;
+  const std::shared_ptr<Held> h = it->second;
+  h->cancel = true;
+  for (auto q = queue_.begin(); q != queue_.end(); ++q)
+    if (*q == h) {
+      for (int row = h->next_row; row < h->rect.h; ++row) {
+        --queued_rows_;
+        queued_samples_ -= h->row_samples(row);
+      }
+      queue_.erase(q);
+      break;
+    }
+  held_.erase(it);
+  more_.notify_one();
+}
+
+void Worker::keep_leases(const std::atomic<bool>& stop) {
+  std::unique_lock<std::mutex> lock(mu_);
+  double due = now_seconds() + heartbeat_ms_ / 1000.0;
+  while (!stopping_) {
+    if (stop) {  // a signal: abandon unfinished work at once (renders check per pixel)
+      stopping_ = true;
+      for (auto& [id, h] : held_) h->cancel = true;
+      work_.notify_all();
+      more_.notify_all();
+      outbox_cv_.notify_all();
+      return;
+    }
+    if (now_seconds() >= due) {
+      std::vector<uint64_t> ids;
+      for (const auto& [id, h] : held_) ids.push_back(id);
+      lock.unlock();
+      std::vector<uint64_t> refused;
+      for (uint64_t id : ids) {
+        v1::HeartbeatRequest hb;
+        hb.set_worker_id(worker_id_);
+        hb.set_task_id(id);
+        v1::HeartbeatResponse hr;
+        if (stub_->Heartbeat(context(5).get(), hb, &hr).ok() && !hr.keep_going()) refused.push_back(id);
+      }
+      lock.lock();
+      for (uint64_t id : refused)
+        if (auto it = held_.find(id); it != held_.end() && it->second->rows_done < it->second->rect.h) drop_locked(id);
+      due = now_seconds() + heartbeat_ms_ / 1000.0;
+    }
+    stopped_cv_.wait_for(lock, std::chrono::milliseconds(10));  // also polls `stop` (set by a signal)
+  }
 }
 
 void Worker::release(uint64_t task_id) {
@@ -158,132 +286,74 @@ void Worker::release(uint64_t task_id) {
   stub_->ReleaseTask(context(2).get(), rel, &rr);
 }
 
-std::optional<v1::Task> Worker::fetch_task(grpc::Status* status, uint32_t* retry_ms) {
-  v1::GetTaskRequest req;
-  req.set_worker_id(worker_id_);
-  v1::GetTaskResponse resp;
-  *status = stub_->GetTask(context(10).get(), req, &resp);
-  *retry_ms = resp.retry_after_ms();
-  if (!status->ok() || !resp.has_task()) return std::nullopt;
-  return resp.task();
-}
-
-bool Worker::submit(const v1::TaskResult& result, const std::atomic<bool>& stop) {
-  for (int attempt = 0; attempt < 5 && !stop; ++attempt) {
-    v1::ResultAck ack;
-    const grpc::Status rs = stub_->SubmitResult(context(30).get(), result, &ack);
-    if (rs.ok()) return true;
-    if (options_.verbose) std::fprintf(stderr, "tessera-worker: submit: %s\n", rs.error_message().c_str());
-    std::this_thread::sleep_for(std::chrono::milliseconds(100 << attempt));
-  }
-  return false;
-}
-
 void Worker::run(const std::atomic<bool>& stop) {
   if (!register_worker(stop)) return;
-  // While a tile renders, the next task is fetched and the previous result is sent, so
-  // the cores never wait for a round trip to the coordinator.
-  std::optional<v1::Task> next;
-  std::future<bool> sending;
-  while (!stop) {
-    std::optional<v1::Task> current = std::move(next);
-    next.reset();
-    if (!current) {
-      grpc::Status st;
-      uint32_t retry_ms = 0;
-      current = fetch_task(&st, &retry_ms);
+  registered_at_ = now_seconds();
+  stopping_ = false;
+  std::thread keeper([&] { keep_leases(stop); });
+  std::thread sender([this] { send_loop(); });
+  {
+    ThreadPool pool(options_.threads);
+    for (int i = 0; i < pool.size(); ++i) pool.run([this] { render_loop(); });
+    while (!stop) {
+      {
+        std::unique_lock<std::mutex> lock(mu_);
+        more_.wait_for(lock, std::chrono::milliseconds(50), [&] { return stopping_ || wants_more_locked(); });
+        if (stopping_ || !wants_more_locked()) continue;
+      }
+      v1::GetTaskRequest req;
+      req.set_worker_id(worker_id_);
+      v1::GetTaskResponse resp;
+      const grpc::Status st = stub_->GetTask(context(10).get(), req, &resp);  // long-polls when there is no work
       if (!st.ok()) {
         if (options_.verbose) std::fprintf(stderr, "tessera-worker: get task: %s\n", st.error_message().c_str());
-        // Unknown worker (the coordinator restarted) or unreachable: register again.
+        // Unknown worker (the coordinator restarted) or unreachable: its leases are gone.
+        {
+          std::lock_guard<std::mutex> lock(mu_);
+          while (!held_.empty()) drop_locked(held_.begin()->first);
+        }
         sleep_backoff(stop);
         if (!register_worker(stop)) break;
         continue;
       }
       backoff_ = 0.1;
-      if (!current) {
-        const auto until = now_seconds() + std::max(10u, retry_ms) / 1000.0;
-        while (!stop && now_seconds() < until) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+      if (!resp.has_task()) continue;
+      auto h = std::make_shared<Held>();
+      h->task = resp.task();
+      try {
+        h->rect = from_proto(h->task.tile());
+        if (!h->task.active().empty() && h->task.active().size() != size_t(h->rect.area()))
+          throw WireError("active mask size");
+        if (h->rect.area() <= 0) throw WireError("empty tile");
+        h->prepared = prepare(h->task);
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "tessera-worker: task %llu: %s\n", (unsigned long long)h->task.task_id(), e.what());
+        release(h->task.task_id());  // another worker may manage; this one backs off
+        sleep_backoff(stop);
         continue;
       }
+      if (!h->task.active().empty()) h->mask = reinterpret_cast<const uint8_t*>(h->task.active().data());
+      h->sums.resize(size_t(h->rect.area()));
+      std::lock_guard<std::mutex> lock(mu_);
+      held_[h->task.task_id()] = h;
+      queue_.push_back(h);
+      queued_rows_ += uint64_t(h->rect.h);
+      for (int row = 0; row < h->rect.h; ++row) queued_samples_ += h->row_samples(row);
+      work_.notify_all();
     }
-    const v1::Task& task = *current;
-    std::atomic<bool> abort{false};
-    std::atomic<uint64_t> prefetched{0};
-    bool done = false;
-    std::mutex mu;
-    std::condition_variable cv;
-    std::future<std::optional<v1::Task>> prefetch = std::async(std::launch::async, [&]() -> std::optional<v1::Task> {
-      grpc::Status st;
-      uint32_t retry_ms = 0;
-      std::optional<v1::Task> t = fetch_task(&st, &retry_ms);
-      if (t) prefetched = t->task_id();
-      return t;
-    });
-    // Heartbeats keep the leases (current and prefetched) while rendering; a "no" for the
-    // current task (cancelled, reassigned) or a stop request aborts the render. The
-    // thread wakes at once when the render ends.
-    std::thread heart([&] {
-      std::unique_lock<std::mutex> lock(mu);
-      double due = now_seconds() + heartbeat_ms_ / 1000.0;
-      while (!done) {
-        if (stop) abort = true;
-        if (now_seconds() >= due) {
-          lock.unlock();
-          for (uint64_t id : {task.task_id(), prefetched.load()}) {
-            if (!id) continue;
-            v1::HeartbeatRequest hb;
-            hb.set_worker_id(worker_id_);
-            hb.set_task_id(id);
-            v1::HeartbeatResponse hr;
-            if (stub_->Heartbeat(context(5).get(), hb, &hr).ok() && !hr.keep_going() && id == task.task_id())
-              abort = true;
-          }
-          due = now_seconds() + heartbeat_ms_ / 1000.0;
-          lock.lock();
-          continue;
-        }
-        cv.wait_for(lock, std::chrono::milliseconds(10));  // also polls `stop` (set by a signal)
-      }
-    });
-    std::vector<PixelSums> sums;
-    TileStats stats;
-    bool ok = false;
-    const double t0 = now_seconds();
-    try {
-      ok = render(task, &sums, &stats, abort);
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "tessera-worker: task %llu: %s\n", (unsigned long long)task.task_id(), e.what());
-    }
-    const double seconds = now_seconds() - t0;
-    {
-      std::lock_guard<std::mutex> lock(mu);
-      done = true;
-    }
-    cv.notify_all();
-    heart.join();
-    if (!ok) {  // abandoned: give the lease back so another worker starts at once
-      release(task.task_id());
-      next = prefetch.get();
-      if (!stop) sleep_backoff(stop);
-      continue;
-    }
-    auto result = std::make_shared<v1::TaskResult>();
-    result->set_worker_id(worker_id_);
-    result->set_task_id(task.task_id());
-    result->set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
-    result->set_sums_zstd(encode_sums(sums));
-    result->set_samples(stats.samples);
-    result->set_rays(stats.rays.rays + stats.rays.shadow_rays);
-    result->set_nan_samples(stats.nan_samples);
-    result->set_render_seconds(seconds);
-    if (sending.valid() && sending.get()) ++tasks_done_;
-    sending = std::async(std::launch::async, [this, result, &stop] { return submit(*result, stop); });
-    // Only now wait for the prefetched task: when there is no work left it long-polls,
-    // and the result must not wait behind it.
-    next = prefetch.get();
-  }
-  if (sending.valid() && sending.get()) ++tasks_done_;
-  if (next) release(next->task_id());
+    std::lock_guard<std::mutex> lock(mu_);
+    stopping_ = true;
+    for (auto& [id, h] : held_) h->cancel = true;
+    work_.notify_all();
+    outbox_cv_.notify_all();
+    stopped_cv_.notify_all();
+  }  // joins the render threads
+  keeper.join();
+  sender.join();  // finished results are sent first
+  // What was not finished goes back, so another worker starts on it at once.
+  for (const auto& [id, h] : held_) release(id);
+  held_.clear();
+  queue_.clear();
 }
 
 }  // namespace tessera
