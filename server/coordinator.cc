@@ -260,7 +260,8 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
 
 std::optional<Coordinator::ImageSnapshot> Coordinator::after_merge_locked(Job& job, const v1::TaskResult& result,
                                                                           double now) {
-  workers_.record_result(result.worker_id(), result.samples(), result.render_seconds(), now);
+  workers_.record_result(result.worker_id(), result.samples(), result.render_seconds(), result.busy_thread_seconds(),
+                         result.thread_seconds(), now);
   const bool done = job.plan.done();
   if (done) {
     job.state = v1::JobStatus::DONE;
@@ -378,6 +379,11 @@ void Coordinator::wait_for_work(double timeout) const {
 std::vector<WorkerInfo> Coordinator::workers() const {
   std::lock_guard<std::mutex> lock(mu_);
   return workers_.list();
+}
+
+double Coordinator::utilization() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return workers_.utilization();
 }
 
 CoordinatorCounters Coordinator::counters() const {

@@ -89,6 +89,7 @@ class Coordinator {
   v1::JobStatus wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const;
 
   std::vector<WorkerInfo> workers() const;
+  double utilization() const;  // of every live worker's render threads, recently
   CoordinatorCounters counters() const;
   double uptime() const;
   const CoordinatorOptions& options() const { return options_; }

@@ -106,6 +106,7 @@ void StatusHttp::stop() {
 std::string StatusHttp::status_json() const {
   nlohmann::json j;
   j["uptime_seconds"] = c_.uptime();
+  j["utilization"] = c_.utilization();
   j["jobs"] = nlohmann::json::array();
   for (const v1::JobStatus& s : c_.list()) j["jobs"].push_back(to_json(s));
   j["workers"] = nlohmann::json::array();
@@ -116,7 +117,10 @@ std::string StatusHttp::status_json() const {
                             {"samples_per_second", w.samples_per_second},
                             {"tasks_done", w.tasks_done},
                             {"leases", w.leases},
-                            {"active", w.leases != 0}});
+                            {"active", w.leases != 0},
+                            {"busy_thread_seconds", w.busy_thread_seconds},
+                            {"thread_seconds", w.thread_seconds},
+                            {"utilization", w.utilization}});
   }
   return j.dump();
 }
@@ -154,6 +158,18 @@ std::string StatusHttp::metrics_text() const {
   gauge("tessera_workers", "Live workers (heard from within the worker timeout).", double(workers.size()));
   gauge("tessera_workers_busy", "Workers holding a lease.", double(busy));
   gauge("tessera_uptime_seconds", "Seconds since start.", c_.uptime());
+  gauge("tessera_workers_utilization", "Busy over available render-thread time of all workers, last seconds.",
+        c_.utilization());
+  auto per_worker = [&](const char* name, const char* type, const char* help, auto value) {
+    m << "# HELP " << name << ' ' << help << "\n# TYPE " << name << ' ' << type << '\n';
+    for (const auto& w : workers) m << name << "{worker=\"" << w.id << "\"} " << value(w) << '\n';
+  };
+  per_worker("tessera_worker_utilization", "gauge", "Busy over available render-thread time, last seconds.",
+             [](const WorkerInfo& w) { return w.utilization; });
+  per_worker("tessera_worker_busy_thread_seconds_total", "counter", "Render-thread time spent rendering.",
+             [](const WorkerInfo& w) { return w.busy_thread_seconds; });
+  per_worker("tessera_worker_thread_seconds_total", "counter", "Render threads x wall time since registering.",
+             [](const WorkerInfo& w) { return w.thread_seconds; });
   return m.str();
 }
 

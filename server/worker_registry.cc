@@ -1,5 +1,7 @@
 #include "server/worker_registry.h"
 
+#include <algorithm>
+
 namespace tessera {
 
 WorkerInfo& WorkerRegistry::add(const std::string& name, uint32_t threads, double now) {
@@ -35,7 +37,8 @@ std::vector<WorkerInfo> WorkerRegistry::list() const {
   return out;
 }
 
-void WorkerRegistry::record_result(uint64_t id, uint64_t samples, double seconds, double now) {
+void WorkerRegistry::record_result(uint64_t id, uint64_t samples, double seconds, double busy_thread_seconds,
+                                   double thread_seconds, double now) {
   WorkerInfo* w = find(id);
   if (!w) return;
   w->last_seen = now;
@@ -44,6 +47,28 @@ void WorkerRegistry::record_result(uint64_t id, uint64_t samples, double seconds
     const double rate = double(samples) / seconds;
     w->samples_per_second = w->samples_per_second > 0 ? 0.8 * w->samples_per_second + 0.2 * rate : rate;
   }
+  // Reports only grow; one that does not (a restarted worker process reusing an id
+  // cannot, ids are never reused) is ignored.
+  if (!(thread_seconds >= w->thread_seconds) || !(busy_thread_seconds >= w->busy_thread_seconds)) return;
+  constexpr double kWindowSeconds = 5;
+  if (w->window_start == 0 || now - w->window_start > kWindowSeconds) {
+    w->window_busy = w->busy_thread_seconds;
+    w->window_threads = w->thread_seconds;
+    w->window_start = now;
+  }
+  w->busy_thread_seconds = busy_thread_seconds;
+  w->thread_seconds = thread_seconds;
+  const double dt = w->thread_seconds - w->window_threads;
+  if (dt > 0) w->utilization = std::min(1.0, (w->busy_thread_seconds - w->window_busy) / dt);
+}
+
+double WorkerRegistry::utilization() const {
+  double busy = 0, threads = 0;
+  for (const auto& [id, w] : workers_) {
+    busy += w.busy_thread_seconds - w.window_busy;
+    threads += w.thread_seconds - w.window_threads;
+  }
+  return threads > 0 ? std::min(1.0, busy / threads) : 0;
 }
 
 }  // namespace tessera

@@ -16,6 +16,12 @@ struct WorkerInfo {
   double samples_per_second = 0;  // smoothed over results
   uint64_t tasks_done = 0;
   uint32_t leases = 0;  // live leases held
+  // Render-thread time as the worker reports it with each result, since it registered:
+  // busy (rendering) and threads x wall. Utilization is their ratio over the last few
+  // seconds of reports, so a worker idle between jobs does not dilute a busy one.
+  double busy_thread_seconds = 0, thread_seconds = 0;
+  double utilization = 0;
+  double window_busy = 0, window_threads = 0, window_start = 0;  // the window's first report
 };
 
 class WorkerRegistry {
@@ -26,8 +32,12 @@ class WorkerRegistry {
   // worker that comes back is told to register again.)
   std::vector<uint64_t> forget_silent(double now, double timeout);
   std::vector<WorkerInfo> list() const;
-  // A finished task: its render rate feeds the worker's smoothed speed.
-  void record_result(uint64_t id, uint64_t samples, double seconds, double now);
+  // A finished task: its render rate feeds the worker's smoothed speed; its thread-time
+  // counters the utilization.
+  void record_result(uint64_t id, uint64_t samples, double seconds, double busy_thread_seconds, double thread_seconds,
+                     double now);
+  // Busy over available render-thread time of every worker, over their windows.
+  double utilization() const;
 
  private:
   std::map<uint64_t, WorkerInfo> workers_;

@@ -229,6 +229,12 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   EXPECT_EQ(s["jobs"][0]["state"], "DONE");
   EXPECT_EQ(s["workers"].size(), 1u);
   EXPECT_GT(s["workers"][0]["samples_per_second"].get<double>(), 0);
+  // The worker reported its render threads' time: busy part of it, never more than all.
+  const double busy = s["workers"][0]["busy_thread_seconds"], total = s["workers"][0]["thread_seconds"];
+  EXPECT_GT(busy, 0);
+  EXPECT_LE(busy, total);
+  EXPECT_GT(s["workers"][0]["utilization"].get<double>(), 0);
+  EXPECT_LE(s["workers"][0]["utilization"].get<double>(), 1);
   const nlohmann::json j = get_json("/api/jobs/" + id);
   EXPECT_EQ(j["tiles"].size(), size_t(4 * 3));  // 64x48 in 16-pixel tiles
   EXPECT_EQ(get_json("/api/jobs/no-such-job"), nullptr);
@@ -240,12 +246,14 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   for (std::string line; std::getline(lines, line);) {
     if (line.empty() || line[0] == '#') continue;
     std::smatch m;
-    ASSERT_TRUE(std::regex_match(line, m, std::regex(R"(([a-z_]+)(\{[a-z_]+="[a-z]+"\})? (-?[0-9.e+-]+))"))) << line;
+    ASSERT_TRUE(std::regex_match(line, m, std::regex(R"(([a-z_]+)(\{[a-z_]+="[a-z0-9]+"\})? (-?[0-9.e+-]+))"))) << line;
     std::stod(m[3]);
     ++samples;
   }
   EXPECT_GT(samples, 10);
   EXPECT_NE(metrics.find("tessera_jobs{state=\"done\"} 1"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_worker_utilization{worker=\""), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_workers_utilization "), std::string::npos) << metrics;
   const auto png = cli.Get(("/jobs/" + id + "/preview.png").c_str());
   ASSERT_TRUE(png);
   EXPECT_EQ(png->status, 200);

@@ -361,5 +361,42 @@ TEST_F(CoordinatorTest, ImagesGoToTheSinkAndHoldTheLocalFilmsExactBits) {
 
 TEST_F(CoordinatorTest, UnknownWorkerMustRegisterAgain) { EXPECT_THROW(c->get_task(12345), RequestError); }
 
+// Workers report render-thread time with results; utilization is busy over available time
+// in a recent window. Silent workers are forgotten, so gauges count live workers only.
+TEST_F(CoordinatorTest, UtilizationFromReportsAndSilentWorkersAreForgotten) {
+  c->submit(request(job_settings()));
+  const uint64_t w = worker(), idle = worker();
+  v1::TaskResult r = render_task(c->get_task(w).task(), w);
+  r.set_busy_thread_seconds(1.0);
+  r.set_thread_seconds(2.0);
+  ASSERT_TRUE(c->submit_result(r).accepted());
+  for (const WorkerInfo& info : c->workers())
+    if (info.id == w) EXPECT_NEAR(info.utilization, 0.5, 1e-12);  // since it registered
+  t += 6;  // past the 5 s window: the next report starts a new one from the last
+  r = render_task(c->get_task(w).task(), w);
+  r.set_busy_thread_seconds(2.9);  // of the 2 thread-seconds since the last report, 95% busy
+  r.set_thread_seconds(4.0);
+  ASSERT_TRUE(c->submit_result(r).accepted());
+  double util = -1;
+  for (const WorkerInfo& info : c->workers())
+    if (info.id == w) util = info.utilization;
+  EXPECT_NEAR(util, 0.95, 1e-12);
+  EXPECT_NEAR(c->utilization(), 0.95, 1e-12);
+  // Reports that go backwards are not believed.
+  r = render_task(c->get_task(w).task(), w);
+  r.set_busy_thread_seconds(0.5);
+  r.set_thread_seconds(1.0);
+  ASSERT_TRUE(c->submit_result(r).accepted());
+  EXPECT_NEAR(c->utilization(), 0.95, 1e-12);
+  EXPECT_EQ(c->workers().size(), 2u);
+  t += options().worker_timeout_seconds / 2;
+  c->get_task(w);  // w is heard from; idle is not
+  t += options().worker_timeout_seconds / 2 + 1;
+  c->expire_leases();
+  ASSERT_EQ(c->workers().size(), 1u);
+  EXPECT_EQ(c->workers()[0].id, w);
+  EXPECT_THROW(c->get_task(idle), RequestError);  // told to register again
+}
+
 }  // namespace
 }  // namespace tessera
