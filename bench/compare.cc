@@ -3,9 +3,11 @@
 //   relmse   mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01)
 //   regions  mean RGB of each named rectangle, in both images (--regions FILE.json, a map
 //            of name -> [x, y, w, h] in pixels, row 0 at the top)
+//   identical  every channel of both images (R, G, B, spp, variance) equal bit for bit
 // Usage: tessera_compare IMAGE.exr REFERENCE.exr [--regions FILE.json]
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
@@ -36,7 +38,14 @@ int main(int argc, char** argv) {
         ++n;
       }
     }
-    nlohmann::json out{{"rmse", std::sqrt(se / n)}, {"relmse", rel / n}, {"nonfinite", nonfinite}};
+    bool identical = a.channels.size() == r.channels.size();
+    for (const auto& [name, values] : a.channels) {
+      auto other = r.channels.find(name);
+      identical = identical && other != r.channels.end() && values.size() == other->second.size() &&
+                  std::memcmp(values.data(), other->second.data(), values.size() * sizeof(float)) == 0;
+    }
+    nlohmann::json out{
+        {"rmse", std::sqrt(se / n)}, {"relmse", rel / n}, {"nonfinite", nonfinite}, {"identical", identical}};
     for (int i = 3; i + 1 < argc; ++i) {
       if (std::string(argv[i]) != "--regions") continue;
       std::ifstream f(argv[i + 1]);

@@ -1,5 +1,8 @@
 #include "server/grpc_services.h"
 
+#include <chrono>
+#include <thread>
+
 namespace tessera {
 namespace {
 
@@ -35,12 +38,19 @@ grpc::Status ClientService::ListJobs(grpc::ServerContext*, const v1::ListJobsReq
 }
 grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* req,
                                      grpc::ServerWriter<v1::JobStatus>* w) {
+  // At most kUpdatesPerSecond updates (and always the last): a status with every tile on
+  // every merge cost the render farm's cores more than the watcher gains.
+  constexpr double kUpdatesPerSecond = 4;
   return guarded([&] {
     v1::JobStatus s = c_.status(req->id(), true);
     while (!ctx->IsCancelled()) {
       if (!w->Write(s)) return;
       if (s.state() != v1::JobStatus::QUEUED && s.state() != v1::JobStatus::RUNNING) return;
+      const auto next = std::chrono::steady_clock::now() + std::chrono::duration<double>(1 / kUpdatesPerSecond);
       s = c_.wait_for_change(req->id(), s.samples_done(), 0.5);
+      if (s.state() != v1::JobStatus::QUEUED && s.state() != v1::JobStatus::RUNNING) continue;
+      std::this_thread::sleep_until(next);
+      s = c_.status(req->id(), true);
     }
   });
 }

@@ -1,0 +1,170 @@
+#!/usr/bin/env python3
+"""The farm against a local render of the same frame on the same cores.
+
+On whatever machine it runs: renders one frame with `tessera render -t N` (N = every core)
+and through a local farm (a coordinator on 127.0.0.1 and W workers of T threads, W x T = N)
+for every split of the cores, alternating, REPEAT times. Prints per split the median
+seconds of the whole commands, farm/local, the workers' render-thread utilization during
+the job (busy thread-seconds over threads x the job's elapsed time), and whether the farm
+image equals the local one bit for bit. Exits non-zero if an image differs.
+
+Usage: bench/farm_scale.py [--bin DIR] [--scene FILE] [--cores N] [--splits 1x2,2x1]
+                           [--repeat R] [--json FILE] [--markdown] [-- RENDER FLAGS...]
+Default flags: -r 480 360 -s 64 (our Cornell box).
+"""
+import argparse
+import json
+import os
+import re
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def splits_of(n):
+    return [(w, n // w) for w in range(1, n + 1) if n % w == 0]
+
+
+class Farm:
+    """A coordinator and W workers of T threads on loopback, started and stopped by us."""
+
+    def __init__(self, bin_dir, workers, threads, tmp):
+        self.procs = []
+        os.makedirs(tmp, exist_ok=True)
+        data = os.path.join(tmp, "data")
+        out = open(os.path.join(tmp, "coordinator.out"), "w+")
+        self.procs.append(subprocess.Popen(
+            [os.path.join(bin_dir, "tessera-coordinator"), "--listen", "127.0.0.1:0", "--http", "127.0.0.1:0",
+             "--data", data], stdout=out, stderr=subprocess.DEVNULL))
+        self.grpc = self.http = None
+        for _ in range(200):
+            out.seek(0)
+            text = out.read()
+            g = re.search(r"grpc listening on (\S+)", text)
+            h = re.search(r"http listening on (\S+)", text)
+            if g and h:
+                self.grpc, self.http = g.group(1), h.group(1)
+                break
+            time.sleep(0.05)
+        if not self.grpc:
+            self.stop()
+            raise RuntimeError("the coordinator did not start")
+        for i in range(workers):
+            self.procs.append(subprocess.Popen(
+                [os.path.join(bin_dir, "tessera-worker"), "--coordinator", self.grpc, "--threads", str(threads),
+                 "--cache", os.path.join(tmp, f"cache{i}"), "--name", f"w{i}"],
+                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+        for _ in range(200):  # every worker registered before the clock starts
+            if len(self.status()["workers"]) == workers:
+                return
+            time.sleep(0.05)
+        self.stop()
+        raise RuntimeError("the workers did not register")
+
+    def status(self):
+        with urllib.request.urlopen(f"http://{self.http}/api/status", timeout=10) as r:
+            return json.load(r)
+
+    def stop(self):
+        for p in reversed(self.procs):
+            p.terminate()
+        for p in self.procs:
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+def timed(cmd):
+    t0 = time.monotonic()
+    r = subprocess.run(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    if r.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd)}: exit {r.returncode}: {r.stderr.strip()}")
+    return time.monotonic() - t0, r.stdout
+
+
+def identical(bin_dir, a, b):
+    r = subprocess.run([os.path.join(bin_dir, "tessera_compare"), a, b], stdout=subprocess.PIPE, text=True, check=True)
+    return json.loads(r.stdout)["identical"]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap.add_argument("--bin", default=os.path.join(ROOT, "build", "bin"))
+    ap.add_argument("--scene", default=os.path.join(ROOT, "scenes", "cornell-spheres.dae"))
+    ap.add_argument("--cores", type=int, default=os.cpu_count())
+    ap.add_argument("--splits", help="comma-separated WxT, default every split of --cores")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--json", help="write the results here")
+    ap.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    ap.add_argument("flags", nargs="*", help="render flags (after --)")
+    a = ap.parse_args()
+    flags = a.flags or ["-r", "480", "360", "-s", "64"]
+    splits = [tuple(int(x) for x in s.split("x")) for s in a.splits.split(",")] if a.splits else splits_of(a.cores)
+    tmp = tempfile.mkdtemp(prefix="tessera_farm_scale_")
+    tessera = os.path.join(a.bin, "tessera")
+    rows = []
+    try:
+        local_exr = os.path.join(tmp, "local.exr")
+        local = [timed([tessera, "render", a.scene, *flags, "-t", str(a.cores), "-q", "-f", local_exr])[0]
+                 for _ in range(a.repeat)]
+        for w, t in splits:
+            farm = Farm(a.bin, w, t, os.path.join(tmp, f"{w}x{t}"))
+            try:
+                secs, utils, same = [], [], True
+                for r in range(a.repeat):
+                    # Alternate with local renders so that both see the same machine load.
+                    local.append(timed([tessera, "render", a.scene, *flags, "-t", str(a.cores), "-q", "-f",
+                                        local_exr])[0])
+                    before = {x["id"]: x["busy_thread_seconds"] for x in farm.status()["workers"]}
+                    out = os.path.join(tmp, f"farm_{w}x{t}_{r}.exr")
+                    s, stdout = timed([tessera, "submit", a.scene, *flags, "--coordinator", farm.grpc, "--wait", "-q",
+                                       "--json", "-f", out])
+                    job = json.loads(stdout)
+                    st = farm.status()
+                    busy = sum(x["busy_thread_seconds"] - before.get(x["id"], 0) for x in st["workers"])
+                    threads = sum(x["threads"] for x in st["workers"])
+                    secs.append(s)
+                    utils.append(busy / (threads * job["elapsed_seconds"]) if job["elapsed_seconds"] > 0 else 0)
+                    same = same and identical(a.bin, out, local_exr)
+            finally:
+                farm.stop()
+            rows.append({"workers": w, "threads": t, "seconds": statistics.median(secs),
+                         "utilization": statistics.median(utils), "identical": same})
+        local_s = statistics.median(local)
+        for row in rows:
+            row["farm_over_local"] = row["seconds"] / local_s
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+    title = f"{os.path.basename(a.scene)} {' '.join(flags)}, {a.cores} cores, median of {a.repeat}"
+    if a.markdown:
+        print(f"{title}\n\n| run | seconds | farm/local | utilization | image |\n|---|---|---|---|---|")
+        print(f"| `tessera render -t {a.cores}` | {local_s:.2f} | 1.000 | | reference |")
+        for r in rows:
+            print(f"| farm, {r['workers']} x {r['threads']} | {r['seconds']:.2f} | {r['farm_over_local']:.3f} | "
+                  f"{100 * r['utilization']:.1f}% | {'identical' if r['identical'] else 'DIFFERS'} |")
+    else:
+        print(title)
+        print(f"{'run':<24}{'seconds':>9}{'farm/local':>12}{'util':>8}  image")
+        print(f"{'local -t ' + str(a.cores):<24}{local_s:>9.2f}{1:>12.3f}{'':>8}  reference")
+        for r in rows:
+            print(f"{'farm ' + str(r['workers']) + ' x ' + str(r['threads']):<24}{r['seconds']:>9.2f}"
+                  f"{r['farm_over_local']:>12.3f}{100 * r['utilization']:>7.1f}%  "
+                  f"{'identical' if r['identical'] else 'DIFFERS'}")
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump({"scene": a.scene, "flags": flags, "cores": a.cores, "local_seconds": local_s,
+                       "splits": rows}, f, indent=2)
+    return 0 if all(r["identical"] for r in rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
