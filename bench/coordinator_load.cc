@@ -3,7 +3,8 @@
 // coordinator's own cost is measured: merged tiles per second, and the status endpoint's
 // latency while it is under that load.
 //
-// Usage: tessera_coordinator_load [--workers N] [--threads N] [--seconds S] [--size W H] [--json FILE]
+// Usage: tessera_coordinator_load SCENE [--workers N] [--threads N] [--batch N] [--seconds S]
+//                                 [--size W H] [--json FILE]
 #include <grpcpp/grpcpp.h>
 #include <httplib.h>
 
@@ -31,24 +32,56 @@ double percentile(std::vector<double> v, double p) {
 }
 }  // namespace
 
+const char* kUsage =
+    "usage: tessera_coordinator_load SCENE [--workers N] [--threads N] [--batch N] [--seconds S] [--size W H]\n"
+    "                                [--json FILE]\n"
+    "  SCENE        any scene file (.dae, .gltf); only its upload and check are exercised\n"
+    "  --workers N  simulated workers (default 1000)\n"
+    "  --threads N  client threads driving them (default 8)\n"
+    "  --batch N    tasks a simulated worker asks for and returns at once (default 8)\n"
+    "  --seconds S  measuring time after 1 s of warm-up (default 10)\n"
+    "  --size W H   frame size, in 32-pixel tiles of 1-sample passes (default 1920 1080)\n"
+    "  --json FILE  also write the figures as JSON\n";
+
 int main(int argc, char** argv) {
-  int workers = 1000, threads = 8, width = 1920, height = 1080;
+  int workers = 1000, threads = 8, width = 1920, height = 1080, batch = 8;
   double seconds = 10;
-  std::string json_path, scene = std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-spheres.dae";
+  std::string json_path, scene;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
-    if (a == "--workers" && i + 1 < argc)
-      workers = std::atoi(argv[++i]);
-    else if (a == "--threads" && i + 1 < argc)
-      threads = std::atoi(argv[++i]);
-    else if (a == "--seconds" && i + 1 < argc)
-      seconds = std::atof(argv[++i]);
-    else if (a == "--json" && i + 1 < argc)
-      json_path = argv[++i];
-    else if (a == "--size" && i + 2 < argc) {
-      width = std::atoi(argv[++i]);
-      height = std::atoi(argv[++i]);
+    auto number = [&](const char* flag) -> const char* {
+      if (i + 1 >= argc) {
+        std::fprintf(stderr, "tessera_coordinator_load: %s needs a value\n%s", flag, kUsage);
+        std::exit(2);
+      }
+      return argv[++i];
+    };
+    if (a == "-h" || a == "--help") {
+      std::printf("%s", kUsage);
+      return 0;
+    } else if (a == "--workers") {
+      workers = std::atoi(number("--workers"));
+    } else if (a == "--threads") {
+      threads = std::atoi(number("--threads"));
+    } else if (a == "--batch") {
+      batch = std::atoi(number("--batch"));
+    } else if (a == "--seconds") {
+      seconds = std::atof(number("--seconds"));
+    } else if (a == "--json") {
+      json_path = number("--json");
+    } else if (a == "--size") {
+      width = std::atoi(number("--size"));
+      height = std::atoi(number("--size"));
+    } else if (a[0] != '-' && scene.empty()) {
+      scene = a;
+    } else {
+      std::fprintf(stderr, "tessera_coordinator_load: unknown argument '%s'\n%s", a.c_str(), kUsage);
+      return 2;
     }
+  }
+  if (scene.empty() || workers < 1 || threads < 1 || batch < 1 || !(seconds > 0) || width < 1 || height < 1) {
+    std::fprintf(stderr, "%s", kUsage);
+    return 2;
   }
   const fs::path data = fs::temp_directory_path() / ("tessera_load_" + std::to_string(getpid()));
   CoordinatorOptions opt;
@@ -100,22 +133,28 @@ int main(int argc, char** argv) {
         v1::RegisterResponse resp;
         if (stub->Register(&ctx, r, &resp).ok()) ids.push_back(resp.worker_id());
       }
+      if (ids.empty()) return;  // more client threads than workers
       for (size_t k = 0; !stop; k = (k + 1) % ids.size()) {
         grpc::ClientContext c1;
         v1::GetTaskRequest g;
         g.set_worker_id(ids[k]);
-        v1::GetTaskResponse task;
-        if (!stub->GetTask(&c1, g, &task).ok() || !task.has_task()) continue;
+        g.set_max_tasks(uint32_t(batch));
+        v1::GetTaskResponse tasks;
+        if (!stub->GetTask(&c1, g, &tasks).ok() || tasks.tasks_size() == 0) continue;
         grpc::ClientContext c2;
-        v1::TaskResult res;
-        res.set_worker_id(ids[k]);
-        res.set_task_id(task.task().task_id());
-        res.set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
-        res.set_sums_zstd(payload);
-        res.set_samples(1024);
-        res.set_render_seconds(0.05);
-        v1::ResultAck ack;
-        if (stub->SubmitResult(&c2, res, &ack).ok() && ack.accepted()) ++merged;
+        v1::ResultBatch results;
+        for (const v1::Task& task : tasks.tasks()) {
+          v1::TaskResult* res = results.add_results();
+          res->set_worker_id(ids[k]);
+          res->set_task_id(task.task_id());
+          res->set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
+          res->set_sums_zstd(payload);
+          res->set_samples(1024);
+          res->set_render_seconds(0.05);
+        }
+        v1::ResultAcks acks;
+        if (stub->SubmitResults(&c2, results, &acks).ok())
+          for (const v1::ResultAck& ack : acks.acks()) merged += ack.accepted();
         rpcs += 2;
       }
     });
@@ -149,8 +188,8 @@ int main(int argc, char** argv) {
   fs::remove_all(data);
 
   const double tiles_per_s = double(m1 - m0) / elapsed;
-  std::printf("frame %dx%d, simulated workers %d (client threads %d), %.1f s\n", width, height, workers, threads,
-              elapsed);
+  std::printf("frame %dx%d, simulated workers %d (client threads %d, batches of %d), %.1f s\n", width, height, workers,
+              threads, batch, elapsed);
   std::printf("merged tiles/s %.0f  (32x32 tiles: %.1f M pixel-samples/s merged), worker RPCs/s %.0f\n", tiles_per_s,
               tiles_per_s * 1024 / 1e6, double(r1 - r0) / elapsed);
   std::printf("status /api/status latency ms: p50 %.2f p99 %.2f max %.2f (%zu requests)\n", percentile(st, 0.5),
@@ -159,6 +198,7 @@ int main(int argc, char** argv) {
               percentile(mt, 1.0));
   if (!json_path.empty())
     std::ofstream(json_path) << nlohmann::json{{"workers", workers},
+                                               {"batch", batch},
                                                {"merged_tiles_per_second", tiles_per_s},
                                                {"worker_rpcs_per_second", double(r1 - r0) / elapsed},
                                                {"status_p50_ms", percentile(st, 0.5)},

@@ -128,7 +128,7 @@ size_t Coordinator::expire_leases() {
   return expire_locked(clock_->now());
 }
 
-v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id) {
+v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples) {
   std::lock_guard<std::mutex> lock(mu_);
   const double now = clock_->now();
   expire_locked(now);
@@ -144,30 +144,38 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id) {
     return a->priority != b->priority ? a->priority > b->priority : a->seq < b->seq;
   });
   v1::GetTaskResponse resp;
+  max_tasks = std::clamp<uint32_t>(max_tasks, 1, kMaxTasksPerRequest);
+  uint64_t samples = 0;
   for (Job* job : order) {
-    std::optional<TileTask> t = job->plan.take();
-    if (!t) continue;
-    const uint64_t task_id = leases_.grant({job->id, t->tile, t->pass, worker_id, now + options_.lease_seconds});
-    job->tile_lease[t->tile] = task_id;
-    ++w->leases;
-    if (job->state == v1::JobStatus::QUEUED) {
-      job->state = v1::JobStatus::RUNNING;
-      job->started = now;
+    while (uint32_t(resp.tasks_size()) < max_tasks && (max_samples == 0 || samples < max_samples)) {
+      std::optional<TileTask> t = job->plan.take();
+      if (!t) break;
+      const uint64_t task_id = leases_.grant({job->id, t->tile, t->pass, worker_id, now + options_.lease_seconds});
+      job->tile_lease[t->tile] = task_id;
+      ++w->leases;
+      if (job->state == v1::JobStatus::QUEUED) {
+        job->state = v1::JobStatus::RUNNING;
+        job->started = now;
+      }
+      v1::Task* task = resp.add_tasks();
+      task->set_task_id(task_id);
+      task->set_job_id(job->id);
+      task->set_scene_hash(job->scene_hash);
+      *task->mutable_settings() = job->settings_proto;
+      *task->mutable_tile() = to_proto(t->rect);
+      task->set_pass(t->pass);
+      task->set_sample_begin(t->sample_begin);
+      task->set_sample_end(t->sample_end);
+      uint64_t pixels = uint64_t(t->rect.area());
+      if (!t->active.empty()) {
+        task->set_active(t->active.data(), t->active.size());
+        pixels = uint64_t(std::count(t->active.begin(), t->active.end(), 1));
+      }
+      samples += pixels * (t->sample_end - t->sample_begin);
+      ++counters_.tasks_dispatched;
     }
-    v1::Task* task = resp.mutable_task();
-    task->set_task_id(task_id);
-    task->set_job_id(job->id);
-    task->set_scene_hash(job->scene_hash);
-    *task->mutable_settings() = job->settings_proto;
-    *task->mutable_tile() = to_proto(t->rect);
-    task->set_pass(t->pass);
-    task->set_sample_begin(t->sample_begin);
-    task->set_sample_end(t->sample_end);
-    if (!t->active.empty()) task->set_active(t->active.data(), t->active.size());
-    ++counters_.tasks_dispatched;
-    return resp;
   }
-  resp.set_retry_after_ms(200);
+  if (resp.tasks_size() == 0) resp.set_retry_after_ms(200);
   return resp;
 }
 
@@ -179,11 +187,14 @@ v1::SceneBundle Coordinator::scene(const std::string& hash) const {
   }
 }
 
-bool Coordinator::heartbeat(uint64_t worker_id, uint64_t task_id) {
+std::vector<uint64_t> Coordinator::heartbeat(uint64_t worker_id, const std::vector<uint64_t>& task_ids) {
   std::lock_guard<std::mutex> lock(mu_);
   const double now = clock_->now();
   if (WorkerInfo* w = workers_.find(worker_id)) w->last_seen = now;
-  return leases_.renew(task_id, worker_id, now + options_.lease_seconds);
+  std::vector<uint64_t> refused;
+  for (uint64_t id : task_ids)
+    if (!leases_.renew(id, worker_id, now + options_.lease_seconds)) refused.push_back(id);
+  return refused;
 }
 
 void Coordinator::release(uint64_t worker_id, uint64_t task_id) {

@@ -59,6 +59,7 @@ struct CoordinatorCounters {
 
 class Coordinator {
  public:
+  static constexpr uint32_t kMaxTasksPerRequest = 256;
   // Images go to `sink`, or to <data_dir>/jobs/<id>/ when it is null.
   explicit Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> clock = std::make_unique<SteadyClock>(),
                        std::unique_ptr<ImageSink> sink = nullptr);
@@ -73,9 +74,15 @@ class Coordinator {
 
   // Worker side.
   v1::RegisterResponse register_worker(const v1::RegisterRequest& request);
-  v1::GetTaskResponse get_task(uint64_t worker_id);
+  // Up to max_tasks tasks, stopping once they hold max_samples samples (0: no such limit);
+  // always one if any is ready.
+  v1::GetTaskResponse get_task(uint64_t worker_id, uint32_t max_tasks = 1, uint64_t max_samples = 0);
   v1::SceneBundle scene(const std::string& hash) const;
-  bool heartbeat(uint64_t worker_id, uint64_t task_id);
+  // Renews the worker's leases; returns the tasks it must not go on with.
+  std::vector<uint64_t> heartbeat(uint64_t worker_id, const std::vector<uint64_t>& task_ids);
+  bool heartbeat(uint64_t worker_id, uint64_t task_id) {
+    return heartbeat(worker_id, std::vector<uint64_t>{task_id}).empty();
+  }
   v1::ResultAck submit_result(const v1::TaskResult& result);
   void release(uint64_t worker_id, uint64_t task_id);
 

@@ -70,8 +70,8 @@ grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskR
   return guarded([&] {
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
     while (true) {
-      *out = c_.get_task(req->worker_id());
-      if (out->has_task() || ctx->IsCancelled() || std::chrono::steady_clock::now() >= until) return;
+      *out = c_.get_task(req->worker_id(), req->max_tasks(), req->max_samples());
+      if (out->tasks_size() > 0 || ctx->IsCancelled() || std::chrono::steady_clock::now() >= until) return;
       c_.wait_for_work(0.25);
     }
   });
@@ -81,10 +81,15 @@ grpc::Status WorkerService::FetchScene(grpc::ServerContext*, const v1::FetchScen
 }
 grpc::Status WorkerService::Heartbeat(grpc::ServerContext*, const v1::HeartbeatRequest* req,
                                       v1::HeartbeatResponse* out) {
-  return guarded([&] { out->set_keep_going(c_.heartbeat(req->worker_id(), req->task_id())); });
+  return guarded([&] {
+    for (uint64_t id : c_.heartbeat(req->worker_id(), {req->task_ids().begin(), req->task_ids().end()}))
+      out->add_refused(id);
+  });
 }
-grpc::Status WorkerService::SubmitResult(grpc::ServerContext*, const v1::TaskResult* req, v1::ResultAck* out) {
-  return guarded([&] { *out = c_.submit_result(*req); });
+grpc::Status WorkerService::SubmitResults(grpc::ServerContext*, const v1::ResultBatch* req, v1::ResultAcks* out) {
+  return guarded([&] {
+    for (const v1::TaskResult& r : req->results()) *out->add_acks() = c_.submit_result(r);
+  });
 }
 grpc::Status WorkerService::ReleaseTask(grpc::ServerContext*, const v1::ReleaseRequest* req, v1::ReleaseResponse*) {
   return guarded([&] { c_.release(req->worker_id(), req->task_id()); });

@@ -28,7 +28,7 @@ class WorkerService final : public v1::TesseraWorker::Service {
   grpc::Status GetTask(grpc::ServerContext*, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) override;
   grpc::Status FetchScene(grpc::ServerContext*, const v1::FetchSceneRequest* req, v1::SceneBundle* out) override;
   grpc::Status Heartbeat(grpc::ServerContext*, const v1::HeartbeatRequest* req, v1::HeartbeatResponse* out) override;
-  grpc::Status SubmitResult(grpc::ServerContext*, const v1::TaskResult* req, v1::ResultAck* out) override;
+  grpc::Status SubmitResults(grpc::ServerContext*, const v1::ResultBatch* req, v1::ResultAcks* out) override;
   grpc::Status ReleaseTask(grpc::ServerContext*, const v1::ReleaseRequest* req, v1::ReleaseResponse* out) override;
 
  private:

@@ -196,24 +196,29 @@ void Worker::send_loop() {
   while (true) {
     outbox_cv_.wait(lock, [this] { return stopping_ || !outbox_.empty(); });
     if (outbox_.empty()) return;  // stopping, and everything finished was sent
-    const std::shared_ptr<Held> h = outbox_.front();
-    outbox_.pop_front();
-    v1::TaskResult result;
-    result.set_worker_id(worker_id_);
-    result.set_task_id(h->task.task_id());
-    result.set_busy_thread_seconds(busy_thread_seconds_);
-    result.set_thread_seconds(options_.threads * (now_seconds() - registered_at_));
+    // Everything finished so far goes in one request.
+    const std::deque<std::shared_ptr<Held>> batch = std::move(outbox_);
+    outbox_.clear();
+    const double busy = busy_thread_seconds_, threads = options_.threads * (now_seconds() - registered_at_);
     lock.unlock();
-    result.set_raw_size(uint32_t(h->sums.size() * kBytesPerPixel));
-    result.set_sums_zstd(encode_sums(h->sums));
-    result.set_samples(h->stats.samples);
-    result.set_rays(h->stats.rays.rays + h->stats.rays.shadow_rays);
-    result.set_nan_samples(h->stats.nan_samples);
-    result.set_render_seconds(h->last_row - h->first_row);
+    v1::ResultBatch results;
+    for (const std::shared_ptr<Held>& h : batch) {
+      v1::TaskResult* r = results.add_results();
+      r->set_worker_id(worker_id_);
+      r->set_task_id(h->task.task_id());
+      r->set_raw_size(uint32_t(h->sums.size() * kBytesPerPixel));
+      r->set_sums_zstd(encode_sums(h->sums));
+      r->set_samples(h->stats.samples);
+      r->set_rays(h->stats.rays.rays + h->stats.rays.shadow_rays);
+      r->set_nan_samples(h->stats.nan_samples);
+      r->set_render_seconds(h->last_row - h->first_row);
+      r->set_busy_thread_seconds(busy);
+      r->set_thread_seconds(threads);
+    }
     bool sent = false;
     for (int attempt = 0; attempt < 5 && !sent; ++attempt) {
-      v1::ResultAck ack;
-      const grpc::Status st = stub_->SubmitResult(context(30).get(), result, &ack);
+      v1::ResultAcks acks;
+      const grpc::Status st = stub_->SubmitResults(context(30).get(), results, &acks);
       sent = st.ok();
       if (!sent) {
         if (options_.verbose) std::fprintf(stderr, "tessera-worker: submit: %s\n", st.error_message().c_str());
@@ -221,8 +226,10 @@ void Worker::send_loop() {
       }
     }
     lock.lock();
-    if (sent) ++tasks_done_;
-    held_.erase(h->task.task_id());  // unsent: its lease expires and another worker renders it
+    for (const std::shared_ptr<Held>& h : batch) {
+      if (sent) ++tasks_done_;
+      held_.erase(h->task.task_id());  // unsent: its lease expires and another worker renders it
+    }
     more_.notify_one();
   }
 }
@@ -258,20 +265,17 @@ void Worker::keep_leases(const std::atomic<bool>& stop) {
       return;
     }
     if (now_seconds() >= due) {
-      std::vector<uint64_t> ids;
-      for (const auto& [id, h] : held_) ids.push_back(id);
+      v1::HeartbeatRequest hb;
+      hb.set_worker_id(worker_id_);
+      for (const auto& [id, h] : held_) hb.add_task_ids(id);
       lock.unlock();
-      std::vector<uint64_t> refused;
-      for (uint64_t id : ids) {
-        v1::HeartbeatRequest hb;
-        hb.set_worker_id(worker_id_);
-        hb.set_task_id(id);
-        v1::HeartbeatResponse hr;
-        if (stub_->Heartbeat(context(5).get(), hb, &hr).ok() && !hr.keep_going()) refused.push_back(id);
-      }
+      v1::HeartbeatResponse hr;
+      const bool ok = hb.task_ids_size() == 0 || stub_->Heartbeat(context(5).get(), hb, &hr).ok();
       lock.lock();
-      for (uint64_t id : refused)
-        if (auto it = held_.find(id); it != held_.end() && it->second->rows_done < it->second->rect.h) drop_locked(id);
+      if (ok)
+        for (uint64_t id : hr.refused())
+          if (auto it = held_.find(id); it != held_.end() && it->second->rows_done < it->second->rect.h)
+            drop_locked(id);
       due = now_seconds() + heartbeat_ms_ / 1000.0;
     }
     stopped_cv_.wait_for(lock, std::chrono::milliseconds(10));  // also polls `stop` (set by a signal)
@@ -286,6 +290,31 @@ void Worker::release(uint64_t task_id) {
   stub_->ReleaseTask(context(2).get(), rel, &rr);
 }
 
+void Worker::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
+  auto h = std::make_shared<Held>();
+  h->task = task;
+  try {
+    h->rect = from_proto(h->task.tile());
+    if (!h->task.active().empty() && h->task.active().size() != size_t(h->rect.area()))
+      throw WireError("active mask size");
+    if (h->rect.area() <= 0) throw WireError("empty tile");
+    h->prepared = prepare(h->task);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tessera-worker: task %llu: %s\n", (unsigned long long)h->task.task_id(), e.what());
+    release(h->task.task_id());  // another worker may manage; this one backs off
+    sleep_backoff(stop);
+    return;
+  }
+  if (!h->task.active().empty()) h->mask = reinterpret_cast<const uint8_t*>(h->task.active().data());
+  h->sums.resize(size_t(h->rect.area()));
+  std::lock_guard<std::mutex> lock(mu_);
+  held_[h->task.task_id()] = h;
+  queue_.push_back(h);
+  queued_rows_ += uint64_t(h->rect.h);
+  for (int row = 0; row < h->rect.h; ++row) queued_samples_ += h->row_samples(row);
+  work_.notify_all();
+}
+
 void Worker::run(const std::atomic<bool>& stop) {
   if (!register_worker(stop)) return;
   registered_at_ = now_seconds();
@@ -296,13 +325,19 @@ void Worker::run(const std::atomic<bool>& stop) {
     ThreadPool pool(options_.threads);
     for (int i = 0; i < pool.size(); ++i) pool.run([this] { render_loop(); });
     while (!stop) {
+      v1::GetTaskRequest req;
+      req.set_worker_id(worker_id_);
       {
         std::unique_lock<std::mutex> lock(mu_);
         more_.wait_for(lock, std::chrono::milliseconds(50), [&] { return stopping_ || wants_more_locked(); });
         if (stopping_ || !wants_more_locked()) continue;
+        // As much work as the threads get through in the lookahead, at the measured speed;
+        // two tasks until there is a measurement.
+        const double rate = samples_per_thread_second_ * options_.threads;
+        const uint32_t room = uint32_t(options_.max_tasks - int(held_.size()));
+        req.set_max_tasks(rate > 0 ? room : std::min(room, 2u));
+        if (rate > 0) req.set_max_samples(uint64_t(std::max(1.0, rate * options_.lookahead_seconds - queued_samples_)));
       }
-      v1::GetTaskRequest req;
-      req.set_worker_id(worker_id_);
       v1::GetTaskResponse resp;
       const grpc::Status st = stub_->GetTask(context(10).get(), req, &resp);  // long-polls when there is no work
       if (!st.ok()) {
@@ -317,29 +352,7 @@ void Worker::run(const std::atomic<bool>& stop) {
         continue;
       }
       backoff_ = 0.1;
-      if (!resp.has_task()) continue;
-      auto h = std::make_shared<Held>();
-      h->task = resp.task();
-      try {
-        h->rect = from_proto(h->task.tile());
-        if (!h->task.active().empty() && h->task.active().size() != size_t(h->rect.area()))
-          throw WireError("active mask size");
-        if (h->rect.area() <= 0) throw WireError("empty tile");
-        h->prepared = prepare(h->task);
-      } catch (const std::exception& e) {
-        std::fprintf(stderr, "tessera-worker: task %llu: %s\n", (unsigned long long)h->task.task_id(), e.what());
-        release(h->task.task_id());  // another worker may manage; this one backs off
-        sleep_backoff(stop);
-        continue;
-      }
-      if (!h->task.active().empty()) h->mask = reinterpret_cast<const uint8_t*>(h->task.active().data());
-      h->sums.resize(size_t(h->rect.area()));
-      std::lock_guard<std::mutex> lock(mu_);
-      held_[h->task.task_id()] = h;
-      queue_.push_back(h);
-      queued_rows_ += uint64_t(h->rect.h);
-      for (int row = 0; row < h->rect.h; ++row) queued_samples_ += h->row_samples(row);
-      work_.notify_all();
+      for (const v1::Task& task : resp.tasks()) enqueue(task, stop);
     }
     std::lock_guard<std::mutex> lock(mu_);
     stopping_ = true;

@@ -55,6 +55,8 @@ class Worker {
   std::shared_ptr<const Prepared> prepare(const v1::Task& task);
   const Scene& scene_for(const std::string& hash);
   bool wants_more_locked() const;
+  // Prepares a leased task and queues it for the render threads (or gives it back).
+  void enqueue(const v1::Task& task, const std::atomic<bool>& stop);
   void render_loop();
   void send_loop();
   void keep_leases(const std::atomic<bool>& stop);

@@ -95,8 +95,8 @@ class CoordinatorTest : public ::testing::Test {
   void drain(uint64_t w) {
     for (int guard = 0; guard < 100000; ++guard) {
       const v1::GetTaskResponse r = c->get_task(w);
-      if (!r.has_task()) return;
-      ASSERT_TRUE(c->submit_result(render_task(r.task(), w)).accepted());
+      if (r.tasks_size() == 0) return;
+      ASSERT_TRUE(c->submit_result(render_task(r.tasks(0), w)).accepted());
     }
   }
   Film local(const RenderSettings& s) { return render_image(TileRenderer(scene, s), 2).film; }
@@ -149,7 +149,7 @@ TEST_F(CoordinatorTest, OutOfOrderWorkersAndAdaptiveSamplingStillMatch) {
     std::vector<std::pair<v1::Task, uint64_t>> held;
     for (uint64_t w : {a, b, a, b}) {
       v1::GetTaskResponse r = c->get_task(w);
-      if (r.has_task()) held.emplace_back(r.task(), w);
+      if (r.tasks_size() > 0) held.emplace_back(r.tasks(0), w);
     }
     if (held.empty()) break;
     for (auto it = held.rbegin(); it != held.rend(); ++it)
@@ -162,7 +162,7 @@ TEST_F(CoordinatorTest, OutOfOrderWorkersAndAdaptiveSamplingStillMatch) {
 TEST_F(CoordinatorTest, DuplicateResultIsDropped) {
   const std::string id = c->submit(request(job_settings()));
   const uint64_t w = worker();
-  const v1::Task task = c->get_task(w).task();
+  const v1::Task task = c->get_task(w).tasks(0);
   const v1::TaskResult res = render_task(task, w);
   EXPECT_TRUE(c->submit_result(res).accepted());
   const v1::ResultAck again = c->submit_result(res);
@@ -176,7 +176,7 @@ TEST_F(CoordinatorTest, ExpiredLeaseGoesToAnotherWorkerAndTheLateResultIsNotMerg
   const RenderSettings s = job_settings();
   const std::string id = c->submit(request(s));
   const uint64_t slow = worker(), fast = worker();
-  const v1::Task first = c->get_task(slow).task();
+  const v1::Task first = c->get_task(slow).tasks(0);
   t += 2;
   EXPECT_TRUE(c->heartbeat(slow, first.task_id()));  // renewed to t + 5
   t += 4;
@@ -185,7 +185,7 @@ TEST_F(CoordinatorTest, ExpiredLeaseGoesToAnotherWorkerAndTheLateResultIsNotMerg
   EXPECT_EQ(c->expire_leases(), 1u);
   EXPECT_FALSE(c->heartbeat(slow, first.task_id()));  // the slow worker is told to stop
   // The same tile pass goes to the other worker (fewest passes first).
-  const v1::Task retry = c->get_task(fast).task();
+  const v1::Task retry = c->get_task(fast).tasks(0);
   EXPECT_EQ(retry.tile().x(), first.tile().x());
   EXPECT_EQ(retry.tile().y(), first.tile().y());
   EXPECT_EQ(retry.pass(), first.pass());
@@ -202,7 +202,7 @@ TEST_F(CoordinatorTest, ExpiredLeaseGoesToAnotherWorkerAndTheLateResultIsNotMerg
 TEST_F(CoordinatorTest, HostileResultsAreRejectedAndCounted) {
   c->submit(request(job_settings()));
   const uint64_t w = worker();
-  const v1::Task task = c->get_task(w).task();
+  const v1::Task task = c->get_task(w).tasks(0);
   v1::TaskResult bad = render_task(task, w);
   bad.set_task_id(999999);  // never issued
   EXPECT_FALSE(c->submit_result(bad).accepted());
@@ -252,12 +252,12 @@ TEST_F(CoordinatorTest, MalformedSceneIsRefusedAtSubmitAndOthersStillRun) {
 TEST_F(CoordinatorTest, CancelStopsDispatchAndKeepsWhatWasRendered) {
   const std::string id = c->submit(request(job_settings()));
   const uint64_t w = worker();
-  const v1::Task a = c->get_task(w).task();
+  const v1::Task a = c->get_task(w).tasks(0);
   ASSERT_TRUE(c->submit_result(render_task(a, w)).accepted());
-  const v1::Task b = c->get_task(w).task();
+  const v1::Task b = c->get_task(w).tasks(0);
   EXPECT_EQ(c->cancel(id).state(), v1::JobStatus::CANCELLED);
   EXPECT_FALSE(c->heartbeat(w, b.task_id()));
-  EXPECT_FALSE(c->get_task(w).has_task());
+  EXPECT_FALSE(c->get_task(w).tasks_size() > 0);
   const ExrImage img = read_exr(image_path(id, "image.exr"));
   float spp = 0;
   for (float n : img.channels.at("spp")) spp += n;
@@ -281,8 +281,8 @@ TEST_F(CoordinatorTest, ImageFetchedAsSoonAsTheJobEndsHoldsEverySample) {
   const uint64_t w = worker();
   auto lease_all = [&] {
     std::vector<v1::TaskResult> results;
-    for (v1::GetTaskResponse r = c->get_task(w); r.has_task(); r = c->get_task(w))
-      results.push_back(render_task(r.task(), w));
+    for (v1::GetTaskResponse r = c->get_task(w); r.tasks_size() > 0; r = c->get_task(w))
+      results.push_back(render_task(r.tasks(0), w));
     return results;
   };
   const std::string id = c->submit(request(s));
@@ -311,7 +311,7 @@ TEST_F(CoordinatorTest, HigherPriorityJobsGoFirst) {
   v1::SubmitJobRequest r = request(job_settings());
   r.set_priority(5);
   const std::string high = c->submit(r);
-  EXPECT_EQ(c->get_task(worker()).task().job_id(), high);
+  EXPECT_EQ(c->get_task(worker()).tasks(0).job_id(), high);
   (void)low;
 }
 
@@ -366,14 +366,14 @@ TEST_F(CoordinatorTest, UnknownWorkerMustRegisterAgain) { EXPECT_THROW(c->get_ta
 TEST_F(CoordinatorTest, UtilizationFromReportsAndSilentWorkersAreForgotten) {
   c->submit(request(job_settings()));
   const uint64_t w = worker(), idle = worker();
-  v1::TaskResult r = render_task(c->get_task(w).task(), w);
+  v1::TaskResult r = render_task(c->get_task(w).tasks(0), w);
   r.set_busy_thread_seconds(1.0);
   r.set_thread_seconds(2.0);
   ASSERT_TRUE(c->submit_result(r).accepted());
   for (const WorkerInfo& info : c->workers())
     if (info.id == w) EXPECT_NEAR(info.utilization, 0.5, 1e-12);  // since it registered
   t += 6;  // past the 5 s window: the next report starts a new one from the last
-  r = render_task(c->get_task(w).task(), w);
+  r = render_task(c->get_task(w).tasks(0), w);
   r.set_busy_thread_seconds(2.9);  // of the 2 thread-seconds since the last report, 95% busy
   r.set_thread_seconds(4.0);
   ASSERT_TRUE(c->submit_result(r).accepted());
@@ -383,7 +383,7 @@ TEST_F(CoordinatorTest, UtilizationFromReportsAndSilentWorkersAreForgotten) {
   EXPECT_NEAR(util, 0.95, 1e-12);
   EXPECT_NEAR(c->utilization(), 0.95, 1e-12);
   // Reports that go backwards are not believed.
-  r = render_task(c->get_task(w).task(), w);
+  r = render_task(c->get_task(w).tasks(0), w);
   r.set_busy_thread_seconds(0.5);
   r.set_thread_seconds(1.0);
   ASSERT_TRUE(c->submit_result(r).accepted());
@@ -396,6 +396,29 @@ TEST_F(CoordinatorTest, UtilizationFromReportsAndSilentWorkersAreForgotten) {
   ASSERT_EQ(c->workers().size(), 1u);
   EXPECT_EQ(c->workers()[0].id, w);
   EXPECT_THROW(c->get_task(idle), RequestError);  // told to register again
+}
+
+// A worker asks for as many tasks as keep it busy: a count and a sample budget. Each task
+// is its own lease, and the image is still the local one bit for bit.
+TEST_F(CoordinatorTest, BatchedLeasesFollowTheCountAndSampleLimits) {
+  const RenderSettings s = job_settings();  // 48x36 in 16-pixel tiles: 9 tiles, passes of 4, 4, 2
+  const std::string id = c->submit(request(s));
+  const uint64_t w = worker();
+  EXPECT_EQ(c->get_task(w, 3).tasks_size(), 3);
+  // 16 x 16 pixels x 4 samples = 1024 samples a task: a budget of 1500 takes two.
+  EXPECT_EQ(c->get_task(w, 100, 1500).tasks_size(), 2);
+  const v1::GetTaskResponse rest = c->get_task(w, 100);
+  EXPECT_EQ(rest.tasks_size(), 4);  // every tile's first pass is out: nothing else is ready
+  EXPECT_EQ(c->heartbeat(w, std::vector<uint64_t>{rest.tasks(0).task_id(), 999999}),
+            std::vector<uint64_t>{999999});  // renewed, and refused the unknown one
+  for (const v1::Task& t : rest.tasks()) ASSERT_TRUE(c->submit_result(render_task(t, w)).accepted());
+  for (v1::GetTaskResponse r = c->get_task(w, 100); r.tasks_size() > 0; r = c->get_task(w, 100))
+    for (const v1::Task& t : r.tasks()) ASSERT_TRUE(c->submit_result(render_task(t, w)).accepted());
+  EXPECT_NE(c->status(id, false).state(), v1::JobStatus::DONE);  // the first five were never returned
+  t += 10;                                                       // their leases expire and the tiles go out again
+  drain(w);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
 }
 
 }  // namespace
