@@ -1,0 +1,184 @@
+// The farm subcommands as functions, against a coordinator and a worker in this process:
+// what `tessera submit/status/jobs/watch/fetch/cancel` print and write, without processes.
+#include "client/farm_client.h"
+
+#include <grpcpp/grpcpp.h>
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cstring>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "core/io/image_io.h"
+#include "core/render/local_renderer.h"
+#include "core/scene/load.h"
+#include "server/grpc_services.h"
+#include "tests/core/test_paths.h"
+#include "worker/worker.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Captures what a command prints.
+class Output {
+ public:
+  Output() : f_(std::tmpfile()) {}
+  ~Output() { std::fclose(f_); }
+  std::FILE* file() { return f_; }
+  std::string text() {
+    std::fflush(f_);
+    std::rewind(f_);
+    std::string s;
+    char buf[4096];
+    for (size_t n; (n = std::fread(buf, 1, sizeof buf, f_)) > 0;) s.append(buf, n);
+    return s;
+  }
+
+ private:
+  std::FILE* f_;
+};
+
+class FarmClient : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_client_" + std::to_string(::getpid()));
+  std::unique_ptr<Coordinator> coordinator;
+  std::unique_ptr<ClientService> client_service;
+  std::unique_ptr<WorkerService> worker_service;
+  std::unique_ptr<grpc::Server> server;
+  std::unique_ptr<v1::Tessera::StubInterface> stub;
+  std::atomic<bool> stop_worker{false};
+  std::thread worker;
+  std::string address;
+  Output out, err;
+  FarmContext ctx;
+
+  void SetUp() override {
+    CoordinatorOptions o;
+    o.data_dir = (dir / "data").string();
+    o.image_interval_seconds = 0;
+    coordinator = std::make_unique<Coordinator>(o);
+    client_service = std::make_unique<ClientService>(*coordinator);
+    worker_service = std::make_unique<WorkerService>(*coordinator);
+    grpc::ServerBuilder b;
+    int port = 0;
+    b.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
+    b.RegisterService(client_service.get());
+    b.RegisterService(worker_service.get());
+    server = b.BuildAndStart();
+    ASSERT_GT(port, 0);
+    address = "127.0.0.1:" + std::to_string(port);
+    stub = connect_coordinator(address);
+    ctx.coordinator = address;
+    ctx.quiet = true;
+    ctx.out = out.file();
+    ctx.err = err.file();
+  }
+  void start_worker() {
+    worker = std::thread([this] {
+      WorkerOptions w;
+      w.coordinator = address;
+      w.threads = 2;
+      w.cache_dir = (dir / "cache").string();
+      Worker(w).run(stop_worker);
+    });
+  }
+  void TearDown() override {
+    stop_worker = true;
+    if (worker.joinable()) worker.join();
+    server->Shutdown();
+    fs::remove_all(dir);
+  }
+  SubmitRequest request(const std::vector<std::string>& outputs) {
+    SubmitRequest r;
+    r.flags.scene = testing::source_path("scenes/cornell-spheres.dae");
+    r.flags.resolution = {40, 30};
+    r.flags.settings.spp = 8;
+    r.flags.settings.pass_spp = 4;
+    r.flags.settings.max_depth = 4;
+    r.flags.settings.tile_size = 16;
+    r.flags.outputs = outputs;
+    return r;
+  }
+};
+
+TEST_F(FarmClient, SubmitWaitsAndWritesTheLocalImageThenListsStatusAndFetch) {
+  start_worker();
+  const std::string exr = (dir / "farm.exr").string(), png = (dir / "farm.png").string();
+  SubmitRequest r = request({exr, png});
+  r.wait = true;
+  r.name = "cornell";
+  ctx.json = true;
+  ASSERT_EQ(submit_job(*stub, r, ctx), 0) << err.text();
+  const nlohmann::json final = nlohmann::json::parse(out.text());
+  EXPECT_EQ(final["state"], "DONE");
+  EXPECT_EQ(final["name"], "cornell");
+  const std::string id = final["id"];
+  // The image is `tessera render`'s, in every channel.
+  const Scene scene = load_scene(r.flags.scene);
+  const Film local = render_image(TileRenderer(scene, to_settings(r.flags)), 2).film;
+  const ExrImage img = read_exr(exr);
+  ASSERT_EQ(img.width, 40);
+  for (size_t i = 0; i < local.pixels().size(); ++i) {
+    const Rgb m = local.pixels()[i].mean();
+    ASSERT_EQ(std::memcmp(&m.r, &img.channels.at("R")[i], 4), 0) << i;
+    ASSERT_EQ(img.channels.at("spp")[i], float(local.pixels()[i].n)) << i;
+  }
+  EXPECT_TRUE(fs::file_size(png) > 8);
+
+  ctx.json = false;
+  Output listing;
+  ctx.out = listing.file();
+  EXPECT_EQ(list_jobs(*stub, ctx), 0);
+  EXPECT_NE(listing.text().find(id + "  DONE"), std::string::npos) << listing.text();
+  Output one;
+  ctx.out = one.file();
+  EXPECT_EQ(show_status(*stub, id, ctx), 0);
+  EXPECT_NE(one.text().find("elapsed"), std::string::npos) << one.text();
+  EXPECT_EQ(watch_job(*stub, id, ctx), 0);  // an ended job: at once, DONE
+  const std::string again = (dir / "again.exr").string();
+  EXPECT_EQ(fetch_image(*stub, id, {again}, ctx), 0);
+  EXPECT_EQ(read_exr(again).channels.at("R"), img.channels.at("R"));
+}
+
+TEST_F(FarmClient, ErrorsNameTheProblem) {
+  try {
+    show_status(*stub, "no-such-job", ctx);
+    ADD_FAILURE();
+  } catch (const FarmError& e) {
+    EXPECT_NE(std::string(e.what()).find("no job 'no-such-job'"), std::string::npos) << e.what();
+  }
+  EXPECT_THROW(fetch_image(*stub, "x", {(dir / "out.tiff").string()}, ctx), FarmError);  // before any download
+  SubmitRequest bad = request({});
+  bad.flags.settings.spp = 0;
+  EXPECT_THROW(submit_job(*stub, bad, ctx), CLI::ValidationError);
+  auto gone = connect_coordinator("127.0.0.1:1");
+  FarmContext c = ctx;
+  c.coordinator = "127.0.0.1:1";
+  try {
+    list_jobs(*gone, c);
+    ADD_FAILURE();
+  } catch (const FarmError& e) {
+    EXPECT_NE(std::string(e.what()).find("coordinator 127.0.0.1:1 unreachable"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(FarmClient, CancelKeepsTheJobAndSaysCancelled) {
+  SubmitRequest r = request({});
+  r.flags.settings.spp = 1 << 20;  // no worker: it stays queued
+  ASSERT_EQ(submit_job(*stub, r, ctx), 0);
+  std::string id = out.text();
+  id.erase(id.find_last_not_of("\n") + 1);
+  Output c;
+  ctx.out = c.file();
+  EXPECT_EQ(cancel_job(*stub, id, ctx), 0);
+  EXPECT_NE(c.text().find("CANCELLED"), std::string::npos) << c.text();
+  EXPECT_EQ(watch_job(*stub, id, ctx), 1);  // ended, but not DONE
+}
+
+}  // namespace
+}  // namespace tessera
