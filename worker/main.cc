@@ -21,6 +21,13 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 1024));
   app.add_option("--cache", opt.cache_dir, "scene cache directory")->capture_default_str();
   app.add_option("--name", opt.name, "name shown by the coordinator (default host:pid)");
+  app.add_option("--lookahead", opt.lookahead_seconds,
+                 "seconds of work to keep leased beyond what the threads are rendering, at the measured speed")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 60.0));
+  app.add_option("--max-tasks", opt.max_tasks, "leases held at once, at most")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 4096));
   app.add_flag("-v,--verbose", opt.verbose, "log connection events");
   CLI11_PARSE(app, argc, argv);
   struct sigaction sa {};
