@@ -1,0 +1,185 @@
+// The farm across machines, for real: the coordinator and each worker in a network
+// namespace of its own (its own loopback, its own address), joined by veth pairs to a
+// bridge in the coordinator's namespace. The test makes the namespaces with `ip netns`
+// and removes them; it skips, saying why, where the kernel or the user may not.
+//
+// Addresses are from 192.0.2.0/24 (TEST-NET-1, reserved for documentation): they exist
+// only inside these namespaces, which have no route anywhere else.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <sstream>
+#include <thread>
+
+#include "core/io/image_io.h"
+#include "tests/integration/process.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::Process;
+
+const std::string kBin = TESSERA_BIN_DIR;
+const std::string kScene = std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-spheres.dae";
+
+int sh(const std::string& cmd) {
+  const int status = std::system((cmd + " >/dev/null 2>&1").c_str());
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::string slurp(const std::string& p) {
+  std::ifstream f(p);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+// Three hosts: "c" (coordinator and client, with the bridge, 192.0.2.1) and "w1", "w2"
+// (workers, 192.0.2.11 and .12). Removed, with their links, when the object goes away.
+class Hosts {
+ public:
+  Hosts() : prefix_("ts" + std::to_string(::getpid() % 100000)) {}
+  ~Hosts() {
+    for (const char* h : {"w1", "w2", "c"}) sh("ip netns del " + ns(h));
+  }
+  std::string ns(const std::string& host) const { return prefix_ + host; }
+  // Empty on success, else why the machine refused.
+  std::string make() {
+    if (geteuid() != 0) return "not root: ip netns needs CAP_SYS_ADMIN";
+    if (sh("ip netns add " + ns("c")) != 0) return "'ip netns add' refused (no network namespaces here)";
+    std::vector<std::string> steps = {
+        "ip -n " + ns("c") + " link set lo up",
+        "ip -n " + ns("c") + " link add br0 type bridge",
+        "ip -n " + ns("c") + " addr add 192.0.2.1/24 dev br0",
+        "ip -n " + ns("c") + " link set br0 up",
+    };
+    for (const auto& [host, addr] : {std::pair{"w1", "192.0.2.11"}, std::pair{"w2", "192.0.2.12"}}) {
+      const std::string h = host;
+      steps.push_back("ip netns add " + ns(h));
+      steps.push_back("ip -n " + ns(h) + " link set lo up");
+      // One end in the worker's namespace, the other on the coordinator's bridge.
+      steps.push_back("ip link add " + ns(h) + "a netns " + ns(h) + " type veth peer name " + ns(h) + "b netns " +
+                      ns("c"));
+      steps.push_back("ip -n " + ns(h) + " addr add " + addr + "/24 dev " + ns(h) + "a");
+      steps.push_back("ip -n " + ns(h) + " link set " + ns(h) + "a up");
+      steps.push_back("ip -n " + ns("c") + " link set " + ns(h) + "b master br0");
+      steps.push_back("ip -n " + ns("c") + " link set " + ns(h) + "b up");
+    }
+    for (const std::string& s : steps)
+      if (sh(s) != 0) return "'" + s + "' failed";
+    return "";
+  }
+  // Cuts a worker off: its end of the link goes down.
+  void unplug(const std::string& host) { sh("ip -n " + ns(host) + " link set " + ns(host) + "a down"); }
+
+ private:
+  std::string prefix_;
+};
+
+class NetnsFarm : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_netns_" + std::to_string(::getpid()));
+  Hosts hosts;
+  void SetUp() override {
+    fs::create_directories(dir);
+    const std::string refused = hosts.make();
+    if (!refused.empty()) GTEST_SKIP() << "network namespaces unavailable: " << refused << "; skipping";
+  }
+  void TearDown() override {
+    if (!HasFailure()) fs::remove_all(dir);
+  }
+  std::vector<std::string> in(const std::string& host, const std::vector<std::string>& argv) {
+    std::vector<std::string> a{"netns", "exec", hosts.ns(host)};
+    a.insert(a.end(), argv.begin(), argv.end());
+    return a;
+  }
+  // `tessera ARGS` on host c; returns stdout, asserting success.
+  std::string tessera(const std::string& args) {
+    const std::string out = (dir / "cmd.out").string(), err = (dir / "cmd.err").string();
+    const int status = std::system(
+        ("ip netns exec " + hosts.ns("c") + " " + kBin + "/tessera " + args + " >" + out + " 2>" + err).c_str());
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << args << ": " << slurp(err);
+    return slurp(out);
+  }
+};
+
+TEST_F(NetnsFarm, TwoMachinesRenderTheLocalImageAndOneLosingItsLinkChangesNothing) {
+  const std::string flags = "-r 96 72 -s 512 --pass-spp 8 -m 6 --tile 16 --seed 5";
+  const std::string local = (dir / "local.exr").string();
+  ASSERT_EQ(sh(kBin + "/tessera render " + kScene + " " + flags + " -q -f " + local), 0);
+
+  Process coordinator("/usr/sbin/ip",
+                      in("c", {kBin + "/tessera-coordinator", "--listen", "192.0.2.1:0", "--http", "127.0.0.1:0",
+                               "--data", (dir / "data").string(), "--lease-seconds", "2"}),
+                      (dir / "coordinator.err").string());
+  std::smatch m;
+  const std::string line = coordinator.read_line();
+  ASSERT_TRUE(std::regex_match(line, m, std::regex("grpc listening on (192\\.0\\.2\\.1:\\d+)"))) << line;
+  const std::string addr = m[1];
+  const std::string http = coordinator.read_line();
+  ASSERT_TRUE(std::regex_match(http, m, std::regex("http listening on (127\\.0\\.0\\.1:\\d+)"))) << http;
+  const std::string metrics_url = "http://" + std::string(m[1]) + "/metrics";
+  std::vector<std::unique_ptr<Process>> workers;
+  for (const char* h : {"w1", "w2"})
+    workers.push_back(
+        std::make_unique<Process>("/usr/sbin/ip",
+                                  in(h, {kBin + "/tessera-worker", "--coordinator", addr, "--threads", "1", "--cache",
+                                         (dir / (std::string("cache-") + h)).string(), "--name", h, "-v"}),
+                                  (dir / (std::string("worker-") + h + ".err")).string()));
+
+  // The scene reaches the workers only over the wire: submitted from a copy that is gone
+  // before any worker could read it.
+  const fs::path copy = dir / "submitted" / "scene.dae";
+  fs::create_directories(copy.parent_path());
+  fs::copy_file(kScene, copy);
+  std::string id = tessera("submit " + copy.string() + " " + flags + " --coordinator " + addr);
+  id.erase(id.find_last_not_of('\n') + 1);
+  fs::remove_all(copy.parent_path());
+
+  // Both machines at work, then one loses its link mid-job.
+  nlohmann::json st;
+  for (int i = 0; i < 600; ++i) {
+    st = nlohmann::json::parse(tessera("status " + id + " --json --coordinator " + addr));
+    if (std::stoull(st["samples_done"].get<std::string>()) * 5 > std::stoull(st["samples_total"].get<std::string>()))
+      break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_EQ(st["state"], "RUNNING") << st.dump();
+  EXPECT_EQ(st["active_workers"], 2) << st.dump();
+  hosts.unplug("w1");
+
+  const nlohmann::json done = nlohmann::json::parse(tessera("watch " + id + " --json --coordinator " + addr));
+  EXPECT_EQ(done["state"], "DONE") << done.dump();
+  const std::string farm = (dir / "farm.exr").string();
+  tessera("fetch " + id + " -f " + farm + " --coordinator " + addr);
+  const ExrImage a = read_exr(local), b = read_exr(farm);
+  for (const char* ch : {"R", "G", "B", "spp", "variance"})
+    EXPECT_EQ(0, std::memcmp(a.channels.at(ch).data(), b.channels.at(ch).data(), a.channels.at(ch).size() * 4))
+        << "channel " << ch << " differs";
+  // The cut-off worker held leases: they expired, and their tiles were rendered again.
+  const std::string metrics = (dir / "metrics.txt").string();
+  ASSERT_EQ(std::system(("ip netns exec " + hosts.ns("c") +
+                         " python3 -c \"import urllib.request; print(urllib.request.urlopen('" + metrics_url +
+                         "').read().decode())\" > " + metrics)
+                            .c_str()),
+            0);
+  const std::string metrics_text = slurp(metrics);
+  ASSERT_TRUE(std::regex_search(metrics_text, m, std::regex("tessera_leases_expired_total (\\d+)"))) << metrics_text;
+  EXPECT_GE(std::stoi(m[1]), 1);
+  // Each worker fetched the scene into its own cache.
+  for (const char* h : {"w1", "w2"}) {
+    bool cached = false;
+    for (const auto& e : fs::recursive_directory_iterator(dir / (std::string("cache-") + h)))
+      cached |= e.path().filename() == "scene.dae";
+    EXPECT_TRUE(cached) << h;
+  }
+}
+
+}  // namespace
+}  // namespace tessera
