@@ -97,6 +97,14 @@ TEST_F(Cli, BadFlagsAreRefused) {
   EXPECT_NE(run("render " + scene + " --camera sideways").code, 0);
   EXPECT_NE(run("render /no/such/file.dae").code, 0);
   EXPECT_NE(run("render " + scene + " -q -s 1 -r 8 8 -f " + (dir / "x.bmp").string()).code, 0);
+  // The one range check names the flag, for render and submit alike.
+  for (const std::string cmd : {"render ", "submit "})
+    for (const auto& [flags, named] : std::vector<std::pair<std::string, std::string>>{
+             {" -s 0", "-s"}, {" --tile 0", "--tile"}, {" --noise-target -1", "--noise-target"}, {" -a 0 0.1", "-a"}}) {
+      const auto r = run(cmd + scene + flags + (cmd == "submit " ? " --coordinator 127.0.0.1:1" : ""));
+      EXPECT_NE(r.code, 0) << cmd << flags;
+      EXPECT_NE(r.err.find(named), std::string::npos) << cmd << flags << ": " << r.err;
+    }
 }
 
 }  // namespace

@@ -99,7 +99,17 @@ TEST(WireSettings, RoundTripAndRangeChecks) {
   s.seed = 1234567890123ull;
   s.camera.lens_radius = 0.1f;
   s.window = Rect{2, 3, 4, 5};
+  s.tile_size = 24;
+  s.noise_target = 0.125;
+  s.nee = false;
+  s.mis = false;
   const RenderSettings r = from_proto(to_proto(s));
+  EXPECT_EQ(r.tile_size, 24);
+  EXPECT_EQ(r.noise_target, 0.125);
+  EXPECT_FALSE(r.nee);
+  EXPECT_FALSE(r.mis);
+  // A message without the switches means the defaults: both techniques on.
+  EXPECT_TRUE(from_proto(v1::RenderSettings(to_proto(RenderSettings()))).nee);
   EXPECT_EQ(r.spp, 99);
   EXPECT_TRUE(r.adaptive);
   EXPECT_EQ(r.seed, s.seed);
@@ -114,6 +124,47 @@ TEST(WireSettings, RoundTripAndRangeChecks) {
   p = to_proto(s);
   p.mutable_window()->set_x(100000);
   EXPECT_THROW(from_proto(p), WireError);
+  p = to_proto(s);
+  p.set_spp(0xffffffffu);  // past INT_MAX: must not wrap to a small number
+  EXPECT_THROW(from_proto(p), WireError);
+  p = to_proto(s);
+  p.set_noise_target(std::numeric_limits<double>::quiet_NaN());
+  try {
+    from_proto(p);
+    ADD_FAILURE();
+  } catch (const WireError& e) {
+    EXPECT_NE(std::string(e.what()).find("--noise-target"), std::string::npos) << e.what();
+  }
+}
+
+// validate() is the one range check: each bad value is refused naming its flag.
+TEST(Settings, EachSettingOutOfRangeIsRefusedByItsFlag) {
+  auto refused_as = [](void (*change)(RenderSettings&)) {
+    RenderSettings s;
+    change(s);
+    try {
+      s.validate();
+    } catch (const SettingsError& e) {
+      return e.flag();
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NO_THROW(RenderSettings().validate());
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.spp = 0; }), "-s");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.spp = RenderSettings::kMaxSpp + 1; }), "-s");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.light_samples = 0; }), "-l");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.max_depth = -1; }), "-m");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.adaptive = true, s.adaptive_batch = 0; }), "-a");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.adaptive = true, s.adaptive_tolerance = -1; }), "-a");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.pass_spp = 0; }), "--pass-spp");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.tile_size = RenderSettings::kMaxTileSize + 1; }), "--tile");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.noise_target = -0.5; }), "--noise-target");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.width = 0; }), "-r");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.height = RenderSettings::kMaxImageSide + 1; }), "-r");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.lens_radius = -1; }), "-b");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.focal_distance = 0; }), "-d");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.window = Rect{470, 0, 20, 10}; }), "-p");    // past the right edge
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.window = Rect{0, 0, 0, 0}; }), "accepted");  // the whole image
 }
 
 }  // namespace

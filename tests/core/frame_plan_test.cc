@@ -1,0 +1,162 @@
+// The frame plan: the one schedule of `tessera render` and the coordinator. What it hands
+// out, in which order, and what it merges; checked with made-up sums, no rendering.
+#include "core/render/frame_plan.h"
+
+#include <gtest/gtest.h>
+
+#include <set>
+
+namespace tessera {
+namespace {
+
+RenderSettings settings(int w, int h, int tile, int spp, int pass) {
+  RenderSettings s;
+  s.camera.width = w;
+  s.camera.height = h;
+  s.tile_size = tile;
+  s.spp = spp;
+  s.pass_spp = pass;
+  return s;
+}
+
+// Sums as a render of the task would give: every active pixel `pass length` samples of
+// radiance `v`.
+std::vector<PixelSums> sums_for(const TileTask& t, double v) {
+  std::vector<PixelSums> out(size_t(t.rect.area()));
+  const uint32_t n = t.sample_end - t.sample_begin;
+  for (size_t i = 0; i < out.size(); ++i) {
+    if (!t.active.empty() && !t.active[i]) continue;
+    out[i] = PixelSums{v * n, v * n, v * n, v * v * n, n};
+  }
+  return out;
+}
+
+TEST(FramePlan, CutsTheWindowIntoTilesAndSamplesIntoPasses) {
+  const FramePlan plan(settings(70, 40, 32, 10, 4));
+  ASSERT_EQ(plan.tiles().size(), 6u);  // 3 x 2, the last column and row cut short
+  EXPECT_EQ(plan.tiles()[2], (Rect{64, 0, 6, 32}));
+  EXPECT_EQ(plan.tiles()[5], (Rect{64, 32, 6, 8}));
+  ASSERT_EQ(plan.passes().size(), 3u);
+  EXPECT_EQ(plan.passes()[2], (std::pair<uint32_t, uint32_t>{8, 10}));
+  EXPECT_EQ(plan.samples_total(), 70u * 40u * 10u);
+  EXPECT_FALSE(plan.done());
+}
+
+TEST(FramePlan, EveryTileOncePerPassFewestPassesFirstAndNoTileTwiceAtOnce) {
+  FramePlan plan(settings(64, 64, 16, 12, 4));  // 16 tiles, 3 passes
+  std::set<uint32_t> out;
+  for (int i = 0; i < 16; ++i) {
+    const std::optional<TileTask> t = plan.take();
+    ASSERT_TRUE(t);
+    EXPECT_EQ(t->pass, 0u);
+    EXPECT_TRUE(out.insert(t->tile).second);
+  }
+  EXPECT_FALSE(plan.take());  // every tile's next pass waits for its previous one
+  // Merging tile 5's first pass makes its second ready, and only that.
+  TileTask five;
+  five.tile = 5;
+  five.pass = 0;
+  five.rect = plan.tiles()[5];
+  five.sample_begin = 0;
+  five.sample_end = 4;
+  EXPECT_EQ(plan.merge(5, 0, sums_for(five, 1)), FramePlan::Merge::kMerged);
+  const std::optional<TileTask> next = plan.take();
+  ASSERT_TRUE(next);
+  EXPECT_EQ(next->tile, 5u);
+  EXPECT_EQ(next->pass, 1u);
+  EXPECT_EQ(next->sample_begin, 4u);
+  EXPECT_EQ(next->sample_end, 8u);
+  EXPECT_FALSE(plan.take());
+}
+
+TEST(FramePlan, DuplicatesAndSumsThatDoNotFitChangeNothing) {
+  FramePlan plan(settings(32, 32, 16, 8, 4));
+  const TileTask t = *plan.take();
+  std::vector<PixelSums> wrong_size(3);
+  EXPECT_EQ(plan.merge(t.tile, t.pass, wrong_size), FramePlan::Merge::kInvalid);
+  std::vector<PixelSums> too_many = sums_for(t, 1);
+  too_many[7].n = 5;  // more samples than the pass has
+  EXPECT_EQ(plan.merge(t.tile, t.pass, too_many), FramePlan::Merge::kInvalid);
+  EXPECT_EQ(plan.merge(t.tile, 1, sums_for(t, 1)), FramePlan::Merge::kDuplicate);  // not its pass yet
+  EXPECT_EQ(plan.merge(99, 0, sums_for(t, 1)), FramePlan::Merge::kDuplicate);      // no such tile
+  EXPECT_EQ(plan.merges(), 0u);
+  EXPECT_EQ(plan.samples_merged(), 0u);
+  uint64_t samples = 0;
+  EXPECT_EQ(plan.merge(t.tile, t.pass, sums_for(t, 1), &samples), FramePlan::Merge::kMerged);
+  EXPECT_EQ(samples, 16u * 16u * 4u);
+  EXPECT_EQ(plan.merge(t.tile, t.pass, sums_for(t, 1)), FramePlan::Merge::kDuplicate);  // a second copy
+  EXPECT_EQ(plan.merges(), 1u);
+}
+
+TEST(FramePlan, AbandonedTasksComeBackAndLateResultsStillCount) {
+  FramePlan plan(settings(16, 16, 16, 8, 4));  // one tile
+  const TileTask t = *plan.take();
+  EXPECT_FALSE(plan.take());
+  plan.put_back(t.tile);  // its lease ended
+  const std::optional<TileTask> again = plan.take();
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->pass, t.pass);
+  plan.put_back(t.tile);
+  // The first worker's result arrives after all, while the tile waits to be re-issued.
+  EXPECT_EQ(plan.merge(t.tile, t.pass, sums_for(t, 1)), FramePlan::Merge::kMerged);
+  const std::optional<TileTask> second = plan.take();  // the next pass, not the old one
+  ASSERT_TRUE(second);
+  EXPECT_EQ(second->pass, 1u);
+  EXPECT_FALSE(plan.take());
+  EXPECT_EQ(plan.merge(second->tile, 1, sums_for(*second, 1)), FramePlan::Merge::kMerged);
+  EXPECT_TRUE(plan.done());
+  EXPECT_EQ(plan.fraction_done(), 1);
+  EXPECT_EQ(plan.frame_passes_done(), 2u);
+  plan.put_back(t.tile);  // a lease that ends after the tile finished changes nothing
+  EXPECT_FALSE(plan.take());
+}
+
+// Converged pixels leave the active mask; a tile with none left is finished early.
+TEST(FramePlan, AdaptiveSamplingMasksConvergedPixelsAndFinishesTilesEarly) {
+  RenderSettings s = settings(16, 8, 8, 64, 1);
+  s.adaptive = true;
+  s.adaptive_batch = 4;  // passes [0,5) [5,9) ...
+  s.adaptive_tolerance = 0.05f;
+  FramePlan plan(s);
+  for (int k = 0; k < 2; ++k) {
+    const TileTask t = *plan.take();
+    ASSERT_EQ(t.active.size(), 64u);
+    std::vector<PixelSums> sums = sums_for(t, 1);  // zero variance: converged at once
+    if (t.tile == 1) sums[3].lum2 *= 3;            // one noisy pixel keeps tile 1 going
+    EXPECT_EQ(plan.merge(t.tile, t.pass, sums), FramePlan::Merge::kMerged);
+  }
+  EXPECT_TRUE(plan.progress(0).finished);
+  EXPECT_FALSE(plan.progress(1).finished);
+  const TileTask t = *plan.take();
+  EXPECT_EQ(t.tile, 1u);
+  EXPECT_EQ(t.sample_begin, 5u);
+  for (size_t i = 0; i < t.active.size(); ++i) EXPECT_EQ(t.active[i], i == 3 ? 1 : 0) << i;
+  EXPECT_FALSE(plan.take());
+}
+
+// A tile stops once its estimated relative error meets the target, after two passes.
+TEST(FramePlan, NoiseTargetFinishesQuietTilesAfterTwoPasses) {
+  RenderSettings s = settings(16, 8, 8, 64, 4);
+  s.noise_target = 0.1;
+  FramePlan plan(s);
+  auto run_pass = [&](double quiet_noise, double loud_noise) {
+    for (int k = 0; k < 2; ++k) {
+      const TileTask t = *plan.take();
+      std::vector<PixelSums> sums = sums_for(t, 1);
+      const double noise = t.tile == 0 ? quiet_noise : loud_noise;
+      for (PixelSums& p : sums) p.lum2 += noise * p.n;  // per-sample variance ~ noise
+      ASSERT_EQ(plan.merge(t.tile, t.pass, sums), FramePlan::Merge::kMerged);
+    }
+  };
+  run_pass(0, 10);
+  EXPECT_FALSE(plan.progress(0).finished);  // quiet, but only one pass
+  run_pass(0, 10);
+  EXPECT_TRUE(plan.progress(0).finished);
+  EXPECT_LE(plan.progress(0).relative_error, 0.1f);
+  EXPECT_FALSE(plan.progress(1).finished);
+  EXPECT_GT(plan.progress(1).relative_error, 0.1f);
+  EXPECT_LT(plan.fraction_done(), 1);
+}
+
+}  // namespace
+}  // namespace tessera
