@@ -2,6 +2,8 @@
 
 #include <httplib.h>
 
+#include <cmath>
+#include <cstdio>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
@@ -104,25 +106,32 @@ void StatusHttp::stop() {
 }
 
 std::string StatusHttp::status_json() const {
-  nlohmann::json j;
-  j["uptime_seconds"] = c_.uptime();
-  j["utilization"] = c_.utilization();
-  j["jobs"] = nlohmann::json::array();
-  for (const v1::JobStatus& s : c_.list()) j["jobs"].push_back(to_json(s));
-  j["workers"] = nlohmann::json::array();
-  for (const WorkerInfo& w : c_.workers()) {
-    j["workers"].push_back({{"id", w.id},
-                            {"name", w.name},
-                            {"threads", w.threads},
-                            {"samples_per_second", w.samples_per_second},
-                            {"tasks_done", w.tasks_done},
-                            {"leases", w.leases},
-                            {"active", w.leases != 0},
-                            {"busy_thread_seconds", w.busy_thread_seconds},
-                            {"thread_seconds", w.thread_seconds},
-                            {"utilization", w.utilization}});
+  // Written out directly: with thousands of workers, building a JSON object per worker
+  // was most of the endpoint's time.
+  std::string out;
+  char buf[2048];  // a worker's name is at most 256 characters, at most 6 each escaped
+  auto num = [](double v) { return std::isfinite(v) ? v : 0.0; };
+  std::snprintf(buf, sizeof buf, "{\"uptime_seconds\":%.17g,\"utilization\":%.17g,\"jobs\":[", num(c_.uptime()),
+                num(c_.utilization()));
+  out += buf;
+  const std::vector<v1::JobStatus> jobs = c_.list();
+  for (size_t i = 0; i < jobs.size(); ++i) out += (i ? "," : "") + proto_json(jobs[i]);
+  out += "],\"workers\":[";
+  const std::vector<WorkerInfo> workers = c_.workers();
+  out.reserve(out.size() + workers.size() * 280);
+  for (size_t i = 0; i < workers.size(); ++i) {
+    const WorkerInfo& w = workers[i];
+    std::snprintf(buf, sizeof buf,
+                  "%s{\"id\":%llu,\"name\":%s,\"threads\":%u,\"samples_per_second\":%.17g,\"tasks_done\":%llu,"
+                  "\"leases\":%u,\"active\":%s,\"busy_thread_seconds\":%.17g,\"thread_seconds\":%.17g,"
+                  "\"utilization\":%.17g}",
+                  i ? "," : "", (unsigned long long)w.id, nlohmann::json(w.name).dump().c_str(), w.threads,
+                  num(w.samples_per_second), (unsigned long long)w.tasks_done, w.leases, w.leases ? "true" : "false",
+                  num(w.busy_thread_seconds), num(w.thread_seconds), num(w.utilization));
+    out += buf;
   }
-  return j.dump();
+  out += "]}";
+  return out;
 }
 
 std::string StatusHttp::metrics_text() const {
@@ -160,9 +169,16 @@ std::string StatusHttp::metrics_text() const {
   gauge("tessera_uptime_seconds", "Seconds since start.", c_.uptime());
   gauge("tessera_workers_utilization", "Busy over available render-thread time of all workers, last seconds.",
         c_.utilization());
+  std::string lines;  // thousands of workers: snprintf, not the stream's formatting
   auto per_worker = [&](const char* name, const char* type, const char* help, auto value) {
     m << "# HELP " << name << ' ' << help << "\n# TYPE " << name << ' ' << type << '\n';
-    for (const auto& w : workers) m << name << "{worker=\"" << w.id << "\"} " << value(w) << '\n';
+    lines.clear();
+    char buf[160];
+    for (const auto& w : workers) {
+      std::snprintf(buf, sizeof buf, "%s{worker=\"%llu\"} %.9g\n", name, (unsigned long long)w.id, value(w));
+      lines += buf;
+    }
+    m << lines;
   };
   per_worker("tessera_worker_utilization", "gauge", "Busy over available render-thread time, last seconds.",
              [](const WorkerInfo& w) { return w.utilization; });
