@@ -3,8 +3,9 @@
 
 On whatever machine it runs: renders one frame with `tessera render -t N` (N = every core)
 and through a local farm (a coordinator on 127.0.0.1 and W workers of T threads, W x T = N)
-for every split of the cores, alternating, REPEAT times. Prints per split the median
-seconds of the whole commands, farm/local, the workers' render-thread utilization during
+for every split of the cores, each farm run beside a local run, REPEAT times. Prints per
+split the median seconds of the whole commands, the median of the farm/local ratios of
+those pairs, the workers' render-thread utilization during
 the job (busy thread-seconds over threads x the job's elapsed time), and whether the farm
 image equals the local one bit for bit. Exits non-zero if an image differs.
 
@@ -118,9 +119,10 @@ def main():
         for w, t in splits:
             farm = Farm(a.bin, w, t, os.path.join(tmp, f"{w}x{t}"))
             try:
-                secs, utils, same = [], [], True
+                secs, ratios, utils, same = [], [], [], True
                 for r in range(a.repeat):
-                    # Alternate with local renders so that both see the same machine load.
+                    # Each farm run beside a local run: the ratio of the pair is what a
+                    # shared, drifting machine changes least.
                     local.append(timed([tessera, "render", a.scene, *flags, "-t", str(a.cores), "-q", "-f",
                                         local_exr])[0])
                     before = {x["id"]: x["busy_thread_seconds"] for x in farm.status()["workers"]}
@@ -132,15 +134,15 @@ def main():
                     busy = sum(x["busy_thread_seconds"] - before.get(x["id"], 0) for x in st["workers"])
                     threads = sum(x["threads"] for x in st["workers"])
                     secs.append(s)
+                    ratios.append(s / local[-1])
                     utils.append(busy / (threads * job["elapsed_seconds"]) if job["elapsed_seconds"] > 0 else 0)
                     same = same and identical(a.bin, out, local_exr)
             finally:
                 farm.stop()
             rows.append({"workers": w, "threads": t, "seconds": statistics.median(secs),
-                         "utilization": statistics.median(utils), "identical": same})
+                         "farm_over_local": statistics.median(ratios), "utilization": statistics.median(utils),
+                         "identical": same})
         local_s = statistics.median(local)
-        for row in rows:
-            row["farm_over_local"] = row["seconds"] / local_s
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 

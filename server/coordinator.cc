@@ -288,7 +288,12 @@ std::optional<Coordinator::ImageSnapshot> Coordinator::after_merge_locked(Job& j
 }
 
 Coordinator::ImageSnapshot Coordinator::snapshot_locked(Job& job) {
-  ImageSnapshot snap{&job, std::make_unique<Film>(job.plan.film()), {}, ++job.image_seq, job.plan.merges()};
+  std::unique_ptr<Film> film = std::move(job.spare_film);
+  if (film)
+    *film = job.plan.film();  // into the mapped pages of the last snapshot
+  else
+    film = std::make_unique<Film>(job.plan.film());
+  ImageSnapshot snap{&job, std::move(film), {}, ++job.image_seq, job.plan.merges()};
   snap.meta = {{"job", job.id},
                {"scene", job.name},
                {"seed", std::to_string(job.plan.settings().seed)},
@@ -298,23 +303,28 @@ Coordinator::ImageSnapshot Coordinator::snapshot_locked(Job& job) {
   return snap;
 }
 
-void Coordinator::write_snapshot(const ImageSnapshot& snap) {
+void Coordinator::write_snapshot(ImageSnapshot& snap) {
   if (options_.before_image_write) options_.before_image_write();
   Job& job = *snap.job;
-  std::lock_guard<std::mutex> wl(job.write_mu);
-  if (snap.seq <= job.written_seq) return;  // a newer snapshot is already written
-  try {
-    sink_->write(job.id, *snap.film, snap.meta);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "tessera-coordinator: job %s: image: %s\n", job.id.c_str(), e.what());
-    std::lock_guard<std::mutex> lock(mu_);
-    ++counters_.image_errors;
-    return;
+  enum { kSkipped, kWritten, kFailed } outcome = kSkipped;  // skipped: a newer one is written
+  {
+    std::lock_guard<std::mutex> wl(job.write_mu);
+    if (snap.seq > job.written_seq) {
+      try {
+        sink_->write(job.id, *snap.film, snap.meta);
+        job.written_seq = snap.seq;
+        job.written_merges = snap.merges;
+        outcome = kWritten;
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "tessera-coordinator: job %s: image: %s\n", job.id.c_str(), e.what());
+        outcome = kFailed;
+      }
+    }
   }
-  job.written_seq = snap.seq;
-  job.written_merges = snap.merges;
   std::lock_guard<std::mutex> lock(mu_);
-  ++counters_.images_written;
+  counters_.images_written += outcome == kWritten;
+  counters_.image_errors += outcome == kFailed;
+  if (job.live()) job.spare_film = std::move(snap.film);  // for the next snapshot
 }
 
 void Coordinator::write_image(Job& job) {

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -27,7 +28,11 @@ struct Job {
   // Progressive images: a snapshot is taken under the coordinator's lock, written outside.
   uint32_t image_frame_passes = 0;  // frame passes in the last image taken
   double last_image = -1e9;
-  uint64_t image_seq = 0;       // snapshots taken
+  uint64_t image_seq = 0;  // snapshots taken
+  // A film to copy the next snapshot into: its pages are already mapped, so the copy under
+  // the coordinator's lock is a memory copy, not thousands of page faults (231 ms for a
+  // fresh 1920x1080 film here, against a few for a reused one).
+  std::unique_ptr<Film> spare_film;
   std::mutex write_mu;          // one writer at a time; guards the two below
   uint64_t written_seq = 0;     // newest snapshot written (0: none yet)
   uint64_t written_merges = 0;  // the film version it holds

@@ -19,6 +19,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
+constexpr int kLingerMs = 20;  // how long finished results may wait for company
+
 std::unique_ptr<grpc::ClientContext> context(double seconds) {
   auto ctx = std::make_unique<grpc::ClientContext>();
   ctx->set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(int64_t(seconds * 1000)));
@@ -148,9 +150,10 @@ std::shared_ptr<const Worker::Prepared> Worker::prepare(const v1::Task& task) {
 
 bool Worker::wants_more_locked() const {
   if (held_.size() >= size_t(options_.max_tasks)) return false;
-  if (queued_rows_ < 2 * uint64_t(options_.threads)) return true;
+  if (queued_rows_ < 2 * uint64_t(options_.threads)) return true;  // threads about to run dry
+  // Refill at half the lookahead, up to all of it: fewer, larger requests.
   const double rate = samples_per_thread_second_ * options_.threads;
-  return rate > 0 && queued_samples_ < rate * options_.lookahead_seconds;
+  return rate > 0 && queued_samples_ < 0.5 * rate * options_.lookahead_seconds;
 }
 
 void Worker::render_loop() {
@@ -198,6 +201,12 @@ void Worker::send_loop() {
   while (true) {
     outbox_cv_.wait(lock, [this] { return stopping_ || !outbox_.empty(); });
     if (outbox_.empty()) return;  // stopping, and everything finished was sent
+    // While the render threads still have work, let results gather for a moment: one call
+    // for several results. With nothing queued, a result may be what frees the next pass
+    // of a tile, so it goes at once.
+    const auto linger_until = std::chrono::steady_clock::now() + std::chrono::milliseconds(kLingerMs);
+    while (!stopping_ && !queue_.empty() && outbox_cv_.wait_until(lock, linger_until) != std::cv_status::timeout) {
+    }
     // Everything finished so far goes in one request.
     const std::deque<std::shared_ptr<Held>> batch = std::move(outbox_);
     outbox_.clear();
