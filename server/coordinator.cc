@@ -206,6 +206,16 @@ void Coordinator::release(uint64_t worker_id, uint64_t task_id) {
   changed_.notify_all();
 }
 
+void Coordinator::unregister(uint64_t worker_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (uint64_t id : leases_.held_by(worker_id)) {
+    end_lease_locked(id, true);
+    ++counters_.leases_released;
+  }
+  workers_.remove(worker_id);
+  changed_.notify_all();
+}
+
 v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
   v1::ResultAck ack;
   // Which task, and is its result still wanted? Then decode outside the lock (the slow

@@ -85,6 +85,8 @@ class Coordinator {
   }
   v1::ResultAck submit_result(const v1::TaskResult& result);
   void release(uint64_t worker_id, uint64_t task_id);
+  // The worker stops: its leases go back to their jobs and it is forgotten.
+  void unregister(uint64_t worker_id);
 
   // Waits up to `timeout` seconds for a change that may make work available (a job
   // submitted, a tile pass merged, a lease ended): lets GetTask long-poll.

@@ -95,4 +95,9 @@ grpc::Status WorkerService::ReleaseTask(grpc::ServerContext*, const v1::ReleaseR
   return guarded([&] { c_.release(req->worker_id(), req->task_id()); });
 }
 
+grpc::Status WorkerService::Unregister(grpc::ServerContext*, const v1::UnregisterRequest* req,
+                                       v1::UnregisterResponse*) {
+  return guarded([&] { c_.unregister(req->worker_id()); });
+}
+
 }  // namespace tessera

@@ -30,6 +30,7 @@ class WorkerService final : public v1::TesseraWorker::Service {
   grpc::Status Heartbeat(grpc::ServerContext*, const v1::HeartbeatRequest* req, v1::HeartbeatResponse* out) override;
   grpc::Status SubmitResults(grpc::ServerContext*, const v1::ResultBatch* req, v1::ResultAcks* out) override;
   grpc::Status ReleaseTask(grpc::ServerContext*, const v1::ReleaseRequest* req, v1::ReleaseResponse* out) override;
+  grpc::Status Unregister(grpc::ServerContext*, const v1::UnregisterRequest* req, v1::UnregisterResponse*) override;
 
  private:
   Coordinator& c_;

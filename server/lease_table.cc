@@ -56,6 +56,13 @@ void LeaseTable::forget_job(const std::string& job) {
     for (auto it = m->begin(); it != m->end();) it = it->second.job == job ? m->erase(it) : std::next(it);
 }
 
+std::vector<uint64_t> LeaseTable::held_by(uint64_t worker) const {
+  std::vector<uint64_t> out;
+  for (const auto& [id, l] : live_)
+    if (l.worker == worker) out.push_back(id);
+  return out;
+}
+
 uint32_t LeaseTable::workers_on(const std::string& job) const {
   std::set<uint64_t> w;
   for (const auto& [id, l] : live_)

@@ -32,6 +32,8 @@ class LeaseTable {
   std::vector<std::pair<uint64_t, Lease>> expire(double now);
   // Ends every live lease of the job, and forgets all its leases.
   void forget_job(const std::string& job);
+  // The live leases a worker holds.
+  std::vector<uint64_t> held_by(uint64_t worker) const;
   // Live leases of a job: how many distinct workers hold them.
   uint32_t workers_on(const std::string& job) const;
   size_t live_count() const { return live_.size(); }

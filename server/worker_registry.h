@@ -31,6 +31,7 @@ class WorkerRegistry {
   // Forgets workers not heard from for `timeout` seconds; returns their ids. (A forgotten
   // worker that comes back is told to register again.)
   std::vector<uint64_t> forget_silent(double now, double timeout);
+  void remove(uint64_t id) { workers_.erase(id); }
   std::vector<WorkerInfo> list() const;
   // A finished task: its render rate feeds the worker's smoothed speed; its thread-time
   // counters the utilization.

@@ -374,8 +374,13 @@ void Worker::run(const std::atomic<bool>& stop) {
   }  // joins the render threads
   keeper.join();
   sender.join();  // finished results are sent first
-  // What was not finished goes back, so another worker starts on it at once.
-  for (const auto& [id, h] : held_) release(id);
+  // What was not finished goes back, so another worker starts on it at once, and this
+  // worker stops counting as one.
+  v1::UnregisterRequest bye;
+  bye.set_worker_id(worker_id_);
+  v1::UnregisterResponse ok;
+  if (!stub_->Unregister(context(2).get(), bye, &ok).ok())
+    for (const auto& [id, h] : held_) release(id);  // at least the leases, one by one
   held_.clear();
   queue_.clear();
 }

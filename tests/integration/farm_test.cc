@@ -137,6 +137,21 @@ TEST_F(Farm, NoiseTargetAndEstimatorSwitchesGiveTheLocalImage) {
   expect_same_pixels(local, out);
 }
 
+// Odd tiles that do not divide the frame, adaptive sampling, and workers of different
+// thread counts taking rows of several tasks at once: still the local image.
+TEST_F(Farm, OddTilesAdaptiveSamplingAndUnequalWorkersGiveTheLocalImage) {
+  const std::string flags = "-r 90 70 -s 48 -a 8 0.1 -m 6 --tile 13 --seed 3";
+  const std::string local = local_render(flags);
+  start_coordinator();
+  start_worker(2);
+  start_worker(1);
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r =
+      run("submit " + kScene + " " + flags + " --coordinator " + grpc_addr + " --wait -q -f " + out, dir);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+}
+
 TEST_F(Farm, GltfSceneThroughTheFarmMatchesTheLocalRender) {
   const std::string scene = std::string(TESSERA_SOURCE_DIR) + "/scenes/dof-row.gltf";
   const std::string flags = "-r 96 64 -s 8 --pass-spp 4 -b 0.1 -d 7";
@@ -300,6 +315,7 @@ TEST_F(Farm, WorkerStopsCleanlyOnSigtermAndGivesItsLeaseBack) {
   ASSERT_TRUE(std::regex_search(metrics, m, std::regex("tessera_leases_released_total (\\d+)"))) << metrics;
   EXPECT_GE(std::stoi(m[1]), 1);  // the abandoned tile (and a prefetched one, if any)
   EXPECT_NE(metrics.find("tessera_workers_busy 0"), std::string::npos) << metrics;  // no lease left held
+  EXPECT_NE(metrics.find("\ntessera_workers 0\n"), std::string::npos) << metrics;   // and it left at once
 }
 
 TEST_F(Farm, WorkerReconnectsWhenTheCoordinatorComesBack) {

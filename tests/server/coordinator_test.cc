@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <thread>
 
 #include "core/io/image_io.h"
@@ -419,6 +420,23 @@ TEST_F(CoordinatorTest, BatchedLeasesFollowTheCountAndSampleLimits) {
   drain(w);
   EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
   EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
+// A worker that stops says so: its leases go back at once and it no longer counts.
+TEST_F(CoordinatorTest, UnregisteredWorkersGiveTheirLeasesBackAndLeave) {
+  c->submit(request(job_settings()));
+  const uint64_t leaving = worker(), staying = worker();
+  const v1::GetTaskResponse held = c->get_task(leaving, 3);
+  ASSERT_EQ(held.tasks_size(), 3);
+  c->unregister(leaving);
+  EXPECT_EQ(c->workers().size(), 1u);
+  EXPECT_EQ(c->counters().leases_released, 3u);
+  EXPECT_THROW(c->get_task(leaving), RequestError);
+  // The three tiles are ready again at once, for the worker that stays (no expiry wait).
+  std::set<uint32_t> again;
+  const v1::GetTaskResponse reissued = c->get_task(staying, 100);
+  for (const v1::Task& t : reissued.tasks()) again.insert(t.tile().x() * 1000 + t.tile().y());
+  for (const v1::Task& t : held.tasks()) EXPECT_TRUE(again.count(t.tile().x() * 1000 + t.tile().y()));
 }
 
 }  // namespace
