@@ -12,6 +12,7 @@
 #include <thread>
 
 #include "core/io/image_io.h"
+#include "tests/integration/farm_helpers.h"
 #include "tests/integration/process.h"
 
 namespace tessera {
@@ -20,8 +21,10 @@ namespace {
 namespace fs = std::filesystem;
 using testing::Process;
 
-const std::string kBin = TESSERA_BIN_DIR;
-const std::string kScene = std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-spheres.dae";
+using testing::expect_same_pixels;
+using testing::kBin;
+using testing::kScene;
+using testing::slurp;
 
 struct CommandResult {
   int code = -1;
@@ -31,25 +34,7 @@ struct CommandResult {
 CommandResult run(const std::string& args, const fs::path& dir) {
   const std::string out = (dir / "cmd.out").string(), err = (dir / "cmd.err").string();
   const int status = std::system((kBin + "/tessera " + args + " >" + out + " 2>" + err).c_str());
-  auto slurp = [](const std::string& p) {
-    std::ifstream f(p);
-    std::stringstream ss;
-    ss << f.rdbuf();
-    return ss.str();
-  };
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
-}
-
-// Bitwise equality of every channel.
-void expect_same_pixels(const std::string& a_path, const std::string& b_path) {
-  const ExrImage a = read_exr(a_path), b = read_exr(b_path);
-  ASSERT_EQ(a.width, b.width);
-  ASSERT_EQ(a.height, b.height);
-  for (const char* ch : {"R", "G", "B", "spp", "variance"}) {
-    ASSERT_TRUE(a.channels.count(ch) && b.channels.count(ch)) << ch;
-    const auto &x = a.channels.at(ch), &y = b.channels.at(ch);
-    EXPECT_EQ(0, std::memcmp(x.data(), y.data(), x.size() * sizeof(float))) << "channel " << ch << " differs";
-  }
 }
 
 class Farm : public ::testing::Test {
@@ -95,6 +80,12 @@ class Farm : public ::testing::Test {
     if (!res || res->status != 200) return nullptr;
     return nlohmann::json::parse(res->body);
   }
+  // `tessera submit SCENE FLAGS --wait -q EXTRA -f OUT` against this test's coordinator.
+  CommandResult submit_wait(const std::string& scene, const std::string& flags, const std::string& out,
+                            const std::string& extra = "") {
+    return run("submit " + scene + " " + flags + " --coordinator " + grpc_addr + " --wait -q " + extra + " -f " + out,
+               dir);
+  }
   std::string local_render(const std::string& flags) {
     const std::string out = (dir / "local.exr").string();
     const CommandResult r = run("render " + kScene + " " + flags + " -q -f " + out, dir);
@@ -111,8 +102,7 @@ TEST_F(Farm, OneTwoAndThreeWorkersGiveTheBytesOfTessearRender) {
   for (int n = 1; n <= 3; ++n) {
     start_worker();
     const std::string out = (dir / ("farm" + std::to_string(n) + ".exr")).string();
-    const CommandResult r =
-        run("submit " + kScene + " " + kFlags + " --coordinator " + grpc_addr + " --wait -q -f " + out, dir);
+    const CommandResult r = submit_wait(kScene, kFlags, out);
     ASSERT_EQ(r.code, 0) << r.err << r.out;
     EXPECT_NE(r.out.find("DONE"), std::string::npos) << r.out;
     expect_same_pixels(local, out);
@@ -127,8 +117,7 @@ TEST_F(Farm, NoiseTargetAndEstimatorSwitchesGiveTheLocalImage) {
   start_coordinator();
   start_worker(2);
   const std::string out = (dir / "farm.exr").string();
-  const CommandResult r =
-      run("submit " + kScene + " " + flags + " --coordinator " + grpc_addr + " --wait -q --json -f " + out, dir);
+  const CommandResult r = submit_wait(kScene, flags, out, "--json");
   ASSERT_EQ(r.code, 0) << r.err;
   const nlohmann::json status = nlohmann::json::parse(r.out);
   EXPECT_LT(std::stoull(status["samples_done"].get<std::string>()),
@@ -146,8 +135,7 @@ TEST_F(Farm, OddTilesAdaptiveSamplingAndUnequalWorkersGiveTheLocalImage) {
   start_worker(2);
   start_worker(1);
   const std::string out = (dir / "farm.exr").string();
-  const CommandResult r =
-      run("submit " + kScene + " " + flags + " --coordinator " + grpc_addr + " --wait -q -f " + out, dir);
+  const CommandResult r = submit_wait(kScene, flags, out);
   ASSERT_EQ(r.code, 0) << r.err;
   expect_same_pixels(local, out);
 }
@@ -160,8 +148,7 @@ TEST_F(Farm, GltfSceneThroughTheFarmMatchesTheLocalRender) {
   start_coordinator();
   start_worker(2);
   const std::string out = (dir / "farm.exr").string();
-  const CommandResult r =
-      run("submit " + scene + " " + flags + " --coordinator " + grpc_addr + " --wait -q -f " + out, dir);
+  const CommandResult r = submit_wait(scene, flags, out);
   ASSERT_EQ(r.code, 0) << r.err;
   expect_same_pixels(local, out);
 }
@@ -233,9 +220,7 @@ TEST_F(Farm, CancelStopsWorkAndKeepsTheImage) {
 TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   start_coordinator();
   start_worker();
-  const CommandResult r = run("submit " + kScene + " -r 64 48 -s 8 --tile 16 --coordinator " + grpc_addr +
-                                  " --wait -q -f " + (dir / "x.png").string(),
-                              dir);
+  const CommandResult r = submit_wait(kScene, "-r 64 48 -s 8 --tile 16", (dir / "x.png").string());
   ASSERT_EQ(r.code, 0) << r.err;
   const nlohmann::json s = get_json("/api/status");
   ASSERT_NE(s, nullptr);
@@ -286,9 +271,7 @@ TEST_F(Farm, MalformedSceneIsRefusedAtSubmitAndTheCoordinatorKeepsServing) {
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.err.find("broken.dae"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("unknown up_axis 'Q_UP'"), std::string::npos) << r.err;
-  const CommandResult ok = run(
-      "submit " + kScene + " -r 32 24 -s 4 --coordinator " + grpc_addr + " --wait -q -f " + (dir / "ok.exr").string(),
-      dir);
+  const CommandResult ok = submit_wait(kScene, "-r 32 24 -s 4", (dir / "ok.exr").string());
   EXPECT_EQ(ok.code, 0) << ok.err;
 }
 
@@ -328,9 +311,7 @@ TEST_F(Farm, WorkerReconnectsWhenTheCoordinatorComesBack) {
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   start_coordinator(addr);  // same port: the worker finds it again
   ASSERT_EQ(grpc_addr, addr);
-  const CommandResult r = run("submit " + kScene + " -r 32 24 -s 4 --coordinator " + grpc_addr + " --wait -q -f " +
-                                  (dir / "again.exr").string(),
-                              dir);
+  const CommandResult r = submit_wait(kScene, "-r 32 24 -s 4", (dir / "again.exr").string());
   EXPECT_EQ(r.code, 0) << r.err;
 }
 

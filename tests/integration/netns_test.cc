@@ -17,6 +17,7 @@
 #include <thread>
 
 #include "core/io/image_io.h"
+#include "tests/integration/farm_helpers.h"
 #include "tests/integration/process.h"
 
 namespace tessera {
@@ -25,19 +26,14 @@ namespace {
 namespace fs = std::filesystem;
 using testing::Process;
 
-const std::string kBin = TESSERA_BIN_DIR;
-const std::string kScene = std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-spheres.dae";
+using testing::expect_same_pixels;
+using testing::kBin;
+using testing::kScene;
+using testing::slurp;
 
 int sh(const std::string& cmd) {
   const int status = std::system((cmd + " >/dev/null 2>&1").c_str());
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
-
-std::string slurp(const std::string& p) {
-  std::ifstream f(p);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
 }
 
 // Three hosts: "c" (coordinator and client, with the bridge, 192.0.2.1) and "w1", "w2"
@@ -158,10 +154,7 @@ TEST_F(NetnsFarm, TwoMachinesRenderTheLocalImageAndOneLosingItsLinkChangesNothin
   EXPECT_EQ(done["state"], "DONE") << done.dump();
   const std::string farm = (dir / "farm.exr").string();
   tessera("fetch " + id + " -f " + farm + " --coordinator " + addr);
-  const ExrImage a = read_exr(local), b = read_exr(farm);
-  for (const char* ch : {"R", "G", "B", "spp", "variance"})
-    EXPECT_EQ(0, std::memcmp(a.channels.at(ch).data(), b.channels.at(ch).data(), a.channels.at(ch).size() * 4))
-        << "channel " << ch << " differs";
+  expect_same_pixels(local, farm);
   // The cut-off worker held leases: they expired, and their tiles were rendered again.
   const std::string metrics = (dir / "metrics.txt").string();
   ASSERT_EQ(std::system(("ip netns exec " + hosts.ns("c") +

@@ -1,0 +1,38 @@
+// What the farm's integration tests share: where the binaries and the default scene are,
+// reading a file whole, and comparing two images bit for bit.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "core/io/image_io.h"
+
+namespace tessera::testing {
+
+inline const std::string kBin = TESSERA_BIN_DIR;
+inline const std::string kScene = std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-spheres.dae";
+
+inline std::string slurp(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+// Bitwise equality of every channel.
+inline void expect_same_pixels(const std::string& a_path, const std::string& b_path) {
+  const ExrImage a = read_exr(a_path), b = read_exr(b_path);
+  ASSERT_EQ(a.width, b.width);
+  ASSERT_EQ(a.height, b.height);
+  for (const char* ch : {"R", "G", "B", "spp", "variance"}) {
+    ASSERT_TRUE(a.channels.count(ch) && b.channels.count(ch)) << ch;
+    const auto &x = a.channels.at(ch), &y = b.channels.at(ch);
+    EXPECT_EQ(0, std::memcmp(x.data(), y.data(), x.size() * sizeof(float))) << "channel " << ch << " differs";
+  }
+}
+
+}  // namespace tessera::testing
