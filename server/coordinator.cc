@@ -222,8 +222,9 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
   // part), and look again: another copy may have been merged meanwhile.
   auto wanted = [&](Lease* out) -> bool {
     const Lease* l = leases_.known(result.task_id());
-    if (!l) {
-      ++counters_.results_rejected;  // never issued
+    // Never issued, or issued to another worker: only the lease's holder may answer it.
+    if (!l || l->worker != result.worker_id()) {
+      ++counters_.results_rejected;
       return false;
     }
     auto job = jobs_.find(l->job);

@@ -439,5 +439,31 @@ TEST_F(CoordinatorTest, UnregisteredWorkersGiveTheirLeasesBackAndLeave) {
   for (const v1::Task& t : held.tasks()) EXPECT_TRUE(again.count(t.tile().x() * 1000 + t.tile().y()));
 }
 
+// Issue 10, row 7: results for tasks leased to another worker, or from a worker id that
+// never registered, were merged (the honest ones then dropped as duplicates). A result
+// counts only from the worker that holds, or held, the task's lease.
+TEST_F(CoordinatorTest, ResultsCountOnlyFromTheLeaseHolder) {
+  const RenderSettings s = job_settings();
+  const std::string id = c->submit(request(s));
+  const uint64_t honest = worker(), rogue = worker();
+  const v1::GetTaskResponse held = c->get_task(honest, 4);
+  ASSERT_EQ(held.tasks_size(), 4);
+  for (const v1::Task& task : held.tasks()) {
+    v1::TaskResult forged = render_task(task, rogue);  // a registered worker, not the holder
+    EXPECT_FALSE(c->submit_result(forged).accepted());
+    forged.set_worker_id(987654);  // never registered
+    EXPECT_FALSE(c->submit_result(forged).accepted());
+  }
+  EXPECT_EQ(c->counters().results_rejected, 8u);
+  EXPECT_EQ(c->counters().results_merged, 0u);
+  // The holder's results still merge, also after its lease expired.
+  t += 10;
+  c->expire_leases();
+  for (const v1::Task& task : held.tasks()) EXPECT_TRUE(c->submit_result(render_task(task, honest)).accepted());
+  drain(honest);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
 }  // namespace
 }  // namespace tessera
