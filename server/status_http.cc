@@ -12,33 +12,41 @@ namespace {
 
 nlohmann::json to_json(const google::protobuf::Message& m) { return nlohmann::json::parse(proto_json(m)); }
 
+// The live page: markup only; its style and script are served separately so that the
+// Content-Security-Policy can forbid inline script (and with it any markup a job or
+// worker name might smuggle in). Every value the script writes into the page goes
+// through esc(), user strings and numbers alike.
 const char* kLivePage = R"HTML(<!doctype html>
-<html><head><meta charset="utf-8"><title>Tessera</title>
-<style>
-body{font-family:sans-serif;margin:1.5em;background:#111;color:#ddd}
-table{border-collapse:collapse}td,th{padding:2px 10px;text-align:left}
-.row{display:flex;gap:1.5em;align-items:flex-start}canvas,img{image-rendering:pixelated;border:1px solid #444}
-</style></head><body>
+<html><head><meta charset="utf-8"><title>Tessera</title><link rel="stylesheet" href="/app.css"></head><body>
 <h2>Tessera</h2>
 <div id="summary"></div>
 <div class="row"><div><h3>Image</h3><img id="preview" alt="no image yet"></div>
 <div><h3>Tiles <small>(passes merged; white = finished)</small></h3><canvas id="heat"></canvas></div></div>
 <h3>Jobs</h3><table id="jobs"></table>
 <h3>Workers</h3><table id="workers"></table>
-<script>
+<script src="/app.js"></script></body></html>)HTML";
+
+const char* kLiveCss = R"CSS(body{font-family:sans-serif;margin:1.5em;background:#111;color:#ddd}
+table{border-collapse:collapse}td,th{padding:2px 10px;text-align:left}
+.row{display:flex;gap:1.5em;align-items:flex-start}canvas,img{image-rendering:pixelated;border:1px solid #444}
+)CSS";
+
+const char* kLiveJs = R"JS('use strict';
+const esc = v => String(v).replace(/[&<>"']/g, c => ({'&':'&amp;','<':'&lt;','>':'&gt;','"':'&quot;',"'":'&#39;'}[c]));
 async function tick(){
   const s = await (await fetch('/api/status')).json();
   const jobs = s.jobs || [], workers = s.workers || [];
   document.getElementById('summary').textContent =
-    `${jobs.length} jobs, ${workers.filter(w=>w.active).length} active workers, up ${s.uptime_seconds.toFixed(0)} s`;
+    `${jobs.length} jobs, ${workers.filter(w=>w.active).length} active workers, ` +
+    `${(100*s.utilization).toFixed(0)}% busy, up ${s.uptime_seconds.toFixed(0)} s`;
   document.getElementById('jobs').innerHTML = '<tr><th>id</th><th>name</th><th>state</th><th>samples</th><th>frame passes</th><th>ETA</th></tr>' +
-    jobs.map(j=>`<tr><td>${j.id}</td><td>${j.name}</td><td>${j.state}</td><td>${(100*j.samples_done/Math.max(1,j.samples_total)).toFixed(1)}%</td><td>${j.frame_passes_done}/${j.passes_total}</td><td>${j.eta_seconds.toFixed(0)} s</td></tr>`).join('');
-  document.getElementById('workers').innerHTML = '<tr><th>id</th><th>name</th><th>threads</th><th>samples/s</th><th>tasks</th></tr>' +
-    workers.map(w=>`<tr><td>${w.id}</td><td>${w.name}</td><td>${w.threads}</td><td>${(w.samples_per_second/1e6).toFixed(2)} M</td><td>${w.tasks_done}</td></tr>`).join('');
+    jobs.map(j=>`<tr><td>${esc(j.id)}</td><td>${esc(j.name)}</td><td>${esc(j.state)}</td><td>${esc((100*j.samples_done/Math.max(1,j.samples_total)).toFixed(1))}%</td><td>${esc(j.frame_passes_done)}/${esc(j.passes_total)}</td><td>${esc(j.eta_seconds.toFixed(0))} s</td></tr>`).join('');
+  document.getElementById('workers').innerHTML = '<tr><th>id</th><th>name</th><th>threads</th><th>samples/s</th><th>busy</th><th>tasks</th></tr>' +
+    workers.map(w=>`<tr><td>${esc(w.id)}</td><td>${esc(w.name)}</td><td>${esc(w.threads)}</td><td>${esc((w.samples_per_second/1e6).toFixed(2))} M</td><td>${esc((100*w.utilization).toFixed(0))}%</td><td>${esc(w.tasks_done)}</td></tr>`).join('');
   const job = jobs.find(j=>j.state==='RUNNING') || jobs[jobs.length-1];
   if (!job) return;
-  document.getElementById('preview').src = `/jobs/${job.id}/preview.png?t=${Date.now()}`;
-  const d = await (await fetch(`/api/jobs/${job.id}`)).json();
+  document.getElementById('preview').src = `/jobs/${encodeURIComponent(job.id)}/preview.png?t=${Date.now()}`;
+  const d = await (await fetch(`/api/jobs/${encodeURIComponent(job.id)}`)).json();
   const c = document.getElementById('heat'), ctx = c.getContext('2d');
   c.width = d.settings.width; c.height = d.settings.height;
   ctx.fillStyle = '#000'; ctx.fillRect(0, 0, c.width, c.height);
@@ -49,7 +57,12 @@ async function tick(){
   }
 }
 tick(); setInterval(tick, 1000);
-</script></body></html>)HTML";
+)JS";
+
+// Only this server's own script, style, images and API; no inline script, no framing.
+const char* kContentSecurityPolicy =
+    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self'; connect-src 'self'; "
+    "base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
 
 }  // namespace
 
@@ -86,6 +99,15 @@ StatusHttp::StatusHttp(Coordinator& c) : c_(c), server_(std::make_unique<httplib
     res.set_content(png, "image/png");
   });
   server_->Get("/", [](const httplib::Request&, httplib::Response& res) { res.set_content(kLivePage, "text/html"); });
+  server_->Get("/app.js",
+               [](const httplib::Request&, httplib::Response& res) { res.set_content(kLiveJs, "text/javascript"); });
+  server_->Get("/app.css",
+               [](const httplib::Request&, httplib::Response& res) { res.set_content(kLiveCss, "text/css"); });
+  // Every response: the policy, and no content-type guessing by browsers.
+  server_->set_post_routing_handler([](const httplib::Request&, httplib::Response& res) {
+    res.set_header("Content-Security-Policy", kContentSecurityPolicy);
+    res.set_header("X-Content-Type-Options", "nosniff");
+  });
 }
 
 StatusHttp::~StatusHttp() { stop(); }

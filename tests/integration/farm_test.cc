@@ -260,6 +260,27 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   EXPECT_EQ(png->body.substr(1, 3), "PNG");
   const auto page = cli.Get("/");
   EXPECT_NE(page->body.find("<canvas"), std::string::npos);
+  // Issue 10, row 8: names went into innerHTML as they were, with no policy. Now the page
+  // has no inline script, a policy that forbids it, and every value written as markup is
+  // escaped.
+  const std::string csp = page->get_header_value("Content-Security-Policy");
+  EXPECT_NE(csp.find("default-src 'none'"), std::string::npos) << csp;
+  EXPECT_NE(csp.find("script-src 'self';"), std::string::npos) << csp;  // no 'unsafe-inline'
+  EXPECT_EQ(csp.find("unsafe"), std::string::npos) << csp;
+  EXPECT_EQ(page->body.find("<script>"), std::string::npos);
+  EXPECT_EQ(png->get_header_value("X-Content-Type-Options"), "nosniff");
+  const auto js = cli.Get("/app.js");
+  ASSERT_TRUE(js);
+  EXPECT_EQ(js->status, 200);
+  std::istringstream script(js->body);
+  int markup_lines = 0;
+  for (std::string line; std::getline(script, line);) {
+    if (line.find("innerHTML") == std::string::npos && line.find("<td>") == std::string::npos) continue;
+    ++markup_lines;
+    for (size_t at = line.find("${"); at != std::string::npos; at = line.find("${", at + 2))
+      EXPECT_EQ(line.compare(at + 2, 4, "esc("), 0) << "unescaped value in markup: " << line.substr(at, 40);
+  }
+  EXPECT_GE(markup_lines, 4);
 }
 
 TEST_F(Farm, MalformedSceneIsRefusedAtSubmitAndTheCoordinatorKeepsServing) {
