@@ -94,7 +94,12 @@ v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& req
     throw RequestError(RequestError::Code::kInvalidArgument,
                        "protocol version " + std::to_string(req.version()) + " not supported");
   std::lock_guard<std::mutex> lock(mu_);
-  const WorkerInfo& w = workers_.add(req.name(), req.threads(), clock_->now());
+  const double now = clock_->now();
+  workers_.forget_silent(now, options_.worker_timeout_seconds);
+  if (workers_.size() >= options_.max_workers)
+    throw RequestError(RequestError::Code::kResourceExhausted,
+                       "the coordinator has its " + std::to_string(options_.max_workers) + " workers");
+  const WorkerInfo& w = workers_.add(req.name(), req.threads(), now);
   v1::RegisterResponse r;
   r.set_worker_id(w.id);
   r.set_heartbeat_interval_ms(uint32_t(options_.heartbeat_seconds * 1000));

@@ -35,6 +35,8 @@ struct CoordinatorOptions {
   double image_interval_seconds = 5;  // progressive images at most this often
   // A worker not heard from for this long is forgotten (it registers again if it returns).
   double worker_timeout_seconds = 60;
+  // Registered workers at most: a Register loop cannot grow the coordinator without bound.
+  size_t max_workers = 10000;
   // Test seam: runs between an image snapshot leaving the lock and its write.
   std::function<void()> before_image_write;
 };
@@ -42,7 +44,7 @@ struct CoordinatorOptions {
 // A request the coordinator refuses, with a message for the client.
 class RequestError : public std::runtime_error {
  public:
-  enum class Code { kInvalidArgument, kNotFound, kFailedPrecondition };
+  enum class Code { kInvalidArgument, kNotFound, kFailedPrecondition, kResourceExhausted };
   RequestError(Code code, const std::string& what) : std::runtime_error(what), code_(code) {}
   Code code() const { return code_; }
 

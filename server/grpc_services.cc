@@ -13,10 +13,20 @@ grpc::Status guarded(F&& f) {
     f();
     return grpc::Status::OK;
   } catch (const RequestError& e) {
-    const grpc::StatusCode code = e.code() == RequestError::Code::kNotFound ? grpc::StatusCode::NOT_FOUND
-                                  : e.code() == RequestError::Code::kFailedPrecondition
-                                      ? grpc::StatusCode::FAILED_PRECONDITION
-                                      : grpc::StatusCode::INVALID_ARGUMENT;
+    grpc::StatusCode code = grpc::StatusCode::INVALID_ARGUMENT;
+    switch (e.code()) {
+      case RequestError::Code::kInvalidArgument:
+        break;
+      case RequestError::Code::kNotFound:
+        code = grpc::StatusCode::NOT_FOUND;
+        break;
+      case RequestError::Code::kFailedPrecondition:
+        code = grpc::StatusCode::FAILED_PRECONDITION;
+        break;
+      case RequestError::Code::kResourceExhausted:
+        code = grpc::StatusCode::RESOURCE_EXHAUSTED;
+        break;
+    }
     return grpc::Status(code, e.what());
   } catch (const std::exception& e) {
     return grpc::Status(grpc::StatusCode::INTERNAL, e.what());

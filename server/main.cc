@@ -36,6 +36,9 @@ int main(int argc, char** argv) {
   app.add_option("--lease-seconds", opt.lease_seconds, "lease length; a silent worker's task moves on after it")
       ->capture_default_str()
       ->check(CLI::Range(0.1, 3600.0));
+  app.add_option("--max-workers", opt.max_workers, "registered workers at most (silent ones are forgotten after 60 s)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000000));
   app.add_option("--image-interval", opt.image_interval_seconds, "write progressive images at most this often (s)")
       ->capture_default_str();
   CLI11_PARSE(app, argc, argv);

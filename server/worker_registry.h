@@ -32,6 +32,7 @@ class WorkerRegistry {
   // worker that comes back is told to register again.)
   std::vector<uint64_t> forget_silent(double now, double timeout);
   void remove(uint64_t id) { workers_.erase(id); }
+  size_t size() const { return workers_.size(); }
   std::vector<WorkerInfo> list() const;
   // A finished task: its render rate feeds the worker's smoothed speed; its thread-time
   // counters the utilization.

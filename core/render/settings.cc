@@ -35,6 +35,12 @@ void RenderSettings::validate() const {
     require(window.x >= 0 && window.y >= 0 && window.w >= 1 && window.h >= 1 &&
                 int64_t(window.x) + window.w <= camera.width && int64_t(window.y) + window.h <= camera.height,
             "-p", "the cell must lie inside the -r image");
+  const Rect w = effective_window();
+  require(w.area() <= kMaxPixels, window.area() > 0 ? "-p" : "-r",
+          std::to_string(w.area()) + " pixels; at most " + std::to_string(kMaxPixels) + " in one frame");
+  const int64_t tiles = ((int64_t(w.w) + tile_size - 1) / tile_size) * ((int64_t(w.h) + tile_size - 1) / tile_size);
+  require(tiles <= kMaxTiles, "--tile",
+          std::to_string(tiles) + " tiles; at most " + std::to_string(kMaxTiles) + ": use a larger --tile");
 }
 
 std::vector<std::pair<uint32_t, uint32_t>> RenderSettings::passes() const {

@@ -35,6 +35,10 @@ struct RenderSettings {
   static constexpr int kMaxImageSide = 65536;
   static constexpr int kMaxTileSize = 4096;
   static constexpr double kMaxNoiseTarget = 1e9;
+  // What one frame may ask for, checked before anything is allocated: the film holds 40
+  // bytes a pixel (5.4 GB at the limit, past 11000 x 11000), the plan ~80 bytes a tile.
+  static constexpr int64_t kMaxPixels = int64_t(1) << 27;
+  static constexpr int64_t kMaxTiles = int64_t(1) << 18;
 
   int spp = 64;           // -s: camera samples per pixel (a maximum with -a or --noise-target)
   int light_samples = 1;  // -l: samples per area (or ambient) light per shading point

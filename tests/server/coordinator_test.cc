@@ -465,5 +465,28 @@ TEST_F(CoordinatorTest, ResultsCountOnlyFromTheLeaseHolder) {
   EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
 }
 
+// Issue 10, row 5: a Register loop made 20,000 workers that were never removed. Workers
+// are capped, silent ones are forgotten, and leaving frees a place.
+TEST_F(CoordinatorTest, RegisteredWorkersAreBounded) {
+  CoordinatorOptions o = options();
+  o.max_workers = 3;
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  const uint64_t first = worker();
+  worker();
+  worker();
+  try {
+    worker();
+    ADD_FAILURE();
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kResourceExhausted);
+    EXPECT_NE(std::string(e.what()).find("3 workers"), std::string::npos) << e.what();
+  }
+  c->unregister(first);
+  EXPECT_NO_THROW(worker());
+  t += o.worker_timeout_seconds + 1;  // all silent: forgotten when the next one registers
+  EXPECT_NO_THROW(worker());
+  EXPECT_EQ(c->workers().size(), 1u);
+}
+
 }  // namespace
 }  // namespace tessera

@@ -165,6 +165,11 @@ TEST(Settings, EachSettingOutOfRangeIsRefusedByItsFlag) {
   EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.focal_distance = 0; }), "-d");
   EXPECT_EQ(refused_as([](RenderSettings& s) { s.window = Rect{470, 0, 20, 10}; }), "-p");    // past the right edge
   EXPECT_EQ(refused_as([](RenderSettings& s) { s.window = Rect{0, 0, 0, 0}; }), "accepted");  // the whole image
+  // Issue 10, row 9: `-r 2048 2048 --tile 1` made 4 M tiles and 0.83 GB at submit.
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.width = s.camera.height = 2048, s.tile_size = 1; }), "--tile");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.width = s.camera.height = 2048, s.tile_size = 4; }),
+            "accepted");  // 262,144 tiles: the limit itself
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.width = s.camera.height = 65536; }), "-r");
 }
 
 }  // namespace
