@@ -2,6 +2,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <string>
+
+#include "core/scene/scene_error.h"
 
 namespace tessera {
 
@@ -45,7 +49,40 @@ uint32_t Scene::add_material(Material m) {
   return uint32_t(materials.size() - 1);
 }
 
+namespace {
+
+std::string describe(Vec3 p) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "(%g, %g, %g)", double(p.x), double(p.y), double(p.z));
+  return buf;
+}
+
+}  // namespace
+
 void Scene::finalize() {
+  // Geometry the ray tracer cannot handle is refused here, for every loader, before any
+  // renderer (or a farm's coordinator at submit) builds on it.
+  auto in_range = [](double v) { return std::isfinite(v) && std::abs(v) <= kMaxCoordinate; };
+  auto check_point = [&](Vec3 p, const std::string& element, const std::string& what) {
+    if (!in_range(p.x) || !in_range(p.y) || !in_range(p.z))
+      throw SceneError(source, element,
+                       what + " " + describe(p) + " is not finite or outside +-1e12, the range the ray tracer handles");
+  };
+  for (const Mesh& m : meshes)
+    for (size_t v = 0; v < m.positions.size(); ++v)
+      check_point(m.positions[v], "mesh '" + m.name + "'", "vertex " + std::to_string(v));
+  for (const Sphere& sp : spheres) {
+    check_point(sp.center, "sphere '" + sp.name + "'", "centre");
+    if (!(sp.radius > 0) || !in_range(sp.radius))
+      throw SceneError(source, "sphere '" + sp.name + "'",
+                       "radius " + std::to_string(sp.radius) + " must be positive and at most 1e12");
+  }
+  for (const Light& l : lights) {
+    check_point(l.position, "light '" + l.name + "'", "position");
+    check_point(l.edge_x, "light '" + l.name + "'", "edge");
+    check_point(l.edge_y, "light '" + l.name + "'", "edge");
+  }
+  if (camera.present) check_point(camera.eye, "camera", "eye");
   // Rect lights are also geometry: a one-sided emitter that camera rays see and that
   // blocks other rays (format doc 3.3, with the physical radiance `color`).
   for (size_t i = 0; i < lights.size(); ++i) {

@@ -105,6 +105,12 @@ struct Bounds {
 };
 
 struct Scene {
+  // Coordinates the ray tracer handles: Embree refuses rays whose origin or direction
+  // reaches 1.8e18 (FLT_LARGE) and aborts the process, and CS184 framing puts the eye
+  // about a bounding-box diagonal away. 1e12 leaves a margin of a million for both, and
+  // is far beyond any real scene (docs/ray-offsets.md).
+  static constexpr double kMaxCoordinate = 1e12;
+
   std::string source;  // file it came from
   std::vector<Material> materials;
   std::vector<Mesh> meshes;
@@ -118,7 +124,9 @@ struct Scene {
   // Bounds of meshes and spheres that are objects (light shapes excluded), as CS184 frames.
   Bounds object_bounds() const;
   // Adds the emitter lights for emission materials and the visible rectangle of each rect
-  // light; computes normals. Loaders call it last.
+  // light; computes normals; checks every position, radius and the file camera are finite
+  // and within kMaxCoordinate (SceneError naming the element otherwise). Loaders call it
+  // last.
   void finalize();
   uint32_t add_material(Material m);
 };

@@ -167,6 +167,13 @@ class BadCollada : public ::testing::Test {
   }
 };
 
+// Issue 10, row 1: one wall vertex set to 1e20 (finite) was accepted, and every renderer
+// then aborted inside Embree. Geometry out of the traceable range is refused on load.
+TEST_F(BadCollada, VertexBeyondTheTraceableRange) {
+  expect_error(replaced("-1 -0.75 -1 -1 -0.75 1", "99999999999999999999 -0.75 -1 -1 -0.75 1"), "mesh '",
+               "vertex 0 (1e+20, -0.75, -1) is not finite or outside +-1e12");
+}
+
 TEST_F(BadCollada, TruncatedFile) { expect_error(base.substr(0, base.size() / 2), "line ", "XML parse error"); }
 
 TEST_F(BadCollada, GarbageBytes) {

@@ -104,6 +104,19 @@ class Gltf : public ::testing::Test {
   void expect_error(Doc d, const std::string& reason) { expect_error(write(std::move(d)), reason); }
 };
 
+// Issue 10, row 1: coordinates the ray tracer cannot handle are refused on load, whether
+// in the vertices or through a node's transform.
+TEST_F(Gltf, GeometryBeyondTheTraceableRangeIsRefused) {
+  Doc far;
+  far.blob.replace(0, 12, std::string(12, '\0'));
+  const float big = 3e12f;
+  std::memcpy(far.blob.data() + 12, &big, 4);  // vertex 1 at x = 3e12
+  expect_error(far, "vertex 1 (3e+12, 0, 0) is not finite or outside +-1e12");
+  Doc moved;
+  moved.j["nodes"][0]["translation"] = {0, 5e12, 0};
+  expect_error(moved, "outside +-1e12");
+}
+
 TEST_F(Gltf, EmbeddedBuffersNormalsUvsAndIndices) {
   const Scene s = load(Doc());
   ASSERT_EQ(s.meshes.size(), 1u);

@@ -91,6 +91,22 @@ TEST_F(Cli, MalformedSceneGivesOneLineNamingTheFileAndExitsNonZero) {
   EXPECT_FALSE(fs::exists(dir / "x.exr"));
 }
 
+// Issue 10, row 1: `tessera render` aborted in Embree (SIGABRT) on a vertex at 1e20.
+TEST_F(Cli, GeometryOutOfRangeIsAnErrorNotACrash) {
+  std::ifstream in(std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-spheres.dae");
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string wall = "-1 -0.75 -1 -1 -0.75 1";
+  ASSERT_NE(text.find(wall), std::string::npos);
+  text.replace(text.find(wall), 2, "99999999999999999999");
+  const std::string bad = (dir / "far.dae").string();
+  std::ofstream(bad) << text;
+  const CommandResult r = run("render " + bad + " -q -s 1 -r 8 8 -f " + (dir / "x.exr").string());
+  EXPECT_EQ(r.code, 2) << r.err;
+  EXPECT_NE(r.err.find("far.dae: mesh '"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("outside +-1e12"), std::string::npos) << r.err;
+  EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+}
+
 TEST_F(Cli, BadFlagsAreRefused) {
   EXPECT_NE(run("render " + scene + " -r 0 10").code, 0);
   EXPECT_NE(run("render " + scene + " -p 60 0 20 20 -r 64 48").code, 0);

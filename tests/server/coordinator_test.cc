@@ -234,6 +234,16 @@ TEST_F(CoordinatorTest, MalformedSceneIsRefusedAtSubmitAndOthersStillRun) {
     EXPECT_NE(std::string(e.what()).find("cornell-spheres.dae: "), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("dangling reference '#gone'"), std::string::npos) << e.what();
   }
+  v1::SubmitJobRequest far = request(job_settings());  // loads, but cannot be traced
+  std::string text = far.files(0).content();
+  text.replace(text.find("-1 -0.75 -1 -1 -0.75 1"), 2, "99999999999999999999");
+  far.mutable_files(0)->set_content(text);
+  try {
+    c->submit(far);
+    ADD_FAILURE();
+  } catch (const RequestError& e) {
+    EXPECT_NE(std::string(e.what()).find("cornell-spheres.dae: mesh '"), std::string::npos) << e.what();
+  }
   v1::SubmitJobRequest traversal = request(job_settings());
   traversal.mutable_files(0)->set_path("../../etc/x.dae");
   traversal.set_main_file("../../etc/x.dae");
@@ -244,7 +254,7 @@ TEST_F(CoordinatorTest, MalformedSceneIsRefusedAtSubmitAndOthersStillRun) {
   v1::SubmitJobRequest old = request(job_settings());
   old.set_version(99);
   EXPECT_THROW(c->submit(old), RequestError);
-  EXPECT_EQ(c->counters().jobs_refused, 4u);
+  EXPECT_EQ(c->counters().jobs_refused, 5u);
   const std::string id = c->submit(request(job_settings()));
   drain(worker());
   EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
