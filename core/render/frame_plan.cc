@@ -12,6 +12,16 @@ bool pixel_converged(const PixelSums& p, float tolerance) {
   return half_width <= tolerance * mu;
 }
 
+bool plausible(const PixelSums& p) {
+  if (!(std::isfinite(p.r) && std::isfinite(p.g) && std::isfinite(p.b) && std::isfinite(p.lum2))) return false;
+  if (p.r < 0 || p.g < 0 || p.b < 0 || p.lum2 < 0) return false;  // radiance is never negative
+  if (p.n == 0) return p.r == 0 && p.g == 0 && p.b == 0 && p.lum2 == 0;
+  // Cauchy-Schwarz: (sum l)^2 <= n sum l^2. The slack covers the float luminance of each
+  // sample against the double weights of lum_sum(); no honest pixel comes near it.
+  const double s = p.lum_sum();
+  return s * s <= double(p.n) * p.lum2 * (1 + 1e-5) + 1e-300;
+}
+
 FramePlan::FramePlan(const RenderSettings& settings)
     : settings_(settings), film_(settings.effective_window()), passes_(settings.passes()) {
   const Rect w = film_.window();
@@ -62,7 +72,7 @@ FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const std::vecto
   const uint32_t pass_len = passes_[pass].second - passes_[pass].first;
   uint64_t n = 0;
   for (const PixelSums& p : sums) {
-    if (p.n > pass_len) return Merge::kInvalid;
+    if (p.n > pass_len || !plausible(p)) return Merge::kInvalid;
     n += p.n;
   }
   ready_.erase({pass, tile});  // a late result for a tile waiting to be re-issued

@@ -53,7 +53,8 @@ class FramePlan {
   bool wants(uint32_t tile, uint32_t pass) const;
   // Adds a task's sums into the film and advances the tile. kDuplicate: that pass of the
   // tile was already merged (or the tile is finished); kInvalid: the sums do not fit the
-  // task (size, or more samples in a pixel than the pass has). Nothing changes unless
+  // task (size, more samples in a pixel than the pass has, or not plausible()). Nothing
+  // changes unless
   // kMerged. `samples` receives the samples merged.
   Merge merge(uint32_t tile, uint32_t pass, const std::vector<PixelSums>& sums, uint64_t* samples = nullptr);
 
@@ -85,6 +86,10 @@ class FramePlan {
   uint64_t samples_merged_ = 0, samples_total_ = 0, merges_ = 0;
   double work_done_ = 0, work_total_ = 0;  // pixel-samples scheduled
 };
+
+// Whether a pixel's sums could come from rendering: finite, non-negative, zero without
+// samples, and a squared-luminance sum that Cauchy-Schwarz allows for its luminance sum.
+bool plausible(const PixelSums& p);
 
 // CS184 adaptive stopping (format doc 7.1, dividing by the true count): a pixel stops when
 // the 95% confidence half-width of its luminance is within tolerance x mean.

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <condition_variable>
 #include <mutex>
+#include <stdexcept>
 
 #include "core/util/thread_pool.h"
 
@@ -33,7 +34,10 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
             renderer.render(task->rect, task->sample_begin, task->sample_end,
                             task->active.empty() ? nullptr : task->active.data(), &mine);
         lock.lock();
-        plan.merge(task->tile, task->pass, sums);
+        // Our own sums always fit: anything else is a broken invariant, and stopping loudly
+        // beats waiting forever for a tile that never advances.
+        if (plan.merge(task->tile, task->pass, sums) != FramePlan::Merge::kMerged)
+          throw std::logic_error("tessera render: the frame plan refused a tile's own sums");
         cv.notify_all();
       }
       stats.add(mine);

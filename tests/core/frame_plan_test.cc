@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
 #include <set>
 
 namespace tessera {
@@ -86,6 +87,27 @@ TEST(FramePlan, DuplicatesAndSumsThatDoNotFitChangeNothing) {
   EXPECT_EQ(samples, 16u * 16u * 4u);
   EXPECT_EQ(plan.merge(t.tile, t.pass, sums_for(t, 1)), FramePlan::Merge::kDuplicate);  // a second copy
   EXPECT_EQ(plan.merges(), 1u);
+}
+
+// Issue 10, row 6: a rogue worker's finite but huge sums, or a negative squared luminance,
+// were merged and the image had non-finite pixels. No honest render gives either.
+TEST(FramePlan, SumsNoRenderCouldGiveAreRefused) {
+  FramePlan plan(settings(16, 16, 16, 8, 4));
+  const TileTask t = *plan.take();
+  auto with = [&](void (*spoil)(PixelSums&)) {
+    std::vector<PixelSums> sums = sums_for(t, 0.7);
+    spoil(sums[5]);
+    return plan.merge(t.tile, t.pass, sums);
+  };
+  EXPECT_EQ(with([](PixelSums& p) { p.r = 1e300; }), FramePlan::Merge::kInvalid);  // its square cannot fit lum2
+  EXPECT_EQ(with([](PixelSums& p) { p.lum2 = -1; }), FramePlan::Merge::kInvalid);
+  EXPECT_EQ(with([](PixelSums& p) { p.g = -0.5; }), FramePlan::Merge::kInvalid);
+  EXPECT_EQ(with([](PixelSums& p) { p.lum2 = 0.1; }), FramePlan::Merge::kInvalid);  // mean 0.7, spread below 0
+  EXPECT_EQ(with([](PixelSums& p) { p.n = 0; }), FramePlan::Merge::kInvalid);       // sums without samples
+  EXPECT_EQ(with([](PixelSums& p) { p.b = std::numeric_limits<double>::infinity(); }), FramePlan::Merge::kInvalid);
+  EXPECT_EQ(plan.merges(), 0u);
+  EXPECT_EQ(with([](PixelSums&) {}), FramePlan::Merge::kMerged);
+  for (const PixelSums& p : plan.film().pixels()) EXPECT_TRUE(plausible(p));
 }
 
 TEST(FramePlan, AbandonedTasksComeBackAndLateResultsStillCount) {
