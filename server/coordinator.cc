@@ -323,6 +323,7 @@ void Coordinator::write_snapshot(ImageSnapshot& snap) {
   if (options_.before_image_write) options_.before_image_write();
   Job& job = *snap.job;
   enum { kSkipped, kWritten, kFailed } outcome = kSkipped;  // skipped: a newer one is written
+  std::string why;
   {
     std::lock_guard<std::mutex> wl(job.write_mu);
     if (snap.seq > job.written_seq) {
@@ -332,7 +333,12 @@ void Coordinator::write_snapshot(ImageSnapshot& snap) {
         job.written_merges = snap.merges;
         outcome = kWritten;
       } catch (const std::exception& e) {
-        std::fprintf(stderr, "tessera-coordinator: job %s: image: %s\n", job.id.c_str(), e.what());
+        std::fprintf(stderr, "tessera-coordinator: job %s: image: %s (kept in memory; retried)\n", job.id.c_str(),
+                     e.what());
+        // Clients see this: the data folder is named, not its path on this machine.
+        why = e.what();
+        for (size_t at; !options_.data_dir.empty() && (at = why.find(options_.data_dir)) != std::string::npos;)
+          why.replace(at, options_.data_dir.size(), "<data>");
         outcome = kFailed;
       }
     }
@@ -340,6 +346,8 @@ void Coordinator::write_snapshot(ImageSnapshot& snap) {
   std::lock_guard<std::mutex> lock(mu_);
   counters_.images_written += outcome == kWritten;
   counters_.image_errors += outcome == kFailed;
+  if (outcome == kWritten) job.image_error.clear();
+  if (outcome == kFailed) job.image_error = why;
   if (job.live()) job.spare_film = std::move(snap.film);  // for the next snapshot
 }
 
@@ -392,6 +400,12 @@ v1::Image Coordinator::image(const std::string& id) {
   v1::Image img;
   {
     std::lock_guard<std::mutex> wl(job->write_mu);
+    if (job->written_seq == 0 || (!live && job->written_merges != merges)) {
+      std::lock_guard<std::mutex> lock(mu_);
+      throw RequestError(RequestError::Code::kFailedPrecondition,
+                         "job " + id + ": its image could not be written (" + job->image_error +
+                             "); the samples are kept and the write is retried");
+    }
     img.set_exr(sink_->exr(id));
     img.set_png(sink_->png(id));
   }

@@ -23,6 +23,7 @@ struct Job {
   std::vector<uint64_t> tile_lease;  // the live task id of each tile, 0 = none
   v1::JobStatus::State state = v1::JobStatus::QUEUED;
   std::string error;
+  std::string image_error;  // the last image write's failure; empty once one succeeds
   double submitted = 0, started = 0, finished_at = 0;
 
   // Progressive images: a snapshot is taken under the coordinator's lock, written outside.

@@ -498,5 +498,50 @@ TEST_F(CoordinatorTest, RegisteredWorkersAreBounded) {
   EXPECT_EQ(c->workers().size(), 1u);
 }
 
+// Issue 10, row 3: with the data folder full or read-only, the write error went back to
+// the worker as a failed result (so it resent), nothing was logged, and a DONE job could
+// not be fetched. Now results are accepted, the job says why its image is missing without
+// naming server paths, a fetch gets a clear error, and the write is retried.
+TEST_F(CoordinatorTest, ImageWriteFailuresAreReportedAndRetriedNeverBlamedOnWorkers) {
+  class FlakySink : public MemoryImageSink {
+   public:
+    explicit FlakySink(std::string dir) : dir_(std::move(dir)) {}
+    std::atomic<bool> fail{true};
+    void write(const std::string& job, const Film& film, const ImageMetadata& meta) override {
+      if (fail) throw std::runtime_error(dir_ + "/jobs/" + job + "/image.exr.tmp: No space left on device");
+      MemoryImageSink::write(job, film, meta);
+    }
+
+   private:
+    std::string dir_;
+  };
+  auto owned = std::make_unique<FlakySink>(dir);
+  FlakySink* sink = owned.get();
+  c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t), std::move(owned));
+  const RenderSettings s = job_settings();
+  const std::string id = c->submit(request(s));
+  drain(worker());  // every result accepted (drain asserts it)
+  const v1::JobStatus st = c->status(id, false);
+  EXPECT_EQ(st.state(), v1::JobStatus::DONE);
+  EXPECT_NE(st.error().find("image not written: <data>/jobs/"), std::string::npos) << st.error();
+  EXPECT_NE(st.error().find("No space left on device"), std::string::npos) << st.error();
+  EXPECT_EQ(st.error().find(dir), std::string::npos) << "a server path in " << st.error();
+  EXPECT_GE(c->counters().image_errors, 1u);
+  EXPECT_EQ(c->counters().results_rejected, 0u);
+  try {
+    c->image(id);
+    ADD_FAILURE();
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kFailedPrecondition);
+    EXPECT_NE(std::string(e.what()).find("could not be written"), std::string::npos) << e.what();
+  }
+  sink->fail = false;  // space again: the next fetch writes the final image
+  EXPECT_NO_THROW(c->image(id));
+  EXPECT_EQ(c->status(id, false).error(), "");
+  const Film written = sink->film(id), expected = local(s);
+  ASSERT_EQ(written.pixels().size(), expected.pixels().size());
+  for (size_t i = 0; i < written.pixels().size(); ++i) ASSERT_EQ(written.pixels()[i].n, expected.pixels()[i].n);
+}
+
 }  // namespace
 }  // namespace tessera
