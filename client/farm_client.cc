@@ -97,6 +97,7 @@ int show_status(v1::Tessera::StubInterface& stub, const std::string& job, const 
     std::fprintf(c.out, "%s\n  elapsed %s, eta %s, %llu of %llu samples\n", describe(s).c_str(),
                  format_duration(s.elapsed_seconds()).c_str(), format_duration(s.eta_seconds()).c_str(),
                  (unsigned long long)s.samples_done(), (unsigned long long)s.samples_total());
+  if (!c.json && !s.error().empty()) std::fprintf(c.out, "  error: %s\n", s.error().c_str());
   return 0;
 }
 
@@ -171,6 +172,7 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
     for (size_t i = 0; i < outputs.size(); ++i) std::fprintf(c.out, "%s%s", i ? ", " : "", outputs[i].c_str());
     std::fprintf(c.out, "\n");
   }
+  if (!final.error().empty()) std::fprintf(c.err, "tessera: job %s: %s\n", id.id().c_str(), final.error().c_str());
   return final.state() == v1::JobStatus::DONE ? 0 : 1;
 }
 

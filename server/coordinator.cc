@@ -202,13 +202,31 @@ std::vector<uint64_t> Coordinator::heartbeat(uint64_t worker_id, const std::vect
   return refused;
 }
 
-void Coordinator::release(uint64_t worker_id, uint64_t task_id) {
-  std::lock_guard<std::mutex> lock(mu_);
-  const Lease* l = leases_.live(task_id);
-  if (!l || l->worker != worker_id) return;
-  end_lease_locked(task_id, true);
-  ++counters_.leases_released;
-  changed_.notify_all();
+void Coordinator::release(uint64_t worker_id, uint64_t task_id, const std::string& error) {
+  Job* failed = nullptr;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    const Lease* l = leases_.live(task_id);
+    if (!l || l->worker != worker_id) return;
+    const std::string job_id = l->job;
+    end_lease_locked(task_id, true);
+    ++counters_.leases_released;
+    changed_.notify_all();
+    auto it = jobs_.find(job_id);
+    if (error.empty() || it == jobs_.end() || !it->second->live()) return;
+    Job& job = *it->second;
+    ++counters_.tasks_failed;
+    job.failed_on.insert(worker_id);
+    if (job.failed_on.size() < kFailuresToFail) return;  // maybe that worker's trouble: another tries
+    job.state = v1::JobStatus::FAILED;
+    job.error = "tasks failed on " + std::to_string(job.failed_on.size()) + " workers: " + error.substr(0, 1024);
+    job.finished_at = clock_->now();
+    for (uint64_t lease : job.tile_lease)
+      if (lease) end_lease_locked(lease, false);
+    leases_.forget_job(job.id);
+    failed = &job;
+  }
+  write_image(*failed);  // keep what was rendered
 }
 
 void Coordinator::unregister(uint64_t worker_id) {

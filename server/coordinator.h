@@ -54,7 +54,8 @@ class RequestError : public std::runtime_error {
 
 struct CoordinatorCounters {
   uint64_t tasks_dispatched = 0, results_merged = 0, results_duplicate = 0, results_rejected = 0;
-  uint64_t leases_expired = 0, leases_released = 0, samples_merged = 0, jobs_submitted = 0, jobs_refused = 0;
+  uint64_t leases_expired = 0, leases_released = 0, tasks_failed = 0, samples_merged = 0, jobs_submitted = 0,
+           jobs_refused = 0;
   uint64_t images_written = 0, image_errors = 0;
   double merge_seconds = 0;
 };
@@ -86,7 +87,10 @@ class Coordinator {
     return heartbeat(worker_id, std::vector<uint64_t>{task_id}).empty();
   }
   v1::ResultAck submit_result(const v1::TaskResult& result);
-  void release(uint64_t worker_id, uint64_t task_id);
+  // Gives a lease back. With an error, the worker could not render the task: once tasks
+  // of a job failed on kFailuresToFail different workers, the job fails with the error.
+  void release(uint64_t worker_id, uint64_t task_id, const std::string& error = "");
+  static constexpr size_t kFailuresToFail = 2;
   // The worker stops: its leases go back to their jobs and it is forgotten.
   void unregister(uint64_t worker_id);
 

@@ -102,7 +102,7 @@ grpc::Status WorkerService::SubmitResults(grpc::ServerContext*, const v1::Result
   });
 }
 grpc::Status WorkerService::ReleaseTask(grpc::ServerContext*, const v1::ReleaseRequest* req, v1::ReleaseResponse*) {
-  return guarded([&] { c_.release(req->worker_id(), req->task_id()); });
+  return guarded([&] { c_.release(req->worker_id(), req->task_id(), req->error()); });
 }
 
 grpc::Status WorkerService::Unregister(grpc::ServerContext*, const v1::UnregisterRequest* req,

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -23,7 +24,8 @@ struct Job {
   std::vector<uint64_t> tile_lease;  // the live task id of each tile, 0 = none
   v1::JobStatus::State state = v1::JobStatus::QUEUED;
   std::string error;
-  std::string image_error;  // the last image write's failure; empty once one succeeds
+  std::string image_error;       // the last image write's failure; empty once one succeeds
+  std::set<uint64_t> failed_on;  // workers that could not render one of its tasks
   double submitted = 0, started = 0, finished_at = 0;
 
   // Progressive images: a snapshot is taken under the coordinator's lock, written outside.

@@ -172,6 +172,7 @@ std::string StatusHttp::metrics_text() const {
   counter("tessera_results_rejected_total", "Results refused as unknown or malformed.", double(k.results_rejected));
   counter("tessera_leases_expired_total", "Leases that expired without a result.", double(k.leases_expired));
   counter("tessera_leases_released_total", "Leases given back early by workers.", double(k.leases_released));
+  counter("tessera_tasks_failed_total", "Tasks a worker could not render.", double(k.tasks_failed));
   counter("tessera_samples_merged_total", "Camera samples merged.", double(k.samples_merged));
   counter("tessera_jobs_submitted_total", "Jobs accepted.", double(k.jobs_submitted));
   counter("tessera_jobs_refused_total", "Jobs refused at submit.", double(k.jobs_refused));

@@ -293,10 +293,11 @@ void Worker::keep_leases(const std::atomic<bool>& stop) {
   }
 }
 
-void Worker::release(uint64_t task_id) {
+void Worker::release(uint64_t task_id, const std::string& error) {
   v1::ReleaseRequest rel;
   rel.set_worker_id(worker_id_);
   rel.set_task_id(task_id);
+  rel.set_error(error);
   v1::ReleaseResponse rr;
   stub_->ReleaseTask(context(2).get(), rel, &rr);
 }
@@ -312,7 +313,7 @@ void Worker::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
     h->prepared = prepare(h->task);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tessera-worker: task %llu: %s\n", (unsigned long long)h->task.task_id(), e.what());
-    release(h->task.task_id());  // another worker may manage; this one backs off
+    release(h->task.task_id(), e.what());  // another worker may manage; this one backs off
     sleep_backoff(stop);
     return;
   }

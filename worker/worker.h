@@ -60,8 +60,8 @@ class Worker {
   void render_loop();
   void send_loop();
   void keep_leases(const std::atomic<bool>& stop);
-  void drop_locked(uint64_t task_id);  // cancels a held task and forgets it
-  void release(uint64_t task_id);
+  void drop_locked(uint64_t task_id);                             // cancels a held task and forgets it
+  void release(uint64_t task_id, const std::string& error = "");  // error: could not render it
   void sleep_backoff(const std::atomic<bool>& stop);
 
   WorkerOptions options_;

@@ -543,5 +543,31 @@ TEST_F(CoordinatorTest, ImageWriteFailuresAreReportedAndRetriedNeverBlamedOnWork
   for (size_t i = 0; i < written.pixels().size(); ++i) ASSERT_EQ(written.pixels()[i].n, expected.pixels()[i].n);
 }
 
+// Issue 10: a task no worker can render no longer goes round forever. One worker's
+// failure puts the tile back for another; failures on two workers fail the job with the
+// error, keep what was rendered, and the queue moves on to the next job.
+TEST_F(CoordinatorTest, TasksFailingOnTwoWorkersFailTheJobAndTheQueueMovesOn) {
+  v1::SubmitJobRequest first = request(job_settings());
+  first.set_priority(1);
+  const std::string doomed = c->submit(first), next = c->submit(request(job_settings()));
+  const uint64_t a = worker(), b = worker();
+  const v1::Task ta = c->get_task(a).tasks(0);
+  ASSERT_EQ(ta.job_id(), doomed);
+  ASSERT_TRUE(c->submit_result(render_task(c->get_task(a).tasks(0), a)).accepted());  // some work is done
+  c->release(a, ta.task_id(), "cannot load scene: out of memory");
+  EXPECT_EQ(c->status(doomed, false).state(), v1::JobStatus::RUNNING);  // maybe just a's trouble
+  const v1::Task tb = c->get_task(b).tasks(0);
+  EXPECT_EQ(tb.tile().x(), ta.tile().x());  // the same tile, straight away
+  EXPECT_EQ(tb.tile().y(), ta.tile().y());
+  c->release(b, tb.task_id(), "cannot load scene: out of memory");
+  const v1::JobStatus st = c->status(doomed, false);
+  EXPECT_EQ(st.state(), v1::JobStatus::FAILED);
+  EXPECT_EQ(st.error(), "tasks failed on 2 workers: cannot load scene: out of memory");
+  EXPECT_EQ(c->counters().tasks_failed, 2u);
+  EXPECT_GT(c->image(doomed).exr().size(), 0u);  // what was rendered is kept
+  drain(b);
+  EXPECT_EQ(c->status(next, false).state(), v1::JobStatus::DONE);
+}
+
 }  // namespace
 }  // namespace tessera
