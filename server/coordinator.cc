@@ -95,7 +95,7 @@ v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& req
                        "protocol version " + std::to_string(req.version()) + " not supported");
   std::lock_guard<std::mutex> lock(mu_);
   const double now = clock_->now();
-  workers_.forget_silent(now, options_.worker_timeout_seconds);
+  if (workers_.size() >= options_.max_workers) workers_.forget_silent(now, options_.worker_timeout_seconds);
   if (workers_.size() >= options_.max_workers)
     throw RequestError(RequestError::Code::kResourceExhausted,
                        "the coordinator has its " + std::to_string(options_.max_workers) + " workers");
@@ -122,7 +122,6 @@ void Coordinator::end_lease_locked(uint64_t id, bool requeue) {
 size_t Coordinator::expire_locked(double now) {
   const auto expired = leases_.expire(now);
   for (const auto& [id, l] : expired) lease_ended_locked(id, l, true);
-  workers_.forget_silent(now, options_.worker_timeout_seconds);
   counters_.leases_expired += expired.size();
   if (!expired.empty()) changed_.notify_all();
   return expired.size();
@@ -130,7 +129,10 @@ size_t Coordinator::expire_locked(double now) {
 
 size_t Coordinator::expire_leases() {
   std::lock_guard<std::mutex> lock(mu_);
-  return expire_locked(clock_->now());
+  const double now = clock_->now();
+  // Here, on the reaper's tick, not in every GetTask: it walks every worker.
+  workers_.forget_silent(now, options_.worker_timeout_seconds);
+  return expire_locked(now);
 }
 
 v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples) {

@@ -97,8 +97,8 @@ class Coordinator {
   // Waits up to `timeout` seconds for a change that may make work available (a job
   // submitted, a tile pass merged, a lease ended): lets GetTask long-poll.
   void wait_for_work(double timeout) const;
-  // Expires overdue leases and forgets silent workers; get_task calls it too. Returns how
-  // many leases expired.
+  // Expires overdue leases (get_task does too) and forgets silent workers (only here: the
+  // reaper calls it every 200 ms). Returns how many leases expired.
   size_t expire_leases();
   // Blocks until a job ends, its samples change from `last_samples`, or `timeout` passes.
   v1::JobStatus wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const;
