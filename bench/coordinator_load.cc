@@ -114,7 +114,10 @@ int main(int argc, char** argv) {
   *req.mutable_settings() = to_proto(s);
   c.submit(req);
   std::vector<PixelSums> sums(32 * 32);  // every tile is 32x32 when the size divides by 32
-  for (size_t i = 0; i < sums.size(); ++i) sums[i] = PixelSums{0.1 * (i % 7), 0.2, 0.3, 0.04, 1};
+  for (size_t i = 0; i < sums.size(); ++i) {  // one sample a pixel, as a render gives it
+    sums[i] = PixelSums{0.1 * (i % 7), 0.2, 0.3, 0, 1};
+    sums[i].lum2 = sums[i].lum_sum() * sums[i].lum_sum();
+  }
   const std::string payload = encode_sums(sums);
 
   std::atomic<bool> stop{false};
