@@ -113,7 +113,7 @@ int main(int argc, char** argv) {
   req.set_main_file(main);
   *req.mutable_settings() = to_proto(s);
   c.submit(req);
-  std::vector<PixelSums> sums(32 * 32);  // every tile is 32x32 when the size divides by 32
+  std::vector<PixelSums> sums(32 * 32);       // every tile is 32x32 when the size divides by 32
   for (size_t i = 0; i < sums.size(); ++i) {  // one sample a pixel, as a render gives it
     sums[i] = PixelSums{0.1 * (i % 7), 0.2, 0.3, 0, 1};
     sums[i].lum2 = sums[i].lum_sum() * sums[i].lum_sum();
@@ -190,6 +190,10 @@ int main(int argc, char** argv) {
   server->Shutdown();
   fs::remove_all(data);
 
+  if (m1 == m0) {  // a coordinator that refuses every result measures nothing
+    std::fprintf(stderr, "tessera_coordinator_load: error: no result was merged\n");
+    return 1;
+  }
   const double tiles_per_s = double(m1 - m0) / elapsed;
   std::printf("frame %dx%d, simulated workers %d (client threads %d, batches of %d), %.1f s\n", width, height, workers,
               threads, batch, elapsed);
