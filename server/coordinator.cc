@@ -220,15 +220,22 @@ void Coordinator::release(uint64_t worker_id, uint64_t task_id, const std::strin
     ++counters_.tasks_failed;
     job.failed_on.insert(worker_id);
     if (job.failed_on.size() < kFailuresToFail) return;  // maybe that worker's trouble: another tries
-    job.state = v1::JobStatus::FAILED;
     job.error = "tasks failed on " + std::to_string(job.failed_on.size()) + " workers: " + error.substr(0, 1024);
-    job.finished_at = clock_->now();
-    for (uint64_t lease : job.tile_lease)
-      if (lease) end_lease_locked(lease, false);
-    leases_.forget_job(job.id);
+    end_job_locked(job, v1::JobStatus::FAILED, clock_->now());
     failed = &job;
   }
   write_image(*failed);  // keep what was rendered
+}
+
+void Coordinator::end_job_locked(Job& job, v1::JobStatus::State state, double now) {
+  job.state = state;
+  job.finished_at = now;
+  for (uint64_t lease : job.tile_lease)
+    if (lease) end_lease_locked(lease, false);
+  leases_.forget_job(job.id);
+  // Its scene is dropped, from memory and disk, once no live job uses it; the film (and
+  // so the image) stays. Submitting the scene again checks it again.
+  scenes_.release(job.scene_hash);
 }
 
 void Coordinator::unregister(uint64_t worker_id) {
@@ -310,11 +317,7 @@ std::optional<Coordinator::ImageSnapshot> Coordinator::after_merge_locked(Job& j
   workers_.record_result(result.worker_id(), result.samples(), result.render_seconds(), result.busy_thread_seconds(),
                          result.thread_seconds(), now);
   const bool done = job.plan.done();
-  if (done) {
-    job.state = v1::JobStatus::DONE;
-    job.finished_at = now;
-    leases_.forget_job(job.id);
-  }
+  if (done) end_job_locked(job, v1::JobStatus::DONE, now);
   const uint32_t frame = job.plan.frame_passes_done();
   if (!done && (frame <= job.image_frame_passes || now - job.last_image < options_.image_interval_seconds))
     return std::nullopt;
@@ -386,11 +389,7 @@ v1::JobStatus Coordinator::cancel(const std::string& id) {
     std::lock_guard<std::mutex> lock(mu_);
     job = find(id);
     if (!job->live()) return job->status(clock_->now(), 0, false);
-    job->state = v1::JobStatus::CANCELLED;
-    job->finished_at = clock_->now();
-    for (uint64_t lease : job->tile_lease)
-      if (lease) end_lease_locked(lease, false);
-    leases_.forget_job(id);
+    end_job_locked(*job, v1::JobStatus::CANCELLED, clock_->now());
     changed_.notify_all();
   }
   write_image(*job);  // keep what was rendered

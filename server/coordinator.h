@@ -127,6 +127,8 @@ class Coordinator {
   // Ends a live lease: the tile loses it (and, with `requeue`, is ready again), the worker
   // holds one lease fewer; the lease stays known so a late result is recognised.
   void end_lease_locked(uint64_t id, bool requeue);
+  // The job is DONE, CANCELLED or FAILED: its leases end, and its scene goes if unused.
+  void end_job_locked(Job& job, v1::JobStatus::State state, double now);
   void lease_ended_locked(uint64_t id, const Lease& lease, bool requeue);
   size_t expire_locked(double now);
   // After a merge: the job's end, the worker's speed, and maybe a progressive image.

@@ -16,7 +16,10 @@ std::string SceneStore::add(const std::string& main_file, const SceneFiles& file
   const std::string hash = bundle_hash(main_file, files);
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (scenes_.count(hash)) return hash;  // the same bytes were checked before
+    if (scenes_.count(hash)) {  // the same bytes were checked before
+      ++uses_[hash];
+      return hash;
+    }
   }
   // Unpacked into a folder of its own, so that two submits of one scene never share
   // files, then renamed into place (the first to finish wins; the bytes are the same).
@@ -39,12 +42,26 @@ std::string SceneStore::add(const std::string& main_file, const SceneFiles& file
   v1::SceneBundle& b = scenes_[hash];
   b.set_main_file(main_file);
   *b.mutable_files() = files;
+  ++uses_[hash];
   return hash;
 }
 
 v1::SceneBundle SceneStore::get(const std::string& hash) const {
   std::lock_guard<std::mutex> lock(mu_);
   return scenes_.at(hash);
+}
+
+void SceneStore::release(const std::string& hash) {
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = uses_.find(hash);
+    if (it == uses_.end() || --it->second > 0) return;
+    uses_.erase(it);
+    scenes_.erase(hash);
+    // Under the lock: an add() of the same bytes waits, then unpacks afresh.
+    std::error_code ec;
+    fs::remove_all(fs::path(dir_) / hash, ec);
+  }
 }
 
 }  // namespace tessera

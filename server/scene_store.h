@@ -14,17 +14,22 @@ class SceneStore {
  public:
   explicit SceneStore(std::string dir);
   // Unpacks the bundle under <dir>/<hash> and loads it as a worker will, so a bad scene is
-  // refused here and never reaches a worker. Returns the content hash. Throws WireError
+  // refused here and never reaches a worker. Returns the content hash; the caller holds one
+  // use of the scene until it calls release(). Throws WireError
   // (unsafe bundle) or SceneError naming the file as the user knows it, not by its path
   // here; a refused scene leaves nothing on disk. Thread-safe.
   std::string add(const std::string& main_file, const SceneFiles& files);
   // Throws std::out_of_range for an unknown hash.
   v1::SceneBundle get(const std::string& hash) const;
+  // Each add() is a use of the scene (a job); when its last use is released the scene
+  // is forgotten, in memory and on disk.
+  void release(const std::string& hash);
 
  private:
   std::string dir_;
   mutable std::mutex mu_;
   std::map<std::string, v1::SceneBundle> scenes_;
+  std::map<std::string, int> uses_;
 };
 
 }  // namespace tessera

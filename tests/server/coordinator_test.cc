@@ -569,5 +569,27 @@ TEST_F(CoordinatorTest, TasksFailingOnTwoWorkersFailTheJobAndTheQueueMovesOn) {
   EXPECT_EQ(c->status(next, false).state(), v1::JobStatus::DONE);
 }
 
+// Issue 10, row 9: scenes were kept in memory and on disk forever. A scene now lives as
+// long as a live job uses it; a job's image outlives it.
+TEST_F(CoordinatorTest, ScenesGoWhenTheirLastJobEnds) {
+  const std::string a = c->submit(request(job_settings())), b = c->submit(request(job_settings()));
+  const uint64_t w = worker();
+  const std::string hash = c->get_task(w).tasks(0).scene_hash();
+  const fs::path on_disk = fs::path(dir) / "scenes" / hash;
+  EXPECT_TRUE(fs::exists(on_disk));
+  c->cancel(a);
+  EXPECT_NO_THROW(c->scene(hash));  // b still needs it
+  EXPECT_TRUE(fs::exists(on_disk));
+  drain(w);
+  ASSERT_EQ(c->status(b, false).state(), v1::JobStatus::DONE);
+  EXPECT_THROW(c->scene(hash), RequestError);
+  EXPECT_FALSE(fs::exists(on_disk));
+  EXPECT_GT(c->image(b).exr().size(), 0u);                       // the image stays
+  const std::string again = c->submit(request(job_settings()));  // checked afresh
+  EXPECT_NO_THROW(c->scene(hash));
+  drain(w);
+  EXPECT_EQ(c->status(again, false).state(), v1::JobStatus::DONE);
+}
+
 }  // namespace
 }  // namespace tessera
