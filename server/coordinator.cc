@@ -65,9 +65,9 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req) {
   job->seq = next_job_++;
   job->submitted = clock_->now();
   job->tile_lease.assign(job->plan.tiles().size(), 0);
-  if (job->plan.done()) job->state = v1::JobStatus::DONE;
   const std::string id = job->id;
-  jobs_[id] = std::move(job);
+  Job& added = *(jobs_[id] = std::move(job));
+  if (added.plan.done()) end_job_locked(added, v1::JobStatus::DONE, added.submitted);  // releases the scene too
   ++counters_.jobs_submitted;
   changed_.notify_all();
   return id;

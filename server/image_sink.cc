@@ -1,8 +1,8 @@
 #include "server/image_sink.h"
 
 #include <filesystem>
-#include <fstream>
-#include <sstream>
+
+#include "core/io/files.h"
 
 namespace tessera {
 
@@ -19,12 +19,10 @@ void DiskImageSink::write(const std::string& job, const Film& film, const ImageM
 }
 
 namespace {
+// Images are replaced by rename, never removed: present means whole.
 std::string read_if_present(const std::string& p) {
-  std::ifstream in(p, std::ios::binary);
-  if (!in) return {};
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
+  std::error_code ec;
+  return fs::exists(p, ec) ? read_file_bytes(p) : std::string();
 }
 }  // namespace
 

@@ -106,8 +106,8 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
   return false;
 }
 
-const Scene& Worker::scene_for(const std::string& hash) {
-  if (auto it = scenes_.find(hash); it != scenes_.end()) return *it->second;
+std::shared_ptr<Scene> Worker::scene_for(const std::string& hash) {
+  if (auto it = scenes_.find(hash); it != scenes_.end()) return it->second;
   if (hash.size() != 32 || hash.find_first_not_of("0123456789abcdef") != std::string::npos)
     throw WireError("bad scene hash '" + hash + "'");
   const fs::path dir = fs::path(options_.cache_dir) / hash;
@@ -127,16 +127,14 @@ const Scene& Worker::scene_for(const std::string& hash) {
     main = unpack_bundle(dir.string(), bundle.main_file(), bundle.files());
     std::ofstream(marker) << bundle.main_file() << "\n";
   }
-  auto scene = std::make_shared<Scene>(load_scene(main));
-  return *(scenes_[hash] = std::move(scene));
+  return scenes_[hash] = std::make_shared<Scene>(load_scene(main));
 }
 
 std::shared_ptr<const Worker::Prepared> Worker::prepare(const v1::Task& task) {
   const std::string key = task.scene_hash() + task.settings().SerializeAsString();
   if (auto it = prepared_.find(key); it != prepared_.end()) return it->second;
   auto p = std::make_shared<Prepared>();
-  scene_for(task.scene_hash());
-  p->scene = scenes_.at(task.scene_hash());
+  p->scene = scene_for(task.scene_hash());
   p->renderer = std::make_unique<TileRenderer>(*p->scene, from_proto(task.settings()));
   // A few renderers stay built (jobs alternate by priority); tasks in flight hold theirs.
   prepared_[key] = p;

@@ -53,7 +53,7 @@ class Worker {
 
   bool register_worker(const std::atomic<bool>& stop);
   std::shared_ptr<const Prepared> prepare(const v1::Task& task);
-  const Scene& scene_for(const std::string& hash);
+  std::shared_ptr<Scene> scene_for(const std::string& hash);  // loaded once per content hash
   bool wants_more_locked() const;
   // Prepares a leased task and queues it for the render threads (or gives it back).
   void enqueue(const v1::Task& task, const std::atomic<bool>& stop);
