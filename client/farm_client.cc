@@ -117,6 +117,10 @@ int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const 
       throw FarmError(out + ": unknown image format (use .exr or .png)");
   v1::FetchImageRequest req;
   req.set_id(job);
+  for (const std::string& out : outputs) {  // only the formats written: a PNG is encoded on request
+    if (has_ext(out, ".exr")) req.set_exr(true);
+    if (has_ext(out, ".png")) req.set_png(true);
+  }
   v1::Image img;
   check(stub.FetchImage(deadline(120).get(), req, &img), c);
   for (const std::string& out : outputs) {

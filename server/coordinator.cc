@@ -397,7 +397,7 @@ v1::JobStatus Coordinator::cancel(const std::string& id) {
   return job->status(clock_->now(), 0, false);
 }
 
-v1::Image Coordinator::image(const std::string& id) {
+v1::Image Coordinator::image(const std::string& id, bool exr, bool png) {
   Job* job;
   bool live;
   uint64_t merges;
@@ -425,8 +425,8 @@ v1::Image Coordinator::image(const std::string& id) {
                          "job " + id + ": its image could not be written (" + job->image_error +
                              "); the samples are kept and the write is retried");
     }
-    img.set_exr(sink_->exr(id));
-    img.set_png(sink_->png(id));
+    if (exr) img.set_exr(sink_->exr(id));
+    if (png) img.set_png(sink_->png(id));
   }
   std::lock_guard<std::mutex> lock(mu_);
   img.set_frame_passes_done(job->image_frame_passes);
@@ -438,7 +438,13 @@ v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_
   const Job* job = find(id);
   changed_.wait_for(lock, std::chrono::duration<double>(timeout),
                     [&] { return !job->live() || job->plan.samples_merged() != last_samples; });
-  return job->status(clock_->now(), workers_on(*job), true);
+  return job->status(clock_->now(), workers_on(*job), false);
+}
+
+bool Coordinator::wait_for_end(const std::string& id, double timeout) const {
+  std::unique_lock<std::mutex> lock(mu_);
+  const Job* job = find(id);
+  return changed_.wait_for(lock, std::chrono::duration<double>(timeout), [&] { return !job->live(); });
 }
 
 void Coordinator::wait_for_work(double timeout) const {

@@ -73,7 +73,8 @@ class Coordinator {
   v1::JobStatus status(const std::string& id, bool with_tiles) const;
   std::vector<v1::JobStatus> list() const;  // in submission order
   v1::JobStatus cancel(const std::string& id);
-  v1::Image image(const std::string& id);  // an ended job's image holds its whole film
+  // The latest image in the formats asked for; an ended job's image holds its whole film.
+  v1::Image image(const std::string& id, bool exr = true, bool png = true);
 
   // Worker side.
   v1::RegisterResponse register_worker(const v1::RegisterRequest& request);
@@ -100,8 +101,11 @@ class Coordinator {
   // Expires overdue leases (get_task does too) and forgets silent workers (only here: the
   // reaper calls it every 200 ms). Returns how many leases expired.
   size_t expire_leases();
-  // Blocks until a job ends, its samples change from `last_samples`, or `timeout` passes.
+  // Blocks until a job ends, its samples change from `last_samples`, or `timeout` passes;
+  // returns its status without tiles.
   v1::JobStatus wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const;
+  // Blocks until the job has ended (true) or `timeout` passes (false).
+  bool wait_for_end(const std::string& id, double timeout) const;
 
   std::vector<WorkerInfo> workers() const;
   double utilization() const;  // of every live worker's render threads, recently

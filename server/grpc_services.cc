@@ -52,15 +52,19 @@ grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* 
   // every merge cost the render farm's cores more than the watcher gains.
   constexpr double kUpdatesPerSecond = 4;
   return guarded([&] {
-    v1::JobStatus s = c_.status(req->id(), true);
+    // Progress only: a watcher that wants every tile asks GetJob.
+    v1::JobStatus s = c_.status(req->id(), false);
+    const auto ended = [](const v1::JobStatus& st) {
+      return st.state() != v1::JobStatus::QUEUED && st.state() != v1::JobStatus::RUNNING;
+    };
     while (!ctx->IsCancelled()) {
-      if (!w->Write(s)) return;
-      if (s.state() != v1::JobStatus::QUEUED && s.state() != v1::JobStatus::RUNNING) return;
+      if (!w->Write(s) || ended(s)) return;
       const auto next = std::chrono::steady_clock::now() + std::chrono::duration<double>(1 / kUpdatesPerSecond);
       s = c_.wait_for_change(req->id(), s.samples_done(), 0.5);
-      if (s.state() != v1::JobStatus::QUEUED && s.state() != v1::JobStatus::RUNNING) continue;
-      std::this_thread::sleep_until(next);
-      s = c_.status(req->id(), true);
+      if (ended(s)) continue;
+      // The end is never held back by the rate limit: the client is waiting for it.
+      c_.wait_for_end(req->id(), std::chrono::duration<double>(next - std::chrono::steady_clock::now()).count());
+      s = c_.status(req->id(), false);
     }
   });
 }
@@ -68,7 +72,10 @@ grpc::Status ClientService::CancelJob(grpc::ServerContext*, const v1::JobId* req
   return guarded([&] { *out = c_.cancel(req->id()); });
 }
 grpc::Status ClientService::FetchImage(grpc::ServerContext*, const v1::FetchImageRequest* req, v1::Image* out) {
-  return guarded([&] { *out = c_.image(req->id()); });
+  return guarded([&] {
+    const bool any = req->exr() || req->png();  // neither: both, as before the choice existed
+    *out = c_.image(req->id(), req->exr() || !any, req->png() || !any);
+  });
 }
 
 grpc::Status WorkerService::Register(grpc::ServerContext*, const v1::RegisterRequest* req, v1::RegisterResponse* out) {

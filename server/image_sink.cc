@@ -15,7 +15,12 @@ std::string DiskImageSink::path(const std::string& job, const char* file) const 
 void DiskImageSink::write(const std::string& job, const Film& film, const ImageMetadata& meta) {
   fs::create_directories(fs::path(dir_) / job);
   write_exr(path(job, "image.exr"), film, meta, true);
-  write_png(path(job, "preview.png"), film, true);
+  forget_preview(job);
+}
+
+void DiskImageSink::forget_preview(const std::string& job) {
+  std::lock_guard<std::mutex> lock(mu_);
+  previews_.remove_if([&](const auto& p) { return p.first == job; });
 }
 
 namespace {
@@ -27,7 +32,23 @@ std::string read_if_present(const std::string& p) {
 }  // namespace
 
 std::string DiskImageSink::exr(const std::string& job) const { return read_if_present(path(job, "image.exr")); }
-std::string DiskImageSink::png(const std::string& job) const { return read_if_present(path(job, "preview.png")); }
+std::string DiskImageSink::png(const std::string& job) const {
+  std::lock_guard<std::mutex> lock(mu_);  // one encode at a time: it is the expensive part
+  for (auto it = previews_.begin(); it != previews_.end(); ++it)
+    if (it->first == job) {
+      previews_.splice(previews_.end(), previews_, it);
+      return it->second;
+    }
+  std::error_code ec;
+  const std::string exr_path = path(job, "image.exr");
+  if (!fs::exists(exr_path, ec)) return {};
+  const ExrImage img = read_exr(exr_path);
+  std::string png = encode_png(img.width, img.height, img.channels.at("R").data(), img.channels.at("G").data(),
+                               img.channels.at("B").data(), true);
+  previews_.emplace_back(job, png);
+  if (previews_.size() > kPreviewsKept) previews_.pop_front();
+  return png;
+}
 
 void MemoryImageSink::write(const std::string& job, const Film& film, const ImageMetadata& meta) {
   std::lock_guard<std::mutex> lock(mu_);

@@ -1,6 +1,7 @@
 // Where a job's images go: a seam, so that coordinator tests need no disk.
 #pragma once
 
+#include <list>
 #include <map>
 #include <mutex>
 #include <string>
@@ -21,9 +22,10 @@ class ImageSink {
   virtual std::string png(const std::string& job) const = 0;
 };
 
-// <dir>/<job>/image.exr and preview.png, each written to a temporary file and renamed into
-// place. Fast encoding: progressive images are frequent, and the final one is on the path
-// between the last tile and the client's download.
+// <dir>/<job>/image.exr, written to a temporary file and renamed into place, uncompressed:
+// progressive images are frequent, and the final one is on the path between the last tile
+// and the client's download. The sRGB PNG preview is made from that file when somebody
+// asks for it (the live page, a client writing .png), and kept until the next write.
 class DiskImageSink : public ImageSink {
  public:
   explicit DiskImageSink(std::string dir) : dir_(std::move(dir)) {}
@@ -33,7 +35,12 @@ class DiskImageSink : public ImageSink {
   std::string path(const std::string& job, const char* file) const;
 
  private:
+  void forget_preview(const std::string& job);
+  static constexpr size_t kPreviewsKept = 8;
   std::string dir_;
+  mutable std::mutex mu_;  // guards previews_
+  // job -> its preview PNG (empty: made at the next request); most recent last.
+  mutable std::list<std::pair<std::string, std::string>> previews_;
 };
 
 // Keeps the films in memory, unencoded: for tests, which compare them bit for bit.

@@ -84,7 +84,7 @@ StatusHttp::StatusHttp(Coordinator& c) : c_(c), server_(std::make_unique<httplib
   server_->Get(R"(/jobs/([A-Za-z0-9-]+)/preview.png)", [this](const httplib::Request& req, httplib::Response& res) {
     std::string png;
     try {
-      png = c_.image(req.matches[1]).png();
+      png = c_.image(req.matches[1], false, true).png();
     } catch (const RequestError& e) {
       res.status = 404;
       res.set_content(e.what(), "text/plain");
@@ -137,7 +137,10 @@ std::string StatusHttp::status_json() const {
                 num(c_.utilization()));
   out += buf;
   const std::vector<v1::JobStatus> jobs = c_.list();
-  for (size_t i = 0; i < jobs.size(); ++i) out += (i ? "," : "") + proto_json(jobs[i]);
+  for (size_t i = 0; i < jobs.size(); ++i) {
+    if (i) out += ',';
+    out += proto_json(jobs[i]);
+  }
   out += "],\"workers\":[";
   const std::vector<WorkerInfo> workers = c_.workers();
   out.reserve(out.size() + workers.size() * 280);

@@ -329,8 +329,14 @@ void Worker::run(const std::atomic<bool>& stop) {
   if (!register_worker(stop)) return;
   registered_at_ = now_seconds();
   stopping_ = false;
-  std::thread keeper([&] { keep_leases(stop); });
-  std::thread sender([this] { send_loop(); });
+  std::thread keeper([&] {
+    set_thread_name("leases");
+    keep_leases(stop);
+  });
+  std::thread sender([this] {
+    set_thread_name("send");
+    send_loop();
+  });
   {
     ThreadPool pool(options_.threads);
     for (int i = 0; i < pool.size(); ++i) pool.run([this] { render_loop(); });

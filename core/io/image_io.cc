@@ -8,6 +8,8 @@
 #include <OpenEXR/ImfStringAttribute.h>
 #include <stb/stb_image_write.h>
 
+#include "core/io/files.h"
+
 #include <cmath>
 #include <cstdio>
 #include <mutex>
@@ -77,27 +79,41 @@ void write_exr(const std::string& path, const Film& film, const ImageMetadata& m
   commit(tmp, path);
 }
 
-void write_png(const std::string& path, const Film& film, bool fast) {
-  const int w = film.width(), h = film.height();
+std::string encode_png(int w, int h, const float* r, const float* g, const float* b, bool fast) {
   std::vector<uint8_t> rgb(size_t(w) * h * 3);
   for (size_t i = 0; i < size_t(w) * h; ++i) {
-    const Rgb m = film.pixels()[i].mean();
-    rgb[3 * i] = srgb_byte(m.r);
-    rgb[3 * i + 1] = srgb_byte(m.g);
-    rgb[3 * i + 2] = srgb_byte(m.b);
+    rgb[3 * i] = srgb_byte(r[i]);
+    rgb[3 * i + 1] = srgb_byte(g[i]);
+    rgb[3 * i + 2] = srgb_byte(b[i]);
   }
-  const std::string tmp = temp_path(path);
+  std::string out;
+  auto append = [](void* context, void* data, int size) {
+    static_cast<std::string*>(context)->append(static_cast<const char*>(data), size_t(size));
+  };
   // stb's compression level is a global: set and use it under one lock.
   static std::mutex stb_mu;
-  std::unique_lock<std::mutex> lock(stb_mu);
+  std::lock_guard<std::mutex> lock(stb_mu);
   stbi_write_png_compression_level = fast ? 1 : 8;
-  const int ok = stbi_write_png(tmp.c_str(), w, h, 3, rgb.data(), w * 3);
-  lock.unlock();
-  if (!ok) {
-    std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": cannot write PNG");
+  if (!stbi_write_png_to_func(append, &out, w, h, 3, rgb.data(), w * 3)) throw std::runtime_error("cannot encode PNG");
+  return out;
+}
+
+void write_png(const std::string& path, const Film& film, bool fast) {
+  const size_t n = size_t(film.width()) * film.height();
+  std::vector<float> r(n), g(n), b(n);
+  for (size_t i = 0; i < n; ++i) {
+    const Rgb m = film.pixels()[i].mean();
+    r[i] = m.r;
+    g[i] = m.g;
+    b[i] = m.b;
   }
-  commit(tmp, path);
+  std::string bytes;
+  try {
+    bytes = encode_png(film.width(), film.height(), r.data(), g.data(), b.data(), fast);
+  } catch (const std::runtime_error& e) {
+    throw std::runtime_error(path + ": " + e.what());
+  }
+  write_file_atomic(path, bytes);
 }
 
 void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata) {

@@ -17,6 +17,8 @@ using ImageMetadata = std::map<std::string, std::string>;
 // speed (no EXR compression, light PNG compression): for frequent progressive images.
 void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata, bool fast = false);
 void write_png(const std::string& path, const Film& film, bool fast = false);
+// The PNG file's bytes for linear RGB planes of w x h (row 0 at the top).
+std::string encode_png(int w, int h, const float* r, const float* g, const float* b, bool fast = false);
 // Picks the format from the extension (.exr or .png); throws on anything else.
 void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata);
 

@@ -1,13 +1,21 @@
 #include "core/util/thread_pool.h"
 
+#include <pthread.h>
+
 #include <algorithm>
+#include <string>
 
 namespace tessera {
 
-ThreadPool::ThreadPool(int threads) {
+void set_thread_name(const char* name) {
+  pthread_setname_np(pthread_self(), std::string(name).substr(0, 15).c_str());
+}
+
+ThreadPool::ThreadPool(int threads, const char* name) {
   if (threads <= 0) threads = int(std::max(1u, std::thread::hardware_concurrency()));
   for (int i = 0; i < threads; ++i)
-    threads_.emplace_back([this] {
+    threads_.emplace_back([this, name = std::string(name)] {
+      set_thread_name(name.c_str());
       std::unique_lock<std::mutex> lock(mu_);
       while (true) {
         work_.wait(lock, [this] { return stopping_ || !jobs_.empty(); });

@@ -13,8 +13,9 @@ namespace tessera {
 
 class ThreadPool {
  public:
-  // threads <= 0: one per core.
-  explicit ThreadPool(int threads);
+  // threads <= 0: one per core. `name` names the threads (15 characters at most, as in
+  // top -H and /proc/<pid>/task/*/comm).
+  explicit ThreadPool(int threads, const char* name = "render");
   // Finishes every queued job, then joins.
   ~ThreadPool();
   ThreadPool(const ThreadPool&) = delete;
@@ -33,5 +34,8 @@ class ThreadPool {
   bool stopping_ = false;
   std::vector<std::thread> threads_;
 };
+
+// Names the calling thread (truncated to 15 characters).
+void set_thread_name(const char* name);
 
 }  // namespace tessera

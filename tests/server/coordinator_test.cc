@@ -381,8 +381,11 @@ TEST_F(CoordinatorTest, UtilizationFromReportsAndSilentWorkersAreForgotten) {
   r.set_busy_thread_seconds(1.0);
   r.set_thread_seconds(2.0);
   ASSERT_TRUE(c->submit_result(r).accepted());
-  for (const WorkerInfo& info : c->workers())
-    if (info.id == w) EXPECT_NEAR(info.utilization, 0.5, 1e-12);  // since it registered
+  for (const WorkerInfo& info : c->workers()) {
+    if (info.id == w) {
+      EXPECT_NEAR(info.utilization, 0.5, 1e-12);  // since it registered
+    }
+  }
   t += 6;  // past the 5 s window: the next report starts a new one from the last
   r = render_task(c->get_task(w).tasks(0), w);
   r.set_busy_thread_seconds(2.9);  // of the 2 thread-seconds since the last report, 95% busy
