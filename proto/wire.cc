@@ -85,21 +85,37 @@ std::string proto_json(const google::protobuf::Message& m) {
   return s;
 }
 
+namespace {
+constexpr int kPlanes = 8 * 4 + 4;  // 36 = kBytesPerPixel
+
+// The fields of a pixel as little-endian integers (x86-64 is little-endian).
+template <typename Fn>
+void for_each_field(PixelSums& p, Fn&& fn) {
+  fn(&p.r, 8);
+  fn(&p.g, 8);
+  fn(&p.b, 8);
+  fn(&p.lum2, 8);
+  fn(&p.n, 4);
+}
+}  // namespace
+
 std::string encode_sums(const std::vector<PixelSums>& sums) {
-  std::string raw(sums.size() * kBytesPerPixel, '\0');
-  char* out = raw.data();
-  for (const PixelSums& p : sums) {  // x86-64 is little-endian, as the format says
-    std::memcpy(out, &p.r, 8);
-    std::memcpy(out + 8, &p.g, 8);
-    std::memcpy(out + 16, &p.b, 8);
-    std::memcpy(out + 24, &p.lum2, 8);
-    std::memcpy(out + 32, &p.n, 4);
-    out += kBytesPerPixel;
+  static_assert(kPlanes == int(kBytesPerPixel));
+  const size_t n = sums.size();
+  std::string raw(n * kBytesPerPixel, '\0');
+  for (size_t i = 0; i < n; ++i) {
+    PixelSums p = sums[i];
+    uint8_t* plane = reinterpret_cast<uint8_t*>(raw.data()) + i;
+    for_each_field(p, [&](void* field, int bytes) {
+      uint64_t v = 0;
+      std::memcpy(&v, field, size_t(bytes));
+      for (int k = 0; k < bytes; ++k, plane += n) *plane = uint8_t(v >> (8 * k));
+    });
   }
   std::string compressed(ZSTD_compressBound(raw.size()), '\0');
-  const size_t n = ZSTD_compress(compressed.data(), compressed.size(), raw.data(), raw.size(), 1);
-  if (ZSTD_isError(n)) throw std::runtime_error(std::string("zstd: ") + ZSTD_getErrorName(n));
-  compressed.resize(n);
+  const size_t size = ZSTD_compress(compressed.data(), compressed.size(), raw.data(), raw.size(), 1);
+  if (ZSTD_isError(size)) throw std::runtime_error(std::string("zstd: ") + ZSTD_getErrorName(size));
+  compressed.resize(size);
   return compressed;
 }
 
@@ -114,16 +130,16 @@ std::vector<PixelSums> decode_sums(const std::string& compressed, size_t pixels)
   if (ZSTD_isError(n)) throw WireError(std::string("sums: ") + ZSTD_getErrorName(n));
   if (n != want) throw WireError("sums: " + std::to_string(n) + " bytes, " + std::to_string(want) + " expected");
   std::vector<PixelSums> sums(pixels);
-  const char* in = raw.data();
-  for (PixelSums& p : sums) {
-    std::memcpy(&p.r, in, 8);
-    std::memcpy(&p.g, in + 8, 8);
-    std::memcpy(&p.b, in + 16, 8);
-    std::memcpy(&p.lum2, in + 24, 8);
-    std::memcpy(&p.n, in + 32, 4);
+  for (size_t i = 0; i < pixels; ++i) {
+    PixelSums& p = sums[i];
+    const uint8_t* plane = reinterpret_cast<const uint8_t*>(raw.data()) + i;
+    for_each_field(p, [&](void* field, int bytes) {
+      uint64_t v = 0;
+      for (int k = 0; k < bytes; ++k, plane += pixels) v |= uint64_t(*plane) << (8 * k);
+      std::memcpy(field, &v, size_t(bytes));
+    });
     if (!std::isfinite(p.r) || !std::isfinite(p.g) || !std::isfinite(p.b) || !std::isfinite(p.lum2))
       throw WireError("sums: non-finite value");
-    in += kBytesPerPixel;
   }
   return sums;
 }

@@ -145,13 +145,22 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
                        "unknown worker " + std::to_string(worker_id) + "; register again");
   w->last_seen = now;
   std::vector<Job*> order;
+  uint64_t outstanding = leases_.live_count();  // tasks out now or ready to go
   for (auto& [id, job] : jobs_)
-    if (job->live()) order.push_back(job.get());
+    if (job->live()) {
+      order.push_back(job.get());
+      outstanding += job->plan.ready();
+    }
   std::sort(order.begin(), order.end(), [](const Job* a, const Job* b) {
     return a->priority != b->priority ? a->priority > b->priority : a->seq < b->seq;
   });
   v1::GetTaskResponse resp;
-  max_tasks = std::clamp<uint32_t>(max_tasks, 1, kMaxTasksPerRequest);
+  // No more than the worker's share (by threads) of the work there is, less what it holds:
+  // when a small frame has fewer tasks than the workers would queue, the first to ask must
+  // not take them all while the others idle.
+  const uint64_t share = (outstanding * w->threads + workers_.threads() - 1) / std::max<uint64_t>(1, workers_.threads());
+  const uint64_t room = share > w->leases ? share - w->leases : 0;
+  max_tasks = uint32_t(std::min<uint64_t>(std::clamp<uint32_t>(max_tasks, 1, kMaxTasksPerRequest), room));
   uint64_t samples = 0;
   for (Job* job : order) {
     while (uint32_t(resp.tasks_size()) < max_tasks && (max_samples == 0 || samples < max_samples)) {

@@ -8,9 +8,17 @@ WorkerInfo& WorkerRegistry::add(const std::string& name, uint32_t threads, doubl
   WorkerInfo w;
   w.id = next_++;
   w.name = name.substr(0, 256);
-  w.threads = threads;
+  w.threads = std::clamp<uint32_t>(threads, 1, kMaxThreads);
   w.last_seen = now;
+  threads_ += w.threads;
   return workers_[w.id] = w;
+}
+
+void WorkerRegistry::remove(uint64_t id) {
+  auto it = workers_.find(id);
+  if (it == workers_.end()) return;
+  threads_ -= it->second.threads;
+  workers_.erase(it);
 }
 
 WorkerInfo* WorkerRegistry::find(uint64_t id) {
@@ -23,6 +31,7 @@ std::vector<uint64_t> WorkerRegistry::forget_silent(double now, double timeout) 
   for (auto it = workers_.begin(); it != workers_.end();) {
     if (now - it->second.last_seen > timeout) {
       gone.push_back(it->first);
+      threads_ -= it->second.threads;
       it = workers_.erase(it);
     } else {
       ++it;

@@ -26,13 +26,16 @@ struct WorkerInfo {
 
 class WorkerRegistry {
  public:
+  static constexpr uint32_t kMaxThreads = 4096;  // a worker's claimed threads, at most
+  // `threads` is clamped to [1, kMaxThreads]: it weighs the worker's share of the work.
   WorkerInfo& add(const std::string& name, uint32_t threads, double now);
   WorkerInfo* find(uint64_t id);
   // Forgets workers not heard from for `timeout` seconds; returns their ids. (A forgotten
   // worker that comes back is told to register again.)
   std::vector<uint64_t> forget_silent(double now, double timeout);
-  void remove(uint64_t id) { workers_.erase(id); }
+  void remove(uint64_t id);
   size_t size() const { return workers_.size(); }
+  uint64_t threads() const { return threads_; }  // of every known worker
   std::vector<WorkerInfo> list() const;
   // A finished task: its render rate feeds the worker's smoothed speed; its thread-time
   // counters the utilization.
@@ -44,6 +47,7 @@ class WorkerRegistry {
  private:
   std::map<uint64_t, WorkerInfo> workers_;
   uint64_t next_ = 1;
+  uint64_t threads_ = 0;
 };
 
 }  // namespace tessera

@@ -3,6 +3,7 @@
 #include <grpcpp/grpcpp.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -19,7 +20,10 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr int kLingerMs = 20;  // how long finished results may wait for company
+constexpr int kLingerMs = 50;  // how long finished results may wait for company
+// How often the lease keeper and the fetcher look at the stop flag (set by a signal): each
+// look wakes a thread, which on a small machine takes a core from a render thread.
+constexpr int kStopPollMs = 100;
 
 std::unique_ptr<grpc::ClientContext> context(double seconds) {
   auto ctx = std::make_unique<grpc::ClientContext>();
@@ -161,7 +165,10 @@ void Worker::render_loop() {
     if (stopping_) return;
     const std::shared_ptr<Held> h = queue_.front();
     const int row = h->next_row++;
-    if (h->next_row == h->rect.h) queue_.pop_front();
+    if (h->next_row == h->rect.h) {
+      queue_.pop_front();
+      if (queue_.empty() && !outbox_.empty()) outbox_cv_.notify_one();  // results stop lingering
+    }
     --queued_rows_;
     queued_samples_ -= h->row_samples(row);
     // Wake the fetcher only when it has something to do: a wake-up per row cost a 2-core
@@ -188,8 +195,9 @@ void Worker::render_loop() {
         samples_per_thread_second_ =
             samples_per_thread_second_ > 0 ? 0.7 * samples_per_thread_second_ + 0.3 * rate : rate;
       }
+      // The sender sleeps through its linger: only the first result of a batch wakes it.
+      if (outbox_.empty()) outbox_cv_.notify_one();
       outbox_.push_back(h);
-      outbox_cv_.notify_one();
     }
   }
 }
@@ -202,9 +210,9 @@ void Worker::send_loop() {
     // While the render threads still have work, let results gather for a moment: one call
     // for several results. With nothing queued, a result may be what frees the next pass
     // of a tile, so it goes at once.
+    // (The render thread that takes the last queued row wakes it early.)
     const auto linger_until = std::chrono::steady_clock::now() + std::chrono::milliseconds(kLingerMs);
-    while (!stopping_ && !queue_.empty() && outbox_cv_.wait_until(lock, linger_until) != std::cv_status::timeout) {
-    }
+    outbox_cv_.wait_until(lock, linger_until, [this] { return stopping_ || queue_.empty(); });
     // Everything finished so far goes in one request.
     const std::deque<std::shared_ptr<Held>> batch = std::move(outbox_);
     outbox_.clear();
@@ -287,7 +295,9 @@ void Worker::keep_leases(const std::atomic<bool>& stop) {
             drop_locked(id);
       due = now_seconds() + heartbeat_ms_ / 1000.0;
     }
-    stopped_cv_.wait_for(lock, std::chrono::milliseconds(10));  // also polls `stop` (set by a signal)
+    // Until the next heartbeat, looking at `stop` (set by a signal) now and then.
+    stopped_cv_.wait_for(lock, std::chrono::milliseconds(
+                                   std::clamp(int64_t((due - now_seconds()) * 1000) + 1, int64_t(1), int64_t(kStopPollMs))));
   }
 }
 
@@ -345,7 +355,7 @@ void Worker::run(const std::atomic<bool>& stop) {
       req.set_worker_id(worker_id_);
       {
         std::unique_lock<std::mutex> lock(mu_);
-        more_.wait_for(lock, std::chrono::milliseconds(50), [&] { return stopping_ || wants_more_locked(); });
+        more_.wait_for(lock, std::chrono::milliseconds(kStopPollMs), [&] { return stopping_ || wants_more_locked(); });
         if (stopping_ || !wants_more_locked()) continue;
         // As much work as the threads get through in the lookahead, at the measured speed;
         // two tasks until there is a measurement.

@@ -59,6 +59,7 @@ class FramePlan {
   Merge merge(uint32_t tile, uint32_t pass, const std::vector<PixelSums>& sums, uint64_t* samples = nullptr);
 
   bool done() const { return tiles_done_ == tiles_.size(); }
+  size_t ready() const { return ready_.size(); }  // tasks take() could hand out now
   const Film& film() const { return film_; }
   const RenderSettings& settings() const { return settings_; }
   const std::vector<Rect>& tiles() const { return tiles_; }

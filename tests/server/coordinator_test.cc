@@ -435,6 +435,35 @@ TEST_F(CoordinatorTest, BatchedLeasesFollowTheCountAndSampleLimits) {
   EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
 }
 
+// A small frame has fewer tasks than eager workers would queue: each gets its share by
+// threads, so the first to ask does not take everything while the others idle.
+TEST_F(CoordinatorTest, WorkersGetTheirShareOfTheReadyWorkByThreads) {
+  c->submit(request(job_settings()));  // 9 tiles: 9 tasks ready at first
+  auto join = [&](uint32_t threads) {
+    v1::RegisterRequest r;
+    r.set_version(kProtocolVersion);
+    r.set_name("w");
+    r.set_threads(threads);
+    return c->register_worker(r).worker_id();
+  };
+  const uint64_t big = join(2), small = join(1);
+  const v1::GetTaskResponse a = c->get_task(big, 100);
+  EXPECT_EQ(a.tasks_size(), 6);  // 2 of 3 threads: 6 of 9
+  EXPECT_EQ(c->get_task(big, 100).tasks_size(), 0);  // it holds its share already
+  EXPECT_EQ(c->get_task(small, 100).tasks_size(), 3);
+  // As results come back, the work there is shrinks, and so do the shares; a worker with
+  // nothing always gets at least one task.
+  for (const v1::Task& task : a.tasks()) ASSERT_TRUE(c->submit_result(render_task(task, big)).accepted());
+  EXPECT_EQ(c->get_task(big, 100).tasks_size(), 6);
+  // A claimed thread count is bounded: it only weighs shares.
+  const uint64_t liar = join(4000000000u);
+  for (const WorkerInfo& info : c->workers()) {
+    if (info.id == liar) {
+      EXPECT_EQ(info.threads, WorkerRegistry::kMaxThreads);
+    }
+  }
+}
+
 // A worker that stops says so: its leases go back at once and it no longer counts.
 TEST_F(CoordinatorTest, UnregisteredWorkersGiveTheirLeasesBackAndLeave) {
   c->submit(request(job_settings()));
