@@ -4,7 +4,7 @@
 // latency while it is under that load.
 //
 // Usage: tessera_coordinator_load SCENE [--workers N] [--threads N] [--batch N] [--seconds S]
-//                                 [--size W H] [--json FILE]
+//                                 [--size W H] [--jobs N] [--json FILE]
 #include <grpcpp/grpcpp.h>
 #include <httplib.h>
 
@@ -14,8 +14,10 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <thread>
+#include <sys/resource.h>
 
 #include "server/grpc_services.h"
 #include "server/status_http.h"
@@ -25,6 +27,12 @@ namespace fs = std::filesystem;
 
 namespace {
 double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
+double cpu_seconds(int who) {  // RUSAGE_SELF: the process; RUSAGE_THREAD: the caller
+  rusage u{};
+  getrusage(who, &u);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
@@ -34,17 +42,20 @@ double percentile(std::vector<double> v, double p) {
 
 const char* kUsage =
     "usage: tessera_coordinator_load SCENE [--workers N] [--threads N] [--batch N] [--seconds S] [--size W H]\n"
-    "                                [--json FILE]\n"
+    "                                [--jobs N] [--json FILE]\n"
     "  SCENE        any scene file (.dae, .gltf); only its upload and check are exercised\n"
     "  --workers N  simulated workers (default 1000)\n"
     "  --threads N  client threads driving them (default 8)\n"
     "  --batch N    tasks a simulated worker asks for and returns at once (default 8)\n"
     "  --seconds S  measuring time after 1 s of warm-up (default 10)\n"
     "  --size W H   frame size, in 32-pixel tiles of 1-sample passes (default 1920 1080)\n"
+    "  --jobs N     frames queued at once (default 4). Each worker gets at most its share of\n"
+    "               the outstanding tasks, so one frame of 2,040 tiles gives 1,000 workers\n"
+    "               batches of 3 whatever they ask for\n"
     "  --json FILE  also write the figures as JSON\n";
 
 int main(int argc, char** argv) {
-  int workers = 1000, threads = 8, width = 1920, height = 1080, batch = 8;
+  int workers = 1000, threads = 8, width = 1920, height = 1080, batch = 8, jobs = 4;
   double seconds = 10;
   std::string json_path, scene;
   for (int i = 1; i < argc; ++i) {
@@ -67,6 +78,8 @@ int main(int argc, char** argv) {
       batch = std::atoi(number("--batch"));
     } else if (a == "--seconds") {
       seconds = std::atof(number("--seconds"));
+    } else if (a == "--jobs") {
+      jobs = std::atoi(number("--jobs"));
     } else if (a == "--json") {
       json_path = number("--json");
     } else if (a == "--size") {
@@ -79,7 +92,7 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (scene.empty() || workers < 1 || threads < 1 || batch < 1 || !(seconds > 0) || width < 1 || height < 1) {
+  if (scene.empty() || workers < 1 || threads < 1 || batch < 1 || jobs < 1 || !(seconds > 0) || width < 1 || height < 1) {
     std::fprintf(stderr, "%s", kUsage);
     return 2;
   }
@@ -112,22 +125,28 @@ int main(int argc, char** argv) {
   pack_scene(scene, &main, req.mutable_files());
   req.set_main_file(main);
   *req.mutable_settings() = to_proto(s);
-  c.submit(req);
-  std::vector<PixelSums> sums(32 * 32);       // every tile is 32x32 when the size divides by 32
-  for (size_t i = 0; i < sums.size(); ++i) {  // one sample a pixel, as a render gives it
-    sums[i] = PixelSums{0.1 * (i % 7), 0.2, 0.3, 0, 1};
-    sums[i].lum2 = sums[i].lum_sum() * sums[i].lum_sum();
-  }
-  const std::string payload = encode_sums(sums);
+  for (int j = 0; j < jobs; ++j) c.submit(req);
+  // A tile's sums, one sample a pixel as a render gives it, made once per tile size (the
+  // last row and column of tiles are cut short when the size does not divide by 32).
+  auto payload_for = [](size_t pixels) {
+    std::vector<PixelSums> sums(pixels);
+    for (size_t i = 0; i < sums.size(); ++i) {
+      sums[i] = PixelSums{0.1 * (i % 7), 0.2, 0.3, 0, 1};
+      sums[i].lum2 = sums[i].lum_sum() * sums[i].lum_sum();
+    }
+    return encode_sums(sums);
+  };
 
   std::atomic<bool> stop{false};
   std::atomic<uint64_t> merged{0}, rpcs{0};
+  std::vector<std::atomic<double>> load_cpu(size_t(threads) + 1);  // clients, then the poller
   std::vector<std::thread> pool;
   const std::string target = "127.0.0.1:" + std::to_string(port);
   for (int t = 0; t < threads; ++t) {
     pool.emplace_back([&, t] {
       auto stub = v1::TesseraWorker::NewStub(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()));
       std::vector<uint64_t> ids;  // this thread's share of the simulated workers
+      std::map<size_t, std::string> payloads;  // by tile area
       for (int w = t; w < workers; w += threads) {
         grpc::ClientContext ctx;
         v1::RegisterRequest r;
@@ -138,6 +157,7 @@ int main(int argc, char** argv) {
       }
       if (ids.empty()) return;  // more client threads than workers
       for (size_t k = 0; !stop; k = (k + 1) % ids.size()) {
+        load_cpu[size_t(t)] = cpu_seconds(RUSAGE_THREAD);
         grpc::ClientContext c1;
         v1::GetTaskRequest g;
         g.set_worker_id(ids[k]);
@@ -150,7 +170,10 @@ int main(int argc, char** argv) {
           v1::TaskResult* res = results.add_results();
           res->set_worker_id(ids[k]);
           res->set_task_id(task.task_id());
-          res->set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
+          const Rect tile = from_proto(task.tile());
+          std::string& payload = payloads[size_t(tile.area())];
+          if (payload.empty()) payload = payload_for(size_t(tile.area()));
+          res->set_raw_size(uint32_t(tile.area() * kBytesPerPixel));
           res->set_sums_zstd(payload);
           res->set_samples(1024);
           res->set_render_seconds(0.05);
@@ -167,6 +190,7 @@ int main(int argc, char** argv) {
   std::thread poller([&] {
     httplib::Client cli("127.0.0.1", http_port);
     while (!stop) {
+      load_cpu[size_t(threads)] = cpu_seconds(RUSAGE_THREAD);
       double t0 = now();
       if (cli.Get("/api/status")) status_ms.push_back((now() - t0) * 1e3);
       t0 = now();
@@ -176,12 +200,21 @@ int main(int argc, char** argv) {
   });
   std::this_thread::sleep_for(std::chrono::seconds(1));  // registration and warm-up
   const uint64_t m0 = merged, r0 = rpcs;
+  // The coordinator's own CPU: the process's, less the simulated workers' and the status
+  // poller's threads (each keeps its own CPU time in a slot).
+  auto coordinator_cpu = [&] {
+    double others = 0;
+    for (const auto& c : load_cpu) others += c;
+    return cpu_seconds(RUSAGE_SELF) - others;
+  };
+  const double cpu0 = coordinator_cpu();
   status_ms.clear();
   metrics_ms.clear();
   const double t0 = now();
   std::this_thread::sleep_for(std::chrono::duration<double>(seconds));
   const double elapsed = now() - t0;
   const uint64_t m1 = merged, r1 = rpcs;
+  const double server_cpu = coordinator_cpu() - cpu0;
   const std::vector<double> st = status_ms, mt = metrics_ms;
   stop = true;
   for (auto& t : pool) t.join();
@@ -195,10 +228,13 @@ int main(int argc, char** argv) {
     return 1;
   }
   const double tiles_per_s = double(m1 - m0) / elapsed;
-  std::printf("frame %dx%d, simulated workers %d (client threads %d, batches of %d), %.1f s\n", width, height, workers,
-              threads, batch, elapsed);
+  std::printf("%d frames %dx%d, simulated workers %d (client threads %d, batches of %d), %.1f s\n", jobs, width,
+              height, workers, threads, batch, elapsed);
   std::printf("merged tiles/s %.0f  (32x32 tiles: %.1f M pixel-samples/s merged), worker RPCs/s %.0f\n", tiles_per_s,
               tiles_per_s * 1024 / 1e6, double(r1 - r0) / elapsed);
+  const double per_cpu_second = server_cpu > 0 ? double(m1 - m0) / server_cpu : 0;
+  std::printf("coordinator: %.2f CPU-s, %.1f us a merged result: %.0f merged results per CPU-second\n",
+              server_cpu, 1e6 / std::max(1.0, per_cpu_second), per_cpu_second);
   std::printf("status /api/status latency ms: p50 %.2f p99 %.2f max %.2f (%zu requests)\n", percentile(st, 0.5),
               percentile(st, 0.99), percentile(st, 1.0), st.size());
   std::printf("status /metrics    latency ms: p50 %.2f p99 %.2f max %.2f\n", percentile(mt, 0.5), percentile(mt, 0.99),
@@ -206,8 +242,13 @@ int main(int argc, char** argv) {
   if (!json_path.empty())
     std::ofstream(json_path) << nlohmann::json{{"workers", workers},
                                                {"batch", batch},
+                                               {"jobs", jobs},
+                                               {"width", width},
+                                               {"height", height},
                                                {"merged_tiles_per_second", tiles_per_s},
                                                {"worker_rpcs_per_second", double(r1 - r0) / elapsed},
+                                               {"coordinator_cpu_seconds", server_cpu},
+                                               {"merged_per_coordinator_cpu_second", per_cpu_second},
                                                {"status_p50_ms", percentile(st, 0.5)},
                                                {"status_p99_ms", percentile(st, 0.99)},
                                                {"metrics_p50_ms", percentile(mt, 0.5)},

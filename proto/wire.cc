@@ -3,7 +3,9 @@
 #include <google/protobuf/util/json_util.h>
 #include <zstd.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 
 namespace tessera {
@@ -86,31 +88,31 @@ std::string proto_json(const google::protobuf::Message& m) {
 }
 
 namespace {
-constexpr int kPlanes = 8 * 4 + 4;  // 36 = kBytesPerPixel
-
-// The fields of a pixel as little-endian integers (x86-64 is little-endian).
-template <typename Fn>
-void for_each_field(PixelSums& p, Fn&& fn) {
-  fn(&p.r, 8);
-  fn(&p.g, 8);
-  fn(&p.b, 8);
-  fn(&p.lum2, 8);
-  fn(&p.n, 4);
-}
+// A pixel's fields in wire order, as little-endian integers of 8 or 4 bytes (x86-64 is
+// little-endian).
+struct Field {
+  size_t offset, bytes;
+};
+constexpr Field kFields[] = {{offsetof(PixelSums, r), 8},
+                             {offsetof(PixelSums, g), 8},
+                             {offsetof(PixelSums, b), 8},
+                             {offsetof(PixelSums, lum2), 8},
+                             {offsetof(PixelSums, n), 4}};
+static_assert(8 * 4 + 4 == kBytesPerPixel);
 }  // namespace
 
 std::string encode_sums(const std::vector<PixelSums>& sums) {
-  static_assert(kPlanes == int(kBytesPerPixel));
   const size_t n = sums.size();
   std::string raw(n * kBytesPerPixel, '\0');
-  for (size_t i = 0; i < n; ++i) {
-    PixelSums p = sums[i];
-    uint8_t* plane = reinterpret_cast<uint8_t*>(raw.data()) + i;
-    for_each_field(p, [&](void* field, int bytes) {
-      uint64_t v = 0;
-      std::memcpy(&v, field, size_t(bytes));
-      for (int k = 0; k < bytes; ++k, plane += n) *plane = uint8_t(v >> (8 * k));
-    });
+  uint8_t* plane = reinterpret_cast<uint8_t*>(raw.data());
+  std::vector<uint64_t> v(n);
+  for (const Field& f : kFields) {  // field by field, then byte by byte: loops that vectorize
+    for (size_t i = 0; i < n; ++i) {
+      v[i] = 0;
+      std::memcpy(&v[i], reinterpret_cast<const char*>(&sums[i]) + f.offset, f.bytes);
+    }
+    for (size_t k = 0; k < f.bytes; ++k, plane += n)
+      for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(v[i] >> (8 * k));
   }
   std::string compressed(ZSTD_compressBound(raw.size()), '\0');
   const size_t size = ZSTD_compress(compressed.data(), compressed.size(), raw.data(), raw.size(), 1);
@@ -130,17 +132,19 @@ std::vector<PixelSums> decode_sums(const std::string& compressed, size_t pixels)
   if (ZSTD_isError(n)) throw WireError(std::string("sums: ") + ZSTD_getErrorName(n));
   if (n != want) throw WireError("sums: " + std::to_string(n) + " bytes, " + std::to_string(want) + " expected");
   std::vector<PixelSums> sums(pixels);
-  for (size_t i = 0; i < pixels; ++i) {
-    PixelSums& p = sums[i];
-    const uint8_t* plane = reinterpret_cast<const uint8_t*>(raw.data()) + i;
-    for_each_field(p, [&](void* field, int bytes) {
+  const uint8_t* plane = reinterpret_cast<const uint8_t*>(raw.data());
+  for (const Field& f : kFields) {  // each pixel's value from its field's byte planes
+    char* out = reinterpret_cast<char*>(sums.data()) + f.offset;
+    for (size_t i = 0; i < pixels; ++i, out += sizeof(PixelSums)) {
       uint64_t v = 0;
-      for (int k = 0; k < bytes; ++k, plane += pixels) v |= uint64_t(*plane) << (8 * k);
-      std::memcpy(field, &v, size_t(bytes));
-    });
+      for (size_t k = 0; k < f.bytes; ++k) v |= uint64_t(plane[k * pixels + i]) << (8 * k);
+      std::memcpy(out, &v, f.bytes);
+    }
+    plane += f.bytes * pixels;
+  }
+  for (const PixelSums& p : sums)
     if (!std::isfinite(p.r) || !std::isfinite(p.g) || !std::isfinite(p.b) || !std::isfinite(p.lum2))
       throw WireError("sums: non-finite value");
-  }
   return sums;
 }
 

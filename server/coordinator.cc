@@ -56,15 +56,19 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req) {
   } catch (const SceneError& e) {
     throw refuse(e.what());
   }
-  std::lock_guard<std::mutex> lock(mu_);
-  auto job = std::make_unique<Job>(new_job_id_locked(), settings);
+  // The plan's film and the snapshot film are made here, outside the lock: for a large
+  // frame, allocating and zeroing them takes long enough to stall every worker.
+  auto job = std::make_unique<Job>("", settings);
   job->settings_proto = to_proto(settings);
   job->scene_hash = hash;
   job->name = req.name().empty() ? req.main_file() : req.name();
   job->priority = req.priority();
+  job->tile_lease.assign(job->plan.tiles().size(), 0);
+  job->spare_film = std::make_unique<Film>(job->plan.film());
+  std::lock_guard<std::mutex> lock(mu_);
+  job->id = new_job_id_locked();
   job->seq = next_job_++;
   job->submitted = clock_->now();
-  job->tile_lease.assign(job->plan.tiles().size(), 0);
   const std::string id = job->id;
   Job& added = *(jobs_[id] = std::move(job));
   if (added.plan.done()) end_job_locked(added, v1::JobStatus::DONE, added.submitted);  // releases the scene too
@@ -328,8 +332,11 @@ std::optional<Coordinator::ImageSnapshot> Coordinator::after_merge_locked(Job& j
   const bool done = job.plan.done();
   if (done) end_job_locked(job, v1::JobStatus::DONE, now);
   const uint32_t frame = job.plan.frame_passes_done();
-  if (!done && (frame <= job.image_frame_passes || now - job.last_image < options_.image_interval_seconds))
-    return std::nullopt;
+  // Progressive images take at most 1/kImageWriteShare of the time: a large frame's image
+  // takes long enough to write that the interval alone would let writing crowd out merging.
+  constexpr double kImageWriteShare = 20;
+  const double interval = std::max(options_.image_interval_seconds, kImageWriteShare * job.image_write_seconds);
+  if (!done && (frame <= job.image_frame_passes || now - job.last_image < interval)) return std::nullopt;
   job.image_frame_passes = frame;
   job.last_image = now;
   return snapshot_locked(job);
@@ -356,6 +363,7 @@ void Coordinator::write_snapshot(ImageSnapshot& snap) {
   Job& job = *snap.job;
   enum { kSkipped, kWritten, kFailed } outcome = kSkipped;  // skipped: a newer one is written
   std::string why;
+  const auto t0 = std::chrono::steady_clock::now();
   {
     std::lock_guard<std::mutex> wl(job.write_mu);
     if (snap.seq > job.written_seq) {
@@ -375,7 +383,9 @@ void Coordinator::write_snapshot(ImageSnapshot& snap) {
       }
     }
   }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::lock_guard<std::mutex> lock(mu_);
+  if (outcome == kWritten) job.image_write_seconds = seconds;
   counters_.images_written += outcome == kWritten;
   counters_.image_errors += outcome == kFailed;
   if (outcome == kWritten) job.image_error.clear();

@@ -32,9 +32,12 @@ FramePlan::FramePlan(const RenderSettings& settings)
   progress_.resize(tiles_.size());
   active_.assign(size_t(w.area()), 1);
   for (uint32_t t = 0; t < tiles_.size(); ++t) ready_.emplace(0, t);
+  unfinished_at_.assign(passes_.size() + 1, 0);
+  unfinished_at_[0] = passes_.empty() ? 0 : uint32_t(tiles_.size());
   for (const auto& [s0, s1] : passes_) samples_total_ += uint64_t(s1 - s0) * uint64_t(w.area());
   work_total_ = double(samples_total_);
   if (passes_.empty()) tiles_done_ = uint32_t(tiles_.size());  // nothing to render
+  while (frame_passes_ < passes_.size() && unfinished_at_[frame_passes_] == 0) ++frame_passes_;
 }
 
 std::optional<TileTask> FramePlan::take() {
@@ -87,6 +90,7 @@ FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const std::vecto
 
 void FramePlan::finish_pass(uint32_t tile) {
   TileProgress& t = progress_[tile];
+  --unfinished_at_[t.passes_done];
   ++t.passes_done;
   const Rect& r = tiles_[tile];
   const Rect& win = film_.window();
@@ -112,14 +116,10 @@ void FramePlan::finish_pass(uint32_t tile) {
       work_total_ -= double(passes_[p].second - passes_[p].first) * double(r.area());
   } else {
     ready_.emplace(t.passes_done, tile);
+    ++unfinished_at_[t.passes_done];
   }
-}
-
-uint32_t FramePlan::frame_passes_done() const {
-  uint32_t m = uint32_t(passes_.size());
-  for (const TileProgress& t : progress_)
-    if (!t.finished) m = std::min(m, t.passes_done);
-  return m;
+  // Tiles only move up, so the lowest pass with unfinished tiles only moves up too.
+  while (frame_passes_ < passes_.size() && unfinished_at_[frame_passes_] == 0) ++frame_passes_;
 }
 
 double FramePlan::fraction_done() const {

@@ -66,7 +66,7 @@ class FramePlan {
   const std::vector<std::pair<uint32_t, uint32_t>>& passes() const { return passes_; }
   const TileProgress& progress(uint32_t tile) const { return progress_[tile]; }
   uint32_t tiles_done() const { return tiles_done_; }
-  uint32_t frame_passes_done() const;  // passes every unfinished tile has merged
+  uint32_t frame_passes_done() const { return frame_passes_; }  // passes every unfinished tile has merged
   uint64_t samples_merged() const { return samples_merged_; }
   uint64_t samples_total() const { return samples_total_; }  // an upper bound (-a, noise target)
   uint64_t merges() const { return merges_; }                // the film's version
@@ -83,6 +83,8 @@ class FramePlan {
   std::vector<TileProgress> progress_;
   std::vector<uint8_t> active_;                    // per film pixel (adaptive sampling)
   std::set<std::pair<uint32_t, uint32_t>> ready_;  // (passes merged, tile): O(log tiles)
+  std::vector<uint32_t> unfinished_at_;  // [p]: unfinished tiles with p passes merged
+  uint32_t frame_passes_ = 0;            // the lowest p with any (passes_.size() if none)
   uint32_t tiles_done_ = 0;
   uint64_t samples_merged_ = 0, samples_total_ = 0, merges_ = 0;
   double work_done_ = 0, work_total_ = 0;  // pixel-samples scheduled
