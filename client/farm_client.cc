@@ -17,8 +17,9 @@ void check(const grpc::Status& st, const FarmContext& c) {
   throw FarmError(st.error_message());
 }
 
-std::unique_ptr<grpc::ClientContext> deadline(double seconds = 30) {
+std::unique_ptr<grpc::ClientContext> deadline(const FarmContext& c, double seconds = 30) {
   auto ctx = std::make_unique<grpc::ClientContext>();
+  authorize(*ctx, c.access);
   ctx->set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(int64_t(seconds * 1000)));
   return ctx;
 }
@@ -43,6 +44,7 @@ void print_status(const v1::JobStatus& s, const FarmContext& c) {
 // Streams progress until the job ends; returns its final status.
 v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, const FarmContext& c) {
   grpc::ClientContext ctx;
+  authorize(ctx, c.access);
   v1::JobId req;
   req.set_id(id);
   auto reader = stub.WatchJob(&ctx, req);
@@ -68,16 +70,16 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
 
 }  // namespace
 
-std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::string& address) {
+std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::string& address, const Access& access) {
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(kMaxMessageBytes);
   args.SetMaxSendMessageSize(kMaxMessageBytes);
-  return v1::Tessera::NewStub(grpc::CreateCustomChannel(address, grpc::InsecureChannelCredentials(), args));
+  return v1::Tessera::NewStub(grpc::CreateCustomChannel(address, channel_credentials(access), args));
 }
 
 int list_jobs(v1::Tessera::StubInterface& stub, const FarmContext& c) {
   v1::JobList list;
-  check(stub.ListJobs(deadline().get(), v1::ListJobsRequest(), &list), c);
+  check(stub.ListJobs(deadline(c).get(), v1::ListJobsRequest(), &list), c);
   if (c.json)
     std::fprintf(c.out, "%s\n", proto_json(list).c_str());
   else
@@ -90,7 +92,7 @@ int show_status(v1::Tessera::StubInterface& stub, const std::string& job, const 
   v1::JobId req;
   req.set_id(job);
   v1::JobStatus s;
-  check(stub.GetJob(deadline().get(), req, &s), c);
+  check(stub.GetJob(deadline(c).get(), req, &s), c);
   if (c.json)
     std::fprintf(c.out, "%s\n", proto_json(s).c_str());
   else
@@ -122,7 +124,7 @@ int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const 
     if (has_ext(out, ".png")) req.set_png(true);
   }
   v1::Image img;
-  check(stub.FetchImage(deadline(120).get(), req, &img), c);
+  check(stub.FetchImage(deadline(c, 120).get(), req, &img), c);
   for (const std::string& out : outputs) {
     try {
       write_file_atomic(out, has_ext(out, ".exr") ? img.exr() : img.png());
@@ -137,7 +139,7 @@ int cancel_job(v1::Tessera::StubInterface& stub, const std::string& job, const F
   v1::JobId req;
   req.set_id(job);
   v1::JobStatus s;
-  check(stub.CancelJob(deadline().get(), req, &s), c);
+  check(stub.CancelJob(deadline(c).get(), req, &s), c);
   print_status(s, c);
   return 0;
 }
@@ -156,7 +158,7 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
   req.set_priority(r.priority);
   req.set_name(r.name.empty() ? r.flags.scene : r.name);
   v1::JobId id;
-  check(stub.SubmitJob(deadline(120).get(), req, &id), c);
+  check(stub.SubmitJob(deadline(c, 120).get(), req, &id), c);
   if (!r.wait) {
     if (c.json)
       std::fprintf(c.out, "{\"id\": \"%s\"}\n", id.id().c_str());

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "access.h"
 #include "client/render_flags.h"
 #include "tessera.grpc.pb.h"
 
@@ -26,9 +27,11 @@ struct FarmContext {
   bool quiet = false;                          // no progress bar
   std::FILE* out = stdout;
   std::FILE* err = stderr;
+  Access access;  // the token sent with every call, and TLS
 };
 
-std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::string& address);
+std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::string& address,
+                                                                const Access& access = Access());
 
 struct SubmitRequest {
   RenderFlags flags;

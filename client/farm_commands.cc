@@ -15,10 +15,19 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
     bind(cmd, *c);
     cmd->add_option("--coordinator", c->coordinator, "coordinator gRPC address HOST:PORT")->capture_default_str();
     cmd->add_flag("--json", c->json, "machine-readable output");
-    runs.push_back([cmd, c, run]() -> int {
+    auto token_file = std::make_shared<std::string>(), tls_ca = std::make_shared<std::string>();
+    cmd->add_option("--token-file", *token_file,
+                    "file holding the access token (else $TESSERA_TOKEN_FILE, or the token in $TESSERA_TOKEN)");
+    cmd->add_option("--tls-ca", *tls_ca, "PEM certificate authority: connect over TLS (else $TESSERA_TLS_CA)");
+    runs.push_back([cmd, c, run, token_file, tls_ca]() -> int {
       if (!cmd->parsed()) return -1;
       try {
-        return run(*connect_coordinator(c->coordinator), *c);
+        try {
+          c->access = load_access(*token_file, *tls_ca);
+        } catch (const std::runtime_error& e) {
+          throw FarmError(e.what());
+        }
+        return run(*connect_coordinator(c->coordinator, c->access), *c);
       } catch (const FarmError& e) {
         std::fprintf(stderr, "tessera: error: %s\n", e.what());
         return 1;

@@ -11,7 +11,7 @@ PACKAGES=(
   libzstd-dev libxxhash-dev libstb-dev libsqlite3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-numpy python3-matplotlib
-  iproute2
+  iproute2 libssl-dev openssl
 )
 
 missing=()

@@ -37,7 +37,7 @@ std::string Coordinator::new_job_id_locked() {
   return buf;
 }
 
-std::string Coordinator::submit(const v1::SubmitJobRequest& req) {
+std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::string& owner) {
   auto refuse = [&](const std::string& why) {
     std::lock_guard<std::mutex> lock(mu_);
     ++counters_.jobs_refused;
@@ -63,6 +63,7 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req) {
   job->scene_hash = hash;
   job->name = req.name().empty() ? req.main_file() : req.name();
   job->priority = req.priority();
+  job->owner = owner;
   job->tile_lease.assign(job->plan.tiles().size(), 0);
   job->spare_film = std::make_unique<Film>(job->plan.film());
   std::lock_guard<std::mutex> lock(mu_);
@@ -402,11 +403,14 @@ void Coordinator::write_image(Job& job) {
   write_snapshot(snap);
 }
 
-v1::JobStatus Coordinator::cancel(const std::string& id) {
+v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requester, bool any) {
   Job* job;
   {
     std::lock_guard<std::mutex> lock(mu_);
     job = find(id);
+    if (!any && job->owner != requester)
+      throw RequestError(RequestError::Code::kPermissionDenied,
+                         "job " + id + " belongs to '" + job->owner + "': a client may cancel only its own jobs");
     if (!job->live()) return job->status(clock_->now(), 0, false);
     end_job_locked(*job, v1::JobStatus::CANCELLED, clock_->now());
     changed_.notify_all();

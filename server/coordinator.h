@@ -44,7 +44,7 @@ struct CoordinatorOptions {
 // A request the coordinator refuses, with a message for the client.
 class RequestError : public std::runtime_error {
  public:
-  enum class Code { kInvalidArgument, kNotFound, kFailedPrecondition, kResourceExhausted };
+  enum class Code { kInvalidArgument, kNotFound, kFailedPrecondition, kResourceExhausted, kPermissionDenied };
   RequestError(Code code, const std::string& what) : std::runtime_error(what), code_(code) {}
   Code code() const { return code_; }
 
@@ -69,10 +69,12 @@ class Coordinator {
   ~Coordinator();
 
   // Client side. Throw RequestError.
-  std::string submit(const v1::SubmitJobRequest& request);
+  // `owner`: the submitting token's name; only it (or an admin) may cancel the job.
+  std::string submit(const v1::SubmitJobRequest& request, const std::string& owner = "");
   v1::JobStatus status(const std::string& id, bool with_tiles) const;
   std::vector<v1::JobStatus> list() const;  // in submission order
-  v1::JobStatus cancel(const std::string& id);
+  // `requester` may cancel only its own jobs unless `any` (an admin, or no access tokens).
+  v1::JobStatus cancel(const std::string& id, const std::string& requester = "", bool any = true);
   // The latest image in the formats asked for; an ended job's image holds its whole film.
   v1::Image image(const std::string& id, bool exr = true, bool png = true);
 

@@ -26,6 +26,9 @@ grpc::Status guarded(F&& f) {
       case RequestError::Code::kResourceExhausted:
         code = grpc::StatusCode::RESOURCE_EXHAUSTED;
         break;
+      case RequestError::Code::kPermissionDenied:
+        code = grpc::StatusCode::PERMISSION_DENIED;
+        break;
     }
     return grpc::Status(code, e.what());
   } catch (const std::exception& e) {
@@ -33,16 +36,46 @@ grpc::Status guarded(F&& f) {
   }
 }
 
+// The caller, if its token allows `action`; otherwise the status to answer with.
+grpc::Status caller(const Authenticator* auth, grpc::ServerContext* ctx, Action action, Principal* who) {
+  if (!auth || !auth->enabled()) {
+    *who = Principal{"", Role::kAdmin};
+    return grpc::Status::OK;
+  }
+  std::string token;
+  const auto& metadata = ctx->client_metadata();
+  if (auto it = metadata.find("authorization"); it != metadata.end())
+    token = Authenticator::token_from_header(std::string_view(it->second.data(), it->second.size()));
+  const std::optional<Principal> p = auth->authenticate(token);
+  if (!p)
+    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
+                        token.empty() ? "this coordinator needs an access token (--token-file FILE or TESSERA_TOKEN)"
+                                      : "the access token is not known to this coordinator");
+  if (!Authenticator::allows(p->role, action))
+    return grpc::Status(grpc::StatusCode::PERMISSION_DENIED,
+                        std::string("a ") + role_name(p->role) + " token may not do this");
+  *who = *p;
+  return grpc::Status::OK;
+}
+
+// Checks the caller, then runs f(principal) under guarded().
+template <typename F>
+grpc::Status as(const Authenticator* auth, grpc::ServerContext* ctx, Action action, F&& f) {
+  Principal who;
+  if (grpc::Status st = caller(auth, ctx, action, &who); !st.ok()) return st;
+  return guarded([&] { f(who); });
+}
+
 }  // namespace
 
-grpc::Status ClientService::SubmitJob(grpc::ServerContext*, const v1::SubmitJobRequest* req, v1::JobId* out) {
-  return guarded([&] { out->set_id(c_.submit(*req)); });
+grpc::Status ClientService::SubmitJob(grpc::ServerContext* ctx, const v1::SubmitJobRequest* req, v1::JobId* out) {
+  return as(auth_, ctx, Action::kSubmit, [&](const Principal& who) { out->set_id(c_.submit(*req, who.name)); });
 }
-grpc::Status ClientService::GetJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) {
-  return guarded([&] { *out = c_.status(req->id(), true); });
+grpc::Status ClientService::GetJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::JobStatus* out) {
+  return as(auth_, ctx, Action::kRead, [&](const Principal&) { *out = c_.status(req->id(), true); });
 }
-grpc::Status ClientService::ListJobs(grpc::ServerContext*, const v1::ListJobsRequest*, v1::JobList* out) {
-  return guarded([&] {
+grpc::Status ClientService::ListJobs(grpc::ServerContext* ctx, const v1::ListJobsRequest*, v1::JobList* out) {
+  return as(auth_, ctx, Action::kRead, [&](const Principal&) {
     for (v1::JobStatus& s : c_.list()) *out->add_jobs() = std::move(s);
   });
 }
@@ -51,7 +84,7 @@ grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* 
   // At most kUpdatesPerSecond updates (and always the last): a status with every tile on
   // every merge cost the render farm's cores more than the watcher gains.
   constexpr double kUpdatesPerSecond = 4;
-  return guarded([&] {
+  return as(auth_, ctx, Action::kRead, [&](const Principal&) {
     // Progress only: a watcher that wants every tile asks GetJob.
     v1::JobStatus s = c_.status(req->id(), false);
     const auto ended = [](const v1::JobStatus& st) {
@@ -68,23 +101,26 @@ grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* 
     }
   });
 }
-grpc::Status ClientService::CancelJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) {
-  return guarded([&] { *out = c_.cancel(req->id()); });
+grpc::Status ClientService::CancelJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::JobStatus* out) {
+  return as(auth_, ctx, Action::kCancel, [&](const Principal& who) {
+    *out = c_.cancel(req->id(), who.name, who.role == Role::kAdmin);
+  });
 }
-grpc::Status ClientService::FetchImage(grpc::ServerContext*, const v1::FetchImageRequest* req, v1::Image* out) {
-  return guarded([&] {
+grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::FetchImageRequest* req, v1::Image* out) {
+  return as(auth_, ctx, Action::kRead, [&](const Principal&) {
     const bool any = req->exr() || req->png();  // neither: both, as before the choice existed
     *out = c_.image(req->id(), req->exr() || !any, req->png() || !any);
   });
 }
 
-grpc::Status WorkerService::Register(grpc::ServerContext*, const v1::RegisterRequest* req, v1::RegisterResponse* out) {
-  return guarded([&] { *out = c_.register_worker(*req); });
+grpc::Status WorkerService::Register(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
+                                     v1::RegisterResponse* out) {
+  return as(auth_, ctx, Action::kWork, [&](const Principal&) { *out = c_.register_worker(*req); });
 }
 grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) {
   // Long poll: an idle worker waits here (up to a second) and gets a new job's first task
   // the moment it is submitted, instead of sleeping through a retry interval.
-  return guarded([&] {
+  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
     while (true) {
       *out = c_.get_task(req->worker_id(), req->max_tasks(), req->max_samples());
@@ -93,28 +129,31 @@ grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskR
     }
   });
 }
-grpc::Status WorkerService::FetchScene(grpc::ServerContext*, const v1::FetchSceneRequest* req, v1::SceneBundle* out) {
-  return guarded([&] { *out = c_.scene(req->scene_hash()); });
+grpc::Status WorkerService::FetchScene(grpc::ServerContext* ctx, const v1::FetchSceneRequest* req,
+                                       v1::SceneBundle* out) {
+  return as(auth_, ctx, Action::kWork, [&](const Principal&) { *out = c_.scene(req->scene_hash()); });
 }
-grpc::Status WorkerService::Heartbeat(grpc::ServerContext*, const v1::HeartbeatRequest* req,
+grpc::Status WorkerService::Heartbeat(grpc::ServerContext* ctx, const v1::HeartbeatRequest* req,
                                       v1::HeartbeatResponse* out) {
-  return guarded([&] {
+  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
     for (uint64_t id : c_.heartbeat(req->worker_id(), {req->task_ids().begin(), req->task_ids().end()}))
       out->add_refused(id);
   });
 }
-grpc::Status WorkerService::SubmitResults(grpc::ServerContext*, const v1::ResultBatch* req, v1::ResultAcks* out) {
-  return guarded([&] {
+grpc::Status WorkerService::SubmitResults(grpc::ServerContext* ctx, const v1::ResultBatch* req,
+                                          v1::ResultAcks* out) {
+  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
     for (const v1::TaskResult& r : req->results()) *out->add_acks() = c_.submit_result(r);
   });
 }
-grpc::Status WorkerService::ReleaseTask(grpc::ServerContext*, const v1::ReleaseRequest* req, v1::ReleaseResponse*) {
-  return guarded([&] { c_.release(req->worker_id(), req->task_id(), req->error()); });
+grpc::Status WorkerService::ReleaseTask(grpc::ServerContext* ctx, const v1::ReleaseRequest* req,
+                                        v1::ReleaseResponse*) {
+  return as(auth_, ctx, Action::kWork, [&](const Principal&) { c_.release(req->worker_id(), req->task_id(), req->error()); });
 }
 
-grpc::Status WorkerService::Unregister(grpc::ServerContext*, const v1::UnregisterRequest* req,
+grpc::Status WorkerService::Unregister(grpc::ServerContext* ctx, const v1::UnregisterRequest* req,
                                        v1::UnregisterResponse*) {
-  return guarded([&] { c_.unregister(req->worker_id()); });
+  return as(auth_, ctx, Action::kWork, [&](const Principal&) { c_.unregister(req->worker_id()); });
 }
 
 }  // namespace tessera

@@ -3,13 +3,15 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include "server/auth.h"
 #include "server/coordinator.h"
 
 namespace tessera {
 
+// Without an Authenticator (or with an open one) every caller may do everything.
 class ClientService final : public v1::Tessera::Service {
  public:
-  explicit ClientService(Coordinator& c) : c_(c) {}
+  explicit ClientService(Coordinator& c, const Authenticator* auth = nullptr) : c_(c), auth_(auth) {}
   grpc::Status SubmitJob(grpc::ServerContext*, const v1::SubmitJobRequest* req, v1::JobId* out) override;
   grpc::Status GetJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) override;
   grpc::Status ListJobs(grpc::ServerContext*, const v1::ListJobsRequest*, v1::JobList* out) override;
@@ -19,11 +21,12 @@ class ClientService final : public v1::Tessera::Service {
 
  private:
   Coordinator& c_;
+  const Authenticator* auth_;
 };
 
 class WorkerService final : public v1::TesseraWorker::Service {
  public:
-  explicit WorkerService(Coordinator& c) : c_(c) {}
+  explicit WorkerService(Coordinator& c, const Authenticator* auth = nullptr) : c_(c), auth_(auth) {}
   grpc::Status Register(grpc::ServerContext*, const v1::RegisterRequest* req, v1::RegisterResponse* out) override;
   grpc::Status GetTask(grpc::ServerContext*, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) override;
   grpc::Status FetchScene(grpc::ServerContext*, const v1::FetchSceneRequest* req, v1::SceneBundle* out) override;
@@ -34,6 +37,7 @@ class WorkerService final : public v1::TesseraWorker::Service {
 
  private:
   Coordinator& c_;
+  const Authenticator* auth_;
 };
 
 }  // namespace tessera

@@ -19,6 +19,7 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   s.set_priority(priority);
   const double elapsed = started > 0 ? (live() ? now : finished_at) - started : 0;
   s.set_elapsed_seconds(elapsed);
+  s.set_owner(owner);
   const double f = plan.fraction_done();
   if (live() && f > 0) s.set_eta_seconds(elapsed * (1 - f) / f);
   s.set_active_workers(workers);

@@ -17,6 +17,7 @@ struct Job {
   Job(std::string id, const RenderSettings& settings) : id(std::move(id)), plan(settings) {}
 
   std::string id, name, scene_hash;
+  std::string owner;  // the submitting token's name
   int32_t priority = 0;
   uint64_t seq = 0;  // submission order
   v1::RenderSettings settings_proto;

@@ -5,8 +5,10 @@
 #include <CLI/CLI.hpp>
 #include <atomic>
 #include <cstdio>
+#include <cstdlib>
 #include <thread>
 
+#include "core/io/files.h"
 #include "server/grpc_services.h"
 #include "server/status_http.h"
 
@@ -22,6 +24,11 @@ std::pair<std::string, int> split_host_port(const std::string& s, const char* fl
   } catch (const std::exception&) {
     throw CLI::ValidationError(flag, "bad port in '" + s + "'");
   }
+}
+
+// Loopback only: 127.0.0.0/8, ::1 and localhost.
+bool is_loopback(const std::string& host) {
+  return host.rfind("127.", 0) == 0 || host == "localhost" || host == "::1" || host == "[::1]";
 }
 
 }  // namespace
@@ -41,7 +48,23 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(1, 1000000));
   app.add_option("--image-interval", opt.image_interval_seconds, "write progressive images at most this often (s)")
       ->capture_default_str();
+  std::string tokens_file, tls_cert, tls_key;
+  bool insecure = false;
+  app.add_option("--tokens", tokens_file,
+                 "access tokens, one 'ROLE NAME TOKEN' a line (roles: viewer, client, worker, admin); "
+                 "also $TESSERA_TOKENS_FILE")
+      ->check(CLI::ExistingFile);
+  app.add_option("--tls-cert", tls_cert, "PEM certificate chain: serve gRPC and HTTP over TLS")->check(CLI::ExistingFile);
+  app.add_option("--tls-key", tls_key, "PEM private key of --tls-cert")->check(CLI::ExistingFile);
+  app.add_flag("--insecure", insecure,
+               "allow listening beyond loopback without access tokens (anyone who can connect may do anything)");
   CLI11_PARSE(app, argc, argv);
+  if (tls_cert.empty() != tls_key.empty()) {
+    std::fprintf(stderr, "tessera-coordinator: error: --tls-cert and --tls-key go together\n");
+    return 2;
+  }
+  if (tokens_file.empty())
+    if (const char* env = std::getenv("TESSERA_TOKENS_FILE")) tokens_file = env;
   opt.heartbeat_seconds = std::min(2.0, opt.lease_seconds / 4);
 
   // Block the stop signals in every thread; main waits for them below.
@@ -54,12 +77,32 @@ int main(int argc, char** argv) {
   try {
     const auto [grpc_host, grpc_port] = split_host_port(listen, "--listen");
     const auto [http_host, http_port] = split_host_port(http, "--http");
+    const tessera::Authenticator auth =
+        tokens_file.empty() ? tessera::Authenticator() : tessera::Authenticator::from_file(tokens_file);
+    const bool open_network = !is_loopback(grpc_host) || !is_loopback(http_host);
+    if (!auth.enabled()) {
+      if (open_network && !insecure) {
+        std::fprintf(stderr,
+                     "tessera-coordinator: error: refusing to listen beyond loopback (%s, %s) without access tokens: "
+                     "give --tokens FILE, or --insecure to allow anyone who can connect to do anything\n",
+                     listen.c_str(), http.c_str());
+        return 2;
+      }
+      std::fprintf(stderr, "tessera-coordinator: no access tokens: every caller may do anything (%s)\n",
+                   open_network ? "--insecure, reachable beyond loopback" : "loopback only");
+    }
+    std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
+    if (!tls_cert.empty()) {
+      grpc::SslServerCredentialsOptions tls;
+      tls.pem_key_cert_pairs.push_back({tessera::read_file_bytes(tls_key), tessera::read_file_bytes(tls_cert)});
+      credentials = grpc::SslServerCredentials(tls);
+    }
     tessera::Coordinator coordinator(opt);
-    tessera::ClientService client(coordinator);
-    tessera::WorkerService worker(coordinator);
+    tessera::ClientService client(coordinator, &auth);
+    tessera::WorkerService worker(coordinator, &auth);
     grpc::ServerBuilder builder;
     int bound = 0;
-    builder.AddListeningPort(grpc_host + ":" + std::to_string(grpc_port), grpc::InsecureServerCredentials(), &bound);
+    builder.AddListeningPort(grpc_host + ":" + std::to_string(grpc_port), credentials, &bound);
     builder.SetMaxReceiveMessageSize(tessera::kMaxMessageBytes);
     builder.SetMaxSendMessageSize(tessera::kMaxMessageBytes);
     builder.RegisterService(&client);
@@ -69,11 +112,11 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "tessera-coordinator: error: cannot listen on %s\n", listen.c_str());
       return 1;
     }
-    tessera::StatusHttp status(coordinator);
+    tessera::StatusHttp status(coordinator, &auth, tls_cert, tls_key);
     const int http_bound = status.bind(http_host, http_port);
     status.start();
-    std::printf("grpc listening on %s:%d\n", grpc_host.c_str(), bound);
-    std::printf("http listening on %s:%d\n", http_host.c_str(), http_bound);
+    std::printf("grpc listening on %s:%d%s\n", grpc_host.c_str(), bound, tls_cert.empty() ? "" : " (TLS)");
+    std::printf("http listening on %s:%d%s\n", http_host.c_str(), http_bound, tls_cert.empty() ? "" : " (TLS)");
     std::fflush(stdout);
 
     std::atomic<bool> stopping{false};

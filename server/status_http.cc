@@ -66,7 +66,30 @@ const char* kContentSecurityPolicy =
 
 }  // namespace
 
-StatusHttp::StatusHttp(Coordinator& c) : c_(c), server_(std::make_unique<httplib::Server>()) {
+namespace {
+std::unique_ptr<httplib::Server> make_server(const std::string& cert, const std::string& key) {
+  if (cert.empty() && key.empty()) return std::make_unique<httplib::Server>();
+  auto tls = std::make_unique<httplib::SSLServer>(cert.c_str(), key.c_str());
+  if (!tls->is_valid()) throw std::runtime_error("http: cannot load the TLS certificate " + cert + " and key " + key);
+  return tls;
+}
+}  // namespace
+
+StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::string& tls_cert,
+                       const std::string& tls_key)
+    : c_(c), server_(make_server(tls_cert, tls_key)) {
+  if (auth && auth->enabled())
+    server_->set_pre_routing_handler([auth](const httplib::Request& req, httplib::Response& res) {
+      const std::optional<Principal> who =
+          auth->authenticate(Authenticator::token_from_header(req.get_header_value("Authorization")));
+      if (who && Authenticator::allows(who->role, Action::kRead)) return httplib::Server::HandlerResponse::Unhandled;
+      res.status = who ? 403 : 401;
+      if (!who) res.set_header("WWW-Authenticate", "Basic realm=\"tessera\", charset=\"UTF-8\"");
+      res.set_content(who ? std::string("a ") + role_name(who->role) + " token may not read the status\n"
+                          : "this coordinator needs an access token (Authorization: Bearer TOKEN)\n",
+                      "text/plain");
+      return httplib::Server::HandlerResponse::Handled;
+    });
   server_->Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {
     res.set_content(status_json(), "application/json");
   });

@@ -4,12 +4,16 @@
 //   /metrics             Prometheus text format
 //   /jobs/<id>/preview.png   the latest progressive preview
 //   /                    a live page: the progressive image and a per-tile heat map
+// With access tokens, every request needs one that may read (viewer, client or admin), as
+// "Authorization: Bearer TOKEN" or HTTP Basic auth with the token as the password (so a
+// browser asks for it).
 #pragma once
 
 #include <memory>
 #include <string>
 #include <thread>
 
+#include "server/auth.h"
 #include "server/coordinator.h"
 
 namespace httplib {
@@ -20,7 +24,9 @@ namespace tessera {
 
 class StatusHttp {
  public:
-  explicit StatusHttp(Coordinator& coordinator);
+  // With `tls_cert` and `tls_key` (PEM files) it serves HTTPS. Throws if they do not load.
+  explicit StatusHttp(Coordinator& coordinator, const Authenticator* auth = nullptr, const std::string& tls_cert = "",
+                      const std::string& tls_key = "");
   ~StatusHttp();
   // Binds host:port (port 0 picks one) and returns the port; throws on failure.
   int bind(const std::string& host, int port);

@@ -6,7 +6,9 @@ namespace tessera {
 
 WorkerInfo& WorkerRegistry::add(const std::string& name, uint32_t threads, double now) {
   WorkerInfo w;
-  w.id = next_++;
+  // 53 random bits: unguessable, and exact as a JSON number in a browser.
+  do w.id = ids_() >> 11;
+  while (w.id == 0 || workers_.count(w.id));
   w.name = name.substr(0, 256);
   w.threads = std::clamp<uint32_t>(threads, 1, kMaxThreads);
   w.last_seen = now;

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <map>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -46,7 +47,7 @@ class WorkerRegistry {
 
  private:
   std::map<uint64_t, WorkerInfo> workers_;
-  uint64_t next_ = 1;
+  std::mt19937_64 ids_{std::random_device{}()};  // ids are unguessable: results are checked by id
   uint64_t threads_ = 0;
 };
 

@@ -29,15 +29,26 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 4096));
   app.add_flag("-v,--verbose", opt.verbose, "log connection events");
+  std::string token_file, tls_ca;
+  app.add_option("--token-file", token_file,
+                 "file holding a worker access token (else $TESSERA_TOKEN_FILE, or the token in $TESSERA_TOKEN)");
+  app.add_option("--tls-ca", tls_ca, "PEM certificate authority: connect over TLS (else $TESSERA_TLS_CA)");
   CLI11_PARSE(app, argc, argv);
+  try {
+    opt.access = tessera::load_access(token_file, tls_ca);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tessera-worker: error: %s\n", e.what());
+    return 2;
+  }
   struct sigaction sa {};
   sa.sa_handler = on_signal;
   sigaction(SIGTERM, &sa, nullptr);
   sigaction(SIGINT, &sa, nullptr);
   try {
     tessera::Worker worker(opt);
-    worker.run(g_stop);
+    const bool ok = worker.run(g_stop);
     std::fprintf(stderr, "tessera-worker: stopped after %llu tasks\n", (unsigned long long)worker.tasks_done());
+    if (!ok) return 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tessera-worker: error: %s\n", e.what());
     return 1;

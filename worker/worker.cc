@@ -25,8 +25,9 @@ constexpr int kLingerMs = 50;  // how long finished results may wait for company
 // look wakes a thread, which on a small machine takes a core from a render thread.
 constexpr int kStopPollMs = 100;
 
-std::unique_ptr<grpc::ClientContext> context(double seconds) {
+std::unique_ptr<grpc::ClientContext> context(const Access& access, double seconds) {
   auto ctx = std::make_unique<grpc::ClientContext>();
+  authorize(*ctx, access);
   ctx->set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(int64_t(seconds * 1000)));
   return ctx;
 }
@@ -74,7 +75,7 @@ Worker::Worker(WorkerOptions options) : options_(std::move(options)) {
   args.SetMaxSendMessageSize(kMaxMessageBytes);
   // Reconnect quickly after the coordinator comes back.
   args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, 2000);
-  channel_ = grpc::CreateCustomChannel(options_.coordinator, grpc::InsecureChannelCredentials(), args);
+  channel_ = grpc::CreateCustomChannel(options_.coordinator, channel_credentials(options_.access), args);
   stub_ = v1::TesseraWorker::NewStub(channel_);
 }
 
@@ -93,7 +94,7 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
     req.set_name(options_.name);
     req.set_threads(uint32_t(options_.threads));
     v1::RegisterResponse resp;
-    const grpc::Status st = stub_->Register(context(5).get(), req, &resp);
+    const grpc::Status st = stub_->Register(context(options_.access, 5).get(), req, &resp);
     if (st.ok()) {
       worker_id_ = resp.worker_id();
       heartbeat_ms_ = std::max(50u, resp.heartbeat_interval_ms());
@@ -101,6 +102,13 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
       if (options_.verbose)
         std::fprintf(stderr, "tessera-worker: registered as %llu\n", (unsigned long long)worker_id_.load());
       return true;
+    }
+    if (st.error_code() == grpc::StatusCode::UNAUTHENTICATED || st.error_code() == grpc::StatusCode::PERMISSION_DENIED ||
+        st.error_code() == grpc::StatusCode::INVALID_ARGUMENT) {  // retrying cannot help
+      std::fprintf(stderr, "tessera-worker: error: coordinator %s refused to register this worker: %s\n",
+                   options_.coordinator.c_str(), st.error_message().c_str());
+      refused_ = true;
+      return false;
     }
     if (options_.verbose)
       std::fprintf(stderr, "tessera-worker: coordinator %s: %s; retrying\n", options_.coordinator.c_str(),
@@ -124,7 +132,7 @@ std::shared_ptr<Scene> Worker::scene_for(const std::string& hash) {
     v1::FetchSceneRequest req;
     req.set_scene_hash(hash);
     v1::SceneBundle bundle;
-    const grpc::Status st = stub_->FetchScene(context(120).get(), req, &bundle);
+    const grpc::Status st = stub_->FetchScene(context(options_.access, 120).get(), req, &bundle);
     if (!st.ok()) throw std::runtime_error("fetch scene " + hash + ": " + st.error_message());
     if (bundle_hash(bundle.main_file(), bundle.files()) != hash)
       throw WireError("scene bundle does not match its hash");
@@ -235,7 +243,7 @@ void Worker::send_loop() {
     bool sent = false;
     for (int attempt = 0; attempt < 5 && !sent; ++attempt) {
       v1::ResultAcks acks;
-      const grpc::Status st = stub_->SubmitResults(context(30).get(), results, &acks);
+      const grpc::Status st = stub_->SubmitResults(context(options_.access, 30).get(), results, &acks);
       sent = st.ok();
       if (!sent) {
         if (options_.verbose) std::fprintf(stderr, "tessera-worker: submit: %s\n", st.error_message().c_str());
@@ -287,7 +295,7 @@ void Worker::keep_leases(const std::atomic<bool>& stop) {
       for (const auto& [id, h] : held_) hb.add_task_ids(id);
       lock.unlock();
       v1::HeartbeatResponse hr;
-      const bool ok = hb.task_ids_size() == 0 || stub_->Heartbeat(context(5).get(), hb, &hr).ok();
+      const bool ok = hb.task_ids_size() == 0 || stub_->Heartbeat(context(options_.access, 5).get(), hb, &hr).ok();
       lock.lock();
       if (ok)
         for (uint64_t id : hr.refused())
@@ -307,7 +315,7 @@ void Worker::release(uint64_t task_id, const std::string& error) {
   rel.set_task_id(task_id);
   rel.set_error(error);
   v1::ReleaseResponse rr;
-  stub_->ReleaseTask(context(2).get(), rel, &rr);
+  stub_->ReleaseTask(context(options_.access, 2).get(), rel, &rr);
 }
 
 void Worker::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
@@ -335,8 +343,8 @@ void Worker::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
   work_.notify_all();
 }
 
-void Worker::run(const std::atomic<bool>& stop) {
-  if (!register_worker(stop)) return;
+bool Worker::run(const std::atomic<bool>& stop) {
+  if (!register_worker(stop)) return !refused_;
   registered_at_ = now_seconds();
   stopping_ = false;
   std::thread keeper([&] {
@@ -365,7 +373,7 @@ void Worker::run(const std::atomic<bool>& stop) {
         if (rate > 0) req.set_max_samples(uint64_t(std::max(1.0, rate * options_.lookahead_seconds - queued_samples_)));
       }
       v1::GetTaskResponse resp;
-      const grpc::Status st = stub_->GetTask(context(10).get(), req, &resp);  // long-polls when there is no work
+      const grpc::Status st = stub_->GetTask(context(options_.access, 10).get(), req, &resp);  // long-polls when there is no work
       if (!st.ok()) {
         if (options_.verbose) std::fprintf(stderr, "tessera-worker: get task: %s\n", st.error_message().c_str());
         // Unknown worker (the coordinator restarted) or unreachable: its leases are gone.
@@ -374,7 +382,7 @@ void Worker::run(const std::atomic<bool>& stop) {
           while (!held_.empty()) drop_locked(held_.begin()->first);
         }
         sleep_backoff(stop);
-        if (!register_worker(stop)) break;
+        if (!register_worker(stop)) break;  // stopped, or refused
         continue;
       }
       backoff_ = 0.1;
@@ -394,10 +402,11 @@ void Worker::run(const std::atomic<bool>& stop) {
   v1::UnregisterRequest bye;
   bye.set_worker_id(worker_id_);
   v1::UnregisterResponse ok;
-  if (!stub_->Unregister(context(2).get(), bye, &ok).ok())
+  if (!stub_->Unregister(context(options_.access, 2).get(), bye, &ok).ok())
     for (const auto& [id, h] : held_) release(id);  // at least the leases, one by one
   held_.clear();
   queue_.clear();
+  return !refused_;
 }
 
 }  // namespace tessera

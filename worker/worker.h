@@ -24,6 +24,7 @@
 
 #include "core/render/tile_renderer.h"
 #include "core/scene/scene.h"
+#include "access.h"
 #include "wire.h"
 
 namespace tessera {
@@ -36,6 +37,7 @@ struct WorkerOptions {
   bool verbose = false;
   double lookahead_seconds = 0.3;  // queued work to keep, at the measured speed
   int max_tasks = 64;              // leases held at once, at most
+  Access access;                   // token and TLS
 };
 
 class Worker {
@@ -44,7 +46,8 @@ class Worker {
   ~Worker();
   // Works until `stop` becomes true; then abandons unfinished tasks (releasing their
   // leases), sends the finished ones, and returns. Network failures are retried forever.
-  void run(const std::atomic<bool>& stop);
+  // Returns false if the coordinator refused this worker (a bad token, another protocol).
+  bool run(const std::atomic<bool>& stop);
   uint64_t tasks_done() const { return tasks_done_; }
 
  private:
@@ -86,6 +89,7 @@ class Worker {
   double busy_thread_seconds_ = 0;
   double samples_per_thread_second_ = 0;  // measured, smoothed
   bool stopping_ = false;
+  bool refused_ = false;  // registration refused: retrying cannot help
   std::atomic<uint64_t> tasks_done_{0};
 };
 

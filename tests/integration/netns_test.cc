@@ -16,6 +16,7 @@
 #include <sstream>
 #include <thread>
 
+#include "core/io/files.h"
 #include "core/io/image_io.h"
 #include "tests/integration/farm_helpers.h"
 #include "tests/integration/process.h"
@@ -78,6 +79,10 @@ class Hosts {
   std::string prefix_;
 };
 
+constexpr const char* kClientToken = "client-token-0123456789abcdef";
+constexpr const char* kWorkerToken = "worker-token-0123456789abcdef";
+constexpr const char* kViewerToken = "viewer-token-0123456789abcdef";
+
 class NetnsFarm : public ::testing::Test {
  protected:
   fs::path dir = fs::temp_directory_path() / ("tessera_netns_" + std::to_string(::getpid()));
@@ -95,24 +100,36 @@ class NetnsFarm : public ::testing::Test {
     a.insert(a.end(), argv.begin(), argv.end());
     return a;
   }
-  // `tessera ARGS` on host c; returns stdout, asserting success.
+  // A file holding the token of `role` ("client" or "worker").
+  std::string token_file(const std::string& role) {
+    const std::string path = (dir / (role + ".token")).string();
+    write_file_atomic(path, role == "client" ? kClientToken : kWorkerToken);
+    return path;
+  }
+  // `tessera ARGS` on host c, as the client "alice"; returns stdout, asserting success.
   std::string tessera(const std::string& args) {
     const std::string out = (dir / "cmd.out").string(), err = (dir / "cmd.err").string();
-    const int status = std::system(
-        ("ip netns exec " + hosts.ns("c") + " " + kBin + "/tessera " + args + " >" + out + " 2>" + err).c_str());
+    const int status = std::system(("ip netns exec " + hosts.ns("c") + " " + kBin + "/tessera " + args +
+                                    " --token-file " + token_file("client") + " >" + out + " 2>" + err)
+                                       .c_str());
     EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << args << ": " << slurp(err);
     return slurp(out);
   }
 };
 
 TEST_F(NetnsFarm, TwoMachinesRenderTheLocalImageAndOneLosingItsLinkChangesNothing) {
+  // Beyond loopback, as on real machines: with access tokens (the coordinator refuses to
+  // listen there without them).
+  write_file_atomic((dir / "tokens").string(), "client alice " + std::string(kClientToken) + "\nworker farm " +
+                                                   kWorkerToken + "\nviewer ops " + kViewerToken + "\n");
   const std::string flags = "-r 96 72 -s 512 --pass-spp 8 -m 6 --tile 16 --seed 5";
   const std::string local = (dir / "local.exr").string();
   ASSERT_EQ(sh(kBin + "/tessera render " + kScene + " " + flags + " -q -f " + local), 0);
 
   Process coordinator("/usr/sbin/ip",
                       in("c", {kBin + "/tessera-coordinator", "--listen", "192.0.2.1:0", "--http", "127.0.0.1:0",
-                               "--data", (dir / "data").string(), "--lease-seconds", "2"}),
+                               "--data", (dir / "data").string(), "--lease-seconds", "2", "--tokens",
+                               (dir / "tokens").string()}),
                       (dir / "coordinator.err").string());
   std::smatch m;
   const std::string line = coordinator.read_line();
@@ -126,7 +143,8 @@ TEST_F(NetnsFarm, TwoMachinesRenderTheLocalImageAndOneLosingItsLinkChangesNothin
     workers.push_back(
         std::make_unique<Process>("/usr/sbin/ip",
                                   in(h, {kBin + "/tessera-worker", "--coordinator", addr, "--threads", "1", "--cache",
-                                         (dir / (std::string("cache-") + h)).string(), "--name", h, "-v"}),
+                                         (dir / (std::string("cache-") + h)).string(), "--name", h, "-v",
+                                         "--token-file", token_file("worker")}),
                                   (dir / (std::string("worker-") + h + ".err")).string()));
 
   // The scene reaches the workers only over the wire: submitted from a copy that is gone
@@ -157,10 +175,10 @@ TEST_F(NetnsFarm, TwoMachinesRenderTheLocalImageAndOneLosingItsLinkChangesNothin
   expect_same_pixels(local, farm);
   // The cut-off worker held leases: they expired, and their tiles were rendered again.
   const std::string metrics = (dir / "metrics.txt").string();
-  ASSERT_EQ(std::system(("ip netns exec " + hosts.ns("c") +
-                         " python3 -c \"import urllib.request; print(urllib.request.urlopen('" + metrics_url +
-                         "').read().decode())\" > " + metrics)
-                            .c_str()),
+  const std::string fetch_metrics = "import urllib.request; r = urllib.request.Request('" + metrics_url +
+                                    "', headers={'Authorization': 'Bearer " + kViewerToken +
+                                    "'}); print(urllib.request.urlopen(r).read().decode())";
+  ASSERT_EQ(std::system(("ip netns exec " + hosts.ns("c") + " python3 -c \"" + fetch_metrics + "\" > " + metrics).c_str()),
             0);
   const std::string metrics_text = slurp(metrics);
   ASSERT_TRUE(std::regex_search(metrics_text, m, std::regex("tessera_leases_expired_total (\\d+)"))) << metrics_text;

@@ -1,0 +1,138 @@
+#include "server/auth.h"
+
+#include <openssl/evp.h>
+
+#include <sstream>
+
+#include "core/io/files.h"
+
+namespace tessera {
+namespace {
+
+std::string sha256(std::string_view s) {
+  unsigned char digest[EVP_MAX_MD_SIZE];
+  unsigned int n = 0;
+  EVP_Digest(s.data(), s.size(), digest, &n, EVP_sha256(), nullptr);
+  return std::string(reinterpret_cast<const char*>(digest), n);
+}
+
+std::optional<Role> parse_role(const std::string& s) {
+  if (s == "viewer") return Role::kViewer;
+  if (s == "client") return Role::kClient;
+  if (s == "worker") return Role::kWorker;
+  if (s == "admin") return Role::kAdmin;
+  return std::nullopt;
+}
+
+std::string base64_decode(std::string_view in) {
+  std::string out;
+  uint32_t buf = 0;
+  int bits = 0;
+  for (char c : in) {
+    int v;
+    if (c >= 'A' && c <= 'Z') v = c - 'A';
+    else if (c >= 'a' && c <= 'z') v = c - 'a' + 26;
+    else if (c >= '0' && c <= '9') v = c - '0' + 52;
+    else if (c == '+') v = 62;
+    else if (c == '/') v = 63;
+    else if (c == '=') break;
+    else return {};
+    buf = (buf << 6) | uint32_t(v);
+    bits += 6;
+    if (bits >= 8) {
+      bits -= 8;
+      out.push_back(char((buf >> bits) & 0xff));
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+const char* role_name(Role role) {
+  switch (role) {
+    case Role::kViewer:
+      return "viewer";
+    case Role::kClient:
+      return "client";
+    case Role::kWorker:
+      return "worker";
+    case Role::kAdmin:
+      return "admin";
+  }
+  return "?";
+}
+
+Authenticator Authenticator::from_file(const std::string& path) {
+  std::string text;
+  try {
+    text = read_file_bytes(path);
+  } catch (const std::runtime_error& e) {
+    throw AuthConfigError(e.what());
+  }
+  return from_text(text, path);
+}
+
+Authenticator Authenticator::from_text(const std::string& text, const std::string& where) {
+  Authenticator a;
+  std::istringstream lines(text);
+  std::string line;
+  for (int n = 1; std::getline(lines, line); ++n) {
+    if (const size_t hash = line.find('#'); hash != std::string::npos) line.resize(hash);
+    std::istringstream words(line);
+    std::string role, name, token, extra;
+    if (!(words >> role)) continue;  // blank or comment
+    const std::string at = where + ":" + std::to_string(n) + ": ";
+    if (!(words >> name >> token) || (words >> extra))
+      throw AuthConfigError(at + "expected ROLE NAME TOKEN");
+    const std::optional<Role> r = parse_role(role);
+    if (!r) throw AuthConfigError(at + "unknown role '" + role + "' (viewer, client, worker or admin)");
+    if (token.size() < kMinTokenLength)
+      throw AuthConfigError(at + "token shorter than " + std::to_string(kMinTokenLength) + " characters");
+    if (!a.tokens_.emplace(sha256(token), Principal{name, *r}).second)
+      throw AuthConfigError(at + "the same token appears twice");
+  }
+  if (a.tokens_.empty()) throw AuthConfigError(where + ": no tokens");
+  return a;
+}
+
+std::optional<Principal> Authenticator::authenticate(std::string_view token) const {
+  if (!enabled()) return Principal{"", Role::kAdmin};
+  if (token.empty()) return std::nullopt;
+  // Looked up by digest: how long a comparison takes says nothing about the token.
+  auto it = tokens_.find(sha256(token));
+  if (it == tokens_.end()) return std::nullopt;
+  return it->second;
+}
+
+std::string Authenticator::token_from_header(std::string_view v) {
+  auto strip = [](std::string_view s) {
+    while (!s.empty() && s.front() == ' ') s.remove_prefix(1);
+    while (!s.empty() && (s.back() == ' ' || s.back() == '\r')) s.remove_suffix(1);
+    return s;
+  };
+  v = strip(v);
+  if (v.substr(0, 7) == "Bearer ") return std::string(strip(v.substr(7)));
+  if (v.substr(0, 6) == "Basic ") {
+    const std::string user_pass = base64_decode(strip(v.substr(6)));
+    const size_t colon = user_pass.find(':');
+    return colon == std::string::npos ? std::string() : user_pass.substr(colon + 1);
+  }
+  return {};
+}
+
+bool Authenticator::allows(Role role, Action action) {
+  switch (role) {
+    case Role::kAdmin:
+      return true;
+    case Role::kClient:
+      return action != Action::kWork;
+    case Role::kViewer:
+      return action == Action::kRead;
+    case Role::kWorker:
+      return action == Action::kWork;
+  }
+  return false;
+}
+
+}  // namespace tessera

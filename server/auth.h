@@ -1,0 +1,58 @@
+// Who may do what. Tokens with roles, read from a file the operator keeps (never from the
+// command line); each gRPC call and HTTP request presents one, and its role decides:
+//
+//   viewer   read: job status, images, the live page, /api/*, /metrics
+//   client   what a viewer may, and submit jobs and cancel its own
+//   worker   register, lease tasks, fetch scenes, return results; nothing else
+//   admin    everything, including cancelling anyone's job
+//
+// Without a token file every caller is an admin: the coordinator then listens on loopback
+// only unless the operator says --insecure (server/main.cc).
+#pragma once
+
+#include <map>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <string_view>
+
+namespace tessera {
+
+enum class Role { kViewer, kClient, kWorker, kAdmin };
+enum class Action { kRead, kSubmit, kCancel, kWork };
+
+struct Principal {
+  std::string name;  // from the token file: whose jobs are whose
+  Role role = Role::kAdmin;
+};
+
+class AuthConfigError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+class Authenticator {
+ public:
+  Authenticator() = default;  // open: no tokens, everyone is an admin
+  // Lines "ROLE NAME TOKEN" (role: viewer, client, worker or admin; '#' starts a comment).
+  // Tokens are kept only as SHA-256 digests. Throws AuthConfigError naming the file and
+  // line; a token shorter than kMinTokenLength is refused (guessable).
+  static Authenticator from_file(const std::string& path);
+  static Authenticator from_text(const std::string& text, const std::string& where);
+  static constexpr size_t kMinTokenLength = 16;
+
+  bool enabled() const { return !tokens_.empty(); }
+  // The principal a token stands for; nothing if it stands for none. Open: the admin.
+  std::optional<Principal> authenticate(std::string_view token) const;
+  // The token in an "authorization" header or metadata value: "Bearer T", or HTTP Basic
+  // with the token as the password (what a browser asks for).
+  static std::string token_from_header(std::string_view value);
+  static bool allows(Role role, Action action);
+
+ private:
+  std::map<std::string, Principal> tokens_;  // SHA-256 of the token -> principal
+};
+
+const char* role_name(Role role);
+
+}  // namespace tessera
