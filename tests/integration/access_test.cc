@@ -1,0 +1,208 @@
+// Access control through the real binaries: tokens with roles on gRPC and HTTP, a client
+// cancelling only its own jobs, loopback-only without tokens unless --insecure, and TLS.
+#include <httplib.h>
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <regex>
+#include <string>
+
+#include "core/io/files.h"
+#include "tests/integration/farm_helpers.h"
+#include "tests/integration/process.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::expect_same_pixels;
+using testing::kBin;
+using testing::kScene;
+using testing::Process;
+using testing::slurp;
+
+constexpr const char* kAlice = "alice-client-token-0123456789";
+constexpr const char* kBob = "bob-client-token-0123456789ab";
+constexpr const char* kWorker = "worker-token-0123456789abcdef";
+constexpr const char* kViewer = "viewer-token-0123456789abcdef";
+constexpr const char* kAdmin = "admin-token-0123456789abcdefg";
+const std::string kFlags = "-r 48 36 -s 8 --pass-spp 4 -m 4 --seed 2 --tile 16";
+
+struct Result {
+  int code = -1;
+  std::string out, err;
+};
+
+class Access : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_access_" + std::to_string(::getpid()) + "_" +
+                                              ::testing::UnitTest::GetInstance()->current_test_info()->name());
+  std::unique_ptr<Process> coordinator;
+  std::vector<std::unique_ptr<Process>> workers;
+  std::string grpc_addr;
+  int http_port = 0;
+
+  void SetUp() override {
+    fs::create_directories(dir);
+    write_file_atomic((dir / "tokens").string(),
+                      std::string("# role name token\n") + "client alice " + kAlice + "\nclient bob " + kBob +
+                          "\nworker farm " + kWorker + "\nviewer ops " + kViewer + "\nadmin root " + kAdmin + "\n");
+  }
+  void TearDown() override {
+    workers.clear();
+    coordinator.reset();
+    fs::remove_all(dir);
+  }
+  std::string token_file(const char* token) {
+    const std::string path = (dir / (std::string(token).substr(0, 5) + ".token")).string();
+    write_file_atomic(path, std::string(token) + "\n");
+    return path;
+  }
+  void start_coordinator(std::vector<std::string> extra = {}) {
+    std::vector<std::string> args{"--listen", "127.0.0.1:0", "--http", "127.0.0.1:0", "--data",
+                                  (dir / "data").string(), "--tokens", (dir / "tokens").string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    coordinator = std::make_unique<Process>(kBin + "/tessera-coordinator", args, (dir / "coordinator.err").string());
+    const std::string g = coordinator->read_line(), h = coordinator->read_line();
+    std::smatch m;
+    ASSERT_TRUE(std::regex_search(g, m, std::regex("grpc listening on (127\\.0\\.0\\.1:\\d+)"))) << g;
+    grpc_addr = m[1];
+    ASSERT_TRUE(std::regex_search(h, m, std::regex("http listening on 127\\.0\\.0\\.1:(\\d+)"))) << h;
+    http_port = std::stoi(m[1]);
+  }
+  Process& start_worker(const char* token, const std::string& extra_flag = "", const std::string& extra_value = "") {
+    std::vector<std::string> args{"--coordinator", grpc_addr, "--threads", "1", "--cache", (dir / "cache").string(),
+                                  "--token-file", token_file(token)};
+    if (!extra_flag.empty()) args.insert(args.end(), {extra_flag, extra_value});
+    const std::string n = std::to_string(workers.size());
+    workers.push_back(
+        std::make_unique<Process>(kBin + "/tessera-worker", args, (dir / ("worker" + n + ".err")).string()));
+    return *workers.back();
+  }
+  // `tessera ARGS --coordinator ADDR`, with the token (if any) from a file.
+  Result tessera(const std::string& args, const char* token, const std::string& extra = "") {
+    const std::string out = (dir / "cmd.out").string(), err = (dir / "cmd.err").string();
+    std::string cmd = kBin + "/tessera " + args + " --coordinator " + grpc_addr + " " + extra;
+    if (token) cmd += " --token-file " + token_file(token);
+    const int status = std::system(("env -u TESSERA_TOKEN -u TESSERA_TOKEN_FILE " + cmd + " >" + out + " 2>" + err).c_str());
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
+  }
+  std::string submit(const char* token) {
+    const Result r = tessera("submit " + kScene + " " + kFlags, token);
+    EXPECT_EQ(r.code, 0) << r.err;
+    std::string id = r.out;
+    id.erase(id.find_last_not_of('\n') + 1);
+    return id;
+  }
+  int http_get(const std::string& path, const std::string& authorization, std::string* www = nullptr) {
+    httplib::Client cli("127.0.0.1", http_port);
+    httplib::Headers h;
+    if (!authorization.empty()) h.emplace("Authorization", authorization);
+    auto res = cli.Get(path.c_str(), h);
+    if (!res) return -1;
+    if (www) *www = res->get_header_value("WWW-Authenticate");
+    return res->status;
+  }
+};
+
+TEST_F(Access, EveryCallNeedsATokenWhoseRoleAllowsIt) {
+  start_coordinator();
+  // No token, or an unknown one: refused, saying what is missing.
+  Result r = tessera("jobs", nullptr);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("needs an access token"), std::string::npos) << r.err;
+  r = tessera("jobs", "an-unknown-token-0123456789");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("not known"), std::string::npos) << r.err;
+  // A viewer reads but may not submit; a worker token may not act as a client.
+  EXPECT_EQ(tessera("jobs", kViewer).code, 0);
+  r = tessera("submit " + kScene + " " + kFlags, kViewer);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("a viewer token may not"), std::string::npos) << r.err;
+  r = tessera("jobs", kWorker);
+  EXPECT_NE(r.err.find("a worker token may not"), std::string::npos) << r.err;
+
+  // A client token cannot register as a worker: the worker says why and exits 1.
+  Process& impostor = start_worker(kAlice);
+  EXPECT_EQ(impostor.wait(20), 1);
+  EXPECT_NE(slurp((dir / "worker0.err").string()).find("a client token may not"), std::string::npos);
+
+  // Alice's job; Bob may read it but not cancel it; the admin may.
+  const std::string a1 = submit(kAlice), a2 = submit(kAlice);
+  EXPECT_EQ(tessera("status " + a1, kBob).code, 0);
+  r = tessera("cancel " + a1, kBob);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("only its own jobs"), std::string::npos) << r.err;
+  EXPECT_EQ(tessera("cancel " + a1, kAlice).code, 0) << "the owner may";
+  EXPECT_EQ(tessera("cancel " + a2, kAdmin).code, 0) << "an admin may";
+  EXPECT_NE(tessera("status " + a1 + " --json", kViewer).out.find("\"owner\":\"alice\""), std::string::npos);
+
+  // A worker with a worker token renders Alice's next job: the local image, bit for bit.
+  start_worker(kWorker);
+  const std::string out = (dir / "farm.exr").string(), local = (dir / "local.exr").string();
+  r = tessera("submit " + kScene + " " + kFlags + " --wait -q -f " + out, kAlice);
+  ASSERT_EQ(r.code, 0) << r.err;
+  ASSERT_EQ(std::system((kBin + "/tessera render " + kScene + " " + kFlags + " -q -f " + local).c_str()), 0);
+  expect_same_pixels(local, out);
+
+  // HTTP: 401 (with a Basic challenge, so a browser asks) without a token, 403 for a
+  // worker's, 200 for a viewer's as a bearer token or as the Basic password.
+  std::string challenge;
+  EXPECT_EQ(http_get("/api/status", "", &challenge), 401);
+  EXPECT_NE(challenge.find("Basic"), std::string::npos);
+  EXPECT_EQ(http_get("/metrics", std::string("Bearer ") + kWorker), 403);
+  EXPECT_EQ(http_get("/api/status", std::string("Bearer ") + kViewer), 200);
+  httplib::Client browser("127.0.0.1", http_port);
+  browser.set_basic_auth("ops", kViewer);
+  auto page = browser.Get("/");
+  ASSERT_TRUE(page);
+  EXPECT_EQ(page->status, 200);
+}
+
+TEST_F(Access, WithoutTokensOnlyLoopbackUnlessInsecure) {
+  auto start = [&](std::vector<std::string> args) {
+    args.insert(args.end(), {"--http", "127.0.0.1:0", "--data", (dir / "data").string()});
+    return std::make_unique<Process>(kBin + "/tessera-coordinator", args, (dir / "c.err").string());
+  };
+  auto refused = start({"--listen", "0.0.0.0:0"});
+  EXPECT_EQ(refused->wait(10), 2);
+  EXPECT_NE(slurp((dir / "c.err").string()).find("refusing to listen beyond loopback"), std::string::npos);
+  auto open = start({"--listen", "0.0.0.0:0", "--insecure"});
+  EXPECT_NE(open->read_line().find("grpc listening on 0.0.0.0:"), std::string::npos);
+  open.reset();
+  auto local = start({"--listen", "127.0.0.1:0"});
+  EXPECT_NE(local->read_line().find("grpc listening on 127.0.0.1:"), std::string::npos);
+  local.reset();
+  EXPECT_NE(slurp((dir / "c.err").string()).find("loopback only"), std::string::npos);
+}
+
+TEST_F(Access, TlsForGrpcAndHttp) {
+  if (std::system("command -v openssl >/dev/null 2>&1") != 0) GTEST_SKIP() << "no openssl command to make a certificate";
+  const std::string cert = (dir / "cert.pem").string(), key = (dir / "key.pem").string();
+  ASSERT_EQ(std::system(("openssl req -x509 -newkey rsa:2048 -nodes -days 1 -subj /CN=localhost -addext "
+                         "subjectAltName=IP:127.0.0.1,DNS:localhost -keyout " +
+                         key + " -out " + cert + " >/dev/null 2>&1")
+                            .c_str()),
+            0);
+  start_coordinator({"--tls-cert", cert, "--tls-key", key});
+  start_worker(kWorker, "--tls-ca", cert);
+  const std::string out = (dir / "tls.exr").string(), local = (dir / "local.exr").string();
+  Result r = tessera("submit " + kScene + " " + kFlags + " --wait -q -f " + out, kAlice, "--tls-ca " + cert);
+  ASSERT_EQ(r.code, 0) << r.err;
+  ASSERT_EQ(std::system((kBin + "/tessera render " + kScene + " " + kFlags + " -q -f " + local).c_str()), 0);
+  expect_same_pixels(local, out);
+  // Plaintext is not spoken.
+  r = tessera("jobs", kAlice);
+  EXPECT_EQ(r.code, 1);
+  // HTTPS, verified against the same certificate.
+  httplib::SSLClient https("127.0.0.1", http_port);
+  https.set_ca_cert_path(cert.c_str());
+  https.enable_server_certificate_verification(true);
+  auto res = https.Get("/api/status", httplib::Headers{{"Authorization", std::string("Bearer ") + kViewer}});
+  ASSERT_TRUE(res) << httplib::to_string(res.error());
+  EXPECT_EQ(res->status, 200);
+}
+
+}  // namespace
+}  // namespace tessera
