@@ -50,6 +50,36 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   std::string hash;
   try {
     settings = from_proto(req.settings());
+  } catch (const WireError& e) {
+    throw refuse(e.what());
+  }
+  // Limits first, before anything large is allocated. (Submits racing each other may pass
+  // together: the limits are for bounding memory and fairness, not exact to the job.)
+  const int64_t pixels = settings.effective_window().area();
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    size_t mine = 0;
+    int64_t live_pixels = 0;
+    for (const auto& [id, j] : jobs_)
+      if (j->live()) {
+        mine += j->owner == owner;
+        live_pixels += j->plan.film().window().area();
+      }
+    if (mine >= options_.max_jobs_per_client) {
+      ++counters_.jobs_refused;
+      throw RequestError(RequestError::Code::kResourceExhausted,
+                         (owner.empty() ? std::string("this coordinator") : "client '" + owner + "'") + " has " +
+                             std::to_string(mine) + " live jobs, the most allowed (--max-jobs-per-client)");
+    }
+    if (live_pixels + pixels > options_.max_live_pixels) {
+      ++counters_.jobs_refused;
+      throw RequestError(RequestError::Code::kResourceExhausted,
+                         "live frames hold " + std::to_string(live_pixels) + " pixels; this job's " +
+                             std::to_string(pixels) + " would pass the limit of " +
+                             std::to_string(options_.max_live_pixels) + " (--max-live-pixels); try again later");
+    }
+  }
+  try {
     hash = scenes_.add(req.main_file(), req.files());  // a bad scene is refused here
   } catch (const WireError& e) {
     throw refuse(e.what());

@@ -37,6 +37,11 @@ struct CoordinatorOptions {
   double worker_timeout_seconds = 60;
   // Registered workers at most: a Register loop cannot grow the coordinator without bound.
   size_t max_workers = 10000;
+  // Live (queued or running) jobs one client (token name) may have at once.
+  size_t max_jobs_per_client = 100;
+  // Pixels of all live frames together: each costs two 40-byte films in memory (the plan's
+  // and the snapshot's), so the default, 2^27, is about 10 GB at most.
+  int64_t max_live_pixels = int64_t(1) << 27;
   // Test seam: runs between an image snapshot leaving the lock and its write.
   std::function<void()> before_image_write;
 };

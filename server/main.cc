@@ -46,6 +46,13 @@ int main(int argc, char** argv) {
   app.add_option("--max-workers", opt.max_workers, "registered workers at most (silent ones are forgotten after 60 s)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
+  app.add_option("--max-jobs-per-client", opt.max_jobs_per_client, "live jobs one client token may have at once")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--max-live-pixels", opt.max_live_pixels,
+                 "pixels of all live frames together (each pixel costs 80 bytes of memory)")
+      ->capture_default_str()
+      ->check(CLI::Range(int64_t(1), int64_t(1) << 40));
   app.add_option("--image-interval", opt.image_interval_seconds, "write progressive images at most this often (s)")
       ->capture_default_str();
   std::string tokens_file, tls_cert, tls_key;

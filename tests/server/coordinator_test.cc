@@ -464,6 +464,36 @@ TEST_F(CoordinatorTest, WorkersGetTheirShareOfTheReadyWorkByThreads) {
   }
 }
 
+// Per-client and memory limits refuse a job before anything large is allocated, with a
+// message that names the limit; ending jobs makes room again.
+TEST_F(CoordinatorTest, LiveJobsPerClientAndLivePixelsAreBounded) {
+  CoordinatorOptions o = options();
+  o.max_jobs_per_client = 2;
+  o.max_live_pixels = 4 * 48 * 36;  // four of job_settings()'s frames
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  const std::string a1 = c->submit(request(job_settings()), "alice");
+  c->submit(request(job_settings()), "alice");
+  try {
+    c->submit(request(job_settings()), "alice");
+    ADD_FAILURE() << "a third live job for alice";
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kResourceExhausted);
+    EXPECT_NE(std::string(e.what()).find("--max-jobs-per-client"), std::string::npos) << e.what();
+  }
+  c->submit(request(job_settings()), "bob");  // others are not held back by alice
+  c->cancel(a1, "alice", false);
+  c->submit(request(job_settings()), "alice");  // a live job ended: room again
+  RenderSettings big = job_settings();
+  big.camera.width = 96;  // two frames' worth: 4 live frames already
+  try {
+    c->submit(request(big), "carol");
+    ADD_FAILURE() << "past the live pixel limit";
+  } catch (const RequestError& e) {
+    EXPECT_NE(std::string(e.what()).find("--max-live-pixels"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(c->list().size(), 4u);  // nothing was kept of the refused ones
+}
+
 // A worker that stops says so: its leases go back at once and it no longer counts.
 TEST_F(CoordinatorTest, UnregisteredWorkersGiveTheirLeasesBackAndLeave) {
   c->submit(request(job_settings()));
