@@ -2,6 +2,9 @@
 
 #include <grpcpp/grpcpp.h>
 
+#include <chrono>
+#include <thread>
+
 #include "client/progress.h"
 #include "core/io/files.h"
 #include "scene_bundle.h"
@@ -41,31 +44,57 @@ void print_status(const v1::JobStatus& s, const FarmContext& c) {
   std::fprintf(c.out, "%s\n", c.json ? proto_json(s).c_str() : describe(s).c_str());
 }
 
-// Streams progress until the job ends; returns its final status.
+// Streams progress until the job ends; returns its final status. A lost connection (the
+// coordinator restarting, a network blip) is retried with back-off for up to
+// c.reconnect_seconds; only then, or when the coordinator no longer knows the job, is it
+// an error.
 v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, const FarmContext& c) {
-  grpc::ClientContext ctx;
-  authorize(ctx, c.access);
-  v1::JobId req;
-  req.set_id(id);
-  auto reader = stub.WatchJob(&ctx, req);
-  v1::JobStatus s, last;
   ProgressBar bar(c.quiet || c.json);
+  v1::JobStatus s, last;
   bool any = false;
-  while (reader->Read(&s)) {
-    any = true;
-    last = s;
-    char what[128];
-    std::snprintf(what, sizeof what, "%s passes %u/%u tiles %u/%u workers %u", state_name(s.state()),
-                  s.frame_passes_done(), s.passes_total(), s.tiles_done(), s.tiles_total(), s.active_workers());
-    const double fraction =
-        ended(s) ? 1.0 : double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total()));
-    bar.update(fraction, what, s.elapsed_seconds());
-    if (ended(s)) break;
+  double backoff = 0.25;
+  auto lost_since = std::chrono::steady_clock::now();
+  while (true) {
+    grpc::ClientContext ctx;
+    authorize(ctx, c.access);
+    v1::JobId req;
+    req.set_id(id);
+    auto reader = stub.WatchJob(&ctx, req);
+    while (reader->Read(&s)) {
+      any = true;
+      last = s;
+      backoff = 0.25;
+      char what[128];
+      std::snprintf(what, sizeof what, "%s passes %u/%u tiles %u/%u workers %u", state_name(s.state()),
+                    s.frame_passes_done(), s.passes_total(), s.tiles_done(), s.tiles_total(), s.active_workers());
+      const double fraction =
+          ended(s) ? 1.0 : double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total()));
+      bar.update(fraction, what, s.elapsed_seconds());
+      if (ended(s)) {
+        ctx.TryCancel();
+        return last;
+      }
+      lost_since = std::chrono::steady_clock::now();
+    }
+    const grpc::Status st = reader->Finish();
+    const bool transient = st.ok() || st.error_code() == grpc::StatusCode::UNAVAILABLE ||
+                           st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED ||
+                           st.error_code() == grpc::StatusCode::CANCELLED;
+    if (st.error_code() == grpc::StatusCode::NOT_FOUND && any)
+      throw FarmError("job " + id + " is no longer known to coordinator " + c.coordinator +
+                      " (it restarted without it?): " + st.error_message());
+    if (!transient) check(st, c);
+    const double lost = std::chrono::duration<double>(std::chrono::steady_clock::now() - lost_since).count();
+    if (lost > c.reconnect_seconds) {
+      check(st, c);  // says why, naming the coordinator
+      throw FarmError("lost coordinator " + c.coordinator + " while watching job " + id);
+    }
+    if (!c.quiet && !c.json)
+      std::fprintf(c.err, "\ntessera: lost coordinator %s (%s); reconnecting in %.1f s\n", c.coordinator.c_str(),
+                   st.error_message().c_str(), backoff);
+    std::this_thread::sleep_for(std::chrono::duration<double>(backoff));
+    backoff = std::min(5.0, backoff * 2);
   }
-  const grpc::Status st = reader->Finish();
-  if (!any) check(st, c);
-  if (!ended(last)) throw FarmError("lost the coordinator while watching job " + id);
-  return last;
 }
 
 }  // namespace

@@ -28,6 +28,9 @@ struct FarmContext {
   std::FILE* out = stdout;
   std::FILE* err = stderr;
   Access access;  // the token sent with every call, and TLS
+  // How long watching a job (watch, submit --wait) keeps reconnecting to a coordinator
+  // that went away before giving up.
+  double reconnect_seconds = 300;
 };
 
 std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::string& address,

@@ -19,6 +19,10 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
     cmd->add_option("--token-file", *token_file,
                     "file holding the access token (else $TESSERA_TOKEN_FILE, or the token in $TESSERA_TOKEN)");
     cmd->add_option("--tls-ca", *tls_ca, "PEM certificate authority: connect over TLS (else $TESSERA_TLS_CA)");
+    cmd->add_option("--reconnect-seconds", c->reconnect_seconds,
+                    "while watching a job, keep reconnecting to a coordinator that went away this long")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 1e6));
     runs.push_back([cmd, c, run, token_file, tls_ca]() -> int {
       if (!cmd->parsed()) return -1;
       try {

@@ -64,12 +64,7 @@ class FarmClient : public ::testing::Test {
     coordinator = std::make_unique<Coordinator>(o);
     client_service = std::make_unique<ClientService>(*coordinator);
     worker_service = std::make_unique<WorkerService>(*coordinator);
-    grpc::ServerBuilder b;
-    int port = 0;
-    b.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
-    b.RegisterService(client_service.get());
-    b.RegisterService(worker_service.get());
-    server = b.BuildAndStart();
+    const int port = serve(0);
     ASSERT_GT(port, 0);
     address = "127.0.0.1:" + std::to_string(port);
     stub = connect_coordinator(address);
@@ -77,6 +72,16 @@ class FarmClient : public ::testing::Test {
     ctx.quiet = true;
     ctx.out = out.file();
     ctx.err = err.file();
+  }
+  // Serves the coordinator on `port` (0: a free one); returns the port.
+  int serve(int port) {
+    grpc::ServerBuilder b;
+    int bound = 0;
+    b.AddListeningPort("127.0.0.1:" + std::to_string(port), grpc::InsecureServerCredentials(), &bound);
+    b.RegisterService(client_service.get());
+    b.RegisterService(worker_service.get());
+    server = b.BuildAndStart();
+    return bound;
   }
   void start_worker() {
     worker = std::thread([this] {
@@ -178,6 +183,29 @@ TEST_F(FarmClient, CancelKeepsTheJobAndSaysCancelled) {
   EXPECT_EQ(cancel_job(*stub, id, ctx), 0);
   EXPECT_NE(c.text().find("CANCELLED"), std::string::npos) << c.text();
   EXPECT_EQ(watch_job(*stub, id, ctx), 1);  // ended, but not DONE
+}
+
+// The coordinator goes away while a client watches (here its server stops and comes back
+// on the same port): the watch reconnects with back-off and sees the job end.
+TEST_F(FarmClient, WatchReconnectsWhenTheCoordinatorComesBack) {
+  SubmitRequest r = request({(dir / "x.exr").string()});
+  ASSERT_EQ(submit_job(*stub, r, ctx), 0) << err.text();
+  std::string id = out.text();
+  id.erase(id.find_last_not_of('\n') + 1);
+  const int port = std::stoi(address.substr(address.rfind(':') + 1));
+  std::atomic<int> code{-1};
+  FarmContext quiet = ctx;
+  Output watched;
+  quiet.out = watched.file();
+  std::thread watcher([&] { code = watch_job(*stub, id, quiet); });
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  server->Shutdown(std::chrono::system_clock::now());  // the watch loses its stream
+  std::this_thread::sleep_for(std::chrono::milliseconds(700));
+  ASSERT_EQ(serve(port), port);
+  start_worker();  // the job can only end after the coordinator is back
+  watcher.join();
+  EXPECT_EQ(code, 0) << err.text();
+  EXPECT_NE(watched.text().find("DONE"), std::string::npos) << watched.text();
 }
 
 }  // namespace
