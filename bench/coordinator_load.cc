@@ -7,6 +7,7 @@
 //                                 [--size W H] [--jobs N] [--json FILE]
 #include <grpcpp/grpcpp.h>
 #include <httplib.h>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <atomic>
@@ -17,7 +18,6 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <thread>
-#include <sys/resource.h>
 
 #include "server/grpc_services.h"
 #include "server/status_http.h"
@@ -92,7 +92,8 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
-  if (scene.empty() || workers < 1 || threads < 1 || batch < 1 || jobs < 1 || !(seconds > 0) || width < 1 || height < 1) {
+  if (scene.empty() || workers < 1 || threads < 1 || batch < 1 || jobs < 1 || !(seconds > 0) || width < 1 ||
+      height < 1) {
     std::fprintf(stderr, "%s", kUsage);
     return 2;
   }
@@ -145,7 +146,7 @@ int main(int argc, char** argv) {
   for (int t = 0; t < threads; ++t) {
     pool.emplace_back([&, t] {
       auto stub = v1::TesseraWorker::NewStub(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()));
-      std::vector<uint64_t> ids;  // this thread's share of the simulated workers
+      std::vector<uint64_t> ids;               // this thread's share of the simulated workers
       std::map<size_t, std::string> payloads;  // by tile area
       for (int w = t; w < workers; w += threads) {
         grpc::ClientContext ctx;
@@ -228,13 +229,13 @@ int main(int argc, char** argv) {
     return 1;
   }
   const double tiles_per_s = double(m1 - m0) / elapsed;
-  std::printf("%d frames %dx%d, simulated workers %d (client threads %d, batches of %d), %.1f s\n", jobs, width,
-              height, workers, threads, batch, elapsed);
+  std::printf("%d frames %dx%d, simulated workers %d (client threads %d, batches of %d), %.1f s\n", jobs, width, height,
+              workers, threads, batch, elapsed);
   std::printf("merged tiles/s %.0f  (32x32 tiles: %.1f M pixel-samples/s merged), worker RPCs/s %.0f\n", tiles_per_s,
               tiles_per_s * 1024 / 1e6, double(r1 - r0) / elapsed);
   const double per_cpu_second = server_cpu > 0 ? double(m1 - m0) / server_cpu : 0;
-  std::printf("coordinator: %.2f CPU-s, %.1f us a merged result: %.0f merged results per CPU-second\n",
-              server_cpu, 1e6 / std::max(1.0, per_cpu_second), per_cpu_second);
+  std::printf("coordinator: %.2f CPU-s, %.1f us a merged result: %.0f merged results per CPU-second\n", server_cpu,
+              1e6 / std::max(1.0, per_cpu_second), per_cpu_second);
   std::printf("status /api/status latency ms: p50 %.2f p99 %.2f max %.2f (%zu requests)\n", percentile(st, 0.5),
               percentile(st, 0.99), percentile(st, 1.0), st.size());
   std::printf("status /metrics    latency ms: p50 %.2f p99 %.2f max %.2f\n", percentile(mt, 0.5), percentile(mt, 0.99),

@@ -24,26 +24,16 @@ std::optional<Role> parse_role(const std::string& s) {
   return std::nullopt;
 }
 
+// Standard padded base64 (what HTTP Basic authentication sends); empty if malformed.
 std::string base64_decode(std::string_view in) {
-  std::string out;
-  uint32_t buf = 0;
-  int bits = 0;
-  for (char c : in) {
-    int v;
-    if (c >= 'A' && c <= 'Z') v = c - 'A';
-    else if (c >= 'a' && c <= 'z') v = c - 'a' + 26;
-    else if (c >= '0' && c <= '9') v = c - '0' + 52;
-    else if (c == '+') v = 62;
-    else if (c == '/') v = 63;
-    else if (c == '=') break;
-    else return {};
-    buf = (buf << 6) | uint32_t(v);
-    bits += 6;
-    if (bits >= 8) {
-      bits -= 8;
-      out.push_back(char((buf >> bits) & 0xff));
-    }
-  }
+  if (in.empty() || in.size() % 4 != 0 || in.size() > 4096) return {};
+  std::string out(in.size() / 4 * 3, '\0');
+  const int n = EVP_DecodeBlock(reinterpret_cast<unsigned char*>(out.data()),
+                                reinterpret_cast<const unsigned char*>(in.data()), int(in.size()));
+  if (n < 0) return {};
+  size_t padding = 0;  // EVP_DecodeBlock counts the bytes '=' stands for
+  while (padding < 2 && in[in.size() - 1 - padding] == '=') ++padding;
+  out.resize(size_t(n) - padding);
   return out;
 }
 
@@ -83,8 +73,7 @@ Authenticator Authenticator::from_text(const std::string& text, const std::strin
     std::string role, name, token, extra;
     if (!(words >> role)) continue;  // blank or comment
     const std::string at = where + ":" + std::to_string(n) + ": ";
-    if (!(words >> name >> token) || (words >> extra))
-      throw AuthConfigError(at + "expected ROLE NAME TOKEN");
+    if (!(words >> name >> token) || (words >> extra)) throw AuthConfigError(at + "expected ROLE NAME TOKEN");
     const std::optional<Role> r = parse_role(role);
     if (!r) throw AuthConfigError(at + "unknown role '" + role + "' (viewer, client, worker or admin)");
     if (token.size() < kMinTokenLength)
@@ -119,6 +108,19 @@ std::string Authenticator::token_from_header(std::string_view v) {
     return colon == std::string::npos ? std::string() : user_pass.substr(colon + 1);
   }
   return {};
+}
+
+Authenticator::Check Authenticator::check(std::string_view authorization, Action action) const {
+  const std::string token = token_from_header(authorization);
+  const std::optional<Principal> p = authenticate(token);
+  if (!p)
+    return {
+        Check::kUnauthenticated,
+        {},
+        token.empty() ? "this coordinator needs an access token" : "the access token is not known to this coordinator"};
+  if (!allows(p->role, action))
+    return {Check::kDenied, {}, std::string("a ") + role_name(p->role) + " token may not do this"};
+  return {Check::kAllowed, *p, ""};
 }
 
 bool Authenticator::allows(Role role, Action action) {

@@ -49,6 +49,15 @@ class Authenticator {
   static std::string token_from_header(std::string_view value);
   static bool allows(Role role, Action action);
 
+  // Who presents `authorization` (a header or metadata value, possibly empty) and whether
+  // its role may do `action`: the one check behind every gRPC call and HTTP request.
+  struct Check {
+    enum Outcome { kAllowed, kUnauthenticated, kDenied } outcome = kUnauthenticated;
+    Principal who;    // when allowed
+    std::string why;  // when not: for the caller, naming what is missing
+  };
+  Check check(std::string_view authorization, Action action) const;
+
  private:
   std::map<std::string, Principal> tokens_;  // SHA-256 of the token -> principal
 };

@@ -38,10 +38,10 @@ std::string Coordinator::new_job_id_locked() {
 }
 
 std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::string& owner) {
-  auto refuse = [&](const std::string& why) {
+  auto refuse = [&](const std::string& why, RequestError::Code code = RequestError::Code::kInvalidArgument) {
     std::lock_guard<std::mutex> lock(mu_);
     ++counters_.jobs_refused;
-    return RequestError(RequestError::Code::kInvalidArgument, why);
+    return RequestError(code, why);
   };
   if (req.version() != kProtocolVersion)
     throw refuse("protocol version " + std::to_string(req.version()) + " not supported (this coordinator speaks " +
@@ -56,6 +56,7 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   // Limits first, before anything large is allocated. (Submits racing each other may pass
   // together: the limits are for bounding memory and fairness, not exact to the job.)
   const int64_t pixels = settings.effective_window().area();
+  std::string over;  // the limit this job would pass
   {
     std::lock_guard<std::mutex> lock(mu_);
     size_t mine = 0;
@@ -65,20 +66,15 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
         mine += j->owner == owner;
         live_pixels += j->plan.film().window().area();
       }
-    if (mine >= options_.max_jobs_per_client) {
-      ++counters_.jobs_refused;
-      throw RequestError(RequestError::Code::kResourceExhausted,
-                         (owner.empty() ? std::string("this coordinator") : "client '" + owner + "'") + " has " +
-                             std::to_string(mine) + " live jobs, the most allowed (--max-jobs-per-client)");
-    }
-    if (live_pixels + pixels > options_.max_live_pixels) {
-      ++counters_.jobs_refused;
-      throw RequestError(RequestError::Code::kResourceExhausted,
-                         "live frames hold " + std::to_string(live_pixels) + " pixels; this job's " +
-                             std::to_string(pixels) + " would pass the limit of " +
-                             std::to_string(options_.max_live_pixels) + " (--max-live-pixels); try again later");
-    }
+    if (mine >= options_.max_jobs_per_client)
+      over = (owner.empty() ? std::string("this coordinator") : "client '" + owner + "'") + " has " +
+             std::to_string(mine) + " live jobs, the most allowed (--max-jobs-per-client)";
+    else if (live_pixels + pixels > options_.max_live_pixels)
+      over = "live frames hold " + std::to_string(live_pixels) + " pixels; this job's " + std::to_string(pixels) +
+             " would pass the limit of " + std::to_string(options_.max_live_pixels) +
+             " (--max-live-pixels); try again later";
   }
+  if (!over.empty()) throw refuse(over, RequestError::Code::kResourceExhausted);
   try {
     hash = scenes_.add(req.main_file(), req.files());  // a bad scene is refused here
   } catch (const WireError& e) {
@@ -193,7 +189,8 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
   // No more than the worker's share (by threads) of the work there is, less what it holds:
   // when a small frame has fewer tasks than the workers would queue, the first to ask must
   // not take them all while the others idle.
-  const uint64_t share = (outstanding * w->threads + workers_.threads() - 1) / std::max<uint64_t>(1, workers_.threads());
+  const uint64_t share =
+      (outstanding * w->threads + workers_.threads() - 1) / std::max<uint64_t>(1, workers_.threads());
   const uint64_t room = share > w->leases ? share - w->leases : 0;
   max_tasks = uint32_t(std::min<uint64_t>(std::clamp<uint32_t>(max_tasks, 1, kMaxTasksPerRequest), room));
   uint64_t samples = 0;

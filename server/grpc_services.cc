@@ -38,24 +38,24 @@ grpc::Status guarded(F&& f) {
 
 // The caller, if its token allows `action`; otherwise the status to answer with.
 grpc::Status caller(const Authenticator* auth, grpc::ServerContext* ctx, Action action, Principal* who) {
-  if (!auth || !auth->enabled()) {
+  if (!auth) {
     *who = Principal{"", Role::kAdmin};
     return grpc::Status::OK;
   }
-  std::string token;
   const auto& metadata = ctx->client_metadata();
-  if (auto it = metadata.find("authorization"); it != metadata.end())
-    token = Authenticator::token_from_header(std::string_view(it->second.data(), it->second.size()));
-  const std::optional<Principal> p = auth->authenticate(token);
-  if (!p)
-    return grpc::Status(grpc::StatusCode::UNAUTHENTICATED,
-                        token.empty() ? "this coordinator needs an access token (--token-file FILE or TESSERA_TOKEN)"
-                                      : "the access token is not known to this coordinator");
-  if (!Authenticator::allows(p->role, action))
-    return grpc::Status(grpc::StatusCode::PERMISSION_DENIED,
-                        std::string("a ") + role_name(p->role) + " token may not do this");
-  *who = *p;
-  return grpc::Status::OK;
+  const auto it = metadata.find("authorization");
+  const Authenticator::Check c = auth->check(
+      it == metadata.end() ? std::string_view() : std::string_view(it->second.data(), it->second.size()), action);
+  switch (c.outcome) {
+    case Authenticator::Check::kAllowed:
+      *who = c.who;
+      return grpc::Status::OK;
+    case Authenticator::Check::kUnauthenticated:
+      return grpc::Status(grpc::StatusCode::UNAUTHENTICATED, c.why + " (--token-file FILE or TESSERA_TOKEN)");
+    case Authenticator::Check::kDenied:
+      break;
+  }
+  return grpc::Status(grpc::StatusCode::PERMISSION_DENIED, c.why);
 }
 
 // Checks the caller, then runs f(principal) under guarded().
@@ -102,9 +102,8 @@ grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* 
   });
 }
 grpc::Status ClientService::CancelJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::JobStatus* out) {
-  return as(auth_, ctx, Action::kCancel, [&](const Principal& who) {
-    *out = c_.cancel(req->id(), who.name, who.role == Role::kAdmin);
-  });
+  return as(auth_, ctx, Action::kCancel,
+            [&](const Principal& who) { *out = c_.cancel(req->id(), who.name, who.role == Role::kAdmin); });
 }
 grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::FetchImageRequest* req, v1::Image* out) {
   return as(auth_, ctx, Action::kRead, [&](const Principal&) {
@@ -140,15 +139,14 @@ grpc::Status WorkerService::Heartbeat(grpc::ServerContext* ctx, const v1::Heartb
       out->add_refused(id);
   });
 }
-grpc::Status WorkerService::SubmitResults(grpc::ServerContext* ctx, const v1::ResultBatch* req,
-                                          v1::ResultAcks* out) {
+grpc::Status WorkerService::SubmitResults(grpc::ServerContext* ctx, const v1::ResultBatch* req, v1::ResultAcks* out) {
   return as(auth_, ctx, Action::kWork, [&](const Principal&) {
     for (const v1::TaskResult& r : req->results()) *out->add_acks() = c_.submit_result(r);
   });
 }
-grpc::Status WorkerService::ReleaseTask(grpc::ServerContext* ctx, const v1::ReleaseRequest* req,
-                                        v1::ReleaseResponse*) {
-  return as(auth_, ctx, Action::kWork, [&](const Principal&) { c_.release(req->worker_id(), req->task_id(), req->error()); });
+grpc::Status WorkerService::ReleaseTask(grpc::ServerContext* ctx, const v1::ReleaseRequest* req, v1::ReleaseResponse*) {
+  return as(auth_, ctx, Action::kWork,
+            [&](const Principal&) { c_.release(req->worker_id(), req->task_id(), req->error()); });
 }
 
 grpc::Status WorkerService::Unregister(grpc::ServerContext* ctx, const v1::UnregisterRequest* req,

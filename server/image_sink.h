@@ -39,7 +39,7 @@ class DiskImageSink : public ImageSink {
   static constexpr size_t kPreviewsKept = 8;
   std::string dir_;
   mutable std::mutex mu_;  // guards previews_
-  // job -> its preview PNG (empty: made at the next request); most recent last.
+  // (job, its preview PNG) for the last jobs asked; most recent last. A write drops the job's.
   mutable std::list<std::pair<std::string, std::string>> previews_;
 };
 

@@ -61,7 +61,8 @@ int main(int argc, char** argv) {
                  "access tokens, one 'ROLE NAME TOKEN' a line (roles: viewer, client, worker, admin); "
                  "also $TESSERA_TOKENS_FILE")
       ->check(CLI::ExistingFile);
-  app.add_option("--tls-cert", tls_cert, "PEM certificate chain: serve gRPC and HTTP over TLS")->check(CLI::ExistingFile);
+  app.add_option("--tls-cert", tls_cert, "PEM certificate chain: serve gRPC and HTTP over TLS")
+      ->check(CLI::ExistingFile);
   app.add_option("--tls-key", tls_key, "PEM private key of --tls-cert")->check(CLI::ExistingFile);
   app.add_flag("--insecure", insecure,
                "allow listening beyond loopback without access tokens (anyone who can connect may do anything)");

@@ -80,14 +80,12 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
     : c_(c), server_(make_server(tls_cert, tls_key)) {
   if (auth && auth->enabled())
     server_->set_pre_routing_handler([auth](const httplib::Request& req, httplib::Response& res) {
-      const std::optional<Principal> who =
-          auth->authenticate(Authenticator::token_from_header(req.get_header_value("Authorization")));
-      if (who && Authenticator::allows(who->role, Action::kRead)) return httplib::Server::HandlerResponse::Unhandled;
-      res.status = who ? 403 : 401;
-      if (!who) res.set_header("WWW-Authenticate", "Basic realm=\"tessera\", charset=\"UTF-8\"");
-      res.set_content(who ? std::string("a ") + role_name(who->role) + " token may not read the status\n"
-                          : "this coordinator needs an access token (Authorization: Bearer TOKEN)\n",
-                      "text/plain");
+      const Authenticator::Check c = auth->check(req.get_header_value("Authorization"), Action::kRead);
+      if (c.outcome == Authenticator::Check::kAllowed) return httplib::Server::HandlerResponse::Unhandled;
+      const bool unauthenticated = c.outcome == Authenticator::Check::kUnauthenticated;
+      res.status = unauthenticated ? 401 : 403;
+      if (unauthenticated) res.set_header("WWW-Authenticate", "Basic realm=\"tessera\", charset=\"UTF-8\"");
+      res.set_content(c.why + (unauthenticated ? " (Authorization: Bearer TOKEN)\n" : "\n"), "text/plain");
       return httplib::Server::HandlerResponse::Handled;
     });
   server_->Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {

@@ -103,7 +103,8 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
         std::fprintf(stderr, "tessera-worker: registered as %llu\n", (unsigned long long)worker_id_.load());
       return true;
     }
-    if (st.error_code() == grpc::StatusCode::UNAUTHENTICATED || st.error_code() == grpc::StatusCode::PERMISSION_DENIED ||
+    if (st.error_code() == grpc::StatusCode::UNAUTHENTICATED ||
+        st.error_code() == grpc::StatusCode::PERMISSION_DENIED ||
         st.error_code() == grpc::StatusCode::INVALID_ARGUMENT) {  // retrying cannot help
       std::fprintf(stderr, "tessera-worker: error: coordinator %s refused to register this worker: %s\n",
                    options_.coordinator.c_str(), st.error_message().c_str());
@@ -304,8 +305,8 @@ void Worker::keep_leases(const std::atomic<bool>& stop) {
       due = now_seconds() + heartbeat_ms_ / 1000.0;
     }
     // Until the next heartbeat, looking at `stop` (set by a signal) now and then.
-    stopped_cv_.wait_for(lock, std::chrono::milliseconds(
-                                   std::clamp(int64_t((due - now_seconds()) * 1000) + 1, int64_t(1), int64_t(kStopPollMs))));
+    stopped_cv_.wait_for(lock, std::chrono::milliseconds(std::clamp(int64_t((due - now_seconds()) * 1000) + 1,
+                                                                    int64_t(1), int64_t(kStopPollMs))));
   }
 }
 
@@ -373,7 +374,8 @@ bool Worker::run(const std::atomic<bool>& stop) {
         if (rate > 0) req.set_max_samples(uint64_t(std::max(1.0, rate * options_.lookahead_seconds - queued_samples_)));
       }
       v1::GetTaskResponse resp;
-      const grpc::Status st = stub_->GetTask(context(options_.access, 10).get(), req, &resp);  // long-polls when there is no work
+      const grpc::Status st =
+          stub_->GetTask(context(options_.access, 10).get(), req, &resp);  // long-polls when there is no work
       if (!st.ok()) {
         if (options_.verbose) std::fprintf(stderr, "tessera-worker: get task: %s\n", st.error_message().c_str());
         // Unknown worker (the coordinator restarted) or unreachable: its leases are gone.

@@ -8,12 +8,12 @@
 #include <OpenEXR/ImfStringAttribute.h>
 #include <stb/stb_image_write.h>
 
-#include "core/io/files.h"
-
 #include <cmath>
 #include <cstdio>
 #include <mutex>
 #include <stdexcept>
+
+#include "core/io/files.h"
 
 namespace tessera {
 namespace {

@@ -83,8 +83,8 @@ class FramePlan {
   std::vector<TileProgress> progress_;
   std::vector<uint8_t> active_;                    // per film pixel (adaptive sampling)
   std::set<std::pair<uint32_t, uint32_t>> ready_;  // (passes merged, tile): O(log tiles)
-  std::vector<uint32_t> unfinished_at_;  // [p]: unfinished tiles with p passes merged
-  uint32_t frame_passes_ = 0;            // the lowest p with any (passes_.size() if none)
+  std::vector<uint32_t> unfinished_at_;            // [p]: unfinished tiles with p passes merged
+  uint32_t frame_passes_ = 0;                      // the lowest p with any (passes_.size() if none)
   uint32_t tiles_done_ = 0;
   uint64_t samples_merged_ = 0, samples_total_ = 0, merges_ = 0;
   double work_done_ = 0, work_total_ = 0;  // pixel-samples scheduled

@@ -7,9 +7,7 @@
 
 namespace tessera {
 
-void set_thread_name(const char* name) {
-  pthread_setname_np(pthread_self(), std::string(name).substr(0, 15).c_str());
-}
+void set_thread_name(const char* name) { pthread_setname_np(pthread_self(), std::string(name).substr(0, 15).c_str()); }
 
 ThreadPool::ThreadPool(int threads, const char* name) {
   if (threads <= 0) threads = int(std::max(1u, std::thread::hardware_concurrency()));

@@ -1,7 +1,7 @@
 // Access control through the real binaries: tokens with roles on gRPC and HTTP, a client
 // cancelling only its own jobs, loopback-only without tokens unless --insecure, and TLS.
-#include <httplib.h>
 #include <gtest/gtest.h>
+#include <httplib.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -16,6 +16,7 @@ namespace tessera {
 namespace {
 
 namespace fs = std::filesystem;
+using testing::CommandResult;
 using testing::expect_same_pixels;
 using testing::kBin;
 using testing::kScene;
@@ -29,11 +30,6 @@ constexpr const char* kViewer = "viewer-token-0123456789abcdef";
 constexpr const char* kAdmin = "admin-token-0123456789abcdefg";
 const std::string kFlags = "-r 48 36 -s 8 --pass-spp 4 -m 4 --seed 2 --tile 16";
 
-struct Result {
-  int code = -1;
-  std::string out, err;
-};
-
 class Access : public ::testing::Test {
  protected:
   fs::path dir = fs::temp_directory_path() / ("tessera_access_" + std::to_string(::getpid()) + "_" +
@@ -45,9 +41,9 @@ class Access : public ::testing::Test {
 
   void SetUp() override {
     fs::create_directories(dir);
-    write_file_atomic((dir / "tokens").string(),
-                      std::string("# role name token\n") + "client alice " + kAlice + "\nclient bob " + kBob +
-                          "\nworker farm " + kWorker + "\nviewer ops " + kViewer + "\nadmin root " + kAdmin + "\n");
+    write_file_atomic((dir / "tokens").string(), std::string("# role name token\n") + "client alice " + kAlice +
+                                                     "\nclient bob " + kBob + "\nworker farm " + kWorker +
+                                                     "\nviewer ops " + kViewer + "\nadmin root " + kAdmin + "\n");
   }
   void TearDown() override {
     workers.clear();
@@ -60,8 +56,8 @@ class Access : public ::testing::Test {
     return path;
   }
   void start_coordinator(std::vector<std::string> extra = {}) {
-    std::vector<std::string> args{"--listen", "127.0.0.1:0", "--http", "127.0.0.1:0", "--data",
-                                  (dir / "data").string(), "--tokens", (dir / "tokens").string()};
+    std::vector<std::string> args{"--listen", "127.0.0.1:0",           "--http",   "127.0.0.1:0",
+                                  "--data",   (dir / "data").string(), "--tokens", (dir / "tokens").string()};
     args.insert(args.end(), extra.begin(), extra.end());
     coordinator = std::make_unique<Process>(kBin + "/tessera-coordinator", args, (dir / "coordinator.err").string());
     const std::string g = coordinator->read_line(), h = coordinator->read_line();
@@ -72,8 +68,8 @@ class Access : public ::testing::Test {
     http_port = std::stoi(m[1]);
   }
   Process& start_worker(const char* token, const std::string& extra_flag = "", const std::string& extra_value = "") {
-    std::vector<std::string> args{"--coordinator", grpc_addr, "--threads", "1", "--cache", (dir / "cache").string(),
-                                  "--token-file", token_file(token)};
+    std::vector<std::string> args{"--coordinator",          grpc_addr,      "--threads",      "1", "--cache",
+                                  (dir / "cache").string(), "--token-file", token_file(token)};
     if (!extra_flag.empty()) args.insert(args.end(), {extra_flag, extra_value});
     const std::string n = std::to_string(workers.size());
     workers.push_back(
@@ -81,15 +77,16 @@ class Access : public ::testing::Test {
     return *workers.back();
   }
   // `tessera ARGS --coordinator ADDR`, with the token (if any) from a file.
-  Result tessera(const std::string& args, const char* token, const std::string& extra = "") {
+  CommandResult tessera(const std::string& args, const char* token, const std::string& extra = "") {
     const std::string out = (dir / "cmd.out").string(), err = (dir / "cmd.err").string();
     std::string cmd = kBin + "/tessera " + args + " --coordinator " + grpc_addr + " " + extra;
     if (token) cmd += " --token-file " + token_file(token);
-    const int status = std::system(("env -u TESSERA_TOKEN -u TESSERA_TOKEN_FILE " + cmd + " >" + out + " 2>" + err).c_str());
+    const int status =
+        std::system(("env -u TESSERA_TOKEN -u TESSERA_TOKEN_FILE " + cmd + " >" + out + " 2>" + err).c_str());
     return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(out), slurp(err)};
   }
   std::string submit(const char* token) {
-    const Result r = tessera("submit " + kScene + " " + kFlags, token);
+    const CommandResult r = tessera("submit " + kScene + " " + kFlags, token);
     EXPECT_EQ(r.code, 0) << r.err;
     std::string id = r.out;
     id.erase(id.find_last_not_of('\n') + 1);
@@ -109,7 +106,7 @@ class Access : public ::testing::Test {
 TEST_F(Access, EveryCallNeedsATokenWhoseRoleAllowsIt) {
   start_coordinator();
   // No token, or an unknown one: refused, saying what is missing.
-  Result r = tessera("jobs", nullptr);
+  CommandResult r = tessera("jobs", nullptr);
   EXPECT_EQ(r.code, 1);
   EXPECT_NE(r.err.find("needs an access token"), std::string::npos) << r.err;
   r = tessera("jobs", "an-unknown-token-0123456789");
@@ -178,7 +175,8 @@ TEST_F(Access, WithoutTokensOnlyLoopbackUnlessInsecure) {
 }
 
 TEST_F(Access, TlsForGrpcAndHttp) {
-  if (std::system("command -v openssl >/dev/null 2>&1") != 0) GTEST_SKIP() << "no openssl command to make a certificate";
+  if (std::system("command -v openssl >/dev/null 2>&1") != 0)
+    GTEST_SKIP() << "no openssl command to make a certificate";
   const std::string cert = (dir / "cert.pem").string(), key = (dir / "key.pem").string();
   ASSERT_EQ(std::system(("openssl req -x509 -newkey rsa:2048 -nodes -days 1 -subj /CN=localhost -addext "
                          "subjectAltName=IP:127.0.0.1,DNS:localhost -keyout " +
@@ -188,7 +186,7 @@ TEST_F(Access, TlsForGrpcAndHttp) {
   start_coordinator({"--tls-cert", cert, "--tls-key", key});
   start_worker(kWorker, "--tls-ca", cert);
   const std::string out = (dir / "tls.exr").string(), local = (dir / "local.exr").string();
-  Result r = tessera("submit " + kScene + " " + kFlags + " --wait -q -f " + out, kAlice, "--tls-ca " + cert);
+  CommandResult r = tessera("submit " + kScene + " " + kFlags + " --wait -q -f " + out, kAlice, "--tls-ca " + cert);
   ASSERT_EQ(r.code, 0) << r.err;
   ASSERT_EQ(std::system((kBin + "/tessera render " + kScene + " " + kFlags + " -q -f " + local).c_str()), 0);
   expect_same_pixels(local, out);

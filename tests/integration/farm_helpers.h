@@ -16,6 +16,12 @@ namespace tessera::testing {
 inline const std::string kBin = TESSERA_BIN_DIR;
 inline const std::string kScene = std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-spheres.dae";
 
+// A command's exit code and what it printed.
+struct CommandResult {
+  int code = -1;
+  std::string out, err;
+};
+
 inline std::string slurp(const std::string& path) {
   std::ifstream f(path);
   std::stringstream ss;

@@ -21,15 +21,11 @@ namespace {
 namespace fs = std::filesystem;
 using testing::Process;
 
+using testing::CommandResult;
 using testing::expect_same_pixels;
 using testing::kBin;
 using testing::kScene;
 using testing::slurp;
-
-struct CommandResult {
-  int code = -1;
-  std::string out, err;
-};
 
 CommandResult run(const std::string& args, const fs::path& dir) {
   const std::string out = (dir / "cmd.out").string(), err = (dir / "cmd.err").string();
