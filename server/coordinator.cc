@@ -15,8 +15,100 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
     : options_(std::move(options)),
       clock_(std::move(clock)),
       sink_(sink ? std::move(sink) : std::make_unique<DiskImageSink>((fs::path(options_.data_dir) / "jobs").string())),
-      scenes_((fs::path(options_.data_dir) / "scenes").string()) {
+      scenes_((fs::path(options_.data_dir) / "scenes").string()),
+      store_(std::make_unique<JobStore>(options_.data_dir)) {
   started_ = clock_->now();
+  store_->before_checkpoint_rename = options_.before_checkpoint_rename;
+  // 2^40 tasks a run: ids of different runs never meet.
+  leases_ = LeaseTable(store_->next_generation() << 40);
+  restore_jobs();
+}
+
+void Coordinator::restore_jobs() {
+  const double now = clock_->now();
+  std::vector<Job*> ended_on_restore;  // live in the database, but done or lost
+  for (StoredJob& sj : store_->jobs()) {
+    RenderSettings settings;
+    try {
+      settings = from_proto(sj.settings);
+    } catch (const WireError& e) {  // checked at submit: only a damaged database gets here
+      std::fprintf(stderr, "tessera-coordinator: job %s: stored settings: %s; skipped\n", sj.id.c_str(), e.what());
+      continue;
+    }
+    auto job = std::make_unique<Job>(sj.id, settings);
+    job->settings_proto = sj.settings;
+    job->name = sj.name;
+    job->owner = sj.owner;
+    job->priority = sj.priority;
+    job->seq = sj.seq;
+    job->scene_hash = sj.scene_hash;
+    job->state = sj.state;
+    job->error = sj.error;
+    job->submitted = now;
+    next_job_ = std::max(next_job_, sj.seq + 1);
+    double elapsed = sj.elapsed;
+    std::string lost;  // why a live job cannot go on
+    try {
+      if (std::optional<Checkpoint> cp = store_->read_checkpoint(sj.id)) {
+        job->plan.restore(cp->state, std::move(cp->film));
+        if (job->live()) elapsed = cp->elapsed;
+      }
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "tessera-coordinator: job %s: %s; its samples are rendered again\n", sj.id.c_str(),
+                   e.what());
+    }
+    for (const char* tmp : {"checkpoint.tmp", "image.exr.tmp"}) {  // a write the crash cut short
+      std::error_code ec;
+      fs::remove(fs::path(options_.data_dir) / "jobs" / sj.id / tmp, ec);
+    }
+    Job& j = *job;
+    jobs_[sj.id] = std::move(job);
+    ++counters_.jobs_restored;
+    if (j.live()) {
+      try {
+        scenes_.restore(j.scene_hash);
+      } catch (const std::exception& e) {
+        lost = e.what();
+      }
+      j.tile_lease.assign(j.plan.tiles().size(), 0);
+      if (j.plan.merges() > 0 || elapsed > 0) {
+        j.state = v1::JobStatus::RUNNING;
+        j.started = now - elapsed;
+      } else {
+        j.state = v1::JobStatus::QUEUED;
+      }
+      j.last_checkpoint = now;
+      j.checkpoint_merges = j.plan.merges();
+      if (!lost.empty()) {
+        j.error = "cannot go on after the coordinator restarted: " + lost;
+        end_job_locked(j, v1::JobStatus::FAILED, now);
+        ended_on_restore.push_back(&j);
+      } else if (j.plan.done()) {  // the crash came between its last checkpoint and recording its end
+        end_job_locked(j, v1::JobStatus::DONE, now);
+        ended_on_restore.push_back(&j);
+      } else {
+        j.spare_film = std::make_unique<Film>(j.plan.film());
+      }
+    } else {
+      // Ended: its image is on disk and its film is not needed; status comes from the plan.
+      j.started = now - elapsed;
+      j.finished_at = now;
+      j.image_frame_passes = j.plan.frame_passes_done();
+      j.plan.release_film();
+      j.written_seq = j.checkpoint_seq = j.image_seq = 1;
+      j.written_merges = j.checkpoint_written_merges = j.plan.merges();
+      j.end_recorded = true;
+    }
+  }
+  scenes_.remove_unused();  // scenes of jobs that ended, or whose submit the crash cut short
+  for (Job* j : ended_on_restore) write_image(*j);  // writes the image and records the end
+}
+
+std::string Coordinator::without_data_dir(std::string why) const {
+  // Clients see this: the data folder is named, not its path on this machine.
+  for (size_t at; !options_.data_dir.empty() && (at = why.find(options_.data_dir)) != std::string::npos;)
+    why.replace(at, options_.data_dir.size(), "<data>");
+  return why;
 }
 
 Coordinator::~Coordinator() = default;
@@ -92,10 +184,32 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   job->owner = owner;
   job->tile_lease.assign(job->plan.tiles().size(), 0);
   job->spare_film = std::make_unique<Film>(job->plan.film());
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    job->id = new_job_id_locked();  // 64 random bits: no other submit picks it meanwhile
+    job->seq = next_job_++;
+  }
+  // Durable before it is acknowledged (and outside the lock: it waits for the disk).
+  try {
+    StoredJob row;
+    row.id = job->id;
+    row.name = job->name;
+    row.owner = owner;
+    row.scene_hash = hash;
+    row.main_file = req.main_file();
+    row.priority = job->priority;
+    row.seq = job->seq;
+    row.settings = job->settings_proto;
+    store_->add(row);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tessera-coordinator: submit: %s\n", e.what());
+    scenes_.release(hash);
+    throw refuse("the coordinator cannot record the job: " + without_data_dir(e.what()),
+                 RequestError::Code::kResourceExhausted);
+  }
   std::lock_guard<std::mutex> lock(mu_);
-  job->id = new_job_id_locked();
-  job->seq = next_job_++;
   job->submitted = clock_->now();
+  job->last_checkpoint = job->submitted;
   const std::string id = job->id;
   Job& added = *(jobs_[id] = std::move(job));
   if (added.plan.done()) end_job_locked(added, v1::JobStatus::DONE, added.submitted);  // releases the scene too
@@ -360,65 +474,122 @@ std::optional<Coordinator::ImageSnapshot> Coordinator::after_merge_locked(Job& j
   const bool done = job.plan.done();
   if (done) end_job_locked(job, v1::JobStatus::DONE, now);
   const uint32_t frame = job.plan.frame_passes_done();
-  // Progressive images take at most 1/kImageWriteShare of the time: a large frame's image
-  // takes long enough to write that the interval alone would let writing crowd out merging.
-  constexpr double kImageWriteShare = 20;
-  const double interval = std::max(options_.image_interval_seconds, kImageWriteShare * job.image_write_seconds);
-  if (!done && (frame <= job.image_frame_passes || now - job.last_image < interval)) return std::nullopt;
-  job.image_frame_passes = frame;
-  job.last_image = now;
-  return snapshot_locked(job);
+  // Progressive images and checkpoints take at most 1/kWriteShare of the time: a large
+  // frame's take long enough to write that the interval alone would let writing crowd out
+  // merging.
+  constexpr double kWriteShare = 20;
+  const double image_interval = std::max(options_.image_interval_seconds, kWriteShare * job.image_write_seconds);
+  const double checkpoint_interval =
+      std::max(options_.checkpoint_seconds, kWriteShare * job.checkpoint_write_seconds);
+  const bool image = done || (frame > job.image_frame_passes && now - job.last_image >= image_interval);
+  const bool checkpoint = done || now - job.last_checkpoint >= checkpoint_interval;
+  if (!image && !checkpoint) return std::nullopt;
+  if (image) {
+    job.image_frame_passes = frame;
+    job.last_image = now;
+  }
+  if (checkpoint) job.last_checkpoint = now;
+  return snapshot_locked(job, image, checkpoint);
 }
 
-Coordinator::ImageSnapshot Coordinator::snapshot_locked(Job& job) {
+Coordinator::ImageSnapshot Coordinator::snapshot_locked(Job& job, bool image, bool checkpoint) {
+  ImageSnapshot snap;
+  snap.job = &job;
+  if (!job.plan.has_film()) return snap;  // ended, written, released: nothing to write
   std::unique_ptr<Film> film = std::move(job.spare_film);
   if (film)
     *film = job.plan.film();  // into the mapped pages of the last snapshot
   else
     film = std::make_unique<Film>(job.plan.film());
-  ImageSnapshot snap{&job, std::move(film), {}, ++job.image_seq, job.plan.merges()};
+  snap.film = std::move(film);
+  snap.seq = ++job.image_seq;
+  snap.merges = job.plan.merges();
+  snap.image = image;
+  snap.checkpoint = checkpoint;
+  if (checkpoint) {
+    snap.plan = job.plan.state();
+    job.checkpoint_merges = snap.merges;
+  }
+  snap.elapsed = job.started > 0 ? (job.live() ? clock_->now() : job.finished_at) - job.started : 0;
+  snap.ended = !job.live();
+  snap.state = job.state;
+  snap.error = job.error;
   snap.meta = {{"job", job.id},
                {"scene", job.name},
                {"seed", std::to_string(job.plan.settings().seed)},
                {"frame_passes", std::to_string(job.plan.frame_passes_done())}};
-  if (job.started > 0)
-    snap.meta["render_seconds"] = std::to_string((job.live() ? clock_->now() : job.finished_at) - job.started);
+  if (job.started > 0) snap.meta["render_seconds"] = std::to_string(snap.elapsed);
   return snap;
 }
 
 void Coordinator::write_snapshot(ImageSnapshot& snap) {
+  if (!snap.film) return;
   if (options_.before_image_write) options_.before_image_write();
   Job& job = *snap.job;
-  enum { kSkipped, kWritten, kFailed } outcome = kSkipped;  // skipped: a newer one is written
-  std::string why;
-  const auto t0 = std::chrono::steady_clock::now();
+  enum Outcome { kSkipped, kWritten, kFailed };  // skipped: a newer one is written
+  Outcome image = kSkipped, checkpoint = kSkipped;
+  std::string image_why, checkpoint_why;
+  double image_seconds = 0, checkpoint_seconds = 0;
+  bool release_film = false;
+  auto attempt = [&](const char* what, double* seconds, std::string* why, auto&& write) {
+    const auto t0 = std::chrono::steady_clock::now();
+    try {
+      write();
+      *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      return kWritten;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "tessera-coordinator: job %s: %s: %s (kept in memory; retried)\n", job.id.c_str(), what,
+                   e.what());
+      *why = without_data_dir(e.what());
+      return kFailed;
+    }
+  };
   {
     std::lock_guard<std::mutex> wl(job.write_mu);
-    if (snap.seq > job.written_seq) {
-      try {
-        sink_->write(job.id, *snap.film, snap.meta);
+    if (snap.image && snap.seq > job.written_seq) {
+      image = attempt("image", &image_seconds, &image_why, [&] { sink_->write(job.id, *snap.film, snap.meta); });
+      if (image == kWritten) {
         job.written_seq = snap.seq;
         job.written_merges = snap.merges;
-        outcome = kWritten;
-      } catch (const std::exception& e) {
-        std::fprintf(stderr, "tessera-coordinator: job %s: image: %s (kept in memory; retried)\n", job.id.c_str(),
-                     e.what());
-        // Clients see this: the data folder is named, not its path on this machine.
-        why = e.what();
-        for (size_t at; !options_.data_dir.empty() && (at = why.find(options_.data_dir)) != std::string::npos;)
-          why.replace(at, options_.data_dir.size(), "<data>");
-        outcome = kFailed;
       }
     }
+    if (snap.checkpoint && snap.seq > job.checkpoint_seq) {
+      checkpoint = attempt("checkpoint", &checkpoint_seconds, &checkpoint_why,
+                           [&] { store_->write_checkpoint(job.id, snap.plan, *snap.film, snap.elapsed); });
+      if (checkpoint == kWritten) {
+        job.checkpoint_seq = snap.seq;
+        job.checkpoint_written_merges = snap.merges;
+      }
+    }
+    // A DONE job's end is recorded once the checkpoint with its whole film is on disk, so
+    // that a restart never finds a DONE job with part of a film. A cancelled or failed job's
+    // end is recorded at once: nothing more will be rendered for it either way.
+    const bool whole = job.checkpoint_written_merges == snap.merges;
+    if (snap.ended && !job.end_recorded && (whole || snap.state != v1::JobStatus::DONE)) {
+      try {
+        store_->end(job.id, snap.state, snap.error, snap.elapsed);
+        job.end_recorded = true;
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "tessera-coordinator: job %s: recording its end: %s\n", job.id.c_str(), e.what());
+      }
+    }
+    release_film = snap.ended && job.end_recorded && whole && job.written_merges == snap.merges;
   }
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::lock_guard<std::mutex> lock(mu_);
-  if (outcome == kWritten) job.image_write_seconds = seconds;
-  counters_.images_written += outcome == kWritten;
-  counters_.image_errors += outcome == kFailed;
-  if (outcome == kWritten) job.image_error.clear();
-  if (outcome == kFailed) job.image_error = why;
-  if (job.live()) job.spare_film = std::move(snap.film);  // for the next snapshot
+  if (image == kWritten) job.image_write_seconds = image_seconds;
+  if (checkpoint == kWritten) job.checkpoint_write_seconds = checkpoint_seconds;
+  counters_.images_written += image == kWritten;
+  counters_.image_errors += image == kFailed;
+  counters_.checkpoints_written += checkpoint == kWritten;
+  counters_.checkpoint_errors += checkpoint == kFailed;
+  if (image == kWritten) job.image_error.clear();
+  if (image == kFailed) job.image_error = image_why;
+  if (checkpoint == kWritten) job.checkpoint_error.clear();
+  if (checkpoint == kFailed) job.checkpoint_error = checkpoint_why;
+  if (job.live())
+    job.spare_film = std::move(snap.film);  // for the next snapshot
+  else if (release_film)
+    job.plan.release_film();  // the image and checkpoint on disk hold it all
 }
 
 void Coordinator::write_image(Job& job) {
@@ -428,6 +599,19 @@ void Coordinator::write_image(Job& job) {
     snap = snapshot_locked(job);
   }
   write_snapshot(snap);
+}
+
+void Coordinator::checkpoint_all() {
+  std::vector<ImageSnapshot> snaps;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    for (auto& [id, job] : jobs_)
+      if (job->live() && job->plan.merges() != job->checkpoint_merges) {
+        job->last_checkpoint = clock_->now();
+        snaps.push_back(snapshot_locked(*job, false, true));
+      }
+  }
+  for (ImageSnapshot& snap : snaps) write_snapshot(snap);
 }
 
 v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requester, bool any) {

@@ -4,9 +4,11 @@
 //   LeaseTable      which worker renders which task, until when  (lease_table.h)
 //   WorkerRegistry  who is there, and how fast                   (worker_registry.h)
 //   ImageSink       where progressive images go                  (image_sink.h)
+//   JobStore        what survives a crash: jobs in SQLite, film checkpoints (job_store.h)
 // A task is one tile of one job for one pass, leased to one worker. The frame plan makes
 // the merged image bit-identical to `tessera render`; the coordinator adds leases, job
-// priorities and images. One mutex guards everything but scene checks and image writes.
+// priorities, images and durability. One mutex guards everything but scene checks, image
+// and checkpoint writes, and the job database.
 #pragma once
 
 #include <condition_variable>
@@ -22,6 +24,7 @@
 #include "server/clock.h"
 #include "server/image_sink.h"
 #include "server/job.h"
+#include "server/job_store.h"
 #include "server/lease_table.h"
 #include "server/scene_store.h"
 #include "server/worker_registry.h"
@@ -33,6 +36,9 @@ struct CoordinatorOptions {
   double lease_seconds = 10;
   double heartbeat_seconds = 2;
   double image_interval_seconds = 5;  // progressive images at most this often
+  // A live job's film and plan are saved at least this often while it merges results: a
+  // coordinator killed and restarted renders again at most the results of this long.
+  double checkpoint_seconds = 5;
   // A worker not heard from for this long is forgotten (it registers again if it returns).
   double worker_timeout_seconds = 60;
   // Registered workers at most: a Register loop cannot grow the coordinator without bound.
@@ -42,8 +48,10 @@ struct CoordinatorOptions {
   // Pixels of all live frames together: each costs two 40-byte films in memory (the plan's
   // and the snapshot's), so the default, 2^27, is about 10 GB at most.
   int64_t max_live_pixels = int64_t(1) << 27;
-  // Test seam: runs between an image snapshot leaving the lock and its write.
+  // Test seams: between an image snapshot leaving the lock and its write; between a
+  // checkpoint's temporary file being written and its rename.
   std::function<void()> before_image_write;
+  std::function<void()> before_checkpoint_rename;
 };
 
 // A request the coordinator refuses, with a message for the client.
@@ -61,14 +69,17 @@ struct CoordinatorCounters {
   uint64_t tasks_dispatched = 0, results_merged = 0, results_duplicate = 0, results_rejected = 0;
   uint64_t leases_expired = 0, leases_released = 0, tasks_failed = 0, samples_merged = 0, jobs_submitted = 0,
            jobs_refused = 0;
-  uint64_t images_written = 0, image_errors = 0;
+  uint64_t images_written = 0, image_errors = 0, checkpoints_written = 0, checkpoint_errors = 0;
+  uint64_t jobs_restored = 0;
   double merge_seconds = 0;
 };
 
 class Coordinator {
  public:
   static constexpr uint32_t kMaxTasksPerRequest = 256;
-  // Images go to `sink`, or to <data_dir>/jobs/<id>/ when it is null.
+  // Images go to `sink`, or to <data_dir>/jobs/<id>/ when it is null. Jobs kept in
+  // data_dir by an earlier run come back in their states, live ones from their last
+  // checkpoint. Throws std::runtime_error when the data folder cannot be used.
   explicit Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> clock = std::make_unique<SteadyClock>(),
                        std::unique_ptr<ImageSink> sink = nullptr);
   ~Coordinator();
@@ -114,6 +125,10 @@ class Coordinator {
   // Blocks until the job has ended (true) or `timeout` passes (false).
   bool wait_for_end(const std::string& id, double timeout) const;
 
+  // Saves every running job's film and plan now (a coordinator told to stop): a restart
+  // then renders nothing again.
+  void checkpoint_all();
+
   std::vector<WorkerInfo> workers() const;
   double utilization() const;  // of every live worker's render threads, recently
   CoordinatorCounters counters() const;
@@ -122,17 +137,27 @@ class Coordinator {
 
  private:
   // A film to write outside the lock, newest-wins by sequence number.
+  // A snapshot writes the image, the checkpoint, or both; one taken after the job ended
+  // also records the end in the job database, once its checkpoint is on disk.
   struct ImageSnapshot {
     Job* job = nullptr;
-    std::unique_ptr<Film> film;
+    std::unique_ptr<Film> film;  // null: nothing to write (an ended job's film was released)
     ImageMetadata meta;
     uint64_t seq = 0;
     uint64_t merges = 0;  // the film version copied
+    bool image = true, checkpoint = true;
+    PlanState plan;
+    double elapsed = 0;
+    bool ended = false;
+    v1::JobStatus::State state = v1::JobStatus::QUEUED;
+    std::string error;
   };
 
   Job* find(const std::string& id) const;  // mu_ held; throws kNotFound
   uint32_t workers_on(const Job& job) const { return leases_.workers_on(job.id); }
-  ImageSnapshot snapshot_locked(Job& job);
+  ImageSnapshot snapshot_locked(Job& job, bool image = true, bool checkpoint = true);
+  void restore_jobs();  // from store_, at construction
+  std::string without_data_dir(std::string message) const;  // for clients' eyes
   void write_snapshot(ImageSnapshot& snap);  // mu_ not held; gives the film back to the job
   void write_image(Job& job);                // mu_ not held: snapshot, then write
   // Ends a live lease: the tile loses it (and, with `requeue`, is ready again), the worker
@@ -150,6 +175,7 @@ class Coordinator {
   std::unique_ptr<Clock> clock_;
   std::unique_ptr<ImageSink> sink_;
   SceneStore scenes_;
+  std::unique_ptr<JobStore> store_;
   double started_ = 0;
   mutable std::mutex mu_;
   mutable std::condition_variable changed_;

@@ -9,7 +9,13 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   s.set_state(state);
   // A job whose image cannot be written still renders (the film is in memory and writes
   // are retried with the next snapshot); the user is told why its image is missing.
-  s.set_error(image_error.empty() ? error : error + (error.empty() ? "" : "; ") + "image not written: " + image_error);
+  std::string e = error;
+  auto add = [&](const char* what, const std::string& why) {
+    if (!why.empty()) e += (e.empty() ? "" : "; ") + std::string(what) + why;
+  };
+  add("image not written: ", image_error);
+  add("checkpoint not written: ", checkpoint_error);
+  s.set_error(e);
   s.set_samples_done(plan.samples_merged());
   s.set_samples_total(plan.samples_total());
   s.set_tiles_done(plan.tiles_done());

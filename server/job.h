@@ -26,6 +26,7 @@ struct Job {
   v1::JobStatus::State state = v1::JobStatus::QUEUED;
   std::string error;
   std::string image_error;       // the last image write's failure; empty once one succeeds
+  std::string checkpoint_error;  // the same for checkpoints
   std::set<uint64_t> failed_on;  // workers that could not render one of its tasks
   double submitted = 0, started = 0, finished_at = 0;
 
@@ -38,9 +39,15 @@ struct Job {
   // the coordinator's lock is a memory copy, not thousands of page faults (231 ms for a
   // fresh 1920x1080 film here, against a few for a reused one).
   std::unique_ptr<Film> spare_film;
-  std::mutex write_mu;          // one writer at a time; guards the two below
-  uint64_t written_seq = 0;     // newest snapshot written (0: none yet)
-  uint64_t written_merges = 0;  // the film version it holds
+  double last_checkpoint = 0;           // when the last snapshot with a checkpoint was taken
+  double checkpoint_write_seconds = 0;  // how long the last checkpoint write took
+  uint64_t checkpoint_merges = 0;       // the film version of the last checkpoint taken
+  std::mutex write_mu;                  // one writer at a time; guards the five below
+  uint64_t written_seq = 0;             // newest snapshot whose image was written (0: none yet)
+  uint64_t written_merges = 0;          // the film version it holds
+  uint64_t checkpoint_seq = 0;          // newest snapshot whose checkpoint was written
+  uint64_t checkpoint_written_merges = 0;
+  bool end_recorded = false;  // the job database has its end
 
   bool live() const { return state == v1::JobStatus::QUEUED || state == v1::JobStatus::RUNNING; }
   // `now` for the elapsed time; `workers` with live leases on it.

@@ -20,6 +20,9 @@ struct Lease {
 
 class LeaseTable {
  public:
+  // Task ids count up from `first_id`: a restarted coordinator starts past the last run's,
+  // so a result for a task of that run is never taken for one of this run.
+  explicit LeaseTable(uint64_t first_id = 1) : next_(first_id) {}
   uint64_t grant(Lease lease);  // returns the new task id
   const Lease* live(uint64_t id) const;
   // A live or ended lease: whoever returns its result first is merged.

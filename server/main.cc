@@ -39,7 +39,16 @@ int main(int argc, char** argv) {
   tessera::CoordinatorOptions opt;
   app.add_option("--listen", listen, "gRPC address HOST:PORT (port 0 picks a free port)")->capture_default_str();
   app.add_option("--http", http, "status endpoint HOST:PORT (port 0 picks a free port)")->capture_default_str();
-  app.add_option("--data", opt.data_dir, "data directory (scenes, progressive images)")->capture_default_str();
+  app.add_option("--data", opt.data_dir,
+                 "data directory (job database, scenes, images, checkpoints); a coordinator started again on it "
+                 "takes up its jobs")
+      ->capture_default_str();
+  app.add_option("--checkpoint-seconds", opt.checkpoint_seconds,
+                 "save running jobs' films at least this often: what a crash can cost")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 3600.0));
+  int write_delay_ms = 0;  // for the crash tests: a window in which to kill mid-write
+  app.add_option("--test-checkpoint-delay-ms", write_delay_ms)->group("")->check(CLI::Range(0, 60000));
   app.add_option("--lease-seconds", opt.lease_seconds, "lease length; a silent worker's task moves on after it")
       ->capture_default_str()
       ->check(CLI::Range(0.1, 3600.0));
@@ -105,7 +114,18 @@ int main(int argc, char** argv) {
       tls.pem_key_cert_pairs.push_back({tessera::read_file_bytes(tls_key), tessera::read_file_bytes(tls_cert)});
       credentials = grpc::SslServerCredentials(tls);
     }
+    if (write_delay_ms > 0)
+      opt.before_checkpoint_rename = [write_delay_ms] {
+        std::this_thread::sleep_for(std::chrono::milliseconds(write_delay_ms));
+      };
     tessera::Coordinator coordinator(opt);
+    if (const uint64_t restored = coordinator.counters().jobs_restored) {
+      size_t live = 0;
+      for (const auto& j : coordinator.list())
+        live += j.state() == tessera::v1::JobStatus::QUEUED || j.state() == tessera::v1::JobStatus::RUNNING;
+      std::fprintf(stderr, "tessera-coordinator: took up %llu jobs from %s (%zu to finish)\n",
+                   (unsigned long long)restored, opt.data_dir.c_str(), live);
+    }
     tessera::ClientService client(coordinator, &auth);
     tessera::WorkerService worker(coordinator, &auth);
     grpc::ServerBuilder builder;
@@ -141,6 +161,7 @@ int main(int argc, char** argv) {
     reaper.join();
     server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
     status.stop();
+    coordinator.checkpoint_all();  // results merged since the last checkpoint are kept too
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tessera-coordinator: error: %s\n", e.what());
     return 1;

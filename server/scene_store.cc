@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <filesystem>
+#include <fstream>
 
 #include "core/scene/load.h"
 #include "core/scene/scene_error.h"
@@ -22,9 +23,8 @@ std::string SceneStore::add(const std::string& main_file, const SceneFiles& file
     }
   }
   // Unpacked into a folder of its own, so that two submits of one scene never share
-  // files, then renamed into place (the first to finish wins; the bytes are the same).
+  // files, loaded, and removed: the bundle itself is what is kept.
   static std::atomic<uint64_t> staging_seq{0};
-  const fs::path dir = fs::path(dir_) / hash;
   const fs::path staging = fs::path(dir_) / (hash + ".staging-" + std::to_string(++staging_seq));
   std::error_code ec;
   try {
@@ -36,14 +36,53 @@ std::string SceneStore::add(const std::string& main_file, const SceneFiles& file
     fs::remove_all(staging, ec);
     throw;
   }
-  fs::rename(staging, dir, ec);
-  if (ec) fs::remove_all(staging, ec);  // already there
-  std::lock_guard<std::mutex> lock(mu_);
-  v1::SceneBundle& b = scenes_[hash];
+  fs::remove_all(staging, ec);
+  v1::SceneBundle b;
   b.set_main_file(main_file);
   *b.mutable_files() = files;
+  // Written under a name of its own and renamed into place: two adds of the same bytes
+  // write the same file, and a reader sees one whole.
+  const fs::path kept = fs::path(dir_) / (hash + ".bundle");
+  const fs::path tmp = staging.string() + ".bundle";
+  {
+    std::ofstream out(tmp, std::ios::binary);
+    if (!b.SerializeToOstream(&out) || !out.flush()) {
+      fs::remove(tmp, ec);
+      throw std::runtime_error("cannot keep the scene on the coordinator's disk");
+    }
+  }
+  std::lock_guard<std::mutex> lock(mu_);  // renamed under it: a release() of the same bytes removes it before or after
+  fs::rename(tmp, kept, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    throw std::runtime_error("cannot keep the scene on the coordinator's disk");
+  }
+  scenes_[hash] = std::move(b);
   ++uses_[hash];
   return hash;
+}
+
+void SceneStore::restore(const std::string& hash) {
+  const fs::path kept = fs::path(dir_) / (hash + ".bundle");
+  v1::SceneBundle b;
+  std::ifstream in(kept, std::ios::binary);
+  if (!in || !b.ParseFromIstream(&in)) throw std::runtime_error("its scene is missing from the data folder");
+  if (bundle_hash(b.main_file(), b.files()) != hash)
+    throw std::runtime_error("its scene in the data folder is damaged");
+  add(b.main_file(), b.files());
+}
+
+void SceneStore::remove_unused() {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(dir_, ec)) {
+    const std::string name = entry.path().filename().string();
+    const size_t dot = name.find('.');
+    if (name.substr(dot == std::string::npos ? name.size() : dot) == ".bundle" && scenes_.count(name.substr(0, dot)))
+      continue;
+    std::error_code rm;
+    fs::remove_all(entry.path(), rm);
+  }
 }
 
 v1::SceneBundle SceneStore::get(const std::string& hash) const {
@@ -58,9 +97,9 @@ void SceneStore::release(const std::string& hash) {
     if (it == uses_.end() || --it->second > 0) return;
     uses_.erase(it);
     scenes_.erase(hash);
-    // Under the lock: an add() of the same bytes waits, then unpacks afresh.
+    // Under the lock: an add() of the same bytes waits, then checks afresh.
     std::error_code ec;
-    fs::remove_all(fs::path(dir_) / hash, ec);
+    fs::remove(fs::path(dir_) / (hash + ".bundle"), ec);
   }
 }
 

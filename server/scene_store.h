@@ -1,5 +1,6 @@
-// Scenes by content hash: checked when submitted, kept on disk for the coordinator's own
-// check and in memory for the workers that fetch them.
+// Scenes by content hash: checked when submitted, kept in memory for the workers that fetch
+// them and on disk (<dir>/<hash>.bundle, the bundle as received) for a restarted
+// coordinator.
 #pragma once
 
 #include <map>
@@ -13,12 +14,17 @@ namespace tessera {
 class SceneStore {
  public:
   explicit SceneStore(std::string dir);
-  // Unpacks the bundle under <dir>/<hash> and loads it as a worker will, so a bad scene is
+  // Unpacks the bundle into a folder of its own and loads it as a worker will, so a bad scene is
   // refused here and never reaches a worker. Returns the content hash; the caller holds one
   // use of the scene until it calls release(). Throws WireError
   // (unsafe bundle) or SceneError naming the file as the user knows it, not by its path
   // here; a refused scene leaves nothing on disk. Thread-safe.
   std::string add(const std::string& main_file, const SceneFiles& files);
+  // add() for a scene kept on disk by an earlier run; throws std::runtime_error (or what
+  // add() throws) when it is missing or its bytes no longer have this hash.
+  void restore(const std::string& hash);
+  // Removes from the folder everything no scene in memory needs (after restore()s).
+  void remove_unused();
   // Throws std::out_of_range for an unknown hash.
   v1::SceneBundle get(const std::string& hash) const;
   // Each add() is a use of the scene (a job); when its last use is released the scene

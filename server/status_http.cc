@@ -202,6 +202,10 @@ std::string StatusHttp::metrics_text() const {
   counter("tessera_jobs_refused_total", "Jobs refused at submit.", double(k.jobs_refused));
   counter("tessera_images_written_total", "Progressive images written.", double(k.images_written));
   counter("tessera_image_errors_total", "Progressive image writes that failed.", double(k.image_errors));
+  counter("tessera_checkpoints_written_total", "Film checkpoints written (crash safety).",
+          double(k.checkpoints_written));
+  counter("tessera_checkpoint_errors_total", "Film checkpoint writes that failed.", double(k.checkpoint_errors));
+  counter("tessera_jobs_restored_total", "Jobs taken up from the data folder at start.", double(k.jobs_restored));
   counter("tessera_merge_seconds_total", "Time spent adding tile sums into films.", k.merge_seconds);
   size_t counts[5] = {};
   for (const v1::JobStatus& s : c_.list()) ++counts[std::min<size_t>(4, size_t(s.state()))];

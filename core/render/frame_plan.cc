@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace tessera {
 
@@ -125,6 +127,51 @@ void FramePlan::finish_pass(uint32_t tile) {
 double FramePlan::fraction_done() const {
   if (done()) return 1;
   return work_total_ > 0 ? std::min(1.0, work_done_ / work_total_) : 0;
+}
+
+PlanState FramePlan::state() const {
+  PlanState s;
+  s.progress = progress_;
+  if (settings_.adaptive) s.active = active_;
+  s.samples_merged = samples_merged_;
+  s.merges = merges_;
+  s.work_done = work_done_;
+  s.work_total = work_total_;
+  return s;
+}
+
+void FramePlan::restore(const PlanState& s, Film film) {
+  const Rect w = settings_.effective_window();
+  auto bad = [](const std::string& why) { throw std::invalid_argument("saved frame plan: " + why); };
+  if (!(film.window() == w)) bad("the film does not fit the frame");
+  if (s.progress.size() != tiles_.size()) bad("tile count " + std::to_string(s.progress.size()) + ", expected " +
+                                              std::to_string(tiles_.size()));
+  if (s.active.size() != (settings_.adaptive ? size_t(w.area()) : 0)) bad("the active-pixel mask does not fit");
+  if (!(std::isfinite(s.work_done) && std::isfinite(s.work_total))) bad("work is not finite");
+  std::vector<uint32_t> unfinished(passes_.size() + 1, 0);
+  uint32_t done = 0;
+  for (const TileProgress& t : s.progress) {
+    if (t.passes_done > passes_.size() || (!t.finished && t.passes_done == passes_.size() && !passes_.empty()))
+      bad("a tile has " + std::to_string(t.passes_done) + " passes merged of " + std::to_string(passes_.size()));
+    if (t.finished)
+      ++done;
+    else
+      ++unfinished[t.passes_done];
+  }
+  progress_ = s.progress;
+  if (settings_.adaptive) active_ = s.active;
+  samples_merged_ = s.samples_merged;
+  merges_ = s.merges;
+  work_done_ = s.work_done;
+  work_total_ = s.work_total;
+  film_ = std::move(film);
+  unfinished_at_ = std::move(unfinished);
+  tiles_done_ = passes_.empty() ? uint32_t(tiles_.size()) : done;  // nothing to render: done
+  ready_.clear();
+  for (uint32_t t = 0; t < tiles_.size() && !passes_.empty(); ++t)
+    if (!progress_[t].finished) ready_.emplace(progress_[t].passes_done, t);
+  frame_passes_ = 0;
+  while (frame_passes_ < passes_.size() && unfinished_at_[frame_passes_] == 0) ++frame_passes_;
 }
 
 }  // namespace tessera

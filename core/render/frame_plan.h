@@ -37,6 +37,16 @@ struct TileProgress {
   float relative_error = 1;  // estimated from the merged film after the last pass
 };
 
+// What a plan has done besides its film: with the film, enough to rebuild the plan exactly
+// (FramePlan::restore), so that a coordinator restarted from a checkpoint goes on as if it
+// had never stopped. Everything else (the ready set, per-pass counts) follows from these.
+struct PlanState {
+  std::vector<TileProgress> progress;  // one per tile
+  std::vector<uint8_t> active;         // per film pixel; empty unless adaptive sampling
+  uint64_t samples_merged = 0, merges = 0;
+  double work_done = 0, work_total = 0;
+};
+
 class FramePlan {
  public:
   enum class Merge { kMerged, kDuplicate, kInvalid };
@@ -72,6 +82,16 @@ class FramePlan {
   uint64_t merges() const { return merges_; }                // the film's version
   // Fraction of the scheduled work done, 1 when done (adaptive sampling may end early).
   double fraction_done() const;
+
+  PlanState state() const;
+  // Takes up a saved state and film (from state() and film() of a plan with the same
+  // settings) in place of this plan's; nothing is taken. Throws std::invalid_argument,
+  // changing nothing, when they do not fit these settings or contradict themselves.
+  void restore(const PlanState& state, Film film);
+  // Frees the film of a plan whose image is kept elsewhere (an ended job's); film() is
+  // then empty and has_film() false.
+  void release_film() { film_ = Film(Rect{}); }
+  bool has_film() const { return film_.window() == settings_.effective_window(); }
 
  private:
   void finish_pass(uint32_t tile);

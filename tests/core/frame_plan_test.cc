@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <limits>
 #include <set>
 
@@ -178,6 +179,85 @@ TEST(FramePlan, NoiseTargetFinishesQuietTilesAfterTwoPasses) {
   EXPECT_FALSE(plan.progress(1).finished);
   EXPECT_GT(plan.progress(1).relative_error, 0.1f);
   EXPECT_LT(plan.fraction_done(), 1);
+}
+
+// Sums with some noise that depends on the task and pixel only, so that adaptive sampling
+// stops some pixels and not others.
+std::vector<PixelSums> noisy_sums_for(const TileTask& t) {
+  std::vector<PixelSums> out = sums_for(t, 0.5);
+  for (size_t i = 0; i < out.size(); ++i) {
+    const uint32_t h = uint32_t((t.tile * 7919u + t.pass * 104729u + uint32_t(i) * 2654435761u) >> 7) % 97;
+    out[i].lum2 += out[i].n * (h < 40 ? 0.0 : 0.01 * h);
+  }
+  return out;
+}
+
+// A plan rebuilt from state() and film() goes on exactly as the plan it was taken from:
+// the same tasks in the same order, the same film bits, the same progress. This is what
+// lets a restarted coordinator finish a job bit-identical to `tessera render`.
+TEST(FramePlan, ARestoredPlanGoesOnExactlyAsTheOriginal) {
+  for (const bool adaptive : {false, true}) {
+    RenderSettings s = settings(40, 24, 8, 24, 4);
+    s.adaptive = adaptive;
+    s.adaptive_batch = 4;
+    s.adaptive_tolerance = 0.2f;
+    FramePlan a(s);
+    for (int k = 0; k < 23; ++k) {  // part of the way, with one task left taken
+      const TileTask t = *a.take();
+      ASSERT_EQ(a.merge(t.tile, t.pass, noisy_sums_for(t)), FramePlan::Merge::kMerged);
+    }
+    (void)a.take();  // taken when the checkpoint is written: the restored plan hands it out again
+    FramePlan b(s);
+    b.restore(a.state(), a.film());
+    EXPECT_EQ(b.merges(), a.merges());
+    EXPECT_EQ(b.samples_merged(), a.samples_merged());
+    EXPECT_EQ(b.frame_passes_done(), a.frame_passes_done());
+    EXPECT_EQ(b.tiles_done(), a.tiles_done());
+    EXPECT_EQ(b.fraction_done(), a.fraction_done());
+    // `a` restarted too (its taken task lost with the coordinator), then both run to the end.
+    FramePlan a2(s);
+    a2.restore(a.state(), a.film());
+    int steps = 0;
+    while (!a2.done()) {
+      const std::optional<TileTask> ta = a2.take(), tb = b.take();
+      ASSERT_TRUE(ta && tb);
+      ASSERT_EQ(ta->tile, tb->tile);
+      ASSERT_EQ(ta->pass, tb->pass);
+      ASSERT_EQ(ta->active, tb->active);
+      ASSERT_EQ(a2.merge(ta->tile, ta->pass, noisy_sums_for(*ta)), FramePlan::Merge::kMerged);
+      ASSERT_EQ(b.merge(tb->tile, tb->pass, noisy_sums_for(*tb)), FramePlan::Merge::kMerged);
+      ++steps;
+    }
+    EXPECT_GT(steps, 0);
+    EXPECT_TRUE(b.done());
+    ASSERT_EQ(a2.film().pixels().size(), b.film().pixels().size());
+    EXPECT_EQ(0, std::memcmp(a2.film().pixels().data(), b.film().pixels().data(),
+                             b.film().pixels().size() * sizeof(PixelSums)));
+    for (uint32_t t = 0; t < b.tiles().size(); ++t) {
+      EXPECT_EQ(a2.progress(t).passes_done, b.progress(t).passes_done);
+      EXPECT_EQ(a2.progress(t).relative_error, b.progress(t).relative_error);
+    }
+  }
+}
+
+TEST(FramePlan, AStateThatDoesNotFitIsRefusedAndChangesNothing) {
+  const RenderSettings s = settings(40, 24, 8, 24, 4);
+  FramePlan a(s);
+  const TileTask t = *a.take();
+  ASSERT_EQ(a.merge(t.tile, t.pass, sums_for(t, 1)), FramePlan::Merge::kMerged);
+  FramePlan b(s);
+  PlanState st = a.state();
+  st.progress.pop_back();
+  EXPECT_THROW(b.restore(st, a.film()), std::invalid_argument);
+  st = a.state();
+  st.progress[0].passes_done = 99;
+  EXPECT_THROW(b.restore(st, a.film()), std::invalid_argument);
+  EXPECT_THROW(b.restore(a.state(), Film(Rect{0, 0, 8, 8})), std::invalid_argument);
+  st = a.state();
+  st.active.assign(10, 1);  // a mask for a plan without adaptive sampling
+  EXPECT_THROW(b.restore(st, a.film()), std::invalid_argument);
+  EXPECT_EQ(b.merges(), 0u);
+  EXPECT_EQ(b.ready(), b.tiles().size());
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <regex>
 #include <sstream>
@@ -41,19 +42,22 @@ class Farm : public ::testing::Test {
   std::vector<std::unique_ptr<Process>> workers;
   std::string grpc_addr;
   int http_port = 0;
+  int coordinators = 0;  // started so far: each writes its own log
 
   void SetUp() override { fs::create_directories(dir); }
   void TearDown() override {
     workers.clear();
     coordinator.reset();
-    fs::remove_all(dir);
+    if (!std::getenv("TESSERA_KEEP_TEST_DIR")) fs::remove_all(dir);
   }
-  void start_coordinator(const std::string& listen = "127.0.0.1:0", const std::string& lease = "2") {
-    coordinator = std::make_unique<Process>(
-        kBin + "/tessera-coordinator",
-        std::vector<std::string>{"--listen", listen, "--http", "127.0.0.1:0", "--data", (dir / "data").string(),
-                                 "--lease-seconds", lease, "--image-interval", "0.2"},
-        (dir / "coordinator.err").string());
+  void start_coordinator(const std::string& listen = "127.0.0.1:0", const std::string& lease = "2",
+                         const std::vector<std::string>& extra = {}) {
+    std::vector<std::string> args{"--listen",        listen, "--http",           "127.0.0.1:0", "--data",
+                                  (dir / "data").string(), "--lease-seconds", lease,         "--image-interval",
+                                  "0.2"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    coordinator = std::make_unique<Process>(kBin + "/tessera-coordinator", args,
+                                            (dir / ("coordinator" + std::to_string(++coordinators) + ".err")).string());
     const std::string g = coordinator->read_line(), h = coordinator->read_line();
     std::smatch m;
     ASSERT_TRUE(std::regex_match(g, m, std::regex("grpc listening on (127\\.0\\.0\\.1:\\d+)"))) << g;
@@ -316,6 +320,71 @@ TEST_F(Farm, WorkerStopsCleanlyOnSigtermAndGivesItsLeaseBack) {
   EXPECT_GE(std::stoi(m[1]), 1);  // the abandoned tile (and a prefetched one, if any)
   EXPECT_NE(metrics.find("tessera_workers_busy 0"), std::string::npos) << metrics;  // no lease left held
   EXPECT_NE(metrics.find("\ntessera_workers 0\n"), std::string::npos) << metrics;   // and it left at once
+}
+
+// kill -9 of the coordinator before the first merge, mid-pass and in the middle of writing
+// a checkpoint; each time it is started again on the same data folder and port. The
+// workers and the waiting client carry on by themselves, and the image is still the bytes
+// of `tessera render`.
+TEST_F(Farm, CoordinatorKilledAtAnyMomentLosesNothingAndTheImageIsUnchanged) {
+  const std::string flags = "-r 160 120 -s 256 --pass-spp 8 -m 6 --seed 5";
+  const std::string local = local_render(flags);
+  const std::vector<std::string> crashy{"--checkpoint-seconds", "0.3", "--test-checkpoint-delay-ms", "250"};
+  start_coordinator("127.0.0.1:0", "2", crashy);
+  const std::string addr = grpc_addr;
+  const std::string out = (dir / "farm.exr").string();
+  Process client(kBin + "/tessera",
+                 {"submit", kScene, "-r", "160", "120", "-s", "256", "--pass-spp", "8", "-m", "6", "--seed", "5",
+                  "--coordinator", addr, "--wait", "-q", "-f", out},
+                 (dir / "client.err").string());
+  auto job = [&]() -> nlohmann::json {
+    const nlohmann::json s = get_json("/api/status");
+    return s == nullptr || s["jobs"].empty() ? nlohmann::json() : s["jobs"][0];
+  };
+  auto samples = [&](const nlohmann::json& j) { return std::stoull(j["samples_done"].get<std::string>()); };
+  auto wait_for = [&](const std::function<bool()>& ok) {
+    for (int i = 0; i < 3000; ++i) {
+      if (ok()) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    return false;
+  };
+  auto crash_and_restart = [&] {
+    coordinator->signal(SIGKILL);
+    ASSERT_EQ(coordinator->wait(10), -SIGKILL);
+    start_coordinator(addr, "2", crashy);
+    ASSERT_EQ(grpc_addr, addr);
+  };
+  // 1. Accepted, nothing rendered: no workers yet.
+  ASSERT_TRUE(wait_for([&] { return !job().is_null(); }));
+  const std::string id = job()["id"];
+  crash_and_restart();
+  ASSERT_FALSE(job().is_null());
+  EXPECT_EQ(job()["id"], id);
+  EXPECT_EQ(job()["state"], "QUEUED");
+  start_worker();
+  start_worker();
+  // 2. Mid-pass, after a checkpoint: the restarted one starts from it.
+  const fs::path checkpoint = dir / "data" / "jobs" / id / "checkpoint";
+  ASSERT_TRUE(wait_for([&] { return fs::exists(checkpoint) && samples(job()) > 0; }));
+  crash_and_restart();
+  ASSERT_FALSE(job().is_null());
+  EXPECT_GT(samples(job()), 0u);  // taken up from the checkpoint, not from nothing
+  EXPECT_EQ(job()["state"], "RUNNING");
+  // 3. While a checkpoint is being written (its temporary file is there, not yet renamed).
+  ASSERT_TRUE(wait_for([&] { return fs::exists(checkpoint.string() + ".tmp"); }));
+  crash_and_restart();
+  ASSERT_FALSE(job().is_null());
+  // The client reconnects by itself and fetches the finished image.
+  ASSERT_EQ(client.wait(120), 0) << slurp((dir / "client.err").string());
+  expect_same_pixels(local, out);
+  EXPECT_EQ(job()["state"], "DONE");
+  // Once more with the job done: it stays done, and its image can still be fetched.
+  crash_and_restart();
+  EXPECT_EQ(job()["state"], "DONE");
+  const std::string again = (dir / "again.exr").string();
+  ASSERT_EQ(run("fetch " + id + " -f " + again + " --coordinator " + addr, dir).code, 0);
+  expect_same_pixels(local, again);
 }
 
 TEST_F(Farm, WorkerReconnectsWhenTheCoordinatorComesBack) {
