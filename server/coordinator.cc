@@ -5,11 +5,32 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "core/render/tile_renderer.h"
+#include "core/scene/load.h"
 #include "core/scene/scene_error.h"
+#define XXH_INLINE_ALL  // header only: nothing to link
+#include <xxhash.h>
 
 namespace tessera {
 
 namespace fs = std::filesystem;
+
+namespace {
+
+// Of the sums' values (not their padding or wire encoding, which may differ between two
+// honest workers): equal digests, equal bits.
+uint64_t sums_digest(const std::vector<PixelSums>& sums) {
+  XXH3_state_t st;
+  XXH3_64bits_reset(&st);
+  for (const PixelSums& p : sums) {
+    const double v[4] = {p.r, p.g, p.b, p.lum2};
+    XXH3_64bits_update(&st, v, sizeof v);
+    XXH3_64bits_update(&st, &p.n, sizeof p.n);
+  }
+  return XXH3_64bits_digest(&st);
+}
+
+}  // namespace
 
 Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> clock, std::unique_ptr<ImageSink> sink)
     : options_(std::move(options)),
@@ -234,17 +255,22 @@ std::vector<v1::JobStatus> Coordinator::list() const {
   return out;
 }
 
-v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& req) {
+v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& req, const std::string& principal) {
   if (req.version() != kProtocolVersion)
     throw RequestError(RequestError::Code::kInvalidArgument,
                        "protocol version " + std::to_string(req.version()) + " not supported");
   std::lock_guard<std::mutex> lock(mu_);
+  if (!principal.empty() && quarantined_principals_.count(principal))
+    throw RequestError(RequestError::Code::kPermissionDenied,
+                       "worker token '" + principal +
+                           "' is quarantined: its results differed from the same tasks rendered elsewhere");
   const double now = clock_->now();
   if (workers_.size() >= options_.max_workers) workers_.forget_silent(now, options_.worker_timeout_seconds);
   if (workers_.size() >= options_.max_workers)
     throw RequestError(RequestError::Code::kResourceExhausted,
                        "the coordinator has its " + std::to_string(options_.max_workers) + " workers");
-  const WorkerInfo& w = workers_.add(req.name(), req.threads(), now);
+  WorkerInfo& w = workers_.add(req.name(), req.threads(), now);
+  w.principal = principal;
   v1::RegisterResponse r;
   r.set_worker_id(w.id);
   r.set_heartbeat_interval_ms(uint32_t(options_.heartbeat_seconds * 1000));
@@ -253,7 +279,12 @@ v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& req
 }
 
 void Coordinator::lease_ended_locked(uint64_t id, const Lease& l, bool requeue) {
-  if (auto job = jobs_.find(l.job); job != jobs_.end() && job->second->tile_lease[l.tile] == id) {
+  if (l.check) {  // a check waits for another worker
+    if (auto c = checks_.find(l.check); c != checks_.end() && c->second.lease == id) {
+      c->second.lease = 0;
+      c->second.since = clock_->now();
+    }
+  } else if (auto job = jobs_.find(l.job); job != jobs_.end() && job->second->tile_lease[l.tile] == id) {
     job->second->tile_lease[l.tile] = 0;
     if (requeue) job->second->plan.put_back(l.tile);
   }
@@ -273,17 +304,57 @@ size_t Coordinator::expire_locked(double now) {
 }
 
 size_t Coordinator::expire_leases() {
-  std::lock_guard<std::mutex> lock(mu_);
-  const double now = clock_->now();
-  // Here, on the reaper's tick, not in every GetTask: it walks every worker.
-  workers_.forget_silent(now, options_.worker_timeout_seconds);
-  return expire_locked(now);
+  std::vector<ImageSnapshot> finished;
+  size_t expired;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    const double now = clock_->now();
+    // Here, on the reaper's tick, not in every GetTask: it walks every worker.
+    workers_.forget_silent(now, options_.worker_timeout_seconds);
+    expired = expire_locked(now);
+    // A check no other worker took for two lease periods (there may be none) is skipped,
+    // so that a job does not wait for a second worker forever.
+    std::set<Job*> touched;
+    for (auto it = checks_.begin(); it != checks_.end();) {
+      auto next = std::next(it);
+      if (it->second.lease == 0 && now - it->second.since > 2 * options_.lease_seconds) {
+        touched.insert(jobs_.at(it->second.job).get());
+        drop_check_locked(it, true);
+      }
+      it = next;
+    }
+    for (Job* job : touched)
+      if (auto snap = finish_if_done_locked(*job, now)) finished.push_back(std::move(*snap));
+  }
+  for (ImageSnapshot& snap : finished) write_snapshot(snap);
+  return expired;
+}
+
+void Coordinator::drop_check_locked(std::map<uint64_t, Check>::iterator it, bool skipped) {
+  if (it->second.lease) end_lease_locked(it->second.lease, false);
+  if (auto job = jobs_.find(it->second.job); job != jobs_.end() && job->second->pending_checks > 0)
+    --job->second->pending_checks;
+  counters_.checks_skipped += skipped;
+  checks_.erase(it);
+}
+
+std::optional<Coordinator::ImageSnapshot> Coordinator::finish_if_done_locked(Job& job, double now) {
+  if (!job.live() || !job.plan.done() || job.pending_checks > 0) return std::nullopt;
+  end_job_locked(job, v1::JobStatus::DONE, now);
+  changed_.notify_all();
+  job.image_frame_passes = job.plan.frame_passes_done();
+  job.last_image = job.last_checkpoint = now;
+  return snapshot_locked(job, true, true);
 }
 
 v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples) {
   std::lock_guard<std::mutex> lock(mu_);
   const double now = clock_->now();
   expire_locked(now);
+  if (quarantined_.count(worker_id))
+    throw RequestError(RequestError::Code::kPermissionDenied,
+                       "worker " + std::to_string(worker_id) +
+                           " is quarantined: its results differed from the same tasks rendered elsewhere");
   WorkerInfo* w = workers_.find(worker_id);
   if (!w)
     throw RequestError(RequestError::Code::kFailedPrecondition,
@@ -308,6 +379,23 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
   const uint64_t room = share > w->leases ? share - w->leases : 0;
   max_tasks = uint32_t(std::min<uint64_t>(std::clamp<uint32_t>(max_tasks, 1, kMaxTasksPerRequest), room));
   uint64_t samples = 0;
+  // Checks first (they are few, and a job waits for its checks to end): any worker but
+  // the one whose result is checked.
+  for (auto& [check_id, c] : checks_) {
+    if (uint32_t(resp.tasks_size()) >= max_tasks) break;
+    if (c.lease || c.first_worker == worker_id) continue;
+    Lease l{c.job, c.tile, c.pass, worker_id, now + options_.lease_seconds};
+    l.check = check_id;
+    c.lease = leases_.grant(std::move(l));
+    ++w->leases;
+    v1::Task* task = resp.add_tasks();
+    *task = *c.task;
+    task->set_task_id(c.lease);
+    ++counters_.tasks_dispatched;
+  }
+  // Verification needs a second worker.
+  const bool sample_checks = options_.verify_fraction > 0 && workers_.size() > 1;
+  std::uniform_real_distribution<double> uniform(0, 1);
   for (Job* job : order) {
     while (uint32_t(resp.tasks_size()) < max_tasks && (max_samples == 0 || samples < max_samples)) {
       std::optional<TileTask> t = job->plan.take();
@@ -335,6 +423,8 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
       }
       samples += pixels * (t->sample_end - t->sample_begin);
       ++counters_.tasks_dispatched;
+      if (sample_checks && uniform(ids_) < options_.verify_fraction)
+        leases_.live(task_id)->task = std::make_shared<const v1::Task>(*task);
     }
   }
   if (resp.tasks_size() == 0) resp.set_retry_after_ms(200);
@@ -385,6 +475,11 @@ void Coordinator::release(uint64_t worker_id, uint64_t task_id, const std::strin
 void Coordinator::end_job_locked(Job& job, v1::JobStatus::State state, double now) {
   job.state = state;
   job.finished_at = now;
+  for (auto it = checks_.begin(); it != checks_.end();) {  // undecided checks: moot now
+    auto next = std::next(it);
+    if (it->second.job == job.id) drop_check_locked(it, false);
+    it = next;
+  }
   for (uint64_t lease : job.tile_lease)
     if (lease) end_lease_locked(lease, false);
   leases_.forget_job(job.id);
@@ -410,10 +505,12 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
   auto wanted = [&](Lease* out) -> bool {
     const Lease* l = leases_.known(result.task_id());
     // Never issued, or issued to another worker: only the lease's holder may answer it.
-    if (!l || l->worker != result.worker_id()) {
+    if (!l || l->worker != result.worker_id() || quarantined_.count(l->worker)) {
       ++counters_.results_rejected;
       return false;
     }
+    *out = *l;
+    if (l->check) return true;  // checked in check_result
     auto job = jobs_.find(l->job);
     if (job == jobs_.end() || !job->second->live()) return false;
     if (!job->second->plan.wants(l->tile, l->pass)) {
@@ -425,12 +522,13 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     return true;
   };
   Lease lease;
-  size_t pixels;
+  size_t pixels = 0;
   {
     std::lock_guard<std::mutex> lock(mu_);
     if (!wanted(&lease)) return ack;
-    pixels = size_t(jobs_.at(lease.job)->plan.tiles()[lease.tile].area());
+    if (!lease.check) pixels = size_t(jobs_.at(lease.job)->plan.tiles()[lease.tile].area());
   }
+  if (lease.check) return check_result(result, lease);
   std::vector<PixelSums> sums;
   try {
     if (result.raw_size() != pixels * kBytesPerPixel) throw WireError("raw size does not match the tile");
@@ -443,7 +541,7 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
   std::optional<ImageSnapshot> pending;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (!wanted(&lease)) return ack;
+    if (!wanted(&lease) || lease.check) return ack;
     Job& job = *jobs_.at(lease.job);
     const auto t0 = std::chrono::steady_clock::now();
     uint64_t samples = 0;
@@ -459,6 +557,19 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     const uint64_t other = job.tile_lease[lease.tile];
     end_lease_locked(result.task_id(), false);
     if (other) end_lease_locked(other, false);
+    job.merged_by[result.worker_id()].push_back(lease.tile);
+    if (lease.task) {  // picked for verification: another worker renders it again
+      Check& c = checks_[next_check_++];
+      c.job = job.id;
+      c.tile = lease.tile;
+      c.pass = lease.pass;
+      c.task = lease.task;
+      c.first_worker = result.worker_id();
+      c.digest = sums_digest(sums);
+      c.since = clock_->now();
+      ++job.pending_checks;
+      ++counters_.checks_issued;
+    }
     pending = after_merge_locked(job, result, clock_->now());
     ack.set_accepted(true);
     changed_.notify_all();
@@ -467,11 +578,132 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
   return ack;
 }
 
+v1::ResultAck Coordinator::check_result(const v1::TaskResult& result, const Lease& lease) {
+  v1::ResultAck ack;
+  Check c;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = checks_.find(lease.check);
+    if (it == checks_.end() || it->second.lease != result.task_id()) return ack;  // decided, or moot
+    c = it->second;
+  }
+  const Rect rect = from_proto(c.task->tile());
+  uint64_t digest;
+  try {
+    if (result.raw_size() != size_t(rect.area()) * kBytesPerPixel) throw WireError("raw size does not match the tile");
+    digest = sums_digest(decode_sums(result.sums_zstd(), size_t(rect.area())));
+  } catch (const WireError&) {
+    std::lock_guard<std::mutex> lock(mu_);
+    ++counters_.results_rejected;
+    return ack;
+  }
+  const uint64_t checker = result.worker_id();
+  std::optional<ImageSnapshot> finished;
+  std::vector<uint64_t> liars;
+  std::string why;
+  if (digest != c.digest) {
+    // Two workers differ: this process renders the task too, and whoever differs from it
+    // is quarantined (both, if all three differ). Rare, so done here, outside the lock.
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      ++counters_.check_mismatches;
+    }
+    try {
+      const uint64_t ours = sums_digest(render_here(*c.task));
+      if (ours != c.digest) liars.push_back(c.first_worker);
+      if (ours != digest) liars.push_back(checker);
+      why = "job " + c.job + " tile " + std::to_string(c.tile) + " pass " + std::to_string(c.pass) +
+            ": its sums differ from the coordinator's render of the same task";
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "tessera-coordinator: check of job %s tile %u: cannot render it here: %s\n",
+                   c.job.c_str(), c.tile, e.what());
+    }
+  }
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = checks_.find(lease.check);
+    if (it == checks_.end() || it->second.lease != result.task_id()) return ack;  // moot meanwhile
+    drop_check_locked(it, false);
+    if (digest == c.digest) ++counters_.checks_passed;
+    for (uint64_t w : liars) quarantine_locked(w, why);
+    ack.set_accepted(std::find(liars.begin(), liars.end(), checker) == liars.end());
+    if (auto job = jobs_.find(c.job); job != jobs_.end()) finished = finish_if_done_locked(*job->second, clock_->now());
+    changed_.notify_all();
+  }
+  if (finished) write_snapshot(*finished);
+  return ack;
+}
+
+std::vector<PixelSums> Coordinator::render_here(const v1::Task& task) {
+  const v1::SceneBundle b = scenes_.get(task.scene_hash());
+  static std::atomic<uint64_t> seq{0};
+  const fs::path dir =
+      fs::path(options_.data_dir) / "scenes" / (task.scene_hash() + ".referee-" + std::to_string(++seq));
+  struct Cleanup {
+    fs::path dir;
+    ~Cleanup() {
+      std::error_code ec;
+      fs::remove_all(dir, ec);
+    }
+  } cleanup{dir};
+  const Scene scene = load_scene(unpack_bundle(dir.string(), b.main_file(), b.files()));
+  const Rect rect = from_proto(task.tile());
+  if (!task.active().empty() && task.active().size() != size_t(rect.area())) throw WireError("active mask size");
+  const auto* mask = task.active().empty() ? nullptr : reinterpret_cast<const uint8_t*>(task.active().data());
+  TileStats stats;
+  return TileRenderer(scene, from_proto(task.settings()))
+      .render(rect, task.sample_begin(), task.sample_end(), mask, &stats);
+}
+
+void Coordinator::quarantine_locked(uint64_t worker, const std::string& why) {
+  if (!quarantined_.insert(worker).second) return;
+  ++counters_.workers_quarantined;
+  std::string name = std::to_string(worker);
+  if (const WorkerInfo* w = workers_.find(worker)) {
+    name = "'" + w->name + "' (" + name + ")";
+    if (!w->principal.empty()) quarantined_principals_.insert(w->principal);
+  }
+  std::fprintf(stderr, "tessera-coordinator: worker %s quarantined: %s\n", name.c_str(), why.c_str());
+  for (uint64_t id : leases_.held_by(worker)) end_lease_locked(id, true);
+  // What it merged is rendered again: every tile of a live job it added sums to starts
+  // over (a tile's passes build on each other). An ended job is flagged.
+  for (auto& [id, job] : jobs_) {
+    auto mine = job->merged_by.find(worker);
+    if (mine == job->merged_by.end()) continue;
+    std::set<uint32_t> tiles(mine->second.begin(), mine->second.end());
+    job->merged_by.erase(mine);
+    if (job->live()) {
+      for (uint32_t t : tiles) {
+        if (job->tile_lease[t]) end_lease_locked(job->tile_lease[t], false);
+        job->plan.reset_tile(t);
+        ++counters_.tiles_rendered_again;
+      }
+      for (auto it = checks_.begin(); it != checks_.end();) {  // checks of those tiles are moot
+        auto next = std::next(it);
+        if (it->second.job == id && tiles.count(it->second.tile)) drop_check_locked(it, false);
+        it = next;
+      }
+    } else if (job->state == v1::JobStatus::DONE) {
+      job->error += std::string(job->error.empty() ? "" : "; ") + std::to_string(tiles.size()) +
+                    " tiles hold results of worker " + name +
+                    ", quarantined after the job ended (its results differed from the same tasks rendered "
+                    "elsewhere): submit the job again for an image without them";
+      try {
+        store_->end(job->id, job->state, job->error, job->finished_at - job->started);
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "tessera-coordinator: job %s: %s\n", job->id.c_str(), e.what());
+      }
+    }
+  }
+  workers_.remove(worker);
+  changed_.notify_all();
+}
+
 std::optional<Coordinator::ImageSnapshot> Coordinator::after_merge_locked(Job& job, const v1::TaskResult& result,
                                                                           double now) {
   workers_.record_result(result.worker_id(), result.samples(), result.render_seconds(), result.busy_thread_seconds(),
                          result.thread_seconds(), now);
-  const bool done = job.plan.done();
+  const bool done = job.plan.done() && job.pending_checks == 0;  // every check decided
   if (done) end_job_locked(job, v1::JobStatus::DONE, now);
   const uint32_t frame = job.plan.frame_passes_done();
   // Progressive images and checkpoints take at most 1/kWriteShare of the time: a large

@@ -18,6 +18,7 @@
 #include <mutex>
 #include <optional>
 #include <random>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -48,6 +49,12 @@ struct CoordinatorOptions {
   // Pixels of all live frames together: each costs two 40-byte films in memory (the plan's
   // and the snapshot's), so the default, 2^27, is about 10 GB at most.
   int64_t max_live_pixels = int64_t(1) << 27;
+  // Verify by replay: this fraction of tasks, picked at random, is rendered again by a
+  // second worker and the sums compared bit for bit. When they differ, the coordinator
+  // renders the task itself, and a worker whose sums differ from its render is
+  // quarantined: its leases end, the tiles it merged into live jobs are rendered again,
+  // and, with access tokens, its token may not register again.
+  double verify_fraction = 0.02;
   // Test seams: between an image snapshot leaving the lock and its write; between a
   // checkpoint's temporary file being written and its rename.
   std::function<void()> before_image_write;
@@ -71,6 +78,8 @@ struct CoordinatorCounters {
            jobs_refused = 0;
   uint64_t images_written = 0, image_errors = 0, checkpoints_written = 0, checkpoint_errors = 0;
   uint64_t jobs_restored = 0;
+  uint64_t checks_issued = 0, checks_passed = 0, check_mismatches = 0, checks_skipped = 0, workers_quarantined = 0,
+           tiles_rendered_again = 0;
   double merge_seconds = 0;
 };
 
@@ -95,7 +104,8 @@ class Coordinator {
   v1::Image image(const std::string& id, bool exr = true, bool png = true);
 
   // Worker side.
-  v1::RegisterResponse register_worker(const v1::RegisterRequest& request);
+  // `principal`: the worker's access token name (a quarantined one may not register).
+  v1::RegisterResponse register_worker(const v1::RegisterRequest& request, const std::string& principal = "");
   // Up to max_tasks tasks, stopping once they hold max_samples samples (0: no such limit);
   // always one if any is ready.
   v1::GetTaskResponse get_task(uint64_t worker_id, uint32_t max_tasks = 1, uint64_t max_samples = 0);
@@ -171,6 +181,24 @@ class Coordinator {
   std::optional<ImageSnapshot> after_merge_locked(Job& job, const v1::TaskResult& result, double now);
   std::string new_job_id_locked();
 
+  // Verify by replay (see CoordinatorOptions::verify_fraction).
+  struct Check {
+    std::string job;
+    uint32_t tile = 0, pass = 0;
+    std::shared_ptr<const v1::Task> task;  // as the first worker got it
+    uint64_t first_worker = 0;
+    uint64_t digest = 0;  // of the merged sums
+    uint64_t lease = 0;   // the check's live lease (0: waiting for a worker)
+    double since = 0;     // waiting since
+  };
+  v1::ResultAck check_result(const v1::TaskResult& result, const Lease& lease);
+  // The sums of a task as this process renders them: the referee when two workers differ.
+  std::vector<PixelSums> render_here(const v1::Task& task);
+  void quarantine_locked(uint64_t worker, const std::string& why);
+  void drop_check_locked(std::map<uint64_t, Check>::iterator it, bool skipped);
+  // The plan is done and no check is pending: the job is DONE; returns its final snapshot.
+  std::optional<ImageSnapshot> finish_if_done_locked(Job& job, double now);
+
   CoordinatorOptions options_;
   std::unique_ptr<Clock> clock_;
   std::unique_ptr<ImageSink> sink_;
@@ -185,6 +213,10 @@ class Coordinator {
   uint64_t next_job_ = 1;
   std::mt19937_64 ids_{std::random_device{}()};
   CoordinatorCounters counters_;
+  std::map<uint64_t, Check> checks_;
+  uint64_t next_check_ = 1;
+  std::set<uint64_t> quarantined_;                // worker ids
+  std::set<std::string> quarantined_principals_;  // their token names, refused at Register
 };
 
 }  // namespace tessera

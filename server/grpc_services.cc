@@ -114,7 +114,7 @@ grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::Fetch
 
 grpc::Status WorkerService::Register(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
                                      v1::RegisterResponse* out) {
-  return as(auth_, ctx, Action::kWork, [&](const Principal&) { *out = c_.register_worker(*req); });
+  return as(auth_, ctx, Action::kWork, [&](const Principal& who) { *out = c_.register_worker(*req, who.name); });
 }
 grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) {
   // Long poll: an idle worker waits here (up to a second) and gets a new job's first task

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <set>
@@ -28,6 +29,11 @@ struct Job {
   std::string image_error;       // the last image write's failure; empty once one succeeds
   std::string checkpoint_error;  // the same for checkpoints
   std::set<uint64_t> failed_on;  // workers that could not render one of its tasks
+  // Verification: the tiles each worker's results were merged into (a tile once per
+  // pass), to render again if the worker is found lying; checks not yet decided (the job
+  // ends only when none is left).
+  std::map<uint64_t, std::vector<uint32_t>> merged_by;
+  uint32_t pending_checks = 0;
   double submitted = 0, started = 0, finished_at = 0;
 
   // Progressive images: a snapshot is taken under the coordinator's lock, written outside.

@@ -5,9 +5,12 @@
 
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
+
+#include "wire.h"
 
 namespace tessera {
 
@@ -16,6 +19,10 @@ struct Lease {
   uint32_t tile = 0, pass = 0;
   uint64_t worker = 0;
   double deadline = 0;
+  // Verification: `task` is kept when the result is to be rendered again by another
+  // worker; `check` names the check a lease renders (0: an ordinary task).
+  std::shared_ptr<const v1::Task> task;
+  uint64_t check = 0;
 };
 
 class LeaseTable {
@@ -25,6 +32,7 @@ class LeaseTable {
   explicit LeaseTable(uint64_t first_id = 1) : next_(first_id) {}
   uint64_t grant(Lease lease);  // returns the new task id
   const Lease* live(uint64_t id) const;
+  Lease* live(uint64_t id) { return const_cast<Lease*>(static_cast<const LeaseTable*>(this)->live(id)); }
   // A live or ended lease: whoever returns its result first is merged.
   const Lease* known(uint64_t id) const;
   // Extends a live lease of this worker; false if it is not live or not the worker's.

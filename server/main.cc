@@ -47,6 +47,11 @@ int main(int argc, char** argv) {
                  "save running jobs' films at least this often: what a crash can cost")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 3600.0));
+  app.add_option("--verify-fraction", opt.verify_fraction,
+                 "render this fraction of tasks again on a second worker and compare the bits; a worker that "
+                 "differs from the coordinator's own render is quarantined (0 turns it off)")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0));
   int write_delay_ms = 0;  // for the crash tests: a window in which to kill mid-write
   app.add_option("--test-checkpoint-delay-ms", write_delay_ms)->group("")->check(CLI::Range(0, 60000));
   app.add_option("--lease-seconds", opt.lease_seconds, "lease length; a silent worker's task moves on after it")

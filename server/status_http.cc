@@ -206,6 +206,15 @@ std::string StatusHttp::metrics_text() const {
           double(k.checkpoints_written));
   counter("tessera_checkpoint_errors_total", "Film checkpoint writes that failed.", double(k.checkpoint_errors));
   counter("tessera_jobs_restored_total", "Jobs taken up from the data folder at start.", double(k.jobs_restored));
+  counter("tessera_checks_issued_total", "Merged results picked to be rendered again by another worker.",
+          double(k.checks_issued));
+  counter("tessera_checks_passed_total", "Checks whose second render had the same bits.", double(k.checks_passed));
+  counter("tessera_check_mismatches_total", "Checks whose second render differed.", double(k.check_mismatches));
+  counter("tessera_checks_skipped_total", "Checks no other worker took in time.", double(k.checks_skipped));
+  counter("tessera_workers_quarantined_total", "Workers whose results differed from the coordinator's render.",
+          double(k.workers_quarantined));
+  counter("tessera_tiles_rendered_again_total", "Tiles started over because a quarantined worker merged into them.",
+          double(k.tiles_rendered_again));
   counter("tessera_merge_seconds_total", "Time spent adding tile sums into films.", k.merge_seconds);
   size_t counts[5] = {};
   for (const v1::JobStatus& s : c_.list()) ++counts[std::min<size_t>(4, size_t(s.state()))];

@@ -12,6 +12,7 @@ namespace tessera {
 struct WorkerInfo {
   uint64_t id = 0;
   std::string name;
+  std::string principal;  // the access token's name ("" without tokens)
   uint32_t threads = 0;
   double last_seen = 0;
   double samples_per_second = 0;  // smoothed over results

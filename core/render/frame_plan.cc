@@ -129,6 +129,36 @@ double FramePlan::fraction_done() const {
   return work_total_ > 0 ? std::min(1.0, work_done_ / work_total_) : 0;
 }
 
+void FramePlan::reset_tile(uint32_t tile) {
+  if (tile >= tiles_.size() || passes_.empty()) return;
+  TileProgress& t = progress_[tile];
+  const Rect& r = tiles_[tile];
+  const double area = double(r.area());
+  if (t.finished) {
+    --tiles_done_;
+    for (uint32_t p = t.passes_done; p < passes_.size(); ++p)  // scheduled again
+      work_total_ += double(passes_[p].second - passes_[p].first) * area;
+  } else {
+    --unfinished_at_[t.passes_done];
+    ready_.erase({t.passes_done, tile});
+  }
+  for (uint32_t p = 0; p < t.passes_done; ++p) work_done_ -= double(passes_[p].second - passes_[p].first) * area;
+  const Rect& w = film_.window();
+  for (int y = 0; y < r.h; ++y)
+    for (int x = 0; x < r.w; ++x) {
+      PixelSums& px = film_.at(r.x - w.x + x, r.y - w.y + y);
+      samples_merged_ -= px.n;
+      px = PixelSums{};
+      active_[size_t(r.y - w.y + y) * w.w + (r.x - w.x + x)] = 1;
+    }
+  t = TileProgress{};
+  ++unfinished_at_[0];
+  ready_.emplace(0, tile);
+  ++merges_;  // the film changed
+  frame_passes_ = 0;
+  while (frame_passes_ < passes_.size() && unfinished_at_[frame_passes_] == 0) ++frame_passes_;
+}
+
 PlanState FramePlan::state() const {
   PlanState s;
   s.progress = progress_;

@@ -83,6 +83,12 @@ class FramePlan {
   // Fraction of the scheduled work done, 1 when done (adaptive sampling may end early).
   double fraction_done() const;
 
+  // Forgets everything merged into one tile (its pixels back to zero, every pass to be
+  // rendered again, its pixels active again): for results found to come from a worker that
+  // lies. Rendering the tile's passes again gives the film the same bits as if the tile
+  // had been rendered honestly the first time. A lease on the tile must be ended first.
+  void reset_tile(uint32_t tile);
+
   PlanState state() const;
   // Takes up a saved state and film (from state() and film() of a plan with the same
   // settings) in place of this plan's; nothing is taken. Throws std::invalid_argument,

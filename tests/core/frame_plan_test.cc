@@ -260,5 +260,44 @@ TEST(FramePlan, AStateThatDoesNotFitIsRefusedAndChangesNothing) {
   EXPECT_EQ(b.ready(), b.tiles().size());
 }
 
+// A tile reset (its results came from a lying worker) and rendered again ends with the
+// film of a plan that never saw the lie.
+TEST(FramePlan, AResetTileRenderedAgainGivesTheHonestFilm) {
+  for (const bool adaptive : {false, true}) {
+    RenderSettings s = settings(40, 24, 8, 24, 4);
+    s.adaptive = adaptive;
+    s.adaptive_batch = 4;
+    s.adaptive_tolerance = 0.2f;
+    FramePlan honest(s), lied_to(s);
+    while (!honest.done()) {
+      const TileTask t = *honest.take();
+      ASSERT_EQ(honest.merge(t.tile, t.pass, noisy_sums_for(t)), FramePlan::Merge::kMerged);
+    }
+    std::set<uint32_t> lied;  // tiles with a lie merged: tile 3 and 7, on their second pass
+    while (!lied_to.done()) {
+      const TileTask t = *lied_to.take();
+      std::vector<PixelSums> sums = noisy_sums_for(t);
+      if ((t.tile == 3 || t.tile == 7) && t.pass == 1 && !lied.count(t.tile)) {
+        for (PixelSums& p : sums) p = PixelSums{p.r * 0.8, p.g * 0.8, p.b * 0.8, p.lum2 * 0.64, p.n};  // plausible, wrong
+        lied.insert(t.tile);
+      }
+      ASSERT_EQ(lied_to.merge(t.tile, t.pass, sums), FramePlan::Merge::kMerged);
+      if (lied.size() == 2 && lied_to.merges() >= 32) {  // the lies found after some more merges
+        for (uint32_t bad : {3u, 7u}) lied_to.reset_tile(bad);
+        lied.insert(99);
+        EXPECT_FALSE(lied_to.done());
+        EXPECT_EQ(lied_to.progress(3).passes_done, 0u);
+      }
+    }
+    ASSERT_TRUE(lied.count(99));
+    for (size_t i = 0; i < honest.film().pixels().size(); ++i) {
+      const PixelSums &a = honest.film().pixels()[i], &b = lied_to.film().pixels()[i];
+      ASSERT_TRUE(a.r == b.r && a.g == b.g && a.b == b.b && a.lum2 == b.lum2 && a.n == b.n) << i;
+    }
+    EXPECT_EQ(honest.samples_merged(), lied_to.samples_merged());
+    EXPECT_EQ(lied_to.fraction_done(), 1);
+  }
+}
+
 }  // namespace
 }  // namespace tessera
