@@ -12,6 +12,7 @@ PACKAGES=(
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-numpy python3-matplotlib
   iproute2 libssl-dev openssl
+  clang libclang-rt-14-dev
 )
 
 missing=()

@@ -90,6 +90,8 @@ TEST(WireCodec, SumsRoundTripExactlyAndHostileDataIsRefused) {
   EXPECT_THROW(decode_sums("garbage", 1), WireError);
   sums[3].r = std::numeric_limits<double>::quiet_NaN();
   EXPECT_THROW(decode_sums(encode_sums(sums), sums.size()), WireError);
+  // Found by fuzz_result (UBSan: pointer arithmetic on an empty vector's null data()).
+  EXPECT_TRUE(decode_sums(encode_sums({}), 0).empty());
 }
 
 TEST(WireSettings, RoundTripAndRangeChecks) {

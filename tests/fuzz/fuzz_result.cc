@@ -1,0 +1,71 @@
+// libFuzzer target: what the coordinator decodes from bytes it did not write itself or
+// that a crash may have cut short: a worker's tile sums (decode_sums, then the plan's
+// plausibility check) and a film checkpoint (decode_checkpoint). The first input byte
+// picks which; refusals are WireError / std::runtime_error; a decoded tile must hold only
+// finite numbers. Seeds: TESSERA_FUZZ_SEEDS=DIR writes some and exits.
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <stdexcept>
+#include <string>
+
+#include "core/render/frame_plan.h"
+#include "server/job_store.h"
+#include "wire.h"
+
+namespace {
+std::vector<tessera::PixelSums> tile(size_t n) {
+  std::vector<tessera::PixelSums> s(n);
+  for (size_t i = 0; i < n; ++i) s[i] = {0.25 * double(i), 0.5, 1.0 / 3, 0.125 * double(i), uint32_t(i % 5)};
+  return s;
+}
+}  // namespace
+
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  const char* seeds = std::getenv("TESSERA_FUZZ_SEEDS");
+  if (!seeds) return 0;
+  namespace fs = std::filesystem;
+  fs::create_directories(seeds);
+  for (const size_t n : {1, 16, 64}) {
+    const std::string sums = tessera::encode_sums(tile(n));
+    std::ofstream(fs::path(seeds) / ("sums" + std::to_string(n)), std::ios::binary)
+        << char(0) << char(n & 0xff) << char(n >> 8) << sums;
+  }
+  tessera::PlanState st;
+  st.progress = {{1, false, 0.5f}, {2, true, 0.25f}};
+  st.active.assign(16, 1);
+  tessera::Film film(tessera::Rect{0, 0, 4, 4});
+  film.add_tile(film.window(), tile(16));
+  std::ofstream(fs::path(seeds) / "checkpoint", std::ios::binary)
+      << char(1) << tessera::encode_checkpoint(st, film, 2.5);
+  std::exit(0);
+}
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  if (size < 1) return 0;
+  if (data[0] % 2 == 0) {  // tile sums: two bytes of pixel count, then the payload
+    if (size < 3) return 0;
+    const size_t pixels = size_t(data[1]) | size_t(data[2]) << 8;
+    try {
+      const auto sums = tessera::decode_sums(std::string(reinterpret_cast<const char*>(data) + 3, size - 3), pixels);
+      if (sums.size() != pixels) __builtin_trap();
+      for (const tessera::PixelSums& p : sums) {
+        if (!std::isfinite(p.r) || !std::isfinite(p.g) || !std::isfinite(p.b) || !std::isfinite(p.lum2))
+          __builtin_trap();
+        (void)tessera::plausible(p);
+      }
+    } catch (const tessera::WireError&) {
+    }
+  } else {
+    try {
+      const tessera::Checkpoint c =
+          tessera::decode_checkpoint(std::string(reinterpret_cast<const char*>(data) + 1, size - 1));
+      if (c.film.pixels().size() != size_t(c.film.window().area())) __builtin_trap();
+    } catch (const std::runtime_error&) {
+    }
+  }
+  return 0;
+}
