@@ -17,8 +17,8 @@ if [ ! -f "$B/build.ninja" ]; then
   CXX=clang++ cmake -S . -B "$B" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTESSERA_FUZZ=ON \
     -DTESSERA_BUILD_TESTS=OFF -DTESSERA_BUILD_BENCH=OFF
 fi
-targets="collada gltf bundle result"
-cmake --build "$B" -j "$(nproc)" --target $(for t in $targets; do echo "fuzz_$t"; done)
+targets=${FUZZ_TARGETS:-collada gltf bundle result}
+cmake --build "$B" -j "$(nproc)" --target fuzz_collada fuzz_gltf fuzz_bundle fuzz_result
 corpus="$B/corpus"
 for t in $targets; do mkdir -p "$corpus/$t" "tests/fuzz/regressions/$t"; done
 cp scenes/*.dae "$corpus/collada/"

@@ -18,6 +18,8 @@ bool plausible(const PixelSums& p) {
   if (!(std::isfinite(p.r) && std::isfinite(p.g) && std::isfinite(p.b) && std::isfinite(p.lum2))) return false;
   if (p.r < 0 || p.g < 0 || p.b < 0 || p.lum2 < 0) return false;  // radiance is never negative
   if (p.n == 0) return p.r == 0 && p.g == 0 && p.b == 0 && p.lum2 == 0;
+  const double cap = double(p.n) * kMaxSampleValue;
+  if (p.r > cap || p.g > cap || p.b > cap || p.lum2 > cap * kMaxSampleValue) return false;
   // Cauchy-Schwarz: (sum l)^2 <= n sum l^2. The slack covers the float luminance of each
   // sample against the double weights of lum_sum(); no honest pixel comes near it.
   const double s = p.lum_sum();

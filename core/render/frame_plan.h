@@ -116,8 +116,17 @@ class FramePlan {
   double work_done_ = 0, work_total_ = 0;  // pixel-samples scheduled
 };
 
+// A sample's radiance at most, per channel. Emitters are at most Scene::kMaxEmission
+// (1e20) and every BSDF conserves energy; with MIS an area light's contribution stays
+// within its radiance times a small factor, so an honest sample passes 1e30 only through
+// the 1/d^2 of a delta light (or, with --no-mis, an area light) closer than 1e-5 to the
+// shading point. The bound keeps every pixel's mean a finite float whatever a worker
+// sends; lies within it are for verification by replay to find.
+constexpr double kMaxSampleValue = 1e30;
+
 // Whether a pixel's sums could come from rendering: finite, non-negative, zero without
-// samples, and a squared-luminance sum that Cauchy-Schwarz allows for its luminance sum.
+// samples, at most n x kMaxSampleValue per channel (n x kMaxSampleValue^2 squared), and a
+// squared-luminance sum that Cauchy-Schwarz allows for its luminance sum.
 bool plausible(const PixelSums& p);
 
 // CS184 adaptive stopping (format doc 7.1, dividing by the true count): a pixel stops when

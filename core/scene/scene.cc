@@ -83,6 +83,15 @@ void Scene::finalize() {
     check_point(l.edge_y, "light '" + l.name + "'", "edge");
   }
   if (camera.present) check_point(camera.eye, "camera", "eye");
+  auto check_emission = [&](Rgb c, const std::string& element) {
+    for (const double v : {double(c.r), double(c.g), double(c.b)})
+      if (!std::isfinite(v) || v < 0 || v > kMaxEmission)
+        throw SceneError(source, element,
+                         "emission " + std::to_string(v) + " must be finite, non-negative and at most 1e20");
+  };
+  for (const Light& l : lights) check_emission(l.color, "light '" + l.name + "'");
+  for (const Material& m : materials)
+    if (m.kind == Material::Kind::kEmission) check_emission(m.radiance, "material '" + m.name + "'");
   // Rect lights are also geometry: a one-sided emitter that camera rays see and that
   // blocks other rays (format doc 3.3, with the physical radiance `color`).
   for (size_t i = 0; i < lights.size(); ++i) {

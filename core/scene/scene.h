@@ -110,6 +110,10 @@ struct Scene {
   // about a bounding-box diagonal away. 1e12 leaves a margin of a million for both, and
   // is far beyond any real scene (docs/ray-offsets.md).
   static constexpr double kMaxCoordinate = 1e12;
+  // Emitted radiance and light intensity, per channel, at most: keeps every honest sample
+  // far below kMaxSampleValue (core/render/frame_plan.h), so that a sample beyond it is
+  // a worker's lie, not a bright scene.
+  static constexpr double kMaxEmission = 1e20;
 
   std::string source;  // file it came from
   std::vector<Material> materials;

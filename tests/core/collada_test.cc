@@ -174,6 +174,13 @@ TEST_F(BadCollada, VertexBeyondTheTraceableRange) {
                "vertex 0 (1e+20, -0.75, -1) is not finite or outside +-1e12");
 }
 
+// Issue 10, row 6: emitters are bounded so that a sample brighter than kMaxSampleValue can
+// only be a worker's lie.
+TEST_F(BadCollada, EmitterBrighterThanTheBound) {
+  expect_error(replaced("<area><color>12 12 12</color>", "<area><color>12 1e25 12</color>"), "light '",
+               "must be finite, non-negative and at most 1e20");
+}
+
 TEST_F(BadCollada, TruncatedFile) { expect_error(base.substr(0, base.size() / 2), "line ", "XML parse error"); }
 
 TEST_F(BadCollada, GarbageBytes) {

@@ -106,6 +106,10 @@ TEST(FramePlan, SumsNoRenderCouldGiveAreRefused) {
   EXPECT_EQ(with([](PixelSums& p) { p.lum2 = 0.1; }), FramePlan::Merge::kInvalid);  // mean 0.7, spread below 0
   EXPECT_EQ(with([](PixelSums& p) { p.n = 0; }), FramePlan::Merge::kInvalid);       // sums without samples
   EXPECT_EQ(with([](PixelSums& p) { p.b = std::numeric_limits<double>::infinity(); }), FramePlan::Merge::kInvalid);
+  // Consistent (Cauchy-Schwarz holds) but brighter than any sample can be: the pixel's
+  // mean would not fit the image's floats.
+  EXPECT_EQ(with([](PixelSums& p) { p = PixelSums{1e150 * p.n, 1e150 * p.n, 1e150 * p.n, 1e300 * p.n, p.n}; }),
+            FramePlan::Merge::kInvalid);
   EXPECT_EQ(plan.merges(), 0u);
   EXPECT_EQ(with([](PixelSums&) {}), FramePlan::Merge::kMerged);
   for (const PixelSums& p : plan.film().pixels()) EXPECT_TRUE(plausible(p));

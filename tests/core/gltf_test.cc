@@ -361,6 +361,12 @@ TEST_F(Gltf, BufferShorterThanDeclared) {
   expect_error(write(d, false), "short.bin");
 }
 
+// Found by fuzz_gltf: a number too large for a double (1e999) made the JSON parser throw
+// an exception the loader did not expect, and the process ended.
+TEST_F(Gltf, NumberBeyondADoubleIsAnError) {
+  expect_error(write("scene.gltf", R"({"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"x":1e999})"), "JSON");
+}
+
 TEST_F(Gltf, BrokenBase64) {
   Doc d;
   d.embed();

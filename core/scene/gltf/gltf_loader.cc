@@ -140,7 +140,7 @@ class GltfLoader {
     nlohmann::json j;
     try {
       j = nlohmann::json::parse(binary ? glb_json(bytes) : bytes);
-    } catch (const nlohmann::json::parse_error& e) {
+    } catch (const nlohmann::json::exception& e) {  // parse_error, and out_of_range for numbers like 1e999
       fail("JSON", first_line(e.what()));
     }
     std::vector<std::string> out;
@@ -245,7 +245,7 @@ class GltfLoader {
     nlohmann::json j;
     try {
       j = nlohmann::json::parse(json_text);
-    } catch (const nlohmann::json::parse_error& e) {
+    } catch (const nlohmann::json::exception& e) {  // parse_error, and out_of_range for numbers like 1e999
       fail("JSON", first_line(e.what()));
     }
     if (!j.is_object()) fail("JSON", "top level is not an object");
