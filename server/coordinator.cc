@@ -312,12 +312,13 @@ size_t Coordinator::expire_leases() {
     // Here, on the reaper's tick, not in every GetTask: it walks every worker.
     workers_.forget_silent(now, options_.worker_timeout_seconds);
     expired = expire_locked(now);
-    // A check no other worker took for two lease periods (there may be none) is skipped,
-    // so that a job does not wait for a second worker forever.
+    // A check that no other worker can take (none is registered) or took for two lease
+    // periods is skipped, so that a job does not wait for a second worker forever.
     std::set<Job*> touched;
     for (auto it = checks_.begin(); it != checks_.end();) {
       auto next = std::next(it);
-      if (it->second.lease == 0 && now - it->second.since > 2 * options_.lease_seconds) {
+      const size_t others = workers_.size() - (workers_.find(it->second.first_worker) ? 1 : 0);
+      if (it->second.lease == 0 && (others == 0 || now - it->second.since > 2 * options_.lease_seconds)) {
         touched.insert(jobs_.at(it->second.job).get());
         drop_check_locked(it, true);
       }
@@ -660,7 +661,7 @@ void Coordinator::quarantine_locked(uint64_t worker, const std::string& why) {
   ++counters_.workers_quarantined;
   std::string name = std::to_string(worker);
   if (const WorkerInfo* w = workers_.find(worker)) {
-    name = "'" + w->name + "' (" + name + ")";
+    name = "'" + w->name + "' (" + (w->principal.empty() ? "" : "token '" + w->principal + "', ") + name + ")";
     if (!w->principal.empty()) quarantined_principals_.insert(w->principal);
   }
   std::fprintf(stderr, "tessera-coordinator: worker %s quarantined: %s\n", name.c_str(), why.c_str());

@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 4096));
   app.add_flag("-v,--verbose", opt.verbose, "log connection events");
+  app.add_flag("--test-lie", opt.lie)->group("");  // verification tests: wrong sums
   std::string token_file, tls_ca;
   app.add_option("--token-file", token_file,
                  "file holding a worker access token (else $TESSERA_TOKEN_FILE, or the token in $TESSERA_TOKEN)");

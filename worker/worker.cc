@@ -233,6 +233,8 @@ void Worker::send_loop() {
       r->set_worker_id(worker_id_);
       r->set_task_id(h->task.task_id());
       r->set_raw_size(uint32_t(h->sums.size() * kBytesPerPixel));
+      if (options_.lie)
+        for (PixelSums& p : h->sums) p = PixelSums{p.r * 0.8, p.g * 0.8, p.b * 0.8, p.lum2 * 0.64, p.n};
       r->set_sums_zstd(encode_sums(h->sums));
       r->set_samples(h->stats.samples);
       r->set_rays(h->stats.rays.rays + h->stats.rays.shadow_rays);

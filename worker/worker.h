@@ -38,6 +38,9 @@ struct WorkerOptions {
   double lookahead_seconds = 0.3;  // queued work to keep, at the measured speed
   int max_tasks = 64;              // leases held at once, at most
   Access access;                   // token and TLS
+  // For the verification tests only (a hidden flag): every result's sums scaled by 0.8
+  // (plausible, and wrong), as a broken or dishonest machine would send them.
+  bool lie = false;
 };
 
 class Worker {

@@ -28,6 +28,7 @@ constexpr const char* kBob = "bob-client-token-0123456789ab";
 constexpr const char* kWorker = "worker-token-0123456789abcdef";
 constexpr const char* kViewer = "viewer-token-0123456789abcdef";
 constexpr const char* kAdmin = "admin-token-0123456789abcdefg";
+constexpr const char* kMallory = "mallory-worker-token-0123456789";
 const std::string kFlags = "-r 48 36 -s 8 --pass-spp 4 -m 4 --seed 2 --tile 16";
 
 class Access : public ::testing::Test {
@@ -43,7 +44,8 @@ class Access : public ::testing::Test {
     fs::create_directories(dir);
     write_file_atomic((dir / "tokens").string(), std::string("# role name token\n") + "client alice " + kAlice +
                                                      "\nclient bob " + kBob + "\nworker farm " + kWorker +
-                                                     "\nviewer ops " + kViewer + "\nadmin root " + kAdmin + "\n");
+                                                     "\nviewer ops " + kViewer + "\nadmin root " + kAdmin +
+                                                     "\nworker mallory " + kMallory + "\n");
   }
   void TearDown() override {
     workers.clear();
@@ -68,9 +70,14 @@ class Access : public ::testing::Test {
     http_port = std::stoi(m[1]);
   }
   Process& start_worker(const char* token, const std::string& extra_flag = "", const std::string& extra_value = "") {
+    std::vector<std::string> extra;
+    if (!extra_flag.empty()) extra = {extra_flag, extra_value};
+    return start_worker(token, extra);
+  }
+  Process& start_worker(const char* token, const std::vector<std::string>& extra) {
     std::vector<std::string> args{"--coordinator",          grpc_addr,      "--threads",      "1", "--cache",
                                   (dir / "cache").string(), "--token-file", token_file(token)};
-    if (!extra_flag.empty()) args.insert(args.end(), {extra_flag, extra_value});
+    args.insert(args.end(), extra.begin(), extra.end());
     const std::string n = std::to_string(workers.size());
     workers.push_back(
         std::make_unique<Process>(kBin + "/tessera-worker", args, (dir / ("worker" + n + ".err")).string()));
@@ -200,6 +207,31 @@ TEST_F(Access, TlsForGrpcAndHttp) {
   auto res = https.Get("/api/status", httplib::Headers{{"Authorization", std::string("Bearer ") + kViewer}});
   ASSERT_TRUE(res) << httplib::to_string(res.error());
   EXPECT_EQ(res->status, 200);
+}
+
+// Verify by replay through the real binaries: a worker that returns wrong (plausible) sums
+// is caught by a second worker's render of the same task, quarantined, refused when it
+// registers again with its token (so it exits), and what it merged is rendered again: the
+// image is still the bytes of `tessera render`.
+TEST_F(Access, ALyingWorkerIsCaughtQuarantinedAndTheImageIsUnchanged) {
+  const std::string flags = "-r 96 72 -s 32 --pass-spp 8 -m 4 --seed 3 --tile 16";  // 120 tasks
+  start_coordinator({"--verify-fraction", "0.5"});
+  start_worker(kWorker);
+  Process& liar = start_worker(kMallory, std::vector<std::string>{"--test-lie"});
+  const std::string out = (dir / "farm.exr").string(), local = (dir / "local.exr").string();
+  const CommandResult r = tessera("submit " + kScene + " " + flags + " --wait -q -f " + out, kAlice);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const int rc = std::system((kBin + "/tessera render " + kScene + " " + flags + " -q -f " + local).c_str());
+  ASSERT_EQ(rc, 0);
+  expect_same_pixels(local, out);
+  EXPECT_EQ(liar.wait(30), 1);  // refused at Register: quarantined
+  EXPECT_NE(slurp((dir / "worker1.err").string()).find("quarantined"), std::string::npos);
+  EXPECT_NE(slurp((dir / "coordinator.err").string()).find("token 'mallory'"), std::string::npos)
+      << slurp((dir / "coordinator.err").string());
+  httplib::Client cli("127.0.0.1", http_port);
+  const auto m = cli.Get("/metrics", {{"Authorization", std::string("Bearer ") + kViewer}});
+  ASSERT_TRUE(m);
+  EXPECT_NE(m->body.find("tessera_workers_quarantined_total 1\n"), std::string::npos);
 }
 
 }  // namespace
