@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 
+#include "core/io/files.h"
 #include "core/render/tile_renderer.h"
 #include "core/scene/load.h"
 #include "core/scene/scene_error.h"
@@ -927,6 +928,44 @@ std::vector<WorkerInfo> Coordinator::workers() const {
 double Coordinator::utilization() const {
   std::lock_guard<std::mutex> lock(mu_);
   return workers_.utilization();
+}
+
+Coordinator::Queue Coordinator::queue() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  Queue q;
+  q.tasks_leased = leases_.live_count();
+  for (const auto& [id, job] : jobs_)
+    if (job->live()) {
+      q.tasks_ready += job->plan.ready();
+      q.samples_remaining += job->plan.samples_total() - std::min(job->plan.samples_total(), job->plan.samples_merged());
+    }
+  double speed = 0, threads = 0;
+  for (const WorkerInfo& w : workers_.list())
+    if (w.samples_per_second > 0) {
+      speed += w.samples_per_second;
+      threads += w.threads;
+    }
+  if (threads > 0) thread_speed_ = speed / threads;
+  q.samples_per_thread_second = thread_speed_ > 0 ? thread_speed_ : kAssumedThreadSpeed;
+  q.core_seconds_remaining = double(q.samples_remaining) / q.samples_per_thread_second;
+  return q;
+}
+
+std::string Coordinator::unready_reason() const {
+  try {
+    store_->ping();
+  } catch (const std::exception& e) {
+    return without_data_dir(e.what());
+  }
+  const fs::path probe = fs::path(options_.data_dir) / ".ready-probe";
+  try {
+    write_file_atomic(probe.string(), "ok\n");
+  } catch (const std::exception&) {
+    return "the data folder does not take writes";
+  }
+  std::error_code ec;
+  fs::remove(probe, ec);
+  return "";
 }
 
 CoordinatorCounters Coordinator::counters() const {

@@ -139,6 +139,20 @@ class Coordinator {
   // then renders nothing again.
   void checkpoint_all();
 
+  // What is left to render, for autoscalers (Kubernetes HPA, Slurm scripts): tasks ready
+  // and leased, samples not yet merged (an upper bound with adaptive sampling), and those
+  // samples in core-seconds at the render speed per thread measured lately.
+  struct Queue {
+    uint64_t tasks_ready = 0, tasks_leased = 0, samples_remaining = 0;
+    double samples_per_thread_second = 0;  // measured; kAssumedThreadSpeed before any result
+    double core_seconds_remaining = 0;
+  };
+  static constexpr double kAssumedThreadSpeed = 1e6;  // samples/s a thread, about ours on CS184 scenes
+  Queue queue() const;
+  // Empty when the coordinator can serve (its job database answers and its data folder
+  // takes writes); else what is wrong. For readiness probes.
+  std::string unready_reason() const;
+
   std::vector<WorkerInfo> workers() const;
   double utilization() const;  // of every live worker's render threads, recently
   CoordinatorCounters counters() const;
@@ -213,6 +227,7 @@ class Coordinator {
   uint64_t next_job_ = 1;
   std::mt19937_64 ids_{std::random_device{}()};
   CoordinatorCounters counters_;
+  mutable double thread_speed_ = 0;  // the last measured samples/s per render thread (0: none yet)
   std::map<uint64_t, Check> checks_;
   uint64_t next_check_ = 1;
   std::set<uint64_t> quarantined_;                // worker ids

@@ -307,6 +307,11 @@ std::vector<StoredJob> JobStore::jobs() const {
   return out;
 }
 
+void JobStore::ping() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  Statement(db_, "SELECT count(*) FROM jobs").step();
+}
+
 std::string JobStore::checkpoint_path(const std::string& id) const {
   return (fs::path(dir_) / "jobs" / id / "checkpoint").string();
 }

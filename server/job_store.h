@@ -52,6 +52,7 @@ class JobStore {
   void add(const StoredJob& job);
   void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed);
   std::vector<StoredJob> jobs() const;  // in submission order
+  void ping() const;                    // a query; throws std::runtime_error if it fails
 
   // Replaces the job's checkpoint: written to a temporary file, synced, renamed into place.
   // Throws std::runtime_error naming the file.

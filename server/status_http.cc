@@ -80,6 +80,8 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
     : c_(c), server_(make_server(tls_cert, tls_key)) {
   if (auth && auth->enabled())
     server_->set_pre_routing_handler([auth](const httplib::Request& req, httplib::Response& res) {
+      // Probes (kubelet, load balancers) carry no token, and the answers say nothing.
+      if (req.path == "/healthz" || req.path == "/readyz") return httplib::Server::HandlerResponse::Unhandled;
       const Authenticator::Check c = auth->check(req.get_header_value("Authorization"), Action::kRead);
       if (c.outcome == Authenticator::Check::kAllowed) return httplib::Server::HandlerResponse::Unhandled;
       const bool unauthenticated = c.outcome == Authenticator::Check::kUnauthenticated;
@@ -88,6 +90,12 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
       res.set_content(c.why + (unauthenticated ? " (Authorization: Bearer TOKEN)\n" : "\n"), "text/plain");
       return httplib::Server::HandlerResponse::Handled;
     });
+  server_->Get("/healthz", [](const httplib::Request&, httplib::Response& res) { res.set_content("ok\n", "text/plain"); });
+  server_->Get("/readyz", [this](const httplib::Request&, httplib::Response& res) {
+    const std::string why = c_.unready_reason();
+    res.status = why.empty() ? 200 : 503;
+    res.set_content(why.empty() ? "ready\n" : why + "\n", "text/plain");
+  });
   server_->Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {
     res.set_content(status_json(), "application/json");
   });
@@ -215,6 +223,19 @@ std::string StatusHttp::metrics_text() const {
           double(k.workers_quarantined));
   counter("tessera_tiles_rendered_again_total", "Tiles started over because a quarantined worker merged into them.",
           double(k.tiles_rendered_again));
+  const Coordinator::Queue q = c_.queue();
+  m << "# HELP tessera_queue_tasks Tasks of live jobs: ready to hand out, or leased to a worker.\n"
+       "# TYPE tessera_queue_tasks gauge\n"
+    << "tessera_queue_tasks{state=\"ready\"} " << q.tasks_ready << "\ntessera_queue_tasks{state=\"leased\"} "
+    << q.tasks_leased << '\n';
+  gauge("tessera_remaining_samples", "Camera samples of live jobs not yet merged (an upper bound with -a).",
+        double(q.samples_remaining));
+  gauge("tessera_thread_samples_per_second",
+        "Render speed per worker thread, measured lately (1e6 assumed before any result).",
+        q.samples_per_thread_second);
+  gauge("tessera_remaining_core_seconds",
+        "Work left in core-seconds at the measured speed: the autoscaling signal (workers = this / seconds wanted).",
+        q.core_seconds_remaining);
   counter("tessera_merge_seconds_total", "Time spent adding tile sums into films.", k.merge_seconds);
   size_t counts[5] = {};
   for (const v1::JobStatus& s : c_.list()) ++counts[std::min<size_t>(4, size_t(s.state()))];

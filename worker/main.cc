@@ -29,6 +29,10 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 4096));
   app.add_flag("-v,--verbose", opt.verbose, "log connection events");
+  app.add_option("--exit-when-idle", opt.exit_when_idle_seconds,
+                 "leave after this many seconds without a task (0: never); for batch allocations")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e9));
   app.add_flag("--test-lie", opt.lie)->group("");  // verification tests: wrong sums
   std::string token_file, tls_ca;
   app.add_option("--token-file", token_file,

@@ -361,7 +361,18 @@ bool Worker::run(const std::atomic<bool>& stop) {
   {
     ThreadPool pool(options_.threads);
     for (int i = 0; i < pool.size(); ++i) pool.run([this] { render_loop(); });
+    double last_work = now_seconds();
     while (!stop) {
+      if (options_.exit_when_idle_seconds > 0) {
+        std::lock_guard<std::mutex> lock(mu_);
+        if (!held_.empty()) {
+          last_work = now_seconds();
+        } else if (now_seconds() - last_work > options_.exit_when_idle_seconds) {
+          std::fprintf(stderr, "tessera-worker: no work for %g s (--exit-when-idle): leaving\n",
+                       options_.exit_when_idle_seconds);
+          break;
+        }
+      }
       v1::GetTaskRequest req;
       req.set_worker_id(worker_id_);
       {
@@ -390,6 +401,7 @@ bool Worker::run(const std::atomic<bool>& stop) {
         continue;
       }
       backoff_ = 0.1;
+      if (resp.tasks_size() > 0) last_work = now_seconds();
       for (const v1::Task& task : resp.tasks()) enqueue(task, stop);
     }
     std::lock_guard<std::mutex> lock(mu_);

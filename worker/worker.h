@@ -41,6 +41,9 @@ struct WorkerOptions {
   // For the verification tests only (a hidden flag): every result's sums scaled by 0.8
   // (plausible, and wrong), as a broken or dishonest machine would send them.
   bool lie = false;
+  // Leave (cleanly, as on SIGTERM) after this long without a task; 0: never. For batch
+  // allocations (Slurm) that should end when the queue is empty.
+  double exit_when_idle_seconds = 0;
 };
 
 class Worker {

@@ -156,6 +156,8 @@ TEST_F(Access, EveryCallNeedsATokenWhoseRoleAllowsIt) {
   EXPECT_EQ(http_get("/api/status", "", &challenge), 401);
   EXPECT_NE(challenge.find("Basic"), std::string::npos);
   EXPECT_EQ(http_get("/metrics", std::string("Bearer ") + kWorker), 403);
+  EXPECT_EQ(http_get("/healthz", ""), 200);  // probes need no token, and say nothing
+  EXPECT_EQ(http_get("/readyz", ""), 200);
   EXPECT_EQ(http_get("/api/status", std::string("Bearer ") + kViewer), 200);
   httplib::Client browser("127.0.0.1", http_port);
   browser.set_basic_auth("ops", kViewer);

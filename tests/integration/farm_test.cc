@@ -65,13 +65,13 @@ class Farm : public ::testing::Test {
     ASSERT_TRUE(std::regex_match(h, m, std::regex("http listening on 127\\.0\\.0\\.1:(\\d+)"))) << h;
     http_port = std::stoi(m[1]);
   }
-  Process& start_worker(int threads = 1) {
+  Process& start_worker(int threads = 1, const std::vector<std::string>& extra = {}) {
     const std::string n = std::to_string(workers.size());
-    workers.push_back(std::make_unique<Process>(
-        kBin + "/tessera-worker",
-        std::vector<std::string>{"--coordinator", grpc_addr, "--threads", std::to_string(threads), "--cache",
-                                 (dir / ("cache" + n)).string(), "--name", "w" + n},
-        (dir / ("worker" + n + ".err")).string()));
+    std::vector<std::string> args{"--coordinator", grpc_addr, "--threads", std::to_string(threads), "--cache",
+                                  (dir / ("cache" + n)).string(), "--name", "w" + n};
+    args.insert(args.end(), extra.begin(), extra.end());
+    workers.push_back(
+        std::make_unique<Process>(kBin + "/tessera-worker", args, (dir / ("worker" + n + ".err")).string()));
     return *workers.back();
   }
   nlohmann::json get_json(const std::string& path) {
@@ -254,6 +254,15 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   EXPECT_NE(metrics.find("tessera_jobs{state=\"done\"} 1"), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("tessera_worker_utilization{worker=\""), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("tessera_workers_utilization "), std::string::npos) << metrics;
+  // Autoscaling signals (issue 11): nothing left once the job is done.
+  EXPECT_NE(metrics.find("tessera_queue_tasks{state=\"ready\"} 0"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_remaining_core_seconds 0"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_thread_samples_per_second "), std::string::npos) << metrics;
+  // Probes for Kubernetes.
+  EXPECT_EQ(cli.Get("/healthz")->status, 200);
+  const auto ready = cli.Get("/readyz");
+  EXPECT_EQ(ready->status, 200);
+  EXPECT_EQ(ready->body, "ready\n");
   const auto png = cli.Get(("/jobs/" + id + "/preview.png").c_str());
   ASSERT_TRUE(png);
   EXPECT_EQ(png->status, 200);
@@ -385,6 +394,19 @@ TEST_F(Farm, CoordinatorKilledAtAnyMomentLosesNothingAndTheImageIsUnchanged) {
   const std::string again = (dir / "again.exr").string();
   ASSERT_EQ(run("fetch " + id + " -f " + again + " --coordinator " + addr, dir).code, 0);
   expect_same_pixels(local, again);
+}
+
+// For batch allocations (Slurm): a worker with --exit-when-idle leaves cleanly once the
+// queue has been empty that long, and not while there is work.
+TEST_F(Farm, WorkerWithExitWhenIdleLeavesOnceTheQueueIsEmpty) {
+  start_coordinator();
+  Process& w = start_worker(1, {"--exit-when-idle", "3"});
+  const CommandResult r = submit_wait(kScene, "-r 64 48 -s 16 --pass-spp 4", (dir / "idle.exr").string());
+  ASSERT_EQ(r.code, 0) << r.err;  // it stayed while there was work
+  EXPECT_EQ(w.wait(20), 0);
+  EXPECT_NE(slurp((dir / "worker0.err").string()).find("--exit-when-idle"), std::string::npos);
+  const nlohmann::json s = get_json("/api/status");
+  EXPECT_TRUE(s["workers"].empty()) << s.dump();  // it said goodbye
 }
 
 TEST_F(Farm, WorkerReconnectsWhenTheCoordinatorComesBack) {

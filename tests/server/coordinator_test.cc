@@ -908,5 +908,32 @@ TEST_F(VerifyTest, NoChecksWithOneWorkerOrAZeroFraction) {
   (void)id;
 }
 
+// The autoscaling signal: what is left, in tasks, samples and core-seconds.
+TEST_F(CoordinatorTest, QueueDepthCountsWhatIsLeft) {
+  const RenderSettings s = job_settings();
+  const std::string id = c->submit(request(s));
+  Coordinator::Queue q = c->queue();
+  EXPECT_EQ(q.tasks_ready, 9u);  // 48x36 in 16-pixel tiles, first passes
+  EXPECT_EQ(q.tasks_leased, 0u);
+  EXPECT_EQ(q.samples_remaining, 48u * 36u * 10u);
+  EXPECT_EQ(q.samples_per_thread_second, Coordinator::kAssumedThreadSpeed);
+  EXPECT_DOUBLE_EQ(q.core_seconds_remaining, 48.0 * 36 * 10 / Coordinator::kAssumedThreadSpeed);
+  const uint64_t w = worker();
+  const v1::GetTaskResponse r = c->get_task(w, 2);
+  EXPECT_EQ(c->queue().tasks_leased, 2u);
+  v1::TaskResult res = render_task(r.tasks(0), w);
+  res.set_render_seconds(0.5);  // a measured speed: samples / 0.5 s on one thread
+  ASSERT_TRUE(c->submit_result(res).accepted());
+  q = c->queue();
+  EXPECT_EQ(q.samples_per_thread_second, double(res.samples()) / 0.5);
+  EXPECT_DOUBLE_EQ(q.core_seconds_remaining, double(q.samples_remaining) / q.samples_per_thread_second);
+  ASSERT_TRUE(c->submit_result(render_task(r.tasks(1), w)).accepted());
+  drain(w);
+  q = c->queue();
+  EXPECT_EQ(q.tasks_ready + q.tasks_leased + q.samples_remaining, 0u);
+  EXPECT_EQ(c->unready_reason(), "");
+  (void)id;
+}
+
 }  // namespace
 }  // namespace tessera
