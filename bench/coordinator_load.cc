@@ -5,6 +5,7 @@
 //
 // Usage: tessera_coordinator_load SCENE [--workers N] [--threads N] [--batch N] [--seconds S]
 //                                 [--size W H] [--jobs N] [--json FILE]
+//                                 [--checkpoint-seconds S] [--verify-fraction F]
 #include <grpcpp/grpcpp.h>
 #include <httplib.h>
 #include <sys/resource.h>
@@ -42,7 +43,7 @@ double percentile(std::vector<double> v, double p) {
 
 const char* kUsage =
     "usage: tessera_coordinator_load SCENE [--workers N] [--threads N] [--batch N] [--seconds S] [--size W H]\n"
-    "                                [--jobs N] [--json FILE]\n"
+    "                                [--jobs N] [--json FILE] [--checkpoint-seconds S] [--verify-fraction F]\n"
     "  SCENE        any scene file (.dae, .gltf); only its upload and check are exercised\n"
     "  --workers N  simulated workers (default 1000)\n"
     "  --threads N  client threads driving them (default 8)\n"
@@ -52,11 +53,14 @@ const char* kUsage =
     "  --jobs N     frames queued at once (default 4). Each worker gets at most its share of\n"
     "               the outstanding tasks, so one frame of 2,040 tiles gives 1,000 workers\n"
     "               batches of 3 whatever they ask for\n"
-    "  --json FILE  also write the figures as JSON\n";
+    "  --json FILE  also write the figures as JSON\n"
+    "  --checkpoint-seconds S, --verify-fraction F\n"
+    "               the coordinator's settings (defaults: the coordinator's, 5 and 0.02)\n";
 
 int main(int argc, char** argv) {
   int workers = 1000, threads = 8, width = 1920, height = 1080, batch = 8, jobs = 4;
   double seconds = 10;
+  CoordinatorOptions opt;
   std::string json_path, scene;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -80,6 +84,10 @@ int main(int argc, char** argv) {
       seconds = std::atof(number("--seconds"));
     } else if (a == "--jobs") {
       jobs = std::atoi(number("--jobs"));
+    } else if (a == "--checkpoint-seconds") {
+      opt.checkpoint_seconds = std::atof(number("--checkpoint-seconds"));
+    } else if (a == "--verify-fraction") {
+      opt.verify_fraction = std::atof(number("--verify-fraction"));
     } else if (a == "--json") {
       json_path = number("--json");
     } else if (a == "--size") {
@@ -98,7 +106,6 @@ int main(int argc, char** argv) {
     return 2;
   }
   const fs::path data = fs::temp_directory_path() / ("tessera_load_" + std::to_string(getpid()));
-  CoordinatorOptions opt;
   opt.data_dir = data.string();
   opt.lease_seconds = 60;
   Coordinator c(opt);
@@ -229,6 +236,9 @@ int main(int argc, char** argv) {
     return 1;
   }
   const double tiles_per_s = double(m1 - m0) / elapsed;
+  std::printf("checkpoints every %g s, verify fraction %g: %llu checkpoints, %llu checks passed of %llu\n",
+              opt.checkpoint_seconds, opt.verify_fraction, (unsigned long long)c.counters().checkpoints_written,
+              (unsigned long long)c.counters().checks_passed, (unsigned long long)c.counters().checks_issued);
   std::printf("%d frames %dx%d, simulated workers %d (client threads %d, batches of %d), %.1f s\n", jobs, width, height,
               workers, threads, batch, elapsed);
   std::printf("merged tiles/s %.0f  (32x32 tiles: %.1f M pixel-samples/s merged), worker RPCs/s %.0f\n", tiles_per_s,
