@@ -89,6 +89,8 @@ void Coordinator::restore_jobs() {
     if (j.live()) {
       try {
         scenes_.restore(j.scene_hash);
+        for (const v1::SceneFile& f : scenes_.get(j.scene_hash).files())
+          j.scene_bytes += f.path().size() + f.content().size();
       } catch (const std::exception& e) {
         lost = e.what();
       }
@@ -170,19 +172,34 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   // Limits first, before anything large is allocated. (Submits racing each other may pass
   // together: the limits are for bounding memory and fairness, not exact to the job.)
   const int64_t pixels = settings.effective_window().area();
+  const uint64_t samples = uint64_t(pixels) * uint64_t(settings.spp);  // at most
+  uint64_t scene_bytes = 0;
+  for (const v1::SceneFile& f : req.files()) scene_bytes += f.path().size() + f.content().size();
   std::string over;  // the limit this job would pass
+  const std::string who = owner.empty() ? std::string("this coordinator") : "client '" + owner + "'";
   {
     std::lock_guard<std::mutex> lock(mu_);
     size_t mine = 0;
     int64_t live_pixels = 0;
+    uint64_t my_bytes = 0, my_samples = 0;
     for (const auto& [id, j] : jobs_)
       if (j->live()) {
-        mine += j->owner == owner;
         live_pixels += j->plan.film().window().area();
+        if (j->owner != owner) continue;
+        ++mine;
+        my_bytes += j->scene_bytes;
+        my_samples += j->plan.samples_total() - std::min(j->plan.samples_total(), j->plan.samples_merged());
       }
-    if (mine >= options_.max_jobs_per_client)
-      over = (owner.empty() ? std::string("this coordinator") : "client '" + owner + "'") + " has " +
-             std::to_string(mine) + " live jobs, the most allowed (--max-jobs-per-client)";
+    if (my_bytes + scene_bytes > options_.max_scene_bytes_per_client)
+      over = who + "'s live jobs hold " + std::to_string(my_bytes) + " scene bytes; this job's " +
+             std::to_string(scene_bytes) + " would pass the limit of " +
+             std::to_string(options_.max_scene_bytes_per_client) + " (--max-scene-bytes-per-client)";
+    else if (my_samples + samples > options_.max_queued_samples_per_client)
+      over = who + " has " + std::to_string(my_samples) + " samples queued; this job's " + std::to_string(samples) +
+             " would pass the limit of " + std::to_string(options_.max_queued_samples_per_client) +
+             " (--max-queued-samples-per-client)";
+    else if (mine >= options_.max_jobs_per_client)
+      over = who + " has " + std::to_string(mine) + " live jobs, the most allowed (--max-jobs-per-client)";
     else if (live_pixels + pixels > options_.max_live_pixels)
       over = "live frames hold " + std::to_string(live_pixels) + " pixels; this job's " + std::to_string(pixels) +
              " would pass the limit of " + std::to_string(options_.max_live_pixels) +
@@ -204,6 +221,7 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   job->name = req.name().empty() ? req.main_file() : req.name();
   job->priority = req.priority();
   job->owner = owner;
+  job->scene_bytes = scene_bytes;
   job->tile_lease.assign(job->plan.tiles().size(), 0);
   job->spare_film = std::make_unique<Film>(job->plan.film());
   {

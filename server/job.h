@@ -19,6 +19,7 @@ struct Job {
 
   std::string id, name, scene_hash;
   std::string owner;  // the submitting token's name
+  uint64_t scene_bytes = 0;  // its bundle's, counted against the owner's limit
   int32_t priority = 0;
   uint64_t seq = 0;  // submission order
   v1::RenderSettings settings_proto;

@@ -67,6 +67,14 @@ int main(int argc, char** argv) {
                  "pixels of all live frames together (each pixel costs 80 bytes of memory)")
       ->capture_default_str()
       ->check(CLI::Range(int64_t(1), int64_t(1) << 40));
+  app.add_option("--max-scene-bytes-per-client", opt.max_scene_bytes_per_client,
+                 "scene bytes of one client's live jobs together, at most")
+      ->capture_default_str()
+      ->check(CLI::Range(uint64_t(1), uint64_t(1) << 50));
+  app.add_option("--max-queued-samples-per-client", opt.max_queued_samples_per_client,
+                 "camera samples still to render of one client's live jobs together, at most")
+      ->capture_default_str()
+      ->check(CLI::Range(uint64_t(1), uint64_t(1) << 62));
   app.add_option("--image-interval", opt.image_interval_seconds, "write progressive images at most this often (s)")
       ->capture_default_str();
   std::string tokens_file, tls_cert, tls_key;

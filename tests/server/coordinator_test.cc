@@ -496,6 +496,35 @@ TEST_F(CoordinatorTest, LiveJobsPerClientAndLivePixelsAreBounded) {
   EXPECT_EQ(c->list().size(), 4u);  // nothing was kept of the refused ones
 }
 
+TEST_F(CoordinatorTest, SceneBytesAndQueuedSamplesPerClientAreBounded) {
+  const v1::SubmitJobRequest one = request(job_settings());
+  uint64_t bytes = 0;
+  for (const v1::SceneFile& f : one.files()) bytes += f.path().size() + f.content().size();
+  CoordinatorOptions o = options();
+  o.max_scene_bytes_per_client = 2 * bytes;  // two jobs' scenes
+  o.max_queued_samples_per_client = 3 * 48 * 36 * 10;
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  c->submit(one, "alice");
+  c->submit(one, "alice");
+  try {
+    c->submit(one, "alice");
+    ADD_FAILURE() << "a third scene's bytes for alice";
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kResourceExhausted);
+    EXPECT_NE(std::string(e.what()).find("--max-scene-bytes-per-client"), std::string::npos) << e.what();
+  }
+  RenderSettings more = job_settings();
+  more.spp = 40;  // four frames' samples
+  try {
+    c->submit(request(more), "bob");
+    ADD_FAILURE() << "past bob's queued samples";
+  } catch (const RequestError& e) {
+    EXPECT_NE(std::string(e.what()).find("--max-queued-samples-per-client"), std::string::npos) << e.what();
+  }
+  c->submit(one, "bob");  // within both
+  EXPECT_EQ(c->list().size(), 3u);
+}
+
 // A worker that stops says so: its leases go back at once and it no longer counts.
 TEST_F(CoordinatorTest, UnregisteredWorkersGiveTheirLeasesBackAndLeave) {
   c->submit(request(job_settings()));
