@@ -381,7 +381,8 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
                        "unknown worker " + std::to_string(worker_id) + "; register again");
   w->last_seen = now;
   std::vector<Job*> order;
-  uint64_t outstanding = leases_.live_count();  // tasks out now or ready to go
+  uint64_t outstanding = leases_.live_count();  // tasks out now or ready to go, checks included
+  for (const auto& [check_id, c] : checks_) outstanding += c.lease == 0;
   for (auto& [id, job] : jobs_)
     if (job->live()) {
       order.push_back(job.get());
