@@ -89,8 +89,8 @@ void Coordinator::restore_jobs() {
     if (j.live()) {
       try {
         scenes_.restore(j.scene_hash);
-        for (const v1::SceneFile& f : scenes_.get(j.scene_hash).files())
-          j.scene_bytes += f.path().size() + f.content().size();
+        const v1::SceneBundle bundle = scenes_.get(j.scene_hash);
+        for (const v1::SceneFile& f : bundle.files()) j.scene_bytes += f.path().size() + f.content().size();
       } catch (const std::exception& e) {
         lost = e.what();
       }
