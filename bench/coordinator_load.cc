@@ -55,7 +55,7 @@ const char* kUsage =
     "               batches of 3 whatever they ask for\n"
     "  --json FILE  also write the figures as JSON\n"
     "  --checkpoint-seconds S, --verify-fraction F\n"
-    "               the coordinator's settings (defaults: the coordinator's, 5 and 0.02)\n";
+    "               the coordinator's settings (defaults: the coordinator's, 5 and 0.01)\n";
 
 int main(int argc, char** argv) {
   int workers = 1000, threads = 8, width = 1920, height = 1080, batch = 8, jobs = 4;

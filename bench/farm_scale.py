@@ -35,14 +35,14 @@ def splits_of(n):
 class Farm:
     """A coordinator and W workers of T threads on loopback, started and stopped by us."""
 
-    def __init__(self, bin_dir, workers, threads, tmp):
+    def __init__(self, bin_dir, workers, threads, tmp, coordinator_flags=()):
         self.procs = []
         os.makedirs(tmp, exist_ok=True)
         data = os.path.join(tmp, "data")
         out = open(os.path.join(tmp, "coordinator.out"), "w+")
         self.procs.append(subprocess.Popen(
             [os.path.join(bin_dir, "tessera-coordinator"), "--listen", "127.0.0.1:0", "--http", "127.0.0.1:0",
-             "--data", data], stdout=out, stderr=subprocess.DEVNULL))
+             "--data", data, *coordinator_flags], stdout=out, stderr=subprocess.DEVNULL))
         self.grpc = self.http = None
         for _ in range(200):
             out.seek(0)
@@ -105,6 +105,8 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--json", help="write the results here")
     ap.add_argument("--markdown", action="store_true", help="print the table as Markdown")
+    ap.add_argument("--coordinator-flags", default="",
+                    help="extra coordinator flags, e.g. '--verify-fraction 0' (quoted, split on spaces)")
     ap.add_argument("flags", nargs="*", help="render flags (after --)")
     a = ap.parse_args()
     flags = a.flags or ["-r", "480", "360", "-s", "64"]
@@ -117,7 +119,7 @@ def main():
         local = [timed([tessera, "render", a.scene, *flags, "-t", str(a.cores), "-q", "-f", local_exr])[0]
                  for _ in range(a.repeat)]
         for w, t in splits:
-            farm = Farm(a.bin, w, t, os.path.join(tmp, f"{w}x{t}"))
+            farm = Farm(a.bin, w, t, os.path.join(tmp, f"{w}x{t}"), a.coordinator_flags.split())
             try:
                 secs, ratios, utils, same = [], [], [], True
                 for r in range(a.repeat):

@@ -57,7 +57,7 @@ struct CoordinatorOptions {
   // renders the task itself, and a worker whose sums differ from its render is
   // quarantined: its leases end, the tiles it merged into live jobs are rendered again,
   // and, with access tokens, its token may not register again.
-  double verify_fraction = 0.02;
+  double verify_fraction = 0.01;  // costs this fraction of the farm's render time
   // Test seams: between an image snapshot leaving the lock and its write; between a
   // checkpoint's temporary file being written and its rename.
   std::function<void()> before_image_write;
