@@ -1,0 +1,34 @@
+#!/usr/bin/env bash
+# Builds the OCI image with podman from a release build: the three executables, every
+# shared library `ldd` says they load (and the loader), a passwd entry for the unprivileged
+# user 65532, name-service files, and the default scene. No base image, no registry.
+#   deploy/container/build-image.sh [BUILD_DIR (build)] [TAG (tessera:latest)]
+set -euo pipefail
+here=$(cd "$(dirname "$0")" && pwd)
+root=$(cd "$here/../.." && pwd)
+build=$(cd "${1:-$root/build}" && pwd)
+tag=${2:-tessera:latest}
+ctx=$(mktemp -d)
+trap 'rm -rf "$ctx"' EXIT
+rootfs="$ctx/rootfs"
+mkdir -p "$rootfs/usr/bin" "$rootfs/etc" "$rootfs/tmp" "$rootfs/usr/share/tessera/scenes" "$rootfs/var/lib/tessera"
+chmod 1777 "$rootfs/tmp"
+bins=(tessera tessera-coordinator tessera-worker)
+for b in "${bins[@]}"; do
+  install -m 0755 "$build/bin/$b" "$rootfs/usr/bin/$b"
+  strip --strip-unneeded "$rootfs/usr/bin/$b" 2>/dev/null || true
+done
+# Every library the executables load, at the path the loader finds it (symlinks resolved).
+for lib in $(for b in "${bins[@]}"; do ldd "$build/bin/$b"; done | grep -oE '/[^ ]+\.so[^ ]*' | sort -u); do
+  mkdir -p "$rootfs$(dirname "$lib")"
+  cp -L "$lib" "$rootfs$lib"
+done
+printf 'root:x:0:0:root:/:/sbin/nologin\ntessera:x:65532:65532:tessera:/tmp:/sbin/nologin\n' >"$rootfs/etc/passwd"
+printf 'root:x:0:\ntessera:x:65532:\n' >"$rootfs/etc/group"
+printf 'hosts: files dns\n' >"$rootfs/etc/nsswitch.conf"
+printf '127.0.0.1 localhost\n::1 localhost\n' >"$rootfs/etc/hosts"
+chown 65532:65532 "$rootfs/var/lib/tessera"
+cp "$root/scenes/cornell-spheres.dae" "$rootfs/usr/share/tessera/scenes/"
+cp "$here/Containerfile" "$ctx/"
+podman build --quiet --tag "$tag" "$ctx" >/dev/null
+echo "built $tag: $(podman image inspect --format '{{.Size}}' "$tag") bytes"
