@@ -13,7 +13,7 @@ PACKAGES=(
   python3 python3-numpy python3-matplotlib
   iproute2 libssl-dev openssl
   clang libclang-rt-14-dev
-  podman
+  podman slurm-wlm munge curl
 )
 
 missing=()

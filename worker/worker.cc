@@ -89,6 +89,12 @@ void Worker::sleep_backoff(const std::atomic<bool>& stop) {
 
 bool Worker::register_worker(const std::atomic<bool>& stop) {
   while (!stop) {
+    // A coordinator that cannot be reached has no work for us either.
+    if (options_.exit_when_idle_seconds > 0 && now_seconds() - last_work_ > options_.exit_when_idle_seconds) {
+      std::fprintf(stderr, "tessera-worker: no work for %g s (--exit-when-idle; coordinator %s unreachable): leaving\n",
+                   options_.exit_when_idle_seconds, options_.coordinator.c_str());
+      return false;
+    }
     v1::RegisterRequest req;
     req.set_version(kProtocolVersion);
     req.set_name(options_.name);
@@ -347,6 +353,7 @@ void Worker::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
 }
 
 bool Worker::run(const std::atomic<bool>& stop) {
+  last_work_ = now_seconds();
   if (!register_worker(stop)) return !refused_;
   registered_at_ = now_seconds();
   stopping_ = false;
@@ -361,13 +368,12 @@ bool Worker::run(const std::atomic<bool>& stop) {
   {
     ThreadPool pool(options_.threads);
     for (int i = 0; i < pool.size(); ++i) pool.run([this] { render_loop(); });
-    double last_work = now_seconds();
     while (!stop) {
       if (options_.exit_when_idle_seconds > 0) {
         std::lock_guard<std::mutex> lock(mu_);
         if (!held_.empty()) {
-          last_work = now_seconds();
-        } else if (now_seconds() - last_work > options_.exit_when_idle_seconds) {
+          last_work_ = now_seconds();
+        } else if (now_seconds() - last_work_ > options_.exit_when_idle_seconds) {
           std::fprintf(stderr, "tessera-worker: no work for %g s (--exit-when-idle): leaving\n",
                        options_.exit_when_idle_seconds);
           break;
@@ -401,7 +407,7 @@ bool Worker::run(const std::atomic<bool>& stop) {
         continue;
       }
       backoff_ = 0.1;
-      if (resp.tasks_size() > 0) last_work = now_seconds();
+      if (resp.tasks_size() > 0) last_work_ = now_seconds();
       for (const v1::Task& task : resp.tasks()) enqueue(task, stop);
     }
     std::lock_guard<std::mutex> lock(mu_);

@@ -60,6 +60,8 @@ class Worker {
   struct Prepared;  // a scene and a renderer for one (scene, settings)
   struct Held;      // a leased task on its way through the pipeline
 
+  // Registers, retrying with back-off; false if stopped, refused, or idle past
+  // --exit-when-idle while the coordinator cannot be reached.
   bool register_worker(const std::atomic<bool>& stop);
   std::shared_ptr<const Prepared> prepare(const v1::Task& task);
   std::shared_ptr<Scene> scene_for(const std::string& hash);  // loaded once per content hash
@@ -80,6 +82,7 @@ class Worker {
   uint32_t heartbeat_ms_ = 2000;
   double backoff_ = 0.1;
   double registered_at_ = 0;
+  double last_work_ = 0;  // when it last held or was given a task (--exit-when-idle)
   // Fetcher only.
   std::map<std::string, std::shared_ptr<Scene>> scenes_;  // by content hash
   std::map<std::string, std::shared_ptr<const Prepared>> prepared_;

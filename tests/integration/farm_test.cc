@@ -409,6 +409,14 @@ TEST_F(Farm, WorkerWithExitWhenIdleLeavesOnceTheQueueIsEmpty) {
   EXPECT_TRUE(s["workers"].empty()) << s.dump();  // it said goodbye
 }
 
+// A coordinator that cannot be reached has no work either: an idle batch worker leaves.
+TEST_F(Farm, WorkerWithExitWhenIdleLeavesWhenTheCoordinatorIsUnreachable) {
+  grpc_addr = "127.0.0.1:1";  // nothing listens there
+  Process& w = start_worker(1, {"--exit-when-idle", "1"});
+  EXPECT_EQ(w.wait(20), 0);
+  EXPECT_NE(slurp((dir / "worker0.err").string()).find("unreachable"), std::string::npos);
+}
+
 TEST_F(Farm, WorkerReconnectsWhenTheCoordinatorComesBack) {
   start_coordinator();
   const std::string addr = grpc_addr;
