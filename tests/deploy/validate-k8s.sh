@@ -18,3 +18,17 @@ if [ ! -d "$work/node_modules/kubernetes-models" ]; then
   fi
 fi
 node "$work/validate_k8s.mjs" "$src/../../deploy/k8s"
+# The check itself: a misspelt field and a wrong type must each be found.
+bad=$(mktemp -d)
+trap 'rm -rf "$bad"' EXIT
+cp -r "$src/../../deploy/k8s/." "$bad/"
+sed -i 's/periodSeconds: 5/periodSecnds: 5/' "$bad/base/coordinator.yaml"
+sed -i 's/^  replicas: 1$/  replicas: "one"/' "$bad/base/workers.yaml"
+if out=$(node "$work/validate_k8s.mjs" "$bad" 2>&1); then
+  echo "FAIL: the check passed broken manifests"
+  exit 1
+fi
+for want in "V1Probe has no field 'periodSecnds'" "spec/replicas must be integer"; do
+  grep -qF "$want" <<<"$out" || { echo "FAIL: the check missed: $want"; echo "$out"; exit 1; }
+done
+echo "the check finds a misspelt field and a wrong type"

@@ -4,6 +4,7 @@
 import fs from "node:fs";
 import path from "node:path";
 import YAML from "yaml";
+import k8s from "@kubernetes/client-node";
 
 const root = process.argv[2];
 const models = {
@@ -21,6 +22,28 @@ const models = {
       .HorizontalPodAutoscaler,
   },
 };
+
+// The API's field list of every type (the client's generated models): a field a type does
+// not have is a misspelling, which the schemas above let through (they allow extra keys).
+function unknownFields(obj, type, where, out) {
+  if (obj === null || obj === undefined) return;
+  if (type.startsWith("Array<")) {
+    if (Array.isArray(obj)) obj.forEach((v, i) => unknownFields(v, type.slice(6, -1), `${where}[${i}]`, out));
+    return;
+  }
+  const map = type.match(/^\{ \[key: string\]: (.*); \}$/);
+  if (map) {
+    for (const [k, v] of Object.entries(obj)) unknownFields(v, map[1], `${where}.${k}`, out);
+    return;
+  }
+  const model = k8s[type];
+  if (!model?.getAttributeTypeMap || typeof obj !== "object") return;  // strings, numbers, IntOrString
+  const fields = model.getAttributeTypeMap();
+  const names = new Set(fields.map((f) => f.baseName));
+  for (const k of Object.keys(obj)) if (!names.has(k)) out.push(`${where}.${k}: ${type} has no field '${k}'`);
+  for (const f of fields) unknownFields(obj[f.baseName], f.type, `${where}.${f.baseName}`, out);
+}
+const modelName = (obj) => obj.apiVersion.split("/").pop().toUpperCase().replace(/^V/, "V") + obj.kind;
 
 let failures = 0, checked = 0;
 const fail = (file, why) => {
@@ -62,6 +85,9 @@ for (const file of walk(root).filter((f) => f.endsWith(".yaml"))) {
     // A strategic-merge patch is a partial object: it must name a kind and an object, and
     // what it sets is checked once merged into the base (here: against the base's kind).
     const isPatch = file.includes(`${path.sep}overlays${path.sep}`) && file.endsWith("-patch.yaml");
+    const unknown = [];
+    unknownFields(obj, modelName(obj), obj.kind, unknown);
+    for (const u of unknown) fail(file, u);
     if (isPatch) {
       if (!obj.metadata?.name) fail(file, "patch without metadata.name");
       checked++;
