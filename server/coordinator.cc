@@ -124,7 +124,7 @@ void Coordinator::restore_jobs() {
       j.end_recorded = true;
     }
   }
-  scenes_.remove_unused();  // scenes of jobs that ended, or whose submit the crash cut short
+  scenes_.remove_unused();                          // scenes of jobs that ended, or whose submit the crash cut short
   for (Job* j : ended_on_restore) write_image(*j);  // writes the image and records the end
 }
 
@@ -280,9 +280,9 @@ v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& req
                        "protocol version " + std::to_string(req.version()) + " not supported");
   std::lock_guard<std::mutex> lock(mu_);
   if (!principal.empty() && quarantined_principals_.count(principal))
-    throw RequestError(RequestError::Code::kPermissionDenied,
-                       "worker token '" + principal +
-                           "' is quarantined: its results differed from the same tasks rendered elsewhere");
+    throw RequestError(
+        RequestError::Code::kPermissionDenied,
+        "worker token '" + principal + "' is quarantined: its results differed from the same tasks rendered elsewhere");
   const double now = clock_->now();
   if (workers_.size() >= options_.max_workers) workers_.forget_silent(now, options_.worker_timeout_seconds);
   if (workers_.size() >= options_.max_workers)
@@ -636,8 +636,8 @@ v1::ResultAck Coordinator::check_result(const v1::TaskResult& result, const Leas
       why = "job " + c.job + " tile " + std::to_string(c.tile) + " pass " + std::to_string(c.pass) +
             ": its sums differ from the coordinator's render of the same task";
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "tessera-coordinator: check of job %s tile %u: cannot render it here: %s\n",
-                   c.job.c_str(), c.tile, e.what());
+      std::fprintf(stderr, "tessera-coordinator: check of job %s tile %u: cannot render it here: %s\n", c.job.c_str(),
+                   c.tile, e.what());
     }
   }
   {
@@ -732,8 +732,7 @@ std::optional<Coordinator::ImageSnapshot> Coordinator::after_merge_locked(Job& j
   // merging.
   constexpr double kWriteShare = 20;
   const double image_interval = std::max(options_.image_interval_seconds, kWriteShare * job.image_write_seconds);
-  const double checkpoint_interval =
-      std::max(options_.checkpoint_seconds, kWriteShare * job.checkpoint_write_seconds);
+  const double checkpoint_interval = std::max(options_.checkpoint_seconds, kWriteShare * job.checkpoint_write_seconds);
   const bool image = done || (frame > job.image_frame_passes && now - job.last_image >= image_interval);
   const bool checkpoint = done || now - job.last_checkpoint >= checkpoint_interval;
   if (!image && !checkpoint) return std::nullopt;
@@ -956,7 +955,8 @@ Coordinator::Queue Coordinator::queue() const {
   for (const auto& [id, job] : jobs_)
     if (job->live()) {
       q.tasks_ready += job->plan.ready();
-      q.samples_remaining += job->plan.samples_total() - std::min(job->plan.samples_total(), job->plan.samples_merged());
+      q.samples_remaining +=
+          job->plan.samples_total() - std::min(job->plan.samples_total(), job->plan.samples_merged());
     }
   double speed = 0, threads = 0;
   for (const WorkerInfo& w : workers_.list())

@@ -183,10 +183,10 @@ class Coordinator {
   Job* find(const std::string& id) const;  // mu_ held; throws kNotFound
   uint32_t workers_on(const Job& job) const { return leases_.workers_on(job.id); }
   ImageSnapshot snapshot_locked(Job& job, bool image = true, bool checkpoint = true);
-  void restore_jobs();  // from store_, at construction
+  void restore_jobs();                                      // from store_, at construction
   std::string without_data_dir(std::string message) const;  // for clients' eyes
-  void write_snapshot(ImageSnapshot& snap);  // mu_ not held; gives the film back to the job
-  void write_image(Job& job);                // mu_ not held: snapshot, then write
+  void write_snapshot(ImageSnapshot& snap);                 // mu_ not held; gives the film back to the job
+  void write_image(Job& job);                               // mu_ not held: snapshot, then write
   // Ends a live lease: the tile loses it (and, with `requeue`, is ready again), the worker
   // holds one lease fewer; the lease stays known so a late result is recognised.
   void end_lease_locked(uint64_t id, bool requeue);

@@ -18,7 +18,7 @@ struct Job {
   Job(std::string id, const RenderSettings& settings) : id(std::move(id)), plan(settings) {}
 
   std::string id, name, scene_hash;
-  std::string owner;  // the submitting token's name
+  std::string owner;         // the submitting token's name
   uint64_t scene_bytes = 0;  // its bundle's, counted against the owner's limit
   int32_t priority = 0;
   uint64_t seq = 0;  // submission order

@@ -316,8 +316,7 @@ std::string JobStore::checkpoint_path(const std::string& id) const {
   return (fs::path(dir_) / "jobs" / id / "checkpoint").string();
 }
 
-void JobStore::write_checkpoint(const std::string& id, const PlanState& state, const Film& film,
-                                double elapsed) const {
+void JobStore::write_checkpoint(const std::string& id, const PlanState& state, const Film& film, double elapsed) const {
   const std::string bytes = encode_checkpoint(state, film, elapsed);
   const fs::path path = checkpoint_path(id);
   fs::create_directories(path.parent_path());

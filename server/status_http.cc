@@ -90,7 +90,8 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
       res.set_content(c.why + (unauthenticated ? " (Authorization: Bearer TOKEN)\n" : "\n"), "text/plain");
       return httplib::Server::HandlerResponse::Handled;
     });
-  server_->Get("/healthz", [](const httplib::Request&, httplib::Response& res) { res.set_content("ok\n", "text/plain"); });
+  server_->Get("/healthz",
+               [](const httplib::Request&, httplib::Response& res) { res.set_content("ok\n", "text/plain"); });
   server_->Get("/readyz", [this](const httplib::Request&, httplib::Response& res) {
     const std::string why = c_.unready_reason();
     res.status = why.empty() ? 200 : 503;

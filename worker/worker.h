@@ -22,9 +22,9 @@
 #include <mutex>
 #include <string>
 
+#include "access.h"
 #include "core/render/tile_renderer.h"
 #include "core/scene/scene.h"
-#include "access.h"
 #include "wire.h"
 
 namespace tessera {

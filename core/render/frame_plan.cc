@@ -176,8 +176,8 @@ void FramePlan::restore(const PlanState& s, Film film) {
   const Rect w = settings_.effective_window();
   auto bad = [](const std::string& why) { throw std::invalid_argument("saved frame plan: " + why); };
   if (!(film.window() == w)) bad("the film does not fit the frame");
-  if (s.progress.size() != tiles_.size()) bad("tile count " + std::to_string(s.progress.size()) + ", expected " +
-                                              std::to_string(tiles_.size()));
+  if (s.progress.size() != tiles_.size())
+    bad("tile count " + std::to_string(s.progress.size()) + ", expected " + std::to_string(tiles_.size()));
   if (s.active.size() != (settings_.adaptive ? size_t(w.area()) : 0)) bad("the active-pixel mask does not fit");
   if (!(std::isfinite(s.work_done) && std::isfinite(s.work_total))) bad("work is not finite");
   std::vector<uint32_t> unfinished(passes_.size() + 1, 0);

@@ -108,7 +108,9 @@ TEST(FramePlan, SumsNoRenderCouldGiveAreRefused) {
   EXPECT_EQ(with([](PixelSums& p) { p.b = std::numeric_limits<double>::infinity(); }), FramePlan::Merge::kInvalid);
   // Consistent (Cauchy-Schwarz holds) but brighter than any sample can be: the pixel's
   // mean would not fit the image's floats.
-  EXPECT_EQ(with([](PixelSums& p) { p = PixelSums{1e150 * p.n, 1e150 * p.n, 1e150 * p.n, 1e300 * p.n, p.n}; }),
+  EXPECT_EQ(with([](PixelSums& p) {
+              p = PixelSums{1e150 * p.n, 1e150 * p.n, 1e150 * p.n, 1e300 * p.n, p.n};
+            }),
             FramePlan::Merge::kInvalid);
   EXPECT_EQ(plan.merges(), 0u);
   EXPECT_EQ(with([](PixelSums&) {}), FramePlan::Merge::kMerged);
@@ -282,7 +284,8 @@ TEST(FramePlan, AResetTileRenderedAgainGivesTheHonestFilm) {
       const TileTask t = *lied_to.take();
       std::vector<PixelSums> sums = noisy_sums_for(t);
       if ((t.tile == 3 || t.tile == 7) && t.pass == 1 && !lied.count(t.tile)) {
-        for (PixelSums& p : sums) p = PixelSums{p.r * 0.8, p.g * 0.8, p.b * 0.8, p.lum2 * 0.64, p.n};  // plausible, wrong
+        for (PixelSums& p : sums)
+          p = PixelSums{p.r * 0.8, p.g * 0.8, p.b * 0.8, p.lum2 * 0.64, p.n};  // plausible, wrong
         lied.insert(t.tile);
       }
       ASSERT_EQ(lied_to.merge(t.tile, t.pass, sums), FramePlan::Merge::kMerged);

@@ -26,8 +26,8 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
   if (!seeds) return 0;
   fs::create_directories(seeds);
   // Small scenes: a seed's size bounds how fast the fuzzer goes.
-  for (const char* scene : {"/scenes/cornell-spheres.dae", "/tests/fuzz/seeds/gltf/triangle.gltf",
-                            "/tests/fuzz/seeds/gltf/triangle.glb"}) {
+  for (const char* scene :
+       {"/scenes/cornell-spheres.dae", "/tests/fuzz/seeds/gltf/triangle.gltf", "/tests/fuzz/seeds/gltf/triangle.glb"}) {
     const fs::path e = std::string(TESSERA_SOURCE_DIR) + scene;
     tessera::v1::SubmitJobRequest r;
     r.set_version(tessera::kProtocolVersion);
@@ -38,8 +38,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
     s.camera.width = 8;
     s.camera.height = 8;
     *r.mutable_settings() = tessera::to_proto(s);
-    std::ofstream(fs::path(seeds) / (e.filename().string() + ".pb"), std::ios::binary)
-        << r.SerializeAsString();
+    std::ofstream(fs::path(seeds) / (e.filename().string() + ".pb"), std::ios::binary) << r.SerializeAsString();
   }
   std::exit(0);
 }

@@ -52,9 +52,9 @@ class Farm : public ::testing::Test {
   }
   void start_coordinator(const std::string& listen = "127.0.0.1:0", const std::string& lease = "2",
                          const std::vector<std::string>& extra = {}) {
-    std::vector<std::string> args{"--listen",        listen, "--http",           "127.0.0.1:0", "--data",
-                                  (dir / "data").string(), "--lease-seconds", lease,         "--image-interval",
-                                  "0.2"};
+    std::vector<std::string> args{
+        "--listen",        listen, "--http",           "127.0.0.1:0", "--data", (dir / "data").string(),
+        "--lease-seconds", lease,  "--image-interval", "0.2"};
     args.insert(args.end(), extra.begin(), extra.end());
     coordinator = std::make_unique<Process>(kBin + "/tessera-coordinator", args,
                                             (dir / ("coordinator" + std::to_string(++coordinators) + ".err")).string());
@@ -67,8 +67,9 @@ class Farm : public ::testing::Test {
   }
   Process& start_worker(int threads = 1, const std::vector<std::string>& extra = {}) {
     const std::string n = std::to_string(workers.size());
-    std::vector<std::string> args{"--coordinator", grpc_addr, "--threads", std::to_string(threads), "--cache",
-                                  (dir / ("cache" + n)).string(), "--name", "w" + n};
+    std::vector<std::string> args{
+        "--coordinator", grpc_addr, "--threads", std::to_string(threads), "--cache", (dir / ("cache" + n)).string(),
+        "--name",        "w" + n};
     args.insert(args.end(), extra.begin(), extra.end());
     workers.push_back(
         std::make_unique<Process>(kBin + "/tessera-worker", args, (dir / ("worker" + n + ".err")).string()));

@@ -450,7 +450,7 @@ TEST_F(CoordinatorTest, WorkersGetTheirShareOfTheReadyWorkByThreads) {
   };
   const uint64_t big = join(2), small = join(1);
   const v1::GetTaskResponse a = c->get_task(big, 100);
-  EXPECT_EQ(a.tasks_size(), 6);  // 2 of 3 threads: 6 of 9
+  EXPECT_EQ(a.tasks_size(), 6);                      // 2 of 3 threads: 6 of 9
   EXPECT_EQ(c->get_task(big, 100).tasks_size(), 0);  // it holds its share already
   EXPECT_EQ(c->get_task(small, 100).tasks_size(), 3);
   // As results come back, the work there is shrinks, and so do the shares; a worker with
@@ -739,7 +739,7 @@ TEST_F(CoordinatorTest, ARestartedCoordinatorGoesOnWithEveryJobInItsState) {
     EXPECT_GT(c->image(id, true, false).exr().size(), 0u);
   }
   EXPECT_GT(c->image(cancelled, true, false).exr().size(), 0u);  // what was rendered stays
-  restart(c, options(), &t);  // and once more, with everything ended
+  restart(c, options(), &t);                                     // and once more, with everything ended
   for (const std::string& id : {done, live, waiting}) EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
   EXPECT_THROW(c->cancel(waiting, "another", false), RequestError);  // owners are kept
   const std::string next = c->submit(request(s));

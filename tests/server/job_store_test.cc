@@ -58,8 +58,7 @@ TEST(JobStore, ACheckpointComesBackBitForBit) {
 TEST(JobStore, EveryTruncatedOrDamagedCheckpointIsRefusedNeverTrusted) {
   const Saved s = sample();
   const std::string good = encode_checkpoint(s.state, s.film, 1);
-  for (size_t n = 0; n < good.size(); ++n)
-    EXPECT_THROW(decode_checkpoint(good.substr(0, n)), std::runtime_error) << n;
+  for (size_t n = 0; n < good.size(); ++n) EXPECT_THROW(decode_checkpoint(good.substr(0, n)), std::runtime_error) << n;
   for (size_t i = 0; i < good.size(); ++i) {
     std::string bad = good;
     bad[i] ^= 0x01;
