@@ -54,6 +54,7 @@ int run_render(const RenderArgs& a) {
                      {"flags", a.command_line},
                      {"render_seconds", std::to_string(r.seconds)},
                      {"nan_samples", std::to_string(r.stats.nan_samples)}};
+  if (s.frame) meta["frame"] = std::to_string(*s.frame);
   for (const std::string& out : outputs) write_image(out, r.film, meta);
 
   const uint64_t rays = r.stats.rays.rays + r.stats.rays.shadow_rays;

@@ -19,6 +19,7 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
   cmd->add_option("-d", s.camera.focal_distance, "Focal distance along the optical axis")->capture_default_str();
   cmd->add_option("-p", f.window, "Render only the cell X Y W H (lower-left pixel, y from the bottom)")->expected(4);
   cmd->add_option("--seed", s.seed, "Random seed")->capture_default_str();
+  cmd->add_option("--frame", s.frame, "Frame number of a sequence: its random numbers depend on it (none: a still)");
   cmd->add_option("--camera", f.camera, "cs184 (framing of the CS184 renderer) or file (the file's camera)")
       ->capture_default_str()
       ->check(CLI::IsMember({"auto", "cs184", "file"}));

@@ -15,6 +15,15 @@ std::string range(int64_t lo, int64_t hi) { return "must be in " + std::to_strin
 
 }  // namespace
 
+uint64_t RenderSettings::sample_seed() const {
+  if (!frame) return seed;
+  // splitmix64 of the seed and the frame: neighbouring frames get unrelated sequences.
+  uint64_t z = seed ^ (0x9E3779B97F4A7C15ull * (uint64_t(uint32_t(*frame)) + 1));
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+  return z ^ (z >> 31);
+}
+
 void RenderSettings::validate() const {
   require(spp >= 1 && spp <= kMaxSpp, "-s", range(1, kMaxSpp));
   require(light_samples >= 1 && light_samples <= kMaxLightSamples, "-l", range(1, kMaxLightSamples));
@@ -25,6 +34,7 @@ void RenderSettings::validate() const {
             "-a", "batch " + range(1, kMaxSpp) + " and tolerance must be >= 0");
   require(pass_spp >= 1 && pass_spp <= kMaxSpp, "--pass-spp", range(1, kMaxSpp));
   require(tile_size >= 1 && tile_size <= kMaxTileSize, "--tile", range(1, kMaxTileSize));
+  require(!frame || (*frame >= -kMaxFrame && *frame <= kMaxFrame), "--frame", range(-kMaxFrame, kMaxFrame));
   require(std::isfinite(noise_target) && noise_target >= 0 && noise_target <= kMaxNoiseTarget, "--noise-target",
           "must be in 0..1e9");
   require(camera.width >= 1 && camera.width <= kMaxImageSide && camera.height >= 1 && camera.height <= kMaxImageSide,

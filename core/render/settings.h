@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -49,6 +50,13 @@ struct RenderSettings {
   int adaptive_batch = 32;
   float adaptive_tolerance = 0.05f;
   uint64_t seed = 0;  // --seed: every random number is a function of it
+  // --frame N: the frame of a sequence this is. Its random numbers depend on it too, so
+  // that the frames of a sequence are independent and each is the same image whether
+  // rendered alone or with the others. A still (none) keeps the seed as it is.
+  static constexpr int kMaxFrame = 1000000;
+  std::optional<int> frame;
+  // The seed the sampler uses: `seed`, mixed with the frame number when there is one.
+  uint64_t sample_seed() const;
   int pass_spp = 16;  // --pass-spp: samples per progressive pass (the unit merged in order)
   // --tile: side of the square tiles the frame is cut into. It never changes the image,
   // except with a noise target, which is judged per tile.

@@ -20,6 +20,7 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
   TileStats local;
   // Checked per pixel, not per row: a row of a many-sample pass can take seconds.
   auto cancelled = [cancel] { return cancel && cancel->load(std::memory_order_relaxed); };
+  const uint64_t seed = settings_.sample_seed();
   for (int y = 0; y < rect.h && !cancelled(); ++y) {
     for (int x = 0; x < rect.w; ++x) {
       if (cancelled()) break;
@@ -29,7 +30,7 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
       const uint64_t pixel_id = uint64_t(py) * uint64_t(width) + uint64_t(px);
       PixelSums sums;
       for (uint32_t s = s0; s < s1; ++s) {
-        Sampler sampler(settings_.seed, pixel_id, s);
+        Sampler sampler(seed, pixel_id, s);
         const Vec2 jitter = sampler.next_2d();
         const Vec2 u_lens = lens ? sampler.next_2d() : Vec2{};
         // The camera counts rows from the bottom (CS184 convention).

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <set>
 
 #include "core/render/local_renderer.h"
 #include "core/scene/load.h"
@@ -92,6 +93,31 @@ TEST(Determinism, IdenticalBitsForAnyThreadCountAndTileSize) {
   RenderSettings other = s;
   other.seed = 8;
   EXPECT_FALSE(identical(a.film, render(scene, other).film));
+}
+
+// Issue 12: each frame of a sequence has random numbers of its own, the same whichever
+// way it is rendered; a still (no frame) keeps exactly the seed's image.
+TEST(Determinism, EachFrameHasItsOwnNumbersAndAStillKeepsTheSeed) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s = small_cornell();
+  EXPECT_EQ(s.sample_seed(), s.seed);
+  const RenderResult still = render(scene, s);
+  s.frame = 7;
+  const RenderResult seven = render(scene, s, 1, 7), again = render(scene, s, 3, 64);
+  EXPECT_TRUE(identical(seven.film, again.film));
+  EXPECT_FALSE(identical(seven.film, still.film));
+  s.frame = 8;
+  EXPECT_FALSE(identical(seven.film, render(scene, s).film));
+  std::set<uint64_t> seeds;  // frames and seeds never share a sequence
+  for (int seed = 0; seed < 4; ++seed)
+    for (int frame = -2; frame < 50; ++frame) {
+      RenderSettings f;
+      f.seed = uint64_t(seed);
+      f.frame = frame;
+      EXPECT_TRUE(seeds.insert(f.sample_seed()).second) << seed << " " << frame;
+    }
+  s.frame = RenderSettings::kMaxFrame + 1;
+  EXPECT_THROW(s.validate(), SettingsError);
 }
 
 TEST(Determinism, AdaptiveSamplingIsReproducibleAndStopsEarly) {

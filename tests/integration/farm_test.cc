@@ -112,6 +112,25 @@ TEST_F(Farm, OneTwoAndThreeWorkersGiveTheBytesOfTessearRender) {
 
 // Every render setting crosses the wire: a noise target (judged per tile, so the tile size
 // matters too) and the estimator switches give the farm exactly `tessera render`'s image.
+// Issue 12: a frame of a sequence (--frame N) is the same image rendered alone or through
+// the farm, and carries its number in the EXR.
+TEST_F(Farm, AFrameNumberGivesTheSameImageLocallyAndThroughTheFarm) {
+  const std::string flags = kFlags + " --frame 12";
+  const std::string local = local_render(flags);
+  start_coordinator();
+  start_worker();
+  start_worker();
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r = submit_wait(kScene, flags, out);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+  EXPECT_EQ(read_exr(out).metadata.at("tessera/frame"), "12");
+  EXPECT_EQ(read_exr(local).metadata.at("tessera/frame"), "12");
+  const CommandResult bad = run("render " + kScene + " -r 8 8 --frame 2000000 -q", dir);
+  EXPECT_NE(bad.code, 0);  // refused like every setting out of range, naming the flag
+  EXPECT_NE(bad.err.find("--frame: must be in -1000000..1000000"), std::string::npos) << bad.err;
+}
+
 TEST_F(Farm, NoiseTargetAndEstimatorSwitchesGiveTheLocalImage) {
   const std::string flags = "-r 96 72 -s 64 --pass-spp 8 -m 6 --tile 24 --noise-target 0.2 --no-mis";
   const std::string local = local_render(flags);

@@ -105,7 +105,10 @@ TEST(WireSettings, RoundTripAndRangeChecks) {
   s.noise_target = 0.125;
   s.nee = false;
   s.mis = false;
+  EXPECT_FALSE(from_proto(to_proto(s)).frame);  // a still stays a still
+  s.frame = -3;
   const RenderSettings r = from_proto(to_proto(s));
+  EXPECT_EQ(r.frame, std::optional<int>(-3));
   EXPECT_EQ(r.tile_size, 24);
   EXPECT_EQ(r.noise_target, 0.125);
   EXPECT_FALSE(r.nee);
