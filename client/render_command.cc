@@ -11,6 +11,7 @@
 #include "client/progress.h"
 #include "client/render_flags.h"
 #include "core/io/image_io.h"
+#include "core/render/frames.h"
 #include "core/render/local_renderer.h"
 #include "core/scene/load.h"
 #include "core/scene/scene_error.h"
@@ -20,6 +21,7 @@ namespace {
 
 struct RenderArgs {
   RenderFlags flags;
+  std::string frames;  // --frames: a sequence, written through -f patterns
   int threads = 0;
   std::string stats_json;
   bool quiet = false;
@@ -39,13 +41,37 @@ class ProgressPrinter {
   ProgressBar bar_;
 };
 
-int run_render(const RenderArgs& a) {
-  const RenderSettings s = to_settings(a.flags);
-  const std::vector<std::string> outputs = output_paths(a.flags);
+int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
+                 const std::vector<std::string>& outputs);
 
+int run_render(const RenderArgs& a) {
+  RenderSettings s = to_settings(a.flags);
+  std::vector<std::string> outputs = output_paths(a.flags);
+  std::vector<int> frames;
+  if (!a.frames.empty()) {
+    if (s.frame) throw CLI::ValidationError("--frames", "give --frames or --frame, not both");
+    frames = parse_frames(a.frames);
+    if (frames.size() > 1)
+      for (const std::string& out : outputs)
+        if (out.find('#') == std::string::npos)
+          throw CLI::ValidationError("--frames", "several frames need a #### in every -f path (got '" + out + "')");
+  }
   const Scene scene = load_scene(a.flags.scene);
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "tessera: warning: %s\n", w.c_str());
-  const TileRenderer renderer(scene, s);
+  TileRenderer renderer(scene, s);
+  if (frames.empty()) return render_frame(a, renderer, s, outputs);
+  for (const int frame : frames) {  // one scene and one acceleration structure for them all
+    s.frame = frame;
+    renderer.set_frame(frame);
+    std::vector<std::string> paths;
+    for (const std::string& out : outputs) paths.push_back(frame_path(out, frame));
+    if (const int rc = render_frame(a, renderer, s, paths)) return rc;
+  }
+  return 0;
+}
+
+int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
+                 const std::vector<std::string>& outputs) {
   ProgressPrinter printer(a.quiet);
   const RenderResult r = render_image(renderer, a.threads, std::ref(printer));
 
@@ -81,9 +107,10 @@ int run_render(const RenderArgs& a) {
                      {"nan_samples", r.stats.nan_samples},
                      {"mean_luminance", r.film.mean_luminance()},
                      {"self_hits", r.stats.rays.self_hits}};
-    std::ofstream f(a.stats_json);
+    const std::string path = s.frame ? frame_path(a.stats_json, *s.frame) : a.stats_json;  // one per frame with ####
+    std::ofstream f(path);
     f << j.dump(2) << "\n";
-    if (!f) throw std::runtime_error(a.stats_json + ": cannot write stats");
+    if (!f) throw std::runtime_error(path + ": cannot write stats");
   }
   return 0;
 }
@@ -98,6 +125,8 @@ std::function<int()> add_render_command(CLI::App& app, const std::string& comman
   cmd->add_option("-t", args->threads, "Threads (0 = all cores)")->capture_default_str()->check(CLI::Range(0, 1024));
   cmd->add_option("--stats-json", args->stats_json, "Write timing figures as JSON");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
+  cmd->add_option("--frames", args->frames,
+                  "Render a sequence: 1-240, 1-240x2, 1,5,9 (each frame as --frame N would; -f paths need ####)");
   return [args, cmd] {
     if (!cmd->parsed()) return -1;
     return run_render(*args);

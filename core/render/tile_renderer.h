@@ -40,6 +40,10 @@ class TileRenderer {
   std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active, TileStats* stats,
                                 const std::atomic<bool>* cancel = nullptr) const;
 
+  // The frame the next renders are of (--frames): only the random numbers change, so the
+  // scene's acceleration structure is built once for a whole sequence. Not while rendering.
+  void set_frame(std::optional<int> frame) { settings_.frame = frame; }
+
   const Scene& scene() const { return scene_; }
   const RenderSettings& settings() const { return settings_; }
 

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/io/image_io.h"
+#include "tests/integration/farm_helpers.h"
 
 namespace {
 
@@ -69,6 +70,26 @@ TEST_F(Cli, RendersExrWithSppVarianceAndMetadataAndAPngAndStats) {
   EXPECT_EQ(j.at("samples").get<uint64_t>(), 40u * 30u * 4u);
   EXPECT_GT(j.at("rays_per_second").get<double>(), 0);
   EXPECT_EQ(j.at("nan_samples").get<uint64_t>(), 0u);
+}
+
+// Issue 12: a sequence renders each frame as `--frame N` alone would, to its own files.
+TEST_F(Cli, FramesRenderASequenceEachFrameAsItsOwnRenderWould) {
+  const std::string pattern = (dir / "seq.##.exr").string();
+  CommandResult r = run("render " + scene + " -s 2 -r 24 16 --frames 1-5x2 -q -f " + pattern);
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const char* f : {"seq.01.exr", "seq.03.exr", "seq.05.exr"}) EXPECT_TRUE(fs::exists(dir / f)) << f;
+  EXPECT_FALSE(fs::exists(dir / "seq.02.exr"));
+  const std::string alone = (dir / "alone.exr").string();
+  ASSERT_EQ(run("render " + scene + " -s 2 -r 24 16 --frame 3 -q -f " + alone).code, 0);
+  tessera::testing::expect_same_pixels(alone, (dir / "seq.03.exr").string());
+  EXPECT_EQ(tessera::read_exr((dir / "seq.05.exr").string()).metadata.at("tessera/frame"), "5");
+  // Several frames into one file would overwrite each other: refused before rendering.
+  r = run("render " + scene + " -s 2 -r 24 16 --frames 1-2 -q -f " + (dir / "one.exr").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("need a #### in every -f path"), std::string::npos) << r.err;
+  r = run("render " + scene + " --frames 3-1 -q -f " + pattern);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("--frames: '3-1': the range runs backwards"), std::string::npos) << r.err;
 }
 
 TEST_F(Cli, CellRenderingWritesOnlyTheCell) {
