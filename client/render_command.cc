@@ -42,35 +42,6 @@ class ProgressPrinter {
 };
 
 int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
-                 const std::vector<std::string>& outputs);
-
-int run_render(const RenderArgs& a) {
-  RenderSettings s = to_settings(a.flags);
-  std::vector<std::string> outputs = output_paths(a.flags);
-  std::vector<int> frames;
-  if (!a.frames.empty()) {
-    if (s.frame) throw CLI::ValidationError("--frames", "give --frames or --frame, not both");
-    frames = parse_frames(a.frames);
-    if (frames.size() > 1)
-      for (const std::string& out : outputs)
-        if (out.find('#') == std::string::npos)
-          throw CLI::ValidationError("--frames", "several frames need a #### in every -f path (got '" + out + "')");
-  }
-  const Scene scene = load_scene(a.flags.scene);
-  for (const std::string& w : scene.warnings) std::fprintf(stderr, "tessera: warning: %s\n", w.c_str());
-  TileRenderer renderer(scene, s);
-  if (frames.empty()) return render_frame(a, renderer, s, outputs);
-  for (const int frame : frames) {  // one scene and one acceleration structure for them all
-    s.frame = frame;
-    renderer.set_frame(frame);
-    std::vector<std::string> paths;
-    for (const std::string& out : outputs) paths.push_back(frame_path(out, frame));
-    if (const int rc = render_frame(a, renderer, s, paths)) return rc;
-  }
-  return 0;
-}
-
-int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
                  const std::vector<std::string>& outputs) {
   ProgressPrinter printer(a.quiet);
   const RenderResult r = render_image(renderer, a.threads, std::ref(printer));
@@ -111,6 +82,32 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
     std::ofstream f(path);
     f << j.dump(2) << "\n";
     if (!f) throw std::runtime_error(path + ": cannot write stats");
+  }
+  return 0;
+}
+
+int run_render(const RenderArgs& a) {
+  RenderSettings s = to_settings(a.flags);
+  std::vector<std::string> outputs = output_paths(a.flags);
+  std::vector<int> frames;
+  if (!a.frames.empty()) {
+    if (s.frame) throw CLI::ValidationError("--frames", "give --frames or --frame, not both");
+    frames = parse_frames(a.frames);
+    if (frames.size() > 1)
+      for (const std::string& out : outputs)
+        if (out.find('#') == std::string::npos)
+          throw CLI::ValidationError("--frames", "several frames need a #### in every -f path (got '" + out + "')");
+  }
+  const Scene scene = load_scene(a.flags.scene);
+  for (const std::string& w : scene.warnings) std::fprintf(stderr, "tessera: warning: %s\n", w.c_str());
+  TileRenderer renderer(scene, s);
+  if (frames.empty()) return render_frame(a, renderer, s, outputs);
+  for (const int frame : frames) {  // one scene and one acceleration structure for them all
+    s.frame = frame;
+    renderer.set_frame(frame);
+    std::vector<std::string> paths;
+    for (const std::string& out : outputs) paths.push_back(frame_path(out, frame));
+    if (const int rc = render_frame(a, renderer, s, paths)) return rc;
   }
   return 0;
 }

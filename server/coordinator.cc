@@ -71,7 +71,8 @@ void Coordinator::restore_jobs() {
     double elapsed = sj.elapsed;
     std::string lost;  // why a live job cannot go on
     try {
-      if (std::optional<Checkpoint> cp = store_->read_checkpoint(sj.id)) {
+      // An ended job's film stays on disk: start-up decodes only what live jobs go on with.
+      if (std::optional<Checkpoint> cp = store_->read_checkpoint(sj.id, job->live())) {
         job->plan.restore(cp->state, std::move(cp->film));
         if (job->live()) elapsed = cp->elapsed;
       }
@@ -118,7 +119,7 @@ void Coordinator::restore_jobs() {
       j.started = now - elapsed;
       j.finished_at = now;
       j.image_frame_passes = j.plan.frame_passes_done();
-      j.plan.release_film();
+      j.plan.release_film();  // (restored without one; a plan without a checkpoint has its own)
       j.written_seq = j.checkpoint_seq = j.image_seq = 1;
       j.written_merges = j.checkpoint_written_merges = j.plan.merges();
       j.end_recorded = true;

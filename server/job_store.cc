@@ -1,13 +1,10 @@
 #include "server/job_store.h"
 
-#include <fcntl.h>
 #include <sqlite3.h>
-#include <unistd.h>
 #include <zstd.h>
 #define XXH_INLINE_ALL  // header only: nothing to link
 #include <xxhash.h>
 
-#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <stdexcept>
@@ -111,23 +108,6 @@ class Statement {
   sqlite3_stmt* s_ = nullptr;
 };
 
-void write_all(int fd, const std::string& bytes, const std::string& path) {
-  for (size_t at = 0; at < bytes.size();) {
-    const ssize_t n = ::write(fd, bytes.data() + at, bytes.size() - at);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) throw std::runtime_error(path + ": cannot write: " + std::strerror(errno));
-    at += size_t(n);
-  }
-}
-
-void fsync_dir(const fs::path& dir) {
-  const int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
-  if (fd >= 0) {
-    ::fsync(fd);
-    ::close(fd);
-  }
-}
-
 }  // namespace
 
 std::string encode_checkpoint(const PlanState& state, const Film& film, double elapsed) {
@@ -158,7 +138,7 @@ std::string encode_checkpoint(const PlanState& state, const Film& film, double e
   return std::move(w.out);
 }
 
-Checkpoint decode_checkpoint(const std::string& bytes) {
+Checkpoint decode_checkpoint(const std::string& bytes, bool with_film) {
   if (bytes.size() < 4 + 8 || std::memcmp(bytes.data(), kMagic, 4) != 0)
     throw std::runtime_error("checkpoint: not a checkpoint file");
   uint64_t sum;
@@ -198,6 +178,7 @@ Checkpoint decode_checkpoint(const std::string& bytes) {
   }
   const std::string sums = in.bytes();
   if (in.at() != bytes.size() - 8) throw std::runtime_error("checkpoint: trailing bytes");
+  if (!with_film) return c;
   c.film = Film(r);
   try {
     std::vector<PixelSums> pixels = decode_sums(sums, size_t(r.area()));
@@ -317,35 +298,16 @@ std::string JobStore::checkpoint_path(const std::string& id) const {
 }
 
 void JobStore::write_checkpoint(const std::string& id, const PlanState& state, const Film& film, double elapsed) const {
-  const std::string bytes = encode_checkpoint(state, film, elapsed);
   const fs::path path = checkpoint_path(id);
   fs::create_directories(path.parent_path());
-  const std::string tmp = path.string() + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw std::runtime_error(tmp + ": cannot create: " + std::strerror(errno));
-  try {
-    write_all(fd, bytes, tmp);
-    if (::fsync(fd) != 0) throw std::runtime_error(tmp + ": cannot sync: " + std::strerror(errno));
-  } catch (...) {
-    ::close(fd);
-    ::unlink(tmp.c_str());
-    throw;
-  }
-  ::close(fd);
-  if (before_checkpoint_rename) before_checkpoint_rename();
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string why = std::strerror(errno);
-    ::unlink(tmp.c_str());
-    throw std::runtime_error(path.string() + ": cannot replace: " + why);
-  }
-  fsync_dir(path.parent_path());
+  write_file_atomic(path.string(), encode_checkpoint(state, film, elapsed), {true, before_checkpoint_rename});
 }
 
-std::optional<Checkpoint> JobStore::read_checkpoint(const std::string& id) const {
+std::optional<Checkpoint> JobStore::read_checkpoint(const std::string& id, bool with_film) const {
   const std::string path = checkpoint_path(id);
   std::error_code ec;
   if (!fs::exists(path, ec)) return std::nullopt;
-  return decode_checkpoint(read_file_bytes(path));
+  return decode_checkpoint(read_file_bytes(path), with_film);
 }
 
 }  // namespace tessera

@@ -57,8 +57,9 @@ class JobStore {
   // Replaces the job's checkpoint: written to a temporary file, synced, renamed into place.
   // Throws std::runtime_error naming the file.
   void write_checkpoint(const std::string& id, const PlanState& state, const Film& film, double elapsed) const;
-  // Nothing when the job has none; throws std::runtime_error when it is damaged.
-  std::optional<Checkpoint> read_checkpoint(const std::string& id) const;
+  // Nothing when the job has none; throws std::runtime_error when it is damaged. Without
+  // `with_film` the film is left empty (its bytes are checksummed, not decoded).
+  std::optional<Checkpoint> read_checkpoint(const std::string& id, bool with_film = true) const;
   std::string checkpoint_path(const std::string& id) const;
 
   // Test seam: runs between a checkpoint's temporary file being written and its rename.
@@ -73,7 +74,8 @@ class JobStore {
 
 // A checkpoint's bytes, and back (the file format; exposed for tests and the fuzzer).
 std::string encode_checkpoint(const PlanState& state, const Film& film, double elapsed);
-// Throws std::runtime_error unless the bytes are a whole, undamaged checkpoint.
-Checkpoint decode_checkpoint(const std::string& bytes);
+// Throws std::runtime_error unless the bytes are a whole, undamaged checkpoint. Without
+// `with_film`, Checkpoint::film stays empty.
+Checkpoint decode_checkpoint(const std::string& bytes, bool with_film = true);
 
 }  // namespace tessera

@@ -41,7 +41,7 @@ FramePlan::FramePlan(const RenderSettings& settings)
   for (const auto& [s0, s1] : passes_) samples_total_ += uint64_t(s1 - s0) * uint64_t(w.area());
   work_total_ = double(samples_total_);
   if (passes_.empty()) tiles_done_ = uint32_t(tiles_.size());  // nothing to render
-  while (frame_passes_ < passes_.size() && unfinished_at_[frame_passes_] == 0) ++frame_passes_;
+  advance_frame_passes();
 }
 
 std::optional<TileTask> FramePlan::take() {
@@ -92,6 +92,10 @@ FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const std::vecto
   return Merge::kMerged;
 }
 
+void FramePlan::advance_frame_passes() {
+  while (frame_passes_ < passes_.size() && unfinished_at_[frame_passes_] == 0) ++frame_passes_;
+}
+
 void FramePlan::finish_pass(uint32_t tile) {
   TileProgress& t = progress_[tile];
   --unfinished_at_[t.passes_done];
@@ -123,7 +127,7 @@ void FramePlan::finish_pass(uint32_t tile) {
     ++unfinished_at_[t.passes_done];
   }
   // Tiles only move up, so the lowest pass with unfinished tiles only moves up too.
-  while (frame_passes_ < passes_.size() && unfinished_at_[frame_passes_] == 0) ++frame_passes_;
+  advance_frame_passes();
 }
 
 double FramePlan::fraction_done() const {
@@ -156,9 +160,9 @@ void FramePlan::reset_tile(uint32_t tile) {
   t = TileProgress{};
   ++unfinished_at_[0];
   ready_.emplace(0, tile);
-  ++merges_;  // the film changed
-  frame_passes_ = 0;
-  while (frame_passes_ < passes_.size() && unfinished_at_[frame_passes_] == 0) ++frame_passes_;
+  ++merges_;          // the film changed
+  frame_passes_ = 0;  // a reset tile moves it down
+  advance_frame_passes();
 }
 
 PlanState FramePlan::state() const {
@@ -175,7 +179,7 @@ PlanState FramePlan::state() const {
 void FramePlan::restore(const PlanState& s, Film film) {
   const Rect w = settings_.effective_window();
   auto bad = [](const std::string& why) { throw std::invalid_argument("saved frame plan: " + why); };
-  if (!(film.window() == w)) bad("the film does not fit the frame");
+  if (!(film.window() == w) && !(film.window() == Rect{})) bad("the film does not fit the frame");
   if (s.progress.size() != tiles_.size())
     bad("tile count " + std::to_string(s.progress.size()) + ", expected " + std::to_string(tiles_.size()));
   if (s.active.size() != (settings_.adaptive ? size_t(w.area()) : 0)) bad("the active-pixel mask does not fit");
@@ -203,7 +207,7 @@ void FramePlan::restore(const PlanState& s, Film film) {
   for (uint32_t t = 0; t < tiles_.size() && !passes_.empty(); ++t)
     if (!progress_[t].finished) ready_.emplace(progress_[t].passes_done, t);
   frame_passes_ = 0;
-  while (frame_passes_ < passes_.size() && unfinished_at_[frame_passes_] == 0) ++frame_passes_;
+  advance_frame_passes();
 }
 
 }  // namespace tessera

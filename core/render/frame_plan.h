@@ -91,8 +91,10 @@ class FramePlan {
 
   PlanState state() const;
   // Takes up a saved state and film (from state() and film() of a plan with the same
-  // settings) in place of this plan's; nothing is taken. Throws std::invalid_argument,
-  // changing nothing, when they do not fit these settings or contradict themselves.
+  // settings) in place of this plan's; nothing is taken. An empty film (Film(Rect{}))
+  // restores the progress only, as after release_film(): for an ended job, whose image is
+  // kept elsewhere. Throws std::invalid_argument, changing nothing, when they do not fit
+  // these settings or contradict themselves.
   void restore(const PlanState& state, Film film);
   // Frees the film of a plan whose image is kept elsewhere (an ended job's); film() is
   // then empty and has_film() false.
@@ -101,6 +103,8 @@ class FramePlan {
 
  private:
   void finish_pass(uint32_t tile);
+  // Moves frame_passes_ up to the lowest pass that still has unfinished tiles.
+  void advance_frame_passes();
 
   RenderSettings settings_;
   Film film_;

@@ -4,7 +4,6 @@
 
 #include <gtest/gtest.h>
 
-#include <cstring>
 #include <limits>
 #include <set>
 
@@ -198,15 +197,30 @@ std::vector<PixelSums> noisy_sums_for(const TileTask& t) {
   return out;
 }
 
+// Settings whose tiles take several passes, with and without adaptive sampling.
+RenderSettings noisy_settings(bool adaptive) {
+  RenderSettings s = settings(40, 24, 8, 24, 4);
+  s.adaptive = adaptive;
+  s.adaptive_batch = 4;
+  s.adaptive_tolerance = 0.2f;
+  return s;
+}
+
+// Every pixel's sums equal bit for bit (field by field: PixelSums has padding).
+void expect_same_film(const Film& a, const Film& b) {
+  ASSERT_EQ(a.pixels().size(), b.pixels().size());
+  for (size_t i = 0; i < a.pixels().size(); ++i) {
+    const PixelSums &p = a.pixels()[i], &q = b.pixels()[i];
+    ASSERT_TRUE(p.r == q.r && p.g == q.g && p.b == q.b && p.lum2 == q.lum2 && p.n == q.n) << i;
+  }
+}
+
 // A plan rebuilt from state() and film() goes on exactly as the plan it was taken from:
 // the same tasks in the same order, the same film bits, the same progress. This is what
 // lets a restarted coordinator finish a job bit-identical to `tessera render`.
 TEST(FramePlan, ARestoredPlanGoesOnExactlyAsTheOriginal) {
   for (const bool adaptive : {false, true}) {
-    RenderSettings s = settings(40, 24, 8, 24, 4);
-    s.adaptive = adaptive;
-    s.adaptive_batch = 4;
-    s.adaptive_tolerance = 0.2f;
+    const RenderSettings s = noisy_settings(adaptive);
     FramePlan a(s);
     for (int k = 0; k < 23; ++k) {  // part of the way, with one task left taken
       const TileTask t = *a.take();
@@ -220,6 +234,11 @@ TEST(FramePlan, ARestoredPlanGoesOnExactlyAsTheOriginal) {
     EXPECT_EQ(b.frame_passes_done(), a.frame_passes_done());
     EXPECT_EQ(b.tiles_done(), a.tiles_done());
     EXPECT_EQ(b.fraction_done(), a.fraction_done());
+    FramePlan progress_only(s);  // an ended job's, restored without its film
+    progress_only.restore(a.state(), Film(Rect{}));
+    EXPECT_FALSE(progress_only.has_film());
+    EXPECT_EQ(progress_only.samples_merged(), a.samples_merged());
+    EXPECT_EQ(progress_only.tiles_done(), a.tiles_done());
     // `a` restarted too (its taken task lost with the coordinator), then both run to the end.
     FramePlan a2(s);
     a2.restore(a.state(), a.film());
@@ -236,9 +255,7 @@ TEST(FramePlan, ARestoredPlanGoesOnExactlyAsTheOriginal) {
     }
     EXPECT_GT(steps, 0);
     EXPECT_TRUE(b.done());
-    ASSERT_EQ(a2.film().pixels().size(), b.film().pixels().size());
-    EXPECT_EQ(0, std::memcmp(a2.film().pixels().data(), b.film().pixels().data(),
-                             b.film().pixels().size() * sizeof(PixelSums)));
+    expect_same_film(a2.film(), b.film());
     for (uint32_t t = 0; t < b.tiles().size(); ++t) {
       EXPECT_EQ(a2.progress(t).passes_done, b.progress(t).passes_done);
       EXPECT_EQ(a2.progress(t).relative_error, b.progress(t).relative_error);
@@ -270,10 +287,7 @@ TEST(FramePlan, AStateThatDoesNotFitIsRefusedAndChangesNothing) {
 // film of a plan that never saw the lie.
 TEST(FramePlan, AResetTileRenderedAgainGivesTheHonestFilm) {
   for (const bool adaptive : {false, true}) {
-    RenderSettings s = settings(40, 24, 8, 24, 4);
-    s.adaptive = adaptive;
-    s.adaptive_batch = 4;
-    s.adaptive_tolerance = 0.2f;
+    const RenderSettings s = noisy_settings(adaptive);
     FramePlan honest(s), lied_to(s);
     while (!honest.done()) {
       const TileTask t = *honest.take();
@@ -297,10 +311,7 @@ TEST(FramePlan, AResetTileRenderedAgainGivesTheHonestFilm) {
       }
     }
     ASSERT_TRUE(lied.count(99));
-    for (size_t i = 0; i < honest.film().pixels().size(); ++i) {
-      const PixelSums &a = honest.film().pixels()[i], &b = lied_to.film().pixels()[i];
-      ASSERT_TRUE(a.r == b.r && a.g == b.g && a.b == b.b && a.lum2 == b.lum2 && a.n == b.n) << i;
-    }
+    expect_same_film(honest.film(), lied_to.film());
     EXPECT_EQ(honest.samples_merged(), lied_to.samples_merged());
     EXPECT_EQ(lied_to.fraction_done(), 1);
   }

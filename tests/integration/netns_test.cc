@@ -126,11 +126,11 @@ TEST_F(NetnsFarm, TwoMachinesRenderTheLocalImageAndOneLosingItsLinkChangesNothin
   const std::string local = (dir / "local.exr").string();
   ASSERT_EQ(sh(kBin + "/tessera render " + kScene + " " + flags + " -q -f " + local), 0);
 
-  Process coordinator("/usr/sbin/ip",
-                      in("c", {kBin + "/tessera-coordinator", "--listen", "192.0.2.1:0", "--http", "127.0.0.1:0",
-                               "--data", (dir / "data").string(), "--lease-seconds", "2", "--tokens",
-                               (dir / "tokens").string()}),
-                      (dir / "coordinator.err").string());
+  Process coordinator(
+      "/usr/sbin/ip",
+      in("c", {kBin + "/tessera-coordinator", "--listen", "192.0.2.1:0", "--http", "127.0.0.1:0", "--data",
+               (dir / "data").string(), "--lease-seconds", "2", "--tokens", (dir / "tokens").string()}),
+      (dir / "coordinator.err").string());
   std::smatch m;
   const std::string line = coordinator.read_line();
   ASSERT_TRUE(std::regex_match(line, m, std::regex("grpc listening on (192\\.0\\.2\\.1:\\d+)"))) << line;
@@ -140,12 +140,11 @@ TEST_F(NetnsFarm, TwoMachinesRenderTheLocalImageAndOneLosingItsLinkChangesNothin
   const std::string metrics_url = "http://" + std::string(m[1]) + "/metrics";
   std::vector<std::unique_ptr<Process>> workers;
   for (const char* h : {"w1", "w2"})
-    workers.push_back(
-        std::make_unique<Process>("/usr/sbin/ip",
-                                  in(h, {kBin + "/tessera-worker", "--coordinator", addr, "--threads", "1", "--cache",
-                                         (dir / (std::string("cache-") + h)).string(), "--name", h, "-v",
-                                         "--token-file", token_file("worker")}),
-                                  (dir / (std::string("worker-") + h + ".err")).string()));
+    workers.push_back(std::make_unique<Process>(
+        "/usr/sbin/ip",
+        in(h, {kBin + "/tessera-worker", "--coordinator", addr, "--threads", "1", "--cache",
+               (dir / (std::string("cache-") + h)).string(), "--name", h, "-v", "--token-file", token_file("worker")}),
+        (dir / (std::string("worker-") + h + ".err")).string()));
 
   // The scene reaches the workers only over the wire: submitted from a copy that is gone
   // before any worker could read it.
@@ -178,8 +177,9 @@ TEST_F(NetnsFarm, TwoMachinesRenderTheLocalImageAndOneLosingItsLinkChangesNothin
   const std::string fetch_metrics = "import urllib.request; r = urllib.request.Request('" + metrics_url +
                                     "', headers={'Authorization': 'Bearer " + kViewerToken +
                                     "'}); print(urllib.request.urlopen(r).read().decode())";
-  ASSERT_EQ(std::system(("ip netns exec " + hosts.ns("c") + " python3 -c \"" + fetch_metrics + "\" > " + metrics).c_str()),
-            0);
+  ASSERT_EQ(
+      std::system(("ip netns exec " + hosts.ns("c") + " python3 -c \"" + fetch_metrics + "\" > " + metrics).c_str()),
+      0);
   const std::string metrics_text = slurp(metrics);
   ASSERT_TRUE(std::regex_search(metrics_text, m, std::regex("tessera_leases_expired_total (\\d+)"))) << metrics_text;
   EXPECT_GE(std::stoi(m[1]), 1);

@@ -53,6 +53,11 @@ TEST(JobStore, ACheckpointComesBackBitForBit) {
   EXPECT_EQ(c.state.merges, 5u);
   EXPECT_EQ(c.state.work_done, 0.1);
   EXPECT_EQ(c.state.work_total, 3e9);
+  // An ended job's progress without its film (start-up leaves finished films on disk).
+  const Checkpoint progress_only = decode_checkpoint(encode_checkpoint(s.state, s.film, 12.5), false);
+  EXPECT_EQ(progress_only.film.window(), Rect{});
+  EXPECT_EQ(progress_only.state.merges, 5u);
+  EXPECT_EQ(progress_only.state.progress[1].passes_done, 3u);
 }
 
 TEST(JobStore, EveryTruncatedOrDamagedCheckpointIsRefusedNeverTrusted) {
