@@ -3,10 +3,13 @@
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
+#include <functional>
+#include <set>
 #include <thread>
 
 #include "client/progress.h"
 #include "core/io/files.h"
+#include "core/render/frames.h"
 #include "scene_bundle.h"
 #include "wire.h"
 
@@ -32,13 +35,66 @@ const char* state_name(v1::JobStatus::State s) { return v1::JobStatus::State_Nam
 bool ended(const v1::JobStatus& s) { return s.state() != v1::JobStatus::QUEUED && s.state() != v1::JobStatus::RUNNING; }
 
 std::string describe(const v1::JobStatus& s) {
-  char buf[256];
-  std::snprintf(
-      buf, sizeof buf, "%s  %-9s %5.1f%%  passes %u/%u  tiles %u/%u  workers %u  %s", s.id().c_str(),
-      state_name(s.state()), 100.0 * double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total())),
-      s.frame_passes_done(), s.passes_total(), s.tiles_done(), s.tiles_total(), s.active_workers(), s.name().c_str());
+  char buf[512];
+  const double percent = 100.0 * double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total()));
+  if (s.frames_total() > 0)
+    std::snprintf(buf, sizeof buf, "%s  %-9s %5.1f%%  frames %u/%u  tiles %u/%u  workers %u  %s", s.id().c_str(),
+                  state_name(s.state()), percent, s.frames_done(), s.frames_total(), s.tiles_done(), s.tiles_total(),
+                  s.active_workers(), s.name().c_str());
+  else
+    std::snprintf(buf, sizeof buf, "%s  %-9s %5.1f%%  passes %u/%u  tiles %u/%u  workers %u  %s", s.id().c_str(),
+                  state_name(s.state()), percent, s.frame_passes_done(), s.passes_total(), s.tiles_done(),
+                  s.tiles_total(), s.active_workers(), s.name().c_str());
   return buf;
 }
+
+// A sequence's frames by state, as ranges: "done 1-3,7; rendering 4 (45%); queued 5-6,8-240".
+std::string describe_frames(const v1::JobStatus& s) {
+  std::string out;
+  for (const v1::JobStatus::State state : {v1::JobStatus::DONE, v1::JobStatus::RUNNING, v1::JobStatus::QUEUED,
+                                           v1::JobStatus::CANCELLED, v1::JobStatus::FAILED}) {
+    std::string list;
+    for (int i = 0; i < s.frames_size();) {
+      const v1::FrameStatus& f = s.frames(i);
+      if (f.state() != state) {
+        ++i;
+        continue;
+      }
+      int j = i;  // a run of consecutive frame numbers in this state
+      while (j + 1 < s.frames_size() && s.frames(j + 1).state() == state && s.frames(j + 1).frame() == s.frames(j).frame() + 1) ++j;
+      list += (list.empty() ? "" : ",") + std::to_string(f.frame());
+      if (j > i) list += "-" + std::to_string(s.frames(j).frame());
+      if (state == v1::JobStatus::RUNNING && j == i) {
+        char pct[32];
+        std::snprintf(pct, sizeof pct, " (%.0f%%)",
+                      100.0 * double(f.samples_done()) / double(std::max<uint64_t>(1, f.samples_total())));
+        list += pct;
+      }
+      i = j + 1;
+    }
+    if (list.empty()) continue;
+    const char* name = state == v1::JobStatus::RUNNING ? "rendering" : state == v1::JobStatus::DONE ? "done"
+                       : state == v1::JobStatus::QUEUED  ? "queued"
+                       : state == v1::JobStatus::FAILED  ? "failed"
+                                                         : "cancelled";
+    out += (out.empty() ? "" : "; ") + std::string(name) + " " + list;
+  }
+  return out;
+}
+
+bool has_ext(const std::string& p, const char* ext) {
+  return p.size() >= 4 && p.compare(p.size() - 4, 4, ext) == 0;
+}
+
+void check_outputs(const std::vector<std::string>& outputs) {
+  for (const std::string& out : outputs)  // before the download, which may be large
+    if (!has_ext(out, ".exr") && !has_ext(out, ".png"))
+      throw FarmError(out + ": unknown image format (use .exr or .png)");
+}
+
+// One image of a job (a frame's, with `frame`) to each output.
+void fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::optional<int> frame,
+               const std::vector<std::string>& outputs, const FarmContext& c);
 
 void print_status(const v1::JobStatus& s, const FarmContext& c) {
   std::fprintf(c.out, "%s\n", c.json ? proto_json(s).c_str() : describe(s).c_str());
@@ -48,7 +104,8 @@ void print_status(const v1::JobStatus& s, const FarmContext& c) {
 // coordinator restarting, a network blip) is retried with back-off for up to
 // c.reconnect_seconds; only then, or when the coordinator no longer knows the job, is it
 // an error.
-v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, const FarmContext& c) {
+v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, const FarmContext& c,
+                    const std::function<void(const v1::JobStatus&)>& on_status = nullptr) {
   ProgressBar bar(c.quiet || c.json);
   v1::JobStatus s, last;
   bool any = false;
@@ -64,9 +121,14 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
       any = true;
       last = s;
       backoff = 0.25;
+      if (on_status) on_status(s);
       char what[128];
-      std::snprintf(what, sizeof what, "%s passes %u/%u tiles %u/%u workers %u", state_name(s.state()),
-                    s.frame_passes_done(), s.passes_total(), s.tiles_done(), s.tiles_total(), s.active_workers());
+      if (s.frames_total() > 0)
+        std::snprintf(what, sizeof what, "%s frames %u/%u workers %u", state_name(s.state()), s.frames_done(),
+                      s.frames_total(), s.active_workers());
+      else
+        std::snprintf(what, sizeof what, "%s passes %u/%u tiles %u/%u workers %u", state_name(s.state()),
+                      s.frame_passes_done(), s.passes_total(), s.tiles_done(), s.tiles_total(), s.active_workers());
       const double fraction =
           ended(s) ? 1.0 : double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total()));
       bar.update(fraction, what, s.elapsed_seconds());
@@ -128,6 +190,7 @@ int show_status(v1::Tessera::StubInterface& stub, const std::string& job, const 
     std::fprintf(c.out, "%s\n  elapsed %s, eta %s, %llu of %llu samples\n", describe(s).c_str(),
                  format_duration(s.elapsed_seconds()).c_str(), format_duration(s.eta_seconds()).c_str(),
                  (unsigned long long)s.samples_done(), (unsigned long long)s.samples_total());
+  if (!c.json && s.frames_total() > 0) std::fprintf(c.out, "  frames: %s\n", describe_frames(s).c_str());
   if (!c.json && !s.error().empty()) std::fprintf(c.out, "  error: %s\n", s.error().c_str());
   return 0;
 }
@@ -138,16 +201,13 @@ int watch_job(v1::Tessera::StubInterface& stub, const std::string& job, const Fa
   return s.state() == v1::JobStatus::DONE ? 0 : 1;
 }
 
-int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const std::vector<std::string>& outputs,
-                const FarmContext& c) {
-  auto has_ext = [](const std::string& p, const char* ext) {
-    return p.size() >= 4 && p.compare(p.size() - 4, 4, ext) == 0;
-  };
-  for (const std::string& out : outputs)  // before the download, which may be large
-    if (!has_ext(out, ".exr") && !has_ext(out, ".png"))
-      throw FarmError(out + ": unknown image format (use .exr or .png)");
+namespace {
+
+void fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::optional<int> frame,
+               const std::vector<std::string>& outputs, const FarmContext& c) {
   v1::FetchImageRequest req;
   req.set_id(job);
+  if (frame) req.set_frame(*frame);
   for (const std::string& out : outputs) {  // only the formats written: a PNG is encoded on request
     if (has_ext(out, ".exr")) req.set_exr(true);
     if (has_ext(out, ".png")) req.set_png(true);
@@ -155,12 +215,43 @@ int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const 
   v1::Image img;
   check(stub.FetchImage(deadline(c, 120).get(), req, &img), c);
   for (const std::string& out : outputs) {
+    const std::string path = frame ? frame_path(out, *frame) : out;
     try {
-      write_file_atomic(out, has_ext(out, ".exr") ? img.exr() : img.png());
+      write_file_atomic(path, has_ext(out, ".exr") ? img.exr() : img.png());
     } catch (const std::runtime_error& e) {
       throw FarmError(e.what());
     }
   }
+}
+
+}  // namespace
+
+int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const std::vector<std::string>& outputs,
+                const FarmContext& c, const FetchWhat& what) {
+  check_outputs(outputs);
+  if (what.all && what.frame) throw FarmError("give --frame N or --all, not both");
+  if (!what.all) {
+    fetch_one(stub, job, what.frame, outputs, c);
+    return 0;
+  }
+  v1::JobId req;
+  req.set_id(job);
+  v1::JobStatus s;
+  check(stub.GetJob(deadline(c).get(), req, &s), c);
+  if (s.frames_total() == 0) throw FarmError("job " + job + " is not a sequence: fetch it without --all");
+  if (s.frames_size() > 1)
+    for (const std::string& out : outputs)
+      if (out.find('#') == std::string::npos)
+        throw FarmError("--all: several frames need a #### in every -f path (got '" + out + "')");
+  int written = 0;
+  for (const v1::FrameStatus& f : s.frames())
+    if (f.state() == v1::JobStatus::DONE) {
+      fetch_one(stub, job, f.frame(), outputs, c);
+      ++written;
+    }
+  if (!c.json)
+    std::fprintf(c.err, "%d of %d frames finished and written%s\n", written, s.frames_size(),
+                 written < s.frames_size() ? (" (the others: " + describe_frames(s) + ")").c_str() : "");
   return 0;
 }
 
@@ -173,10 +264,32 @@ int cancel_job(v1::Tessera::StubInterface& stub, const std::string& job, const F
   return 0;
 }
 
+namespace {
+
+int report_submitted(const std::string& id, const v1::JobStatus& final, const std::vector<std::string>& outputs,
+                     const FarmContext& c) {
+  if (c.json) {
+    std::fprintf(c.out, "%s\n", proto_json(final).c_str());
+  } else {
+    std::fprintf(c.out, "%s: %s in %.2f s, %llu samples -> ", id.c_str(), state_name(final.state()),
+                 final.elapsed_seconds(), (unsigned long long) final.samples_done());
+    for (size_t i = 0; i < outputs.size(); ++i) std::fprintf(c.out, "%s%s", i ? ", " : "", outputs[i].c_str());
+    std::fprintf(c.out, "\n");
+  }
+  if (!final.error().empty()) std::fprintf(c.err, "tessera: job %s: %s\n", id.c_str(), final.error().c_str());
+  return final.state() == v1::JobStatus::DONE ? 0 : 1;
+}
+
+}  // namespace
+
 int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const FarmContext& c) {
   v1::SubmitJobRequest req;
   req.set_version(kProtocolVersion);
   *req.mutable_settings() = to_proto(to_settings(r.flags));
+  const std::vector<int> frames = sequence_frames(r.flags);
+  for (const int f : frames) req.add_frames(f);
+  const auto outputs = output_paths(r.flags);
+  if (r.wait) check_outputs(outputs);
   std::string main;
   try {
     pack_scene(r.flags.scene, &main, req.mutable_files());
@@ -196,19 +309,31 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
     return 0;
   }
   if (!c.json) std::fprintf(c.err, "job %s submitted\n", id.id().c_str());
-  const v1::JobStatus final = watch(stub, id.id(), c);
-  const auto outputs = output_paths(r.flags);
-  fetch_image(stub, id.id(), outputs, c);
-  if (c.json) {
-    std::fprintf(c.out, "%s\n", proto_json(final).c_str());
-  } else {
-    std::fprintf(c.out, "%s: %s in %.2f s, %llu samples -> ", id.id().c_str(), state_name(final.state()),
-                 final.elapsed_seconds(), (unsigned long long) final.samples_done());
-    for (size_t i = 0; i < outputs.size(); ++i) std::fprintf(c.out, "%s%s", i ? ", " : "", outputs[i].c_str());
-    std::fprintf(c.out, "\n");
+  if (frames.empty()) {
+    const v1::JobStatus final = watch(stub, id.id(), c);
+    fetch_one(stub, id.id(), std::nullopt, outputs, c);
+    return report_submitted(id.id(), final, outputs, c);
   }
-  if (!final.error().empty()) std::fprintf(c.err, "tessera: job %s: %s\n", id.id().c_str(), final.error().c_str());
-  return final.state() == v1::JobStatus::DONE ? 0 : 1;
+  // A sequence: each frame's files are written as soon as the frame is done.
+  std::set<int> written;
+  auto write_done = [&](const v1::JobStatus& s) {
+    for (const v1::FrameStatus& f : s.frames())
+      if (f.state() == v1::JobStatus::DONE && !written.count(f.frame())) {
+        fetch_one(stub, id.id(), f.frame(), outputs, c);
+        written.insert(f.frame());
+      }
+  };
+  const v1::JobStatus final = watch(stub, id.id(), c, [&](const v1::JobStatus& s) {
+    try {
+      write_done(s);
+    } catch (const FarmError&) {  // (a coordinator restarting, say) fetched again at the end
+    }
+  });
+  write_done(final);
+  std::vector<std::string> patterns;
+  for (const std::string& out : outputs)
+    patterns.push_back(out + " (" + std::to_string(written.size()) + " of " + std::to_string(frames.size()) + " frames)");
+  return report_submitted(id.id(), final, patterns, c);
 }
 
 }  // namespace tessera

@@ -6,6 +6,7 @@
 
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -48,9 +49,15 @@ int show_status(v1::Tessera::StubInterface& stub, const std::string& job, const 
 int list_jobs(v1::Tessera::StubInterface& stub, const FarmContext& c);
 // Shows progress until the job ends; exit code 0 when it is DONE.
 int watch_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c);
+// Which image of a job to fetch: its only one, one frame of a sequence, or every finished
+// frame (to -f paths with ####, as frame_path fills them in).
+struct FetchWhat {
+  std::optional<int> frame;
+  bool all = false;
+};
 // The job's latest image, to each output (.exr or .png), written atomically.
 int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const std::vector<std::string>& outputs,
-                const FarmContext& c);
+                const FarmContext& c, const FetchWhat& what = {});
 int cancel_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c);
 
 }  // namespace tessera

@@ -65,14 +65,18 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
   add("watch", "Show a job's progress until it ends", job_arg(true),
       [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return watch_job(stub, *job, c); });
   auto outputs = std::make_shared<std::vector<std::string>>();
+  auto which = std::make_shared<FetchWhat>();
   add(
-      "fetch", "Download a job's latest image",
-      [job_arg, outputs](CLI::App* cmd, FarmContext& c) {
+      "fetch", "Download a job's latest image (a sequence's: --frame N, or --all finished frames)",
+      [job_arg, outputs, which](CLI::App* cmd, FarmContext& c) {
         job_arg(true)(cmd, c);
-        cmd->add_option("-f", *outputs, "output .exr or .png (repeat for both)")->required();
+        cmd->add_option("-f", *outputs, "output .exr or .png (repeat for both; #### becomes the frame number)")
+            ->required();
+        cmd->add_option("--frame", which->frame, "the frame of a sequence");
+        cmd->add_flag("--all", which->all, "every finished frame of a sequence (-f paths need ####)");
       },
-      [job, outputs](v1::Tessera::StubInterface& stub, const FarmContext& c) {
-        return fetch_image(stub, *job, *outputs, c);
+      [job, outputs, which](v1::Tessera::StubInterface& stub, const FarmContext& c) {
+        return fetch_image(stub, *job, *outputs, c, *which);
       });
   add("cancel", "Cancel a job (what was rendered is kept)", job_arg(true),
       [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return cancel_job(stub, *job, c); });

@@ -21,7 +21,6 @@ namespace {
 
 struct RenderArgs {
   RenderFlags flags;
-  std::string frames;  // --frames: a sequence, written through -f patterns
   int threads = 0;
   std::string stats_json;
   bool quiet = false;
@@ -89,15 +88,7 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
 int run_render(const RenderArgs& a) {
   RenderSettings s = to_settings(a.flags);
   std::vector<std::string> outputs = output_paths(a.flags);
-  std::vector<int> frames;
-  if (!a.frames.empty()) {
-    if (s.frame) throw CLI::ValidationError("--frames", "give --frames or --frame, not both");
-    frames = parse_frames(a.frames);
-    if (frames.size() > 1)
-      for (const std::string& out : outputs)
-        if (out.find('#') == std::string::npos)
-          throw CLI::ValidationError("--frames", "several frames need a #### in every -f path (got '" + out + "')");
-  }
+  const std::vector<int> frames = sequence_frames(a.flags);
   const Scene scene = load_scene(a.flags.scene);
   for (const std::string& w : scene.warnings) std::fprintf(stderr, "tessera: warning: %s\n", w.c_str());
   TileRenderer renderer(scene, s);
@@ -122,8 +113,6 @@ std::function<int()> add_render_command(CLI::App& app, const std::string& comman
   cmd->add_option("-t", args->threads, "Threads (0 = all cores)")->capture_default_str()->check(CLI::Range(0, 1024));
   cmd->add_option("--stats-json", args->stats_json, "Write timing figures as JSON");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
-  cmd->add_option("--frames", args->frames,
-                  "Render a sequence: 1-240, 1-240x2, 1,5,9 (each frame as --frame N would; -f paths need ####)");
   return [args, cmd] {
     if (!cmd->parsed()) return -1;
     return run_render(*args);

@@ -1,5 +1,6 @@
 #include "client/render_flags.h"
 
+#include "core/render/frames.h"
 #include "core/scene/load.h"
 
 namespace tessera {
@@ -20,6 +21,10 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
   cmd->add_option("-p", f.window, "Render only the cell X Y W H (lower-left pixel, y from the bottom)")->expected(4);
   cmd->add_option("--seed", s.seed, "Random seed")->capture_default_str();
   cmd->add_option("--frame", s.frame, "Frame number of a sequence: its random numbers depend on it (none: a still)");
+  cmd->add_option("--frames", f.frames,
+                  "A sequence: 1-240, 1-240x2, 1,5,9 (each frame as --frame N alone; -f paths need ####)");
+  cmd->add_option("--fps", s.fps, "Frames per second: a frame's time is frame / fps (animation)")
+      ->capture_default_str();
   cmd->add_option("--camera", f.camera, "cs184 (framing of the CS184 renderer) or file (the file's camera)")
       ->capture_default_str()
       ->check(CLI::IsMember({"auto", "cs184", "file"}));
@@ -67,7 +72,24 @@ std::vector<std::string> output_paths(const RenderFlags& f) {
   if (!f.outputs.empty()) return f.outputs;
   std::string stem = f.scene.substr(f.scene.find_last_of('/') + 1);
   stem = stem.substr(0, stem.find_last_of('.'));
+  if (!f.frames.empty()) stem += ".####";
   return {stem + ".exr", stem + ".png"};
+}
+
+std::vector<int> sequence_frames(const RenderFlags& f) {
+  if (f.frames.empty()) return {};
+  if (f.settings.frame) throw CLI::ValidationError("--frames", "give --frames or --frame, not both");
+  std::vector<int> frames;
+  try {
+    frames = parse_frames(f.frames);
+  } catch (const SettingsError& e) {
+    throw CLI::ValidationError(e.flag(), std::string(e.what()).substr(e.flag().size() + 2));
+  }
+  if (frames.size() > 1)
+    for (const std::string& out : output_paths(f))
+      if (out.find('#') == std::string::npos)
+        throw CLI::ValidationError("--frames", "several frames need a #### in every -f path (got '" + out + "')");
+  return frames;
 }
 
 }  // namespace tessera

@@ -19,13 +19,18 @@ struct RenderFlags {
   std::string camera = "auto";            // cs184 for .dae, the file's own camera for glTF
   bool no_nee = false, no_mis = false;
   std::vector<std::string> outputs;
+  std::string frames;  // --frames: a sequence
 };
 
 void add_render_flags(CLI::App* cmd, RenderFlags& f);
 // Converts and validates (RenderSettings::validate()); throws CLI::ValidationError naming
 // the flag, or SceneError for a scene of unknown format.
 RenderSettings to_settings(const RenderFlags& f);
-// -f values, or SCENE.exr and SCENE.png in the current folder.
+// -f values, or SCENE.exr and SCENE.png in the current folder (SCENE.####.exr and
+// SCENE.####.png for a sequence).
 std::vector<std::string> output_paths(const RenderFlags& f);
+// The frames of --frames (empty without it). Throws CLI::ValidationError naming --frames
+// for a bad range, --frame given too, or several frames and an -f path without ####.
+std::vector<int> sequence_frames(const RenderFlags& f);
 
 }  // namespace tessera

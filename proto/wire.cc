@@ -20,6 +20,7 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   p.set_adaptive_tolerance(s.adaptive_tolerance);
   p.set_seed(s.seed);
   if (s.frame) p.set_frame(*s.frame);
+  p.set_fps(s.fps);
   p.set_pass_spp(uint32_t(s.pass_spp));
   p.set_width(uint32_t(s.camera.width));
   p.set_height(uint32_t(s.camera.height));
@@ -46,6 +47,7 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
   s.adaptive_tolerance = p.adaptive_tolerance();
   s.seed = p.seed();
   if (p.has_frame()) s.frame = p.frame();
+  if (p.fps() != 0) s.fps = p.fps();  // a message without it: the default
   s.pass_spp = i(p.pass_spp());
   s.camera.width = i(p.width());
   s.camera.height = i(p.height());

@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include "core/io/files.h"
+#include "core/render/frames.h"
 #include "core/render/tile_renderer.h"
 #include "core/scene/load.h"
 #include "core/scene/scene_error.h"
@@ -50,6 +51,10 @@ void Coordinator::restore_jobs() {
   const double now = clock_->now();
   std::vector<Job*> ended_on_restore;  // live in the database, but done or lost
   for (StoredJob& sj : store_->jobs()) {
+    if (!sj.frames.empty()) {
+      restore_sequence(sj, now, ended_on_restore);
+      continue;
+    }
     RenderSettings settings;
     try {
       settings = from_proto(sj.settings);
@@ -127,6 +132,116 @@ void Coordinator::restore_jobs() {
   }
   scenes_.remove_unused();                          // scenes of jobs that ended, or whose submit the crash cut short
   for (Job* j : ended_on_restore) write_image(*j);  // writes the image and records the end
+  write_unwritten();
+  std::vector<std::string> ids;
+  for (auto& [id, seq] : sequences_) ids.push_back(id);
+  for (const std::string& id : ids) record_sequence_end(id);
+}
+
+void Coordinator::restore_sequence(StoredJob& sj, double now, std::vector<Job*>& ended_on_restore) {
+  auto owned = std::make_unique<Sequence>();
+  Sequence& s = *owned;
+  try {
+    s.settings = from_proto(sj.settings);
+  } catch (const WireError& e) {  // checked at submit: only a damaged database gets here
+    std::fprintf(stderr, "tessera-coordinator: job %s: stored settings: %s; skipped\n", sj.id.c_str(), e.what());
+    return;
+  }
+  s.id = sj.id;
+  s.settings_proto = sj.settings;
+  s.frames = sj.frames;
+  s.jobs.assign(s.frames.size(), nullptr);
+  s.name = sj.name;
+  s.owner = sj.owner;
+  s.priority = sj.priority;
+  s.seq = sj.seq;
+  s.scene_hash = sj.scene_hash;
+  s.state = sj.state;
+  s.error = sj.error;
+  s.submitted = now;
+  next_job_ = std::max(next_job_, sj.seq + 1);
+  sequences_[sj.id] = std::move(owned);
+  ++counters_.jobs_restored;
+  std::string lost;
+  if (s.live()) try {
+      scenes_.restore(s.scene_hash);
+      const v1::SceneBundle bundle = scenes_.get(s.scene_hash);
+      for (const v1::SceneFile& f : bundle.files()) s.scene_bytes += f.path().size() + f.content().size();
+    } catch (const std::exception& e) {
+      lost = e.what();
+    }
+  s.prepared = make_frame_job(s, 0);
+  s.frame_samples = s.prepared->plan.samples_total();
+  s.frame_tiles = uint32_t(s.prepared->plan.tiles().size());
+  s.frame_passes = uint32_t(s.prepared->plan.passes().size());
+  double elapsed = 0;
+  bool all_done = true;
+  for (size_t i = 0; i < s.frames.size(); ++i) {
+    const std::string id = s.frame_job_id(i);
+    std::optional<Checkpoint> cp;
+    std::unique_ptr<Job> job;
+    try {
+      // A frame that started has a checkpoint (or is rendered again from the start).
+      if (!(cp = store_->read_checkpoint(id, s.live()))) {
+        all_done = false;
+        continue;
+      }
+      job = i == 0 ? std::move(s.prepared) : make_frame_job(s, i);
+      job->plan.restore(cp->state, std::move(cp->film));
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "tessera-coordinator: job %s: %s; its samples are rendered again\n", id.c_str(), e.what());
+      all_done = false;
+      continue;
+    }
+    for (const char* tmp : {"checkpoint.tmp", "image.exr.tmp"}) {
+      std::error_code ec;
+      fs::remove(fs::path(options_.data_dir) / "jobs" / id / tmp, ec);
+    }
+    Job& j = *job;
+    jobs_[id] = std::move(job);
+    s.jobs[i] = &j;
+    j.submitted = now;
+    elapsed = std::max(elapsed, cp->elapsed);
+    all_done &= j.plan.done();
+    if (s.live() && !j.plan.done()) {
+      j.state = j.plan.merges() > 0 ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED;
+      j.started = now - cp->elapsed;
+      j.last_checkpoint = now;
+      j.checkpoint_merges = j.plan.merges();
+      j.spare_film = std::make_unique<Film>(j.plan.film());
+      ++s.live_frames;
+    } else if (s.live() && j.plan.has_film()) {  // done: its image is rewritten in case it was not
+      j.state = v1::JobStatus::DONE;
+      j.started = now - cp->elapsed;
+      j.finished_at = now;
+      ended_on_restore.push_back(&j);
+    } else {
+      j.state = j.plan.done() ? v1::JobStatus::DONE : v1::JobStatus::CANCELLED;
+      j.started = now - cp->elapsed;
+      j.finished_at = now;
+      j.image_frame_passes = j.plan.frame_passes_done();
+      j.plan.release_film();
+      j.written_seq = j.checkpoint_seq = j.image_seq = 1;
+      j.written_merges = j.checkpoint_written_merges = j.plan.merges();
+      j.end_recorded = true;
+    }
+  }
+  if (!s.live()) {
+    s.end_recorded = true;
+    s.prepared.reset();
+    s.started = now - elapsed;
+    s.finished_at = now;
+  } else if (!lost.empty()) {
+    s.error = "cannot go on after the coordinator restarted: " + lost;
+    end_sequence_locked(s, v1::JobStatus::FAILED, now);
+  } else if (all_done) {
+    end_sequence_locked(s, v1::JobStatus::DONE, now);
+  } else {
+    s.started = now - elapsed;
+    s.state = elapsed > 0 ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED;
+    while (s.next < s.jobs.size() && s.jobs[s.next]) ++s.next;
+    if (s.prepared && s.next != 0) s.prepared.reset();
+  }
 }
 
 std::string Coordinator::without_data_dir(std::string why) const {
@@ -140,6 +255,128 @@ Coordinator::~Coordinator() = default;
 
 double Coordinator::uptime() const { return clock_->now() - started_; }
 
+Sequence* Coordinator::find_sequence(const std::string& id) const {
+  auto it = sequences_.find(id);
+  return it == sequences_.end() ? nullptr : it->second.get();
+}
+
+std::unique_ptr<Job> Coordinator::make_frame_job(const Sequence& s, size_t index) const {
+  RenderSettings settings = s.settings;
+  settings.frame = s.frames[index];
+  auto job = std::make_unique<Job>(s.frame_job_id(index), settings);
+  job->settings_proto = to_proto(settings);
+  job->sequence = s.id;
+  job->frame_index = uint32_t(index);
+  job->name = s.name + " frame " + std::to_string(s.frames[index]);
+  job->owner = s.owner;
+  job->priority = s.priority;
+  job->seq = s.seq;
+  job->scene_hash = s.scene_hash;
+  job->tile_lease.assign(job->plan.tiles().size(), 0);
+  job->spare_film = std::make_unique<Film>(job->plan.film());
+  return job;
+}
+
+Job* Coordinator::start_frame_locked(Sequence& s, double now) {
+  while (s.next < s.frames.size() && s.jobs[s.next]) ++s.next;
+  if (s.next == s.frames.size() || !s.live()) return nullptr;
+  std::unique_ptr<Job> job = std::move(s.prepared);
+  if (!job || job->frame_index != s.next) job = make_frame_job(s, s.next);  // (none made in time: here)
+  job->submitted = job->last_checkpoint = now;
+  Job& j = *job;
+  jobs_[j.id] = std::move(job);
+  s.jobs[s.next++] = &j;
+  ++s.live_frames;
+  if (s.state == v1::JobStatus::QUEUED) {
+    s.state = v1::JobStatus::RUNNING;
+    s.started = now;
+  }
+  if (j.plan.done()) end_job_locked(j, v1::JobStatus::DONE, now);  // nothing to render (cannot happen today)
+  return &j;
+}
+
+void Coordinator::prepare_frames(const std::vector<Sequence*>& sequences) {
+  for (Sequence* s : sequences) {
+    size_t index;
+    {
+      std::lock_guard<std::mutex> lock(mu_);
+      index = s->next;
+      if (!s->live() || s->prepared || index >= s->frames.size()) continue;
+    }
+    std::unique_ptr<Job> job = make_frame_job(*s, index);  // its films, outside the lock
+    std::lock_guard<std::mutex> lock(mu_);
+    if (s->live() && !s->prepared && s->next == index) s->prepared = std::move(job);
+  }
+}
+
+void Coordinator::frame_ended_locked(Job& job, double now) {
+  Sequence& s = *sequences_.at(job.sequence);
+  if (s.live_frames > 0) --s.live_frames;
+  if (!s.live()) return;  // the sequence ended first and ends its frames itself
+  if (job.state == v1::JobStatus::FAILED) {
+    s.error = "frame " + std::to_string(s.frames[job.frame_index]) + ": " + job.error;
+    end_sequence_locked(s, v1::JobStatus::FAILED, now);
+    return;
+  }
+  for (const Job* j : s.jobs)
+    if (!j || j->state != v1::JobStatus::DONE) return;
+  end_sequence_locked(s, v1::JobStatus::DONE, now);
+}
+
+void Coordinator::end_sequence_locked(Sequence& s, v1::JobStatus::State state, double now) {
+  s.state = state;
+  s.finished_at = now;
+  s.prepared.reset();
+  for (Job* j : s.jobs)
+    if (j && j->live()) {
+      end_job_locked(*j, v1::JobStatus::CANCELLED, now);
+      unwritten_.push_back(j);  // its image keeps what it rendered
+    }
+  scenes_.release(s.scene_hash);
+  changed_.notify_all();
+}
+
+void Coordinator::record_sequence_end(const std::string& id) {
+  v1::JobStatus::State state;
+  std::string error;
+  double elapsed;
+  Sequence* sp;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    sp = find_sequence(id);
+    if (!sp) return;
+    Sequence& s = *sp;
+    if (s.live() || s.end_recorded || s.end_recording) return;
+    if (s.state == v1::JobStatus::DONE)
+      for (const Job* j : s.jobs)
+        if (!j || !j->end_recorded) return;  // a frame's final checkpoint is not on disk yet
+    s.end_recording = true;
+    state = s.state;
+    error = s.error;
+    elapsed = s.started > 0 ? s.finished_at - s.started : 0;
+  }
+  Sequence& s = *sp;
+  bool ok = false;
+  try {
+    store_->end(s.id, state, error, elapsed);
+    ok = true;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tessera-coordinator: job %s: recording its end: %s\n", s.id.c_str(), e.what());
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  s.end_recording = false;
+  s.end_recorded = ok;
+}
+
+void Coordinator::write_unwritten() {
+  std::vector<Job*> jobs;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    jobs.swap(unwritten_);
+  }
+  for (Job* j : jobs) write_image(*j);
+}
+
 Job* Coordinator::find(const std::string& id) const {
   auto it = jobs_.find(id);
   if (it == jobs_.end()) throw RequestError(RequestError::Code::kNotFound, "no job '" + id + "'");
@@ -150,7 +387,7 @@ std::string Coordinator::new_job_id_locked() {
   // Unguessable: 64 random bits, so one client cannot name another's job by counting.
   char buf[17];
   do std::snprintf(buf, sizeof buf, "%016llx", (unsigned long long)ids_());
-  while (jobs_.count(buf));
+  while (jobs_.count(buf) || sequences_.count(buf));
   return buf;
 }
 
@@ -170,10 +407,23 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   } catch (const WireError& e) {
     throw refuse(e.what());
   }
+  const std::vector<int> frames(req.frames().begin(), req.frames().end());
+  if (!frames.empty()) {
+    if (settings.frame) throw refuse("a sequence's settings have no frame number: its frames are listed in frames");
+    if (frames.size() > kMaxFrames)
+      throw refuse(std::to_string(frames.size()) + " frames; at most " + std::to_string(kMaxFrames) + " in one job");
+    std::set<int> seen;
+    for (const int f : frames) {
+      if (f < -RenderSettings::kMaxFrame || f > RenderSettings::kMaxFrame)
+        throw refuse("frame " + std::to_string(f) + " out of range (at most " +
+                     std::to_string(RenderSettings::kMaxFrame) + " either side of 0)");
+      if (!seen.insert(f).second) throw refuse("frame " + std::to_string(f) + " given twice");
+    }
+  }
   // Limits first, before anything large is allocated. (Submits racing each other may pass
   // together: the limits are for bounding memory and fairness, not exact to the job.)
   const int64_t pixels = settings.effective_window().area();
-  const uint64_t samples = uint64_t(pixels) * uint64_t(settings.spp);  // at most
+  const uint64_t samples = uint64_t(pixels) * uint64_t(settings.spp) * std::max<uint64_t>(1, frames.size());  // at most
   uint64_t scene_bytes = 0;
   for (const v1::SceneFile& f : req.files()) scene_bytes += f.path().size() + f.content().size();
   std::string over;  // the limit this job would pass
@@ -187,9 +437,16 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
       if (j->live()) {
         live_pixels += j->plan.film().window().area();
         if (j->owner != owner) continue;
+        my_samples += j->plan.samples_total() - std::min(j->plan.samples_total(), j->plan.samples_merged());
+        if (!j->sequence.empty()) continue;  // its sequence counts as the job
         ++mine;
         my_bytes += j->scene_bytes;
-        my_samples += j->plan.samples_total() - std::min(j->plan.samples_total(), j->plan.samples_merged());
+      }
+    for (const auto& [id, sq] : sequences_)
+      if (sq->live() && sq->owner == owner) {
+        ++mine;
+        my_bytes += sq->scene_bytes;
+        my_samples += sq->frame_samples * (sq->frames.size() - sq->next);  // frames not started
       }
     if (my_bytes + scene_bytes > options_.max_scene_bytes_per_client)
       over = who + "'s live jobs hold " + std::to_string(my_bytes) + " scene bytes; this job's " +
@@ -214,6 +471,7 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   } catch (const SceneError& e) {
     throw refuse(e.what());
   }
+  if (!frames.empty()) return submit_sequence(req, settings, frames, hash, owner, scene_bytes);
   // The plan's film and the snapshot film are made here, outside the lock: for a large
   // frame, allocating and zeroing them takes long enough to stall every worker.
   auto job = std::make_unique<Job>("", settings);
@@ -259,20 +517,82 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   return id;
 }
 
+std::string Coordinator::submit_sequence(const v1::SubmitJobRequest& req, const RenderSettings& settings,
+                                         const std::vector<int>& frames, const std::string& hash,
+                                         const std::string& owner, uint64_t scene_bytes) {
+  auto s = std::make_unique<Sequence>();
+  s->settings = settings;
+  s->settings_proto = to_proto(settings);
+  s->frames = frames;
+  s->jobs.assign(frames.size(), nullptr);
+  s->scene_hash = hash;
+  s->name = req.name().empty() ? req.main_file() : req.name();
+  s->priority = req.priority();
+  s->owner = owner;
+  s->scene_bytes = scene_bytes;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    s->id = new_job_id_locked();
+    s->seq = next_job_++;
+  }
+  s->prepared = make_frame_job(*s, 0);  // the first frame's films, outside the lock
+  s->frame_samples = s->prepared->plan.samples_total();
+  s->frame_tiles = uint32_t(s->prepared->plan.tiles().size());
+  s->frame_passes = uint32_t(s->prepared->plan.passes().size());
+  try {
+    StoredJob row;
+    row.id = s->id;
+    row.name = s->name;
+    row.owner = owner;
+    row.scene_hash = hash;
+    row.main_file = req.main_file();
+    row.priority = s->priority;
+    row.seq = s->seq;
+    row.settings = s->settings_proto;
+    row.frames = frames;
+    store_->add(row);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "tessera-coordinator: submit: %s\n", e.what());
+    scenes_.release(hash);
+    std::lock_guard<std::mutex> lock(mu_);
+    ++counters_.jobs_refused;
+    throw RequestError(RequestError::Code::kResourceExhausted,
+                       "the coordinator cannot record the job: " + without_data_dir(e.what()));
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  s->submitted = clock_->now();
+  const std::string id = s->id;
+  sequences_[id] = std::move(s);
+  ++counters_.jobs_submitted;
+  changed_.notify_all();
+  return id;
+}
+
+std::map<std::string, uint32_t> Coordinator::workers_on_frames_locked(const Sequence& s) const {
+  std::map<std::string, uint32_t> out;
+  for (const Job* j : s.jobs)
+    if (j && j->live()) out[j->id] = workers_on(*j);
+  return out;
+}
+
 v1::JobStatus Coordinator::status(const std::string& id, bool with_tiles) const {
   std::lock_guard<std::mutex> lock(mu_);
+  if (const Sequence* s = find_sequence(id)) return s->status(clock_->now(), workers_on_frames_locked(*s), true);
   const Job& job = *find(id);
   return job.status(clock_->now(), workers_on(job), with_tiles);
 }
 
 std::vector<v1::JobStatus> Coordinator::list() const {
   std::lock_guard<std::mutex> lock(mu_);
-  std::vector<const Job*> order;
-  for (const auto& [id, job] : jobs_) order.push_back(job.get());
-  std::sort(order.begin(), order.end(), [](const Job* a, const Job* b) { return a->seq < b->seq; });
-  std::vector<v1::JobStatus> out;
-  for (const Job* job : order) out.push_back(job->status(clock_->now(), workers_on(*job), false));
-  return out;
+  std::vector<std::pair<uint64_t, v1::JobStatus>> out;  // stills and sequences; frames are in their sequences
+  for (const auto& [id, job] : jobs_)
+    if (job->sequence.empty()) out.emplace_back(job->seq, job->status(clock_->now(), workers_on(*job), false));
+  for (const auto& [id, s] : sequences_)
+    out.emplace_back(s->seq, s->status(clock_->now(), workers_on_frames_locked(*s), false));
+  std::sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<v1::JobStatus> statuses;
+  for (auto& [seq, st] : out) statuses.push_back(std::move(st));
+  return statuses;
 }
 
 v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& req, const std::string& principal) {
@@ -369,6 +689,9 @@ std::optional<Coordinator::ImageSnapshot> Coordinator::finish_if_done_locked(Job
 }
 
 v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples) {
+  v1::GetTaskResponse resp;
+  std::vector<Sequence*> started;  // sequences that started a frame: their next one is made after
+  {
   std::lock_guard<std::mutex> lock(mu_);
   const double now = clock_->now();
   expire_locked(now);
@@ -381,32 +704,50 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
     throw RequestError(RequestError::Code::kFailedPrecondition,
                        "unknown worker " + std::to_string(worker_id) + "; register again");
   w->last_seen = now;
-  std::vector<Job*> order;
+  // Live jobs (frames of sequences among them), and sequences with frames still to start,
+  // by priority, then submission, then frame: a sequence's next frame comes after its
+  // started ones and before later jobs, so its first frames finish first and workers go
+  // from one frame to the next without waiting.
+  struct Source {
+    int32_t priority;
+    uint64_t seq;
+    size_t frame;
+    Job* job;
+    Sequence* sequence;  // a sequence's frames to start
+  };
+  std::vector<Source> order;
   uint64_t outstanding = leases_.live_count();  // tasks out now or ready to go, checks included
   for (const auto& [check_id, c] : checks_) outstanding += c.lease == 0;
   for (auto& [id, job] : jobs_)
     if (job->live()) {
-      order.push_back(job.get());
+      order.push_back({job->priority, job->seq, job->frame_index, job.get(), nullptr});
       outstanding += job->plan.ready();
     }
-  std::sort(order.begin(), order.end(), [](const Job* a, const Job* b) {
-    return a->priority != b->priority ? a->priority > b->priority : a->seq < b->seq;
+  for (auto& [id, sq] : sequences_)
+    if (sq->live() && sq->next < sq->frames.size()) {
+      order.push_back({sq->priority, sq->seq, sq->frames.size(), nullptr, sq.get()});
+      // As if the frames it may start were ready: a worker's share counts them.
+      const uint32_t startable = kMaxLiveFrames - std::min(kMaxLiveFrames, sq->live_frames);
+      outstanding += uint64_t(sq->frame_tiles) * std::min<uint64_t>(sq->frames.size() - sq->next, startable);
+    }
+  std::sort(order.begin(), order.end(), [](const Source& a, const Source& b) {
+    if (a.priority != b.priority) return a.priority > b.priority;
+    return a.seq != b.seq ? a.seq < b.seq : a.frame < b.frame;
   });
-  v1::GetTaskResponse resp;
   // No more than the worker's share (by threads) of the work there is, less what it holds:
   // when a small frame has fewer tasks than the workers would queue, the first to ask must
   // not take them all while the others idle.
   const uint64_t share =
       (outstanding * w->threads + workers_.threads() - 1) / std::max<uint64_t>(1, workers_.threads());
-  const uint64_t room = share > w->leases ? share - w->leases : 0;
-  max_tasks = uint32_t(std::min<uint64_t>(std::clamp<uint32_t>(max_tasks, 1, kMaxTasksPerRequest), room));
+  const uint64_t unshared = share > w->leases ? share - w->leases : 0;
+  max_tasks = uint32_t(std::min<uint64_t>(std::clamp<uint32_t>(max_tasks, 1, kMaxTasksPerRequest), unshared));
   uint64_t samples = 0;
   // Checks first (they are few, and a job waits for its checks to end): any worker but
   // the one whose result is checked.
   for (auto& [check_id, c] : checks_) {
     if (uint32_t(resp.tasks_size()) >= max_tasks) break;
     if (c.lease || c.first_worker == worker_id) continue;
-    Lease l{c.job, c.tile, c.pass, worker_id, now + options_.lease_seconds};
+    Lease l{c.job, c.tile, c.pass, worker_id, now + options_.lease_seconds, nullptr};
     l.check = check_id;
     c.lease = leases_.grant(std::move(l));
     ++w->leases;
@@ -418,11 +759,13 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
   // Verification needs a second worker.
   const bool sample_checks = options_.verify_fraction > 0 && workers_.size() > 1;
   std::uniform_real_distribution<double> uniform(0, 1);
-  for (Job* job : order) {
-    while (uint32_t(resp.tasks_size()) < max_tasks && (max_samples == 0 || samples < max_samples)) {
+  auto room = [&] { return uint32_t(resp.tasks_size()) < max_tasks && (max_samples == 0 || samples < max_samples); };
+  int64_t live_pixels = -1;  // counted when first needed
+  auto take_from = [&](Job* job) {
+    while (room()) {
       std::optional<TileTask> t = job->plan.take();
       if (!t) break;
-      const uint64_t task_id = leases_.grant({job->id, t->tile, t->pass, worker_id, now + options_.lease_seconds});
+      const uint64_t task_id = leases_.grant({job->id, t->tile, t->pass, worker_id, now + options_.lease_seconds, nullptr});
       job->tile_lease[t->tile] = task_id;
       ++w->leases;
       if (job->state == v1::JobStatus::QUEUED) {
@@ -448,8 +791,33 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
       if (sample_checks && uniform(ids_) < options_.verify_fraction)
         leases_.live(task_id)->task = std::make_shared<const v1::Task>(*task);
     }
+  };
+  for (const Source& src : order) {
+    if (src.job) {
+      take_from(src.job);
+      continue;
+    }
+    // The worker has room and the sequence's started frames have no ready task: start the
+    // next frame, within the limits on films in memory.
+    Sequence& sq = *src.sequence;
+    while (room() && sq.live_frames < kMaxLiveFrames) {
+      if (live_pixels < 0) {
+        live_pixels = 0;
+        for (const auto& [id, j] : jobs_)
+          if (j->live()) live_pixels += j->plan.film().window().area();
+      }
+      const int64_t pixels = sq.settings.effective_window().area();
+      if (sq.live_frames > 0 && live_pixels + pixels > options_.max_live_pixels) break;
+      Job* job = start_frame_locked(sq, now);
+      if (!job) break;
+      live_pixels += pixels;
+      if (std::find(started.begin(), started.end(), &sq) == started.end()) started.push_back(&sq);
+      take_from(job);
+    }
   }
   if (resp.tasks_size() == 0) resp.set_retry_after_ms(200);
+  }
+  prepare_frames(started);
   return resp;
 }
 
@@ -492,6 +860,8 @@ void Coordinator::release(uint64_t worker_id, uint64_t task_id, const std::strin
     failed = &job;
   }
   write_image(*failed);  // keep what was rendered
+  write_unwritten();     // a sequence's other frames, when a frame failed
+  if (!failed->sequence.empty()) record_sequence_end(failed->sequence);
 }
 
 void Coordinator::end_job_locked(Job& job, v1::JobStatus::State state, double now) {
@@ -506,8 +876,12 @@ void Coordinator::end_job_locked(Job& job, v1::JobStatus::State state, double no
     if (lease) end_lease_locked(lease, false);
   leases_.forget_job(job.id);
   // Its scene is dropped, from memory and disk, once no live job uses it; the film (and
-  // so the image) stays. Submitting the scene again checks it again.
-  scenes_.release(job.scene_hash);
+  // so the image) stays. Submitting the scene again checks it again. A sequence holds the
+  // scene for its frames.
+  if (job.sequence.empty())
+    scenes_.release(job.scene_hash);
+  else
+    frame_ended_locked(job, now);
 }
 
 void Coordinator::unregister(uint64_t worker_id) {
@@ -821,7 +1195,7 @@ void Coordinator::write_snapshot(ImageSnapshot& snap) {
     const bool whole = job.checkpoint_written_merges == snap.merges;
     if (snap.ended && !job.end_recorded && (whole || snap.state != v1::JobStatus::DONE)) {
       try {
-        store_->end(job.id, snap.state, snap.error, snap.elapsed);
+        if (job.sequence.empty()) store_->end(job.id, snap.state, snap.error, snap.elapsed);  // a frame has no row
         job.end_recorded = true;
       } catch (const std::exception& e) {
         std::fprintf(stderr, "tessera-coordinator: job %s: recording its end: %s\n", job.id.c_str(), e.what());
@@ -829,21 +1203,26 @@ void Coordinator::write_snapshot(ImageSnapshot& snap) {
     }
     release_film = snap.ended && job.end_recorded && whole && job.written_merges == snap.merges;
   }
-  std::lock_guard<std::mutex> lock(mu_);
-  if (image == kWritten) job.image_write_seconds = image_seconds;
-  if (checkpoint == kWritten) job.checkpoint_write_seconds = checkpoint_seconds;
-  counters_.images_written += image == kWritten;
-  counters_.image_errors += image == kFailed;
-  counters_.checkpoints_written += checkpoint == kWritten;
-  counters_.checkpoint_errors += checkpoint == kFailed;
-  if (image == kWritten) job.image_error.clear();
-  if (image == kFailed) job.image_error = image_why;
-  if (checkpoint == kWritten) job.checkpoint_error.clear();
-  if (checkpoint == kFailed) job.checkpoint_error = checkpoint_why;
-  if (job.live())
-    job.spare_film = std::move(snap.film);  // for the next snapshot
-  else if (release_film)
-    job.plan.release_film();  // the image and checkpoint on disk hold it all
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (image == kWritten) job.image_write_seconds = image_seconds;
+    if (checkpoint == kWritten) job.checkpoint_write_seconds = checkpoint_seconds;
+    counters_.images_written += image == kWritten;
+    counters_.image_errors += image == kFailed;
+    counters_.checkpoints_written += checkpoint == kWritten;
+    counters_.checkpoint_errors += checkpoint == kFailed;
+    if (image == kWritten) job.image_error.clear();
+    if (image == kFailed) job.image_error = image_why;
+    if (checkpoint == kWritten) job.checkpoint_error.clear();
+    if (checkpoint == kFailed) job.checkpoint_error = checkpoint_why;
+    if (job.live())
+      job.spare_film = std::move(snap.film);  // for the next snapshot
+    else if (release_film)
+      job.plan.release_film();  // the image and checkpoint on disk hold it all
+  }
+  if (snap.ended && !job.sequence.empty()) {
+    record_sequence_end(job.sequence);
+  }
 }
 
 void Coordinator::write_image(Job& job) {
@@ -869,29 +1248,70 @@ void Coordinator::checkpoint_all() {
 }
 
 v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requester, bool any) {
-  Job* job;
+  auto refuse_other = [&](const std::string& owner) {
+    if (!any && owner != requester)
+      throw RequestError(RequestError::Code::kPermissionDenied,
+                         "job " + id + " belongs to '" + owner + "': a client may cancel only its own jobs");
+  };
+  Job* job = nullptr;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    job = find(id);
-    if (!any && job->owner != requester)
-      throw RequestError(RequestError::Code::kPermissionDenied,
-                         "job " + id + " belongs to '" + job->owner + "': a client may cancel only its own jobs");
-    if (!job->live()) return job->status(clock_->now(), 0, false);
-    end_job_locked(*job, v1::JobStatus::CANCELLED, clock_->now());
-    changed_.notify_all();
+    if (Sequence* s = find_sequence(id)) {
+      refuse_other(s->owner);
+      // Finished frames stay as they are; frames being rendered keep what they have.
+      if (s->live()) end_sequence_locked(*s, v1::JobStatus::CANCELLED, clock_->now());
+    } else {
+      job = find(id);
+      refuse_other(job->owner);
+      if (!job->sequence.empty())
+        throw RequestError(RequestError::Code::kFailedPrecondition,
+                           "job " + id + " is a frame of sequence " + job->sequence + ": cancel the sequence");
+      if (!job->live()) return job->status(clock_->now(), 0, false);
+      end_job_locked(*job, v1::JobStatus::CANCELLED, clock_->now());
+      changed_.notify_all();
+    }
   }
-  write_image(*job);  // keep what was rendered
-  std::lock_guard<std::mutex> lock(mu_);
-  return job->status(clock_->now(), 0, false);
+  if (job) {
+    write_image(*job);  // keep what was rendered
+  } else {
+    write_unwritten();
+    record_sequence_end(id);
+  }
+  return status(id, false);
 }
 
-v1::Image Coordinator::image(const std::string& id, bool exr, bool png) {
+Job* Coordinator::frame_job_locked(const std::string& id, std::optional<int> frame) const {
+  const Sequence* s = find_sequence(id);
+  if (!s) {
+    Job* job = find(id);
+    if (frame && job->plan.settings().frame != frame)
+      throw RequestError(RequestError::Code::kInvalidArgument,
+                         "job " + id + " has no frame " + std::to_string(*frame));
+    return job;
+  }
+  if (!frame)
+    throw RequestError(RequestError::Code::kInvalidArgument,
+                       "job " + id + " is a sequence of " + std::to_string(s->frames.size()) +
+                           " frames: name one (fetch --frame N, or --all)");
+  const auto at = std::find(s->frames.begin(), s->frames.end(), *frame);
+  if (at == s->frames.end())
+    throw RequestError(RequestError::Code::kNotFound,
+                       "job " + id + " has no frame " + std::to_string(*frame));
+  Job* job = s->jobs[size_t(at - s->frames.begin())];
+  if (!job)
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "job " + id + ": frame " + std::to_string(*frame) +
+                           (s->live() ? " has not started yet" : " was never rendered (the job ended first)"));
+  return job;
+}
+
+v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::optional<int> frame) {
   Job* job;
   bool live;
   uint64_t merges;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    job = find(id);
+    job = frame_job_locked(id, frame);
     live = job->live();
     merges = job->plan.merges();
   }
@@ -910,11 +1330,11 @@ v1::Image Coordinator::image(const std::string& id, bool exr, bool png) {
     if (job->written_seq == 0 || (!live && job->written_merges != merges)) {
       std::lock_guard<std::mutex> lock(mu_);
       throw RequestError(RequestError::Code::kFailedPrecondition,
-                         "job " + id + ": its image could not be written (" + job->image_error +
+                         "job " + job->id + ": its image could not be written (" + job->image_error +
                              "); the samples are kept and the write is retried");
     }
-    if (exr) img.set_exr(sink_->exr(id));
-    if (png) img.set_png(sink_->png(id));
+    if (exr) img.set_exr(sink_->exr(job->id));
+    if (png) img.set_png(sink_->png(job->id));
   }
   std::lock_guard<std::mutex> lock(mu_);
   img.set_frame_passes_done(job->image_frame_passes);
@@ -923,6 +1343,11 @@ v1::Image Coordinator::image(const std::string& id, bool exr, bool png) {
 
 v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const {
   std::unique_lock<std::mutex> lock(mu_);
+  if (const Sequence* s = find_sequence(id)) {
+    changed_.wait_for(lock, std::chrono::duration<double>(timeout),
+                      [&] { return !s->live() || s->samples_merged() != last_samples; });
+    return s->status(clock_->now(), workers_on_frames_locked(*s), true);
+  }
   const Job* job = find(id);
   changed_.wait_for(lock, std::chrono::duration<double>(timeout),
                     [&] { return !job->live() || job->plan.samples_merged() != last_samples; });
@@ -931,6 +1356,8 @@ v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_
 
 bool Coordinator::wait_for_end(const std::string& id, double timeout) const {
   std::unique_lock<std::mutex> lock(mu_);
+  if (const Sequence* s = find_sequence(id))
+    return changed_.wait_for(lock, std::chrono::duration<double>(timeout), [&] { return !s->live(); });
   const Job* job = find(id);
   return changed_.wait_for(lock, std::chrono::duration<double>(timeout), [&] { return !job->live(); });
 }
@@ -959,6 +1386,11 @@ Coordinator::Queue Coordinator::queue() const {
       q.tasks_ready += job->plan.ready();
       q.samples_remaining +=
           job->plan.samples_total() - std::min(job->plan.samples_total(), job->plan.samples_merged());
+    }
+  for (const auto& [id, s] : sequences_)  // frames not started yet
+    if (s->live()) {
+      for (size_t i = s->next; i < s->frames.size(); ++i) q.samples_remaining += s->jobs[i] ? 0 : s->frame_samples;
+      q.tasks_ready += s->next < s->frames.size() ? s->frame_tiles : 0;  // the next frame's first passes
     }
   double speed = 0, threads = 0;
   for (const WorkerInfo& w : workers_.list())

@@ -104,7 +104,10 @@ class Coordinator {
   // `requester` may cancel only its own jobs unless `any` (an admin, or no access tokens).
   v1::JobStatus cancel(const std::string& id, const std::string& requester = "", bool any = true);
   // The latest image in the formats asked for; an ended job's image holds its whole film.
-  v1::Image image(const std::string& id, bool exr = true, bool png = true);
+  // A sequence's images are its frames': `frame` names one (it must for a sequence).
+  v1::Image image(const std::string& id, bool exr = true, bool png = true, std::optional<int> frame = std::nullopt);
+  // Frames of one sequence with films at once, at most: each holds two films in memory.
+  static constexpr uint32_t kMaxLiveFrames = 64;
 
   // Worker side.
   // `principal`: the worker's access token name (a quarantined one may not register).
@@ -181,6 +184,29 @@ class Coordinator {
   };
 
   Job* find(const std::string& id) const;  // mu_ held; throws kNotFound
+  std::string submit_sequence(const v1::SubmitJobRequest& req, const RenderSettings& settings,
+                              const std::vector<int>& frames, const std::string& hash, const std::string& owner,
+                              uint64_t scene_bytes);
+  std::map<std::string, uint32_t> workers_on_frames_locked(const Sequence& s) const;
+  Sequence* find_sequence(const std::string& id) const;  // mu_ held; null if not one
+
+  // Sequences. A frame's job, made from the sequence's constant fields (so without mu_).
+  std::unique_ptr<Job> make_frame_job(const Sequence& s, size_t index) const;
+  // Starts the sequence's next frame (its prepared job if there is one); null when every
+  // frame has started.
+  Job* start_frame_locked(Sequence& s, double now);
+  // Makes the next frame's job of these sequences outside the lock (mu_ not held).
+  void prepare_frames(const std::vector<Sequence*>& sequences);
+  void frame_ended_locked(Job& job, double now);
+  // Ends the sequence; its live frames end as CANCELLED (queued in unwritten_).
+  void end_sequence_locked(Sequence& s, v1::JobStatus::State state, double now);
+  // Records a sequence's end in the job database once it can (mu_ not held): at once for a
+  // cancelled or failed one, after every frame's final checkpoint for a DONE one.
+  void record_sequence_end(const std::string& id);
+  // The job of `id`, or of its frame `frame` when `id` is a sequence; throws RequestError.
+  Job* frame_job_locked(const std::string& id, std::optional<int> frame) const;
+  void write_unwritten();  // final images of frames ended by their sequence (mu_ not held)
+  void restore_sequence(StoredJob& row, double now, std::vector<Job*>& ended_on_restore);
   uint32_t workers_on(const Job& job) const { return leases_.workers_on(job.id); }
   ImageSnapshot snapshot_locked(Job& job, bool image = true, bool checkpoint = true);
   void restore_jobs();                                      // from store_, at construction
@@ -224,7 +250,9 @@ class Coordinator {
   double started_ = 0;
   mutable std::mutex mu_;
   mutable std::condition_variable changed_;
-  std::map<std::string, std::unique_ptr<Job>> jobs_;  // jobs are never removed
+  std::map<std::string, std::unique_ptr<Job>> jobs_;  // jobs are never removed; frames too
+  std::map<std::string, std::unique_ptr<Sequence>> sequences_;
+  std::vector<Job*> unwritten_;  // ended frames whose final image is still to be written
   LeaseTable leases_;
   WorkerRegistry workers_;
   uint64_t next_job_ = 1;

@@ -108,7 +108,8 @@ grpc::Status ClientService::CancelJob(grpc::ServerContext* ctx, const v1::JobId*
 grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::FetchImageRequest* req, v1::Image* out) {
   return as(auth_, ctx, Action::kRead, [&](const Principal&) {
     const bool any = req->exr() || req->png();  // neither: both, as before the choice existed
-    *out = c_.image(req->id(), req->exr() || !any, req->png() || !any);
+    *out = c_.image(req->id(), req->exr() || !any, req->png() || !any,
+                    req->has_frame() ? std::optional<int>(req->frame()) : std::nullopt);
   });
 }
 

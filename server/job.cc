@@ -30,6 +30,7 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   if (live() && f > 0) s.set_eta_seconds(elapsed * (1 - f) / f);
   s.set_active_workers(workers);
   *s.mutable_settings() = settings_proto;
+  s.set_sequence(sequence);
   if (with_tiles)
     for (uint32_t i = 0; i < plan.tiles().size(); ++i) {
       const TileProgress& p = plan.progress(i);
@@ -40,6 +41,61 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
       t->set_relative_error(p.relative_error);
       t->set_finished(p.finished);
     }
+  return s;
+}
+
+uint64_t Sequence::samples_merged() const {
+  uint64_t n = 0;
+  for (const Job* j : jobs)
+    if (j) n += j->plan.samples_merged();
+  return n;
+}
+
+v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>& workers, bool with_frames) const {
+  v1::JobStatus s;
+  s.set_id(id);
+  s.set_name(name);
+  s.set_state(state);
+  s.set_priority(priority);
+  s.set_owner(owner);
+  *s.mutable_settings() = settings_proto;
+  s.set_frames_total(uint32_t(frames.size()));
+  s.set_passes_total(frame_passes);
+  uint64_t done = 0, total = 0;
+  uint32_t tiles_done = 0, frames_done = 0, active = 0;
+  std::string e = error;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const Job* j = jobs[i];
+    const uint64_t fd = j ? j->plan.samples_merged() : 0, ft = j ? j->plan.samples_total() : frame_samples;
+    done += fd;
+    total += ft;
+    if (j) {
+      tiles_done += j->plan.tiles_done();
+      frames_done += j->state == v1::JobStatus::DONE;
+      if (auto w = workers.find(j->id); w != workers.end()) active += w->second;
+      for (const std::string* why : {&j->image_error, &j->checkpoint_error})
+        if (!why->empty()) e += (e.empty() ? "" : "; ") + ("frame " + std::to_string(frames[i]) + ": ") + *why;
+    }
+    if (!with_frames) continue;
+    v1::FrameStatus* f = s.add_frames();
+    f->set_frame(frames[i]);
+    f->set_state(j ? j->state : live() ? v1::JobStatus::QUEUED : v1::JobStatus::CANCELLED);
+    f->set_samples_done(fd);
+    f->set_samples_total(ft);
+    if (j) f->set_job_id(j->id);
+  }
+  s.set_error(e);
+  s.set_samples_done(done);
+  s.set_samples_total(total);
+  s.set_tiles_done(tiles_done);
+  s.set_tiles_total(uint32_t(std::min<uint64_t>(UINT32_MAX, uint64_t(frame_tiles) * frames.size())));
+  s.set_frames_done(frames_done);
+  s.set_frame_passes_done(state == v1::JobStatus::DONE ? frame_passes : 0);
+  s.set_active_workers(active);
+  const double elapsed = started > 0 ? (live() ? now : finished_at) - started : 0;
+  s.set_elapsed_seconds(elapsed);
+  const double f = total ? double(done) / double(total) : 0;
+  if (live() && f > 0) s.set_eta_seconds(elapsed * (1 - f) / f);
   return s;
 }
 

@@ -18,6 +18,10 @@ struct Job {
   Job(std::string id, const RenderSettings& settings) : id(std::move(id)), plan(settings) {}
 
   std::string id, name, scene_hash;
+  // A frame of a sequence: the sequence's id and the frame's place in its list (empty for a
+  // job of its own). Such a job has no row in the job database: its sequence has.
+  std::string sequence;
+  uint32_t frame_index = 0;
   std::string owner;         // the submitting token's name
   uint64_t scene_bytes = 0;  // its bundle's, counted against the owner's limit
   int32_t priority = 0;
@@ -59,6 +63,37 @@ struct Job {
   bool live() const { return state == v1::JobStatus::QUEUED || state == v1::JobStatus::RUNNING; }
   // `now` for the elapsed time; `workers` with live leases on it.
   v1::JobStatus status(double now, uint32_t workers, bool with_tiles) const;
+};
+
+// A sequence: one job per frame, each made when the scheduler first needs its tiles (so a
+// long sequence holds the films of only the frames being rendered), in frame order. Its
+// frames are ordinary jobs to the scheduler, leases, checkpoints and images; the sequence
+// keeps the order, the scene, the database row and the end.
+struct Sequence {
+  std::string id, name, owner, scene_hash;
+  uint64_t scene_bytes = 0;
+  int32_t priority = 0;
+  uint64_t seq = 0;
+  RenderSettings settings;  // every frame's, but for its number
+  v1::RenderSettings settings_proto;
+  std::vector<int> frames;
+  std::vector<Job*> jobs;      // per frame: its job once started (the coordinator owns it)
+  size_t next = 0;             // frames before this one have started
+  uint32_t live_frames = 0;    // started and not ended
+  std::unique_ptr<Job> prepared;  // frames[next]'s job, made outside the coordinator's lock
+  // One frame's plan, for counts before any has started.
+  uint64_t frame_samples = 0;
+  uint32_t frame_tiles = 0, frame_passes = 0;
+  v1::JobStatus::State state = v1::JobStatus::QUEUED;
+  std::string error;
+  double submitted = 0, started = 0, finished_at = 0;
+  bool end_recording = false, end_recorded = false;
+
+  bool live() const { return state == v1::JobStatus::QUEUED || state == v1::JobStatus::RUNNING; }
+  std::string frame_job_id(size_t i) const { return id + "-f" + std::to_string(frames[i]); }
+  uint64_t samples_merged() const;
+  // `workers`: with live leases on each frame's job (by id).
+  v1::JobStatus status(double now, const std::map<std::string, uint32_t>& workers, bool with_frames) const;
 };
 
 }  // namespace tessera

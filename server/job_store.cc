@@ -10,6 +10,7 @@
 #include <stdexcept>
 
 #include "core/io/files.h"
+#include "core/render/frames.h"
 
 namespace tessera {
 
@@ -208,7 +209,11 @@ JobStore::JobStore(const std::string& data_dir) : dir_(data_dir) {
             id TEXT PRIMARY KEY, seq INTEGER NOT NULL, name TEXT NOT NULL, owner TEXT NOT NULL,
             priority INTEGER NOT NULL, scene_hash TEXT NOT NULL, main_file TEXT NOT NULL,
             settings BLOB NOT NULL, state INTEGER NOT NULL, error TEXT NOT NULL,
-            elapsed REAL NOT NULL))");
+            elapsed REAL NOT NULL, frames TEXT NOT NULL DEFAULT ''))");
+  // A database from before sequences gains their column.
+  bool has_frames = false;
+  for (Statement q(db_, "PRAGMA table_info(jobs)"); q.step();) has_frames |= q.column_text(1) == "frames";
+  if (!has_frames) exec("ALTER TABLE jobs ADD COLUMN frames TEXT NOT NULL DEFAULT ''");
 }
 
 JobStore::~JobStore() { sqlite3_close(db_); }
@@ -221,6 +226,17 @@ void JobStore::exec(const char* sql) const {
     throw std::runtime_error(why);
   }
 }
+
+namespace {
+std::string frames_text(const std::vector<int>& frames) {  // as parse_frames reads it
+  std::string out;
+  for (int f : frames) {
+    if (!out.empty()) out += ',';
+    out += std::to_string(f);
+  }
+  return out;
+}
+}  // namespace
 
 uint64_t JobStore::next_generation() {
   std::lock_guard<std::mutex> lock(mu_);
@@ -236,8 +252,8 @@ uint64_t JobStore::next_generation() {
 void JobStore::add(const StoredJob& j) {
   std::lock_guard<std::mutex> lock(mu_);
   Statement(db_,
-            "INSERT INTO jobs(id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed) "
-            "VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11)")
+            "INSERT INTO jobs(id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, "
+            "frames) VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)")
       .text(1, j.id)
       .integer(2, int64_t(j.seq))
       .text(3, j.name)
@@ -249,6 +265,7 @@ void JobStore::add(const StoredJob& j) {
       .integer(9, j.state)
       .text(10, j.error)
       .real(11, j.elapsed)
+      .text(12, frames_text(j.frames))
       .step();
 }
 
@@ -265,7 +282,7 @@ void JobStore::end(const std::string& id, v1::JobStatus::State state, const std:
 std::vector<StoredJob> JobStore::jobs() const {
   std::lock_guard<std::mutex> lock(mu_);
   Statement q(db_,
-              "SELECT id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed "
+              "SELECT id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, frames "
               "FROM jobs ORDER BY seq");
   std::vector<StoredJob> out;
   while (q.step()) {
@@ -283,6 +300,12 @@ std::vector<StoredJob> JobStore::jobs() const {
     j.state = v1::JobStatus::State_IsValid(int(state)) ? v1::JobStatus::State(state) : v1::JobStatus::FAILED;
     j.error = q.column_text(9);
     j.elapsed = q.column_real(10);
+    try {
+      const std::string frames = q.column_text(11);
+      if (!frames.empty()) j.frames = parse_frames(frames);
+    } catch (const std::exception& e) {
+      throw std::runtime_error("job database: job " + j.id + ": unreadable frames: " + e.what());
+    }
     out.push_back(std::move(j));
   }
   return out;

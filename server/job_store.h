@@ -30,6 +30,8 @@ struct StoredJob {
   v1::JobStatus::State state = v1::JobStatus::QUEUED;
   std::string error;
   double elapsed = 0;  // render seconds, once the job has ended
+  // A sequence's frames (its frames' jobs have no rows: each is found by its checkpoint).
+  std::vector<int> frames;
 };
 
 struct Checkpoint {

@@ -57,6 +57,10 @@ struct RenderSettings {
   std::optional<int> frame;
   // The seed the sampler uses: `seed`, mixed with the frame number when there is one.
   uint64_t sample_seed() const;
+  // --fps: frames per second: a frame's time (for animation) is frame / fps seconds.
+  static constexpr double kMaxFps = 1e6;
+  double fps = 24;
+  double time() const { return frame ? double(*frame) / fps : 0.0; }
   int pass_spp = 16;  // --pass-spp: samples per progressive pass (the unit merged in order)
   // --tile: side of the square tiles the frame is cut into. It never changes the image,
   // except with a noise target, which is judged per tile.
