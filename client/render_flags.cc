@@ -1,5 +1,8 @@
 #include "client/render_flags.h"
 
+#include <cmath>
+
+#include "core/io/files.h"
 #include "core/render/frames.h"
 #include "core/scene/load.h"
 
@@ -23,6 +26,12 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
   cmd->add_option("--frame", s.frame, "Frame number of a sequence: its random numbers depend on it (none: a still)");
   cmd->add_option("--frames", f.frames,
                   "A sequence: 1-240, 1-240x2, 1,5,9 (each frame as --frame N alone; -f paths need ####)");
+  cmd->add_option("--camera-path", f.camera_path,
+                  "Keyframed camera for a sequence (JSON: eye, target, up, fov, lens_radius, focal_distance, "
+                  "max_depth by frame; docs/sequences.md)")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--turntable", f.turntable,
+                  "Orbit the camera about the scene's vertical axis, one turn in this many frames");
   cmd->add_option("--fps", s.fps, "Frames per second: a frame's time is frame / fps (animation)")
       ->capture_default_str();
   cmd->add_option("--camera", f.camera, "cs184 (framing of the CS184 renderer) or file (the file's camera)")
@@ -61,6 +70,26 @@ RenderSettings to_settings(const RenderFlags& f) {
   s.nee = !f.no_nee;
   s.mis = !f.no_mis;
   try {
+    if (!f.camera_path.empty() || f.turntable != 0) {
+      CameraPath path;
+      if (!f.camera_path.empty()) {
+        try {
+          path = CameraPath::parse(read_file_bytes(f.camera_path));
+        } catch (const SettingsError& e) {
+          throw SettingsError("--camera-path", f.camera_path + ": " + std::string(e.what()).substr(e.flag().size() + 2));
+        } catch (const std::runtime_error& e) {
+          throw SettingsError("--camera-path", e.what());
+        }
+      }
+      if (f.turntable != 0) {
+        if (!std::isfinite(f.turntable)) throw SettingsError("--turntable", "must be a finite number of frames");
+        CameraPath::Turntable t;
+        t.frames = f.turntable;
+        if (!f.frames.empty()) t.start = parse_frames(f.frames).front();  // the first frame faces as the still
+        path.turntable = t;
+      }
+      s.camera.path = std::make_shared<const CameraPath>(std::move(path));
+    }
     s.validate();
   } catch (const SettingsError& e) {
     throw CLI::ValidationError(e.flag(), std::string(e.what()).substr(e.flag().size() + 2));

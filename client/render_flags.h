@@ -20,6 +20,8 @@ struct RenderFlags {
   bool no_nee = false, no_mis = false;
   std::vector<std::string> outputs;
   std::string frames;  // --frames: a sequence
+  std::string camera_path;  // --camera-path FILE
+  double turntable = 0;     // --turntable FRAMES: one turn in this many frames
 };
 
 void add_render_flags(CLI::App* cmd, RenderFlags& f);

@@ -21,6 +21,7 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   p.set_seed(s.seed);
   if (s.frame) p.set_frame(*s.frame);
   p.set_fps(s.fps);
+  if (s.camera.path) p.set_camera_path(s.camera.path->to_json());
   p.set_pass_spp(uint32_t(s.pass_spp));
   p.set_width(uint32_t(s.camera.width));
   p.set_height(uint32_t(s.camera.height));
@@ -60,6 +61,8 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
   s.nee = !p.no_nee();
   s.mis = !p.no_mis();
   try {
+    if (!p.camera_path().empty())
+      s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(p.camera_path()));
     s.validate();
   } catch (const SettingsError& e) {
     throw WireError(std::string("render settings: ") + e.what());

@@ -41,6 +41,7 @@ double now_seconds() {
 struct Worker::Prepared {
   std::shared_ptr<Scene> scene;  // outlives the renderer, which refers to it
   std::unique_ptr<TileRenderer> renderer;
+  std::string base_key;  // scene and settings but the frame: renderers sharing one BVH
 };
 
 struct Worker::Held {
@@ -153,12 +154,28 @@ std::shared_ptr<const Worker::Prepared> Worker::prepare(const v1::Task& task) {
   const std::string key = task.scene_hash() + task.settings().SerializeAsString();
   if (auto it = prepared_.find(key); it != prepared_.end()) return it->second;
   auto p = std::make_shared<Prepared>();
-  p->scene = scene_for(task.scene_hash());
-  p->renderer = std::make_unique<TileRenderer>(*p->scene, from_proto(task.settings()));
-  // A few renderers stay built (jobs alternate by priority); tasks in flight hold theirs.
+  const RenderSettings settings = from_proto(task.settings());
+  // The frames of a sequence share one acceleration structure: a renderer built for any
+  // frame of the same (scene, settings) lends its own to the next frame's.
+  v1::RenderSettings base = task.settings();
+  base.clear_frame();
+  const std::string base_key = task.scene_hash() + base.SerializeAsString();
+  std::shared_ptr<const Prepared> sibling;
+  for (const auto& [k, q] : prepared_)
+    if (q->base_key == base_key) sibling = q;
+  if (sibling) {
+    p->scene = sibling->scene;
+    p->renderer = std::make_unique<TileRenderer>(*sibling->renderer, settings);
+  } else {
+    p->scene = scene_for(task.scene_hash());
+    p->renderer = std::make_unique<TileRenderer>(*p->scene, settings);
+  }
+  p->base_key = base_key;
+  // A few renderers stay built (jobs alternate by priority, frames follow each other);
+  // tasks in flight hold theirs.
   prepared_[key] = p;
   prepared_order_.push_back(key);
-  if (prepared_order_.size() > 4) {
+  if (prepared_order_.size() > 8) {
     prepared_.erase(prepared_order_.front());
     prepared_order_.pop_front();
   }

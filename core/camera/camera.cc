@@ -46,6 +46,33 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
     tmin_ = c.znear;
     tmax_ = c.zfar;
   }
+  const CameraPath::At& p = s.pose;
+  if (p.eye || p.target || p.up || p.orbit) {
+    Vec3 eye = p.eye.value_or(eye_);
+    Vec3 forward = p.target ? normalize(*p.target - eye) : -z_;
+    Vec3 up = p.up ? normalize(*p.up) : y_;
+    if (p.orbit) {
+      const Bounds b = scene.object_bounds();
+      const Vec3 center = p.orbit_center.value_or(b.empty() ? Vec3{} : b.center());
+      // Rodrigues' rotation about the unit axis k by the angle.
+      const Vec3 k = p.orbit_axis;
+      const float cs = std::cos(p.orbit_angle), sn = std::sin(p.orbit_angle);
+      auto rotate = [&](Vec3 v) { return v * cs + cross(k, v) * sn + k * (dot(k, v) * (1 - cs)); };
+      eye = center + rotate(eye - center);
+      forward = rotate(forward);
+      up = rotate(up);
+    }
+    eye_ = eye;
+    z_ = -forward;
+    Vec3 x = cross(up, z_);
+    if (length(x) < 1e-6f) x = cross(std::fabs(z_.y) < 0.9f ? Vec3{0, 1, 0} : Vec3{1, 0, 0}, z_);  // up along the view
+    x_ = normalize(x);
+    y_ = cross(z_, x_);
+  }
+  if (p.fov) {
+    tan_v_ = float(std::tan(double(*p.fov) * deg / 2));
+    tan_h_ = tan_v_ * float(s.width) / float(s.height);
+  }
 }
 
 Ray Camera::generate(float fx, float fy, Vec2 u_lens) const {

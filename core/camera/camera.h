@@ -7,8 +7,14 @@
 //   focal_distance  distance of the plane in focus along the optical axis (-d), default 4.7
 //   framing         kCs184: eye on the bounding box's diagonal, +Y up (default for .dae);
 //                   kFile: the file's own camera pose and field of view
+//   pose            a camera path's values for this frame, in place of the framing's:
+//                   eye, target (else the framing's direction), up, vertical fov; then the
+//                   turntable's turn about its axis
 #pragma once
 
+#include <memory>
+
+#include "core/camera/camera_path.h"
 #include "core/math/ray.h"
 #include "core/math/vec.h"
 #include "core/scene/scene.h"
@@ -22,6 +28,10 @@ struct CameraSettings {
   float lens_radius = 0;
   float focal_distance = 4.7f;
   Framing framing = Framing::kCs184;
+  // --camera-path / --turntable: the sequence's path (null: none), and what the frame being
+  // rendered takes from it (RenderSettings::at_frame fills it in; the camera applies it).
+  std::shared_ptr<const CameraPath> path;
+  CameraPath::At pose;
 };
 
 class Camera {

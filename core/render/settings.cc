@@ -54,6 +54,17 @@ void RenderSettings::validate() const {
           std::to_string(tiles) + " tiles; at most " + std::to_string(kMaxTiles) + ": use a larger --tile");
 }
 
+RenderSettings RenderSettings::at_frame() const {
+  RenderSettings s = *this;
+  if (!camera.path) return s;
+  const CameraPath::At a = camera.path->at(frame.value_or(0));
+  s.camera.pose = a;
+  if (a.lens_radius) s.camera.lens_radius = *a.lens_radius;
+  if (a.focal_distance) s.camera.focal_distance = *a.focal_distance;
+  if (a.max_depth) s.max_depth = *a.max_depth;
+  return s;
+}
+
 std::vector<std::pair<uint32_t, uint32_t>> RenderSettings::passes() const {
   std::vector<std::pair<uint32_t, uint32_t>> out;
   const uint32_t total = uint32_t(std::max(spp, 0));

@@ -79,6 +79,9 @@ struct RenderSettings {
 
   // Throws SettingsError for the first setting out of range.
   void validate() const;
+  // The settings a frame is rendered with: with a camera path (camera.path), its values at
+  // this frame (0 for a still) in camera.pose, lens radius, focal distance and max depth.
+  RenderSettings at_frame() const;
   Rect effective_window() const { return window.area() > 0 ? window : Rect{0, 0, camera.width, camera.height}; }
   // The sample-index ranges of the passes. Films are merged pass by pass in this order.
   // With -a B, passes end where CS184 checks convergence: after B+1, 2B+1, ... samples.

@@ -7,16 +7,32 @@ namespace tessera {
 TileRenderer::TileRenderer(const Scene& scene, const RenderSettings& settings)
     : scene_(scene),
       settings_(settings),
-      accel_(scene),
-      lights_(scene),
-      camera_(scene, settings.camera),
-      integrator_(scene, accel_, lights_, settings_) {}
+      accel_(std::make_shared<const Accel>(scene)),
+      lights_(std::make_shared<const LightSet>(scene)) {
+  set_up_frame();
+}
+
+TileRenderer::TileRenderer(const TileRenderer& base, const RenderSettings& settings)
+    : scene_(base.scene_), settings_(settings), accel_(base.accel_), lights_(base.lights_) {
+  set_up_frame();
+}
+
+void TileRenderer::set_frame(std::optional<int> frame) {
+  settings_.frame = frame;
+  set_up_frame();
+}
+
+void TileRenderer::set_up_frame() {
+  const RenderSettings s = settings_.at_frame();
+  camera_.emplace(scene_, s.camera);
+  integrator_.emplace(scene_, *accel_, *lights_, s);
+}
 
 std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,
                                             TileStats* stats, const std::atomic<bool>* cancel) const {
   std::vector<PixelSums> out(size_t(rect.area()));
   const int width = settings_.camera.width, height = settings_.camera.height;
-  const bool lens = camera_.is_thin_lens();
+  const bool lens = camera_->is_thin_lens();
   TileStats local;
   // Checked per pixel, not per row: a row of a many-sample pass can take seconds.
   auto cancelled = [cancel] { return cancel && cancel->load(std::memory_order_relaxed); };
@@ -34,8 +50,8 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
         const Vec2 jitter = sampler.next_2d();
         const Vec2 u_lens = lens ? sampler.next_2d() : Vec2{};
         // The camera counts rows from the bottom (CS184 convention).
-        const Ray ray = camera_.generate(float(px) + jitter.x, float(height - 1 - py) + jitter.y, u_lens);
-        const Rgb L = integrator_.radiance(ray, sampler, local.rays);
+        const Ray ray = camera_->generate(float(px) + jitter.x, float(height - 1 - py) + jitter.y, u_lens);
+        const Rgb L = integrator_->radiance(ray, sampler, local.rays);
         ++local.samples;
         if (!L.is_finite()) {
           ++local.nan_samples;

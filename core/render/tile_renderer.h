@@ -3,6 +3,7 @@
 #pragma once
 
 #include <atomic>
+#include <optional>
 #include <memory>
 #include <vector>
 
@@ -33,6 +34,9 @@ class TileRenderer {
  public:
   // Builds the acceleration structure; `scene` must outlive the renderer.
   TileRenderer(const Scene& scene, const RenderSettings& settings);
+  // A renderer of base's scene with other settings (another frame of a sequence, say): it
+  // shares base's acceleration structure and lights, so nothing is built but the camera.
+  TileRenderer(const TileRenderer& base, const RenderSettings& settings);
 
   // Samples [s0, s1) of each pixel of `rect` whose `active` flag is set (all when active
   // is null; `active` is rect-sized, row-major). Returns rect-sized sums. If `cancel`
@@ -40,20 +44,23 @@ class TileRenderer {
   std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active, TileStats* stats,
                                 const std::atomic<bool>* cancel = nullptr) const;
 
-  // The frame the next renders are of (--frames): only the random numbers change, so the
-  // scene's acceleration structure is built once for a whole sequence. Not while rendering.
-  void set_frame(std::optional<int> frame) { settings_.frame = frame; }
+  // The frame the next renders are of (--frames): the random numbers and, with a camera
+  // path, the camera change; the scene's acceleration structure is built once for a whole
+  // sequence. Not while rendering.
+  void set_frame(std::optional<int> frame);
 
   const Scene& scene() const { return scene_; }
   const RenderSettings& settings() const { return settings_; }
 
  private:
+  void set_up_frame();  // camera and integrator for settings_'s frame
+
   const Scene& scene_;
   RenderSettings settings_;
-  Accel accel_;
-  LightSet lights_;
-  Camera camera_;
-  Integrator integrator_;
+  std::shared_ptr<const Accel> accel_;
+  std::shared_ptr<const LightSet> lights_;
+  std::optional<Camera> camera_;
+  std::optional<Integrator> integrator_;
 };
 
 }  // namespace tessera

@@ -131,6 +131,78 @@ TEST_F(Farm, AFrameNumberGivesTheSameImageLocallyAndThroughTheFarm) {
   EXPECT_NE(bad.err.find("--frame: must be in -1000000..1000000"), std::string::npos) << bad.err;
 }
 
+// Issue 12: a sequence with a camera path (a focus pull while the camera turns) through a
+// farm that loses a worker mid-job: every frame is tessera render's frame, bit for bit, and
+// a frame rendered alone is the same frame again. submit --wait writes each frame's file.
+TEST_F(Farm, ASequenceThroughAFarmLosingAWorkerGivesEveryFrameOfTesseraRender) {
+  const std::string path = (dir / "path.json").string();
+  std::ofstream(path) << R"({"keys": [{"frame": 1, "lens_radius": 0.05, "focal_distance": 3},
+                                      {"frame": 4, "focal_distance": 6}],
+                             "turntable": {"frames": 16}})";
+  const std::string flags = "-r 96 72 -s 16 --pass-spp 8 -m 6 --seed 5 --tile 16 --camera-path " + path;
+  const CommandResult local =
+      run("render " + kScene + " " + flags + " --frames 1-4 -q -f " + (dir / "local.####.exr").string(), dir);
+  ASSERT_EQ(local.code, 0) << local.err;
+  auto local_frame = [&](int n) {
+    char name[32];
+    std::snprintf(name, sizeof name, "local.%04d.exr", n);
+    return (dir / name).string();
+  };
+  const CommandResult alone = run("render " + kScene + " " + flags + " --frame 3 -q -f " + (dir / "alone.exr").string(), dir);
+  ASSERT_EQ(alone.code, 0) << alone.err;
+  expect_same_pixels(local_frame(3), (dir / "alone.exr").string());
+
+  start_coordinator("127.0.0.1:0", "1");
+  Process& victim = start_worker();
+  start_worker();
+  const CommandResult sub =
+      run("submit " + kScene + " " + flags + " --frames 1-4 --coordinator " + grpc_addr + " --json", dir);
+  ASSERT_EQ(sub.code, 0) << sub.err;
+  const std::string id = nlohmann::json::parse(sub.out).at("id");
+  bool killed = false;
+  for (int i = 0; i < 2000 && !killed; ++i) {
+    const nlohmann::json st = get_json("/api/status");
+    if (st != nullptr && !st["jobs"].empty() && std::stoull(st["jobs"][0]["samples_done"].get<std::string>()) > 0)
+      for (const auto& w : st["workers"])
+        if (w["name"] == "w0" && w["active"].get<bool>()) {
+          victim.signal(SIGKILL);
+          killed = true;
+        }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(killed);
+  const CommandResult w = run("watch " + id + " --coordinator " + grpc_addr, dir);
+  ASSERT_EQ(w.code, 0) << w.err << w.out;
+  EXPECT_NE(w.out.find("frames 4/4"), std::string::npos) << w.out;
+  const CommandResult st = run("status " + id + " --coordinator " + grpc_addr, dir);
+  EXPECT_NE(st.out.find("frames: done 1-4"), std::string::npos) << st.out;
+  const CommandResult all =
+      run("fetch " + id + " --all -f " + (dir / "farm.####.exr").string() + " --coordinator " + grpc_addr, dir);
+  ASSERT_EQ(all.code, 0) << all.err;
+  for (int n = 1; n <= 4; ++n) {
+    char name[32];
+    std::snprintf(name, sizeof name, "farm.%04d.exr", n);
+    expect_same_pixels(local_frame(n), (dir / name).string());
+    EXPECT_EQ(read_exr((dir / name).string()).metadata.at("tessera/frame"), std::to_string(n));
+  }
+  const CommandResult one =
+      run("fetch " + id + " --frame 2 -f " + (dir / "two.png").string() + " --coordinator " + grpc_addr, dir);
+  EXPECT_EQ(one.code, 0) << one.err;
+  EXPECT_TRUE(fs::exists(dir / "two.png"));
+  const CommandResult none = run("fetch " + id + " -f " + (dir / "x.exr").string() + " --coordinator " + grpc_addr, dir);
+  EXPECT_NE(none.code, 0);
+  EXPECT_NE(none.err.find("--frame N"), std::string::npos) << none.err;
+
+  // submit --wait writes each frame as it finishes.
+  const CommandResult waited = submit_wait(kScene, flags + " --frames 3,4", (dir / "wait.####.exr").string());
+  ASSERT_EQ(waited.code, 0) << waited.err << waited.out;
+  expect_same_pixels(local_frame(3), (dir / "wait.0003.exr").string());
+  expect_same_pixels(local_frame(4), (dir / "wait.0004.exr").string());
+  const CommandResult no_hashes = submit_wait(kScene, flags + " --frames 3,4", (dir / "wait.exr").string());
+  EXPECT_NE(no_hashes.code, 0) << no_hashes.err;
+  EXPECT_NE(no_hashes.err.find("#### in every -f path"), std::string::npos) << no_hashes.err;
+}
+
 TEST_F(Farm, NoiseTargetAndEstimatorSwitchesGiveTheLocalImage) {
   const std::string flags = "-r 96 72 -s 64 --pass-spp 8 -m 6 --tile 24 --noise-target 0.2 --no-mis";
   const std::string local = local_render(flags);

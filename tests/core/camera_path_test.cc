@@ -1,0 +1,164 @@
+// Camera paths: the file format's checks, the interpolation, and what a frame's camera
+// takes from the path (turntable, focus pull).
+#include "core/camera/camera_path.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/camera/camera.h"
+#include "core/render/settings.h"
+#include "core/render/tile_renderer.h"
+#include "core/scene/load.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+namespace {
+
+void expect_refused(const std::string& json, const std::string& part) {
+  try {
+    CameraPath::parse(json);
+    ADD_FAILURE() << "accepted: " << json;
+  } catch (const SettingsError& e) {
+    EXPECT_EQ(e.flag(), "--camera-path");
+    EXPECT_NE(std::string(e.what()).find(part), std::string::npos) << e.what();
+  }
+}
+
+TEST(CameraPath, BadFilesAreRefusedNamingTheKeyAndField) {
+  expect_refused("not json", "not JSON");
+  expect_refused("[1, 2]", "must be a JSON object");
+  expect_refused(R"({"keyz": []})", "keyz: unknown field");
+  expect_refused(R"({"keys": [{"eye": [0, 0, 1]}]})", "key 1: has no frame");
+  expect_refused(R"({"keys": [{"frame": 1}, {"frame": 1}]})", "key 2: frame 1.0 does not come after");
+  expect_refused(R"({"keys": [{"frame": 5}, {"frame": 2}]})", "key 2: frame 2.0 does not come after");
+  expect_refused(R"({"keys": [{"frame": 1, "eye": [0, 1]}]})", "key 1 eye: must be [x, y, z]");
+  expect_refused(R"({"keys": [{"frame": 1, "eye": [0, "a", 1]}]})", "key 1 eye: must be a number");
+  expect_refused(R"({"keys": [{"frame": 1, "eye": [0, 1e999, 1]}]})", "1e999");
+  expect_refused(R"({"keys": [{"frame": 1, "eye": [0, 1e13, 1]}]})", "within 1e12");
+  expect_refused(R"({"keys": [{"frame": 1, "fov": 180}]})", "key 1 fov: must be between 0 and 180");
+  expect_refused(R"({"keys": [{"frame": 1, "lens_radius": -0.1}]})", "key 1 lens_radius");
+  expect_refused(R"({"keys": [{"frame": 1, "focal_distance": 0}]})", "key 1 focal_distance: must be > 0");
+  expect_refused(R"({"keys": [{"frame": 1, "max_depth": 2.5}]})", "key 1 max_depth: must be a whole number");
+  expect_refused(R"({"keys": [{"frame": 1, "up": [0, 0, 0]}]})", "key 1 up: must not be zero");
+  expect_refused(R"({"keys": [{"frame": 1, "eye": [1, 1, 1], "target": [1, 1, 1]}]})", "the same point");
+  expect_refused(R"({"keys": [{"frame": 1, "zoom": 2}]})", "key 1 zoom: unknown field");
+  expect_refused(R"({"turntable": {}})", "turntable: has no frames");
+  expect_refused(R"({"turntable": {"frames": 0}})", "turntable frames: must not be 0");
+  expect_refused(R"({"turntable": {"frames": 10, "axis": [0, 0, 0]}})", "turntable axis: must not be zero");
+  expect_refused(std::string(CameraPath::kMaxBytes + 1, ' '), "larger than 1 MiB");
+}
+
+TEST(CameraPath, MonotoneCubicPassesThroughItsKeysAndNeverOvershoots) {
+  const std::vector<double> xs{0, 1, 2, 10}, ys{0, 1, 1.1, 5};
+  for (size_t i = 0; i < xs.size(); ++i) EXPECT_DOUBLE_EQ(monotone_cubic(xs, ys, xs[i]), ys[i]);
+  EXPECT_EQ(monotone_cubic(xs, ys, -5), 0);  // held outside
+  EXPECT_EQ(monotone_cubic(xs, ys, 50), 5);
+  double prev = -1;
+  for (double x = 0; x <= 10; x += 0.01) {  // monotone data: a monotone curve
+    const double y = monotone_cubic(xs, ys, x);
+    EXPECT_GE(y, prev - 1e-12) << x;
+    prev = y;
+  }
+  // Smooth (C1) through an interior key: equal slopes either side.
+  const double h = 1e-6;
+  const double left = (monotone_cubic(xs, ys, 1) - monotone_cubic(xs, ys, 1 - h)) / h;
+  const double right = (monotone_cubic(xs, ys, 1 + h) - monotone_cubic(xs, ys, 1)) / h;
+  EXPECT_NEAR(left, right, 1e-4);
+  // A peak stays a peak: no overshoot past the highest key.
+  const std::vector<double> px{0, 1, 2}, py{0, 1, 0};
+  for (double x = 0; x <= 2; x += 0.01) EXPECT_LE(monotone_cubic(px, py, x), 1 + 1e-12);
+}
+
+TEST(CameraPath, ChannelsInterpolateOverTheKeysThatSetThemAndStepsHold) {
+  const CameraPath path = CameraPath::parse(R"({"keys": [
+      {"frame": 0, "focal_distance": 2, "max_depth": 0},
+      {"frame": 5, "lens_radius": 0.1, "max_depth": 3},
+      {"frame": 10, "focal_distance": 6}]})");
+  CameraPath::At a = path.at(5);
+  EXPECT_FLOAT_EQ(*a.focal_distance, 4);  // two keys: a straight line
+  EXPECT_FLOAT_EQ(*a.lens_radius, 0.1f);  // one key: held everywhere
+  EXPECT_EQ(*a.max_depth, 3);
+  EXPECT_FALSE(a.eye || a.target || a.up || a.fov || a.orbit);  // from the scene
+  EXPECT_EQ(*path.at(4.9).max_depth, 0);
+  EXPECT_EQ(*path.at(-3).max_depth, 0);
+  EXPECT_FLOAT_EQ(*path.at(-3).focal_distance, 2);
+  EXPECT_FLOAT_EQ(*path.at(30).focal_distance, 6);
+  // The wire's canonical text gives the same path.
+  const CameraPath again = CameraPath::parse(path.to_json());
+  EXPECT_EQ(again.to_json(), path.to_json());
+  for (double f : {-1.0, 2.5, 7.0}) EXPECT_EQ(*again.at(f).focal_distance, *path.at(f).focal_distance);
+}
+
+TEST(CameraPath, ATurntableTurnsTheCameraAboutTheSceneAndComesBack) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s;
+  s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(R"({"turntable": {"frames": 8}})"));
+  auto camera_at = [&](int frame) {
+    s.frame = frame;
+    return Camera(scene, s.at_frame().camera);
+  };
+  const Camera still(scene, RenderSettings().camera);
+  const Vec3 center = scene.object_bounds().center();
+  const Camera c0 = camera_at(0), c2 = camera_at(2), c8 = camera_at(8);
+  EXPECT_EQ(c0.eye().x, still.eye().x);  // angle 0: the still's camera, bit for bit
+  EXPECT_EQ(c0.eye().z, still.eye().z);
+  EXPECT_NEAR(c8.eye().x, c0.eye().x, 1e-5);  // one turn: back where it started
+  EXPECT_NEAR(c8.eye().z, c0.eye().z, 1e-5);
+  // A quarter turn about +Y: the eye moves from +Z of the centre to +X, still looking at it.
+  const Vec3 d0 = c0.eye() - center, d2 = c2.eye() - center;
+  EXPECT_NEAR(length(d2), length(d0), 1e-4);
+  EXPECT_NEAR(d2.x, d0.z, 1e-4);
+  EXPECT_NEAR(d2.y, d0.y, 1e-4);
+  EXPECT_NEAR(dot(c2.forward(), normalize(center - c2.eye())), dot(c0.forward(), normalize(center - c0.eye())), 1e-5);
+}
+
+TEST(CameraPath, AFocusPullMovesThePlaneWhereLensRaysMeet) {
+  Scene scene;
+  scene.camera.present = true;
+  RenderSettings s;
+  s.camera.framing = Framing::kFile;
+  s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(
+      R"({"keys": [{"frame": 1, "lens_radius": 0.2, "focal_distance": 2}, {"frame": 11, "focal_distance": 4}]})"));
+  for (const auto& [frame, distance] : {std::pair{1, 2.0f}, {6, 3.0f}, {11, 4.0f}}) {
+    s.frame = frame;
+    const Camera cam(scene, s.at_frame().camera);
+    ASSERT_TRUE(cam.is_thin_lens());
+    // Rays through the centre pixel from two lens points meet on the optical axis at -F.
+    const float fx = s.camera.width / 2.0f, fy = s.camera.height / 2.0f;
+    const Ray a = cam.generate(fx, fy, Vec2{0.1f, 0.5f}), b = cam.generate(fx, fy, Vec2{0.9f, 0.5f});
+    const float ta = (distance - 0) / -a.d.z;  // both start on the lens plane z = 0 (camera at the origin)
+    const float tb = distance / -b.d.z;
+    EXPECT_NEAR(a.o.x + ta * a.d.x, b.o.x + tb * b.d.x, 1e-4) << frame;
+    EXPECT_NEAR(a.o.z + ta * a.d.z, -distance, 1e-4) << frame;
+  }
+}
+
+TEST(CameraPath, AFrameOfAPathRendersAloneAsInItsSequenceAndSharesTheBvh) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s;
+  s.camera.width = 24;
+  s.camera.height = 18;
+  s.spp = 4;
+  s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(
+      R"({"keys": [{"frame": 1, "lens_radius": 0.05, "focal_distance": 3}, {"frame": 3, "focal_distance": 5}],
+          "turntable": {"frames": 12}})"));
+  TileRenderer sequence(scene, s);
+  TileStats st;
+  const Rect all{0, 0, 24, 18};
+  for (int frame : {1, 2, 3}) {
+    sequence.set_frame(frame);
+    const auto in_sequence = sequence.render(all, 0, 4, nullptr, &st);
+    RenderSettings alone = s;
+    alone.frame = frame;
+    const auto by_itself = TileRenderer(scene, alone).render(all, 0, 4, nullptr, &st);
+    const auto shared = TileRenderer(sequence, alone).render(all, 0, 4, nullptr, &st);
+    for (size_t i = 0; i < by_itself.size(); ++i) {
+      ASSERT_EQ(in_sequence[i].r, by_itself[i].r) << frame;
+      ASSERT_EQ(shared[i].g, by_itself[i].g) << frame;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace tessera
