@@ -22,6 +22,7 @@ const char* kLivePage = R"HTML(<!doctype html>
 <div id="summary"></div>
 <div class="row"><div><h3>Image</h3><img id="preview" alt="no image yet"></div>
 <div><h3>Tiles <small>(passes merged; white = finished)</small></h3><canvas id="heat"></canvas></div></div>
+<div id="frames"></div>
 <h3>Jobs</h3><table id="jobs"></table>
 <h3>Workers</h3><table id="workers"></table>
 <script src="/app.js"></script></body></html>)HTML";
@@ -29,6 +30,8 @@ const char* kLivePage = R"HTML(<!doctype html>
 const char* kLiveCss = R"CSS(body{font-family:sans-serif;margin:1.5em;background:#111;color:#ddd}
 table{border-collapse:collapse}td,th{padding:2px 10px;text-align:left}
 .row{display:flex;gap:1.5em;align-items:flex-start}canvas,img{image-rendering:pixelated;border:1px solid #444}
+.frame{display:inline-block;min-width:2.5em;margin:1px;padding:1px 3px;text-align:center;background:#333;color:#ddd}
+.frame.DONE{background:#2a6}.frame.RUNNING{background:#c80}.frame.CANCELLED,.frame.FAILED{background:#733}
 )CSS";
 
 const char* kLiveJs = R"JS('use strict';
@@ -39,14 +42,27 @@ async function tick(){
   document.getElementById('summary').textContent =
     `${jobs.length} jobs, ${workers.filter(w=>w.active).length} active workers, ` +
     `${(100*s.utilization).toFixed(0)}% busy, up ${s.uptime_seconds.toFixed(0)} s`;
-  document.getElementById('jobs').innerHTML = '<tr><th>id</th><th>name</th><th>state</th><th>samples</th><th>frame passes</th><th>ETA</th></tr>' +
-    jobs.map(j=>`<tr><td>${esc(j.id)}</td><td>${esc(j.name)}</td><td>${esc(j.state)}</td><td>${esc((100*j.samples_done/Math.max(1,j.samples_total)).toFixed(1))}%</td><td>${esc(j.frame_passes_done)}/${esc(j.passes_total)}</td><td>${esc(j.eta_seconds.toFixed(0))} s</td></tr>`).join('');
+  document.getElementById('jobs').innerHTML = '<tr><th>id</th><th>name</th><th>state</th><th>samples</th><th>passes / frames</th><th>ETA</th></tr>' +
+    jobs.map(j=>`<tr><td>${esc(j.id)}</td><td>${esc(j.name)}</td><td>${esc(j.state)}</td><td>${esc((100*j.samples_done/Math.max(1,j.samples_total)).toFixed(1))}%</td><td>${esc(j.frames_total ? 'frames ' + j.frames_done + '/' + j.frames_total : j.frame_passes_done + '/' + j.passes_total)}</td><td>${esc(j.eta_seconds.toFixed(0))} s</td></tr>`).join('');
   document.getElementById('workers').innerHTML = '<tr><th>id</th><th>name</th><th>threads</th><th>samples/s</th><th>busy</th><th>tasks</th></tr>' +
     workers.map(w=>`<tr><td>${esc(w.id)}</td><td>${esc(w.name)}</td><td>${esc(w.threads)}</td><td>${esc((w.samples_per_second/1e6).toFixed(2))} M</td><td>${esc((100*w.utilization).toFixed(0))}%</td><td>${esc(w.tasks_done)}</td></tr>`).join('');
   const job = jobs.find(j=>j.state==='RUNNING') || jobs[jobs.length-1];
   if (!job) return;
-  document.getElementById('preview').src = `/jobs/${encodeURIComponent(job.id)}/preview.png?t=${Date.now()}`;
-  const d = await (await fetch(`/api/jobs/${encodeURIComponent(job.id)}`)).json();
+  let id = job.id, d = await (await fetch(`/api/jobs/${encodeURIComponent(id)}`)).json();
+  // A sequence: every frame by state (a finished one opens its image), and the frame being
+  // rendered (else the last one started) in the preview and the tile map.
+  const frames = d.frames || [];
+  document.getElementById('frames').innerHTML = frames.length === 0 ? '' : '<h3>Frames</h3>' + frames.map(f =>
+    f.state === 'DONE'
+      ? `<a class="frame DONE" href="/jobs/${esc(encodeURIComponent(f.job_id))}/preview.png">${esc(f.frame)}</a>`
+      : `<span class="frame ${esc(f.state)}" title="${esc(f.state)}">${esc(f.frame)}</span>`).join('');
+  if (frames.length) {
+    const f = frames.find(f=>f.state==='RUNNING') || [...frames].reverse().find(f=>f.job_id);
+    if (!f) return;
+    id = f.job_id;
+    d = await (await fetch(`/api/jobs/${encodeURIComponent(id)}`)).json();
+  }
+  document.getElementById('preview').src = `/jobs/${encodeURIComponent(id)}/preview.png?t=${Date.now()}`;
   const c = document.getElementById('heat'), ctx = c.getContext('2d');
   c.width = d.settings.width; c.height = d.settings.height;
   ctx.fillStyle = '#000'; ctx.fillRect(0, 0, c.width, c.height);

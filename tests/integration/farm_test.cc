@@ -185,6 +185,13 @@ TEST_F(Farm, ASequenceThroughAFarmLosingAWorkerGivesEveryFrameOfTesseraRender) {
     expect_same_pixels(local_frame(n), (dir / name).string());
     EXPECT_EQ(read_exr((dir / name).string()).metadata.at("tessera/frame"), std::to_string(n));
   }
+  const nlohmann::json seq = get_json("/api/jobs/" + id);  // the live page's view of it
+  ASSERT_EQ(seq.at("frames").size(), 4u) << seq;
+  EXPECT_EQ(seq.at("frames").at(1).at("state"), "DONE");
+  httplib::Client http("127.0.0.1", http_port);
+  const auto preview = http.Get(("/jobs/" + seq.at("frames").at(1).at("job_id").get<std::string>() + "/preview.png").c_str());
+  ASSERT_TRUE(preview && preview->status == 200);
+  EXPECT_EQ(preview->body.substr(1, 3), "PNG");
   const CommandResult one =
       run("fetch " + id + " --frame 2 -f " + (dir / "two.png").string() + " --coordinator " + grpc_addr, dir);
   EXPECT_EQ(one.code, 0) << one.err;
