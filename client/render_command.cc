@@ -50,7 +50,10 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
                      {"flags", a.command_line},
                      {"render_seconds", std::to_string(r.seconds)},
                      {"nan_samples", std::to_string(r.stats.nan_samples)}};
-  if (s.frame) meta["frame"] = std::to_string(*s.frame);
+  if (s.frame) {
+    meta["frame"] = std::to_string(*s.frame);
+    meta["time"] = std::to_string(s.time());  // seconds: frame / fps
+  }
   for (const std::string& out : outputs) write_image(out, r.film, meta);
 
   const uint64_t rays = r.stats.rays.rays + r.stats.rays.shadow_rays;

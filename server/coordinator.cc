@@ -1146,7 +1146,10 @@ Coordinator::ImageSnapshot Coordinator::snapshot_locked(Job& job, bool image, bo
                {"seed", std::to_string(job.plan.settings().seed)},
                {"frame_passes", std::to_string(job.plan.frame_passes_done())}};
   if (job.started > 0) snap.meta["render_seconds"] = std::to_string(snap.elapsed);
-  if (const std::optional<int>& frame = job.plan.settings().frame) snap.meta["frame"] = std::to_string(*frame);
+  if (const std::optional<int>& frame = job.plan.settings().frame) {
+    snap.meta["frame"] = std::to_string(*frame);
+    snap.meta["time"] = std::to_string(job.plan.settings().time());  // seconds: frame / fps
+  }
   return snap;
 }
 

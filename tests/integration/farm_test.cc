@@ -184,6 +184,7 @@ TEST_F(Farm, ASequenceThroughAFarmLosingAWorkerGivesEveryFrameOfTesseraRender) {
     std::snprintf(name, sizeof name, "farm.%04d.exr", n);
     expect_same_pixels(local_frame(n), (dir / name).string());
     EXPECT_EQ(read_exr((dir / name).string()).metadata.at("tessera/frame"), std::to_string(n));
+    EXPECT_EQ(read_exr((dir / name).string()).metadata.at("tessera/time"), std::to_string(n / 24.0));
   }
   const nlohmann::json seq = get_json("/api/jobs/" + id);  // the live page's view of it
   ASSERT_EQ(seq.at("frames").size(), 4u) << seq;
