@@ -32,6 +32,7 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
       ->check(CLI::ExistingFile);
   cmd->add_option("--turntable", f.turntable,
                   "Orbit the camera about the scene's vertical axis, one turn in this many frames");
+  cmd->add_option("--animation", s.animation, "glTF animation that frames follow, by name or index (default: the first)");
   cmd->add_option("--fps", s.fps, "Frames per second: a frame's time is frame / fps (animation)")
       ->capture_default_str();
   cmd->add_option("--camera", f.camera, "cs184 (framing of the CS184 renderer) or file (the file's camera)")

@@ -22,6 +22,7 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   if (s.frame) p.set_frame(*s.frame);
   p.set_fps(s.fps);
   if (s.camera.path) p.set_camera_path(s.camera.path->to_json());
+  p.set_animation(s.animation);
   p.set_pass_spp(uint32_t(s.pass_spp));
   p.set_width(uint32_t(s.camera.width));
   p.set_height(uint32_t(s.camera.height));
@@ -49,6 +50,7 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
   s.seed = p.seed();
   if (p.has_frame()) s.frame = p.frame();
   if (p.fps() != 0) s.fps = p.fps();  // a message without it: the default
+  s.animation = p.animation();
   s.pass_spp = i(p.pass_spp());
   s.camera.width = i(p.width());
   s.camera.height = i(p.height());

@@ -35,6 +35,7 @@ void RenderSettings::validate() const {
   require(pass_spp >= 1 && pass_spp <= kMaxSpp, "--pass-spp", range(1, kMaxSpp));
   require(tile_size >= 1 && tile_size <= kMaxTileSize, "--tile", range(1, kMaxTileSize));
   require(!frame || (*frame >= -kMaxFrame && *frame <= kMaxFrame), "--frame", range(-kMaxFrame, kMaxFrame));
+  require(animation.size() <= kMaxAnimationName, "--animation", "a name of at most 256 bytes");
   require(std::isfinite(fps) && fps > 0 && fps <= kMaxFps, "--fps", "must be > 0 and at most 1e6");
   require(std::isfinite(noise_target) && noise_target >= 0 && noise_target <= kMaxNoiseTarget, "--noise-target",
           "must be in 0..1e9");

@@ -61,6 +61,10 @@ struct RenderSettings {
   static constexpr double kMaxFps = 1e6;
   double fps = 24;
   double time() const { return frame ? double(*frame) / fps : 0.0; }
+  // --animation: which of a glTF file's animations frames follow, by name or index (empty:
+  // the first). A still (no frame) shows the file's rest pose.
+  static constexpr size_t kMaxAnimationName = 256;
+  std::string animation;
   int pass_spp = 16;  // --pass-spp: samples per progressive pass (the unit merged in order)
   // --tile: side of the square tiles the frame is cut into. It never changes the image,
   // except with a noise target, which is judged per tile.

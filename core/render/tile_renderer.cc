@@ -1,31 +1,49 @@
 #include "core/render/tile_renderer.h"
 
 #include "core/sampling/sampler.h"
+#include "core/scene/animation.h"
 
 namespace tessera {
 
-TileRenderer::TileRenderer(const Scene& scene, const RenderSettings& settings)
-    : scene_(scene),
-      settings_(settings),
-      accel_(std::make_shared<const Accel>(scene)),
-      lights_(std::make_shared<const LightSet>(scene)) {
-  set_up_frame();
+TileRenderer::TileRenderer(const Scene& scene, const RenderSettings& settings) : rest_(&scene), settings_(settings) {
+  set_up_frame(nullptr);
 }
 
 TileRenderer::TileRenderer(const TileRenderer& base, const RenderSettings& settings)
-    : scene_(base.scene_), settings_(settings), accel_(base.accel_), lights_(base.lights_) {
-  set_up_frame();
+    : rest_(base.rest_), settings_(settings) {
+  set_up_frame(&base);
 }
 
 void TileRenderer::set_frame(std::optional<int> frame) {
   settings_.frame = frame;
-  set_up_frame();
+  set_up_frame(this);
 }
 
-void TileRenderer::set_up_frame() {
+void TileRenderer::set_up_frame(const TileRenderer* share) {
   const RenderSettings s = settings_.at_frame();
-  camera_.emplace(scene_, s.camera);
-  integrator_.emplace(scene_, *accel_, *lights_, s);
+  if (rest_->animation && settings_.frame) {
+    size_t clip;
+    try {
+      clip = rest_->animation->find_clip(settings_.animation);
+    } catch (const std::invalid_argument& e) {
+      throw SettingsError("--animation", e.what());
+    }
+    posed_ = std::make_shared<const Scene>(pose_scene(*rest_, clip, settings_.time()));
+    scene_ = posed_.get();
+  } else {
+    posed_.reset();
+    scene_ = rest_;
+  }
+  if (scene_ == rest_ && share && share->accel_scene_ == rest_) {  // a static scene's BVH serves every frame
+    accel_ = share->accel_;
+    lights_ = share->lights_;
+  } else if (accel_scene_ != scene_ || !accel_) {
+    accel_ = std::make_shared<const Accel>(*scene_);
+    lights_ = std::make_shared<const LightSet>(*scene_);
+  }
+  accel_scene_ = scene_;
+  camera_.emplace(*scene_, s.camera);
+  integrator_.emplace(*scene_, *accel_, *lights_, s);
 }
 
 std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,

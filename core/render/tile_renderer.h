@@ -32,10 +32,15 @@ struct TileStats {
 
 class TileRenderer {
  public:
-  // Builds the acceleration structure; `scene` must outlive the renderer.
+  // Builds the acceleration structure; `scene` must outlive the renderer. A frame of an
+  // animated scene (settings.frame set, scene.animation not null) is rendered from the
+  // scene posed at the frame's time, with an acceleration structure of its own. Throws
+  // SettingsError("--animation") when the scene has no animation of that name or index,
+  // SceneError when a pose is out of range.
   TileRenderer(const Scene& scene, const RenderSettings& settings);
   // A renderer of base's scene with other settings (another frame of a sequence, say): it
-  // shares base's acceleration structure and lights, so nothing is built but the camera.
+  // shares base's acceleration structure and lights, so nothing is built but the camera
+  // (unless the scene is animated: each pose has its own).
   TileRenderer(const TileRenderer& base, const RenderSettings& settings);
 
   // Samples [s0, s1) of each pixel of `rect` whose `active` flag is set (all when active
@@ -49,13 +54,18 @@ class TileRenderer {
   // sequence. Not while rendering.
   void set_frame(std::optional<int> frame);
 
-  const Scene& scene() const { return scene_; }
+  const Scene& scene() const { return *scene_; }  // as posed for the frame
   const RenderSettings& settings() const { return settings_; }
 
  private:
-  void set_up_frame();  // camera and integrator for settings_'s frame
+  // Pose (if animated), camera and integrator for settings_'s frame; a static scene's
+  // acceleration structure and lights come from `share` when it has them.
+  void set_up_frame(const TileRenderer* share);
 
-  const Scene& scene_;
+  const Scene* rest_;                  // as loaded
+  std::shared_ptr<const Scene> posed_;  // an animated scene at this frame's time
+  const Scene* scene_ = nullptr;       // what is rendered: rest_ or posed_
+  const Scene* accel_scene_ = nullptr;  // what accel_ and lights_ were built for
   RenderSettings settings_;
   std::shared_ptr<const Accel> accel_;
   std::shared_ptr<const LightSet> lights_;

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -82,6 +83,8 @@ struct Texture {
   Rgb sample(Vec2 uv) const;
 };
 
+struct SceneAnimation;  // core/scene/animation.h
+
 struct CameraDesc {
   // The file's camera node world transform, decomposed: eye, forward, up (unit).
   Vec3 eye{0, 0, 0}, forward{0, 0, -1}, up{0, 1, 0};
@@ -123,6 +126,8 @@ struct Scene {
   std::vector<Texture> textures;
   CameraDesc camera;
   std::vector<std::string> warnings;
+  // glTF animations (core/scene/animation.h); null for a scene without any.
+  std::shared_ptr<const SceneAnimation> animation;
 
   size_t triangle_count() const;
   // Bounds of meshes and spheres that are objects (light shapes excluded), as CS184 frames.

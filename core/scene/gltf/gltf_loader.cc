@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "core/math/transform.h"
+#include "core/scene/animation.h"
 #include "core/scene/scene_error.h"
 
 namespace tessera {
@@ -195,7 +196,9 @@ class GltfLoader {
         if (!child[i]) roots.push_back(int(i));
     }
     std::vector<int> path;
-    for (int r : roots) visit(r, Mat4(), path);
+    recording_ = !model_.animations.empty();
+    for (int r : roots) visit(r, Mat4(), path, -1);
+    if (recording_) read_animations();
     if (scene_.meshes.empty() && scene_.spheres.empty()) fail("scene", "no triangles to render");
     if (!scene_.camera.present) frame_bounds();
     scene_.finalize();
@@ -428,7 +431,7 @@ class GltfLoader {
     return t * r * s;
   }
 
-  void visit(int index, const Mat4& parent, std::vector<int>& path) {
+  void visit(int index, const Mat4& parent, std::vector<int>& path, int32_t parent_entry) {
     const std::string el = "nodes[" + std::to_string(index) + "]";
     if (index < 0 || size_t(index) >= model_.nodes.size()) fail(el, "does not exist");
     if (std::find(path.begin(), path.end(), index) != path.end())
@@ -436,15 +439,33 @@ class GltfLoader {
     if (path.size() >= kMaxNodeDepth) fail(el, "node hierarchy deeper than 256 levels");
     const tinygltf::Node& n = model_.nodes[size_t(index)];
     const Mat4 world = parent * local_matrix(n, el);
+    if (recording_) {  // the hierarchy, for posing frames of an animation
+      SceneAnimation::Node e;
+      e.gltf_node = uint32_t(index);
+      e.parent = parent_entry;
+      e.trs = n.matrix.empty();
+      e.matrix = local_matrix(n, el);
+      if (!n.translation.empty()) e.translation = {n.translation[0], n.translation[1], n.translation[2]};
+      if (!n.rotation.empty()) e.rotation = {n.rotation[0], n.rotation[1], n.rotation[2], n.rotation[3]};
+      if (!n.scale.empty()) e.scale = {n.scale[0], n.scale[1], n.scale[2]};
+      entry_ = int32_t(animation_.nodes.size());
+      animation_.nodes.push_back(e);
+    }
+    const int32_t entry = entry_;
     path.push_back(index);
     if (n.mesh >= 0) add_mesh(n.mesh, world, el);
-    if (n.camera >= 0) add_camera(n.camera, world, el);
+    if (n.camera >= 0) {
+      const bool first = !scene_.camera.present;
+      add_camera(n.camera, world, el);
+      if (recording_ && first) animation_.camera_node = entry;
+    }
     if (auto it = n.extensions.find("KHR_lights_punctual"); it != n.extensions.end()) {
       if (!it->second.Has("light") || !it->second.Get("light").IsInt())
         fail(el, "KHR_lights_punctual without a light index");
       add_light(it->second.Get("light").GetNumberAsInt(), world, el);
+      if (recording_) animation_.lights.push_back({uint32_t(scene_.lights.size() - 1), uint32_t(entry)});
     }
-    for (int c : n.children) visit(c, world, path);
+    for (int c : n.children) visit(c, world, path, entry);
     path.pop_back();
   }
 
@@ -503,7 +524,24 @@ class GltfLoader {
         for (size_t i = 0; i < nv; ++i) out.uvs[i] = {t2[2 * i], t2[2 * i + 1]};
       }
       out.material = material(prim.material);
-      if (!out.indices.empty()) scene_.meshes.push_back(std::move(out));
+      if (out.indices.empty()) continue;
+      if (recording_) {  // its object-space geometry, to transform again for each pose
+        SceneAnimation::MeshBinding b;
+        b.mesh = uint32_t(scene_.meshes.size());
+        b.node = uint32_t(entry_);
+        b.positions.resize(nv);
+        for (size_t i = 0; i < nv; ++i) b.positions[i] = Vec3{p3[3 * i], p3[3 * i + 1], p3[3 * i + 2]};
+        if (auto nrm = prim.attributes.find("NORMAL"); nrm != prim.attributes.end()) {
+          const std::vector<float> n3 = read_floats(nrm->second, 3, el + " NORMAL");
+          b.normals.resize(nv);
+          for (size_t i = 0; i < nv; ++i) b.normals[i] = Vec3{n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]};
+        }
+        b.indices = out.indices;
+        if (det < 0)  // back to the file's winding: each pose fixes it for its own transform
+          for (size_t t = 0; t < b.indices.size(); t += 3) std::swap(b.indices[t + 1], b.indices[t + 2]);
+        animation_.meshes.push_back(std::move(b));
+      }
+      scene_.meshes.push_back(std::move(out));
     }
   }
 
@@ -732,8 +770,92 @@ class GltfLoader {
   }
 
   std::string path_;
+  // ---- animations ----------------------------------------------------------------------
+  // Every animation's channels, checked (times increasing, counts agreeing with the
+  // interpolation, targets and samplers that exist); then only the meshes under nodes some
+  // animation moves keep their object-space copy.
+  void read_animations() {
+    for (size_t ai = 0; ai < model_.animations.size(); ++ai) {
+      const tinygltf::Animation& an = model_.animations[ai];
+      const std::string el = "animations[" + std::to_string(ai) + "]";
+      SceneAnimation::Clip clip;
+      clip.name = an.name;
+      for (size_t ci = 0; ci < an.channels.size(); ++ci) {
+        const tinygltf::AnimationChannel& ch = an.channels[ci];
+        const std::string cel = el + ".channels[" + std::to_string(ci) + "]";
+        if (ch.sampler < 0 || size_t(ch.sampler) >= an.samplers.size())
+          fail(cel, "sampler " + std::to_string(ch.sampler) + " does not exist");
+        if (ch.target_node < 0 || size_t(ch.target_node) >= model_.nodes.size())
+          fail(cel, "target node " + std::to_string(ch.target_node) + " does not exist");
+        SceneAnimation::Channel c;
+        c.gltf_node = uint32_t(ch.target_node);
+        size_t comps = 3;
+        if (ch.target_path == "translation") {
+          c.path = SceneAnimation::Path::kTranslation;
+        } else if (ch.target_path == "rotation") {
+          c.path = SceneAnimation::Path::kRotation;
+          comps = 4;
+        } else if (ch.target_path == "scale") {
+          c.path = SceneAnimation::Path::kScale;
+        } else if (ch.target_path == "weights") {
+          warn_once(cel + ": morph target weights are not supported; ignored");
+          continue;
+        } else {
+          fail(cel, "unknown target path '" + ch.target_path + "' (translation, rotation, scale or weights)");
+        }
+        if (!model_.nodes[size_t(ch.target_node)].matrix.empty())
+          fail(cel, "targets nodes[" + std::to_string(ch.target_node) +
+                        "], which has a matrix: only nodes given by translation, rotation and scale can be animated");
+        const tinygltf::AnimationSampler& smp = an.samplers[size_t(ch.sampler)];
+        const std::string sel = el + ".samplers[" + std::to_string(ch.sampler) + "]";
+        if (smp.interpolation == "LINEAR" || smp.interpolation.empty())
+          c.interpolation = SceneAnimation::Interpolation::kLinear;
+        else if (smp.interpolation == "STEP")
+          c.interpolation = SceneAnimation::Interpolation::kStep;
+        else if (smp.interpolation == "CUBICSPLINE")
+          c.interpolation = SceneAnimation::Interpolation::kCubicSpline;
+        else
+          fail(sel, "unknown interpolation '" + smp.interpolation + "' (LINEAR, STEP or CUBICSPLINE)");
+        const std::vector<float> times = read_floats(smp.input, 1, sel + " input");
+        if (times.empty()) fail(sel, "input has no keys");
+        for (size_t k = 1; k < times.size(); ++k)
+          if (!(times[k] > times[k - 1]))
+            fail(sel, "input times must increase: key " + std::to_string(k) + " (" + std::to_string(times[k]) +
+                          " s) does not come after key " + std::to_string(k - 1) + " (" +
+                          std::to_string(times[k - 1]) + " s)");
+        const std::vector<float> values = read_floats(smp.output, int(comps), sel + " output");
+        const bool cubic = c.interpolation == SceneAnimation::Interpolation::kCubicSpline;
+        const size_t want = times.size() * (cubic ? 3 : 1);
+        if (values.size() / comps != want)
+          fail(sel, "output has " + std::to_string(values.size() / comps) + " elements for " +
+                        std::to_string(times.size()) + " input keys; " + (cubic ? "CUBICSPLINE" : smp.interpolation) +
+                        " needs " + std::to_string(want));
+        c.times.assign(times.begin(), times.end());
+        c.values.assign(values.begin(), values.end());
+        clip.duration = std::max(clip.duration, c.times.back());
+        clip.channels.push_back(std::move(c));
+      }
+      animation_.clips.push_back(std::move(clip));
+    }
+    // Keep only what some animation moves.
+    std::set<uint32_t> targets;
+    for (const auto& clip : animation_.clips)
+      for (const auto& c : clip.channels) targets.insert(c.gltf_node);
+    std::vector<bool> moves(animation_.nodes.size());
+    for (size_t i = 0; i < animation_.nodes.size(); ++i) {
+      const auto& e = animation_.nodes[i];
+      moves[i] = targets.count(e.gltf_node) || (e.parent >= 0 && moves[size_t(e.parent)]);
+    }
+    auto& ms = animation_.meshes;
+    ms.erase(std::remove_if(ms.begin(), ms.end(), [&](const auto& b) { return !moves[b.node]; }), ms.end());
+    scene_.animation = std::make_shared<const SceneAnimation>(std::move(animation_));
+  }
+
   tinygltf::Model model_;
   Scene scene_;
+  bool recording_ = false;  // the file has animations: keep what posing needs
+  SceneAnimation animation_;
+  int32_t entry_ = -1;  // the node entry being visited
   std::map<int, uint32_t> materials_;
   std::map<int, int> textures_;
   std::set<std::string> warned_;

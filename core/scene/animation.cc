@@ -1,0 +1,206 @@
+#include "core/scene/animation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "core/scene/scene.h"
+#include "core/scene/scene_error.h"
+
+namespace tessera {
+
+size_t SceneAnimation::find_clip(const std::string& selector) const {
+  if (clips.empty()) throw std::invalid_argument("the scene has no animations");
+  if (selector.empty()) return 0;
+  for (size_t i = 0; i < clips.size(); ++i)
+    if (clips[i].name == selector) return i;
+  if (selector.find_first_not_of("0123456789") == std::string::npos && selector.size() < 9) {
+    const size_t i = std::stoul(selector);
+    if (i < clips.size()) return i;
+  }
+  std::string known;
+  for (size_t i = 0; i < clips.size(); ++i)
+    known += (i ? ", " : "") + std::to_string(i) + (clips[i].name.empty() ? "" : " '" + clips[i].name + "'");
+  throw std::invalid_argument("no animation '" + selector + "' (the scene has " + known + ")");
+}
+
+namespace {
+
+using Q = std::array<double, 4>;
+
+Q normalized(Q q) {
+  const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  if (!(n > 0)) return {0, 0, 0, 1};
+  for (double& v : q) v /= n;
+  return q;
+}
+
+// Spherical linear interpolation along the shorter arc (glTF spec, appendix "Interpolation").
+Q slerp(Q a, Q b, double t) {
+  double d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3];
+  if (d < 0) {  // q and -q are the same rotation: take the shorter way
+    for (double& v : b) v = -v;
+    d = -d;
+  }
+  Q out;
+  if (d > 0.9995) {  // nearly parallel: lerp avoids dividing by sin(0)
+    for (int i = 0; i < 4; ++i) out[size_t(i)] = a[size_t(i)] + t * (b[size_t(i)] - a[size_t(i)]);
+    return normalized(out);
+  }
+  const double theta = std::acos(std::min(1.0, d)), s = std::sin(theta);
+  const double wa = std::sin((1 - t) * theta) / s, wb = std::sin(t * theta) / s;
+  for (int i = 0; i < 4; ++i) out[size_t(i)] = wa * a[size_t(i)] + wb * b[size_t(i)];
+  return normalized(out);
+}
+
+}  // namespace
+
+std::array<double, 4> sample_channel(const SceneAnimation::Channel& c, double time) {
+  using I = SceneAnimation::Interpolation;
+  const size_t n = c.path == SceneAnimation::Path::kRotation ? 4 : 3;
+  const size_t keys = c.times.size();
+  const bool cubic = c.interpolation == I::kCubicSpline;
+  // Key k's value (the middle of its in-tangent, value, out-tangent triple when cubic).
+  auto value = [&](size_t k, size_t part = 1) {
+    std::array<double, 4> v{0, 0, 0, 0};
+    const size_t at = cubic ? (3 * k + part) * n : k * n;
+    for (size_t i = 0; i < n; ++i) v[i] = c.values[at + i];
+    return v;
+  };
+  auto finish = [&](std::array<double, 4> v) { return n == 4 ? normalized(v) : v; };
+  if (time <= c.times.front() || keys == 1) return finish(value(0));
+  if (time >= c.times.back()) return finish(value(keys - 1));
+  const size_t k = size_t(std::upper_bound(c.times.begin(), c.times.end(), time) - c.times.begin()) - 1;
+  const double td = c.times[k + 1] - c.times[k], t = (time - c.times[k]) / td;
+  switch (c.interpolation) {
+    case I::kStep:
+      return finish(value(k));
+    case I::kLinear: {
+      const auto a = value(k), b = value(k + 1);
+      if (n == 4) return slerp(a, b, t);
+      std::array<double, 4> v{};
+      for (size_t i = 0; i < n; ++i) v[i] = a[i] + t * (b[i] - a[i]);
+      return v;
+    }
+    case I::kCubicSpline: {
+      // p(t) = (2t^3 - 3t^2 + 1) v_k + td (t^3 - 2t^2 + t) b_k + (-2t^3 + 3t^2) v_k+1 + td (t^3 - t^2) a_k+1,
+      // b_k the out-tangent of key k and a_k+1 the in-tangent of key k+1 (glTF spec).
+      const auto vk = value(k), bk = value(k, 2), vk1 = value(k + 1), ak1 = value(k + 1, 0);
+      const double t2 = t * t, t3 = t2 * t;
+      std::array<double, 4> v{};
+      for (size_t i = 0; i < n; ++i)
+        v[i] = (2 * t3 - 3 * t2 + 1) * vk[i] + td * (t3 - 2 * t2 + t) * bk[i] + (-2 * t3 + 3 * t2) * vk1[i] +
+               td * (t3 - t2) * ak1[i];
+      return finish(v);
+    }
+  }
+  return finish(value(k));
+}
+
+Mat4 trs_matrix(const std::array<double, 3>& t, const std::array<double, 4>& q, const std::array<double, 3>& s) {
+  const std::array<double, 4> r = normalized(q);
+  const double x = r[0], y = r[1], z = r[2], w = r[3];
+  const Mat4 rot = Mat4::from_row_major({1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), 0,
+                                         2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), 0,
+                                         2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), 0, 0, 0,
+                                         0, 1});
+  return Mat4::translate(t[0], t[1], t[2]) * rot * Mat4::scale(s[0], s[1], s[2]);
+}
+
+Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
+  const SceneAnimation& a = *rest.animation;
+  const SceneAnimation::Clip& clip = a.clips.at(clip_index);
+  // Each node entry's local transform at this time, then its world transform.
+  std::vector<Mat4> world(a.nodes.size());
+  std::vector<bool> moved(a.nodes.size(), false);
+  for (size_t i = 0; i < a.nodes.size(); ++i) {
+    const SceneAnimation::Node& node = a.nodes[i];
+    Mat4 local = node.matrix;
+    bool animated = false;
+    if (node.trs) {
+      std::array<double, 3> t = node.translation, s = node.scale;
+      std::array<double, 4> r = node.rotation;
+      for (const SceneAnimation::Channel& c : clip.channels) {
+        if (c.gltf_node != node.gltf_node) continue;
+        animated = true;
+        const std::array<double, 4> v = sample_channel(c, time);
+        if (c.path == SceneAnimation::Path::kTranslation) t = {v[0], v[1], v[2]};
+        if (c.path == SceneAnimation::Path::kRotation) r = v;
+        if (c.path == SceneAnimation::Path::kScale) s = {v[0], v[1], v[2]};
+      }
+      if (animated) local = trs_matrix(t, r, s);
+    }
+    const int32_t p = node.parent;
+    world[i] = p >= 0 ? world[size_t(p)] * local : local;
+    moved[i] = animated || (p >= 0 && moved[size_t(p)]);
+  }
+  Scene s = rest;
+  s.animation = rest.animation;
+  auto check = [&](Vec3 v, const std::string& what) {
+    if (!is_finite(v) || std::fabs(v.x) > Scene::kMaxCoordinate || std::fabs(v.y) > Scene::kMaxCoordinate ||
+        std::fabs(v.z) > Scene::kMaxCoordinate)
+      throw SceneError(rest.source, "animations[" + std::to_string(clip_index) + "]",
+                       "at " + std::to_string(time) + " s " + what +
+                           " is not finite or outside +-1e12, the range the ray tracer handles");
+  };
+  for (const SceneAnimation::MeshBinding& b : a.meshes) {
+    if (!moved[b.node]) continue;
+    const Mat4& w = world[b.node];
+    Mesh& m = s.meshes[b.mesh];
+    for (size_t i = 0; i < b.positions.size(); ++i) {
+      m.positions[i] = w.point(b.positions[i].x, b.positions[i].y, b.positions[i].z).to_float();
+      check(m.positions[i], "a vertex of mesh '" + m.name + "'");
+    }
+    const double det = w(0, 0) * (w(1, 1) * w(2, 2) - w(1, 2) * w(2, 1)) -
+                       w(0, 1) * (w(1, 0) * w(2, 2) - w(1, 2) * w(2, 0)) +
+                       w(0, 2) * (w(1, 0) * w(2, 1) - w(1, 1) * w(2, 0));
+    m.indices = b.indices;
+    if (det < 0)  // a mirroring pose: keep geometric normals outward
+      for (size_t t = 0; t + 2 < m.indices.size(); t += 3) std::swap(m.indices[t + 1], m.indices[t + 2]);
+    if (!b.normals.empty()) {
+      // The inverse transpose of the upper 3x3 (cofactors: the direction is all that matters).
+      std::array<double, 16> c{};
+      for (int r = 0; r < 3; ++r)
+        for (int k = 0; k < 3; ++k) {
+          const int r1 = (r + 1) % 3, r2 = (r + 2) % 3, k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+          c[size_t(r * 4 + k)] = w(r1, k1) * w(r2, k2) - w(r1, k2) * w(r2, k1);
+        }
+      c[15] = 1;
+      const Mat4 nt = Mat4::from_row_major(c);
+      for (size_t i = 0; i < b.normals.size(); ++i) {
+        const Vec3 v = nt.vector(b.normals[i].x, b.normals[i].y, b.normals[i].z).to_float();
+        const float len = length(v);
+        m.normals[i] = len > 0 && std::isfinite(len) ? v / len : Vec3{};
+      }
+    } else {
+      m.compute_normals();
+    }
+  }
+  for (const SceneAnimation::LightBinding& b : a.lights) {
+    if (!moved[b.node]) continue;
+    const Mat4& w = world[b.node];
+    Light& l = s.lights[b.light];
+    if (l.kind == Light::Kind::kDirectional) {
+      l.direction = -normalize(w.vector(0, 0, -1).to_float());
+    } else {
+      l.position = w.point(0, 0, 0).to_float();
+      if (l.kind == Light::Kind::kSpot) l.direction = normalize(w.vector(0, 0, -1).to_float());
+    }
+    check(l.position, "light '" + l.name + "'");
+  }
+  if (a.camera_node >= 0 && moved[size_t(a.camera_node)]) {
+    const Mat4& w = world[size_t(a.camera_node)];
+    CameraDesc& d = s.camera;
+    d.eye = w.point(0, 0, 0).to_float();
+    d.forward = normalize(w.vector(0, 0, -1).to_float());
+    d.up = normalize(w.vector(0, 1, 0).to_float());
+    d.cs184_dir = -d.forward;
+    check(d.eye, "the camera");
+    if (!is_finite(d.forward) || !is_finite(d.up))
+      throw SceneError(rest.source, "animations[" + std::to_string(clip_index) + "]",
+                       "at " + std::to_string(time) + " s the camera's transform is degenerate");
+  }
+  return s;
+}
+
+}  // namespace tessera
