@@ -7,8 +7,11 @@
   dof-row.gltf          five spheres in a row receding from the camera over a textured
                         floor, lit by a KHR_lights_punctual point and directional light:
                         for depth of field with -b and -d.
+  cornell-animated.gltf the Cornell box with its spheres moving (the glass one LINEAR, the
+                        mirror one hopping along a CUBICSPLINE path) and the camera turning
+                        (rotation slerp) and dollying in, over 2 s: 48 frames at 24 fps.
 
-Run: python3 scenes/make_gltf_scenes.py   (rewrites both files beside this script)
+Run: python3 scenes/make_gltf_scenes.py   (rewrites the files beside this script)
 """
 import base64
 import json
@@ -30,14 +33,17 @@ class Builder:
     def _view(self, data, target):
         while len(self.blob) % 4:
             self.blob.append(0)
-        self.g["bufferViews"].append({"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(data), "target": target})
+        view = {"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(data)}
+        if target:
+            view["target"] = target
+        self.g["bufferViews"].append(view)
         self.blob += data
         return len(self.g["bufferViews"]) - 1
 
     def _accessor(self, values, comps, ctype, fmt, target, minmax=False):
         data = struct.pack("<%d%s" % (len(values), fmt), *values)
         acc = {"bufferView": self._view(data, target), "componentType": ctype, "count": len(values) // comps,
-               "type": {1: "SCALAR", 2: "VEC2", 3: "VEC3"}[comps]}
+               "type": {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}[comps]}
         if minmax:
             acc["min"] = [min(values[i::comps]) for i in range(comps)]
             acc["max"] = [max(values[i::comps]) for i in range(comps)]
@@ -60,11 +66,26 @@ class Builder:
         node = {"name": name, "mesh": len(self.g["meshes"]) - 1}
         if translation:
             node["translation"] = translation
-        self.node(node)
+        return self.node(node)
 
     def node(self, node):
         self.g["nodes"].append(node)
         self.g["scenes"][0]["nodes"].append(len(self.g["nodes"]) - 1)
+        return len(self.g["nodes"]) - 1
+
+    def animate(self, node, path, times, values, interpolation="LINEAR", name="move"):
+        """One channel of the animation `name`: values flat, 3 (4 for rotation) per key,
+        three times that for CUBICSPLINE (in-tangent, value, out-tangent)."""
+        anims = self.g.setdefault("animations", [])
+        anim = next((a for a in anims if a["name"] == name), None)
+        if anim is None:
+            anim = {"name": name, "channels": [], "samplers": []}
+            anims.append(anim)
+        comps = 4 if path == "rotation" else 3
+        anim["samplers"].append({"input": self._accessor(times, 1, 5126, "f", None, True),
+                                 "output": self._accessor(values, comps, 5126, "f", None),
+                                 "interpolation": interpolation})
+        anim["channels"].append({"sampler": len(anim["samplers"]) - 1, "target": {"node": node, "path": path}})
 
     def write(self, path):
         self.g["buffers"] = [{"byteLength": len(self.blob),
@@ -97,7 +118,7 @@ def uv_sphere(radius, seg=96, rings=48):
     return pos, nrm, idx
 
 
-def cornell():
+def cornell(animated=False):
     b = Builder()
     lam = lambda c: b.material({"pbrMetallicRoughness": {"baseColorFactor": c + [1], "metallicFactor": 0, "roughnessFactor": 1}})
     white, red, green = lam([0.73, 0.73, 0.73]), lam([0.63, 0.065, 0.05]), lam([0.14, 0.45, 0.091])
@@ -119,17 +140,32 @@ def cornell():
     mirror = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0.95, 0.95, 0.95, 1], "metallicFactor": 1, "roughnessFactor": 0}})
     glass = b.material({"pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0, "roughnessFactor": 0},
                         "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1.5}}})
-    pos, nrm, idx = uv_sphere(0.3)
-    b.mesh("mirrorSphere", pos, idx, mirror, nrm, translation=[-0.42, -0.449, -0.3])
-    b.mesh("glassSphere", pos, idx, glass, nrm, translation=[0.42, -0.449, 0.3])
+    pos, nrm, idx = uv_sphere(0.3) if not animated else uv_sphere(0.3, 64, 32)
+    mirror_node = b.mesh("mirrorSphere", pos, idx, mirror, nrm, translation=[-0.42, -0.449, -0.3])
+    glass_node = b.mesh("glassSphere", pos, idx, glass, nrm, translation=[0.42, -0.449, 0.3])
     # CS184 framing of the .dae at 480x360: eye 1.5 box diagonals from the centre, and the
     # 800x600 view's pixel pitch (tan(vfov/2) = 360 / (2 * 875)).
     d = 1.5 * math.sqrt(4 + 2.25 + 4)
     b.g["cameras"] = [{"type": "perspective", "perspective": {"yfov": 2 * math.atan(360 / 1750), "aspectRatio": 4 / 3,
                                                                "znear": 0.01, "zfar": 100}}]
-    b.node({"name": "camera", "camera": 0, "translation": [0, 0, d]})
+    camera_node = b.node({"name": "camera", "camera": 0, "translation": [0, 0, d]})
     b.g["extensionsUsed"] = ["KHR_materials_emissive_strength", "KHR_materials_transmission", "KHR_materials_ior"]
-    b.write(os.path.join(HERE, "cornell-spheres.gltf"))
+    if not animated:
+        b.write(os.path.join(HERE, "cornell-spheres.gltf"))
+        return
+    # The glass sphere rolls to the back left (LINEAR), the mirror sphere hops forward and
+    # right (CUBICSPLINE: zero tangents at the ends, an upward out-tangent for the hop), and
+    # the camera turns 20 degrees about +Y (slerp) while dollying in.
+    b.animate(glass_node, "translation", [0, 2], [0.42, -0.449, 0.3, -0.3, -0.449, -0.45])
+    b.animate(mirror_node, "translation", [0, 1, 2],
+              [0, 0, 0, -0.42, -0.449, -0.3, 0, 1.2, 0,
+               0, 0, 0, 0.0, 0.2, 0.0, 0, 0, 0,
+               0, -1.2, 0, 0.45, -0.449, 0.35, 0, 0, 0], "CUBICSPLINE")
+    half = math.radians(20) / 2
+    b.animate(camera_node, "rotation", [0, 2], [0, 0, 0, 1, 0, math.sin(half), 0, math.cos(half)])
+    b.animate(camera_node, "translation", [0, 2],
+              [0, 0, d, d * 0.8 * math.sin(2 * half), 0, d * 0.8 * math.cos(2 * half)])
+    b.write(os.path.join(HERE, "cornell-animated.gltf"))
 
 
 def checker_png(n=8, cell=16):
@@ -177,4 +213,5 @@ def dof_row():
 
 if __name__ == "__main__":
     cornell()
+    cornell(animated=True)
     dof_row()

@@ -465,8 +465,12 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   }
   if (!over.empty()) throw refuse(over, RequestError::Code::kResourceExhausted);
   try {
-    hash = scenes_.add(req.main_file(), req.files());  // a bad scene is refused here
+    // A bad scene is refused here, and settings that ask it for what it has not.
+    hash = scenes_.add(req.main_file(), req.files(),
+                       [&](const Scene& scene) { TileRenderer::check_settings(scene, settings); });
   } catch (const WireError& e) {
+    throw refuse(e.what());
+  } catch (const SettingsError& e) {
     throw refuse(e.what());
   } catch (const SceneError& e) {
     throw refuse(e.what());

@@ -13,7 +13,8 @@ namespace fs = std::filesystem;
 
 SceneStore::SceneStore(std::string dir) : dir_(std::move(dir)) { fs::create_directories(dir_); }
 
-std::string SceneStore::add(const std::string& main_file, const SceneFiles& files) {
+std::string SceneStore::add(const std::string& main_file, const SceneFiles& files,
+                            const std::function<void(const Scene&)>& check) {
   const std::string hash = bundle_hash(main_file, files);
   {
     std::lock_guard<std::mutex> lock(mu_);
@@ -28,7 +29,8 @@ std::string SceneStore::add(const std::string& main_file, const SceneFiles& file
   const fs::path staging = fs::path(dir_) / (hash + ".staging-" + std::to_string(++staging_seq));
   std::error_code ec;
   try {
-    (void)load_scene(unpack_bundle(staging.string(), main_file, files));  // outside the lock: slow
+    const Scene scene = load_scene(unpack_bundle(staging.string(), main_file, files));  // outside the lock: slow
+    if (check) check(scene);
   } catch (const SceneError& e) {
     fs::remove_all(staging, ec);
     throw SceneError(main_file, e.element(), e.reason());

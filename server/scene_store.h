@@ -3,10 +3,12 @@
 // coordinator.
 #pragma once
 
+#include <functional>
 #include <map>
 #include <mutex>
 #include <string>
 
+#include "core/scene/scene.h"
 #include "scene_bundle.h"
 
 namespace tessera {
@@ -19,7 +21,10 @@ class SceneStore {
   // use of the scene until it calls release(). Throws WireError
   // (unsafe bundle) or SceneError naming the file as the user knows it, not by its path
   // here; a refused scene leaves nothing on disk. Thread-safe.
-  std::string add(const std::string& main_file, const SceneFiles& files);
+  // `check`, when given, is called with the loaded scene (a job's settings against it, say)
+  // and may throw to refuse it.
+  std::string add(const std::string& main_file, const SceneFiles& files,
+                  const std::function<void(const Scene&)>& check = nullptr);
   // add() for a scene kept on disk by an earlier run; throws std::runtime_error (or what
   // add() throws) when it is missing or its bytes no longer have this hash.
   void restore(const std::string& hash);

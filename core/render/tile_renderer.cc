@@ -19,15 +19,21 @@ void TileRenderer::set_frame(std::optional<int> frame) {
   set_up_frame(this);
 }
 
+void TileRenderer::check_settings(const Scene& scene, const RenderSettings& settings) {
+  if (settings.animation.empty()) return;
+  if (!scene.animation) throw SettingsError("--animation", "the scene has no animations");
+  try {
+    (void)scene.animation->find_clip(settings.animation);
+  } catch (const std::invalid_argument& e) {
+    throw SettingsError("--animation", e.what());
+  }
+}
+
 void TileRenderer::set_up_frame(const TileRenderer* share) {
   const RenderSettings s = settings_.at_frame();
+  check_settings(*rest_, settings_);
   if (rest_->animation && settings_.frame) {
-    size_t clip;
-    try {
-      clip = rest_->animation->find_clip(settings_.animation);
-    } catch (const std::invalid_argument& e) {
-      throw SettingsError("--animation", e.what());
-    }
+    const size_t clip = rest_->animation->find_clip(settings_.animation);
     posed_ = std::make_shared<const Scene>(pose_scene(*rest_, clip, settings_.time()));
     scene_ = posed_.get();
   } else {

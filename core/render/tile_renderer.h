@@ -49,6 +49,10 @@ class TileRenderer {
   std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active, TileStats* stats,
                                 const std::atomic<bool>* cancel = nullptr) const;
 
+  // Throws SettingsError when `settings` ask the scene for what it has not: an animation
+  // (--animation) it does not have. The coordinator checks a job with it at submit.
+  static void check_settings(const Scene& scene, const RenderSettings& settings);
+
   // The frame the next renders are of (--frames): the random numbers and, with a camera
   // path, the camera change; the scene's acceleration structure is built once for a whole
   // sequence. Not while rendering.

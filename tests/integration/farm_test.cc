@@ -211,6 +211,25 @@ TEST_F(Farm, ASequenceThroughAFarmLosingAWorkerGivesEveryFrameOfTesseraRender) {
   EXPECT_NE(no_hashes.err.find("#### in every -f path"), std::string::npos) << no_hashes.err;
 }
 
+// Issue 12: an animated glTF scene's frames through the farm are tessera render's frames.
+TEST_F(Farm, AnAnimatedGltfSequenceThroughTheFarmGivesTesseraRendersFrames) {
+  const std::string scene = std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-animated.gltf";
+  const std::string flags = "-r 64 48 -s 8 --pass-spp 4 -m 6 --tile 16";
+  const CommandResult local =
+      run("render " + scene + " " + flags + " --frames 6,30 -q -f " + (dir / "local.####.exr").string(), dir);
+  ASSERT_EQ(local.code, 0) << local.err;
+  start_coordinator();
+  start_worker();
+  start_worker();
+  const CommandResult r = submit_wait(scene, flags + " --frames 6,30", (dir / "farm.####.exr").string());
+  ASSERT_EQ(r.code, 0) << r.err << r.out;
+  for (const char* n : {"0006", "0030"})
+    expect_same_pixels((dir / ("local." + std::string(n) + ".exr")).string(), (dir / ("farm." + std::string(n) + ".exr")).string());
+  const CommandResult bad = submit_wait(scene, flags + " --frames 1,2 --animation walk", (dir / "bad.####.exr").string());
+  EXPECT_NE(bad.code, 0);  // refused at submit, naming the animation
+  EXPECT_NE((bad.err + bad.out).find("no animation 'walk'"), std::string::npos) << bad.err << bad.out;
+}
+
 TEST_F(Farm, NoiseTargetAndEstimatorSwitchesGiveTheLocalImage) {
   const std::string flags = "-r 96 72 -s 64 --pass-spp 8 -m 6 --tile 24 --noise-target 0.2 --no-mis";
   const std::string local = local_render(flags);

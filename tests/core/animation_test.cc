@@ -1,0 +1,51 @@
+// Rendering frames of an animated glTF scene (scenes/cornell-animated.gltf): each frame is
+// the scene posed at frame / fps, the same image alone or within a sequence.
+#include <gtest/gtest.h>
+
+#include "core/render/tile_renderer.h"
+#include "core/scene/animation.h"
+#include "core/scene/load.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+namespace {
+
+TEST(Animation, FramesArePosedAtTheirTimeAndEqualTheFrameRenderedAlone) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-animated.gltf"));
+  ASSERT_TRUE(scene.animation);
+  ASSERT_EQ(scene.animation->clips.size(), 1u);
+  EXPECT_DOUBLE_EQ(scene.animation->clips[0].duration, 2.0);
+  // Only the two spheres are kept in object space: the box does not move.
+  EXPECT_EQ(scene.animation->meshes.size(), 2u);
+  RenderSettings s;
+  s.camera.framing = Framing::kFile;
+  s.camera.width = 24;
+  s.camera.height = 18;
+  s.spp = 4;
+  TileRenderer sequence(scene, s);
+  const Rect all{0, 0, 24, 18};
+  TileStats st;
+  std::vector<float> eye_x;
+  for (int frame : {0, 12, 48}) {
+    sequence.set_frame(frame);
+    eye_x.push_back(sequence.scene().camera.eye.x);
+    const auto in_sequence = sequence.render(all, 0, 4, nullptr, &st);
+    RenderSettings alone = s;
+    alone.frame = frame;
+    const auto by_itself = TileRenderer(scene, alone).render(all, 0, 4, nullptr, &st);
+    for (size_t i = 0; i < by_itself.size(); ++i) ASSERT_EQ(in_sequence[i].r, by_itself[i].r) << frame;
+  }
+  EXPECT_EQ(eye_x[0], scene.camera.eye.x);  // t = 0 is the rest pose here
+  EXPECT_LT(eye_x[0], eye_x[1]);            // the camera moves
+  EXPECT_LT(eye_x[1], eye_x[2]);
+  // The frame's time is frame / fps: frame 24 at 24 fps is frame 48 at 48 fps.
+  RenderSettings a = s, b = s;
+  a.frame = 24;
+  b.frame = 48;
+  b.fps = 48;
+  EXPECT_EQ(TileRenderer(scene, a).scene().meshes[6].positions[0].x,
+            TileRenderer(scene, b).scene().meshes[6].positions[0].x);
+}
+
+}  // namespace
+}  // namespace tessera
