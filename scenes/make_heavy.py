@@ -28,10 +28,13 @@ def main():
     out = "build/scenes"
     n = 707
     args = sys.argv[1:]
+    animated = False  # --animated: the chrome sphere rolls 3 units over 2 s (heavy-animated.gltf)
     while args:
         a = args.pop(0)
         if a == "--size":
             n = int(args.pop(0))
+        elif a == "--animated":
+            animated = True
         else:
             out = a
     os.makedirs(out, exist_ok=True)
@@ -79,6 +82,8 @@ def main():
         blob.extend(data)
         acc = {"bufferView": len(views) - 1, "componentType": ctype, "count": len(arr) // comps,
                "type": {1: "SCALAR", 3: "VEC3"}[comps]}
+        if target is None:
+            del views[-1]["target"]
         if minmax:
             acc["min"] = [min(arr[k::comps]) for k in range(comps)]
             acc["max"] = [max(arr[k::comps]) for k in range(comps)]
@@ -89,7 +94,17 @@ def main():
                "indices": add(idx, 1, 5125, 34963), "material": 0}
     sphere = {"attributes": {"POSITION": add(sp_pos, 3, 5126, 34962, True), "NORMAL": add(sp_nrm, 3, 5126, 34962)},
               "indices": add(sp_idx, 1, 5125, 34963)}
-    with open(os.path.join(out, "heavy.bin"), "wb") as f:
+    spheres = [(-2.0, -4.0, 1.0), (1.5, -6.0, 1.2), (4.0, -3.0, 0.8)]
+    animations = []
+    if animated:  # node 1 (sphere0) moves; the million-triangle terrain does not
+        x, z, r = spheres[0]
+        y = height(x, z) + r * 0.9
+        times = add(array.array("f", [0, 2]), 1, 5126, None, True)
+        path = add(array.array("f", [x, y, z, x + 3, y, z]), 3, 5126, None)
+        animations = [{"name": "roll", "samplers": [{"input": times, "output": path}],
+                       "channels": [{"sampler": 0, "target": {"node": 1, "path": "translation"}}]}]
+    name = "heavy-animated" if animated else "heavy"
+    with open(os.path.join(out, name + ".bin"), "wb") as f:
         f.write(blob)
     materials = [
         {"name": "ground", "pbrMetallicRoughness": {"baseColorFactor": [0.45, 0.5, 0.35, 1], "metallicFactor": 0, "roughnessFactor": 1}},
@@ -99,7 +114,7 @@ def main():
         {"name": "copper", "pbrMetallicRoughness": {"baseColorFactor": [0.95, 0.64, 0.54, 1], "metallicFactor": 1, "roughnessFactor": 0.35}}]
     meshes = [{"name": "terrain", "primitives": [terrain]}]
     nodes = [{"name": "terrain", "mesh": 0}]
-    for k, (x, z, r) in enumerate([(-2.0, -4.0, 1.0), (1.5, -6.0, 1.2), (4.0, -3.0, 0.8)]):
+    for k, (x, z, r) in enumerate(spheres):
         meshes.append({"name": "sphere%d" % k, "primitives": [dict(sphere, material=1 + k)]})
         nodes.append({"name": "sphere%d" % k, "mesh": len(meshes) - 1,
                       "translation": [x, height(x, z) + r * 0.9, z], "scale": [r, r, r]})
@@ -112,10 +127,12 @@ def main():
              {"name": "camera", "camera": 0, "translation": [0, 3.5, 6], "rotation": [-0.17, 0, 0, 0.985]}],
          "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "aspectRatio": 1.5, "znear": 0.05, "zfar": 200}}],
          "meshes": meshes, "materials": materials, "accessors": accessors, "bufferViews": views,
-         "buffers": [{"byteLength": len(blob), "uri": "heavy.bin"}]}
-    with open(os.path.join(out, "heavy.gltf"), "w") as f:
+         "buffers": [{"byteLength": len(blob), "uri": name + ".bin"}]}
+    if animations:
+        g["animations"] = animations
+    with open(os.path.join(out, name + ".gltf"), "w") as f:
         json.dump(g, f)
-    print("%s/heavy.gltf: %d triangles" % (out, len(idx) // 3 + 3 * (len(sp_idx) // 3)))
+    print("%s/%s.gltf: %d triangles" % (out, name, len(idx) // 3 + 3 * (len(sp_idx) // 3)))
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <vector>
 
 #include "core/math/ray.h"
 #include "core/math/vec.h"
@@ -25,6 +26,14 @@ class Accel {
   // Builds the acceleration structure; `scene` must outlive the Accel. Throws
   // std::runtime_error if Embree reports an error.
   explicit Accel(const Scene& scene);
+  // The static part of an animated scene: every mesh but those marked in `skip`, and the
+  // spheres. Built once for all frames.
+  Accel(const Scene& scene, const std::vector<bool>& skip);
+  // One pose of an animated scene: the meshes marked in `moving` are built here from
+  // `scene` (the pose, in world space); everything else is `fixed` (built from the same
+  // scene's static part with skip = moving), reached through an instance with the identity
+  // transform, so its BVH is not built again. Hits report mesh indices of `scene` either way.
+  Accel(const Scene& scene, std::shared_ptr<const Accel> fixed, const std::vector<bool>& moving);
   ~Accel();
   Accel(const Accel&) = delete;
   Accel& operator=(const Accel&) = delete;

@@ -108,26 +108,23 @@ struct Accel::Impl {
   unsigned sphere_geom = RTC_INVALID_GEOMETRY_ID;
   SphereData sphere_data{};
   std::string error;
+  std::shared_ptr<const Accel> fixed;  // a pose's static part (its device is this one's)
+  unsigned fixed_sphere_geom = RTC_INVALID_GEOMETRY_ID;
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
     if (device) rtcReleaseDevice(device);
   }
-};
-
-Accel::Accel(const Scene& scene) : impl_(std::make_unique<Impl>()) {
-  impl_->device = rtcNewDevice(nullptr);
-  if (!impl_->device)
-    throw std::runtime_error("cannot create Embree device (error " + std::to_string(int(rtcGetDeviceError(nullptr))) +
-                             ")");
-  rtcSetDeviceErrorFunction(impl_->device, error_callback, &impl_->error);
-  impl_->scene = rtcNewScene(impl_->device);
-  // ROBUST: watertight triangle tests, so rays along shared edges never leak.
-  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
-  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_HIGH);
-
-  for (size_t i = 0; i < scene.meshes.size(); ++i) {
-    const Mesh& m = scene.meshes[i];
-    RTCGeometry g = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  void new_scene(RTCDevice d) {
+    device = d;
+    rtcRetainDevice(device);
+    rtcSetDeviceErrorFunction(device, error_callback, &error);
+    scene = rtcNewScene(device);
+    // ROBUST: watertight triangle tests, so rays along shared edges never leak.
+    rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
+    rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+  }
+  void add_mesh(const Mesh& m, unsigned id) {
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     // Embree may read 16 bytes from the last vertex: pad by one.
     float* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                                            3 * sizeof(float), m.positions.size() + 1));
@@ -141,24 +138,67 @@ Accel::Accel(const Scene& scene) : impl_(std::make_unique<Impl>()) {
                                                                    3 * sizeof(uint32_t), m.triangle_count()));
     std::copy(m.indices.begin(), m.indices.end(), idx);
     rtcCommitGeometry(g);
-    rtcAttachGeometryByID(impl_->scene, g, unsigned(i));  // geomID == mesh index
+    rtcAttachGeometryByID(scene, g, id);  // geomID == mesh index
     rtcReleaseGeometry(g);
   }
-  if (!scene.spheres.empty()) {
-    impl_->sphere_data.scene = &scene;
-    RTCGeometry g = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_USER);
-    rtcSetGeometryUserPrimitiveCount(g, unsigned(scene.spheres.size()));
-    rtcSetGeometryUserData(g, &impl_->sphere_data);
+  void add_spheres(const Scene& s) {
+    if (s.spheres.empty()) return;
+    sphere_data.scene = &s;
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
+    rtcSetGeometryUserPrimitiveCount(g, unsigned(s.spheres.size()));
+    rtcSetGeometryUserData(g, &sphere_data);
     rtcSetGeometryBoundsFunction(g, sphere_bounds, nullptr);
     rtcSetGeometryIntersectFunction(g, sphere_intersect);
     rtcSetGeometryOccludedFunction(g, sphere_occluded);
     rtcCommitGeometry(g);
-    impl_->sphere_geom = unsigned(scene.meshes.size());
-    rtcAttachGeometryByID(impl_->scene, g, impl_->sphere_geom);
+    sphere_geom = unsigned(s.meshes.size());
+    rtcAttachGeometryByID(scene, g, sphere_geom);
     rtcReleaseGeometry(g);
   }
-  rtcCommitScene(impl_->scene);
-  if (!impl_->error.empty()) throw std::runtime_error(impl_->error);
+  void commit() {
+    rtcCommitScene(scene);
+    if (!error.empty()) throw std::runtime_error(error);
+  }
+};
+
+namespace {
+RTCDevice new_device() {
+  RTCDevice d = rtcNewDevice(nullptr);
+  if (!d)
+    throw std::runtime_error("cannot create Embree device (error " + std::to_string(int(rtcGetDeviceError(nullptr))) +
+                             ")");
+  return d;
+}
+}  // namespace
+
+Accel::Accel(const Scene& scene) : Accel(scene, std::vector<bool>()) {}
+
+Accel::Accel(const Scene& scene, const std::vector<bool>& skip) : impl_(std::make_unique<Impl>()) {
+  RTCDevice d = new_device();
+  impl_->new_scene(d);
+  rtcReleaseDevice(d);  // the Impl holds it
+  for (size_t i = 0; i < scene.meshes.size(); ++i)
+    if (i >= skip.size() || !skip[i]) impl_->add_mesh(scene.meshes[i], unsigned(i));
+  impl_->add_spheres(scene);
+  impl_->commit();
+}
+
+Accel::Accel(const Scene& scene, std::shared_ptr<const Accel> fixed, const std::vector<bool>& moving)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->new_scene(fixed->impl_->device);  // an instance must live on its scene's device
+  impl_->fixed = fixed;
+  impl_->fixed_sphere_geom = fixed->impl_->sphere_geom;
+  for (size_t i = 0; i < scene.meshes.size() && i < moving.size(); ++i)
+    if (moving[i]) impl_->add_mesh(scene.meshes[i], unsigned(i));
+  RTCGeometry g = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
+  rtcSetGeometryInstancedScene(g, fixed->impl_->scene);
+  rtcSetGeometryTimeStepCount(g, 1);
+  const float identity[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0};  // 3x4, column-major
+  rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, identity);
+  rtcCommitGeometry(g);
+  rtcAttachGeometryByID(impl_->scene, g, unsigned(scene.meshes.size() + 1));
+  rtcReleaseGeometry(g);
+  impl_->commit();
 }
 
 Accel::~Accel() = default;
@@ -177,7 +217,9 @@ bool Accel::intersect(const Ray& ray, Hit* hit) const {
   hit->u = rh.hit.u;
   hit->v = rh.hit.v;
   hit->ng = {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z};
-  hit->is_sphere = rh.hit.geomID == impl_->sphere_geom;
+  // A hit inside a pose's static part reports that part's geometry ids (mesh indices too).
+  hit->is_sphere = rh.hit.geomID == (rh.hit.instID[0] == RTC_INVALID_GEOMETRY_ID ? impl_->sphere_geom
+                                                                                 : impl_->fixed_sphere_geom);
   hit->shape = hit->is_sphere ? rh.hit.primID : rh.hit.geomID;
   hit->prim = rh.hit.primID;
   return true;

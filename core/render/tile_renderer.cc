@@ -43,6 +43,18 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
   if (scene_ == rest_ && share && share->accel_scene_ == rest_) {  // a static scene's BVH serves every frame
     accel_ = share->accel_;
     lights_ = share->lights_;
+  } else if (posed_) {
+    // Only what moves is built per pose; the rest is one BVH for every frame, instanced.
+    if (share && share->rest_ == rest_ && share->static_part_) static_part_ = share->static_part_;
+    if (!static_part_) {
+      auto part = std::make_shared<StaticPart>();
+      part->moving.assign(rest_->meshes.size(), false);
+      for (const SceneAnimation::MeshBinding& b : rest_->animation->meshes) part->moving[b.mesh] = true;
+      part->accel = std::make_shared<const Accel>(*rest_, part->moving);
+      static_part_ = part;
+    }
+    accel_ = std::make_shared<const Accel>(*scene_, static_part_->accel, static_part_->moving);
+    lights_ = std::make_shared<const LightSet>(*scene_);
   } else if (accel_scene_ != scene_ || !accel_) {
     accel_ = std::make_shared<const Accel>(*scene_);
     lights_ = std::make_shared<const LightSet>(*scene_);

@@ -70,6 +70,12 @@ class TileRenderer {
   std::shared_ptr<const Scene> posed_;  // an animated scene at this frame's time
   const Scene* scene_ = nullptr;       // what is rendered: rest_ or posed_
   const Scene* accel_scene_ = nullptr;  // what accel_ and lights_ were built for
+  // An animated scene's geometry that no animation moves, built once for every pose.
+  struct StaticPart {
+    std::vector<bool> moving;  // per mesh
+    std::shared_ptr<const Accel> accel;
+  };
+  std::shared_ptr<const StaticPart> static_part_;
   RenderSettings settings_;
   std::shared_ptr<const Accel> accel_;
   std::shared_ptr<const LightSet> lights_;
