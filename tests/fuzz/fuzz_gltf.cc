@@ -1,5 +1,6 @@
 // libFuzzer target: the glTF 2.0 loader (.gltf text or .glb, by the first bytes), then
-// the acceleration structure. Any input may be refused with a SceneError; nothing may
+// the acceleration structure, and for animated files a few poses of each animation (with
+// the static part instanced, as frames are rendered). Any input may be refused with a SceneError; nothing may
 // crash, hang or throw anything else. The loader reads files, so each input is written to
 // a private temporary folder first.
 #include <unistd.h>
@@ -9,9 +10,12 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
+#include <vector>
 
 #include "core/accel/accel.h"
+#include "core/scene/animation.h"
 #include "core/scene/gltf/gltf_loader.h"
 #include "core/scene/scene_error.h"
 
@@ -36,6 +40,18 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   try {
     const tessera::Scene scene = tessera::load_gltf_file(path);
     const tessera::Accel accel(scene);
+    if (scene.animation) {
+      std::vector<bool> moving(scene.meshes.size(), false);
+      for (const auto& b : scene.animation->meshes) moving.at(b.mesh) = true;
+      auto fixed = std::make_shared<const tessera::Accel>(scene, moving);
+      for (size_t c = 0; c < scene.animation->clips.size() && c < 4; ++c) {
+        const double d = scene.animation->clips[c].duration;
+        for (const double t : {-1.0, 0.0, d / 3, d, d + 1}) {
+          const tessera::Scene pose = tessera::pose_scene(scene, c, t);
+          const tessera::Accel frame(pose, fixed, moving);
+        }
+      }
+    }
   } catch (const tessera::SceneError&) {
   }
   return 0;

@@ -92,6 +92,23 @@ TEST_F(Cli, FramesRenderASequenceEachFrameAsItsOwnRenderWould) {
   EXPECT_NE(r.err.find("--frames: '3-1': the range runs backwards"), std::string::npos) << r.err;
 }
 
+TEST_F(Cli, ABadCameraPathOrAnimationIsRefusedNamingTheFileKeyAndField) {
+  const std::string path = (dir / "pull.json").string();
+  std::ofstream(path) << R"({"keys": [{"frame": 5, "focal_distance": 3}, {"frame": 2, "focal_distance": 4}]})";
+  CommandResult r = run("render " + scene + " -s 1 -r 8 8 --frames 1-3 --camera-path " + path + " -q -f " +
+                        (dir / "x.####.exr").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("--camera-path: " + path + ": key 2: frame 2.0 does not come after"), std::string::npos)
+      << r.err;
+  EXPECT_FALSE(fs::exists(dir / "x.0001.exr"));  // refused before anything is rendered
+  r = run("render " + scene + " -s 1 -r 8 8 --turntable nan -q -f " + (dir / "t.exr").string());
+  EXPECT_NE(r.code, 0);
+  r = run("render " + std::string(TESSERA_SOURCE_DIR) + "/scenes/cornell-animated.gltf -s 1 -r 8 8 --frame 3 " +
+          "--animation walk -q -f " + (dir / "a.exr").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("--animation: no animation 'walk' (the scene has 0 'move')"), std::string::npos) << r.err;
+}
+
 TEST_F(Cli, CellRenderingWritesOnlyTheCell) {
   const std::string exr = (dir / "cell.exr").string();
   const CommandResult r = run("render " + scene + " -s 2 -r 64 48 -p 8 4 16 12 -q -f " + exr);
