@@ -650,6 +650,7 @@ size_t Coordinator::expire_locked(double now) {
 size_t Coordinator::expire_leases() {
   std::vector<ImageSnapshot> finished;
   size_t expired;
+  std::vector<Sequence*> unprepared;  // their next frame's job is made here, off every worker's path
   {
     std::lock_guard<std::mutex> lock(mu_);
     const double now = clock_->now();
@@ -670,8 +671,11 @@ size_t Coordinator::expire_leases() {
     }
     for (Job* job : touched)
       if (auto snap = finish_if_done_locked(*job, now)) finished.push_back(std::move(*snap));
+    for (auto& [id, sq] : sequences_)
+      if (sq->live() && !sq->prepared && sq->next < sq->frames.size()) unprepared.push_back(sq.get());
   }
   for (ImageSnapshot& snap : finished) write_snapshot(snap);
+  prepare_frames(unprepared);
   return expired;
 }
 
@@ -694,8 +698,6 @@ std::optional<Coordinator::ImageSnapshot> Coordinator::finish_if_done_locked(Job
 
 v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples) {
   v1::GetTaskResponse resp;
-  std::vector<Sequence*> started;  // sequences that started a frame: their next one is made after
-  {
   std::lock_guard<std::mutex> lock(mu_);
   const double now = clock_->now();
   expire_locked(now);
@@ -815,13 +817,10 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
       Job* job = start_frame_locked(sq, now);
       if (!job) break;
       live_pixels += pixels;
-      if (std::find(started.begin(), started.end(), &sq) == started.end()) started.push_back(&sq);
       take_from(job);
     }
   }
   if (resp.tasks_size() == 0) resp.set_retry_after_ms(200);
-  }
-  prepare_frames(started);
   return resp;
 }
 

@@ -132,8 +132,9 @@ class Coordinator {
   // Waits up to `timeout` seconds for a change that may make work available (a job
   // submitted, a tile pass merged, a lease ended): lets GetTask long-poll.
   void wait_for_work(double timeout) const;
-  // Expires overdue leases (get_task does too) and forgets silent workers (only here: the
-  // reaper calls it every 200 ms). Returns how many leases expired.
+  // Expires overdue leases (get_task does too), forgets silent workers and makes the next
+  // frame of each sequence ready to start (only here: the reaper calls it every 200 ms).
+  // Returns how many leases expired.
   size_t expire_leases();
   // Blocks until a job ends, its samples change from `last_samples`, or `timeout` passes;
   // returns its status without tiles.
@@ -195,7 +196,9 @@ class Coordinator {
   // Starts the sequence's next frame (its prepared job if there is one); null when every
   // frame has started.
   Job* start_frame_locked(Sequence& s, double now);
-  // Makes the next frame's job of these sequences outside the lock (mu_ not held).
+  // Makes the next frame's job of these sequences outside the lock (mu_ not held): the
+  // reaper's tick (expire_leases) does, so a worker's GetTask never waits for films to be
+  // allocated; a frame started before its job was prepared is made under the lock.
   void prepare_frames(const std::vector<Sequence*>& sequences);
   void frame_ended_locked(Job& job, double now);
   // Ends the sequence; its live frames end as CANCELLED (queued in unwritten_).
