@@ -13,8 +13,8 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
-#include "core/camera/camera_path.h"
 #include "core/accel/accel.h"
+#include "core/camera/camera_path.h"
 #include "core/light/lights.h"
 #include "core/render/tile_renderer.h"
 #include "core/scene/animation.h"

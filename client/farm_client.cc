@@ -61,7 +61,9 @@ std::string describe_frames(const v1::JobStatus& s) {
         continue;
       }
       int j = i;  // a run of consecutive frame numbers in this state
-      while (j + 1 < s.frames_size() && s.frames(j + 1).state() == state && s.frames(j + 1).frame() == s.frames(j).frame() + 1) ++j;
+      while (j + 1 < s.frames_size() && s.frames(j + 1).state() == state &&
+             s.frames(j + 1).frame() == s.frames(j).frame() + 1)
+        ++j;
       list += (list.empty() ? "" : ",") + std::to_string(f.frame());
       if (j > i) list += "-" + std::to_string(s.frames(j).frame());
       if (state == v1::JobStatus::RUNNING && j == i) {
@@ -73,18 +75,17 @@ std::string describe_frames(const v1::JobStatus& s) {
       i = j + 1;
     }
     if (list.empty()) continue;
-    const char* name = state == v1::JobStatus::RUNNING ? "rendering" : state == v1::JobStatus::DONE ? "done"
-                       : state == v1::JobStatus::QUEUED  ? "queued"
-                       : state == v1::JobStatus::FAILED  ? "failed"
-                                                         : "cancelled";
+    const char* name = state == v1::JobStatus::RUNNING  ? "rendering"
+                       : state == v1::JobStatus::DONE   ? "done"
+                       : state == v1::JobStatus::QUEUED ? "queued"
+                       : state == v1::JobStatus::FAILED ? "failed"
+                                                        : "cancelled";
     out += (out.empty() ? "" : "; ") + std::string(name) + " " + list;
   }
   return out;
 }
 
-bool has_ext(const std::string& p, const char* ext) {
-  return p.size() >= 4 && p.compare(p.size() - 4, 4, ext) == 0;
-}
+bool has_ext(const std::string& p, const char* ext) { return p.size() >= 4 && p.compare(p.size() - 4, 4, ext) == 0; }
 
 void check_outputs(const std::vector<std::string>& outputs) {
   for (const std::string& out : outputs)  // before the download, which may be large
@@ -332,7 +333,8 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
   write_done(final);
   std::vector<std::string> patterns;
   for (const std::string& out : outputs)
-    patterns.push_back(out + " (" + std::to_string(written.size()) + " of " + std::to_string(frames.size()) + " frames)");
+    patterns.push_back(out + " (" + std::to_string(written.size()) + " of " + std::to_string(frames.size()) +
+                       " frames)");
   return report_submitted(id.id(), final, patterns, c);
 }
 

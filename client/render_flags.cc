@@ -32,7 +32,8 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
       ->check(CLI::ExistingFile);
   cmd->add_option("--turntable", f.turntable,
                   "Orbit the camera about the scene's vertical axis, one turn in this many frames");
-  cmd->add_option("--animation", s.animation, "glTF animation that frames follow, by name or index (default: the first)");
+  cmd->add_option("--animation", s.animation,
+                  "glTF animation that frames follow, by name or index (default: the first)");
   cmd->add_option("--fps", s.fps, "Frames per second: a frame's time is frame / fps (animation)")
       ->capture_default_str();
   cmd->add_option("--camera", f.camera, "cs184 (framing of the CS184 renderer) or file (the file's camera)")
@@ -77,7 +78,8 @@ RenderSettings to_settings(const RenderFlags& f) {
         try {
           path = CameraPath::parse(read_file_bytes(f.camera_path));
         } catch (const SettingsError& e) {
-          throw SettingsError("--camera-path", f.camera_path + ": " + std::string(e.what()).substr(e.flag().size() + 2));
+          throw SettingsError("--camera-path",
+                              f.camera_path + ": " + std::string(e.what()).substr(e.flag().size() + 2));
         } catch (const std::runtime_error& e) {
           throw SettingsError("--camera-path", e.what());
         }

@@ -771,7 +771,8 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
     while (room()) {
       std::optional<TileTask> t = job->plan.take();
       if (!t) break;
-      const uint64_t task_id = leases_.grant({job->id, t->tile, t->pass, worker_id, now + options_.lease_seconds, nullptr});
+      const uint64_t task_id =
+          leases_.grant({job->id, t->tile, t->pass, worker_id, now + options_.lease_seconds, nullptr});
       job->tile_lease[t->tile] = task_id;
       ++w->leases;
       if (job->state == v1::JobStatus::QUEUED) {
@@ -1291,18 +1292,16 @@ Job* Coordinator::frame_job_locked(const std::string& id, std::optional<int> fra
   if (!s) {
     Job* job = find(id);
     if (frame && job->plan.settings().frame != frame)
-      throw RequestError(RequestError::Code::kInvalidArgument,
-                         "job " + id + " has no frame " + std::to_string(*frame));
+      throw RequestError(RequestError::Code::kInvalidArgument, "job " + id + " has no frame " + std::to_string(*frame));
     return job;
   }
   if (!frame)
-    throw RequestError(RequestError::Code::kInvalidArgument,
-                       "job " + id + " is a sequence of " + std::to_string(s->frames.size()) +
-                           " frames: name one (fetch --frame N, or --all)");
+    throw RequestError(RequestError::Code::kInvalidArgument, "job " + id + " is a sequence of " +
+                                                                 std::to_string(s->frames.size()) +
+                                                                 " frames: name one (fetch --frame N, or --all)");
   const auto at = std::find(s->frames.begin(), s->frames.end(), *frame);
   if (at == s->frames.end())
-    throw RequestError(RequestError::Code::kNotFound,
-                       "job " + id + " has no frame " + std::to_string(*frame));
+    throw RequestError(RequestError::Code::kNotFound, "job " + id + " has no frame " + std::to_string(*frame));
   Job* job = s->jobs[size_t(at - s->frames.begin())];
   if (!job)
     throw RequestError(RequestError::Code::kFailedPrecondition,

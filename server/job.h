@@ -77,9 +77,9 @@ struct Sequence {
   RenderSettings settings;  // every frame's, but for its number
   v1::RenderSettings settings_proto;
   std::vector<int> frames;
-  std::vector<Job*> jobs;      // per frame: its job once started (the coordinator owns it)
-  size_t next = 0;             // frames before this one have started
-  uint32_t live_frames = 0;    // started and not ended
+  std::vector<Job*> jobs;         // per frame: its job once started (the coordinator owns it)
+  size_t next = 0;                // frames before this one have started
+  uint32_t live_frames = 0;       // started and not ended
   std::unique_ptr<Job> prepared;  // frames[next]'s job, made outside the coordinator's lock
   // One frame's plan, for counts before any has started.
   uint64_t frame_samples = 0;

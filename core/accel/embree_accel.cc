@@ -218,8 +218,8 @@ bool Accel::intersect(const Ray& ray, Hit* hit) const {
   hit->v = rh.hit.v;
   hit->ng = {rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z};
   // A hit inside a pose's static part reports that part's geometry ids (mesh indices too).
-  hit->is_sphere = rh.hit.geomID == (rh.hit.instID[0] == RTC_INVALID_GEOMETRY_ID ? impl_->sphere_geom
-                                                                                 : impl_->fixed_sphere_geom);
+  hit->is_sphere =
+      rh.hit.geomID == (rh.hit.instID[0] == RTC_INVALID_GEOMETRY_ID ? impl_->sphere_geom : impl_->fixed_sphere_geom);
   hit->shape = hit->is_sphere ? rh.hit.primID : rh.hit.geomID;
   hit->prim = rh.hit.primID;
   return true;

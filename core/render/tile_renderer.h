@@ -3,8 +3,8 @@
 #pragma once
 
 #include <atomic>
-#include <optional>
 #include <memory>
+#include <optional>
 #include <vector>
 
 #include "core/accel/accel.h"
@@ -66,9 +66,9 @@ class TileRenderer {
   // acceleration structure and lights come from `share` when it has them.
   void set_up_frame(const TileRenderer* share);
 
-  const Scene* rest_;                  // as loaded
+  const Scene* rest_;                   // as loaded
   std::shared_ptr<const Scene> posed_;  // an animated scene at this frame's time
-  const Scene* scene_ = nullptr;       // what is rendered: rest_ or posed_
+  const Scene* scene_ = nullptr;        // what is rendered: rest_ or posed_
   const Scene* accel_scene_ = nullptr;  // what accel_ and lights_ were built for
   // An animated scene's geometry that no animation moves, built once for every pose.
   struct StaticPart {

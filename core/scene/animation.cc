@@ -100,10 +100,10 @@ std::array<double, 4> sample_channel(const SceneAnimation::Channel& c, double ti
 Mat4 trs_matrix(const std::array<double, 3>& t, const std::array<double, 4>& q, const std::array<double, 3>& s) {
   const std::array<double, 4> r = normalized(q);
   const double x = r[0], y = r[1], z = r[2], w = r[3];
-  const Mat4 rot = Mat4::from_row_major({1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), 0,
-                                         2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), 0,
-                                         2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), 0, 0, 0,
-                                         0, 1});
+  const Mat4 rot =
+      Mat4::from_row_major({1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), 0, 2 * (x * y + z * w),
+                            1 - 2 * (x * x + z * z), 2 * (y * z - x * w), 0, 2 * (x * z - y * w), 2 * (y * z + x * w),
+                            1 - 2 * (x * x + y * y), 0, 0, 0, 0, 1});
   return Mat4::translate(t[0], t[1], t[2]) * rot * Mat4::scale(s[0], s[1], s[2]);
 }
 

@@ -1,11 +1,11 @@
 // Rendering frames of an animated glTF scene (scenes/cornell-animated.gltf): each frame is
 // the scene posed at frame / fps, the same image alone or within a sequence.
+#include "core/scene/animation.h"
+
 #include <gtest/gtest.h>
 
 #include "core/accel/accel.h"
-
 #include "core/render/tile_renderer.h"
-#include "core/scene/animation.h"
 #include "core/scene/load.h"
 #include "tests/core/test_paths.h"
 

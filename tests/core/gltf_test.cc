@@ -4,9 +4,9 @@
 
 #include <cmath>
 #include <cstring>
-#include <limits>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 
 #include "core/scene/animation.h"
@@ -482,22 +482,22 @@ TEST_F(GltfAnimation, LinearStepAndCubicSplineTranslationFollowTheSpec) {
   const Scene lin = load(animated("translation", "LINEAR", {0, 1}, {0, 0, 0, 2, 0, 0}));
   ASSERT_TRUE(lin.animation);
   EXPECT_EQ(lin.animation->clips.at(0).name, "move");
-  EXPECT_FLOAT_EQ(vertex1(lin, 0.5).x, 2);    // 1 + halfway to 2
-  EXPECT_FLOAT_EQ(vertex1(lin, -1).x, 1);     // before the first key: the first value
-  EXPECT_FLOAT_EQ(vertex1(lin, 7).x, 3);      // after the last: the last
+  EXPECT_FLOAT_EQ(vertex1(lin, 0.5).x, 2);           // 1 + halfway to 2
+  EXPECT_FLOAT_EQ(vertex1(lin, -1).x, 1);            // before the first key: the first value
+  EXPECT_FLOAT_EQ(vertex1(lin, 7).x, 3);             // after the last: the last
   EXPECT_FLOAT_EQ(lin.meshes[0].positions[1].x, 1);  // the loaded scene keeps its rest pose
   const Scene step = load(animated("translation", "STEP", {0, 1}, {0, 0, 0, 2, 0, 0}));
   EXPECT_FLOAT_EQ(vertex1(step, 0.99).x, 1);
   EXPECT_FLOAT_EQ(vertex1(step, 1).x, 3);
   // CUBICSPLINE keys are (in-tangent, value, out-tangent); with zero tangents the curve is
   // the Hermite smoothstep: at t = 0.25, (3t^2 - 2t^3) x 2 = 0.3125.
-  const Scene cubic = load(animated("translation", "CUBICSPLINE", {0, 1},
-                                    {0, 0, 0, 0, 0, 0, 0, 0, 0, /**/ 0, 0, 0, 2, 0, 0, 0, 0, 0}));
+  const Scene cubic =
+      load(animated("translation", "CUBICSPLINE", {0, 1}, {0, 0, 0, 0, 0, 0, 0, 0, 0, /**/ 0, 0, 0, 2, 0, 0, 0, 0, 0}));
   EXPECT_NEAR(vertex1(cubic, 0.25).x, 1.3125, 1e-6);
   EXPECT_NEAR(vertex1(cubic, 0.5).x, 2, 1e-6);
   // Tangents count: an out-tangent of 4 units/s at key 0 lifts the start (td = 1).
-  const Scene tangent = load(animated("translation", "CUBICSPLINE", {0, 1},
-                                      {0, 0, 0, 0, 0, 0, 4, 0, 0, /**/ 0, 0, 0, 2, 0, 0, 0, 0, 0}));
+  const Scene tangent =
+      load(animated("translation", "CUBICSPLINE", {0, 1}, {0, 0, 0, 0, 0, 0, 4, 0, 0, /**/ 0, 0, 0, 2, 0, 0, 0, 0, 0}));
   EXPECT_NEAR(vertex1(tangent, 0.25).x, 1 + 0.3125 + 4 * (0.015625 - 2 * 0.0625 + 0.25), 1e-6);
 }
 

@@ -148,7 +148,8 @@ TEST_F(Farm, ASequenceThroughAFarmLosingAWorkerGivesEveryFrameOfTesseraRender) {
     std::snprintf(name, sizeof name, "local.%04d.exr", n);
     return (dir / name).string();
   };
-  const CommandResult alone = run("render " + kScene + " " + flags + " --frame 3 -q -f " + (dir / "alone.exr").string(), dir);
+  const CommandResult alone =
+      run("render " + kScene + " " + flags + " --frame 3 -q -f " + (dir / "alone.exr").string(), dir);
   ASSERT_EQ(alone.code, 0) << alone.err;
   expect_same_pixels(local_frame(3), (dir / "alone.exr").string());
 
@@ -190,14 +191,16 @@ TEST_F(Farm, ASequenceThroughAFarmLosingAWorkerGivesEveryFrameOfTesseraRender) {
   ASSERT_EQ(seq.at("frames").size(), 4u) << seq;
   EXPECT_EQ(seq.at("frames").at(1).at("state"), "DONE");
   httplib::Client http("127.0.0.1", http_port);
-  const auto preview = http.Get(("/jobs/" + seq.at("frames").at(1).at("job_id").get<std::string>() + "/preview.png").c_str());
+  const auto preview =
+      http.Get(("/jobs/" + seq.at("frames").at(1).at("job_id").get<std::string>() + "/preview.png").c_str());
   ASSERT_TRUE(preview && preview->status == 200);
   EXPECT_EQ(preview->body.substr(1, 3), "PNG");
   const CommandResult one =
       run("fetch " + id + " --frame 2 -f " + (dir / "two.png").string() + " --coordinator " + grpc_addr, dir);
   EXPECT_EQ(one.code, 0) << one.err;
   EXPECT_TRUE(fs::exists(dir / "two.png"));
-  const CommandResult none = run("fetch " + id + " -f " + (dir / "x.exr").string() + " --coordinator " + grpc_addr, dir);
+  const CommandResult none =
+      run("fetch " + id + " -f " + (dir / "x.exr").string() + " --coordinator " + grpc_addr, dir);
   EXPECT_NE(none.code, 0);
   EXPECT_NE(none.err.find("--frame N"), std::string::npos) << none.err;
 
@@ -224,8 +227,10 @@ TEST_F(Farm, AnAnimatedGltfSequenceThroughTheFarmGivesTesseraRendersFrames) {
   const CommandResult r = submit_wait(scene, flags + " --frames 6,30", (dir / "farm.####.exr").string());
   ASSERT_EQ(r.code, 0) << r.err << r.out;
   for (const char* n : {"0006", "0030"})
-    expect_same_pixels((dir / ("local." + std::string(n) + ".exr")).string(), (dir / ("farm." + std::string(n) + ".exr")).string());
-  const CommandResult bad = submit_wait(scene, flags + " --frames 1,2 --animation walk", (dir / "bad.####.exr").string());
+    expect_same_pixels((dir / ("local." + std::string(n) + ".exr")).string(),
+                       (dir / ("farm." + std::string(n) + ".exr")).string());
+  const CommandResult bad =
+      submit_wait(scene, flags + " --frames 1,2 --animation walk", (dir / "bad.####.exr").string());
   EXPECT_NE(bad.code, 0);  // refused at submit, naming the animation
   EXPECT_NE((bad.err + bad.out).find("no animation 'walk'"), std::string::npos) << bad.err << bad.out;
 }

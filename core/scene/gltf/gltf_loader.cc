@@ -821,8 +821,8 @@ class GltfLoader {
         for (size_t k = 1; k < times.size(); ++k)
           if (!(times[k] > times[k - 1]))
             fail(sel, "input times must increase: key " + std::to_string(k) + " (" + std::to_string(times[k]) +
-                          " s) does not come after key " + std::to_string(k - 1) + " (" +
-                          std::to_string(times[k - 1]) + " s)");
+                          " s) does not come after key " + std::to_string(k - 1) + " (" + std::to_string(times[k - 1]) +
+                          " s)");
         const std::vector<float> values = read_floats(smp.output, int(comps), sel + " output");
         const bool cubic = c.interpolation == SceneAnimation::Interpolation::kCubicSpline;
         const size_t want = times.size() * (cubic ? 3 : 1);
