@@ -203,6 +203,7 @@ void Coordinator::restore_sequence(StoredJob& sj, double now, std::vector<Job*>&
     j.submitted = now;
     elapsed = std::max(elapsed, cp->elapsed);
     all_done &= j.plan.done();
+    s.frames_done += j.plan.done();
     if (s.live() && !j.plan.done()) {
       j.state = j.plan.merges() > 0 ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED;
       j.started = now - cp->elapsed;
@@ -318,9 +319,9 @@ void Coordinator::frame_ended_locked(Job& job, double now) {
     end_sequence_locked(s, v1::JobStatus::FAILED, now);
     return;
   }
-  for (const Job* j : s.jobs)
-    if (!j || j->state != v1::JobStatus::DONE) return;
-  end_sequence_locked(s, v1::JobStatus::DONE, now);
+  ++s.changes;
+  if (job.state == v1::JobStatus::DONE && ++s.frames_done == s.frames.size())  // O(1): long sequences end often
+    end_sequence_locked(s, v1::JobStatus::DONE, now);
 }
 
 void Coordinator::end_sequence_locked(Sequence& s, v1::JobStatus::State state, double now) {
@@ -958,6 +959,7 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     end_lease_locked(result.task_id(), false);
     if (other) end_lease_locked(other, false);
     job.merged_by[result.worker_id()].push_back(lease.tile);
+    if (!job.sequence.empty()) ++sequences_.at(job.sequence)->changes;
     if (lease.task) {  // picked for verification: another worker renders it again
       Check& c = checks_[next_check_++];
       c.job = job.id;
@@ -1349,8 +1351,11 @@ v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::opt
 v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const {
   std::unique_lock<std::mutex> lock(mu_);
   if (const Sequence* s = find_sequence(id)) {
-    changed_.wait_for(lock, std::chrono::duration<double>(timeout),
-                      [&] { return !s->live() || s->samples_merged() != last_samples; });
+    // Any merge into any frame since the caller's status (whose samples it passed); the
+    // predicate is O(1) however long the sequence (it runs on every merge's notify).
+    const uint64_t since = s->changes;
+    if (s->samples_merged() != last_samples) return s->status(clock_->now(), workers_on_frames_locked(*s), true);
+    changed_.wait_for(lock, std::chrono::duration<double>(timeout), [&] { return !s->live() || s->changes != since; });
     return s->status(clock_->now(), workers_on_frames_locked(*s), true);
   }
   const Job* job = find(id);

@@ -80,6 +80,8 @@ struct Sequence {
   std::vector<Job*> jobs;         // per frame: its job once started (the coordinator owns it)
   size_t next = 0;                // frames before this one have started
   uint32_t live_frames = 0;       // started and not ended
+  uint32_t frames_done = 0;       // DONE
+  uint64_t changes = 0;           // merges into its frames and frame ends: watchers wait on it
   std::unique_ptr<Job> prepared;  // frames[next]'s job, made outside the coordinator's lock
   // One frame's plan, for counts before any has started.
   uint64_t frame_samples = 0;
