@@ -32,6 +32,11 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
       ->check(CLI::ExistingFile);
   cmd->add_option("--turntable", f.turntable,
                   "Orbit the camera about the scene's vertical axis, one turn in this many frames");
+  cmd->add_option("--env-color", f.env_color,
+                  "A uniform environment around the scene: radiance R G B from every direction")
+      ->expected(3);
+  cmd->add_flag("--no-default-env", f.no_default_env,
+                "No neutral environment for a glTF scene without lights (it renders black)");
   cmd->add_option("--animation", s.animation,
                   "glTF animation that frames follow, by name or index (default: the first)");
   cmd->add_option("--fps", s.fps, "Frames per second: a frame's time is frame / fps (animation)")
@@ -71,6 +76,8 @@ RenderSettings to_settings(const RenderFlags& f) {
   }
   s.nee = !f.no_nee;
   s.mis = !f.no_mis;
+  if (!f.env_color.empty()) s.environment = Rgb(f.env_color[0], f.env_color[1], f.env_color[2]);
+  s.default_environment = !f.no_default_env;
   try {
     if (!f.camera_path.empty() || f.turntable != 0) {
       CameraPath path;

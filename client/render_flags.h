@@ -19,9 +19,11 @@ struct RenderFlags {
   std::string camera = "auto";            // cs184 for .dae, the file's own camera for glTF
   bool no_nee = false, no_mis = false;
   std::vector<std::string> outputs;
-  std::string frames;       // --frames: a sequence
-  std::string camera_path;  // --camera-path FILE
-  double turntable = 0;     // --turntable FRAMES: one turn in this many frames
+  std::string frames;            // --frames: a sequence
+  std::string camera_path;       // --camera-path FILE
+  std::vector<float> env_color;  // --env-color R G B
+  bool no_default_env = false;
+  double turntable = 0;  // --turntable FRAMES: one turn in this many frames
 };
 
 void add_render_flags(CLI::App* cmd, RenderFlags& f);

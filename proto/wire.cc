@@ -23,6 +23,9 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   p.set_fps(s.fps);
   if (s.camera.path) p.set_camera_path(s.camera.path->to_json());
   p.set_animation(s.animation);
+  if (s.environment)
+    for (const float c : {s.environment->r, s.environment->g, s.environment->b}) p.add_environment(c);
+  p.set_no_default_environment(!s.default_environment);
   p.set_pass_spp(uint32_t(s.pass_spp));
   p.set_width(uint32_t(s.camera.width));
   p.set_height(uint32_t(s.camera.height));
@@ -51,6 +54,10 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
   if (p.has_frame()) s.frame = p.frame();
   if (p.fps() != 0) s.fps = p.fps();  // a message without it: the default
   s.animation = p.animation();
+  if (p.environment_size() != 0 && p.environment_size() != 3)
+    throw WireError("render settings: environment needs 3 values, got " + std::to_string(p.environment_size()));
+  if (p.environment_size() == 3) s.environment = Rgb(p.environment(0), p.environment(1), p.environment(2));
+  s.default_environment = !p.no_default_environment();
   s.pass_spp = i(p.pass_spp());
   s.camera.width = i(p.width());
   s.camera.height = i(p.height());

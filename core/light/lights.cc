@@ -8,10 +8,12 @@
 
 namespace tessera {
 
-LightSet::LightSet(const Scene& scene) : scene_(scene), mesh_data_(scene.lights.size()) {
-  for (size_t i = 0; i < scene.lights.size(); ++i) {
-    const Light& l = scene.lights[i];
-    if (l.kind == Light::Kind::kAmbient) infinite_.push_back(i);
+LightSet::LightSet(const Scene& scene, std::vector<Light> extra) : scene_(scene), lights_(scene.lights) {
+  lights_.insert(lights_.end(), extra.begin(), extra.end());
+  mesh_data_.resize(lights_.size());
+  for (size_t i = 0; i < lights_.size(); ++i) {
+    const Light& l = lights_[i];
+    if (l.kind == Light::Kind::kAmbient || l.kind == Light::Kind::kEnvironment) infinite_.push_back(i);
     if (l.kind != Light::Kind::kMesh) continue;
     const Mesh& m = scene.meshes[l.shape];
     MeshLightData& d = mesh_data_[i];
@@ -59,7 +61,7 @@ bool finish_area_sample(Vec3 p, Vec3 q, Vec3 q_err, Vec3 n, float area_pdf, Rgb 
 }  // namespace
 
 bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) const {
-  const Light& l = scene_.lights[i];
+  const Light& l = lights_[i];
   switch (l.kind) {
     case Light::Kind::kRect: {
       const Vec3 ex = l.edge_x * (u.x - 0.5f), ey = l.edge_y * (u.y - 0.5f);
@@ -134,12 +136,19 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
       out->li = l.color;
       return true;
     }
+    case Light::Kind::kEnvironment: {
+      out->wi = square_to_uniform_sphere(u);
+      out->dist = std::numeric_limits<float>::infinity();
+      out->pdf = kUniformSpherePdf;
+      out->li = l.color;
+      return true;
+    }
   }
   return false;
 }
 
 float LightSet::pdf_area_hit(size_t i, Vec3 p, Vec3 q, Vec3 nq, float dist) const {
-  const Light& l = scene_.lights[i];
+  const Light& l = lights_[i];
   float area_pdf = 0;
   switch (l.kind) {
     case Light::Kind::kRect:
@@ -162,12 +171,14 @@ float LightSet::pdf_area_hit(size_t i, Vec3 p, Vec3 q, Vec3 nq, float dist) cons
 }
 
 Rgb LightSet::infinite_le(size_t i, Vec3 dir) const {
-  const Light& l = scene_.lights[i];
+  const Light& l = lights_[i];
+  if (l.kind == Light::Kind::kEnvironment) return l.color;
   return (l.kind == Light::Kind::kAmbient && dir.y > 0) ? l.color : Rgb(0);
 }
 
 float LightSet::infinite_pdf(size_t i, Vec3 dir) const {
-  const Light& l = scene_.lights[i];
+  const Light& l = lights_[i];
+  if (l.kind == Light::Kind::kEnvironment) return kUniformSpherePdf;
   return (l.kind == Light::Kind::kAmbient && dir.y > 0) ? kUniformHemispherePdf : 0;
 }
 

@@ -8,6 +8,7 @@
 //   point        intensity `color` / (c + l d + q d^2)   delta
 //   directional  irradiance `color` at normal incidence  delta
 //   ambient      `color` radiance from the +Y hemisphere uniform hemisphere, 1/(2 pi)
+//   environment  `color` radiance from every direction   uniform sphere, 1/(4 pi)
 #pragma once
 
 #include <vector>
@@ -29,10 +30,11 @@ struct LightSample {
 
 class LightSet {
  public:
-  explicit LightSet(const Scene& scene);
+  // The scene's lights, then `extra` ones the settings add (an environment).
+  explicit LightSet(const Scene& scene, std::vector<Light> extra = {});
 
-  size_t size() const { return scene_.lights.size(); }
-  const Light& light(size_t i) const { return scene_.lights[i]; }
+  size_t size() const { return lights_.size(); }
+  const Light& light(size_t i) const { return lights_[i]; }
 
   // u_pick chooses the triangle of a mesh light; u the point. Returns false if this
   // sample carries nothing (p behind a one-sided emitter, zero pdf).
@@ -54,6 +56,7 @@ class LightSet {
     float area = 0;
   };
   const Scene& scene_;
+  std::vector<Light> lights_;
   std::vector<MeshLightData> mesh_data_;  // per light (empty for non-mesh lights)
   std::vector<size_t> infinite_;
 };

@@ -35,6 +35,9 @@ void RenderSettings::validate() const {
   require(pass_spp >= 1 && pass_spp <= kMaxSpp, "--pass-spp", range(1, kMaxSpp));
   require(tile_size >= 1 && tile_size <= kMaxTileSize, "--tile", range(1, kMaxTileSize));
   require(!frame || (*frame >= -kMaxFrame && *frame <= kMaxFrame), "--frame", range(-kMaxFrame, kMaxFrame));
+  if (environment)
+    for (const float c : {environment->r, environment->g, environment->b})
+      require(std::isfinite(c) && c >= 0 && c <= 1e20f, "--env-color", "each channel must be in 0..1e20");
   require(animation.size() <= kMaxAnimationName, "--animation", "a name of at most 256 bytes");
   require(std::isfinite(fps) && fps > 0 && fps <= kMaxFps, "--fps", "must be > 0 and at most 1e6");
   require(std::isfinite(noise_target) && noise_target >= 0 && noise_target <= kMaxNoiseTarget, "--noise-target",

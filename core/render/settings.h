@@ -65,6 +65,13 @@ struct RenderSettings {
   // the first). A still (no frame) shows the file's rest pose.
   static constexpr size_t kMaxAnimationName = 256;
   std::string animation;
+  // --env-color R G B: a uniform environment of this radiance around the scene (light
+  // from every direction, sampled with MIS like every light); none by default.
+  std::optional<Rgb> environment;
+  // --no-default-env turns off the neutral environment (uniform radiance 1) that a glTF
+  // scene with no light at all is rendered under (Scene::unlit).
+  bool default_environment = true;
+  static constexpr float kDefaultEnvironment = 1.0f;
   int pass_spp = 16;  // --pass-spp: samples per progressive pass (the unit merged in order)
   // --tile: side of the square tiles the frame is cut into. It never changes the image,
   // except with a noise target, which is judged per tile.

@@ -40,7 +40,20 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
     posed_.reset();
     scene_ = rest_;
   }
-  if (scene_ == rest_ && share && share->accel_scene_ == rest_) {  // a static scene's BVH serves every frame
+  // What the settings add to the scene's lights: an environment (--env-color), or the
+  // neutral default one for a scene with no light at all.
+  std::vector<Light> extra;
+  if (settings_.environment || (scene_->unlit && settings_.default_environment)) {
+    Light env;
+    env.kind = Light::Kind::kEnvironment;
+    env.name = settings_.environment ? "environment" : "default environment";
+    env.color = settings_.environment.value_or(Rgb(RenderSettings::kDefaultEnvironment));
+    extra.push_back(env);
+  }
+  const bool same_lights = share && share->settings_.environment == settings_.environment &&
+                           share->settings_.default_environment == settings_.default_environment;
+  if (scene_ == rest_ && share && share->accel_scene_ == rest_ &&
+      same_lights) {  // a static scene's BVH serves every frame
     accel_ = share->accel_;
     lights_ = share->lights_;
   } else if (posed_) {
@@ -54,10 +67,10 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
       static_part_ = part;
     }
     accel_ = std::make_shared<const Accel>(*scene_, static_part_->accel, static_part_->moving);
-    lights_ = std::make_shared<const LightSet>(*scene_);
-  } else if (accel_scene_ != scene_ || !accel_) {
-    accel_ = std::make_shared<const Accel>(*scene_);
-    lights_ = std::make_shared<const LightSet>(*scene_);
+    lights_ = std::make_shared<const LightSet>(*scene_, extra);
+  } else {
+    if (accel_scene_ != scene_ || !accel_) accel_ = std::make_shared<const Accel>(*scene_);
+    lights_ = std::make_shared<const LightSet>(*scene_, extra);
   }
   accel_scene_ = scene_;
   camera_.emplace(*scene_, s.camera);

@@ -42,6 +42,7 @@ inline Vec3 square_to_uniform_hemisphere(Vec2 u) {
 constexpr float kUniformHemispherePdf = 0.5f * kInvPi;
 
 // Uniform sphere. pdf = 1 / (4 pi).
+constexpr float kUniformSpherePdf = 0.25f * kInvPi;
 inline Vec3 square_to_uniform_sphere(Vec2 u) {
   const float z = 1 - 2 * u.x;
   const float r = std::sqrt(std::max(0.0f, 1 - z * z));

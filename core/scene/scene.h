@@ -55,10 +55,10 @@ struct Sphere {
 };
 
 struct Light {
-  enum class Kind : uint8_t { kRect, kMesh, kSphere, kPoint, kSpot, kDirectional, kAmbient };
+  enum class Kind : uint8_t { kRect, kMesh, kSphere, kPoint, kSpot, kDirectional, kAmbient, kEnvironment };
   Kind kind = Kind::kPoint;
   std::string name;
-  Rgb color{1.0f};  // radiance (rect, mesh, sphere, ambient), intensity (point),
+  Rgb color{1.0f};  // radiance (rect, mesh, sphere, ambient, environment), intensity (point),
                     // irradiance at normal incidence (directional)
   // Rect: centre, full edge vectors, facing normal (emits toward it), area.
   Vec3 position, edge_x, edge_y, normal;
@@ -71,7 +71,9 @@ struct Light {
   bool two_sided = false;
 
   bool is_delta() const { return kind == Kind::kPoint || kind == Kind::kSpot || kind == Kind::kDirectional; }
-  bool is_infinite() const { return kind == Kind::kDirectional || kind == Kind::kAmbient; }
+  bool is_infinite() const {
+    return kind == Kind::kDirectional || kind == Kind::kAmbient || kind == Kind::kEnvironment;
+  }
 };
 
 // An RGB texture in linear values, bilinearly filtered, with glTF's wrap modes.
@@ -126,6 +128,9 @@ struct Scene {
   std::vector<Texture> textures;
   CameraDesc camera;
   std::vector<std::string> warnings;
+  // A glTF scene with no light at all: rendered under a neutral default environment
+  // unless --no-default-env (RenderSettings::default_environment), with a warning.
+  bool unlit = false;
   // glTF animations (core/scene/animation.h); null for a scene without any.
   std::shared_ptr<const SceneAnimation> animation;
 

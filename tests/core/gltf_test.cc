@@ -305,7 +305,11 @@ TEST_F(Gltf, NoCameraFramesTheBounds) {
   const Scene s = load(d);
   ASSERT_TRUE(s.camera.present);
   EXPECT_GT(s.camera.eye.z, 1);
-  EXPECT_NE(s.warnings.back().find("no camera"), std::string::npos);
+  bool warned = false;
+  for (const std::string& w : s.warnings) warned |= w.find("no camera") != std::string::npos;
+  EXPECT_TRUE(warned);
+  EXPECT_TRUE(s.unlit);
+  EXPECT_NE(s.warnings.front().find("no lights"), std::string::npos) << s.warnings.front();
 }
 
 TEST_F(Gltf, OptionalUnsupportedExtensionIsAWarningOnce) {

@@ -236,6 +236,20 @@ TEST_F(Farm, AnAnimatedGltfSequenceThroughTheFarmGivesTesseraRendersFrames) {
   EXPECT_NE((bad.err + bad.out).find("no animation 'walk'"), std::string::npos) << bad.err << bad.out;
 }
 
+// Issue 13's first piece: a uniform environment (--env-color) crosses the wire and the
+// farm's image is still tessera render's, on a CS184 scene.
+TEST_F(Farm, AnEnvironmentLightGivesTheLocalImageThroughTheFarm) {
+  const std::string flags = "-r 64 48 -s 16 --pass-spp 8 -m 6 --env-color 0.2 0.3 0.4";
+  const std::string local = local_render(flags);
+  start_coordinator();
+  start_worker();
+  start_worker();
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r = submit_wait(kScene, flags, out);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+}
+
 TEST_F(Farm, NoiseTargetAndEstimatorSwitchesGiveTheLocalImage) {
   const std::string flags = "-r 96 72 -s 64 --pass-spp 8 -m 6 --tile 24 --noise-target 0.2 --no-mis";
   const std::string local = local_render(flags);

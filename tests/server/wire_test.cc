@@ -142,6 +142,43 @@ TEST(WireSettings, RoundTripAndRangeChecks) {
   }
 }
 
+// Issue 12 and 13's settings: camera path, fps, animation, environment.
+TEST(WireSettings, SequenceAndEnvironmentSettingsRoundTrip) {
+  RenderSettings s;
+  s.fps = 30;
+  s.animation = "walk";
+  s.environment = Rgb(0.5f, 1, 2);
+  s.default_environment = false;
+  s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(
+      R"({"keys": [{"frame": 1, "focal_distance": 3}, {"frame": 9, "focal_distance": 5}], "turntable": {"frames": 8}})"));
+  const RenderSettings r = from_proto(to_proto(s));
+  EXPECT_EQ(r.fps, 30);
+  EXPECT_EQ(r.animation, "walk");
+  EXPECT_EQ(r.environment, s.environment);
+  EXPECT_FALSE(r.default_environment);
+  ASSERT_TRUE(r.camera.path);
+  EXPECT_EQ(r.camera.path->to_json(), s.camera.path->to_json());
+  const RenderSettings d = from_proto(to_proto(RenderSettings()));
+  EXPECT_FALSE(d.environment);
+  EXPECT_TRUE(d.default_environment);
+  EXPECT_FALSE(d.camera.path);
+  EXPECT_EQ(d.fps, 24);
+  v1::RenderSettings p = to_proto(s);
+  p.add_environment(1);  // four values
+  EXPECT_THROW(from_proto(p), WireError);
+  p = to_proto(s);
+  p.set_camera_path("{\"keys\": 3}");
+  try {
+    from_proto(p);
+    ADD_FAILURE();
+  } catch (const WireError& e) {
+    EXPECT_NE(std::string(e.what()).find("--camera-path"), std::string::npos) << e.what();
+  }
+  p = to_proto(s);
+  p.set_fps(-1);
+  EXPECT_THROW(from_proto(p), WireError);
+}
+
 // validate() is the one range check: each bad value is refused naming its flag.
 TEST(Settings, EachSettingOutOfRangeIsRefusedByItsFlag) {
   auto refused_as = [](void (*change)(RenderSettings&)) {

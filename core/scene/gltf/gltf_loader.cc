@@ -202,6 +202,14 @@ class GltfLoader {
     if (scene_.meshes.empty() && scene_.spheres.empty()) fail("scene", "no triangles to render");
     if (!scene_.camera.present) frame_bounds();
     scene_.finalize();
+    if (scene_.lights.empty()) {  // (emissive materials are lights by now)
+      scene_.unlit = true;
+      scene_.warnings.insert(scene_.warnings.begin(),  // first: it explains the whole image
+                             path_ +
+                                 ": no lights (no KHR_lights_punctual light, no emissive material): rendered under a "
+                                 "neutral default environment of radiance 1 from every direction (--env-color sets "
+                                 "another, --no-default-env none)");
+    }
     return std::move(scene_);
   }
 
