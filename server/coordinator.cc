@@ -170,10 +170,7 @@ void Coordinator::restore_sequence(StoredJob& sj, double now, std::vector<Job*>&
     } catch (const std::exception& e) {
       lost = e.what();
     }
-  s.prepared = make_frame_job(s, 0);
-  s.frame_samples = s.prepared->plan.samples_total();
-  s.frame_tiles = uint32_t(s.prepared->plan.tiles().size());
-  s.frame_passes = uint32_t(s.prepared->plan.passes().size());
+  count_frame(s);  // without a film: an ended sequence needs none
   double elapsed = 0;
   bool all_done = true;
   for (size_t i = 0; i < s.frames.size(); ++i) {
@@ -186,7 +183,7 @@ void Coordinator::restore_sequence(StoredJob& sj, double now, std::vector<Job*>&
         all_done = false;
         continue;
       }
-      job = i == 0 ? std::move(s.prepared) : make_frame_job(s, i);
+      job = make_frame_job(s, i);
       job->plan.restore(cp->state, std::move(cp->film));
     } catch (const std::exception& e) {
       std::fprintf(stderr, "tessera-coordinator: job %s: %s; its samples are rendered again\n", id.c_str(), e.what());
@@ -241,7 +238,6 @@ void Coordinator::restore_sequence(StoredJob& sj, double now, std::vector<Job*>&
     s.started = now - elapsed;
     s.state = elapsed > 0 ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED;
     while (s.next < s.jobs.size() && s.jobs[s.next]) ++s.next;
-    if (s.prepared && s.next != 0) s.prepared.reset();
   }
 }
 
@@ -259,6 +255,17 @@ double Coordinator::uptime() const { return clock_->now() - started_; }
 Sequence* Coordinator::find_sequence(const std::string& id) const {
   auto it = sequences_.find(id);
   return it == sequences_.end() ? nullptr : it->second.get();
+}
+
+void Coordinator::count_frame(Sequence& s) {
+  // As FramePlan counts them (its samples are an upper bound), without making a film.
+  const Rect w = s.settings.effective_window();
+  const int64_t ts = s.settings.tile_size;
+  const auto passes = s.settings.passes();
+  s.frame_passes = uint32_t(passes.size());
+  s.frame_tiles = uint32_t(((w.w + ts - 1) / ts) * ((w.h + ts - 1) / ts));
+  s.frame_samples = 0;
+  for (const auto& [s0, s1] : passes) s.frame_samples += uint64_t(s1 - s0) * uint64_t(w.area());
 }
 
 std::unique_ptr<Job> Coordinator::make_frame_job(const Sequence& s, size_t index) const {
@@ -541,9 +548,7 @@ std::string Coordinator::submit_sequence(const v1::SubmitJobRequest& req, const 
     s->seq = next_job_++;
   }
   s->prepared = make_frame_job(*s, 0);  // the first frame's films, outside the lock
-  s->frame_samples = s->prepared->plan.samples_total();
-  s->frame_tiles = uint32_t(s->prepared->plan.tiles().size());
-  s->frame_passes = uint32_t(s->prepared->plan.passes().size());
+  count_frame(*s);
   try {
     StoredJob row;
     row.id = s->id;

@@ -193,6 +193,7 @@ class Coordinator {
 
   // Sequences. A frame's job, made from the sequence's constant fields (so without mu_).
   std::unique_ptr<Job> make_frame_job(const Sequence& s, size_t index) const;
+  static void count_frame(Sequence& s);  // frame_samples, frame_tiles, frame_passes
   // Starts the sequence's next frame (its prepared job if there is one); null when every
   // frame has started.
   Job* start_frame_locked(Sequence& s, double now);

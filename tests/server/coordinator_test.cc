@@ -1004,6 +1004,8 @@ TEST_F(SequenceTest, EachFrameIsTheImageOfThatFrameAloneAndEarlierFramesGoFirst)
   EXPECT_EQ(st.frames_total(), 3u);
   EXPECT_EQ(st.frames_size(), 3);
   EXPECT_EQ(st.samples_total(), 3u * 48 * 36 * 10);
+  EXPECT_EQ(st.tiles_total(), 3u * 9);  // counted without making a frame's film
+  EXPECT_EQ(st.passes_total(), 3u);
   EXPECT_EQ(c->list().size(), 1u);  // the frames are in their sequence, not listed apart
   const uint64_t w = worker();
   std::vector<std::string> order;  // the job of each task, in the order handed out
