@@ -90,6 +90,27 @@ def timed(cmd):
     return time.monotonic() - t0, r.stdout
 
 
+def frames_of(spec):
+    """The frames of a --frames SPEC (as core/render/frames.h reads it: 1-8, 1-9x2, 1,5,9)."""
+    out = []
+    for part in spec.split(","):
+        m = re.fullmatch(r"(-?\d+)(?:-(-?\d+)(?:x(\d+))?)?", part)
+        if not m:
+            raise SystemExit(f"--frames: cannot read '{part}'")
+        a, b, step = int(m[1]), int(m[2] if m[2] else m[1]), int(m[3] or 1)
+        out += list(range(a, b + 1, step))
+    return out
+
+
+def frame_path(pattern, n):
+    """`pattern` with its last run of '#' replaced by the zero-padded frame number."""
+    m = list(re.finditer(r"#+", pattern))
+    if not m:
+        return pattern
+    r = m[-1]
+    return pattern[:r.start()] + str(n).zfill(len(r[0])) + pattern[r.end():]
+
+
 def identical(bin_dir, a, b):
     r = subprocess.run([os.path.join(bin_dir, "tessera_compare"), a, b], stdout=subprocess.PIPE, text=True, check=True)
     return json.loads(r.stdout)["identical"]
@@ -107,15 +128,24 @@ def main():
     ap.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     ap.add_argument("--coordinator-flags", default="",
                     help="extra coordinator flags, e.g. '--verify-fraction 0' (quoted, split on spaces)")
+    ap.add_argument("--frames", help="a sequence (--frames SPEC) instead of one frame: every frame compared")
     ap.add_argument("flags", nargs="*", help="render flags (after --)")
     a = ap.parse_args()
     flags = a.flags or ["-r", "480", "360", "-s", "64"]
+    frames = frames_of(a.frames) if a.frames else [None]
+    if a.frames:
+        flags = [*flags, "--frames", a.frames]
+    suffix = ".####.exr" if a.frames else ".exr"
+
+    def same_images(x, y):
+        return all(identical(a.bin, frame_path(x, n) if n is not None else x, frame_path(y, n) if n is not None else y)
+                   for n in frames)
     splits = [tuple(int(x) for x in s.split("x")) for s in a.splits.split(",")] if a.splits else splits_of(a.cores)
     tmp = tempfile.mkdtemp(prefix="tessera_farm_scale_")
     tessera = os.path.join(a.bin, "tessera")
     rows = []
     try:
-        local_exr = os.path.join(tmp, "local.exr")
+        local_exr = os.path.join(tmp, "local" + suffix)
         local = [timed([tessera, "render", a.scene, *flags, "-t", str(a.cores), "-q", "-f", local_exr])[0]
                  for _ in range(a.repeat)]
         for w, t in splits:
@@ -128,7 +158,7 @@ def main():
                     local.append(timed([tessera, "render", a.scene, *flags, "-t", str(a.cores), "-q", "-f",
                                         local_exr])[0])
                     before = {x["id"]: x["busy_thread_seconds"] for x in farm.status()["workers"]}
-                    out = os.path.join(tmp, f"farm_{w}x{t}_{r}.exr")
+                    out = os.path.join(tmp, f"farm_{w}x{t}_{r}" + suffix)
                     s, stdout = timed([tessera, "submit", a.scene, *flags, "--coordinator", farm.grpc, "--wait", "-q",
                                        "--json", "-f", out])
                     job = json.loads(stdout)
@@ -138,7 +168,7 @@ def main():
                     secs.append(s)
                     ratios.append(s / local[-1])
                     utils.append(busy / (threads * job["elapsed_seconds"]) if job["elapsed_seconds"] > 0 else 0)
-                    same = same and identical(a.bin, out, local_exr)
+                    same = same and same_images(out, local_exr)
             finally:
                 farm.stop()
             rows.append({"workers": w, "threads": t, "seconds": statistics.median(secs),
