@@ -93,6 +93,30 @@ class Mat4 {
   }
   Dvec3 vector(double x, double y, double z) const { return apply(x, y, z, 0); }
   double operator()(int r, int c) const { return m_[r][c]; }
+  // Determinant of the upper 3x3: negative for a transform that mirrors.
+  double det3() const {
+    return m_[0][0] * (m_[1][1] * m_[2][2] - m_[1][2] * m_[2][1]) -
+           m_[0][1] * (m_[1][0] * m_[2][2] - m_[1][2] * m_[2][0]) +
+           m_[0][2] * (m_[1][0] * m_[2][1] - m_[1][1] * m_[2][0]);
+  }
+  // For normals: the inverse transpose of the upper 3x3, as its cofactor matrix (same
+  // direction, no divide); normalize what it gives (unit_vector).
+  Mat4 normal_matrix() const {
+    std::array<double, 16> c{};
+    for (int r = 0; r < 3; ++r)
+      for (int k = 0; k < 3; ++k) {
+        const int r1 = (r + 1) % 3, r2 = (r + 2) % 3, k1 = (k + 1) % 3, k2 = (k + 2) % 3;
+        c[size_t(r * 4 + k)] = m_[r1][k1] * m_[r2][k2] - m_[r1][k2] * m_[r2][k1];
+      }
+    c[15] = 1;
+    return from_row_major(c);
+  }
+  // The direction (x, y, z) transformed, unit length; zero where the transform degenerates.
+  Vec3 unit_vector(double x, double y, double z) const {
+    const Vec3 v = vector(x, y, z).to_float();
+    const float len = length(v);
+    return len > 0 && std::isfinite(len) ? v / len : Vec3{};
+  }
 
  private:
   double m_[4][4] = {};

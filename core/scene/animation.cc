@@ -107,6 +107,22 @@ Mat4 trs_matrix(const std::array<double, 3>& t, const std::array<double, 4>& q, 
   return Mat4::translate(t[0], t[1], t[2]) * rot * Mat4::scale(s[0], s[1], s[2]);
 }
 
+void place_camera(CameraDesc& d, const Mat4& w) {
+  d.eye = w.point(0, 0, 0).to_float();
+  d.forward = normalize(w.vector(0, 0, -1).to_float());
+  d.up = normalize(w.vector(0, 1, 0).to_float());
+  d.cs184_dir = -d.forward;
+}
+
+void place_light(Light& l, const Mat4& w) {
+  if (l.kind == Light::Kind::kDirectional) {
+    l.direction = -normalize(w.vector(0, 0, -1).to_float());
+    return;
+  }
+  l.position = w.point(0, 0, 0).to_float();
+  if (l.kind == Light::Kind::kSpot) l.direction = normalize(w.vector(0, 0, -1).to_float());
+}
+
 Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
   const SceneAnimation& a = *rest.animation;
   const SceneAnimation::Clip& clip = a.clips.at(clip_index);
@@ -151,27 +167,13 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
       m.positions[i] = w.point(b.positions[i].x, b.positions[i].y, b.positions[i].z).to_float();
       check(m.positions[i], "a vertex of mesh '" + m.name + "'");
     }
-    const double det = w(0, 0) * (w(1, 1) * w(2, 2) - w(1, 2) * w(2, 1)) -
-                       w(0, 1) * (w(1, 0) * w(2, 2) - w(1, 2) * w(2, 0)) +
-                       w(0, 2) * (w(1, 0) * w(2, 1) - w(1, 1) * w(2, 0));
     m.indices = b.indices;
-    if (det < 0)  // a mirroring pose: keep geometric normals outward
+    if (w.det3() < 0)  // a mirroring pose: keep geometric normals outward
       for (size_t t = 0; t + 2 < m.indices.size(); t += 3) std::swap(m.indices[t + 1], m.indices[t + 2]);
     if (!b.normals.empty()) {
-      // The inverse transpose of the upper 3x3 (cofactors: the direction is all that matters).
-      std::array<double, 16> c{};
-      for (int r = 0; r < 3; ++r)
-        for (int k = 0; k < 3; ++k) {
-          const int r1 = (r + 1) % 3, r2 = (r + 2) % 3, k1 = (k + 1) % 3, k2 = (k + 2) % 3;
-          c[size_t(r * 4 + k)] = w(r1, k1) * w(r2, k2) - w(r1, k2) * w(r2, k1);
-        }
-      c[15] = 1;
-      const Mat4 nt = Mat4::from_row_major(c);
-      for (size_t i = 0; i < b.normals.size(); ++i) {
-        const Vec3 v = nt.vector(b.normals[i].x, b.normals[i].y, b.normals[i].z).to_float();
-        const float len = length(v);
-        m.normals[i] = len > 0 && std::isfinite(len) ? v / len : Vec3{};
-      }
+      const Mat4 nt = w.normal_matrix();
+      for (size_t i = 0; i < b.normals.size(); ++i)
+        m.normals[i] = nt.unit_vector(b.normals[i].x, b.normals[i].y, b.normals[i].z);
     } else {
       m.compute_normals();
     }
@@ -180,21 +182,13 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
     if (!moved[b.node]) continue;
     const Mat4& w = world[b.node];
     Light& l = s.lights[b.light];
-    if (l.kind == Light::Kind::kDirectional) {
-      l.direction = -normalize(w.vector(0, 0, -1).to_float());
-    } else {
-      l.position = w.point(0, 0, 0).to_float();
-      if (l.kind == Light::Kind::kSpot) l.direction = normalize(w.vector(0, 0, -1).to_float());
-    }
+    place_light(l, w);
     check(l.position, "light '" + l.name + "'");
   }
   if (a.camera_node >= 0 && moved[size_t(a.camera_node)]) {
     const Mat4& w = world[size_t(a.camera_node)];
     CameraDesc& d = s.camera;
-    d.eye = w.point(0, 0, 0).to_float();
-    d.forward = normalize(w.vector(0, 0, -1).to_float());
-    d.up = normalize(w.vector(0, 1, 0).to_float());
-    d.cs184_dir = -d.forward;
+    place_camera(d, w);
     check(d.eye, "the camera");
     if (!is_finite(d.forward) || !is_finite(d.up))
       throw SceneError(rest.source, "animations[" + std::to_string(clip_index) + "]",

@@ -16,6 +16,8 @@
 namespace tessera {
 
 struct Scene;
+struct CameraDesc;
+struct Light;
 
 struct SceneAnimation {
   // The node hierarchy as the loader visited it (parents before children); a glTF node
@@ -66,6 +68,12 @@ struct SceneAnimation {
 // The value of one channel at `time` (clamped to its keys): 3 or 4 numbers; rotations are
 // unit quaternions (x, y, z, w).
 std::array<double, 4> sample_channel(const SceneAnimation::Channel& c, double time);
+// Where a node's world transform puts the file's camera (eye, forward, up; CS184's
+// direction) and a punctual light (position, and direction for spot and directional):
+// the loader places them, and so does every pose.
+void place_camera(CameraDesc& d, const Mat4& world);
+void place_light(Light& l, const Mat4& world);
+
 // glTF's local transform T * R * S from a translation, a (normalized) quaternion and a scale.
 Mat4 trs_matrix(const std::array<double, 3>& t, const std::array<double, 4>& r, const std::array<double, 3>& s);
 

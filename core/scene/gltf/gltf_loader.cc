@@ -417,26 +417,32 @@ class GltfLoader {
         for (int c = 0; c < 4; ++c) m[size_t(r * 4 + c)] = n.matrix[size_t(c * 4 + r)];  // glTF is column-major
       return Mat4::from_row_major(m);
     }
-    Mat4 t, r, s;
+    const Trs x = trs_of(n, el);
+    return trs_matrix(x.t, x.r, x.s);
+  }
+
+  // A node's translation, rotation and scale (glTF's defaults where absent), checked.
+  struct Trs {
+    std::array<double, 3> t{0, 0, 0}, s{1, 1, 1};
+    std::array<double, 4> r{0, 0, 0, 1};
+  };
+  Trs trs_of(const tinygltf::Node& n, const std::string& el) const {
+    Trs x;
     if (!n.translation.empty()) {
       if (n.translation.size() != 3) fail(el, "translation needs 3 numbers");
-      t = Mat4::translate(n.translation[0], n.translation[1], n.translation[2]);
+      x.t = {n.translation[0], n.translation[1], n.translation[2]};
     }
     if (!n.rotation.empty()) {
       if (n.rotation.size() != 4) fail(el, "rotation needs 4 numbers");
-      double x = n.rotation[0], y = n.rotation[1], z = n.rotation[2], w = n.rotation[3];
-      const double len = std::sqrt(x * x + y * y + z * z + w * w);
+      x.r = {n.rotation[0], n.rotation[1], n.rotation[2], n.rotation[3]};
+      const double len = std::sqrt(x.r[0] * x.r[0] + x.r[1] * x.r[1] + x.r[2] * x.r[2] + x.r[3] * x.r[3]);
       if (!(len > 0)) fail(el, "rotation quaternion is zero");
-      x /= len, y /= len, z /= len, w /= len;
-      r = Mat4::from_row_major({1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w), 0,
-                                2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w), 0,
-                                2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y), 0, 0, 0, 0, 1});
     }
     if (!n.scale.empty()) {
       if (n.scale.size() != 3) fail(el, "scale needs 3 numbers");
-      s = Mat4::scale(n.scale[0], n.scale[1], n.scale[2]);
+      x.s = {n.scale[0], n.scale[1], n.scale[2]};
     }
-    return t * r * s;
+    return x;
   }
 
   void visit(int index, const Mat4& parent, std::vector<int>& path, int32_t parent_entry) {
@@ -446,16 +452,20 @@ class GltfLoader {
       fail(el, "the node graph has a cycle through this node");
     if (path.size() >= kMaxNodeDepth) fail(el, "node hierarchy deeper than 256 levels");
     const tinygltf::Node& n = model_.nodes[size_t(index)];
-    const Mat4 world = parent * local_matrix(n, el);
+    const Mat4 local = local_matrix(n, el);
+    const Mat4 world = parent * local;
     if (recording_) {  // the hierarchy, for posing frames of an animation
       SceneAnimation::Node e;
       e.gltf_node = uint32_t(index);
       e.parent = parent_entry;
       e.trs = n.matrix.empty();
-      e.matrix = local_matrix(n, el);
-      if (!n.translation.empty()) e.translation = {n.translation[0], n.translation[1], n.translation[2]};
-      if (!n.rotation.empty()) e.rotation = {n.rotation[0], n.rotation[1], n.rotation[2], n.rotation[3]};
-      if (!n.scale.empty()) e.scale = {n.scale[0], n.scale[1], n.scale[2]};
+      e.matrix = local;
+      if (e.trs) {
+        const Trs x = trs_of(n, el);
+        e.translation = x.t;
+        e.rotation = x.r;
+        e.scale = x.s;
+      }
       entry_ = int32_t(animation_.nodes.size());
       animation_.nodes.push_back(e);
     }
@@ -481,9 +491,7 @@ class GltfLoader {
     if (size_t(index) >= model_.meshes.size()) fail(node_el, "mesh " + std::to_string(index) + " does not exist");
     const tinygltf::Mesh& mesh = model_.meshes[size_t(index)];
     // det < 0 mirrors the mesh: swap winding so geometric normals stay outward.
-    const double det = w(0, 0) * (w(1, 1) * w(2, 2) - w(1, 2) * w(2, 1)) -
-                       w(0, 1) * (w(1, 0) * w(2, 2) - w(1, 2) * w(2, 0)) +
-                       w(0, 2) * (w(1, 0) * w(2, 1) - w(1, 1) * w(2, 0));
+    const double det = w.det3();
     for (size_t p = 0; p < mesh.primitives.size(); ++p) {
       const tinygltf::Primitive& prim = mesh.primitives[p];
       const std::string el = "meshes[" + std::to_string(index) + "].primitives[" + std::to_string(p) + "]";
@@ -513,16 +521,13 @@ class GltfLoader {
       if (out.indices.size() % 3) fail(el, std::to_string(out.indices.size()) + " indices is not a multiple of 3");
       if (det < 0)
         for (size_t t = 0; t < out.indices.size(); t += 3) std::swap(out.indices[t + 1], out.indices[t + 2]);
+      std::vector<float> n3;  // the file's normals, object space
       if (auto nrm = prim.attributes.find("NORMAL"); nrm != prim.attributes.end()) {
-        const std::vector<float> n3 = read_floats(nrm->second, 3, el + " NORMAL");
+        n3 = read_floats(nrm->second, 3, el + " NORMAL");
         if (n3.size() != p3.size()) fail(el, "NORMAL count differs from POSITION count");
-        const Mat4 nt = normal_matrix(w);
+        const Mat4 nt = w.normal_matrix();
         out.normals.resize(nv);
-        for (size_t i = 0; i < nv; ++i) {
-          const Vec3 v = nt.vector(n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]).to_float();
-          const float len = length(v);
-          out.normals[i] = len > 0 && std::isfinite(len) ? v / len : Vec3{};
-        }
+        for (size_t i = 0; i < nv; ++i) out.normals[i] = nt.unit_vector(n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]);
         out.file_normals = true;
       }
       if (auto uv = prim.attributes.find("TEXCOORD_0"); uv != prim.attributes.end()) {
@@ -539,11 +544,8 @@ class GltfLoader {
         b.node = uint32_t(entry_);
         b.positions.resize(nv);
         for (size_t i = 0; i < nv; ++i) b.positions[i] = Vec3{p3[3 * i], p3[3 * i + 1], p3[3 * i + 2]};
-        if (auto nrm = prim.attributes.find("NORMAL"); nrm != prim.attributes.end()) {
-          const std::vector<float> n3 = read_floats(nrm->second, 3, el + " NORMAL");
-          b.normals.resize(nv);
-          for (size_t i = 0; i < nv; ++i) b.normals[i] = Vec3{n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]};
-        }
+        b.normals.resize(n3.size() / 3);
+        for (size_t i = 0; i < b.normals.size(); ++i) b.normals[i] = Vec3{n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]};
         b.indices = out.indices;
         if (det < 0)  // back to the file's winding: each pose fixes it for its own transform
           for (size_t t = 0; t < b.indices.size(); t += 3) std::swap(b.indices[t + 1], b.indices[t + 2]);
@@ -551,18 +553,6 @@ class GltfLoader {
       }
       scene_.meshes.push_back(std::move(out));
     }
-  }
-
-  static Mat4 normal_matrix(const Mat4& w) {
-    // Inverse transpose of the upper 3x3 (the cofactor matrix: same direction, no divide).
-    std::array<double, 16> c{};
-    for (int r = 0; r < 3; ++r)
-      for (int k = 0; k < 3; ++k) {
-        const int r1 = (r + 1) % 3, r2 = (r + 2) % 3, k1 = (k + 1) % 3, k2 = (k + 2) % 3;
-        c[size_t(r * 4 + k)] = w(r1, k1) * w(r2, k2) - w(r1, k2) * w(r2, k1);
-      }
-    c[15] = 1;
-    return Mat4::from_row_major(c);
   }
 
   // ---- materials (docs/gltf.md) --------------------------------------------------------
@@ -712,10 +702,7 @@ class GltfLoader {
     d.xfov_deg = 2 * std::atan(std::tan(c.perspective.yfov / 2) * d.aspect_ratio.value_or(4.0 / 3.0)) * 180 / M_PI;
     d.znear = float(c.perspective.znear > 0 ? c.perspective.znear : 0.001);
     d.zfar = float(c.perspective.zfar > c.perspective.znear ? c.perspective.zfar : 1e30);
-    d.eye = w.point(0, 0, 0).to_float();
-    d.forward = normalize(w.vector(0, 0, -1).to_float());
-    d.up = normalize(w.vector(0, 1, 0).to_float());
-    d.cs184_dir = -d.forward;
+    place_camera(d, w);
     if (!is_finite(d.forward) || !is_finite(d.up)) fail(node_el, "camera transform is degenerate");
   }
 
@@ -734,15 +721,12 @@ class GltfLoader {
     l.color = color * float(g.intensity / kLumensPerWatt);
     if (g.type == "directional") {
       l.kind = Light::Kind::kDirectional;
-      l.direction = -normalize(w.vector(0, 0, -1).to_float());
     } else if (g.type == "point" || g.type == "spot") {
       l.kind = g.type == "point" ? Light::Kind::kPoint : Light::Kind::kSpot;
-      l.position = w.point(0, 0, 0).to_float();
       l.att_constant = 0;
       l.att_linear = 0;
       l.att_quadratic = 1;  // physical inverse square
       if (g.type == "spot") {
-        l.direction = normalize(w.vector(0, 0, -1).to_float());
         if (!(g.spot.outerConeAngle > g.spot.innerConeAngle && g.spot.innerConeAngle >= 0 &&
               g.spot.outerConeAngle <= M_PI / 2 + 1e-6))
           fail(el, "needs 0 <= innerConeAngle < outerConeAngle <= pi/2");
@@ -753,6 +737,7 @@ class GltfLoader {
     } else {
       fail(el, "unknown light type '" + g.type + "'");
     }
+    place_light(l, w);
     if (!is_finite(l.position) || !is_finite(l.direction)) fail(node_el, "light transform is degenerate");
     scene_.lights.push_back(l);
   }
