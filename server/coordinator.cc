@@ -170,7 +170,6 @@ void Coordinator::restore_sequence(StoredJob& sj, double now, std::vector<Job*>&
     } catch (const std::exception& e) {
       lost = e.what();
     }
-  count_frame(s);  // without a film: an ended sequence needs none
   double elapsed = 0;
   bool all_done = true;
   for (size_t i = 0; i < s.frames.size(); ++i) {
@@ -255,17 +254,6 @@ double Coordinator::uptime() const { return clock_->now() - started_; }
 Sequence* Coordinator::find_sequence(const std::string& id) const {
   auto it = sequences_.find(id);
   return it == sequences_.end() ? nullptr : it->second.get();
-}
-
-void Coordinator::count_frame(Sequence& s) {
-  // As FramePlan counts them (its samples are an upper bound), without making a film.
-  const Rect w = s.settings.effective_window();
-  const int64_t ts = s.settings.tile_size;
-  const auto passes = s.settings.passes();
-  s.frame_passes = uint32_t(passes.size());
-  s.frame_tiles = uint32_t(((w.w + ts - 1) / ts) * ((w.h + ts - 1) / ts));
-  s.frame_samples = 0;
-  for (const auto& [s0, s1] : passes) s.frame_samples += uint64_t(s1 - s0) * uint64_t(w.area());
 }
 
 std::unique_ptr<Job> Coordinator::make_frame_job(const Sequence& s, size_t index) const {
@@ -454,7 +442,7 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
       if (sq->live() && sq->owner == owner) {
         ++mine;
         my_bytes += sq->scene_bytes;
-        my_samples += sq->frame_samples * (sq->frames.size() - sq->next);  // frames not started
+        my_samples += sq->frame_samples() * (sq->frames.size() - sq->next);  // frames not started
       }
     if (my_bytes + scene_bytes > options_.max_scene_bytes_per_client)
       over = who + "'s live jobs hold " + std::to_string(my_bytes) + " scene bytes; this job's " +
@@ -500,24 +488,7 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
     job->id = new_job_id_locked();  // 64 random bits: no other submit picks it meanwhile
     job->seq = next_job_++;
   }
-  // Durable before it is acknowledged (and outside the lock: it waits for the disk).
-  try {
-    StoredJob row;
-    row.id = job->id;
-    row.name = job->name;
-    row.owner = owner;
-    row.scene_hash = hash;
-    row.main_file = req.main_file();
-    row.priority = job->priority;
-    row.seq = job->seq;
-    row.settings = job->settings_proto;
-    store_->add(row);
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "tessera-coordinator: submit: %s\n", e.what());
-    scenes_.release(hash);
-    throw refuse("the coordinator cannot record the job: " + without_data_dir(e.what()),
-                 RequestError::Code::kResourceExhausted);
-  }
+  record_submit(req, job->id, job->name, owner, hash, job->seq, job->settings_proto, {});
   std::lock_guard<std::mutex> lock(mu_);
   job->submitted = clock_->now();
   job->last_checkpoint = job->submitted;
@@ -548,18 +519,30 @@ std::string Coordinator::submit_sequence(const v1::SubmitJobRequest& req, const 
     s->seq = next_job_++;
   }
   s->prepared = make_frame_job(*s, 0);  // the first frame's films, outside the lock
-  count_frame(*s);
+  record_submit(req, s->id, s->name, owner, hash, s->seq, s->settings_proto, frames);
+  std::lock_guard<std::mutex> lock(mu_);
+  s->submitted = clock_->now();
+  const std::string id = s->id;
+  sequences_[id] = std::move(s);
+  ++counters_.jobs_submitted;
+  changed_.notify_all();
+  return id;
+}
+
+void Coordinator::record_submit(const v1::SubmitJobRequest& req, const std::string& id, const std::string& name,
+                                const std::string& owner, const std::string& hash, uint64_t seq,
+                                const v1::RenderSettings& settings, const std::vector<int>& frames) {
+  StoredJob row;
+  row.id = id;
+  row.name = name;
+  row.owner = owner;
+  row.scene_hash = hash;
+  row.main_file = req.main_file();
+  row.priority = req.priority();
+  row.seq = seq;
+  row.settings = settings;
+  row.frames = frames;
   try {
-    StoredJob row;
-    row.id = s->id;
-    row.name = s->name;
-    row.owner = owner;
-    row.scene_hash = hash;
-    row.main_file = req.main_file();
-    row.priority = s->priority;
-    row.seq = s->seq;
-    row.settings = s->settings_proto;
-    row.frames = frames;
     store_->add(row);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tessera-coordinator: submit: %s\n", e.what());
@@ -569,13 +552,6 @@ std::string Coordinator::submit_sequence(const v1::SubmitJobRequest& req, const 
     throw RequestError(RequestError::Code::kResourceExhausted,
                        "the coordinator cannot record the job: " + without_data_dir(e.what()));
   }
-  std::lock_guard<std::mutex> lock(mu_);
-  s->submitted = clock_->now();
-  const std::string id = s->id;
-  sequences_[id] = std::move(s);
-  ++counters_.jobs_submitted;
-  changed_.notify_all();
-  return id;
 }
 
 std::map<std::string, uint32_t> Coordinator::workers_on_frames_locked(const Sequence& s) const {
@@ -740,7 +716,7 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
       order.push_back({sq->priority, sq->seq, sq->frames.size(), nullptr, sq.get()});
       // As if the frames it may start were ready: a worker's share counts them.
       const uint32_t startable = kMaxLiveFrames - std::min(kMaxLiveFrames, sq->live_frames);
-      outstanding += uint64_t(sq->frame_tiles) * std::min<uint64_t>(sq->frames.size() - sq->next, startable);
+      outstanding += uint64_t(sq->frame_tiles()) * std::min<uint64_t>(sq->frames.size() - sq->next, startable);
     }
   std::sort(order.begin(), order.end(), [](const Source& a, const Source& b) {
     if (a.priority != b.priority) return a.priority > b.priority;
@@ -1404,8 +1380,8 @@ Coordinator::Queue Coordinator::queue() const {
     }
   for (const auto& [id, s] : sequences_)  // frames not started yet
     if (s->live()) {
-      for (size_t i = s->next; i < s->frames.size(); ++i) q.samples_remaining += s->jobs[i] ? 0 : s->frame_samples;
-      q.tasks_ready += s->next < s->frames.size() ? s->frame_tiles : 0;  // the next frame's first passes
+      for (size_t i = s->next; i < s->frames.size(); ++i) q.samples_remaining += s->jobs[i] ? 0 : s->frame_samples();
+      q.tasks_ready += s->next < s->frames.size() ? s->frame_tiles() : 0;  // the next frame's first passes
     }
   double speed = 0, threads = 0;
   for (const WorkerInfo& w : workers_.list())

@@ -189,11 +189,16 @@ class Coordinator {
                               const std::vector<int>& frames, const std::string& hash, const std::string& owner,
                               uint64_t scene_bytes);
   std::map<std::string, uint32_t> workers_on_frames_locked(const Sequence& s) const;
+  // Records a submitted job (or sequence, with its frames) durably before the client hears
+  // of it (mu_ not held: it waits for the disk); if it cannot, releases the scene's use and
+  // refuses the submit.
+  void record_submit(const v1::SubmitJobRequest& req, const std::string& id, const std::string& name,
+                     const std::string& owner, const std::string& hash, uint64_t seq,
+                     const v1::RenderSettings& settings, const std::vector<int>& frames);
   Sequence* find_sequence(const std::string& id) const;  // mu_ held; null if not one
 
   // Sequences. A frame's job, made from the sequence's constant fields (so without mu_).
   std::unique_ptr<Job> make_frame_job(const Sequence& s, size_t index) const;
-  static void count_frame(Sequence& s);  // frame_samples, frame_tiles, frame_passes
   // Starts the sequence's next frame (its prepared job if there is one); null when every
   // frame has started.
   Job* start_frame_locked(Sequence& s, double now);

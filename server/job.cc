@@ -60,13 +60,13 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
   s.set_owner(owner);
   *s.mutable_settings() = settings_proto;
   s.set_frames_total(uint32_t(frames.size()));
-  s.set_passes_total(frame_passes);
+  s.set_passes_total(uint32_t(settings.passes().size()));
   uint64_t done = 0, total = 0;
   uint32_t tiles_done = 0, frames_done = 0, active = 0;
   std::string e = error;
   for (size_t i = 0; i < frames.size(); ++i) {
     const Job* j = jobs[i];
-    const uint64_t fd = j ? j->plan.samples_merged() : 0, ft = j ? j->plan.samples_total() : frame_samples;
+    const uint64_t fd = j ? j->plan.samples_merged() : 0, ft = j ? j->plan.samples_total() : frame_samples();
     done += fd;
     total += ft;
     if (j) {
@@ -88,9 +88,9 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
   s.set_samples_done(done);
   s.set_samples_total(total);
   s.set_tiles_done(tiles_done);
-  s.set_tiles_total(uint32_t(std::min<uint64_t>(UINT32_MAX, uint64_t(frame_tiles) * frames.size())));
+  s.set_tiles_total(uint32_t(std::min<uint64_t>(UINT32_MAX, uint64_t(frame_tiles()) * frames.size())));
   s.set_frames_done(frames_done);
-  s.set_frame_passes_done(state == v1::JobStatus::DONE ? frame_passes : 0);
+  s.set_frame_passes_done(state == v1::JobStatus::DONE ? s.passes_total() : 0);
   s.set_active_workers(active);
   const double elapsed = started > 0 ? (live() ? now : finished_at) - started : 0;
   s.set_elapsed_seconds(elapsed);

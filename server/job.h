@@ -83,9 +83,9 @@ struct Sequence {
   uint32_t frames_done = 0;       // DONE
   uint64_t changes = 0;           // merges into its frames and frame ends: watchers wait on it
   std::unique_ptr<Job> prepared;  // frames[next]'s job, made outside the coordinator's lock
-  // One frame's plan, for counts before any has started.
-  uint64_t frame_samples = 0;
-  uint32_t frame_tiles = 0, frame_passes = 0;
+  // One frame's counts, as its plan will have them, before any frame has started.
+  uint64_t frame_samples() const { return uint64_t(settings.effective_window().area()) * uint64_t(settings.spp); }
+  uint32_t frame_tiles() const { return uint32_t(settings.tile_count()); }
   v1::JobStatus::State state = v1::JobStatus::QUEUED;
   std::string error;
   double submitted = 0, started = 0, finished_at = 0;

@@ -53,9 +53,14 @@ void RenderSettings::validate() const {
   const Rect w = effective_window();
   require(w.area() <= kMaxPixels, window.area() > 0 ? "-p" : "-r",
           std::to_string(w.area()) + " pixels; at most " + std::to_string(kMaxPixels) + " in one frame");
-  const int64_t tiles = ((int64_t(w.w) + tile_size - 1) / tile_size) * ((int64_t(w.h) + tile_size - 1) / tile_size);
+  const int64_t tiles = tile_count();
   require(tiles <= kMaxTiles, "--tile",
           std::to_string(tiles) + " tiles; at most " + std::to_string(kMaxTiles) + ": use a larger --tile");
+}
+
+int64_t RenderSettings::tile_count() const {
+  const Rect w = effective_window();
+  return ((int64_t(w.w) + tile_size - 1) / tile_size) * ((int64_t(w.h) + tile_size - 1) / tile_size);
 }
 
 RenderSettings RenderSettings::at_frame() const {

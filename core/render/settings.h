@@ -94,6 +94,8 @@ struct RenderSettings {
   // this frame (0 for a still) in camera.pose, lens radius, focal distance and max depth.
   RenderSettings at_frame() const;
   Rect effective_window() const { return window.area() > 0 ? window : Rect{0, 0, camera.width, camera.height}; }
+  // Tiles the frame is cut into (FramePlan cuts them).
+  int64_t tile_count() const;
   // The sample-index ranges of the passes. Films are merged pass by pass in this order.
   // With -a B, passes end where CS184 checks convergence: after B+1, 2B+1, ... samples.
   std::vector<std::pair<uint32_t, uint32_t>> passes() const;

@@ -3,6 +3,7 @@
 #include "server/coordinator.h"
 
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 
 #include <atomic>
 #include <chrono>
@@ -1113,6 +1114,27 @@ TEST_F(SequenceTest, AFrameFailingOnTwoWorkersFailsTheSequenceAndKeepsTheFinishe
   EXPECT_EQ(st.state(), v1::JobStatus::FAILED);
   EXPECT_NE(st.error().find("frame 2"), std::string::npos) << st.error();
   EXPECT_TRUE(frame_is_local(id, 1));
+}
+
+// A submit the job database cannot record is refused (a still and a sequence alike), its
+// scene is not kept, and nothing is left running.
+TEST_F(SequenceTest, ASubmitTheDatabaseCannotRecordIsRefused) {
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open((dir + "/coordinator.db").c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "DROP TABLE jobs", nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_close(db);
+  for (const v1::SubmitJobRequest& r : {request(job_settings()), sequence({1, 2})}) {
+    try {
+      c->submit(r);
+      ADD_FAILURE() << "accepted";
+    } catch (const RequestError& e) {
+      EXPECT_EQ(e.code(), RequestError::Code::kResourceExhausted);
+      EXPECT_NE(std::string(e.what()).find("the coordinator cannot record the job"), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_TRUE(c->list().empty());
+  EXPECT_EQ(c->counters().jobs_refused, 2u);
+  EXPECT_TRUE(fs::is_empty(dir + "/scenes"));
 }
 
 TEST_F(SequenceTest, BadFrameListsAreRefusedNamingTheProblem) {
