@@ -9,28 +9,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SHARED=${SHARED:-../shared/scenes/cs184}
-BIN=${BIN:-build/bin}
 OUT=docs/gallery
-RUN=$(mktemp -d)
-pids=()
-cleanup() {
-  for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
-  wait 2>/dev/null || true
-  rm -rf "$RUN"
-}
-trap cleanup EXIT
 mkdir -p "$OUT"
-
-"$BIN/tessera-coordinator" --listen 127.0.0.1:0 --http 127.0.0.1:0 --data "$RUN/data" >"$RUN/coordinator.out" 2>"$RUN/coordinator.err" &
-pids+=($!)
-for _ in $(seq 100); do grep -q '^http listening' "$RUN/coordinator.out" 2>/dev/null && break; sleep 0.05; done
-GRPC=$(sed -n 's/^grpc listening on //p' "$RUN/coordinator.out")
-[ -n "$GRPC" ] || { cat "$RUN/coordinator.err" >&2; exit 1; }
-THREADS=$(( $(nproc) > 1 ? $(nproc) / 2 : 1 ))
-for i in 1 2; do
-  "$BIN/tessera-worker" --coordinator "$GRPC" --threads "$THREADS" --cache "$RUN/cache$i" --name "worker$i" 2>"$RUN/worker$i.err" &
-  pids+=($!)
-done
+source deploy/local_farm.sh  # a coordinator and two workers on 127.0.0.1: BIN, RUN, GRPC
 
 sequence() {  # name, frames, then tessera submit arguments
   local name=$1 frames=$2; shift 2

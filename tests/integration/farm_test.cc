@@ -82,6 +82,21 @@ class Farm : public ::testing::Test {
     if (!res || res->status != 200) return nullptr;
     return nlohmann::json::parse(res->body);
   }
+  // Kills worker w0 (`victim`) with SIGKILL while it holds a lease, once the first job has
+  // merged some work; polls the status endpoint up to `tries` times, 5 ms apart.
+  bool kill_while_it_renders(Process& victim, int tries) {
+    for (int i = 0; i < tries; ++i) {
+      const nlohmann::json s = get_json("/api/status");
+      if (s != nullptr && !s["jobs"].empty() && std::stoull(s["jobs"][0]["samples_done"].get<std::string>()) > 0)
+        for (const auto& w : s["workers"])
+          if (w["name"] == "w0" && w["active"].get<bool>()) {
+            victim.signal(SIGKILL);
+            return true;
+          }
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    return false;
+  }
   // `tessera submit SCENE FLAGS --wait -q EXTRA -f OUT` against this test's coordinator.
   CommandResult submit_wait(const std::string& scene, const std::string& flags, const std::string& out,
                             const std::string& extra = "") {
@@ -161,18 +176,7 @@ TEST_F(Farm, ASequenceThroughAFarmLosingAWorkerGivesEveryFrameOfTesseraRender) {
       run("submit " + kScene + " " + flags + " --frames 1-4 --coordinator " + grpc_addr + " --json", dir);
   ASSERT_EQ(sub.code, 0) << sub.err;
   const std::string id = nlohmann::json::parse(sub.out).at("id");
-  bool killed = false;
-  for (int i = 0; i < 2000 && !killed; ++i) {
-    const nlohmann::json st = get_json("/api/status");
-    if (st != nullptr && !st["jobs"].empty() && std::stoull(st["jobs"][0]["samples_done"].get<std::string>()) > 0)
-      for (const auto& w : st["workers"])
-        if (w["name"] == "w0" && w["active"].get<bool>()) {
-          victim.signal(SIGKILL);
-          killed = true;
-        }
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  ASSERT_TRUE(killed);
+  ASSERT_TRUE(kill_while_it_renders(victim, 2000));
   const CommandResult w = run("watch " + id + " --coordinator " + grpc_addr, dir);
   ASSERT_EQ(w.code, 0) << w.err << w.out;
   EXPECT_NE(w.out.find("frames 4/4"), std::string::npos) << w.out;
@@ -302,18 +306,7 @@ TEST_F(Farm, WorkerKilledMidTileChangesNothing) {
   ASSERT_EQ(sub.code, 0) << sub.err;
   const std::string id = nlohmann::json::parse(sub.out).at("id");
   // Kill the victim while it holds a lease, once some work has been merged.
-  bool killed = false;
-  for (int i = 0; i < 1000 && !killed; ++i) {
-    const nlohmann::json s = get_json("/api/status");
-    if (s != nullptr && !s["jobs"].empty() && std::stoull(s["jobs"][0]["samples_done"].get<std::string>()) > 0)
-      for (const auto& w : s["workers"])
-        if (w["name"] == "w0" && w["active"].get<bool>()) {
-          victim.signal(SIGKILL);
-          killed = true;
-        }
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  ASSERT_TRUE(killed);
+  ASSERT_TRUE(kill_while_it_renders(victim, 1000));
   const CommandResult w = run("watch " + id + " --coordinator " + grpc_addr + " --json", dir);
   ASSERT_EQ(w.code, 0) << w.err;
   const std::string out = (dir / "farm.exr").string();
