@@ -1,6 +1,7 @@
 #include "core/camera/camera.h"
 
 #include <cmath>
+#include <optional>
 
 #include "core/sampling/warp.h"
 
@@ -15,6 +16,8 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
   const double deg = M_PI / 180.0;
   const double tx = std::tan(c.xfov_deg * deg / 2);
   double ty = c.yfov_deg ? std::tan(*c.yfov_deg * deg / 2) : tx / c.aspect_ratio.value_or(4.0 / 3.0);
+  // The objects' centre, for CS184 framing and a turntable: walked once (every vertex).
+  std::optional<Vec3> objects_center;
 
   if (s.framing == Framing::kCs184) {
     // Eye on the line from the objects' centre along c, 1.5 diagonals away; +Y up.
@@ -22,6 +25,7 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
     if (std::fabs(dir.y) > 1 - 1e-6f) dir = normalize(Vec3{1e-5f, dir.y, 0});  // phi += 1e-5 (doc 2.2)
     const Bounds b = scene.object_bounds();
     const Vec3 target = b.empty() ? Vec3{} : b.center();
+    objects_center = target;
     const float dist = b.empty() ? 1.0f : 1.5f * length(b.diagonal());
     eye_ = target + dir * dist;
     z_ = normalize(eye_ - target);
@@ -52,8 +56,11 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
     Vec3 forward = p.target ? normalize(*p.target - eye) : -z_;
     Vec3 up = p.up ? normalize(*p.up) : y_;
     if (p.orbit) {
-      const Bounds b = scene.object_bounds();
-      const Vec3 center = p.orbit_center.value_or(b.empty() ? Vec3{} : b.center());
+      if (!p.orbit_center && !objects_center) {
+        const Bounds b = scene.object_bounds();
+        objects_center = b.empty() ? Vec3{} : b.center();
+      }
+      const Vec3 center = p.orbit_center ? *p.orbit_center : *objects_center;
       // Rodrigues' rotation about the unit axis k by the angle.
       const Vec3 k = p.orbit_axis;
       const float cs = std::cos(p.orbit_angle), sn = std::sin(p.orbit_angle);

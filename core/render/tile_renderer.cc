@@ -50,15 +50,9 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
     env.color = settings_.environment.value_or(Rgb(RenderSettings::kDefaultEnvironment));
     extra.push_back(env);
   }
-  const bool same_lights = share && share->settings_.environment == settings_.environment &&
-                           share->settings_.default_environment == settings_.default_environment;
-  if (scene_ == rest_ && share && share->accel_scene_ == rest_ &&
-      same_lights) {  // a static scene's BVH serves every frame
-    accel_ = share->accel_;
-    lights_ = share->lights_;
-  } else if (posed_) {
+  if (posed_) {
     // Only what moves is built per pose; the rest is one BVH for every frame, instanced.
-    if (share && share->rest_ == rest_ && share->static_part_) static_part_ = share->static_part_;
+    if (share && share->static_part_) static_part_ = share->static_part_;
     if (!static_part_) {
       auto part = std::make_shared<StaticPart>();
       part->moving.assign(rest_->meshes.size(), false);
@@ -69,8 +63,18 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
     accel_ = std::make_shared<const Accel>(*scene_, static_part_->accel, static_part_->moving);
     lights_ = std::make_shared<const LightSet>(*scene_, extra);
   } else {
-    if (accel_scene_ != scene_ || !accel_) accel_ = std::make_shared<const Accel>(*scene_);
-    lights_ = std::make_shared<const LightSet>(*scene_, extra);
+    // A static scene's BVH serves every frame and every setting; its lights too, unless
+    // the settings add other ones.
+    const bool shared = share && share->accel_scene_ == rest_;
+    if (shared)
+      accel_ = share->accel_;
+    else if (accel_scene_ != scene_ || !accel_)
+      accel_ = std::make_shared<const Accel>(*scene_);
+    if (shared && share->settings_.environment == settings_.environment &&
+        share->settings_.default_environment == settings_.default_environment)
+      lights_ = share->lights_;
+    else
+      lights_ = std::make_shared<const LightSet>(*scene_, extra);
   }
   accel_scene_ = scene_;
   camera_.emplace(*scene_, s.camera);
