@@ -120,7 +120,9 @@ def uv_sphere(radius, seg=96, rings=48):
 
 def cornell(animated=False):
     b = Builder()
-    lam = lambda c: b.material({"pbrMetallicRoughness": {"baseColorFactor": c + [1], "metallicFactor": 0, "roughnessFactor": 1}})
+    # ior 1: a glTF dielectric without its specular coat, i.e. exactly the .dae's Lambertian walls.
+    lam = lambda c: b.material({"pbrMetallicRoughness": {"baseColorFactor": c + [1], "metallicFactor": 0, "roughnessFactor": 1},
+                                "extensions": {"KHR_materials_ior": {"ior": 1.0}}})
     white, red, green = lam([0.73, 0.73, 0.73]), lam([0.63, 0.065, 0.05]), lam([0.14, 0.45, 0.091])
     h = 0.75
     # The same quads as cornell-spheres.dae (winding normals face into the room).
@@ -139,7 +141,8 @@ def cornell(animated=False):
     b.mesh("light", pos, idx, light)
     mirror = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0.95, 0.95, 0.95, 1], "metallicFactor": 1, "roughnessFactor": 0}})
     glass = b.material({"pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0, "roughnessFactor": 0},
-                        "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1.5}}})
+                        "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1.5},
+                                       "KHR_materials_volume": {"thicknessFactor": 0.6}}})  # a solid sphere
     pos, nrm, idx = uv_sphere(0.3) if not animated else uv_sphere(0.3, 64, 32)
     mirror_node = b.mesh("mirrorSphere", pos, idx, mirror, nrm, translation=[-0.42, -0.449, -0.3])
     glass_node = b.mesh("glassSphere", pos, idx, glass, nrm, translation=[0.42, -0.449, 0.3])
@@ -149,7 +152,8 @@ def cornell(animated=False):
     b.g["cameras"] = [{"type": "perspective", "perspective": {"yfov": 2 * math.atan(360 / 1750), "aspectRatio": 4 / 3,
                                                                "znear": 0.01, "zfar": 100}}]
     camera_node = b.node({"name": "camera", "camera": 0, "translation": [0, 0, d]})
-    b.g["extensionsUsed"] = ["KHR_materials_emissive_strength", "KHR_materials_transmission", "KHR_materials_ior"]
+    b.g["extensionsUsed"] = ["KHR_materials_emissive_strength", "KHR_materials_transmission", "KHR_materials_ior",
+                             "KHR_materials_volume"]
     if not animated:
         b.write(os.path.join(HERE, "cornell-spheres.gltf"))
         return

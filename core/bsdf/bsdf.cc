@@ -32,6 +32,199 @@ float microfacet_pdf(const Material& m, Vec3 wo, Vec3 wi) {
   return Beckmann(m.alpha).pdf_h(h) / (4 * std::fabs(dot(wo, h)));
 }
 
+
+// ---- glTF metallic-roughness (kPbr) ----------------------------------------------------
+// glTF 2.0 Appendix B, as three components mixed by weight:
+//   metal   (metallic)                        Schlick(F0 = base colour) x GGX specular
+//   coat    ((1 - metallic)(1 - transmission)) dielectric: F x GGX specular + (1 - F) base / pi
+//   glass   ((1 - metallic) transmission)      F x GGX reflection + (1 - F) base x GGX transmission
+// F is the exact dielectric Fresnel of `ior` at the microfacet (Schlick's approximation of
+// it, which the specification allows, is what we avoid). Glass transmission is Walter et
+// al. 2007's rough refraction for a solid (`thin` false) and, thin-walled, the reflection
+// lobe mirrored through the surface (no bending). Every lobe is two-sided; only glass tells
+// inside from outside. Sampling picks a lobe by its estimated albedo seen from wo, then
+// the direction (cosine for diffuse, visible normals for the rest); the density is the
+// mixture over all lobes, so one sample of any lobe is weighted by the whole BSDF.
+
+struct PbrWeights {
+  float metal, coat, glass;
+};
+PbrWeights pbr_weights(const Material& m) {
+  const float d = 1 - m.metallic;
+  return {m.metallic, d * (1 - m.transmission), d * m.transmission};
+}
+
+Rgb schlick(Rgb f0, float c) {
+  const float x = 1 - std::clamp(c, 0.0f, 1.0f), x5 = x * x * x * x * x;
+  return f0 + (Rgb(1.0f) - f0) * x5;
+}
+
+float luminance(Rgb c) { return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b; }
+
+// Lobe probabilities for wo: specular reflection, diffuse, transmission (sum 1).
+struct PbrLobes {
+  float spec = 0, diffuse = 0, trans = 0;
+};
+PbrLobes pbr_lobes(const Material& m, Vec3 wo) {
+  const PbrWeights w = pbr_weights(m);
+  const float c = std::fabs(wo.z);
+  const float fc = fresnel_dielectric(c, m.ior), fg = fresnel_dielectric(wo.z, m.ior);
+  const float base = luminance(m.reflectance);
+  PbrLobes p;
+  // Floors keep every lobe that can be non-zero samplable (an unbiased mixture needs it).
+  p.spec = std::max(w.metal * luminance(schlick(m.reflectance, c)) + w.coat * fc + w.glass * fg, 0.05f);
+  if (w.coat > 0 && base > 0) p.diffuse = std::max(w.coat * (1 - fc) * base, 0.02f);
+  if (w.glass > 0 && base > 0) p.trans = std::max(w.glass * (1 - fg) * base, 0.02f);
+  const float sum = p.spec + p.diffuse + p.trans;
+  p.spec /= sum;
+  p.diffuse /= sum;
+  p.trans /= sum;
+  return p;
+}
+
+bool pbr_smooth(const Material& m) { return m.alpha < Material::kSmoothAlpha; }
+
+// Half vector of a reflection, facing +z; false if degenerate or back-facing.
+bool reflection_half(Vec3 wo, Vec3 wi, Vec3* h) {
+  Vec3 v = wo + wi;
+  const float len = length(v);
+  if (!(len > 0)) return false;
+  v = v / len;
+  if (v.z < 0) v = -v;
+  *h = v;
+  return dot(v, wo) * wo.z > 0 && dot(v, wi) * wi.z > 0;
+}
+
+// Generalized half vector of a refraction (Walter et al. eq. 16), facing +z; etap is the
+// relative index along the path (n_t / n_i).
+bool refraction_half(const Material& m, Vec3 wo, Vec3 wi, Vec3* h, float* etap) {
+  *etap = wo.z > 0 ? m.ior : 1 / m.ior;
+  Vec3 v = wi * *etap + wo;
+  const float len = length(v);
+  if (!(len > 0)) return false;
+  v = v / len;
+  if (v.z < 0) v = -v;
+  *h = v;
+  return dot(v, wo) * wo.z > 0 && dot(v, wi) * wi.z > 0;
+}
+
+// The non-delta part of f(wo, wi).
+Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
+  const float co = wo.z, ci = wi.z;
+  if (co == 0 || ci == 0) return Rgb(0);
+  const PbrWeights w = pbr_weights(m);
+  const bool smooth = pbr_smooth(m);
+  const Ggx g(m.alpha);
+  if (co * ci > 0) {
+    Vec3 h;
+    if (!reflection_half(wo, wi, &h)) return Rgb(0);
+    const float oh = dot(wo, h);  // negative inside
+    Rgb f(0.0f);
+    if (w.coat > 0) f += m.reflectance * (w.coat * (1 - fresnel_dielectric(std::fabs(oh), m.ior)) * kInvPi);
+    if (smooth) return f;
+    const float spec = g.d(h) * g.g2(wo, wi) / (4 * std::fabs(co * ci));
+    if (w.metal > 0) f += schlick(m.reflectance, std::fabs(oh)) * (w.metal * spec);
+    const float fd = w.coat * fresnel_dielectric(std::fabs(oh), m.ior) + w.glass * fresnel_dielectric(oh, m.ior);
+    return f + Rgb(fd * spec);
+  }
+  if (w.glass <= 0 || smooth) return Rgb(0);
+  if (m.thin) {  // the reflection lobe mirrored through the surface
+    const Vec3 wr{wi.x, wi.y, -wi.z};
+    Vec3 h;
+    if (!reflection_half(wo, wr, &h)) return Rgb(0);
+    const float spec = g.d(h) * g.g2(wo, wr) / (4 * std::fabs(co * ci));
+    return m.reflectance * (w.glass * (1 - fresnel_dielectric(dot(wo, h), m.ior)) * spec);
+  }
+  Vec3 h;
+  float etap;
+  if (!refraction_half(m, wo, wi, &h, &etap)) return Rgb(0);
+  const float oh = dot(wo, h), ih = dot(wi, h);
+  const float denom = (ih + oh / etap) * (ih + oh / etap) * ci * co;
+  const float ft = g.d(h) * (1 - fresnel_dielectric(oh, m.ior)) * g.g2(wo, wi) * std::fabs(ih * oh / denom);
+  return m.reflectance * (w.glass * ft / (etap * etap));  // radiance scaled by 1/eta^2, as glass
+}
+
+// Density of pbr_sample's non-delta lobes drawing wi.
+float pbr_pdf(const Material& m, Vec3 wo, Vec3 wi) {
+  const float co = wo.z, ci = wi.z;
+  if (co == 0 || ci == 0) return 0;
+  const PbrLobes p = pbr_lobes(m, wo);
+  const bool smooth = pbr_smooth(m);
+  const Ggx g(m.alpha);
+  const Vec3 wo_up = co > 0 ? wo : -wo;
+  if (co * ci > 0) {
+    float pdf = p.diffuse * std::fabs(ci) * kInvPi;
+    Vec3 h;
+    if (!smooth && reflection_half(wo, wi, &h)) pdf += p.spec * g.pdf_visible(wo_up, h) / (4 * std::fabs(dot(wo, h)));
+    return pdf;
+  }
+  if (p.trans <= 0 || smooth) return 0;
+  if (m.thin) {
+    const Vec3 wr{wi.x, wi.y, -wi.z};
+    Vec3 h;
+    if (!reflection_half(wo, wr, &h)) return 0;
+    return p.trans * g.pdf_visible(wo_up, h) / (4 * std::fabs(dot(wo, h)));
+  }
+  Vec3 h;
+  float etap;
+  if (!refraction_half(m, wo, wi, &h, &etap)) return 0;
+  const float oh = dot(wo, h), ih = dot(wi, h);
+  return p.trans * g.pdf_visible(wo_up, h) * std::fabs(ih) / ((ih + oh / etap) * (ih + oh / etap));
+}
+
+bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
+  const float co = wo.z;
+  if (co == 0) return false;
+  const PbrLobes p = pbr_lobes(m, wo);
+  const PbrWeights w = pbr_weights(m);
+  const bool smooth = pbr_smooth(m);
+  const Vec3 wo_up = co > 0 ? wo : -wo;
+  out->etap = 1;
+  out->delta = false;
+  if (u1 < p.diffuse) {
+    const Vec3 d = square_to_cosine_hemisphere(u2);
+    out->wi = co > 0 ? d : Vec3{d.x, d.y, -d.z};
+  } else if (smooth) {  // a delta lobe: weight = its albedo / its probability
+    out->delta = true;
+    out->pdf = 1;
+    const float c = std::fabs(co);
+    if (u1 < p.diffuse + p.spec) {
+      out->wi = reflect_z(wo);
+      const float fd = w.coat * fresnel_dielectric(c, m.ior) + w.glass * fresnel_dielectric(co, m.ior);
+      out->weight = (schlick(m.reflectance, c) * w.metal + Rgb(fd)) / p.spec;
+      return true;
+    }
+    const float t = w.glass * (1 - fresnel_dielectric(co, m.ior)) / p.trans;
+    if (m.thin) {
+      out->wi = -wo;
+      out->weight = m.reflectance * t;
+      return t > 0;
+    }
+    if (!refract(wo, Vec3{0, 0, 1}, m.ior, &out->wi, &out->etap)) return false;
+    out->weight = m.reflectance * (t / (out->etap * out->etap));
+    return t > 0;
+  } else {
+    const Ggx g(m.alpha);
+    const Vec3 h = g.sample_visible(wo_up, u2);  // facing +z, the exterior, as refract() wants
+    if (u1 < p.diffuse + p.spec || p.trans <= 0) {
+      out->wi = h * (2 * dot(wo, h)) - wo;
+      if (out->wi.z * co <= 0) return false;
+    } else if (m.thin) {
+      const Vec3 wr = h * (2 * dot(wo, h)) - wo;
+      out->wi = {wr.x, wr.y, -wr.z};
+      if (out->wi.z * co >= 0) return false;
+    } else {
+      if (!refract(wo, h, m.ior, &out->wi, &out->etap)) return false;
+      if (out->wi.z * co >= 0) return false;
+    }
+  }
+  out->pdf = pbr_pdf(m, wo, out->wi);
+  if (!(out->pdf > 0)) return false;
+  out->weight = pbr_f(m, wo, out->wi) * (std::fabs(out->wi.z) / out->pdf);
+  if (out->wi.z * co < 0 && !m.thin) out->etap = co > 0 ? m.ior : 1 / m.ior;
+  return true;
+}
+
 }  // namespace
 
 Rgb bsdf_eval(const Material& m, Vec3 wo, Vec3 wi) {
@@ -40,6 +233,8 @@ Rgb bsdf_eval(const Material& m, Vec3 wo, Vec3 wi) {
       return (wo.z > 0 && wi.z > 0) ? m.reflectance * kInvPi : Rgb(0);
     case Material::Kind::kMicrofacet:
       return microfacet_f(m, wo, wi);
+    case Material::Kind::kPbr:
+      return pbr_f(m, wo, wi);
     default:
       return Rgb(0);
   }
@@ -51,6 +246,8 @@ float bsdf_pdf(const Material& m, Vec3 wo, Vec3 wi) {
       return (wo.z > 0) ? cosine_hemisphere_pdf(wi.z) : 0;
     case Material::Kind::kMicrofacet:
       return microfacet_pdf(m, wo, wi);
+    case Material::Kind::kPbr:
+      return pbr_pdf(m, wo, wi);
     default:
       return 0;
   }
@@ -114,6 +311,8 @@ bool bsdf_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out)
       out->etap = 1;
       return true;
     }
+    case Material::Kind::kPbr:
+      return pbr_sample(m, wo, u1, u2, out);
     case Material::Kind::kEmission:
       return false;
   }

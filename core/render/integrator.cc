@@ -85,6 +85,38 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
   return sp;
 }
 
+void apply_normal_map(const Scene& scene, const Material& m, const Hit& hit, SurfacePoint* sp) {
+  if (hit.is_sphere) return;
+  const Mesh& mesh = scene.meshes[hit.shape];
+  if (mesh.uvs.empty()) return;
+  const uint32_t i0 = mesh.indices[3 * hit.prim], i1 = mesh.indices[3 * hit.prim + 1],
+                 i2 = mesh.indices[3 * hit.prim + 2];
+  // The triangle's dp/du and dp/dv (pbrt's Triangle::InteractionFromIntersection).
+  const Vec2 uv0 = mesh.uvs[i0], uv1 = mesh.uvs[i1], uv2 = mesh.uvs[i2];
+  const Vec2 d02{uv0.x - uv2.x, uv0.y - uv2.y}, d12{uv1.x - uv2.x, uv1.y - uv2.y};
+  const Vec3 p02 = mesh.positions[i0] - mesh.positions[i2], p12 = mesh.positions[i1] - mesh.positions[i2];
+  const float det = d02.x * d12.y - d02.y * d12.x;
+  if (!(std::fabs(det) > 1e-12f)) return;
+  const Vec3 dpdu = (p02 * d12.y - p12 * d02.y) / det, dpdv = (p12 * d02.x - p02 * d12.x) / det;
+  const Vec3 n = sp->ns;
+  Vec3 t = dpdu - n * dot(n, dpdu);
+  const float tl = length(t);
+  if (!(tl > 0) || !std::isfinite(tl)) return;
+  t = t / tl;
+  // glTF's bitangent is cross(N, T), image "up" (v decreasing) for an unmirrored mapping.
+  Vec3 b = cross(n, t);
+  if (dot(b, dpdv) > 0) b = -b;
+  const TextureRef& ref = m.normal_texture;
+  const Rgb c = scene.textures[size_t(ref.index)].sample(ref.map(sp->uv));
+  const float x = (2 * c.r - 1) * m.normal_scale, y = (2 * c.g - 1) * m.normal_scale, z = 2 * c.b - 1;
+  Vec3 mapped = t * x + b * y + n * z;
+  const float len = length(mapped);
+  if (!(len > 0) || !std::isfinite(len)) return;
+  mapped = mapped / len;
+  if (dot(mapped, sp->ng) <= 0) return;  // a map that turns the normal under the surface: ignore it here
+  sp->ns = mapped;
+}
+
 Vec3 offset_point(Vec3 p, Vec3 p_err, Vec3 n, Vec3 w) {
   const float d = dot(abs(n), p_err) * kOffsetSafety;
   const Vec3 side = dot(w, n) < 0 ? -n : n;
@@ -122,7 +154,8 @@ Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& f
       const Vec2 u = sampler.next_2d();
       LightSample ls;
       if (!lights_.sample(i, sp.p, u_pick, u, &ls) || ls.li.is_black()) continue;
-      if (dot(ls.wi, ng) <= 0) continue;  // below the geometric surface: no leaks
+      // Below the geometric surface: no leaks (a dielectric transmits there).
+      if (!m.is_dielectric() && dot(ls.wi, ng) <= 0) continue;
       const Vec3 wi = frame.to_local(ls.wi);
       const Rgb f = bsdf_eval(m, wo, wi);
       if (f.is_black()) continue;
@@ -174,16 +207,22 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
     if (depth > 0 && !hit.is_sphere && !prev_hit.is_sphere && hit.shape == prev_hit.shape && hit.prim == prev_hit.prim)
       ++counters.self_hits;
     prev_hit = hit;
-    const SurfacePoint sp = make_surface_point(scene_, ray, hit);
+    SurfacePoint sp = make_surface_point(scene_, ray, hit);
     const Material* mp = &scene_.materials[sp.material];
     Material textured;  // only textured materials pay for a copy
-    if (mp->texture >= 0) {
-      textured = *mp;
-      textured.reflectance *= scene_.textures[size_t(mp->texture)].sample(sp.uv);
+    if (mp->has_textures()) {
+      textured = scene_.textured(*mp, sp.uv);
       mp = &textured;
+      if (mp->normal_texture.active()) apply_normal_map(scene_, *mp, hit, &sp);
     }
     const Material& m = *mp;
     const Vec3 wo_world = -ray.d;
+    // Beer-Lambert absorption of a solid glTF volume: the segment just travelled was inside
+    // if it leaves through the surface's back (its outward normal faces along the ray).
+    if (m.kind == Material::Kind::kPbr && !m.absorption.is_black() && dot(sp.ng, ray.d) > 0) {
+      const float t = hit.t;
+      beta *= Rgb(std::exp(-m.absorption.r * t), std::exp(-m.absorption.g * t), std::exp(-m.absorption.b * t));
+    }
     if (m.kind == Material::Kind::kEmission) {  // emitters do not reflect: the path ends
       if (m.two_sided_emission || dot(sp.ng, wo_world) > 0) {
         float w = 1;
@@ -200,7 +239,7 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
     // Reflection-only surfaces are two-sided: shade on the side the ray came from.
     // Dielectrics keep the outward normal to know whether the path is inside.
     Vec3 ng = sp.ng, ns = sp.ns;
-    const bool dielectric = m.kind == Material::Kind::kGlass || m.kind == Material::Kind::kRefraction;
+    const bool dielectric = m.is_dielectric();
     if (!dielectric && dot(ng, wo_world) < 0) {
       ng = -ng;
       ns = -ns;

@@ -34,6 +34,9 @@ struct SurfacePoint {
 };
 
 SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& hit);
+// Turns sp->ns by material m's normal map (glTF tangent space: T along dp/du, B = N x T),
+// with the triangle's texture-space derivatives as the tangent frame.
+void apply_normal_map(const Scene& scene, const Material& m, const Hit& hit, SurfacePoint* sp);
 // A point p with error bound p_err on a surface with normal n, pushed off the surface along
 // n (to the side w points to) by the error bound, so that a ray between it and elsewhere
 // can neither start behind the surface nor hit it again.

@@ -174,3 +174,21 @@ Rgb Texture::sample(Vec2 uv) const {
 }
 
 }  // namespace tessera
+
+namespace tessera {
+
+Material Scene::textured(const Material& m, Vec2 uv) const {
+  Material out = m;
+  auto at = [&](const TextureRef& t) { return textures[size_t(t.index)].sample(t.map(uv)); };
+  if (m.texture.active()) out.reflectance *= at(m.texture);
+  if (m.metal_rough_texture.active()) {
+    const Rgb mr = at(m.metal_rough_texture);
+    out.roughness = std::clamp(m.roughness * mr.g, 0.0f, 1.0f);
+    out.alpha = out.roughness * out.roughness;
+    out.metallic = std::clamp(m.metallic * mr.b, 0.0f, 1.0f);
+  }
+  if (m.emissive_texture.active()) out.radiance *= at(m.emissive_texture);
+  return out;
+}
+
+}  // namespace tessera

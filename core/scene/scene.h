@@ -12,24 +12,65 @@
 
 namespace tessera {
 
+// A texture as a material uses it: which one (Scene::textures), and KHR_texture_transform's
+// affine map of the coordinates, uv' = [m0 m1 m2; m3 m4 m5] (u, v, 1).
+struct TextureRef {
+  int32_t index = -1;
+  float xform[6] = {1, 0, 0, 0, 1, 0};
+  bool active() const { return index >= 0; }
+  Vec2 map(Vec2 uv) const {
+    return {xform[0] * uv.x + xform[1] * uv.y + xform[2], xform[3] * uv.x + xform[4] * uv.y + xform[5]};
+  }
+};
+
 // Material parameters. One struct with a kind tag rather than a class hierarchy: the
 // integrator switches on the kind, which keeps the hot loop free of virtual calls.
+//
+// kDiffuse..kMicrofacet and kEmission are CS184's materials with their CS184 meanings.
+// kPbr is glTF's metallic-roughness model (core/bsdf/bsdf.cc, docs/gltf.md), used for glTF
+// materials only: a CS184 scene never meets it.
 struct Material {
-  enum class Kind : uint8_t { kDiffuse, kMirror, kGlass, kRefraction, kMicrofacet, kEmission };
+  enum class Kind : uint8_t { kDiffuse, kMirror, kGlass, kRefraction, kMicrofacet, kEmission, kPbr };
   Kind kind = Kind::kDiffuse;
   std::string name;
-  Rgb reflectance{0.5f};    // diffuse albedo, mirror and glass reflectance
+  Rgb reflectance{0.5f};    // diffuse albedo, mirror and glass reflectance; kPbr base colour
   Rgb transmittance{1.0f};  // glass and refraction
-  float ior = 1.5f;         // glass and refraction: interior / exterior
-  float alpha = 0.25f;      // microfacet Beckmann roughness
+  float ior = 1.5f;         // glass, refraction, kPbr: interior / exterior
+  float alpha = 0.25f;      // microfacet Beckmann roughness; kPbr GGX alpha (roughness^2)
   Rgb eta{0.2f}, k{3.0f};   // microfacet conductor complex index, per channel
   Rgb radiance{0.0f};       // emission
   bool two_sided_emission = true;
-  int32_t texture = -1;  // Scene::textures index multiplying `reflectance`, or -1
+  TextureRef texture;  // multiplies `reflectance` (sRGB-decoded); kPbr: the base colour texture
 
-  bool is_delta() const { return kind == Kind::kMirror || kind == Kind::kGlass || kind == Kind::kRefraction; }
+  // kPbr only.
+  float metallic = 0;      // 0 dielectric .. 1 metal (continuous)
+  float roughness = 1;     // perceptual; alpha = roughness^2
+  float transmission = 0;  // KHR_materials_transmission: the dielectric part's share that transmits
+  // KHR_materials_volume: a solid (refracting, Beer-Lambert absorption `absorption` per unit
+  // length inside) rather than thin-walled (transmission passes without bending).
+  bool thin = true;
+  Rgb absorption{0.0f};
+  TextureRef metal_rough_texture;  // linear: G scales roughness, B metallic
+  TextureRef normal_texture;       // tangent-space normal map (linear)
+  float normal_scale = 1;
+  TextureRef emissive_texture;     // kEmission: multiplies `radiance` (sRGB-decoded)
+
+  // Below this alpha a kPbr surface's specular lobes are perfectly smooth (delta).
+  static constexpr float kSmoothAlpha = 1e-3f;
+  bool is_delta() const {
+    if (kind == Kind::kPbr) return alpha < kSmoothAlpha && metallic + (1 - metallic) * transmission >= 1;
+    return kind == Kind::kMirror || kind == Kind::kGlass || kind == Kind::kRefraction;
+  }
   // True if no BSDF lobe exists: paths end here.
   bool is_black() const { return kind == Kind::kEmission; }
+  // Keeps the outward normal (a path can be inside it) rather than shading the side the
+  // ray came from.
+  bool is_dielectric() const {
+    return kind == Kind::kGlass || kind == Kind::kRefraction || (kind == Kind::kPbr && transmission > 0);
+  }
+  bool has_textures() const {
+    return texture.active() || metal_rough_texture.active() || normal_texture.active() || emissive_texture.active();
+  }
 };
 
 struct Mesh {
@@ -143,6 +184,10 @@ struct Scene {
   // last.
   void finalize();
   uint32_t add_material(Material m);
+  // The material at a surface point with texture coordinates uv: its textures applied
+  // (base colour, metallic-roughness, emission; not the normal map, which the integrator
+  // applies to the shading frame).
+  Material textured(const Material& m, Vec2 uv) const;
 };
 
 }  // namespace tessera

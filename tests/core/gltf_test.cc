@@ -129,7 +129,7 @@ TEST_F(Gltf, EmbeddedBuffersNormalsUvsAndIndices) {
   EXPECT_FLOAT_EQ(m.normals[0].z, 1);
   ASSERT_EQ(m.uvs.size(), 3u);
   EXPECT_FLOAT_EQ(m.uvs[1].x, 1);  // normalized ubyte 255 -> 1
-  EXPECT_EQ(s.materials[m.material].kind, Material::Kind::kDiffuse);
+  EXPECT_EQ(s.materials[m.material].kind, Material::Kind::kPbr);
   EXPECT_FLOAT_EQ(s.materials[m.material].reflectance.b, 0.7f);
   ASSERT_TRUE(s.camera.present);
   EXPECT_NEAR(*s.camera.yfov_deg, 0.5 * 180 / M_PI, 1e-9);
@@ -199,41 +199,70 @@ TEST_F(Gltf, MaterialMapping) {
     d.j["materials"][0] = m;
     return load(d);
   };
-  const auto kind = [](const Scene& s) { return s.materials[s.meshes[0].material].kind; };
+  const auto of = [](const Scene& s) { return s.materials[s.meshes[0].material]; };
+  // Every glTF material is the metallic-roughness model, its parameters continuous.
   Scene s = mat({{"pbrMetallicRoughness",
                   {{"baseColorFactor", {1, 0.8, 0.4, 1}}, {"metallicFactor", 1}, {"roughnessFactor", 0}}}});
-  EXPECT_EQ(kind(s), Material::Kind::kMirror);
-  EXPECT_FLOAT_EQ(s.materials[0].reflectance.b, 0.4f);
-  s = mat({{"pbrMetallicRoughness",
-            {{"baseColorFactor", {0.8, 0.8, 0.8, 1}}, {"metallicFactor", 1}, {"roughnessFactor", 0.5}}}});
-  ASSERT_EQ(kind(s), Material::Kind::kMicrofacet);
-  EXPECT_FLOAT_EQ(s.materials[0].alpha, 0.25f);  // roughness^2
-  const float k = s.materials[0].k.r;            // F0 = k^2 / (4 + k^2) = 0.8 at eta = 1
-  EXPECT_NEAR(k * k / (4 + k * k), 0.8f, 1e-5);
-  s = mat({{"pbrMetallicRoughness", {{"metallicFactor", 0}}},
+  EXPECT_EQ(of(s).kind, Material::Kind::kPbr);
+  EXPECT_FLOAT_EQ(of(s).reflectance.b, 0.4f);
+  EXPECT_TRUE(of(s).is_delta());  // a smooth metal: a mirror
+  s = mat({{"pbrMetallicRoughness", {{"metallicFactor", 0.3}, {"roughnessFactor", 0.5}}}});
+  EXPECT_FLOAT_EQ(of(s).metallic, 0.3f);
+  EXPECT_FLOAT_EQ(of(s).alpha, 0.25f);  // roughness^2
+  EXPECT_FALSE(of(s).is_delta());
+  EXPECT_FALSE(of(s).is_dielectric());
+  for (const std::string& w : s.warnings) EXPECT_EQ(w.find("metallic"), std::string::npos) << w;  // no rounding
+  // Transmission alone is thin-walled (the extension's definition); with a volume of some
+  // thickness a refracting solid, absorbing -ln(colour) / distance per unit length.
+  s = mat({{"pbrMetallicRoughness", {{"metallicFactor", 0}, {"roughnessFactor", 0.2}}},
            {"extensions",
             {{"KHR_materials_transmission", {{"transmissionFactor", 1}}}, {"KHR_materials_ior", {{"ior", 1.33}}}}}});
-  ASSERT_EQ(kind(s), Material::Kind::kGlass);
-  EXPECT_FLOAT_EQ(s.materials[0].ior, 1.33f);
+  EXPECT_FLOAT_EQ(of(s).transmission, 1);
+  EXPECT_FLOAT_EQ(of(s).ior, 1.33f);
+  EXPECT_TRUE(of(s).thin);
+  EXPECT_TRUE(of(s).is_dielectric());
+  s = mat({{"pbrMetallicRoughness", {{"metallicFactor", 0}}},
+           {"extensions",
+            {{"KHR_materials_transmission", {{"transmissionFactor", 1}}},
+             {"KHR_materials_volume",
+              {{"thicknessFactor", 0.1}, {"attenuationColor", {0.5, 1, 1}}, {"attenuationDistance", 2}}}}}});
+  EXPECT_FALSE(of(s).thin);
+  EXPECT_NEAR(of(s).absorption.r, std::log(2.0) / 2, 1e-6);
+  EXPECT_FLOAT_EQ(of(s).absorption.g, 0);
   s = mat({{"emissiveFactor", {1, 0.5, 0.25}},
            {"doubleSided", true},
            {"extensions", {{"KHR_materials_emissive_strength", {{"emissiveStrength", 8}}}}}});
-  ASSERT_EQ(kind(s), Material::Kind::kEmission);
-  EXPECT_FLOAT_EQ(s.materials[0].radiance.g, 4);
+  ASSERT_EQ(of(s).kind, Material::Kind::kEmission);
+  EXPECT_FLOAT_EQ(of(s).radiance.g, 4);
   ASSERT_EQ(s.lights.size(), 1u);  // emitters are sampled as area lights
   EXPECT_EQ(s.lights[0].kind, Light::Kind::kMesh);
   EXPECT_TRUE(s.lights[0].two_sided);
-  // In-between values follow the documented rounding, with a warning, never silently.
-  s = mat({{"pbrMetallicRoughness", {{"metallicFactor", 0.3}}}});
-  EXPECT_EQ(kind(s), Material::Kind::kDiffuse);
-  ASSERT_FALSE(s.warnings.empty());
-  EXPECT_NE(s.warnings.back().find("metallic 0.3"), std::string::npos) << s.warnings.back();
-  s = mat({{"pbrMetallicRoughness", {{"metallicFactor", 0.7}, {"roughnessFactor", 0.4}}}});
-  EXPECT_EQ(kind(s), Material::Kind::kMicrofacet);
-  EXPECT_NE(s.warnings.back().find("metallic 0.7"), std::string::npos);
   // No material: the spec's default, metallic 1 and roughness 1.
   d.j["meshes"][0]["primitives"][0].erase("material");
-  EXPECT_EQ(kind(load(d)), Material::Kind::kMicrofacet);
+  s = load(d);
+  EXPECT_FLOAT_EQ(of(s).metallic, 1);
+  EXPECT_FLOAT_EQ(of(s).alpha, 1);
+}
+
+TEST_F(Gltf, MaterialValuesOutOfTheirRangeAreRefusedByName) {
+  auto with = [](json m) {
+    Doc d;
+    d.j["materials"][0] = m;
+    return d;
+  };
+  expect_error(with({{"pbrMetallicRoughness", {{"metallicFactor", 1.5}}}}),
+               "materials[0]: metallicFactor 1.500000 is outside [0, 1]");
+  expect_error(with({{"pbrMetallicRoughness", {{"baseColorFactor", {1, -2, 0, 1}}}}}),
+               "baseColorFactor component -2.000000 is out of range");
+  expect_error(with({{"extensions", {{"KHR_materials_ior", {{"ior", 0.5}}}}}}), "ior 0.500000 out of range [1, 10)");
+  expect_error(with({{"extensions", {{"KHR_materials_transmission", {{"transmissionFactor", "all"}}}}}}),
+               "KHR_materials_transmission.transmissionFactor is not a number");
+  expect_error(with({{"extensions", {{"KHR_materials_volume", {{"attenuationDistance", 0}}}}}}),
+               "attenuationDistance must be positive");
+  expect_error(with({{"extensions", {{"KHR_materials_volume", {{"thicknessFactor", -1}}}}}}),
+               "thicknessFactor is negative");
+  expect_error(with({{"extensions", {{"KHR_materials_emissive_strength", {{"emissiveStrength", -3}}}}}}),
+               "emissiveStrength is negative");
 }
 
 TEST_F(Gltf, BaseColourTextureWithSamplerWrapModes) {
@@ -254,7 +283,7 @@ TEST_F(Gltf, BaseColourTextureWithSamplerWrapModes) {
   const Texture& t = s.textures[0];
   EXPECT_EQ(t.wrap_s, Texture::Wrap::kClamp);
   EXPECT_EQ(t.wrap_t, Texture::Wrap::kMirror);
-  EXPECT_EQ(s.materials[s.meshes[0].material].texture, 0);
+  EXPECT_EQ(s.materials[s.meshes[0].material].texture.index, 0);
   EXPECT_NEAR(t.sample({0.25f, 0.5f}).r, 1, 1e-6);  // texel centre of the red texel
   EXPECT_NEAR(t.sample({0.75f, 0.5f}).b, 1, 1e-6);
   EXPECT_NEAR(t.sample({7.0f, 0.5f}).b, 1, 1e-6);   // clamped to the right edge

@@ -27,8 +27,9 @@ constexpr int kMaxNodeDepth = 256;
 // 1 W = 683 lm at 555 nm: KHR_lights_punctual's photometric units to our radiometric RGB.
 constexpr double kLumensPerWatt = 683.0;
 
-const std::set<std::string> kSupportedExtensions = {"KHR_lights_punctual", "KHR_materials_transmission",
-                                                    "KHR_materials_ior", "KHR_materials_emissive_strength"};
+const std::set<std::string> kSupportedExtensions = {
+    "KHR_lights_punctual", "KHR_materials_transmission",      "KHR_materials_ior",
+    "KHR_materials_volume", "KHR_materials_emissive_strength", "KHR_texture_transform"};
 
 std::string read_file(const std::string& path, const std::string& file_for_errors) {
   std::error_code ec;
@@ -556,101 +557,163 @@ class GltfLoader {
   }
 
   // ---- materials (docs/gltf.md) --------------------------------------------------------
+  // A number of a material extension, when the file gives one; NaN or infinity refused.
+  static const tinygltf::Value* ext_value(const tinygltf::ExtensionMap& exts, const char* ext, const char* key) {
+    auto it = exts.find(ext);
+    if (it == exts.end() || !it->second.IsObject() || !it->second.Has(key)) return nullptr;
+    return &it->second.Get(key);
+  }
+  double ext_number(const tinygltf::ExtensionMap& exts, const char* ext, const char* key, double fallback,
+                    const std::string& el) const {
+    const tinygltf::Value* v = ext_value(exts, ext, key);
+    if (!v) return fallback;
+    if (!v->IsNumber()) fail(el, std::string(ext) + "." + key + " is not a number");
+    const double d = v->GetNumberAsDouble();
+    if (!std::isfinite(d)) fail(el, std::string(ext) + "." + key + " is not finite");
+    return d;
+  }
+  // A factor the specification bounds to [0, 1]: out of range refused.
+  double unit_factor(double v, const std::string& el, const std::string& what) const {
+    if (!(v >= 0 && v <= 1)) fail(el, what + " " + std::to_string(v) + " is outside [0, 1]");
+    return v;
+  }
+  Rgb color_factor(const std::vector<double>& f, Rgb fallback, const std::string& el, const std::string& what,
+                   double hi = 1) const {
+    if (f.empty()) return fallback;
+    if (f.size() < 3) fail(el, what + " has " + std::to_string(f.size()) + " numbers, expected 3 or 4");
+    for (size_t i = 0; i < 3; ++i)
+      if (!(f[i] >= 0 && f[i] <= hi)) fail(el, what + " component " + std::to_string(f[i]) + " is out of range");
+    return Rgb(float(f[0]), float(f[1]), float(f[2]));
+  }
+
+  // A textureInfo: the texture, its KHR_texture_transform, and a warning for a texCoord
+  // other than 0 (only TEXCOORD_0 is read).
+  TextureRef texture_ref(int index, int tex_coord, const tinygltf::ExtensionMap& exts, bool srgb,
+                         const std::string& el, const std::string& what) {
+    TextureRef r;
+    if (index < 0) return r;
+    r.index = load_texture(index, el + " " + what, srgb);
+    if (auto it = exts.find("KHR_texture_transform"); it != exts.end() && it->second.IsObject()) {
+      const tinygltf::Value& t = it->second;
+      auto pair = [&](const char* key, double x, double y) -> std::pair<double, double> {
+        if (!t.Has(key)) return {x, y};
+        const tinygltf::Value& v = t.Get(key);
+        if (!v.IsArray() || v.ArrayLen() != 2 || !v.Get(0).IsNumber() || !v.Get(1).IsNumber())
+          fail(el, what + " KHR_texture_transform." + key + " is not two numbers");
+        const double a = v.Get(0).GetNumberAsDouble(), b = v.Get(1).GetNumberAsDouble();
+        if (!std::isfinite(a) || !std::isfinite(b)) fail(el, what + " KHR_texture_transform." + key + " is not finite");
+        return {a, b};
+      };
+      const auto [ox, oy] = pair("offset", 0, 0);
+      const auto [sx, sy] = pair("scale", 1, 1);
+      double rot = 0;
+      if (t.Has("rotation")) {
+        if (!t.Get("rotation").IsNumber() || !std::isfinite(t.Get("rotation").GetNumberAsDouble()))
+          fail(el, what + " KHR_texture_transform.rotation is not a finite number");
+        rot = t.Get("rotation").GetNumberAsDouble();
+      }
+      // uv' = T R S uv, R = [cos sin; -sin cos] (the extension's matrix).
+      const double c = std::cos(rot), sn = std::sin(rot);
+      const double m[6] = {c * sx, sn * sy, ox, -sn * sx, c * sy, oy};
+      for (int i = 0; i < 6; ++i) r.xform[i] = float(m[i]);
+      if (t.Has("texCoord") && t.Get("texCoord").IsInt()) tex_coord = t.Get("texCoord").GetNumberAsInt();
+    }
+    if (tex_coord > 0)
+      warn_once(el + ": " + what + " uses TEXCOORD_" + std::to_string(tex_coord) + "; TEXCOORD_0 is used");
+    return r;
+  }
+
   uint32_t material(int index) {
     if (auto it = materials_.find(index); it != materials_.end()) return it->second;
     Material m;
-    std::string el = "materials[" + std::to_string(index) + "]";
-    Rgb base(1.0f);
-    double metallic = 1, roughness = 1, transmission = 0, ior = 1.5, strength = 1;
+    m.kind = Material::Kind::kPbr;
+    const std::string el = "materials[" + std::to_string(index) + "]";
+    // No material: the specification's default, white, metallic 1, roughness 1.
+    m.reflectance = Rgb(1.0f);
+    m.metallic = 1;
+    m.roughness = 1;
     Rgb emissive(0.0f);
+    double strength = 1;
     bool double_sided = false;
-    int texture = -1;
+    TextureRef emissive_texture;
     if (index >= 0) {
       if (size_t(index) >= model_.materials.size()) fail(el, "does not exist");
       const tinygltf::Material& g = model_.materials[size_t(index)];
       m.name = g.name;
       const auto& pbr = g.pbrMetallicRoughness;
-      if (pbr.baseColorFactor.size() >= 3)
-        base = Rgb(float(pbr.baseColorFactor[0]), float(pbr.baseColorFactor[1]), float(pbr.baseColorFactor[2]));
-      metallic = pbr.metallicFactor;
-      roughness = pbr.roughnessFactor;
-      if (g.emissiveFactor.size() >= 3)
-        emissive = Rgb(float(g.emissiveFactor[0]), float(g.emissiveFactor[1]), float(g.emissiveFactor[2]));
+      m.reflectance = color_factor(pbr.baseColorFactor, Rgb(1.0f), el, "baseColorFactor");
+      m.metallic = float(unit_factor(pbr.metallicFactor, el, "metallicFactor"));
+      m.roughness = float(unit_factor(pbr.roughnessFactor, el, "roughnessFactor"));
+      emissive = color_factor(g.emissiveFactor, Rgb(0.0f), el, "emissiveFactor");
       double_sided = g.doubleSided;
-      auto number = [&](const char* ext, const char* key, double* out) {
-        auto it = g.extensions.find(ext);
-        if (it != g.extensions.end() && it->second.Has(key) && it->second.Get(key).IsNumber())
-          *out = it->second.Get(key).GetNumberAsDouble();
-      };
-      number("KHR_materials_transmission", "transmissionFactor", &transmission);
-      number("KHR_materials_ior", "ior", &ior);
-      number("KHR_materials_emissive_strength", "emissiveStrength", &strength);
-      if (pbr.baseColorTexture.index >= 0) texture = load_texture(pbr.baseColorTexture.index, el);
-      if (pbr.baseColorTexture.texCoord > 0)
-        warn_once(el + ": baseColorTexture uses TEXCOORD_" + std::to_string(pbr.baseColorTexture.texCoord) +
-                  "; TEXCOORD_0 is used");
-      if (pbr.metallicRoughnessTexture.index >= 0)
-        warn_once(el + ": metallicRoughnessTexture is not supported; the factors are used");
-      if (g.emissiveTexture.index >= 0) warn_once(el + ": emissiveTexture is not supported; emissiveFactor is used");
-      if (g.normalTexture.index >= 0) warn_once(el + ": normalTexture is not supported; ignored");
+      const auto& ex = g.extensions;
+      strength = ext_number(ex, "KHR_materials_emissive_strength", "emissiveStrength", 1, el);
+      if (!(strength >= 0)) fail(el, "KHR_materials_emissive_strength.emissiveStrength is negative");
+      m.transmission = float(unit_factor(
+          ext_number(ex, "KHR_materials_transmission", "transmissionFactor", 0, el), el, "transmissionFactor"));
+      const double ior = ext_number(ex, "KHR_materials_ior", "ior", 1.5, el);
+      if (!(ior >= 1 && ior < 10)) fail(el, "KHR_materials_ior ior " + std::to_string(ior) + " out of range [1, 10)");
+      m.ior = float(ior);
+      // KHR_materials_volume: thickness > 0 makes a solid; absorption from the attenuation
+      // colour reached after the attenuation distance: sigma = -ln(colour) / distance.
+      const double thickness = ext_number(ex, "KHR_materials_volume", "thicknessFactor", 0, el);
+      if (!(thickness >= 0)) fail(el, "KHR_materials_volume.thicknessFactor is negative");
+      m.thin = thickness == 0;
+      const double distance = ext_number(ex, "KHR_materials_volume", "attenuationDistance", HUGE_VAL, el);
+      if (!(distance > 0)) fail(el, "KHR_materials_volume.attenuationDistance must be positive");
+      Rgb att(1.0f);
+      if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_volume", "attenuationColor")) {
+        std::vector<double> f;
+        if (v->IsArray())
+          for (size_t i = 0; i < v->ArrayLen(); ++i) f.push_back(v->Get(int(i)).IsNumber() ? v->Get(int(i)).GetNumberAsDouble() : NAN);
+        att = color_factor(f, Rgb(1.0f), el, "KHR_materials_volume.attenuationColor");
+      }
+      if (!m.thin && std::isfinite(distance)) {
+        auto sigma = [&](float c) { return float(-std::log(std::max(double(c), 1e-30)) / distance); };
+        m.absorption = Rgb(sigma(att.r), sigma(att.g), sigma(att.b));
+      }
+      m.texture = texture_ref(pbr.baseColorTexture.index, pbr.baseColorTexture.texCoord,
+                              pbr.baseColorTexture.extensions, true, el, "baseColorTexture");
+      m.metal_rough_texture =
+          texture_ref(pbr.metallicRoughnessTexture.index, pbr.metallicRoughnessTexture.texCoord,
+                      pbr.metallicRoughnessTexture.extensions, false, el, "metallicRoughnessTexture");
+      m.normal_texture = texture_ref(g.normalTexture.index, g.normalTexture.texCoord, g.normalTexture.extensions,
+                                     false, el, "normalTexture");
+      m.normal_scale = float(g.normalTexture.scale);
+      if (!std::isfinite(m.normal_scale)) fail(el, "normalTexture.scale is not finite");
+      emissive_texture = texture_ref(g.emissiveTexture.index, g.emissiveTexture.texCoord,
+                                     g.emissiveTexture.extensions, true, el, "emissiveTexture");
+      if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_transmission", "transmissionTexture"))
+        if (v->IsObject() && v->Has("index"))
+          warn_once(el + ": transmissionTexture is not supported; transmissionFactor is used");
       if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty())
         warn_once(el + ": alphaMode " + g.alphaMode + " is rendered opaque");
     }
-    for (double* v : {&metallic, &roughness, &transmission})
-      if (!std::isfinite(*v)) *v = 0;
-    metallic = std::clamp(metallic, 0.0, 1.0);
-    roughness = std::clamp(roughness, 0.0, 1.0);
-    transmission = std::clamp(transmission, 0.0, 1.0);
+    m.alpha = m.roughness * m.roughness;  // glTF's alpha = roughness^2
     const Rgb radiance = emissive * float(strength);
-    auto between = [](double v) { return v > 0.02 && v < 0.98; };
     if (!radiance.is_black()) {
+      const Rgb base = m.reflectance;
+      const std::string name = m.name;
+      m = Material();
       m.kind = Material::Kind::kEmission;  // emitters do not reflect (docs/gltf.md)
+      m.name = name;
+      m.reflectance = base;
       m.radiance = radiance;
       m.two_sided_emission = double_sided;
-    } else if (transmission >= 0.5) {
-      m.kind = Material::Kind::kGlass;
-      m.ior = float(ior);
-      m.reflectance = Rgb(1.0f);
-      m.transmittance = base;
-      if (!(m.ior >= 1.0f && m.ior < 10)) fail(el, "KHR_materials_ior ior " + std::to_string(ior) + " out of range");
-      if (roughness > 0.02) warn_once(el + ": rough transmission rendered as smooth glass");
-      if (between(transmission))
-        warn_once(el + ": transmission " + std::to_string(transmission) + " rounded to 1 (glass)");
-    } else if (metallic >= 0.5) {
-      // F0 = base colour. Our conductor takes eta and k: with eta = 1, F0 = k^2 / (4 + k^2).
-      if (roughness < 0.02) {
-        m.kind = Material::Kind::kMirror;
-        m.reflectance = base;
-      } else {
-        m.kind = Material::Kind::kMicrofacet;
-        m.alpha = float(roughness * roughness);  // glTF's alpha = roughness^2
-        m.eta = Rgb(1.0f);
-        auto k_of = [](float f0) {
-          f0 = std::clamp(f0, 0.0f, 0.999f);
-          return 2 * std::sqrt(f0 / (1 - f0));
-        };
-        m.k = Rgb(k_of(base.r), k_of(base.g), k_of(base.b));
-      }
-      if (between(metallic)) warn_once(el + ": metallic " + std::to_string(metallic) + " rounded to 1 (metal)");
-      if (texture >= 0) warn_once(el + ": base colour texture on a metal is not supported; baseColorFactor is used");
-      texture = -1;
-    } else {
-      m.kind = Material::Kind::kDiffuse;
-      m.reflectance = base;
-      m.texture = texture;
-      if (between(metallic)) warn_once(el + ": metallic " + std::to_string(metallic) + " rounded to 0 (diffuse)");
-      if (transmission > 0.02)
-        warn_once(el + ": transmission " + std::to_string(transmission) + " rounded to 0 (opaque)");
+      m.emissive_texture = emissive_texture;
     }
     const uint32_t id = scene_.add_material(std::move(m));
     materials_[index] = id;
     return id;
   }
 
-  int load_texture(int index, const std::string& el) {
+  // Colour textures (base colour, emission) are sRGB-encoded, data (metallic-roughness,
+  // normals) linear: a texture used both ways is decoded twice.
+  int load_texture(int index, const std::string& el, bool srgb) {
     if (index < 0 || size_t(index) >= model_.textures.size())
       fail(el, "texture " + std::to_string(index) + " does not exist");
-    if (auto it = textures_.find(index); it != textures_.end()) return it->second;
+    const int key = 2 * index + (srgb ? 1 : 0);
+    if (auto it = textures_.find(key); it != textures_.end()) return it->second;
     const tinygltf::Texture& t = model_.textures[size_t(index)];
     const std::string tel = "textures[" + std::to_string(index) + "]";
     if (t.source < 0 || size_t(t.source) >= model_.images.size())
@@ -662,9 +725,9 @@ class GltfLoader {
     tex.width = img.width;
     tex.height = img.height;
     tex.texels.resize(size_t(img.width) * size_t(img.height));
-    for (size_t i = 0; i < tex.texels.size(); ++i)  // base colour textures are sRGB-encoded
-      tex.texels[i] = Rgb(srgb_to_linear(img.image[4 * i] / 255.0f), srgb_to_linear(img.image[4 * i + 1] / 255.0f),
-                          srgb_to_linear(img.image[4 * i + 2] / 255.0f));
+    auto decode = [srgb](unsigned char c) { return srgb ? srgb_to_linear(c / 255.0f) : c / 255.0f; };
+    for (size_t i = 0; i < tex.texels.size(); ++i)
+      tex.texels[i] = Rgb(decode(img.image[4 * i]), decode(img.image[4 * i + 1]), decode(img.image[4 * i + 2]));
     if (t.sampler >= 0) {
       if (size_t(t.sampler) >= model_.samplers.size())
         fail(tel, "sampler " + std::to_string(t.sampler) + " does not exist");
@@ -682,7 +745,7 @@ class GltfLoader {
       tex.wrap_t = wrap(model_.samplers[size_t(t.sampler)].wrapT);
     }
     scene_.textures.push_back(std::move(tex));
-    return textures_[index] = int(scene_.textures.size() - 1);
+    return textures_[key] = int(scene_.textures.size() - 1);
   }
 
   // ---- cameras and lights ------------------------------------------------------------
