@@ -61,6 +61,12 @@ Rgb schlick(Rgb f0, float c) {
 
 float luminance(Rgb c) { return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b; }
 
+bool pbr_smooth(const Material& m) { return m.alpha < Material::kSmoothAlpha; }
+
+// The glass component's Fresnel at cosine c against the outward normal: a solid's inside
+// sees the inverse index (total internal reflection); a thin wall has air on both sides.
+float glass_fresnel(const Material& m, float c) { return fresnel_dielectric(m.thin ? std::fabs(c) : c, m.ior); }
+
 // Lobe probabilities for wo: specular reflection, diffuse, transmission (sum 1).
 struct PbrLobes {
   float spec = 0, diffuse = 0, trans = 0;
@@ -68,21 +74,25 @@ struct PbrLobes {
 PbrLobes pbr_lobes(const Material& m, Vec3 wo) {
   const PbrWeights w = pbr_weights(m);
   const float c = std::fabs(wo.z);
-  const float fc = fresnel_dielectric(c, m.ior), fg = fresnel_dielectric(wo.z, m.ior);
+  const float fc = fresnel_dielectric(c, m.ior), fg = glass_fresnel(m, wo.z);
   const float base = luminance(m.reflectance);
   PbrLobes p;
-  // Floors keep every lobe that can be non-zero samplable (an unbiased mixture needs it).
-  p.spec = std::max(w.metal * luminance(schlick(m.reflectance, c)) + w.coat * fc + w.glass * fg, 0.05f);
+  p.spec = w.metal * luminance(schlick(m.reflectance, c)) + w.coat * fc + w.glass * fg;
+  p.trans = w.glass > 0 ? w.glass * (1 - fg) * base : 0;
+  // Floors keep every rough lobe that can be non-zero samplable (an unbiased mixture needs
+  // it). A smooth lobe's albedo is exact, so a delta lobe of albedo 0 is never chosen.
+  if (!pbr_smooth(m)) {
+    p.spec = std::max(p.spec, 0.05f);
+    if (w.glass > 0 && base > 0) p.trans = std::max(p.trans, 0.02f);
+  }
   if (w.coat > 0 && base > 0) p.diffuse = std::max(w.coat * (1 - fc) * base, 0.02f);
-  if (w.glass > 0 && base > 0) p.trans = std::max(w.glass * (1 - fg) * base, 0.02f);
   const float sum = p.spec + p.diffuse + p.trans;
+  if (!(sum > 0)) return PbrLobes{};
   p.spec /= sum;
   p.diffuse /= sum;
   p.trans /= sum;
   return p;
 }
-
-bool pbr_smooth(const Material& m) { return m.alpha < Material::kSmoothAlpha; }
 
 // Half vector of a reflection, facing +z; false if degenerate or back-facing.
 bool reflection_half(Vec3 wo, Vec3 wi, Vec3* h) {
@@ -124,7 +134,7 @@ Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
     if (smooth) return f;
     const float spec = g.d(h) * g.g2(wo, wi) / (4 * std::fabs(co * ci));
     if (w.metal > 0) f += schlick(m.reflectance, std::fabs(oh)) * (w.metal * spec);
-    const float fd = w.coat * fresnel_dielectric(std::fabs(oh), m.ior) + w.glass * fresnel_dielectric(oh, m.ior);
+    const float fd = w.coat * fresnel_dielectric(std::fabs(oh), m.ior) + w.glass * glass_fresnel(m, oh);
     return f + Rgb(fd * spec);
   }
   if (w.glass <= 0 || smooth) return Rgb(0);
@@ -133,14 +143,14 @@ Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
     Vec3 h;
     if (!reflection_half(wo, wr, &h)) return Rgb(0);
     const float spec = g.d(h) * g.g2(wo, wr) / (4 * std::fabs(co * ci));
-    return m.reflectance * (w.glass * (1 - fresnel_dielectric(dot(wo, h), m.ior)) * spec);
+    return m.reflectance * (w.glass * (1 - glass_fresnel(m, dot(wo, h))) * spec);
   }
   Vec3 h;
   float etap;
   if (!refraction_half(m, wo, wi, &h, &etap)) return Rgb(0);
   const float oh = dot(wo, h), ih = dot(wi, h);
   const float denom = (ih + oh / etap) * (ih + oh / etap) * ci * co;
-  const float ft = g.d(h) * (1 - fresnel_dielectric(oh, m.ior)) * g.g2(wo, wi) * std::fabs(ih * oh / denom);
+  const float ft = g.d(h) * (1 - glass_fresnel(m, oh)) * g.g2(wo, wi) * std::fabs(ih * oh / denom);
   return m.reflectance * (w.glass * ft / (etap * etap));  // radiance scaled by 1/eta^2, as glass
 }
 
@@ -176,6 +186,7 @@ bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) 
   const float co = wo.z;
   if (co == 0) return false;
   const PbrLobes p = pbr_lobes(m, wo);
+  if (p.spec + p.diffuse + p.trans <= 0) return false;  // black: nothing scatters
   const PbrWeights w = pbr_weights(m);
   const bool smooth = pbr_smooth(m);
   const Vec3 wo_up = co > 0 ? wo : -wo;
@@ -190,11 +201,11 @@ bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) 
     const float c = std::fabs(co);
     if (u1 < p.diffuse + p.spec) {
       out->wi = reflect_z(wo);
-      const float fd = w.coat * fresnel_dielectric(c, m.ior) + w.glass * fresnel_dielectric(co, m.ior);
+      const float fd = w.coat * fresnel_dielectric(c, m.ior) + w.glass * glass_fresnel(m, co);
       out->weight = (schlick(m.reflectance, c) * w.metal + Rgb(fd)) / p.spec;
       return true;
     }
-    const float t = w.glass * (1 - fresnel_dielectric(co, m.ior)) / p.trans;
+    const float t = w.glass * (1 - glass_fresnel(m, co)) / p.trans;
     if (m.thin) {
       out->wi = -wo;
       out->weight = m.reflectance * t;
