@@ -265,16 +265,20 @@ TEST_F(Gltf, MaterialValuesOutOfTheirRangeAreRefusedByName) {
                "emissiveStrength is negative");
 }
 
-TEST_F(Gltf, BaseColourTextureWithSamplerWrapModes) {
-  // A 2x1 PNG: red, then blue (sRGB 255 -> linear 1).
-  const unsigned char png[] = {0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x48,
+// A 2x1 PNG: red, then blue (sRGB 255 -> linear 1).
+const unsigned char kRedBluePng[] = {0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x48,
                                0x44, 0x52, 0x00, 0x00, 0x00, 0x02, 0x00, 0x00, 0x00, 0x01, 0x08, 0x02, 0x00, 0x00,
                                0x00, 0x7b, 0x40, 0xe8, 0xdd, 0x00, 0x00, 0x00, 0x0d, 0x49, 0x44, 0x41, 0x54, 0x78,
                                0x9c, 0x63, 0xf8, 0xcf, 0x00, 0x04, 0xff, 0x01, 0x07, 0x00, 0x01, 0xff, 0xe2, 0x23,
                                0x9e, 0x59, 0x00, 0x00, 0x00, 0x00, 0x49, 0x45, 0x4e, 0x44, 0xae, 0x42, 0x60, 0x82};
+
+std::string red_blue_png_uri() {
+  return "data:image/png;base64," + base64(std::string(reinterpret_cast<const char*>(kRedBluePng), sizeof kRedBluePng));
+}
+
+TEST_F(Gltf, BaseColourTextureWithSamplerWrapModes) {
   Doc d;
-  d.j["images"] = {
-      {{"uri", "data:image/png;base64," + base64(std::string(reinterpret_cast<const char*>(png), sizeof png))}}};
+  d.j["images"] = {{{"uri", red_blue_png_uri()}}};
   d.j["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33648}}};  // clamp, mirrored
   d.j["textures"] = {{{"source", 0}, {"sampler", 0}}};
   d.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
@@ -288,6 +292,51 @@ TEST_F(Gltf, BaseColourTextureWithSamplerWrapModes) {
   EXPECT_NEAR(t.sample({0.75f, 0.5f}).b, 1, 1e-6);
   EXPECT_NEAR(t.sample({7.0f, 0.5f}).b, 1, 1e-6);   // clamped to the right edge
   EXPECT_NEAR(t.sample({-3.0f, 0.5f}).r, 1, 1e-6);  // clamped to the left edge
+}
+
+TEST_F(Gltf, MetallicRoughnessNormalAndEmissiveTexturesWithTextureTransform) {
+  Doc d;
+  d.j["images"] = {{{"uri", red_blue_png_uri()}}};
+  d.j["textures"] = {{{"source", 0}}};
+  json& m = d.j["materials"][0];
+  m["pbrMetallicRoughness"]["metallicFactor"] = 0.8;
+  m["pbrMetallicRoughness"]["roughnessFactor"] = 0.5;
+  m["pbrMetallicRoughness"]["baseColorTexture"]["index"] = 0;
+  json& mr = m["pbrMetallicRoughness"]["metallicRoughnessTexture"];
+  mr["index"] = 0;
+  mr["extensions"]["KHR_texture_transform"] = {{"offset", {0.5, 0}}, {"scale", {2, 1}}, {"rotation", 0}};
+  m["normalTexture"] = {{"index", 0}, {"scale", 0.5}};
+  const Scene s = load(d);
+  // One image, decoded twice: sRGB for colour, linear for data.
+  ASSERT_EQ(s.textures.size(), 2u);
+  const Material& mat = s.materials[s.meshes[0].material];
+  EXPECT_NE(mat.texture.index, mat.metal_rough_texture.index);
+  EXPECT_EQ(mat.metal_rough_texture.index, mat.normal_texture.index);
+  EXPECT_FLOAT_EQ(mat.normal_scale, 0.5f);
+  EXPECT_FLOAT_EQ(mat.metal_rough_texture.xform[0], 2);  // u' = 2 u + 0.5
+  EXPECT_FLOAT_EQ(mat.metal_rough_texture.xform[2], 0.5f);
+  // At u = 0: the transform reads u' = 0.5, between the texels; at u = 0.125, u' = 0.75,
+  // the blue texel: G = 0 (roughness 0), B = 1 (metallic = the factor).
+  const Material at_blue = s.textured(mat, {0.125f, 0.5f});
+  EXPECT_NEAR(at_blue.metallic, 0.8f, 1e-6);
+  EXPECT_NEAR(at_blue.roughness, 0, 1e-6);
+  EXPECT_NEAR(at_blue.alpha, 0, 1e-6);
+  // The base colour texture has no transform: read at u = 0.125 itself.
+  EXPECT_NEAR(at_blue.reflectance.r, mat.reflectance.r * s.textures[size_t(mat.texture.index)].sample({0.125f, 0.5f}).r,
+              1e-6);
+  // An emissive texture multiplies the emissive factor.
+  Doc e;
+  e.j["images"] = {{{"uri", red_blue_png_uri()}}};
+  e.j["textures"] = {{{"source", 0}}};
+  e.j["materials"][0] = {{"emissiveFactor", {1, 1, 1}}, {"emissiveTexture", {{"index", 0}}}};
+  const Scene se = load(e);
+  const Material& em = se.materials[se.meshes[0].material];
+  ASSERT_EQ(em.kind, Material::Kind::kEmission);
+  EXPECT_NEAR(se.textured(em, {0.75f, 0.5f}).radiance.b, 1, 1e-6);
+  EXPECT_NEAR(se.textured(em, {0.75f, 0.5f}).radiance.r, 0, 1e-6);
+  // A malformed transform that is used is refused by name.
+  m["pbrMetallicRoughness"]["metallicRoughnessTexture"]["extensions"]["KHR_texture_transform"]["offset"] = {1};
+  expect_error(d, "metallicRoughnessTexture KHR_texture_transform.offset is not two numbers");
 }
 
 TEST(TextureWrap, RepeatMirrorAndClamp) {
