@@ -3,6 +3,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
+#include <filesystem>
 #include <functional>
 #include <set>
 #include <thread>
@@ -286,7 +287,7 @@ int report_submitted(const std::string& id, const v1::JobStatus& final, const st
 int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const FarmContext& c) {
   v1::SubmitJobRequest req;
   req.set_version(kProtocolVersion);
-  *req.mutable_settings() = to_proto(to_settings(r.flags));
+  RenderSettings settings = to_settings(r.flags);
   const std::vector<int> frames = sequence_frames(r.flags);
   for (const int f : frames) req.add_frames(f);
   const auto outputs = output_paths(r.flags);
@@ -294,9 +295,18 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
   std::string main;
   try {
     pack_scene(r.flags.scene, &main, req.mutable_files());
+    if (!settings.environment_map.empty()) {
+      // The environment map travels in the bundle, named apart from the scene's own files;
+      // workers find it relative to the main file.
+      v1::SceneFile* f = req.mutable_files()->Add();
+      f->set_path(".tessera-env/" + std::filesystem::path(settings.environment_map).filename().string());
+      f->set_content(read_file_bytes(settings.environment_map));
+      settings.environment_map = f->path();
+    }
   } catch (const std::exception& e) {
     throw FarmError(e.what());
   }
+  *req.mutable_settings() = to_proto(settings);
   req.set_main_file(main);
   req.set_priority(r.priority);
   req.set_name(r.name.empty() ? r.flags.scene : r.name);

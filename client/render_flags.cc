@@ -1,6 +1,7 @@
 #include "client/render_flags.h"
 
 #include <cmath>
+#include <filesystem>
 
 #include "core/io/files.h"
 #include "core/render/frames.h"
@@ -35,6 +36,13 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
   cmd->add_option("--env-color", f.env_color,
                   "A uniform environment around the scene: radiance R G B from every direction")
       ->expected(3);
+  cmd->add_option("-e,--env", f.env,
+                  "Environment map around the scene: a lat-long .exr or .hdr image (CS184's -e), importance sampled")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--env-strength", s.environment_strength, "Scales the environment (image, colour or default)")
+      ->capture_default_str();
+  cmd->add_option("--env-rotate", s.environment_rotation, "Turns the environment map by DEGREES about +Y")
+      ->capture_default_str();
   cmd->add_flag("--no-default-env", f.no_default_env,
                 "No neutral environment for a glTF scene without lights (it renders black)");
   cmd->add_option("--animation", s.animation,
@@ -78,6 +86,7 @@ RenderSettings to_settings(const RenderFlags& f) {
   s.mis = !f.no_mis;
   if (!f.env_color.empty()) s.environment = Rgb(f.env_color[0], f.env_color[1], f.env_color[2]);
   s.default_environment = !f.no_default_env;
+  if (!f.env.empty()) s.environment_map = std::filesystem::absolute(f.env).string();
   try {
     if (!f.camera_path.empty() || f.turntable != 0) {
       CameraPath path;

@@ -21,7 +21,8 @@ struct RenderFlags {
   std::vector<std::string> outputs;
   std::string frames;            // --frames: a sequence
   std::string camera_path;       // --camera-path FILE
-  std::vector<float> env_color;  // --env-color R G B
+  std::vector<float> env_color;
+  std::string env;  // --env FILE  // --env-color R G B
   bool no_default_env = false;
   double turntable = 0;  // --turntable FRAMES: one turn in this many frames
 };

@@ -7,8 +7,17 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <filesystem>
 
 namespace tessera {
+
+bool bundle_relative(const std::string& path) {
+  const std::filesystem::path p(path);
+  if (p.empty() || p.is_absolute() || path.find('\0') != std::string::npos) return false;
+  for (const auto& part : p)
+    if (part == "..") return false;
+  return true;
+}
 
 v1::RenderSettings to_proto(const RenderSettings& s) {
   v1::RenderSettings p;
@@ -26,6 +35,9 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   if (s.environment)
     for (const float c : {s.environment->r, s.environment->g, s.environment->b}) p.add_environment(c);
   p.set_no_default_environment(!s.default_environment);
+  p.set_environment_map(s.environment_map);
+  if (s.environment_strength != 1) p.set_environment_strength(s.environment_strength);
+  p.set_environment_rotation(s.environment_rotation);
   p.set_pass_spp(uint32_t(s.pass_spp));
   p.set_width(uint32_t(s.camera.width));
   p.set_height(uint32_t(s.camera.height));
@@ -58,6 +70,12 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
     throw WireError("render settings: environment needs 3 values, got " + std::to_string(p.environment_size()));
   if (p.environment_size() == 3) s.environment = Rgb(p.environment(0), p.environment(1), p.environment(2));
   s.default_environment = !p.no_default_environment();
+  s.environment_map = p.environment_map();
+  if (!s.environment_map.empty() && !bundle_relative(s.environment_map))
+    throw WireError("render settings: environment_map '" + s.environment_map.substr(0, 256) +
+                    "' must name a file inside the scene bundle (a relative path without ..)");
+  if (p.has_environment_strength()) s.environment_strength = p.environment_strength();
+  s.environment_rotation = p.environment_rotation();
   s.pass_spp = i(p.pass_spp());
   s.camera.width = i(p.width());
   s.camera.height = i(p.height());

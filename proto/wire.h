@@ -25,6 +25,8 @@ class WireError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// A path that stays inside a folder when joined to it: relative, no "..", no NUL.
+bool bundle_relative(const std::string& path);
 v1::RenderSettings to_proto(const RenderSettings& s);
 // Throws WireError with RenderSettings::validate()'s message for settings out of range.
 RenderSettings from_proto(const v1::RenderSettings& p);

@@ -3,7 +3,6 @@
 #include <OpenEXR/ImfChannelList.h>
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
-#include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStringAttribute.h>
 #include <stb/stb_image_write.h>
@@ -120,32 +119,6 @@ void write_image(const std::string& path, const Film& film, const ImageMetadata&
   if (ends_with(path, ".exr")) return write_exr(path, film, metadata);
   if (ends_with(path, ".png")) return write_png(path, film);
   throw std::runtime_error(path + ": unknown image format (use .exr or .png)");
-}
-
-ExrImage read_exr(const std::string& path) {
-  ExrImage img;
-  try {
-    Imf::InputFile file(path.c_str());
-    const Imath::Box2i dw = file.header().dataWindow();
-    img.width = dw.max.x - dw.min.x + 1;
-    img.height = dw.max.y - dw.min.y + 1;
-    Imf::FrameBuffer fb;
-    for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it) {
-      std::vector<float>& data = img.channels[it.name()];
-      data.resize(size_t(img.width) * img.height);
-      char* base = reinterpret_cast<char*>(data.data()) -
-                   (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y) * img.width) * ptrdiff_t(sizeof(float));
-      fb.insert(it.name(), Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(img.width)));
-    }
-    file.setFrameBuffer(fb);
-    file.readPixels(dw.min.y, dw.max.y);
-    for (auto it = file.header().begin(); it != file.header().end(); ++it)
-      if (const auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute()))
-        img.metadata[it.name()] = s->value();
-  } catch (const std::exception& e) {
-    throw std::runtime_error(path + ": cannot read EXR: " + e.what());
-  }
-  return img;
 }
 
 }  // namespace tessera

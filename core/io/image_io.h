@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "core/render/film.h"
+#include "core/scene/image_read.h"  // read_exr
 
 namespace tessera {
 
@@ -22,12 +23,6 @@ std::string encode_png(int w, int h, const float* r, const float* g, const float
 // Picks the format from the extension (.exr or .png); throws on anything else.
 void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata);
 
-struct ExrImage {
-  int width = 0, height = 0;
-  std::map<std::string, std::vector<float>> channels;  // row-major, row 0 at the top
-  ImageMetadata metadata;
-};
-ExrImage read_exr(const std::string& path);
 
 // sRGB transfer of a linear value, clamped to [0, 1], as an 8-bit code.
 uint8_t srgb_byte(float linear);

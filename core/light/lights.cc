@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 
+#include "core/light/environment.h"
 #include "core/sampling/warp.h"
 
 namespace tessera {
@@ -146,8 +147,13 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
       return true;
     }
     case Light::Kind::kEnvironment: {
-      out->wi = square_to_uniform_sphere(u);
       out->dist = std::numeric_limits<float>::infinity();
+      if (l.map) {
+        if (!l.map->sample(u, &out->wi, &out->pdf)) return false;
+        out->li = l.color * l.map->radiance(out->wi);
+        return true;
+      }
+      out->wi = square_to_uniform_sphere(u);
       out->pdf = kUniformSpherePdf;
       out->li = l.color;
       return true;
@@ -181,13 +187,13 @@ float LightSet::pdf_area_hit(size_t i, Vec3 p, Vec3 q, Vec3 nq, float dist) cons
 
 Rgb LightSet::infinite_le(size_t i, Vec3 dir) const {
   const Light& l = lights_[i];
-  if (l.kind == Light::Kind::kEnvironment) return l.color;
+  if (l.kind == Light::Kind::kEnvironment) return l.map ? l.color * l.map->radiance(dir) : l.color;
   return (l.kind == Light::Kind::kAmbient && dir.y > 0) ? l.color : Rgb(0);
 }
 
 float LightSet::infinite_pdf(size_t i, Vec3 dir) const {
   const Light& l = lights_[i];
-  if (l.kind == Light::Kind::kEnvironment) return kUniformSpherePdf;
+  if (l.kind == Light::Kind::kEnvironment) return l.map ? l.map->pdf(dir) : kUniformSpherePdf;
   return (l.kind == Light::Kind::kAmbient && dir.y > 0) ? kUniformHemispherePdf : 0;
 }
 

@@ -9,6 +9,7 @@
 //   directional  irradiance `color` at normal incidence  delta
 //   ambient      `color` radiance from the +Y hemisphere uniform hemisphere, 1/(2 pi)
 //   environment  `color` radiance from every direction   uniform sphere, 1/(4 pi)
+//                (x an image, core/light/environment.h)  by luminance x sin theta
 #pragma once
 
 #include <vector>

@@ -38,6 +38,11 @@ void RenderSettings::validate() const {
   if (environment)
     for (const float c : {environment->r, environment->g, environment->b})
       require(std::isfinite(c) && c >= 0 && c <= 1e20f, "--env-color", "each channel must be in 0..1e20");
+  require(environment_map.size() <= kMaxEnvironmentPath, "--env", "a path of at most 4096 bytes");
+  require(std::isfinite(environment_strength) && environment_strength >= 0 && environment_strength <= 1e20f,
+          "--env-strength", "must be in 0..1e20");
+  require(std::isfinite(environment_rotation) && std::fabs(environment_rotation) <= 1e6f, "--env-rotate",
+          "must be a finite angle in degrees (at most 1e6)");
   require(animation.size() <= kMaxAnimationName, "--animation", "a name of at most 256 bytes");
   require(std::isfinite(fps) && fps > 0 && fps <= kMaxFps, "--fps", "must be > 0 and at most 1e6");
   require(std::isfinite(noise_target) && noise_target >= 0 && noise_target <= kMaxNoiseTarget, "--noise-target",

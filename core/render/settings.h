@@ -72,6 +72,16 @@ struct RenderSettings {
   // scene with no light at all is rendered under (Scene::unlit).
   bool default_environment = true;
   static constexpr float kDefaultEnvironment = 1.0f;
+  // --env FILE (CS184's -e): a lat-long .exr or .hdr radiance map around the scene
+  // (core/light/environment.h), times --env-color when given. A relative path is relative
+  // to the scene file's folder: the CLI makes a user's path absolute, and a farm job names
+  // the file it shipped inside the scene bundle.
+  static constexpr size_t kMaxEnvironmentPath = 4096;
+  std::string environment_map;
+  // --env-strength scales whichever environment there is (image, colour or the default);
+  // --env-rotate turns an image environment by degrees about +Y.
+  float environment_strength = 1;
+  float environment_rotation = 0;
   int pass_spp = 16;  // --pass-spp: samples per progressive pass (the unit merged in order)
   // --tile: side of the square tiles the frame is cut into. It never changes the image,
   // except with a noise target, which is judged per tile.

@@ -1,5 +1,8 @@
 #include "core/render/tile_renderer.h"
 
+#include <filesystem>
+
+#include "core/light/environment.h"
 #include "core/sampling/sampler.h"
 #include "core/scene/animation.h"
 
@@ -19,7 +22,28 @@ void TileRenderer::set_frame(std::optional<int> frame) {
   set_up_frame(this);
 }
 
+std::shared_ptr<const EnvironmentMap> TileRenderer::load_environment(const Scene& scene,
+                                                                     const RenderSettings& settings) {
+  if (settings.environment_map.empty()) return nullptr;
+  std::filesystem::path path(settings.environment_map);
+  if (path.is_relative()) path = std::filesystem::path(scene.source).parent_path() / path;
+  try {
+    return std::make_shared<const EnvironmentMap>(read_environment_image(path.string()),
+                                                  settings.environment_rotation);
+  } catch (const std::runtime_error& e) {
+    // Named as the settings name it (a farm job's bundle path), not where it was unpacked.
+    std::string why = e.what();
+    if (why.rfind(path.string(), 0) == 0) why = settings.environment_map + why.substr(path.string().size());
+    throw SettingsError("--env", why);
+  }
+}
+
 void TileRenderer::check_settings(const Scene& scene, const RenderSettings& settings) {
+  (void)load_environment(scene, settings);
+  check_animation(scene, settings);
+}
+
+void TileRenderer::check_animation(const Scene& scene, const RenderSettings& settings) {
   if (settings.animation.empty()) return;
   if (!scene.animation) throw SettingsError("--animation", "the scene has no animations");
   try {
@@ -31,7 +55,7 @@ void TileRenderer::check_settings(const Scene& scene, const RenderSettings& sett
 
 void TileRenderer::set_up_frame(const TileRenderer* share) {
   const RenderSettings s = settings_.at_frame();
-  check_settings(*rest_, settings_);
+  check_animation(*rest_, settings_);
   if (rest_->animation && settings_.frame) {
     const size_t clip = rest_->animation->find_clip(settings_.animation);
     posed_ = std::make_shared<const Scene>(pose_scene(*rest_, clip, settings_.time()));
@@ -40,14 +64,28 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
     posed_.reset();
     scene_ = rest_;
   }
-  // What the settings add to the scene's lights: an environment (--env-color), or the
-  // neutral default one for a scene with no light at all.
+  // What the settings add to the scene's lights: an environment (--env, --env-color), or
+  // the neutral default one for a scene with no light at all. Its image is loaded once and
+  // shared by every renderer that shares these lights.
+  const bool same_environment =
+      share && share->settings_.environment == settings_.environment &&
+      share->settings_.default_environment == settings_.default_environment &&
+      share->settings_.environment_map == settings_.environment_map &&
+      share->settings_.environment_strength == settings_.environment_strength &&
+      share->settings_.environment_rotation == settings_.environment_rotation;
   std::vector<Light> extra;
-  if (settings_.environment || (scene_->unlit && settings_.default_environment)) {
+  if (settings_.environment || !settings_.environment_map.empty() ||
+      (scene_->unlit && settings_.default_environment)) {
     Light env;
     env.kind = Light::Kind::kEnvironment;
-    env.name = settings_.environment ? "environment" : "default environment";
-    env.color = settings_.environment.value_or(Rgb(RenderSettings::kDefaultEnvironment));
+    env.name = !settings_.environment_map.empty() ? settings_.environment_map
+               : settings_.environment            ? "environment"
+                                                  : "default environment";
+    const Rgb base = settings_.environment.value_or(Rgb(RenderSettings::kDefaultEnvironment));
+    env.color = base * settings_.environment_strength;
+    if (!settings_.environment_map.empty())
+      env.map = same_environment && share->environment_ ? share->environment_ : load_environment(*rest_, settings_);
+    environment_ = env.map;
     extra.push_back(env);
   }
   if (posed_) {
@@ -70,8 +108,7 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
       accel_ = share->accel_;
     else if (accel_scene_ != scene_ || !accel_)
       accel_ = std::make_shared<const Accel>(*scene_);
-    if (shared && share->settings_.environment == settings_.environment &&
-        share->settings_.default_environment == settings_.default_environment)
+    if (shared && same_environment)
       lights_ = share->lights_;
     else
       lights_ = std::make_shared<const LightSet>(*scene_, extra);

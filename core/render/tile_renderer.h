@@ -50,8 +50,12 @@ class TileRenderer {
                                 const std::atomic<bool>* cancel = nullptr) const;
 
   // Throws SettingsError when `settings` ask the scene for what it has not: an animation
-  // (--animation) it does not have. The coordinator checks a job with it at submit.
+  // (--animation) it does not have, an environment map (--env) that cannot be read beside
+  // it. The coordinator checks a job with it at submit.
   static void check_settings(const Scene& scene, const RenderSettings& settings);
+  // The --env image, its path relative to the scene file's folder unless absolute; null
+  // without one. Throws SettingsError("--env") naming the file and the problem.
+  static std::shared_ptr<const EnvironmentMap> load_environment(const Scene& scene, const RenderSettings& settings);
 
   // The frame the next renders are of (--frames): the random numbers and, with a camera
   // path, the camera change; the scene's acceleration structure is built once for a whole
@@ -65,6 +69,7 @@ class TileRenderer {
   // Pose (if animated), camera and integrator for settings_'s frame; a static scene's
   // acceleration structure and lights come from `share` when it has them.
   void set_up_frame(const TileRenderer* share);
+  static void check_animation(const Scene& scene, const RenderSettings& settings);
 
   const Scene* rest_;                   // as loaded
   std::shared_ptr<const Scene> posed_;  // an animated scene at this frame's time
@@ -78,6 +83,7 @@ class TileRenderer {
   std::shared_ptr<const StaticPart> static_part_;
   RenderSettings settings_;
   std::shared_ptr<const Accel> accel_;
+  std::shared_ptr<const EnvironmentMap> environment_;  // --env's image, when given
   std::shared_ptr<const LightSet> lights_;
   std::optional<Camera> camera_;
   std::optional<Integrator> integrator_;

@@ -95,6 +95,8 @@ struct Sphere {
   int32_t light = -1;
 };
 
+class EnvironmentMap;  // core/light/environment.h
+
 struct Light {
   enum class Kind : uint8_t { kRect, kMesh, kSphere, kPoint, kSpot, kDirectional, kAmbient, kEnvironment };
   Kind kind = Kind::kPoint;
@@ -110,6 +112,8 @@ struct Light {
   float cos_inner = 1, cos_outer = 0;  // spot: full intensity inside the inner cone, none outside
   uint32_t shape = 0;                  // kMesh: mesh index; kSphere: sphere index; kRect: its mesh
   bool two_sided = false;
+  // kEnvironment: an image (radiance = color x map(direction)); null for a uniform one.
+  std::shared_ptr<const EnvironmentMap> map;
 
   bool is_delta() const { return kind == Kind::kPoint || kind == Kind::kSpot || kind == Kind::kDirectional; }
   bool is_infinite() const {
@@ -170,7 +174,8 @@ struct Scene {
   CameraDesc camera;
   std::vector<std::string> warnings;
   // A glTF scene with no light at all: rendered under a neutral default environment
-  // unless --no-default-env (RenderSettings::default_environment), with a warning.
+  // unless --no-default-env (RenderSettings::default_environment), with a warning that
+  // is warnings[0].
   bool unlit = false;
   // glTF animations (core/scene/animation.h); null for a scene without any.
   std::shared_ptr<const SceneAnimation> animation;

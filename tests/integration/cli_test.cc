@@ -109,6 +109,15 @@ TEST_F(Cli, ABadCameraPathOrAnimationIsRefusedNamingTheFileKeyAndField) {
   EXPECT_NE(r.err.find("--animation: no animation 'walk' (the scene has 0 'move')"), std::string::npos) << r.err;
 }
 
+TEST_F(Cli, ABrokenEnvironmentMapIsRefusedNamingTheFile) {
+  const std::string bad = (dir / "bad.hdr").string();
+  std::ofstream(bad) << "not radiance";
+  const CommandResult r = run("render " + scene + " -s 1 -r 8 8 --env " + bad + " -q -f " + (dir / "e.exr").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("--env: " + bad + ": not a Radiance HDR image"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "e.exr"));
+}
+
 TEST_F(Cli, CellRenderingWritesOnlyTheCell) {
   const std::string exr = (dir / "cell.exr").string();
   const CommandResult r = run("render " + scene + " -s 2 -r 64 48 -p 8 4 16 12 -q -f " + exr);

@@ -254,6 +254,28 @@ TEST_F(Farm, AnEnvironmentLightGivesTheLocalImageThroughTheFarm) {
   expect_same_pixels(local, out);
 }
 
+// An image environment (--env, from another folder than the scene's) travels in the scene
+// bundle: the farm's image is the local one, rotated and scaled alike.
+TEST_F(Farm, AnEnvironmentMapTravelsWithTheSceneAndGivesTheLocalImage) {
+  const std::string flags = "-r 64 48 -s 16 --pass-spp 8 -m 6 --env " + std::string(TESSERA_SOURCE_DIR) + "/scenes/sky.hdr" +
+                            " --env-rotate 30 --env-strength 0.5";
+  const std::string local = local_render(flags);
+  start_coordinator();
+  start_worker();
+  start_worker();
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r = submit_wait(kScene, flags, out);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+  // A broken map is refused at submit, named as the job named it.
+  const std::string bad = (dir / "bad.hdr").string();
+  std::ofstream(bad) << "not radiance";
+  const CommandResult refused = submit_wait(kScene, "-r 8 8 -s 1 --env " + bad, (dir / "bad.exr").string());
+  EXPECT_NE(refused.code, 0);
+  EXPECT_NE(refused.err.find("--env: .tessera-env/bad.hdr: not a Radiance HDR image"), std::string::npos)
+      << refused.err;
+}
+
 TEST_F(Farm, NoiseTargetAndEstimatorSwitchesGiveTheLocalImage) {
   const std::string flags = "-r 96 72 -s 64 --pass-spp 8 -m 6 --tile 24 --noise-target 0.2 --no-mis";
   const std::string local = local_render(flags);

@@ -166,6 +166,26 @@ TEST(WireSettings, SequenceAndEnvironmentSettingsRoundTrip) {
   v1::RenderSettings p = to_proto(s);
   p.add_environment(1);  // four values
   EXPECT_THROW(from_proto(p), WireError);
+  // An environment map is named inside the scene bundle: never a path of the receiver's.
+  s.environment_map = ".tessera-env/sky.hdr";
+  s.environment_strength = 0.5f;
+  s.environment_rotation = 30;
+  const RenderSettings m = from_proto(to_proto(s));
+  EXPECT_EQ(m.environment_map, ".tessera-env/sky.hdr");
+  EXPECT_EQ(m.environment_strength, 0.5f);
+  EXPECT_EQ(m.environment_rotation, 30);
+  EXPECT_EQ(d.environment_strength, 1);  // absent: 1
+  for (const char* bad : {"/etc/passwd", "../../secret.hdr", ".tessera-env/../../x.hdr"}) {
+    p = to_proto(s);
+    p.set_environment_map(bad);
+    try {
+      from_proto(p);
+      ADD_FAILURE() << bad;
+    } catch (const WireError& e) {
+      EXPECT_NE(std::string(e.what()).find("must name a file inside the scene bundle"), std::string::npos) << e.what();
+    }
+  }
+  s.environment_map.clear();
   p = to_proto(s);
   p.set_camera_path("{\"keys\": 3}");
   try {

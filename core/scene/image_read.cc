@@ -1,0 +1,89 @@
+#include "core/scene/image_read.h"
+
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfStringAttribute.h>
+#include <stb/stb_image.h>
+
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <stdexcept>
+
+namespace tessera {
+
+ExrImage read_exr(const std::string& path) {
+  ExrImage img;
+  try {
+    Imf::InputFile file(path.c_str());
+    const Imath::Box2i dw = file.header().dataWindow();
+    const long long w = (long long)dw.max.x - dw.min.x + 1, h = (long long)dw.max.y - dw.min.y + 1;
+    if (w < 1 || h < 1 || w * h > kMaxEnvironmentTexels)
+      throw std::runtime_error(std::to_string(w) + " x " + std::to_string(h) + " pixels is beyond the " +
+                               std::to_string(kMaxEnvironmentTexels) + "-pixel limit");
+    img.width = int(w);
+    img.height = int(h);
+    Imf::FrameBuffer fb;
+    for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it) {
+      std::vector<float>& data = img.channels[it.name()];
+      data.resize(size_t(img.width) * img.height);
+      char* base = reinterpret_cast<char*>(data.data()) -
+                   (ptrdiff_t(dw.min.x) + ptrdiff_t(dw.min.y) * img.width) * ptrdiff_t(sizeof(float));
+      fb.insert(it.name(), Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(img.width)));
+    }
+    file.setFrameBuffer(fb);
+    file.readPixels(dw.min.y, dw.max.y);
+    for (auto it = file.header().begin(); it != file.header().end(); ++it)
+      if (const auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute()))
+        img.metadata[it.name()] = s->value();
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path + ": cannot read EXR: " + e.what());
+  }
+  return img;
+}
+
+RgbImage read_environment_image(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw std::runtime_error(path + ": no such file");
+  const std::string ext = std::filesystem::path(path).extension().string();
+  RgbImage img;
+  if (ext == ".exr" || ext == ".EXR") {
+    ExrImage exr = read_exr(path);
+    const bool rgb = exr.channels.count("R") && exr.channels.count("G") && exr.channels.count("B");
+    if (!rgb && !exr.channels.count("Y"))
+      throw std::runtime_error(path + ": the EXR has no R, G, B (or Y) channels");
+    img.width = exr.width;
+    img.height = exr.height;
+    img.texels.resize(size_t(img.width) * img.height);
+    for (size_t i = 0; i < img.texels.size(); ++i)
+      img.texels[i] = rgb ? Rgb(exr.channels["R"][i], exr.channels["G"][i], exr.channels["B"][i])
+                          : Rgb(exr.channels["Y"][i]);
+  } else if (ext == ".hdr" || ext == ".HDR") {
+    int w = 0, h = 0, n = 0;
+    if (!stbi_info(path.c_str(), &w, &h, &n) || !stbi_is_hdr(path.c_str()))
+      throw std::runtime_error(path + ": not a Radiance HDR image");
+    if (w < 1 || h < 1 || (long long)w * h > kMaxEnvironmentTexels)
+      throw std::runtime_error(path + ": " + std::to_string(w) + " x " + std::to_string(h) +
+                               " pixels is beyond the limit");
+    std::unique_ptr<float, void (*)(void*)> data(stbi_loadf(path.c_str(), &w, &h, &n, 3), stbi_image_free);
+    if (!data) throw std::runtime_error(path + ": cannot read HDR: " + stbi_failure_reason());
+    img.width = w;
+    img.height = h;
+    img.texels.resize(size_t(w) * h);
+    for (size_t i = 0; i < img.texels.size(); ++i)
+      img.texels[i] = Rgb(data.get()[3 * i], data.get()[3 * i + 1], data.get()[3 * i + 2]);
+  } else {
+    throw std::runtime_error(path + ": an environment map must be .exr or .hdr");
+  }
+  for (size_t i = 0; i < img.texels.size(); ++i) {
+    const Rgb& c = img.texels[i];
+    if (!(c.r >= 0 && c.g >= 0 && c.b >= 0) || !c.is_finite())
+      throw std::runtime_error(path + ": pixel (" + std::to_string(i % size_t(img.width)) + ", " +
+                               std::to_string(i / size_t(img.width)) + ") is negative, NaN or infinite");
+  }
+  return img;
+}
+
+}  // namespace tessera

@@ -1,0 +1,34 @@
+// Reading float images: OpenEXR files (every channel by name) and the RGB environment maps
+// lights are made of (.exr or Radiance .hdr). In the scene layer because an environment is
+// scene data; writing images is core/io's.
+#pragma once
+
+#include <map>
+#include <string>
+#include <vector>
+
+#include "core/math/vec.h"
+
+namespace tessera {
+
+struct ExrImage {
+  int width = 0, height = 0;
+  std::map<std::string, std::vector<float>> channels;  // row-major, row 0 at the top
+  std::map<std::string, std::string> metadata;         // the file's string attributes
+};
+// Throws std::runtime_error naming the path. Images over kMaxEnvironmentTexels are refused
+// from the header, before anything is allocated.
+ExrImage read_exr(const std::string& path);
+
+// An RGB image in linear radiance, row 0 at the top.
+struct RgbImage {
+  int width = 0, height = 0;
+  std::vector<Rgb> texels;
+};
+constexpr long long kMaxEnvironmentTexels = 1LL << 26;  // 64 M texels, 768 MB as floats
+// A lat-long environment map: .exr (channels R, G, B by name; Y alone as grey) or .hdr
+// (Radiance RGBE). Throws std::runtime_error naming the file and the problem: unreadable,
+// unknown extension, too large, or a texel that is negative, NaN or infinite.
+RgbImage read_environment_image(const std::string& path);
+
+}  // namespace tessera
