@@ -3,6 +3,7 @@
 #include <cmath>
 #include <optional>
 
+#include "core/render/settings.h"
 #include "core/sampling/warp.h"
 
 namespace tessera {
@@ -41,6 +42,9 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
     // The file's clip planes are absolute but the CS184 eye is placed relative to the
     // scene's size: clipping would cut a scaled scene, so this framing does not clip.
   } else {
+    if (!c.pose_problem.empty())
+      throw SettingsError("--camera", "the file's camera is unusable: " + c.pose_problem +
+                                          " (--camera cs184 frames the scene without it)");
     eye_ = c.eye;
     z_ = -c.forward;
     x_ = normalize(cross(c.up, z_));

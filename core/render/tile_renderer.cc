@@ -41,6 +41,7 @@ std::shared_ptr<const EnvironmentMap> TileRenderer::load_environment(const Scene
 void TileRenderer::check_settings(const Scene& scene, const RenderSettings& settings) {
   (void)load_environment(scene, settings);
   check_animation(scene, settings);
+  (void)Camera(scene, settings.at_frame().camera);  // a file camera the framing needs but cannot use
 }
 
 void TileRenderer::check_animation(const Scene& scene, const RenderSettings& settings) {

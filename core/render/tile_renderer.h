@@ -51,7 +51,8 @@ class TileRenderer {
 
   // Throws SettingsError when `settings` ask the scene for what it has not: an animation
   // (--animation) it does not have, an environment map (--env) that cannot be read beside
-  // it. The coordinator checks a job with it at submit.
+  // it, the file's camera (--camera file) when the file's is unusable. The coordinator
+  // checks a job with it at submit.
   static void check_settings(const Scene& scene, const RenderSettings& settings);
   // The --env image, its path relative to the scene file's folder unless absolute; null
   // without one. Throws SettingsError("--env") naming the file and the problem.

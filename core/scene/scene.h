@@ -141,6 +141,9 @@ struct CameraDesc {
   float znear = 0.001f, zfar = 1000.0f;
   Vec3 cs184_dir{0, 0, 1};  // CS184 framing direction c (format doc section 2.2)
   bool present = false;
+  // Why the pose or clip planes are unusable (a file's sloppy camera that CS184 framing
+  // never reads); empty when they are fine. Rendering with the file's camera refuses it.
+  std::string pose_problem;
 };
 
 struct Bounds {

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include "core/render/settings.h"
 #include "core/scene/collada/collada_loader.h"
 #include "tests/core/test_paths.h"
 
@@ -56,6 +57,33 @@ TEST(Camera, PinholeIsTheZeroApertureLimit) {
   const Ray a = Camera(scene, cs).generate(10, 20, {0.9f, 0.1f});
   EXPECT_EQ(a.o.x, 0);
   EXPECT_EQ(a.o.y, 0);
+}
+
+}  // namespace
+}  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// A .dae whose camera pose is unusable loads (collada_test.cc); CS184 framing renders it,
+// and asking for the file's camera is refused naming the problem.
+TEST(Camera, AnUnusableFilePoseServesCs184FramingAndIsRefusedForFileFraming) {
+  Scene s;
+  s.camera.present = true;
+  s.camera.cs184_dir = {0, 0, 1};
+  s.camera.pose_problem = "<library_cameras>/<camera id=\"cam\">: need 0 <= znear < zfar";
+  s.spheres.push_back(Sphere{"ball", {0, 0, 0}, 1, 0, -1});
+  CameraSettings c;
+  c.framing = Framing::kCs184;
+  EXPECT_NO_THROW(Camera(s, c));
+  c.framing = Framing::kFile;
+  try {
+    Camera camera(s, c);
+    ADD_FAILURE() << "the unusable pose was used";
+  } catch (const SettingsError& e) {
+    EXPECT_EQ(e.flag(), "--camera");
+    EXPECT_NE(std::string(e.what()).find("need 0 <= znear < zfar"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

@@ -261,6 +261,26 @@ TEST_F(BadCollada, OrthographicCamera) {
                "orthographic cameras are not supported");
 }
 
+// Tolerant where CS184 is: the camera's pose and clip planes serve only --camera file, so a
+// sloppy one (a matrix that collapses the view, clip planes the wrong way round) loads with
+// a warning; core/camera refuses it for a render that would use it (camera_test.cc).
+TEST_F(BadCollada, AnUnusableCameraPoseIsAWarningNotAnError) {
+  for (const auto& [from, to] : {std::pair<std::string, std::string>{"<translate>0 0 4</translate><instance_camera",
+                                                                     "<matrix>0 0 0 0 0 0 0 0 0 0 0 4 0 0 0 1</matrix>"
+                                                                     "<instance_camera"},
+                                 {"<znear>0.1</znear><zfar>100</zfar>", "<znear>10</znear><zfar>1</zfar>"}}) {
+    const Scene s = load_collada_string(replaced(from, to), "sloppy.dae");
+    ASSERT_TRUE(s.camera.present);
+    EXPECT_FALSE(s.camera.pose_problem.empty()) << to;
+    bool warned = false;
+    for (const std::string& w : s.warnings) warned |= w.find("CS184 framing does not use it") != std::string::npos;
+    EXPECT_TRUE(warned) << to;
+  }
+  // What CS184 framing does use stays an error: a matrix that leaves no view direction.
+  expect_error(replaced("<translate>0 0 4</translate><instance_camera", "<matrix>0</matrix><instance_camera"),
+               "<camera", "camera node transform is degenerate");
+}
+
 TEST_F(BadCollada, SphereWithoutRadius) {
   expect_error(replaced("<radius>0.3</radius>", ""), "<sphere>", "missing <radius>");
 }

@@ -452,6 +452,51 @@ TEST_F(Gltf, NumberBeyondADoubleIsAnError) {
   expect_error(write("scene.gltf", R"({"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"x":1e999})"), "JSON");
 }
 
+// Tolerant where viewers and the course's renderer are: data nothing uses is never read, so
+// a malformed unused accessor is a warning and a broken unused image nothing at all; the
+// same data in use is still the one-line error.
+TEST_F(Gltf, MalformedDataNothingUsesIsToleratedAndInUseRefused) {
+  Doc d;
+  d.j["accessors"].push_back({{"count", "many"}, {"type", "VEC3"}});  // no componentType, count not a number
+  const size_t bad = d.j["accessors"].size() - 1;
+  d.j["images"] = {{{"uri", "data:image/png;base64,bm90IGFuIGltYWdl"}}};  // "not an image"
+  d.j["textures"] = {{{"source", 0}}};
+  const Scene s = load(d);
+  EXPECT_EQ(s.meshes.size(), 1u);
+  bool warned = false;
+  for (const std::string& w : s.warnings)
+    warned |= w.find("accessors[" + std::to_string(bad) + "] has no valid componentType; nothing uses it: ignored") !=
+              std::string::npos;
+  EXPECT_TRUE(warned);
+  // The same image used by a material: refused, naming it.
+  Doc used = d;
+  used.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+  expect_error(used, "images[0]: not a readable PNG or JPEG");
+  // The same accessor used as indices: refused (by tinygltf's parser).
+  Doc idx = d;
+  idx.j["meshes"][0]["primitives"][0]["indices"] = bad;
+  std::string error;
+  try {
+    load(idx);
+  } catch (const SceneError& e) {
+    error = e.what();
+  }
+  EXPECT_FALSE(error.empty()) << "a malformed accessor in use loaded";
+  // In a .glb too: the JSON chunk is rewritten around the unused accessor.
+  Doc glb = d;
+  glb.j["buffers"][0].erase("uri");
+  std::string json = glb.j.dump();
+  while (json.size() % 4) json += ' ';
+  std::string bin = glb.blob;
+  while (bin.size() % 4) bin += '\0';
+  auto u32 = [](uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
+  const std::string file = "glTF" + u32(2) + u32(uint32_t(12 + 8 + json.size() + 8 + bin.size())) +
+                           u32(uint32_t(json.size())) + "JSON" + json + u32(uint32_t(bin.size())) + "BIN" +
+                           std::string(1, '\0') + bin;
+  const Scene g = load_gltf_file(write("scene.glb", file));
+  EXPECT_EQ(g.meshes.size(), 1u);
+}
+
 TEST_F(Gltf, BrokenBase64) {
   Doc d;
   d.embed();

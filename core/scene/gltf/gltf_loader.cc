@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
@@ -87,31 +88,14 @@ bool guarded_write(std::string* err, const std::string&, const std::vector<unsig
   return false;
 }
 
-// Decodes embedded or external images with stb, refusing absurd sizes before allocating.
-bool load_image(tinygltf::Image* image, const int index, std::string* err, std::string*, int, int,
-                const unsigned char* bytes, int size, void*) {
-  int w = 0, h = 0, comp = 0;
-  if (!stbi_info_from_memory(bytes, size, &w, &h, &comp)) {
-    *err = "images[" + std::to_string(index) + "]: not a readable PNG or JPEG";
-    return false;
-  }
-  if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels) {
-    *err = "images[" + std::to_string(index) + "]: " + std::to_string(w) + "x" + std::to_string(h) +
-           " is over the 64 M texel limit";
-    return false;
-  }
-  unsigned char* data = stbi_load_from_memory(bytes, size, &w, &h, &comp, 4);
-  if (!data) {
-    *err = "images[" + std::to_string(index) + "]: " + stbi_failure_reason();
-    return false;
-  }
-  image->width = w;
-  image->height = h;
-  image->component = 4;
-  image->bits = 8;
-  image->pixel_type = TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE;
-  image->image.assign(data, data + size_t(w) * size_t(h) * 4);
-  stbi_image_free(data);
+// Keeps each image's encoded bytes: an image is decoded only when a material uses it
+// (decode_image), so an unused broken one costs nothing and refuses nothing, as in viewers.
+constexpr int kEncoded = -1;  // tinygltf::Image::component of bytes not yet decoded
+bool load_image(tinygltf::Image* image, const int, std::string*, std::string*, int, int, const unsigned char* bytes,
+                int size, void*) {
+  image->image.assign(bytes, bytes + size);
+  image->width = image->height = 0;
+  image->component = kEncoded;
   return true;
 }
 
@@ -162,9 +146,10 @@ class GltfLoader {
 
   Scene load() {
     scene_.source = path_;
-    const std::string bytes = read_file(path_, path_);
+    std::string bytes = read_file(path_, path_);
     const bool binary = bytes.size() >= 4 && bytes.compare(0, 4, "glTF") == 0;
-    prevalidate(binary ? glb_json(bytes) : bytes);
+    if (std::optional<std::string> fixed = prevalidate(binary ? glb_json(bytes) : bytes))
+      bytes = binary ? replace_glb_json(bytes, *fixed) : *fixed;
 
     tinygltf::TinyGLTF loader;
     FsGuard guard{fs::weakly_canonical(fs::absolute(path_).parent_path()), path_};
@@ -252,8 +237,82 @@ class GltfLoader {
     return b.substr(20, json_len);
   }
 
-  // Checks that tinygltf does not do, before it allocates anything.
-  void prevalidate(const std::string& json_text) {
+  // A GLB with its JSON chunk replaced (padded with spaces to 4 bytes, as the spec asks).
+  std::string replace_glb_json(const std::string& b, std::string json) const {
+    auto u32 = [&](size_t at) {
+      uint32_t v;
+      std::memcpy(&v, b.data() + at, 4);
+      return v;
+    };
+    const size_t old_end = 20 + size_t(u32(12));
+    while (json.size() % 4) json += ' ';
+    std::string out = b.substr(0, 12);
+    const uint32_t len = uint32_t(json.size()), type = 0x4E4F534Au;
+    out.append(reinterpret_cast<const char*>(&len), 4);
+    out.append(reinterpret_cast<const char*>(&type), 4);
+    out += json;
+    out += b.substr(std::min(old_end, b.size()));
+    const uint32_t total = uint32_t(out.size());
+    std::memcpy(out.data() + 8, &total, 4);
+    return out;
+  }
+
+  // Accessors no mesh, animation or skin refers to. The course's renderer and glTF viewers
+  // read accessors only when something uses them, so a malformed unused one must not cost
+  // the scene: it is replaced by a harmless one, with a warning. Returns the accessor's
+  // problem, or empty when tinygltf will parse it.
+  static std::string accessor_problem(const nlohmann::json& a) {
+    static const std::set<std::string> kTypes = {"SCALAR", "VEC2", "VEC3", "VEC4", "MAT2", "MAT3", "MAT4"};
+    static const std::set<int64_t> kComponents = {5120, 5121, 5122, 5123, 5125, 5126};
+    if (!a.is_object()) return "is not an object";
+    if (!a.contains("componentType") || !a["componentType"].is_number_integer() ||
+        !kComponents.count(a["componentType"].get<int64_t>()))
+      return "has no valid componentType";
+    if (!a.contains("count") || !a["count"].is_number_integer() || a["count"].get<int64_t>() < 0)
+      return "has no valid count";
+    if (!a.contains("type") || !a["type"].is_string() || !kTypes.count(a["type"].get<std::string>()))
+      return "has no valid type";
+    if (a.contains("bufferView") && !(a["bufferView"].is_number_integer() && a["bufferView"].get<int64_t>() >= 0))
+      return "has an invalid bufferView";
+    if (a.contains("sparse") && !a["sparse"].is_object()) return "has an invalid sparse";
+    return "";
+  }
+  static std::set<int64_t> used_accessors(const nlohmann::json& j) {
+    std::set<int64_t> used;
+    auto take = [&](const nlohmann::json& v) {
+      if (v.is_number_integer()) used.insert(v.get<int64_t>());
+    };
+    auto values_of = [&](const nlohmann::json& o) {
+      if (o.is_object())
+        for (const auto& [k, v] : o.items()) take(v);
+    };
+    if (j.contains("meshes") && j["meshes"].is_array())
+      for (const auto& m : j["meshes"])
+        if (m.is_object() && m.contains("primitives") && m["primitives"].is_array())
+          for (const auto& p : m["primitives"]) {
+            if (!p.is_object()) continue;
+            if (p.contains("attributes")) values_of(p["attributes"]);
+            if (p.contains("indices")) take(p["indices"]);
+            if (p.contains("targets") && p["targets"].is_array())
+              for (const auto& t : p["targets"]) values_of(t);
+          }
+    if (j.contains("animations") && j["animations"].is_array())
+      for (const auto& a : j["animations"])
+        if (a.is_object() && a.contains("samplers") && a["samplers"].is_array())
+          for (const auto& sm : a["samplers"])
+            if (sm.is_object()) {
+              if (sm.contains("input")) take(sm["input"]);
+              if (sm.contains("output")) take(sm["output"]);
+            }
+    if (j.contains("skins") && j["skins"].is_array())
+      for (const auto& sk : j["skins"])
+        if (sk.is_object() && sk.contains("inverseBindMatrices")) take(sk["inverseBindMatrices"]);
+    return used;
+  }
+
+  // Checks that tinygltf does not do, before it allocates anything. Returns the JSON to
+  // parse instead when unused malformed data had to be set aside.
+  std::optional<std::string> prevalidate(const std::string& json_text) {
     nlohmann::json j;
     try {
       j = nlohmann::json::parse(json_text);
@@ -277,6 +336,21 @@ class GltfLoader {
           fail("buffers[" + std::to_string(i) + "]", std::string("byteLength ") + shown + " is over the 1 GiB limit");
         }
       }
+    bool changed = false;
+    if (j.contains("accessors") && j["accessors"].is_array()) {
+      const std::set<int64_t> used = used_accessors(j);
+      for (size_t i = 0; i < j["accessors"].size(); ++i) {
+        if (used.count(int64_t(i))) continue;
+        const std::string problem = accessor_problem(j["accessors"][i]);
+        if (problem.empty()) continue;
+        scene_.warnings.push_back(path_ + ": accessors[" + std::to_string(i) + "] " + problem +
+                                  "; nothing uses it: ignored");
+        j["accessors"][i] = {{"componentType", 5126}, {"count", 0}, {"type", "SCALAR"}};
+        changed = true;
+      }
+    }
+    if (!changed) return std::nullopt;
+    return j.dump();
   }
 
   // ---- accessors ---------------------------------------------------------------------
@@ -707,6 +781,33 @@ class GltfLoader {
     return id;
   }
 
+  // Decodes images[index] (PNG or JPEG, RGBA 8-bit), refusing absurd sizes before
+  // allocating; once, whatever number of textures use it.
+  const tinygltf::Image& decode_image(int index) {
+    tinygltf::Image& img = model_.images[size_t(index)];
+    const std::string el = "images[" + std::to_string(index) + "]";
+    if (img.component != kEncoded) {
+      if (img.width <= 0 || img.height <= 0 || img.image.size() < size_t(img.width) * size_t(img.height) * 4)
+        fail(el, "has no pixel data");
+      return img;
+    }
+    if (img.image.empty()) fail(el, "has no data (a missing file?)");
+    int w = 0, h = 0, comp = 0;
+    const int size = int(std::min<size_t>(img.image.size(), size_t(INT32_MAX)));
+    if (!stbi_info_from_memory(img.image.data(), size, &w, &h, &comp)) fail(el, "not a readable PNG or JPEG");
+    if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels)
+      fail(el, std::to_string(w) + "x" + std::to_string(h) + " is over the 64 M texel limit");
+    unsigned char* data = stbi_load_from_memory(img.image.data(), size, &w, &h, &comp, 4);
+    if (!data) fail(el, stbi_failure_reason());
+    img.width = w;
+    img.height = h;
+    img.component = 4;
+    img.bits = 8;
+    img.image.assign(data, data + size_t(w) * size_t(h) * 4);
+    stbi_image_free(data);
+    return img;
+  }
+
   // Colour textures (base colour, emission) are sRGB-encoded, data (metallic-roughness,
   // normals) linear: a texture used both ways is decoded twice.
   int load_texture(int index, const std::string& el, bool srgb) {
@@ -718,9 +819,7 @@ class GltfLoader {
     const std::string tel = "textures[" + std::to_string(index) + "]";
     if (t.source < 0 || size_t(t.source) >= model_.images.size())
       fail(tel, "image " + std::to_string(t.source) + " does not exist");
-    const tinygltf::Image& img = model_.images[size_t(t.source)];
-    if (img.width <= 0 || img.height <= 0 || img.image.size() < size_t(img.width) * size_t(img.height) * 4)
-      fail(tel, "image " + std::to_string(t.source) + " has no pixel data");
+    const tinygltf::Image& img = decode_image(t.source);
     Texture tex;
     tex.width = img.width;
     tex.height = img.height;
