@@ -7,6 +7,11 @@
   dof-row.gltf          five spheres in a row receding from the camera over a textured
                         floor, lit by a KHR_lights_punctual point and directional light:
                         for depth of field with -b and -d.
+  material-spheres.gltf the glTF material model in rows of spheres, lit only by an
+                        environment (render with --env scenes/sky.hdr): gold metal and red
+                        plastic at roughness 0, 0.25, 0.5, 0.75, 1; then half-metal, clear
+                        rough glass (0.1, 0.3) and absorbing glass (KHR_materials_volume,
+                        smooth and rough). bench/cycles/compare_gltf.py renders it in Cycles.
   cornell-animated.gltf the Cornell box with its spheres moving (the glass one LINEAR, the
                         mirror one hopping along a CUBICSPLINE path) and the camera turning
                         (rotation slerp) and dollying in, over 2 s: 48 frames at 24 fps.
@@ -215,7 +220,47 @@ def dof_row():
     b.write(os.path.join(HERE, "dof-row.gltf"))
 
 
+# Material spheres: row y of the grid, column x; radius 0.4, 1 apart, camera on +z.
+SPHERE_SPACING, SPHERE_RADIUS = 1.0, 0.4
+
+
+def material_spheres():
+    b = Builder()
+    pos, nrm, idx = uv_sphere(SPHERE_RADIUS, 96, 48)
+    roughness = [0, 0.25, 0.5, 0.75, 1]
+    gold, red = [1.0, 0.78, 0.34, 1], [0.8, 0.1, 0.1, 1]
+    volume = {"thicknessFactor": 0.8}
+    absorbing = {"thicknessFactor": 0.8, "attenuationColor": [0.9, 0.5, 0.3], "attenuationDistance": 0.4}
+    glass = lambda r, v: {"pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0, "roughnessFactor": r},
+                          "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1},
+                                         "KHR_materials_volume": v}}
+    rows = [
+        [("metal r%g" % r, {"pbrMetallicRoughness": {"baseColorFactor": gold, "metallicFactor": 1, "roughnessFactor": r}})
+         for r in roughness],
+        [("plastic r%g" % r, {"pbrMetallicRoughness": {"baseColorFactor": red, "metallicFactor": 0, "roughnessFactor": r}})
+         for r in roughness],
+        [("half-metal r0.4", {"pbrMetallicRoughness": {"baseColorFactor": gold, "metallicFactor": 0.5, "roughnessFactor": 0.4}}),
+         ("glass r0.1", glass(0.1, volume)), ("glass r0.3", glass(0.3, volume)),
+         ("absorbing glass r0", glass(0, absorbing)), ("absorbing glass r0.2", glass(0.2, absorbing))],
+    ]
+    # One sphere's accessors, shared by every sphere's mesh (a mesh per material).
+    attrs = {"POSITION": b._accessor(pos, 3, 5126, "f", 34962, True), "NORMAL": b._accessor(nrm, 3, 5126, "f", 34962)}
+    indices = b._accessor(idx, 1, 5123, "H", 34963)
+    for y, row in enumerate(rows):
+        for x, (name, mat) in enumerate(row):
+            mat["name"] = name
+            b.g["meshes"].append({"name": name, "primitives": [{"attributes": attrs, "indices": indices,
+                                                                "material": b.material(mat)}]})
+            b.node({"name": name, "mesh": len(b.g["meshes"]) - 1,
+                    "translation": [(x - 2) * SPHERE_SPACING, (1 - y) * SPHERE_SPACING, 0]})
+    b.g["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.5, "aspectRatio": 4 / 3, "znear": 0.05, "zfar": 100}}]
+    b.node({"name": "camera", "camera": 0, "translation": [0, 0, 7.5]})
+    b.g["extensionsUsed"] = ["KHR_materials_transmission", "KHR_materials_volume"]
+    b.write(os.path.join(HERE, "material-spheres.gltf"))
+
+
 if __name__ == "__main__":
+    material_spheres()
     cornell()
     cornell(animated=True)
     dof_row()
