@@ -3,6 +3,7 @@
 #   CBspheres at max ray depth 0 1 2 3 4 5 100 (64 spp, 4 samples per light)
 #   CBdragon, lens radius 0.1 focused at nose / middle / tail / back wall, then lens
 #   radius 0.05 0.10 0.15 0.20 focused on its middle.
+#   scenes/material-spheres.gltf under scenes/sky.hdr, and Cycles' image of it (Blender).
 # Renders at 480x360 (CS184 framing fills the frame at that size) and stores 2x
 # box-downsampled PNGs. Needs ../shared/scenes/cs184 and a built tree (deploy/build.sh).
 set -euo pipefail
@@ -33,4 +34,15 @@ done
 for b in 0.05 0.10 0.15 0.20; do
   render "cbdragon-b$b-middle" "$SHARED/CBdragon.dae" -s 64 -l 4 -m 8 -b "$b" -d 4.80
 done
+# glTF's material model under scenes/sky.hdr; with Blender installed, Cycles' image of the
+# same file (as Blender imports it: bench/cycles/gltf_to_cycles.py) beside it.
+render material-spheres scenes/material-spheres.gltf --env scenes/sky.hdr -s 256 -m 16
+if command -v blender >/dev/null; then
+  echo "+ blender gltf_to_cycles.py scenes/material-spheres.gltf (256 spp)" | tee -a "$TMP/log.txt" >&2
+  env -u PYENV_VERSION PATH="$(echo "$PATH" | tr ':' '\n' | grep -v pyenv | paste -sd:)" \
+    blender -b --factory-startup --python bench/cycles/gltf_to_cycles.py -- scenes/material-spheres.gltf \
+    "$TMP/cycles.exr" --env scenes/sky.hdr --spp 256 --png "$TMP/material-spheres-cycles.png" | grep gltf_to_cycles |
+    tee -a "$TMP/log.txt"
+  shrink "$TMP/material-spheres-cycles.png" "$OUT/material-spheres-cycles.png"
+fi
 cp "$TMP/log.txt" "$OUT/render-log.txt"

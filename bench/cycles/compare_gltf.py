@@ -97,18 +97,24 @@ def main():
     json.dump(regions_of(a.scene, a.width, a.height), open(rfile, "w"))
     res = json.loads(run([os.path.join(BIN, "tessera_compare"), ours, theirs, "--regions", rfile]))["regions"]
     lines = ["%s, %d spp each, %d threads: Tessera %.1f s, Cycles %.1f s" % (name, a.spp, a.threads, t_ours, t_theirs),
-             "", "| region | Tessera (R G B) | Cycles (R G B) | worst channel | same model | verdict |",
-             "|---|---|---|---|---|---|"]
+             "", "| region | Tessera (R G B) | Cycles (R G B) | worst channel | luminance, noise | same model | verdict |",
+             "|---|---|---|---|---|---|---|"]
     failed = 0
     for region, v in res.items():
         rel = [(x - y) / max(y, 1e-6) for x, y in zip(v["image"], v["reference"])]
         worst = max(rel, key=abs)
+        # Luminance difference against the noise of the difference: Tessera's standard error
+        # (its variance channel) counted twice, Cycles' being of the same order.
+        lum = lambda c: 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+        dl = lum(v["image"]) - lum(v["reference"])
+        noise = math.sqrt(2) * v.get("image_luminance_stderr", 0)
         why = next((w for k, w in DIFFERENT.items() if region.startswith(k)), None)
         verdict = "differs: see docs/gltf.md" if why else ("ok" if abs(worst) <= a.tolerance else "FAIL")
         failed += verdict == "FAIL"
-        lines.append("| %s | %s | %s | %+.1f%% | %s | %s |" % (
+        lines.append("| %s | %s | %s | %+.1f%% | %+.1f%%, +-%.1f%% | %s | %s |" % (
             region, " ".join("%.4f" % x for x in v["image"]), " ".join("%.4f" % x for x in v["reference"]),
-            100 * worst, "no" if why else "yes", verdict))
+            100 * worst, 100 * dl / max(lum(v["reference"]), 1e-6), 100 * noise / max(lum(v["reference"]), 1e-6),
+            "no" if why else "yes", verdict))
     lines.append("")
     lines.append("%d region(s) outside %.0f%% where the models are the same" % (failed, 100 * a.tolerance))
     text = "\n".join(lines)

@@ -3,7 +3,7 @@
 Run inside Blender 3.4 (Debian's):
   blender -b --factory-startup --python bench/cycles/gltf_to_cycles.py -- SCENE.gltf OUT.exr
       [--env MAP.hdr] [--env-strength 1] [--spp N] [--seed S] [--threads 2] [--max-bounces 16]
-      [--width 480] [--height 360] [--stats F]
+      [--width 480] [--height 360] [--stats F] [--png OUT.png]
 
 Blender's own glTF importer makes the materials (Principled BSDF), lights and camera. On
 top of it, so that the two renderers are given the same problem:
@@ -40,7 +40,7 @@ with warnings.catch_warnings():
 def args():
     argv = sys.argv[sys.argv.index("--") + 1:]
     o = {"scene": argv[0], "out": argv[1], "env": None, "env_strength": 1.0, "spp": 16, "seed": 0, "threads": 2,
-         "max_bounces": 16, "width": 480, "height": 360, "stats": None}
+         "max_bounces": 16, "width": 480, "height": 360, "stats": None, "png": None}
     i = 2
     while i < len(argv):
         k = argv[i].lstrip("-").replace("-", "_")
@@ -142,6 +142,10 @@ def main():
     bpy.ops.render.render(write_still=False)
     seconds = time.time() - t0
     bpy.data.images["Render Result"].save_render(o["out"])
+    if o["png"]:  # sRGB, clamped (Standard view), as Tessera's PNG
+        scene.render.image_settings.file_format = "PNG"
+        scene.render.image_settings.color_depth = "8"
+        bpy.data.images["Render Result"].save_render(o["png"])
     if o["stats"]:
         with open(o["stats"], "w") as f:
             json.dump({"seconds": seconds, "spp": o["spp"]}, f)
