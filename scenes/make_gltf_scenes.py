@@ -126,9 +126,10 @@ def uv_sphere(radius, seg=96, rings=48):
 def cornell(animated=False):
     b = Builder()
     # ior 1: a glTF dielectric without its specular coat, i.e. exactly the .dae's Lambertian walls.
-    lam = lambda c: b.material({"pbrMetallicRoughness": {"baseColorFactor": c + [1], "metallicFactor": 0, "roughnessFactor": 1},
-                                "extensions": {"KHR_materials_ior": {"ior": 1.0}}})
-    white, red, green = lam([0.73, 0.73, 0.73]), lam([0.63, 0.065, 0.05]), lam([0.14, 0.45, 0.091])
+    lam = lambda name, c: b.material({"name": name, "pbrMetallicRoughness": {"baseColorFactor": c + [1], "metallicFactor": 0,
+                                                                           "roughnessFactor": 1},
+                                      "extensions": {"KHR_materials_ior": {"ior": 1.0}}})
+    white, red, green = lam("white", [0.73, 0.73, 0.73]), lam("red", [0.63, 0.065, 0.05]), lam("green", [0.14, 0.45, 0.091])
     h = 0.75
     # The same quads as cornell-spheres.dae (winding normals face into the room).
     walls = {"floor": ([-1, -h, -1], [-1, -h, 1], [1, -h, 1], [1, -h, -1], white),
@@ -139,13 +140,14 @@ def cornell(animated=False):
     for name, (p0, p1, p2, p3, m) in walls.items():
         pos, idx = quad(p0, p1, p2, p3)
         b.mesh(name, pos, idx, m)
-    light = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0},
+    light = b.material({"name": "light", "pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0},
                         "emissiveFactor": [1, 1, 1], "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 12}}})
     # 0.5 x 0.5 at y = 0.74, facing down (one-sided, like the CGL area light).
     pos, idx = quad([-0.25, 0.74, -0.25], [0.25, 0.74, -0.25], [0.25, 0.74, 0.25], [-0.25, 0.74, 0.25])
     b.mesh("light", pos, idx, light)
-    mirror = b.material({"pbrMetallicRoughness": {"baseColorFactor": [0.95, 0.95, 0.95, 1], "metallicFactor": 1, "roughnessFactor": 0}})
-    glass = b.material({"pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0, "roughnessFactor": 0},
+    mirror = b.material({"name": "mirror",
+                         "pbrMetallicRoughness": {"baseColorFactor": [0.95, 0.95, 0.95, 1], "metallicFactor": 1, "roughnessFactor": 0}})
+    glass = b.material({"name": "glass", "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0, "roughnessFactor": 0},
                         "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1.5},
                                        "KHR_materials_volume": {"thicknessFactor": 0.6}}})  # a solid sphere
     pos, nrm, idx = uv_sphere(0.3) if not animated else uv_sphere(0.3, 64, 32)

@@ -13,6 +13,12 @@ top of it, so that the two renderers are given the same problem:
     mirrored before the lookup (docs/gltf.md);
   - every Principled BSDF uses single-scattering GGX (the specification's model; Blender's
     "Multiscatter GGX" would add the energy GGX loses);
+  - one-sided emission: glTF's emitters without doubleSided emit from the front only, as
+    Tessera renders them; Cycles' emission is two-sided, so the strength is multiplied by
+    1 - Backfacing (the importer marks such materials with backface culling);
+  - a dielectric of KHR_materials_ior 1 (no metal, no transmission) is exactly Lambertian
+    in glTF's model (its Fresnel term is 0); Principled v1 cannot say so (Disney diffuse
+    stays), so such a material gets Cycles' Diffuse BSDF (Lambert) with the same colour;
   - KHR_materials_volume's attenuation, which Blender 3.4's importer does not read, as a
     Volume Absorption of density 1 and colour 1 - sigma (Cycles' sigma_a = density (1 -
     colour)), sigma = -ln(attenuationColor) / attenuationDistance per channel;
@@ -49,17 +55,37 @@ def args():
     return o
 
 
+def blender_name(m, index):
+    """The name Blender's importer gives glTF material `index`."""
+    return m.get("name") or "Material_%d" % index
+
+
+def lambertian(path):
+    """Names of materials that glTF's model makes exactly Lambertian (ior 1 dielectrics)."""
+    with open(path) as f:
+        g = json.load(f)
+    out = set()
+    for i, m in enumerate(g.get("materials", [])):
+        ext = m.get("extensions", {})
+        pbr = m.get("pbrMetallicRoughness", {})
+        if (ext.get("KHR_materials_ior", {}).get("ior") == 1 and pbr.get("metallicFactor", 1) == 0 and
+                ext.get("KHR_materials_transmission", {}).get("transmissionFactor", 0) == 0 and
+                not any(m.get("emissiveFactor", [0, 0, 0]))):
+            out.add(blender_name(m, i))
+    return out
+
+
 def volumes(path):
     """Per material name: sigma_a (r, g, b) of its KHR_materials_volume, when it has one."""
     with open(path) as f:
         g = json.load(f)
     out = {}
-    for m in g.get("materials", []):
+    for i, m in enumerate(g.get("materials", [])):
         v = m.get("extensions", {}).get("KHR_materials_volume")
         if not v or v.get("thicknessFactor", 0) <= 0 or "attenuationDistance" not in v:
             continue
         c = v.get("attenuationColor", [1, 1, 1])
-        out[m.get("name", "")] = [-math.log(max(x, 1e-30)) / v["attenuationDistance"] for x in c]
+        out[blender_name(m, i)] = [-math.log(max(x, 1e-30)) / v["attenuationDistance"] for x in c]
     return out
 
 
@@ -73,13 +99,34 @@ def main():
         scene.camera = cams[0]
 
     sigma = volumes(o["scene"])
+    lambert = lambertian(o["scene"])
     for mat in bpy.data.materials:
         if not mat.use_nodes:
             continue
         nodes, links = mat.node_tree.nodes, mat.node_tree.links
-        for n in nodes:
-            if n.type == "BSDF_PRINCIPLED":
-                n.distribution = "GGX"
+        for n in list(nodes):
+            if n.type != "BSDF_PRINCIPLED":
+                continue
+            n.distribution = "GGX"
+            if mat.name in lambert:
+                diffuse = nodes.new("ShaderNodeBsdfDiffuse")
+                base = n.inputs["Base Color"]
+                if base.is_linked:
+                    links.new(base.links[0].from_socket, diffuse.inputs["Color"])
+                else:
+                    diffuse.inputs["Color"].default_value = base.default_value
+                out = next(o for o in nodes if o.type == "OUTPUT_MATERIAL")
+                links.new(diffuse.outputs["BSDF"], out.inputs["Surface"])
+                continue
+            strength = n.inputs["Emission Strength"]
+            if mat.use_backface_culling and not strength.is_linked and strength.default_value > 0:
+                geometry = nodes.new("ShaderNodeNewGeometry")
+                front = nodes.new("ShaderNodeMath")
+                front.operation = "MULTIPLY_ADD"  # backfacing x (-strength) + strength
+                front.inputs[1].default_value = -strength.default_value
+                front.inputs[2].default_value = strength.default_value
+                links.new(geometry.outputs["Backfacing"], front.inputs[0])
+                links.new(front.outputs["Value"], strength)
         if mat.name in sigma:
             out = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
             vol = nodes.new("ShaderNodeVolumeAbsorption")
