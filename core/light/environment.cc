@@ -30,12 +30,29 @@ EnvironmentMap::EnvironmentMap(RgbImage image, float rotation_deg) : image_(std:
   row_p_.assign(size_t(h), 0);
   std::vector<double> row_sum(size_t(h), 0);
   double total = 0;
+  // A pixel's weight is the mean of the radiance over its cell as radiance() sees it,
+  // bilinearly filtered: 1/8, 3/4, 1/8 of its neighbours and itself in each direction
+  // (wrapping in x, clamped in y). Weighting by the pixel alone leaves a dim pixel next to
+  // a bright one (the sun's rim) with a tiny probability but half the bright radiance:
+  // rare samples of huge weight, fireflies on every rough surface.
+  std::vector<double> lum(size_t(w) * h);
+  for (size_t i = 0; i < lum.size(); ++i) lum[i] = luminance(image_.texels[i]);
+  constexpr double kTap[3] = {0.125, 0.75, 0.125};
+  auto filtered = [&](int x, int y) {
+    double sum = 0;
+    for (int j = -1; j <= 1; ++j)
+      for (int i = -1; i <= 1; ++i) {
+        const int xx = ((x + i) % w + w) % w, yy = std::clamp(y + j, 0, h - 1);
+        sum += kTap[i + 1] * kTap[j + 1] * lum[size_t(yy) * w + size_t(xx)];
+      }
+    return sum;
+  };
   for (int y = 0; y < h; ++y) {
     const double sin_t = std::sin(M_PI * (y + 0.5) / h);
     double acc = 0;
     std::vector<double> c(size_t(w) + 1, 0);
     for (int x = 0; x < w; ++x) {
-      acc += double(luminance(image_.texels[size_t(y) * w + x])) * sin_t;
+      acc += filtered(x, y) * sin_t;
       c[size_t(x) + 1] = acc;
     }
     for (int x = 0; x <= w; ++x)

@@ -4,8 +4,9 @@
 // Directions follow CS184 (format doc 7.6): theta = acos(w.y) from +Y (row 0 at the top),
 // phi = atan2(-w.z, w.x) + pi across the columns; radiance is looked up bilinearly (wrap
 // in x, clamp in y). The map turns by `rotation_deg` about +Y. Sampling is piecewise
-// constant per pixel, proportional to luminance x sin(theta) (a marginal over rows, a
-// conditional over columns), so pdf(w) = p_pixel W H / (2 pi^2 sin theta).
+// constant per pixel, proportional to the luminance of the filtered map over the pixel's
+// cell x sin(theta) (a marginal over rows, a conditional over columns), so pdf(w) =
+// p_pixel W H / (2 pi^2 sin theta).
 #pragma once
 
 #include <memory>
