@@ -13,28 +13,18 @@ glass (sharp, same ior) / refraction materials, and CS184's camera framing and f
 view. Cycles: Standard view transform, 1 px box filter, no denoising, no clamping, no
 adaptive sampling, caustics on, the same max bounces, CPU with a fixed thread count.
 """
-import json
 import math
+import os
 import sys
-import time
 import xml.etree.ElementTree as ET
 
 import bpy
 from mathutils import Matrix, Vector
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import cycles_common  # noqa: E402
+
 NS = "{http://www.collada.org/2005/11/COLLADASchema}"
-
-
-def args():
-    argv = sys.argv[sys.argv.index("--") + 1:]
-    o = {"scene": argv[0], "out": argv[1], "spp": 16, "seed": 0, "threads": 2, "max_bounces": 16, "width": 480,
-         "height": 360, "stats": None}
-    i = 2
-    while i < len(argv):
-        k = argv[i].lstrip("-").replace("-", "_")
-        o[k] = type(o[k])(argv[i + 1]) if o[k] is not None else argv[i + 1]
-        i += 2
-    return o
 
 
 def nums(el):
@@ -233,7 +223,7 @@ def add_object(name, verts, faces, material, smooth=False):
 
 
 def main():
-    o = args()
+    o = cycles_common.parse_args(cycles_common.DEFAULTS)
     bpy.ops.wm.read_factory_settings(use_empty=True)
     scene = bpy.context.scene
     c = Collada(o["scene"])
@@ -290,38 +280,8 @@ def main():
     world.use_nodes = True
     world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0
     scene.world = world
-    scene.render.engine = "CYCLES"
-    cy = scene.cycles
-    cy.device = "CPU"
-    cy.samples = o["spp"]
-    cy.use_adaptive_sampling = False
-    cy.use_denoising = False
-    cy.seed = o["seed"]
-    cy.max_bounces = cy.diffuse_bounces = cy.glossy_bounces = cy.transmission_bounces = o["max_bounces"]
-    cy.transparent_max_bounces = o["max_bounces"]
-    cy.caustics_reflective = cy.caustics_refractive = True
-    cy.sample_clamp_direct = cy.sample_clamp_indirect = 0
-    cy.blur_glossy = 0
-    cy.light_sampling_threshold = 0
-    cy.pixel_filter_type = "BOX"
-    cy.filter_width = 1.0
-    scene.render.threads_mode = "FIXED"
-    scene.render.threads = o["threads"]
-    scene.render.resolution_x, scene.render.resolution_y = o["width"], o["height"]
-    scene.render.resolution_percentage = 100
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.image_settings.color_depth = "32"
-    scene.render.image_settings.color_mode = "RGB"
-    t0 = time.time()
-    bpy.ops.render.render(write_still=False)
-    seconds = time.time() - t0
-    bpy.data.images["Render Result"].save_render(o["out"])
-    if o["stats"]:
-        with open(o["stats"], "w") as f:
-            json.dump({"seconds": seconds, "spp": o["spp"]}, f)
-    print("cs184_to_cycles: %s, %d spp in %.2f s -> %s" % (o["scene"], o["spp"], seconds, o["out"]))
+    cycles_common.configure(scene, o)
+    cycles_common.render(scene, o, "cs184_to_cycles")
 
 
 main()

@@ -22,18 +22,19 @@ top of it, so that the two renderers are given the same problem:
   - KHR_materials_volume's attenuation, which Blender 3.4's importer does not read, as a
     Volume Absorption of density 1 and colour 1 - sigma (Cycles' sigma_a = density (1 -
     colour)), sigma = -ln(attenuationColor) / attenuationDistance per channel;
-  - Cycles as in cs184_to_cycles.py: Standard view, 1 px box filter, no denoising, no
-    clamping, no adaptive sampling, caustics on, the same bounces, CPU, fixed threads.
+  - Cycles set as for every comparison (cycles_common.py).
 """
 import json
 import math
+import os
 import sys
-import time
-
 import warnings
 
 import bpy
 import numpy
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import cycles_common  # noqa: E402
 
 # Debian 12's Blender 3.4 glTF importer still says numpy.bool, which Debian's NumPy 1.24
 # removed; it means the builtin. (Run Blender with Debian's python3 first on PATH: a
@@ -41,18 +42,6 @@ import numpy
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     numpy.bool = bool
-
-
-def args():
-    argv = sys.argv[sys.argv.index("--") + 1:]
-    o = {"scene": argv[0], "out": argv[1], "env": None, "env_strength": 1.0, "spp": 16, "seed": 0, "threads": 2,
-         "max_bounces": 16, "width": 480, "height": 360, "stats": None, "png": None}
-    i = 2
-    while i < len(argv):
-        k = argv[i].lstrip("-").replace("-", "_")
-        o[k] = type(o[k])(argv[i + 1]) if o[k] is not None else argv[i + 1]
-        i += 2
-    return o
 
 
 def blender_name(m, index):
@@ -90,7 +79,7 @@ def volumes(path):
 
 
 def main():
-    o = args()
+    o = cycles_common.parse_args(dict(cycles_common.DEFAULTS, env=None, env_strength=1.0, png=None))
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.import_scene.gltf(filepath=o["scene"])
     scene = bpy.context.scene
@@ -160,43 +149,8 @@ def main():
         bg.inputs["Strength"].default_value = 0
     scene.world = world
 
-    scene.render.engine = "CYCLES"
-    cy = scene.cycles
-    cy.device = "CPU"
-    cy.samples = o["spp"]
-    cy.use_adaptive_sampling = False
-    cy.use_denoising = False
-    cy.seed = o["seed"]
-    cy.max_bounces = cy.diffuse_bounces = cy.glossy_bounces = cy.transmission_bounces = o["max_bounces"]
-    cy.volume_bounces = o["max_bounces"]
-    cy.transparent_max_bounces = o["max_bounces"]
-    cy.caustics_reflective = cy.caustics_refractive = True
-    cy.sample_clamp_direct = cy.sample_clamp_indirect = 0
-    cy.blur_glossy = 0
-    cy.light_sampling_threshold = 0
-    cy.pixel_filter_type = "BOX"
-    cy.filter_width = 1.0
-    scene.render.threads_mode = "FIXED"
-    scene.render.threads = o["threads"]
-    scene.render.resolution_x, scene.render.resolution_y = o["width"], o["height"]
-    scene.render.resolution_percentage = 100
-    scene.view_settings.view_transform = "Standard"
-    scene.view_settings.look = "None"
-    scene.render.image_settings.file_format = "OPEN_EXR"
-    scene.render.image_settings.color_depth = "32"
-    scene.render.image_settings.color_mode = "RGB"
-    t0 = time.time()
-    bpy.ops.render.render(write_still=False)
-    seconds = time.time() - t0
-    bpy.data.images["Render Result"].save_render(o["out"])
-    if o["png"]:  # sRGB, clamped (Standard view), as Tessera's PNG
-        scene.render.image_settings.file_format = "PNG"
-        scene.render.image_settings.color_depth = "8"
-        bpy.data.images["Render Result"].save_render(o["png"])
-    if o["stats"]:
-        with open(o["stats"], "w") as f:
-            json.dump({"seconds": seconds, "spp": o["spp"]}, f)
-    print("gltf_to_cycles: %s, %d spp in %.2f s -> %s" % (o["scene"], o["spp"], seconds, o["out"]))
+    cycles_common.configure(scene, o)
+    cycles_common.render(scene, o, "gltf_to_cycles")
 
 
 main()

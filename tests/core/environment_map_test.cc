@@ -175,15 +175,8 @@ TEST(EnvironmentMap, SamplingFollowsLuminanceAndMatchesItsPdf) {
 }
 
 Scene sphere_scene(Material m) {
-  Scene s;
-  s.materials.push_back(m);
-  s.spheres.push_back(Sphere{"inner", {0, 0, 0}, 1, 0, -1});
-  s.camera.present = true;
-  s.camera.eye = {0, 0, 4};
-  s.camera.xfov_deg = 30;
-  s.camera.aspect_ratio = 1;
+  Scene s = testing::lone_sphere(std::move(m));
   s.source = (temp_dir() / "scene.gltf").string();  // relative --env paths resolve beside it
-  s.finalize();
   return s;
 }
 

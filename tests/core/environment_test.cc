@@ -17,17 +17,7 @@ using testing::render;
 // A unit sphere of albedo rho under a uniform environment of radiance 1 and nothing else:
 // every point on it sees radiance 1 over its whole hemisphere, so every pixel is rho (the
 // background 1).
-Scene open_furnace(Material inner) {
-  Scene s;
-  s.materials.push_back(inner);
-  s.spheres.push_back(Sphere{"inner", {0, 0, 0}, 1, 0, -1});
-  s.camera.present = true;
-  s.camera.eye = {0, 0, 4};
-  s.camera.xfov_deg = 30;  // the sphere fills the view but for the corners
-  s.camera.aspect_ratio = 1;
-  s.finalize();
-  return s;
-}
+Scene open_furnace(Material inner) { return testing::lone_sphere(std::move(inner)); }
 
 RenderSettings env_settings() {
   RenderSettings s = testing::furnace_settings();

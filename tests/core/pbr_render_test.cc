@@ -80,17 +80,7 @@ TEST(PbrRender, AbsorbingSolidTransmitsExpOfMinusSigmaTimesItsThickness) {
 // mix of coat and diffuse is not exactly energy conserving: measured here, at most 1% more
 // than it receives.
 TEST(PbrRender, WhiteFurnaces) {
-  auto mean_of = [](Material m) {
-    Scene s;
-    s.materials.push_back(m);
-    s.spheres.push_back(Sphere{"inner", {0, 0, 0}, 1, 0, -1});
-    s.camera.present = true;
-    s.camera.eye = {0, 0, 4};
-    s.camera.xfov_deg = 30;
-    s.camera.aspect_ratio = 1;
-    s.finalize();
-    return film_estimate(render(s, env_settings()).film);
-  };
+  auto mean_of = [](Material m) { return film_estimate(render(testing::lone_sphere(m), env_settings()).film); };
   testing::Estimate e = mean_of(pbr(1, 0));
   EXPECT_NEAR(e.mean, 1.0, 1e-4);
   Material lambert = pbr(0, 0.5f);

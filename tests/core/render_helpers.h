@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cmath>
+#include <utility>
 #include <vector>
 
 #include "core/render/local_renderer.h"
@@ -56,6 +57,20 @@ inline Scene furnace_with(std::vector<Sphere> spheres, Material inner, float enc
 // A unit sphere of albedo rho inside the emitter: every point on it sees radiance 1 over
 // its whole hemisphere, so it reflects exactly rho.
 inline Scene furnace(Material inner) { return furnace_with({Sphere{"inner", {0, 0, 0}, 1, 0, -1}}, inner, 10, 4, 40); }
+
+// A unit sphere of material m at the origin and nothing else, seen from (0, 0, 4) with a
+// 30-degree view that it fills but for the corners (they see the background).
+inline Scene lone_sphere(Material m) {
+  Scene s;
+  s.materials.push_back(std::move(m));
+  s.spheres.push_back(Sphere{"inner", {0, 0, 0}, 1, 0, -1});
+  s.camera.present = true;
+  s.camera.eye = {0, 0, 4};
+  s.camera.xfov_deg = 30;
+  s.camera.aspect_ratio = 1;
+  s.finalize();
+  return s;
+}
 
 inline RenderSettings furnace_settings() {
   RenderSettings s;

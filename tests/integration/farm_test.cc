@@ -109,6 +109,19 @@ class Farm : public ::testing::Test {
     EXPECT_EQ(r.code, 0) << r.err;
     return out;
   }
+  // Renders kScene with `flags` locally, then through a new coordinator and two workers,
+  // and expects the same pixels. Returns the farm's image (the coordinator stays up).
+  std::string farm_gives_the_local_image(const std::string& flags) {
+    const std::string local = local_render(flags);
+    start_coordinator();
+    start_worker();
+    start_worker();
+    const std::string out = (dir / "farm.exr").string();
+    const CommandResult r = submit_wait(kScene, flags, out);
+    EXPECT_EQ(r.code, 0) << r.err;
+    expect_same_pixels(local, out);
+    return out;
+  }
 };
 
 const std::string kFlags = "-r 96 72 -s 24 --pass-spp 8 -m 6 --seed 11 --tile 16";
@@ -131,17 +144,9 @@ TEST_F(Farm, OneTwoAndThreeWorkersGiveTheBytesOfTessearRender) {
 // Issue 12: a frame of a sequence (--frame N) is the same image rendered alone or through
 // the farm, and carries its number in the EXR.
 TEST_F(Farm, AFrameNumberGivesTheSameImageLocallyAndThroughTheFarm) {
-  const std::string flags = kFlags + " --frame 12";
-  const std::string local = local_render(flags);
-  start_coordinator();
-  start_worker();
-  start_worker();
-  const std::string out = (dir / "farm.exr").string();
-  const CommandResult r = submit_wait(kScene, flags, out);
-  ASSERT_EQ(r.code, 0) << r.err;
-  expect_same_pixels(local, out);
+  const std::string out = farm_gives_the_local_image(kFlags + " --frame 12");
   EXPECT_EQ(read_exr(out).metadata.at("tessera/frame"), "12");
-  EXPECT_EQ(read_exr(local).metadata.at("tessera/frame"), "12");
+  EXPECT_EQ(read_exr((dir / "local.exr").string()).metadata.at("tessera/frame"), "12");
   const CommandResult bad = run("render " + kScene + " -r 8 8 --frame 2000000 -q", dir);
   EXPECT_NE(bad.code, 0);  // refused like every setting out of range, naming the flag
   EXPECT_NE(bad.err.find("--frame: must be in -1000000..1000000"), std::string::npos) << bad.err;
@@ -243,30 +248,14 @@ TEST_F(Farm, AnAnimatedGltfSequenceThroughTheFarmGivesTesseraRendersFrames) {
 // Issue 13's first piece: a uniform environment (--env-color) crosses the wire and the
 // farm's image is still tessera render's, on a CS184 scene.
 TEST_F(Farm, AnEnvironmentLightGivesTheLocalImageThroughTheFarm) {
-  const std::string flags = "-r 64 48 -s 16 --pass-spp 8 -m 6 --env-color 0.2 0.3 0.4";
-  const std::string local = local_render(flags);
-  start_coordinator();
-  start_worker();
-  start_worker();
-  const std::string out = (dir / "farm.exr").string();
-  const CommandResult r = submit_wait(kScene, flags, out);
-  ASSERT_EQ(r.code, 0) << r.err;
-  expect_same_pixels(local, out);
+  farm_gives_the_local_image("-r 64 48 -s 16 --pass-spp 8 -m 6 --env-color 0.2 0.3 0.4");
 }
 
 // An image environment (--env, from another folder than the scene's) travels in the scene
 // bundle: the farm's image is the local one, rotated and scaled alike.
 TEST_F(Farm, AnEnvironmentMapTravelsWithTheSceneAndGivesTheLocalImage) {
-  const std::string flags = "-r 64 48 -s 16 --pass-spp 8 -m 6 --env " + std::string(TESSERA_SOURCE_DIR) + "/scenes/sky.hdr" +
-                            " --env-rotate 30 --env-strength 0.5";
-  const std::string local = local_render(flags);
-  start_coordinator();
-  start_worker();
-  start_worker();
-  const std::string out = (dir / "farm.exr").string();
-  const CommandResult r = submit_wait(kScene, flags, out);
-  ASSERT_EQ(r.code, 0) << r.err;
-  expect_same_pixels(local, out);
+  farm_gives_the_local_image("-r 64 48 -s 16 --pass-spp 8 -m 6 --env " + std::string(TESSERA_SOURCE_DIR) +
+                             "/scenes/sky.hdr --env-rotate 30 --env-strength 0.5");
   // A broken map is refused at submit, named as the job named it.
   const std::string bad = (dir / "bad.hdr").string();
   std::ofstream(bad) << "not radiance";
