@@ -19,8 +19,8 @@ struct RenderFlags {
   std::string camera = "auto";            // cs184 for .dae, the file's own camera for glTF
   bool no_nee = false, no_mis = false;
   std::vector<std::string> outputs;
-  std::string frames;            // --frames: a sequence
-  std::string camera_path;       // --camera-path FILE
+  std::string frames;       // --frames: a sequence
+  std::string camera_path;  // --camera-path FILE
   std::vector<float> env_color;
   std::string env;  // --env FILE  // --env-color R G B
   bool no_default_env = false;

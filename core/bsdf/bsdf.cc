@@ -11,12 +11,30 @@ namespace {
 
 Vec3 reflect_z(Vec3 w) { return {-w.x, -w.y, w.z}; }
 
+// The microfacet normal along v, facing +z; false if v is degenerate or the normal is
+// back-facing to wo or wi (each must be on the same side of it as of the macro surface).
+bool half_vector(Vec3 v, Vec3 wo, Vec3 wi, Vec3* h) {
+  const float len = length(v);
+  if (!(len > 0)) return false;
+  v = v / len;
+  if (v.z < 0) v = -v;
+  *h = v;
+  return dot(v, wo) * wo.z > 0 && dot(v, wi) * wi.z > 0;
+}
+
+// Half vector of a reflection.
+bool reflection_half(Vec3 wo, Vec3 wi, Vec3* h) { return half_vector(wo + wi, wo, wi, h); }
+
+// Generalized half vector of a refraction (Walter et al. eq. 16); etap is the relative
+// index along the path (n_t / n_i).
+bool refraction_half(const Material& m, Vec3 wo, Vec3 wi, Vec3* h, float* etap) {
+  *etap = wo.z > 0 ? m.ior : 1 / m.ior;
+  return half_vector(wi * *etap + wo, wo, wi, h);
+}
+
 Rgb microfacet_f(const Material& m, Vec3 wo, Vec3 wi) {
-  if (wo.z <= 0 || wi.z <= 0) return Rgb(0);
-  Vec3 h = wo + wi;
-  const float len = length(h);
-  if (len == 0) return Rgb(0);
-  h = h / len;
+  Vec3 h;
+  if (wo.z <= 0 || wi.z <= 0 || !reflection_half(wo, wi, &h)) return Rgb(0);
   const Beckmann dist(m.alpha);
   // Fresnel at the microfacet (wi . h), not the macro normal as CS184 does.
   const Rgb f = fresnel_conductor(dot(wi, h), m.eta, m.k);
@@ -24,14 +42,10 @@ Rgb microfacet_f(const Material& m, Vec3 wo, Vec3 wi) {
 }
 
 float microfacet_pdf(const Material& m, Vec3 wo, Vec3 wi) {
-  if (wo.z <= 0 || wi.z <= 0) return 0;
-  Vec3 h = wo + wi;
-  const float len = length(h);
-  if (len == 0) return 0;
-  h = h / len;
+  Vec3 h;
+  if (wo.z <= 0 || wi.z <= 0 || !reflection_half(wo, wi, &h)) return 0;
   return Beckmann(m.alpha).pdf_h(h) / (4 * std::fabs(dot(wo, h)));
 }
-
 
 // ---- glTF metallic-roughness (kPbr) ----------------------------------------------------
 // glTF 2.0 Appendix B, as three components mixed by weight:
@@ -59,8 +73,6 @@ Rgb schlick(Rgb f0, float c) {
   return f0 + (Rgb(1.0f) - f0) * x5;
 }
 
-float luminance(Rgb c) { return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b; }
-
 bool pbr_smooth(const Material& m) { return m.alpha < Material::kSmoothAlpha; }
 
 // The glass component's Fresnel at cosine c against the outward normal: a solid's inside
@@ -75,9 +87,9 @@ PbrLobes pbr_lobes(const Material& m, Vec3 wo) {
   const PbrWeights w = pbr_weights(m);
   const float c = std::fabs(wo.z);
   const float fc = fresnel_dielectric(c, m.ior), fg = glass_fresnel(m, wo.z);
-  const float base = luminance(m.reflectance);
+  const float base = m.reflectance.luminance();
   PbrLobes p;
-  p.spec = w.metal * luminance(schlick(m.reflectance, c)) + w.coat * fc + w.glass * fg;
+  p.spec = w.metal * schlick(m.reflectance, c).luminance() + w.coat * fc + w.glass * fg;
   p.trans = w.glass > 0 ? w.glass * (1 - fg) * base : 0;
   // Floors keep every rough lobe that can be non-zero samplable (an unbiased mixture needs
   // it). A smooth lobe's albedo is exact, so a delta lobe of albedo 0 is never chosen.
@@ -94,30 +106,6 @@ PbrLobes pbr_lobes(const Material& m, Vec3 wo) {
   return p;
 }
 
-// Half vector of a reflection, facing +z; false if degenerate or back-facing.
-bool reflection_half(Vec3 wo, Vec3 wi, Vec3* h) {
-  Vec3 v = wo + wi;
-  const float len = length(v);
-  if (!(len > 0)) return false;
-  v = v / len;
-  if (v.z < 0) v = -v;
-  *h = v;
-  return dot(v, wo) * wo.z > 0 && dot(v, wi) * wi.z > 0;
-}
-
-// Generalized half vector of a refraction (Walter et al. eq. 16), facing +z; etap is the
-// relative index along the path (n_t / n_i).
-bool refraction_half(const Material& m, Vec3 wo, Vec3 wi, Vec3* h, float* etap) {
-  *etap = wo.z > 0 ? m.ior : 1 / m.ior;
-  Vec3 v = wi * *etap + wo;
-  const float len = length(v);
-  if (!(len > 0)) return false;
-  v = v / len;
-  if (v.z < 0) v = -v;
-  *h = v;
-  return dot(v, wo) * wo.z > 0 && dot(v, wi) * wi.z > 0;
-}
-
 // The non-delta part of f(wo, wi).
 Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
   const float co = wo.z, ci = wi.z;
@@ -129,12 +117,13 @@ Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
     Vec3 h;
     if (!reflection_half(wo, wi, &h)) return Rgb(0);
     const float oh = dot(wo, h);  // negative inside
+    const float fc = fresnel_dielectric(std::fabs(oh), m.ior);
     Rgb f(0.0f);
-    if (w.coat > 0) f += m.reflectance * (w.coat * (1 - fresnel_dielectric(std::fabs(oh), m.ior)) * kInvPi);
+    if (w.coat > 0) f += m.reflectance * (w.coat * (1 - fc) * kInvPi);
     if (smooth) return f;
     const float spec = g.d(h) * g.g2(wo, wi) / (4 * std::fabs(co * ci));
     if (w.metal > 0) f += schlick(m.reflectance, std::fabs(oh)) * (w.metal * spec);
-    const float fd = w.coat * fresnel_dielectric(std::fabs(oh), m.ior) + w.glass * glass_fresnel(m, oh);
+    const float fd = w.coat * fc + w.glass * glass_fresnel(m, oh);
     return f + Rgb(fd * spec);
   }
   if (w.glass <= 0 || smooth) return Rgb(0);
@@ -217,22 +206,18 @@ bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) 
   } else {
     const Ggx g(m.alpha);
     const Vec3 h = g.sample_visible(wo_up, u2);  // facing +z, the exterior, as refract() wants
-    if (u1 < p.diffuse + p.spec || p.trans <= 0) {
-      out->wi = h * (2 * dot(wo, h)) - wo;
-      if (out->wi.z * co <= 0) return false;
-    } else if (m.thin) {
+    const bool reflect = u1 < p.diffuse + p.spec || p.trans <= 0;
+    if (reflect || m.thin) {
       const Vec3 wr = h * (2 * dot(wo, h)) - wo;
-      out->wi = {wr.x, wr.y, -wr.z};
-      if (out->wi.z * co >= 0) return false;
-    } else {
-      if (!refract(wo, h, m.ior, &out->wi, &out->etap)) return false;
-      if (out->wi.z * co >= 0) return false;
+      out->wi = reflect ? wr : Vec3{wr.x, wr.y, -wr.z};         // thin: mirrored through the surface
+    } else if (!refract(wo, h, m.ior, &out->wi, &out->etap)) {  // sets etap
+      return false;
     }
+    if (reflect ? out->wi.z * co <= 0 : out->wi.z * co >= 0) return false;  // on the wrong side
   }
   out->pdf = pbr_pdf(m, wo, out->wi);
   if (!(out->pdf > 0)) return false;
   out->weight = pbr_f(m, wo, out->wi) * (std::fabs(out->wi.z) / out->pdf);
-  if (out->wi.z * co < 0 && !m.thin) out->etap = co > 0 ? m.ior : 1 / m.ior;
   return true;
 }
 

@@ -23,7 +23,6 @@ std::string encode_png(int w, int h, const float* r, const float* g, const float
 // Picks the format from the extension (.exr or .png); throws on anything else.
 void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata);
 
-
 // sRGB transfer of a linear value, clamped to [0, 1], as an 8-bit code.
 uint8_t srgb_byte(float linear);
 

@@ -6,8 +6,6 @@
 namespace tessera {
 namespace {
 
-float luminance(Rgb c) { return 0.2126f * c.r + 0.7152f * c.g + 0.0722f * c.b; }
-
 // Index i with cdf[i] <= u < cdf[i + 1], skipping zero-probability entries.
 size_t find_interval(const std::vector<float>& cdf, size_t offset, size_t n, float u) {
   const auto first = cdf.begin() + ptrdiff_t(offset), last = first + ptrdiff_t(n + 1);
@@ -36,7 +34,7 @@ EnvironmentMap::EnvironmentMap(RgbImage image, float rotation_deg) : image_(std:
   // a bright one (the sun's rim) with a tiny probability but half the bright radiance:
   // rare samples of huge weight, fireflies on every rough surface.
   std::vector<double> lum(size_t(w) * h);
-  for (size_t i = 0; i < lum.size(); ++i) lum[i] = luminance(image_.texels[i]);
+  for (size_t i = 0; i < lum.size(); ++i) lum[i] = image_.texels[i].luminance();
   constexpr double kTap[3] = {0.125, 0.75, 0.125};
   auto filtered = [&](int x, int y) {
     double sum = 0;

@@ -87,13 +87,8 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
       if (!(len > 0)) return false;
       Rgb radiance = l.color;
       const Material& mat = scene_.materials[m.material];
-      if (mat.emissive_texture.active() && !m.uvs.empty()) {  // glTF emissiveTexture
-        const size_t i0 = m.indices[3 * t], i1 = m.indices[3 * t + 1], i2 = m.indices[3 * t + 2];
-        const float b0 = 1 - bc.x - bc.y;
-        const Vec2 uv{m.uvs[i0].x * b0 + m.uvs[i1].x * bc.x + m.uvs[i2].x * bc.y,
-                      m.uvs[i0].y * b0 + m.uvs[i1].y * bc.x + m.uvs[i2].y * bc.y};
-        radiance = scene_.textured(mat, uv).radiance;
-      }
+      if (mat.emissive_texture.active() && !m.uvs.empty())  // glTF emissiveTexture
+        radiance = scene_.textured(mat, m.uv_at(t, bc.x, bc.y)).radiance;
       return finish_area_sample(p, q, err, n / len, 1 / d.area, radiance, l.two_sided, out);
     }
     case Light::Kind::kSphere: {

@@ -76,10 +76,7 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
   const float ns_len = length(ns);
   sp.ns = ns_len > 0 ? ns / ns_len : sp.ng;
   sp.ns = face_forward(sp.ns, sp.ng);
-  if (!m.uvs.empty()) {
-    const Vec2 a = m.uvs[i0], b = m.uvs[i1], c = m.uvs[i2];
-    sp.uv = {a.x * b0 + b.x * b1 + c.x * b2, a.y * b0 + b.y * b1 + c.y * b2};
-  }
+  if (!m.uvs.empty()) sp.uv = m.uv_at(hit.prim, b1, b2);
   sp.material = m.material;
   sp.light = m.light;
   return sp;

@@ -28,8 +28,7 @@ std::shared_ptr<const EnvironmentMap> TileRenderer::load_environment(const Scene
   std::filesystem::path path(settings.environment_map);
   if (path.is_relative()) path = std::filesystem::path(scene.source).parent_path() / path;
   try {
-    return std::make_shared<const EnvironmentMap>(read_environment_image(path.string()),
-                                                  settings.environment_rotation);
+    return std::make_shared<const EnvironmentMap>(read_environment_image(path.string()), settings.environment_rotation);
   } catch (const std::runtime_error& e) {
     // Named as the settings name it (a farm job's bundle path), not where it was unpacked.
     std::string why = e.what();
@@ -68,15 +67,13 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
   // What the settings add to the scene's lights: an environment (--env, --env-color), or
   // the neutral default one for a scene with no light at all. Its image is loaded once and
   // shared by every renderer that shares these lights.
-  const bool same_environment =
-      share && share->settings_.environment == settings_.environment &&
-      share->settings_.default_environment == settings_.default_environment &&
-      share->settings_.environment_map == settings_.environment_map &&
-      share->settings_.environment_strength == settings_.environment_strength &&
-      share->settings_.environment_rotation == settings_.environment_rotation;
+  const bool same_environment = share && share->settings_.environment == settings_.environment &&
+                                share->settings_.default_environment == settings_.default_environment &&
+                                share->settings_.environment_map == settings_.environment_map &&
+                                share->settings_.environment_strength == settings_.environment_strength &&
+                                share->settings_.environment_rotation == settings_.environment_rotation;
   std::vector<Light> extra;
-  if (settings_.environment || !settings_.environment_map.empty() ||
-      (scene_->unlit && settings_.default_environment)) {
+  if (settings_.environment || !settings_.environment_map.empty() || (scene_->unlit && settings_.default_environment)) {
     Light env;
     env.kind = Light::Kind::kEnvironment;
     env.name = !settings_.environment_map.empty() ? settings_.environment_map

@@ -52,14 +52,13 @@ RgbImage read_environment_image(const std::string& path) {
   if (ext == ".exr" || ext == ".EXR") {
     ExrImage exr = read_exr(path);
     const bool rgb = exr.channels.count("R") && exr.channels.count("G") && exr.channels.count("B");
-    if (!rgb && !exr.channels.count("Y"))
-      throw std::runtime_error(path + ": the EXR has no R, G, B (or Y) channels");
+    if (!rgb && !exr.channels.count("Y")) throw std::runtime_error(path + ": the EXR has no R, G, B (or Y) channels");
     img.width = exr.width;
     img.height = exr.height;
     img.texels.resize(size_t(img.width) * img.height);
     for (size_t i = 0; i < img.texels.size(); ++i)
-      img.texels[i] = rgb ? Rgb(exr.channels["R"][i], exr.channels["G"][i], exr.channels["B"][i])
-                          : Rgb(exr.channels["Y"][i]);
+      img.texels[i] =
+          rgb ? Rgb(exr.channels["R"][i], exr.channels["G"][i], exr.channels["B"][i]) : Rgb(exr.channels["Y"][i]);
   } else if (ext == ".hdr" || ext == ".HDR") {
     int w = 0, h = 0, n = 0;
     if (!stbi_info(path.c_str(), &w, &h, &n) || !stbi_is_hdr(path.c_str()))

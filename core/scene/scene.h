@@ -53,7 +53,7 @@ struct Material {
   TextureRef metal_rough_texture;  // linear: G scales roughness, B metallic
   TextureRef normal_texture;       // tangent-space normal map (linear)
   float normal_scale = 1;
-  TextureRef emissive_texture;     // kEmission: multiplies `radiance` (sRGB-decoded)
+  TextureRef emissive_texture;  // kEmission: multiplies `radiance` (sRGB-decoded)
 
   // Below this alpha a kPbr surface's specular lobes are perfectly smooth (delta).
   static constexpr float kSmoothAlpha = 1e-3f;
@@ -84,6 +84,12 @@ struct Mesh {
   int32_t light = -1;  // index into Scene::lights when the mesh emits
 
   size_t triangle_count() const { return indices.size() / 3; }
+  // Texture coordinates at barycentrics (b1, b2) of triangle `tri`; uvs must not be empty.
+  Vec2 uv_at(size_t tri, float b1, float b2) const {
+    const float b0 = 1 - b1 - b2;
+    const Vec2 a = uvs[indices[3 * tri]], b = uvs[indices[3 * tri + 1]], c = uvs[indices[3 * tri + 2]];
+    return {a.x * b0 + b.x * b1 + c.x * b2, a.y * b0 + b.y * b1 + c.y * b2};
+  }
   void compute_normals();
 };
 

@@ -152,6 +152,25 @@ TEST(Bsdf, DiffuseSamplingMatchesItsPdfAndWeightIsTheAlbedo) {
   EXPECT_GT(r.p_value, kAlpha) << r.describe();
 }
 
+// Chi-square of bsdf_sample's directions against bsdf_pdf over the whole sphere (40 x 80
+// cells), each sample a non-delta one whose weight is f |cos| / pdf in every channel, from
+// bsdf_eval and bsdf_pdf.
+testing::Chi2Result sample_against_pdf(const Material& m, Vec3 wo, uint64_t seed, int n) {
+  return testing::chi2_directions(
+      [&](int i) -> std::optional<Vec3> {
+        Sampler sp(seed, 0, uint32_t(i));
+        BsdfSample s;
+        const float u1 = sp.next_1d();
+        if (!bsdf_sample(m, wo, u1, sp.next_2d(), &s)) return std::nullopt;
+        EXPECT_FALSE(s.delta);
+        const Rgb f = bsdf_eval(m, wo, s.wi) * (std::fabs(s.wi.z) / bsdf_pdf(m, wo, s.wi));
+        for (const auto& [got, expect] : {std::pair{s.weight.r, f.r}, {s.weight.g, f.g}, {s.weight.b, f.b}})
+          EXPECT_NEAR(got, expect, 1e-3f * std::max(1.0f, expect));
+        return s.wi;
+      },
+      [&](Vec3 wi) { return double(bsdf_pdf(m, wo, wi)); }, n, 40, 80);
+}
+
 class MicrofacetTest : public ::testing::TestWithParam<std::tuple<float, float>> {};
 
 TEST_P(MicrofacetTest, ImportanceSamplingMatchesItsPdf) {
@@ -161,19 +180,7 @@ TEST_P(MicrofacetTest, ImportanceSamplingMatchesItsPdf) {
   m.alpha = alpha;
   m.eta = Rgb(0.2f);
   m.k = Rgb(3.9f);
-  const Vec3 wo = dir(theta);
-  const auto r = testing::chi2_directions(
-      [&](int i) -> std::optional<Vec3> {
-        Sampler sp(9, 0, uint32_t(i));
-        BsdfSample s;
-        const float u1 = sp.next_1d();
-        if (!bsdf_sample(m, wo, u1, sp.next_2d(), &s)) return std::nullopt;
-        // The weight is f cos / pdf, consistent with eval and pdf.
-        const Rgb f = bsdf_eval(m, wo, s.wi);
-        EXPECT_NEAR(s.weight.r, f.r * s.wi.z / bsdf_pdf(m, wo, s.wi), 1e-3f * std::max(1.0f, s.weight.r));
-        return s.wi;
-      },
-      [&](Vec3 wi) { return double(bsdf_pdf(m, wo, wi)); }, 300000, 40, 80);
+  const auto r = sample_against_pdf(m, dir(theta), 9, 300000);
   EXPECT_GT(r.p_value, kAlpha) << r.describe();
 }
 
@@ -258,20 +265,7 @@ class PbrTest : public ::testing::TestWithParam<PbrCase> {};
 TEST_P(PbrTest, SamplingMatchesItsPdfAndTheWeightIsFCosOverPdf) {
   const PbrCase c = GetParam();
   const Material m = pbr(c);
-  const Vec3 wo = dir(c.theta);
-  const auto r = testing::chi2_directions(
-      [&](int i) -> std::optional<Vec3> {
-        Sampler sp(11, 0, uint32_t(i));
-        BsdfSample s;
-        const float u1 = sp.next_1d();
-        if (!bsdf_sample(m, wo, u1, sp.next_2d(), &s)) return std::nullopt;
-        EXPECT_FALSE(s.delta);
-        const Rgb f = bsdf_eval(m, wo, s.wi);
-        const float expect = f.g * std::fabs(s.wi.z) / bsdf_pdf(m, wo, s.wi);
-        EXPECT_NEAR(s.weight.g, expect, 1e-3f * std::max(1.0f, expect));
-        return s.wi;
-      },
-      [&](Vec3 wi) { return double(bsdf_pdf(m, wo, wi)); }, 400000, 40, 80);
+  const auto r = sample_against_pdf(m, dir(c.theta), 11, 400000);
   EXPECT_GT(r.p_value, kAlpha) << r.describe();
 }
 
@@ -307,12 +301,14 @@ TEST_P(PbrTest, AlbedoBySamplingEqualsQuadratureAndNeverExceedsOne) {
   EXPECT_LE(mean, 1 + 4 * err) << "albedo " << mean;
   EXPECT_GT(mean, 0.5) << "albedo " << mean;  // GGX without multiple scattering loses some, not half
   // The quadrature misses the sharpest peaks of rough 0.2 a little: 1%.
-  EXPECT_NEAR(radiance_sum / n, quad, 4 * err * 3 + 0.01 * quad) << "sampled " << radiance_sum / n << " quadrature " << quad;
+  EXPECT_NEAR(radiance_sum / n, quad, 4 * err * 3 + 0.01 * quad)
+      << "sampled " << radiance_sum / n << " quadrature " << quad;
 }
 
 INSTANTIATE_TEST_SUITE_P(
     Materials, PbrTest,
-    ::testing::Values(PbrCase{"plastic", 0, 0.5f, 0, true, 0.6f}, PbrCase{"rough_plastic_grazing", 0, 0.9f, 0, true, 1.4f},
+    ::testing::Values(PbrCase{"plastic", 0, 0.5f, 0, true, 0.6f},
+                      PbrCase{"rough_plastic_grazing", 0, 0.9f, 0, true, 1.4f},
                       PbrCase{"metal", 1, 0.3f, 0, true, 1.2f}, PbrCase{"half_metal", 0.5f, 0.7f, 0, true, 0.3f},
                       PbrCase{"rough_glass_outside", 0, 0.3f, 1, false, 0.5f},
                       PbrCase{"rough_glass_inside", 0, 0.3f, 1, false, float(M_PI) - 0.3f},

@@ -168,8 +168,8 @@ TEST(EnvironmentMap, SamplingFollowsLuminanceAndMatchesItsPdf) {
   for (int i = 0; i < nz; ++i)
     for (int j = 0; j < np; ++j) {
       const double z = -1 + (i + 0.5) * 2 / nz, phi = (j + 0.5) * 2 * M_PI / np, s = std::sqrt(1 - z * z);
-      total += map.pdf(Vec3{float(s * std::cos(phi)), float(z), float(s * std::sin(phi))}) * (2.0 / nz) *
-               (2 * M_PI / np);
+      total +=
+          map.pdf(Vec3{float(s * std::cos(phi)), float(z), float(s * std::sin(phi))}) * (2.0 / nz) * (2 * M_PI / np);
     }
   EXPECT_NEAR(total, 1.0, 2e-3);
 }

@@ -170,7 +170,7 @@ TEST(PbrRender, EmissiveTextureScalesCameraHitsAndLightSamplesAlike) {
     LightSample ls;
     ASSERT_TRUE(lights.sample(0, {0, 0, 1}, (i + 0.5f) / 200, {(i % 17 + 0.5f) / 17, (i % 13 + 0.5f) / 13}, &ls));
     // Texel centres at u = 0.25 and 0.75 (x = -0.5, 0.5): clamped beyond them.
-    const bool left = ls.point.x < -0.55f, right = ls.point.x > 0.55f;
+    const bool left = ls.point.x<-0.55f, right = ls.point.x> 0.55f;
     if (left) {
       EXPECT_NEAR(ls.li.r, 2, 1e-5);
       EXPECT_NEAR(ls.li.b, 0, 1e-5);

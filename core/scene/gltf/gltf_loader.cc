@@ -8,8 +8,8 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
-#include <optional>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <set>
 #include <sstream>
 
@@ -29,8 +29,15 @@ constexpr int kMaxNodeDepth = 256;
 constexpr double kLumensPerWatt = 683.0;
 
 const std::set<std::string> kSupportedExtensions = {
-    "KHR_lights_punctual", "KHR_materials_transmission",      "KHR_materials_ior",
+    "KHR_lights_punctual",  "KHR_materials_transmission",      "KHR_materials_ior",
     "KHR_materials_volume", "KHR_materials_emissive_strength", "KHR_texture_transform"};
+
+// A little-endian 32-bit word of a GLB at byte `at` (the caller checks the size).
+uint32_t glb_u32(const std::string& b, size_t at) {
+  uint32_t v;
+  std::memcpy(&v, b.data() + at, 4);
+  return v;
+}
 
 std::string read_file(const std::string& path, const std::string& file_for_errors) {
   std::error_code ec;
@@ -221,11 +228,7 @@ class GltfLoader {
   }
 
   std::string glb_json(const std::string& b) const {
-    auto u32 = [&](size_t at) {
-      uint32_t v;
-      std::memcpy(&v, b.data() + at, 4);
-      return v;
-    };
+    auto u32 = [&](size_t at) { return glb_u32(b, at); };
     if (b.size() < 20) fail("GLB header", "file too short");
     if (u32(4) != 2) fail("GLB header", "version " + std::to_string(u32(4)) + " (expected 2)");
     if (u32(8) > b.size())
@@ -239,11 +242,7 @@ class GltfLoader {
 
   // A GLB with its JSON chunk replaced (padded with spaces to 4 bytes, as the spec asks).
   std::string replace_glb_json(const std::string& b, std::string json) const {
-    auto u32 = [&](size_t at) {
-      uint32_t v;
-      std::memcpy(&v, b.data() + at, 4);
-      return v;
-    };
+    auto u32 = [&](size_t at) { return glb_u32(b, at); };
     const size_t old_end = 20 + size_t(u32(12));
     while (json.size() % 4) json += ' ';
     std::string out = b.substr(0, 12);
@@ -662,8 +661,8 @@ class GltfLoader {
 
   // A textureInfo: the texture, its KHR_texture_transform, and a warning for a texCoord
   // other than 0 (only TEXCOORD_0 is read).
-  TextureRef texture_ref(int index, int tex_coord, const tinygltf::ExtensionMap& exts, bool srgb,
-                         const std::string& el, const std::string& what) {
+  TextureRef texture_ref(int index, int tex_coord, const tinygltf::ExtensionMap& exts, bool srgb, const std::string& el,
+                         const std::string& what) {
     TextureRef r;
     if (index < 0) return r;
     r.index = load_texture(index, el + " " + what, srgb);
@@ -723,8 +722,8 @@ class GltfLoader {
       const auto& ex = g.extensions;
       strength = ext_number(ex, "KHR_materials_emissive_strength", "emissiveStrength", 1, el);
       if (!(strength >= 0)) fail(el, "KHR_materials_emissive_strength.emissiveStrength is negative");
-      m.transmission = float(unit_factor(
-          ext_number(ex, "KHR_materials_transmission", "transmissionFactor", 0, el), el, "transmissionFactor"));
+      m.transmission = float(unit_factor(ext_number(ex, "KHR_materials_transmission", "transmissionFactor", 0, el), el,
+                                         "transmissionFactor"));
       const double ior = ext_number(ex, "KHR_materials_ior", "ior", 1.5, el);
       if (!(ior >= 1 && ior < 10)) fail(el, "KHR_materials_ior ior " + std::to_string(ior) + " out of range [1, 10)");
       m.ior = float(ior);
@@ -739,7 +738,8 @@ class GltfLoader {
       if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_volume", "attenuationColor")) {
         std::vector<double> f;
         if (v->IsArray())
-          for (size_t i = 0; i < v->ArrayLen(); ++i) f.push_back(v->Get(int(i)).IsNumber() ? v->Get(int(i)).GetNumberAsDouble() : NAN);
+          for (size_t i = 0; i < v->ArrayLen(); ++i)
+            f.push_back(v->Get(int(i)).IsNumber() ? v->Get(int(i)).GetNumberAsDouble() : NAN);
         att = color_factor(f, Rgb(1.0f), el, "KHR_materials_volume.attenuationColor");
       }
       if (!m.thin && std::isfinite(distance)) {
@@ -751,12 +751,12 @@ class GltfLoader {
       m.metal_rough_texture =
           texture_ref(pbr.metallicRoughnessTexture.index, pbr.metallicRoughnessTexture.texCoord,
                       pbr.metallicRoughnessTexture.extensions, false, el, "metallicRoughnessTexture");
-      m.normal_texture = texture_ref(g.normalTexture.index, g.normalTexture.texCoord, g.normalTexture.extensions,
-                                     false, el, "normalTexture");
+      m.normal_texture = texture_ref(g.normalTexture.index, g.normalTexture.texCoord, g.normalTexture.extensions, false,
+                                     el, "normalTexture");
       m.normal_scale = float(g.normalTexture.scale);
       if (!std::isfinite(m.normal_scale)) fail(el, "normalTexture.scale is not finite");
-      emissive_texture = texture_ref(g.emissiveTexture.index, g.emissiveTexture.texCoord,
-                                     g.emissiveTexture.extensions, true, el, "emissiveTexture");
+      emissive_texture = texture_ref(g.emissiveTexture.index, g.emissiveTexture.texCoord, g.emissiveTexture.extensions,
+                                     true, el, "emissiveTexture");
       if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_transmission", "transmissionTexture"))
         if (v->IsObject() && v->Has("index"))
           warn_once(el + ": transmissionTexture is not supported; transmissionFactor is used");
