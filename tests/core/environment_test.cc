@@ -90,6 +90,32 @@ TEST(Environment, RangeIsChecked) {
   EXPECT_THROW(s.validate(), SettingsError);
   s.environment = Rgb(2);
   EXPECT_NO_THROW(s.validate());
+  // --env-strength, --env-rotate and the --env path, each refused by its flag.
+  auto flag_of = [](const RenderSettings& r) {
+    try {
+      r.validate();
+    } catch (const SettingsError& e) {
+      return e.flag();
+    }
+    return std::string("none");
+  };
+  for (float strength : {-1.0f, std::nanf(""), 1e21f}) {
+    RenderSettings r;
+    r.environment_strength = strength;
+    EXPECT_EQ(flag_of(r), "--env-strength") << strength;
+  }
+  for (float rotation : {std::nanf(""), INFINITY, 1e7f}) {
+    RenderSettings r;
+    r.environment_rotation = rotation;
+    EXPECT_EQ(flag_of(r), "--env-rotate") << rotation;
+  }
+  RenderSettings r;
+  r.environment_map.assign(RenderSettings::kMaxEnvironmentPath + 1, 'x');
+  EXPECT_EQ(flag_of(r), "--env");
+  r.environment_map = "sky.hdr";
+  r.environment_strength = 0;
+  r.environment_rotation = -720;
+  EXPECT_EQ(flag_of(r), "none");
 }
 
 }  // namespace
