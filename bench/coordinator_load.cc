@@ -114,6 +114,7 @@ int main(int argc, char** argv) {
   grpc::ServerBuilder b;
   int port = 0;
   b.AddListeningPort("127.0.0.1:0", grpc::InsecureServerCredentials(), &port);
+  configure_server(b);
   b.RegisterService(&client);
   b.RegisterService(&worker_service);
   auto server = b.BuildAndStart();

@@ -133,54 +133,103 @@ constexpr Field kFields[] = {{offsetof(PixelSums, r), 8},
                              {offsetof(PixelSums, lum2), 8},
                              {offsetof(PixelSums, n), 4}};
 static_assert(8 * 4 + 4 == kBytesPerPixel);
+
+// zstd contexts and scratch space kept per thread: a fresh context for every tile costs
+// more than compressing it (its tables are allocated, cleared and given back each time).
+struct ZstdScratch {
+  ZSTD_CCtx* c = ZSTD_createCCtx();
+  ZSTD_DCtx* d = ZSTD_createDCtx();
+  std::vector<uint8_t> raw, packed;  // byte planes; compressed
+  std::vector<uint64_t> values;
+  ZstdScratch() {
+    if (!c || !d) throw std::bad_alloc();
+  }
+  ~ZstdScratch() {
+    ZSTD_freeCCtx(c);
+    ZSTD_freeDCtx(d);
+  }
+};
+// The thread's scratch for one call. Buffers grown past a few tiles' worth (a checkpoint's
+// whole film) are given back afterwards: every gRPC thread would otherwise keep one.
+class Scratch {
+ public:
+  Scratch() : z_(get()) {}
+  ~Scratch() {
+    if (z_.raw.capacity() > (4u << 20)) z_.raw = {};
+    if (z_.packed.capacity() > (4u << 20)) z_.packed = {};
+    if (z_.values.capacity() > (1u << 20)) z_.values = {};
+  }
+  ZstdScratch* operator->() { return &z_; }
+
+ private:
+  static ZstdScratch& get() {
+    thread_local ZstdScratch s;
+    return s;
+  }
+  ZstdScratch& z_;
+};
 }  // namespace
 
-std::string encode_sums(const std::vector<PixelSums>& sums) {
-  const size_t n = sums.size();
-  std::string raw(n * kBytesPerPixel, '\0');
-  uint8_t* plane = reinterpret_cast<uint8_t*>(raw.data());
-  std::vector<uint64_t> v(n);
+std::string encode_sums(const PixelSums* sums, size_t n) {
+  Scratch z;
+  z->raw.resize(n * kBytesPerPixel);
+  z->values.resize(n);
+  uint8_t* plane = z->raw.data();
+  uint64_t* v = z->values.data();
   for (const Field& f : kFields) {  // field by field, then byte by byte: loops that vectorize
-    for (size_t i = 0; i < n; ++i) {
-      v[i] = 0;
-      std::memcpy(&v[i], reinterpret_cast<const char*>(&sums[i]) + f.offset, f.bytes);
-    }
+    if (n == 0) break;              // (no pointer arithmetic on an empty array)
+    const char* in = reinterpret_cast<const char*>(sums) + f.offset;
+    if (f.bytes == 8)  // (copies of a constant size: moves, not calls)
+      for (size_t i = 0; i < n; ++i, in += sizeof(PixelSums)) std::memcpy(&v[i], in, 8);
+    else
+      for (size_t i = 0; i < n; ++i, in += sizeof(PixelSums)) {
+        uint32_t u;
+        std::memcpy(&u, in, 4);
+        v[i] = u;
+      }
     for (size_t k = 0; k < f.bytes; ++k, plane += n)
       for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(v[i] >> (8 * k));
   }
-  std::string compressed(ZSTD_compressBound(raw.size()), '\0');
-  const size_t size = ZSTD_compress(compressed.data(), compressed.size(), raw.data(), raw.size(), 1);
+  z->packed.resize(ZSTD_compressBound(z->raw.size()));
+  const size_t size = ZSTD_compressCCtx(z->c, z->packed.data(), z->packed.size(), z->raw.data(), z->raw.size(), 1);
   if (ZSTD_isError(size)) throw std::runtime_error(std::string("zstd: ") + ZSTD_getErrorName(size));
-  compressed.resize(size);
-  return compressed;
+  return std::string(reinterpret_cast<const char*>(z->packed.data()), size);
 }
 
 std::vector<PixelSums> decode_sums(const std::string& compressed, size_t pixels) {
+  std::vector<PixelSums> sums(pixels);
+  decode_sums(compressed, sums.data(), pixels);
+  return sums;
+}
+
+void decode_sums(const std::string& compressed, PixelSums* sums, size_t pixels) {
   const size_t want = pixels * kBytesPerPixel;
   const unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
   if (declared == ZSTD_CONTENTSIZE_ERROR) throw WireError("sums: not zstd data");
   if (declared != ZSTD_CONTENTSIZE_UNKNOWN && declared != want)
     throw WireError("sums: " + std::to_string(declared) + " bytes declared, " + std::to_string(want) + " expected");
-  std::string raw(want, '\0');
-  const size_t n = ZSTD_decompress(raw.data(), raw.size(), compressed.data(), compressed.size());
+  Scratch z;
+  z->raw.resize(want);
+  const size_t n = ZSTD_decompressDCtx(z->d, z->raw.data(), z->raw.size(), compressed.data(), compressed.size());
   if (ZSTD_isError(n)) throw WireError(std::string("sums: ") + ZSTD_getErrorName(n));
   if (n != want) throw WireError("sums: " + std::to_string(n) + " bytes, " + std::to_string(want) + " expected");
-  std::vector<PixelSums> sums(pixels);
-  if (pixels == 0) return sums;  // (no planes: and no pointer arithmetic on an empty vector)
-  const uint8_t* plane = reinterpret_cast<const uint8_t*>(raw.data());
-  for (const Field& f : kFields) {  // each pixel's value from its field's byte planes
-    char* out = reinterpret_cast<char*>(sums.data()) + f.offset;
-    for (size_t i = 0; i < pixels; ++i, out += sizeof(PixelSums)) {
-      uint64_t v = 0;
-      for (size_t k = 0; k < f.bytes; ++k) v |= uint64_t(plane[k * pixels + i]) << (8 * k);
-      std::memcpy(out, &v, f.bytes);
-    }
-    plane += f.bytes * pixels;
+  if (pixels == 0) return;  // (no planes: and no pointer arithmetic on an empty vector)
+  z->values.resize(pixels);
+  uint64_t* v = z->values.data();
+  const uint8_t* plane = z->raw.data();
+  for (const Field& f : kFields) {  // each field's values from its byte planes, plane by plane
+    std::fill_n(v, pixels, 0);
+    for (size_t k = 0; k < f.bytes; ++k, plane += pixels)
+      for (size_t i = 0; i < pixels; ++i) v[i] |= uint64_t(plane[i]) << (8 * k);
+    char* out = reinterpret_cast<char*>(sums) + f.offset;
+    if (f.bytes == 8)  // (copies of a constant size: moves, not calls)
+      for (size_t i = 0; i < pixels; ++i, out += sizeof(PixelSums)) std::memcpy(out, &v[i], 8);
+    else
+      for (size_t i = 0; i < pixels; ++i, out += sizeof(PixelSums)) std::memcpy(out, &v[i], 4);
   }
-  for (const PixelSums& p : sums)
-    if (!std::isfinite(p.r) || !std::isfinite(p.g) || !std::isfinite(p.b) || !std::isfinite(p.lum2))
+  for (const PixelSums* p = sums; p != sums + pixels; ++p)
+    if (!std::isfinite(p->r) || !std::isfinite(p->g) || !std::isfinite(p->b) || !std::isfinite(p->lum2))
       throw WireError("sums: non-finite value");
-  return sums;
 }
 
 }  // namespace tessera

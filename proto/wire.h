@@ -43,8 +43,10 @@ std::string proto_json(const google::protobuf::Message& m);
 // alike. A sum of a pass's float samples leaves the low bytes of the doubles mostly zero
 // and the high bytes alike from pixel to pixel, which planes make easy to compress: half
 // the size, and twice as fast, as zstd on whole pixels.
-std::string encode_sums(const std::vector<PixelSums>& sums);
+std::string encode_sums(const PixelSums* sums, size_t pixels);
+inline std::string encode_sums(const std::vector<PixelSums>& sums) { return encode_sums(sums.data(), sums.size()); }
 // Throws WireError unless the data decodes to exactly `pixels` finite pixels.
+void decode_sums(const std::string& compressed, PixelSums* out, size_t pixels);
 std::vector<PixelSums> decode_sums(const std::string& compressed, size_t pixels);
 
 }  // namespace tessera

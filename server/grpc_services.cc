@@ -1,5 +1,6 @@
 #include "server/grpc_services.h"
 
+#include <algorithm>
 #include <chrono>
 #include <thread>
 
@@ -67,6 +68,13 @@ grpc::Status as(const Authenticator* auth, grpc::ServerContext* ctx, Action acti
 }
 
 }  // namespace
+
+void configure_server(grpc::ServerBuilder& builder) {
+  builder.SetMaxReceiveMessageSize(kMaxMessageBytes);
+  builder.SetMaxSendMessageSize(kMaxMessageBytes);
+  const int threads = int(std::max(2u, std::thread::hardware_concurrency()));
+  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, 2 * threads);
+}
 
 grpc::Status ClientService::SubmitJob(grpc::ServerContext* ctx, const v1::SubmitJobRequest* req, v1::JobId* out) {
   return as(auth_, ctx, Action::kSubmit, [&](const Principal& who) { out->set_id(c_.submit(*req, who.name)); });

@@ -8,6 +8,12 @@
 
 namespace tessera {
 
+// The coordinator's server settings, for the real server and the load benchmark alike:
+// message limits, and enough gRPC threads kept alive between calls. (The sync server's
+// default keeps 2 idle threads and ends the rest after each call, so a busy coordinator
+// made and ended a thread for most calls, and its per-thread decoding scratch with it.)
+void configure_server(grpc::ServerBuilder& builder);
+
 // Without an Authenticator (or with an open one) every caller may do everything.
 class ClientService final : public v1::Tessera::Service {
  public:

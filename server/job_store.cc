@@ -5,6 +5,7 @@
 #define XXH_INLINE_ALL  // header only: nothing to link
 #include <xxhash.h>
 
+#include <algorithm>
 #include <cstring>
 #include <filesystem>
 #include <stdexcept>
@@ -19,7 +20,11 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr char kMagic[4] = {'T', 'S', 'C', 'K'};
-constexpr uint32_t kCheckpointVersion = 1;
+// Version 2: the film's sums in chunks of kChunkPixels, each compressed on its own (a
+// whole film as one buffer took 8 times as long per pixel: caches, and page faults for
+// buffers of the film's size). Version 1 is still read.
+constexpr uint32_t kCheckpointVersion = 2;
+constexpr uint32_t kChunkPixels = 1 << 16;
 
 // Little-endian fields, appended and read back in order.
 class Writer {
@@ -134,7 +139,16 @@ std::string encode_checkpoint(const PlanState& state, const Film& film, double e
   active.resize(n);
   w.put(uint64_t(state.active.size()));
   w.bytes(active);
-  w.bytes(encode_sums(film.pixels()));
+  const std::vector<PixelSums>& pixels = film.pixels();
+  std::vector<std::string> chunks;
+  size_t size = w.out.size() + 4 + 8;
+  for (size_t at = 0; at < pixels.size(); at += kChunkPixels) {
+    chunks.push_back(encode_sums(pixels.data() + at, std::min<size_t>(kChunkPixels, pixels.size() - at)));
+    size += 8 + chunks.back().size();
+  }
+  w.out.reserve(size);  // (appending a film's worth piece by piece would copy it many times)
+  w.put(kChunkPixels);
+  for (const std::string& c : chunks) w.bytes(c);
   w.put(uint64_t(XXH64(w.out.data(), w.out.size(), 0)));
   return std::move(w.out);
 }
@@ -147,8 +161,9 @@ Checkpoint decode_checkpoint(const std::string& bytes, bool with_film) {
   if (XXH64(bytes.data(), bytes.size() - 8, 0) != sum) throw std::runtime_error("checkpoint: checksum mismatch");
   Reader in(bytes);
   in.get<uint32_t>();  // magic
-  if (const uint32_t v = in.get<uint32_t>(); v != kCheckpointVersion)
-    throw std::runtime_error("checkpoint: version " + std::to_string(v) + " not supported");
+  const uint32_t version = in.get<uint32_t>();
+  if (version != 1 && version != kCheckpointVersion)
+    throw std::runtime_error("checkpoint: version " + std::to_string(version) + " not supported");
   Checkpoint c;
   const uint32_t tiles = in.get<uint32_t>();
   if (uint64_t(tiles) * 9 > bytes.size()) throw std::runtime_error("checkpoint: truncated");
@@ -177,13 +192,17 @@ Checkpoint decode_checkpoint(const std::string& bytes, bool with_film) {
     const size_t n = ZSTD_decompress(c.state.active.data(), active_size, active.data(), active.size());
     if (ZSTD_isError(n) || n != active_size) throw std::runtime_error("checkpoint: bad active mask");
   }
-  const std::string sums = in.bytes();
+  const size_t pixels = size_t(r.area());
+  const uint32_t chunk = version == 1 ? uint32_t(std::max<size_t>(1, pixels)) : in.get<uint32_t>();
+  if (chunk == 0) throw std::runtime_error("checkpoint: bad film chunk size");
+  std::vector<std::string> chunks;
+  for (size_t at = 0; at < pixels || (version == 1 && chunks.empty()); at += chunk) chunks.push_back(in.bytes());
   if (in.at() != bytes.size() - 8) throw std::runtime_error("checkpoint: trailing bytes");
   if (!with_film) return c;
   c.film = Film(r);
   try {
-    std::vector<PixelSums> pixels = decode_sums(sums, size_t(r.area()));
-    c.film.add_tile(r, pixels);
+    for (size_t i = 0, at = 0; i < chunks.size() && at < pixels; ++i, at += chunk)
+      decode_sums(chunks[i], &c.film.at(0, 0) + at, std::min<size_t>(chunk, pixels - at));
   } catch (const WireError& e) {
     throw std::runtime_error(std::string("checkpoint: film: ") + e.what());
   }

@@ -144,8 +144,7 @@ int main(int argc, char** argv) {
     grpc::ServerBuilder builder;
     int bound = 0;
     builder.AddListeningPort(grpc_host + ":" + std::to_string(grpc_port), credentials, &bound);
-    builder.SetMaxReceiveMessageSize(tessera::kMaxMessageBytes);
-    builder.SetMaxSendMessageSize(tessera::kMaxMessageBytes);
+    tessera::configure_server(builder);
     builder.RegisterService(&client);
     builder.RegisterService(&worker);
     std::unique_ptr<grpc::Server> server = builder.BuildAndStart();

@@ -7,6 +7,10 @@
 #include <cstddef>
 #include <cstring>
 #include <filesystem>
+#define XXH_INLINE_ALL
+#include <xxhash.h>
+
+#include "proto/wire.h"
 
 namespace tessera {
 namespace {
@@ -28,7 +32,7 @@ Saved sample() {
   s.state.work_done = 0.1;  // not exact in binary: must come back bit for bit anyway
   s.state.work_total = 3e9;
   for (size_t i = 0; i < 20; ++i) {
-    PixelSums& p = s.film.at(int(i % 5), int(i / 5));
+    PixelSums &p = s.film.at(int(i % 5), int(i / 5));
     p = PixelSums{0.1 * double(i), 1.0 / 3, 1e-300, 2.5, uint32_t(i)};
   }
   return s;
@@ -58,6 +62,42 @@ TEST(JobStore, ACheckpointComesBackBitForBit) {
   EXPECT_EQ(progress_only.film.window(), Rect{});
   EXPECT_EQ(progress_only.state.merges, 5u);
   EXPECT_EQ(progress_only.state.progress[1].passes_done, 3u);
+}
+
+TEST(JobStore, ALargeFilmComesBackBitForBitAcrossItsChunks) {
+  // 300 x 300 pixels: the sums are written in pieces of 65,536 pixels, the last one short.
+  Film film(Rect{0, 0, 300, 300});
+  for (int y = 0; y < 300; ++y)
+    for (int x = 0; x < 300; ++x)
+      film.at(x, y) = PixelSums{x * 0.1, y / 3.0, x * 1e-3 + y, double(x * y), uint32_t(x + y)};
+  PlanState state;
+  state.progress = {{1, false, 0.5f}};
+  const Checkpoint c = decode_checkpoint(encode_checkpoint(state, film, 1));
+  ASSERT_EQ(c.film.window(), film.window());
+  for (size_t i = 0; i < film.pixels().size(); ++i) {
+    const PixelSums &a = c.film.pixels()[i], &b = film.pixels()[i];
+    ASSERT_EQ(0, std::memcmp(&a, &b, offsetof(PixelSums, n))) << i;
+    ASSERT_EQ(a.n, b.n) << i;
+  }
+}
+
+TEST(JobStore, ACheckpointOfTheFirstVersionIsStillRead) {
+  // Version 1 kept the film's sums as one piece with no chunk size: what a coordinator
+  // from before finds in its data folder after an upgrade.
+  const Saved s = sample();
+  std::string v2 = encode_checkpoint(s.state, s.film, 7);
+  const size_t film_bytes = encode_sums(s.film.pixels()).size();
+  const size_t chunk_at = v2.size() - 8 - film_bytes - 8 - 4;
+  std::string v1 = v2.substr(0, chunk_at) + v2.substr(chunk_at + 4, v2.size() - 8 - chunk_at - 4);
+  const uint32_t version = 1;
+  std::memcpy(v1.data() + 4, &version, 4);
+  const uint64_t sum = XXH64(v1.data(), v1.size(), 0);
+  v1.append(reinterpret_cast<const char *>(&sum), 8);
+  const Checkpoint c = decode_checkpoint(v1);
+  EXPECT_EQ(c.elapsed, 7);
+  ASSERT_EQ(c.film.window(), s.film.window());
+  for (size_t i = 0; i < 20; ++i) EXPECT_EQ(c.film.pixels()[i].r, s.film.pixels()[i].r) << i;
+  EXPECT_EQ(c.state.merges, 5u);
 }
 
 TEST(JobStore, EveryTruncatedOrDamagedCheckpointIsRefusedNeverTrusted) {
