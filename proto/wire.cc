@@ -2,6 +2,9 @@
 
 #include <google/protobuf/util/json_util.h>
 #include <zstd.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -168,6 +171,44 @@ class Scratch {
   }
   ZstdScratch& z_;
 };
+// Gathers B byte planes of n bytes each (plane k: byte k of every value) into n
+// little-endian values of B bytes, written sizeof(PixelSums) apart from `out` on.
+template <int B>
+void gather_planes(const uint8_t* plane, size_t n, char* out) {
+  static_assert(B == 8 || B == 4);
+  size_t i = 0;
+#ifdef __SSE2__
+  // Eight values at a time: an 8 x B byte transpose in unpack steps (B = 4: two groups of
+  // four values).
+  auto row = [&](int k) { return _mm_loadl_epi64(reinterpret_cast<const __m128i*>(plane + size_t(k) * n + i)); };
+  constexpr size_t kStride = sizeof(PixelSums);
+  for (; i + 8 <= n; i += 8, out += 8 * kStride) {
+    if constexpr (B == 8) {
+      const __m128i a0 = _mm_unpacklo_epi8(row(0), row(1)), a1 = _mm_unpacklo_epi8(row(2), row(3));
+      const __m128i a2 = _mm_unpacklo_epi8(row(4), row(5)), a3 = _mm_unpacklo_epi8(row(6), row(7));
+      const __m128i b0 = _mm_unpacklo_epi16(a0, a1), b1 = _mm_unpackhi_epi16(a0, a1);
+      const __m128i b2 = _mm_unpacklo_epi16(a2, a3), b3 = _mm_unpackhi_epi16(a2, a3);
+      const __m128i c[4] = {_mm_unpacklo_epi32(b0, b2), _mm_unpackhi_epi32(b0, b2), _mm_unpacklo_epi32(b1, b3),
+                            _mm_unpackhi_epi32(b1, b3)};
+      for (int j = 0; j < 4; ++j) {  // values 2j and 2j + 1
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(out + 2 * j * kStride), c[j]);
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(out + (2 * j + 1) * kStride), _mm_unpackhi_epi64(c[j], c[j]));
+      }
+    } else {
+      const __m128i a0 = _mm_unpacklo_epi8(row(0), row(1)), a1 = _mm_unpacklo_epi8(row(2), row(3));
+      alignas(16) uint32_t values[8];
+      _mm_store_si128(reinterpret_cast<__m128i*>(values), _mm_unpacklo_epi16(a0, a1));
+      _mm_store_si128(reinterpret_cast<__m128i*>(values + 4), _mm_unpackhi_epi16(a0, a1));
+      for (int j = 0; j < 8; ++j) std::memcpy(out + j * kStride, &values[j], 4);
+    }
+  }
+#endif
+  for (; i < n; ++i, out += sizeof(PixelSums)) {
+    uint64_t v = 0;
+    for (int k = 0; k < B; ++k) v |= uint64_t(plane[size_t(k) * n + i]) << (8 * k);
+    std::memcpy(out, &v, B);
+  }
+}
 }  // namespace
 
 std::string encode_sums(const PixelSums* sums, size_t n) {
@@ -214,18 +255,14 @@ void decode_sums(const std::string& compressed, PixelSums* sums, size_t pixels) 
   if (ZSTD_isError(n)) throw WireError(std::string("sums: ") + ZSTD_getErrorName(n));
   if (n != want) throw WireError("sums: " + std::to_string(n) + " bytes, " + std::to_string(want) + " expected");
   if (pixels == 0) return;  // (no planes: and no pointer arithmetic on an empty vector)
-  z->values.resize(pixels);
-  uint64_t* v = z->values.data();
   const uint8_t* plane = z->raw.data();
-  for (const Field& f : kFields) {  // each field's values from its byte planes, plane by plane
-    std::fill_n(v, pixels, 0);
-    for (size_t k = 0; k < f.bytes; ++k, plane += pixels)
-      for (size_t i = 0; i < pixels; ++i) v[i] |= uint64_t(plane[i]) << (8 * k);
+  for (const Field& f : kFields) {  // each pixel's field from its byte planes
     char* out = reinterpret_cast<char*>(sums) + f.offset;
-    if (f.bytes == 8)  // (copies of a constant size: moves, not calls)
-      for (size_t i = 0; i < pixels; ++i, out += sizeof(PixelSums)) std::memcpy(out, &v[i], 8);
+    if (f.bytes == 8)
+      gather_planes<8>(plane, pixels, out);
     else
-      for (size_t i = 0; i < pixels; ++i, out += sizeof(PixelSums)) std::memcpy(out, &v[i], 4);
+      gather_planes<4>(plane, pixels, out);
+    plane += f.bytes * pixels;
   }
   for (const PixelSums* p = sums; p != sums + pixels; ++p)
     if (!std::isfinite(p->r) || !std::isfinite(p->g) || !std::isfinite(p->b) || !std::isfinite(p->lum2))

@@ -880,11 +880,15 @@ void Coordinator::unregister(uint64_t worker_id) {
   changed_.notify_all();
 }
 
-v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
-  v1::ResultAck ack;
-  // Which task, and is its result still wanted? Then decode outside the lock (the slow
-  // part), and look again: another copy may have been merged meanwhile.
-  auto wanted = [&](Lease* out) -> bool {
+v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) { return submit_results({&result})[0]; }
+
+std::vector<v1::ResultAck> Coordinator::submit_results(const std::vector<const v1::TaskResult*>& results) {
+  std::vector<v1::ResultAck> acks(results.size());
+  // Is each result's task known, answered by its lease's holder and still wanted? Then its
+  // sums are decoded and checked outside the lock (the slow part), and the batch merged
+  // under one hold of it, each looked at again: another copy may have been merged meanwhile.
+  auto wanted = [&](size_t i, Lease* out) -> bool {
+    const v1::TaskResult& result = *results[i];
     const Lease* l = leases_.known(result.task_id());
     // Never issued, or issued to another worker: only the lease's holder may answer it.
     if (!l || l->worker != result.worker_id() || quarantined_.count(l->worker)) {
@@ -897,68 +901,92 @@ v1::ResultAck Coordinator::submit_result(const v1::TaskResult& result) {
     if (job == jobs_.end() || !job->second->live()) return false;
     if (!job->second->plan.wants(l->tile, l->pass)) {
       ++counters_.results_duplicate;
-      ack.set_duplicate(true);
+      acks[i].set_duplicate(true);
       return false;
     }
-    *out = *l;
     return true;
   };
-  Lease lease;
-  size_t pixels = 0;
+  struct Incoming {
+    size_t index;
+    Lease lease;
+    size_t pixels = 0;
+    uint32_t pass_len = 0;
+    std::optional<CheckedSums> sums;
+  };
+  std::vector<Incoming> incoming;
+  std::vector<std::pair<size_t, Lease>> checks;  // results of verification tasks
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (!wanted(&lease)) return ack;
-    if (!lease.check) pixels = size_t(jobs_.at(lease.job)->plan.tiles()[lease.tile].area());
+    for (size_t i = 0; i < results.size(); ++i) {
+      Lease lease;
+      if (!wanted(i, &lease)) continue;
+      if (lease.check) {
+        checks.emplace_back(i, std::move(lease));
+        continue;
+      }
+      const FramePlan& plan = jobs_.at(lease.job)->plan;
+      const auto& [s0, s1] = plan.passes()[lease.pass];
+      incoming.push_back({i, std::move(lease), size_t(plan.tiles()[lease.tile].area()), s1 - s0, std::nullopt});
+    }
   }
-  if (lease.check) return check_result(result, lease);
-  std::vector<PixelSums> sums;
-  try {
-    if (result.raw_size() != pixels * kBytesPerPixel) throw WireError("raw size does not match the tile");
-    sums = decode_sums(result.sums_zstd(), pixels);
-  } catch (const WireError&) {
-    std::lock_guard<std::mutex> lock(mu_);
-    ++counters_.results_rejected;
-    return ack;
+  uint64_t malformed = 0;
+  for (Incoming& in : incoming) {
+    const v1::TaskResult& result = *results[in.index];
+    try {
+      if (result.raw_size() != in.pixels * kBytesPerPixel) throw WireError("raw size does not match the tile");
+      in.sums = FramePlan::check(decode_sums(result.sums_zstd(), in.pixels), in.pass_len);
+    } catch (const WireError&) {
+    }
+    malformed += !in.sums;
   }
-  std::optional<ImageSnapshot> pending;
+  std::vector<ImageSnapshot> pending;
+  bool merged = false;
   {
     std::lock_guard<std::mutex> lock(mu_);
-    if (!wanted(&lease) || lease.check) return ack;
-    Job& job = *jobs_.at(lease.job);
-    const auto t0 = std::chrono::steady_clock::now();
-    uint64_t samples = 0;
-    if (job.plan.merge(lease.tile, lease.pass, sums, &samples) != FramePlan::Merge::kMerged) {
-      ++counters_.results_rejected;
-      return ack;
+    counters_.results_rejected += malformed;
+    for (Incoming& in : incoming) {
+      if (!in.sums) continue;
+      const v1::TaskResult& result = *results[in.index];
+      Lease lease;
+      if (!wanted(in.index, &lease) || lease.check) continue;
+      Job& job = *jobs_.at(lease.job);
+      const auto t0 = std::chrono::steady_clock::now();
+      if (job.plan.merge(lease.tile, lease.pass, *in.sums) != FramePlan::Merge::kMerged) {
+        ++counters_.results_rejected;
+        continue;
+      }
+      counters_.merge_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      counters_.samples_merged += in.sums->samples();
+      ++counters_.results_merged;
+      // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends
+      // (kept known, so a repeat of this result is recognised as a duplicate).
+      const uint64_t other = job.tile_lease[lease.tile];
+      end_lease_locked(result.task_id(), false);
+      if (other) end_lease_locked(other, false);
+      job.merged_by[result.worker_id()].push_back(lease.tile);
+      if (!job.sequence.empty()) ++sequences_.at(job.sequence)->changes;
+      if (lease.task) {  // picked for verification: another worker renders it again
+        Check& c = checks_[next_check_++];
+        c.job = job.id;
+        c.tile = lease.tile;
+        c.pass = lease.pass;
+        c.task = lease.task;
+        c.first_worker = result.worker_id();
+        c.digest = sums_digest(in.sums->sums());
+        c.since = clock_->now();
+        ++job.pending_checks;
+        ++counters_.checks_issued;
+      }
+      if (std::optional<ImageSnapshot> snap = after_merge_locked(job, result, clock_->now()))
+        pending.push_back(std::move(*snap));
+      acks[in.index].set_accepted(true);
+      merged = true;
     }
-    counters_.merge_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    counters_.samples_merged += samples;
-    ++counters_.results_merged;
-    // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends
-    // (kept known, so a repeat of this result is recognised as a duplicate).
-    const uint64_t other = job.tile_lease[lease.tile];
-    end_lease_locked(result.task_id(), false);
-    if (other) end_lease_locked(other, false);
-    job.merged_by[result.worker_id()].push_back(lease.tile);
-    if (!job.sequence.empty()) ++sequences_.at(job.sequence)->changes;
-    if (lease.task) {  // picked for verification: another worker renders it again
-      Check& c = checks_[next_check_++];
-      c.job = job.id;
-      c.tile = lease.tile;
-      c.pass = lease.pass;
-      c.task = lease.task;
-      c.first_worker = result.worker_id();
-      c.digest = sums_digest(sums);
-      c.since = clock_->now();
-      ++job.pending_checks;
-      ++counters_.checks_issued;
-    }
-    pending = after_merge_locked(job, result, clock_->now());
-    ack.set_accepted(true);
-    changed_.notify_all();
+    if (merged) changed_.notify_all();
   }
-  if (pending) write_snapshot(*pending);
-  return ack;
+  for (ImageSnapshot& snap : pending) write_snapshot(snap);
+  for (const auto& [i, lease] : checks) acks[i] = check_result(*results[i], lease);
+  return acks;
 }
 
 v1::ResultAck Coordinator::check_result(const v1::TaskResult& result, const Lease& lease) {

@@ -121,6 +121,8 @@ class Coordinator {
   bool heartbeat(uint64_t worker_id, uint64_t task_id) {
     return heartbeat(worker_id, std::vector<uint64_t>{task_id}).empty();
   }
+  // A batch of results, each merged if it is wanted and well-formed: one ack each, in order.
+  std::vector<v1::ResultAck> submit_results(const std::vector<const v1::TaskResult*>& results);
   v1::ResultAck submit_result(const v1::TaskResult& result);
   // Gives a lease back. With an error, the worker could not render the task: once tasks
   // of a job failed on kFailuresToFail different workers, the job fails with the error.

@@ -72,8 +72,8 @@ grpc::Status as(const Authenticator* auth, grpc::ServerContext* ctx, Action acti
 void configure_server(grpc::ServerBuilder& builder) {
   builder.SetMaxReceiveMessageSize(kMaxMessageBytes);
   builder.SetMaxSendMessageSize(kMaxMessageBytes);
-  const int threads = int(std::max(2u, std::thread::hardware_concurrency()));
-  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, 2 * threads);
+  const int threads = int(std::max(4u, std::thread::hardware_concurrency()));
+  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, 4 * threads);
 }
 
 grpc::Status ClientService::SubmitJob(grpc::ServerContext* ctx, const v1::SubmitJobRequest* req, v1::JobId* out) {
@@ -150,7 +150,8 @@ grpc::Status WorkerService::Heartbeat(grpc::ServerContext* ctx, const v1::Heartb
 }
 grpc::Status WorkerService::SubmitResults(grpc::ServerContext* ctx, const v1::ResultBatch* req, v1::ResultAcks* out) {
   return as(auth_, ctx, Action::kWork, [&](const Principal&) {
-    for (const v1::TaskResult& r : req->results()) *out->add_acks() = c_.submit_result(r);
+    const std::vector<const v1::TaskResult*> results(req->results().pointer_begin(), req->results().pointer_end());
+    for (v1::ResultAck& ack : c_.submit_results(results)) *out->add_acks() = std::move(ack);
   });
 }
 grpc::Status WorkerService::ReleaseTask(grpc::ServerContext* ctx, const v1::ReleaseRequest* req, v1::ReleaseResponse*) {

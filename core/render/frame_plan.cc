@@ -72,22 +72,34 @@ bool FramePlan::wants(uint32_t tile, uint32_t pass) const {
   return tile < tiles_.size() && !progress_[tile].finished && progress_[tile].passes_done == pass;
 }
 
-FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const std::vector<PixelSums>& sums, uint64_t* samples) {
-  if (!wants(tile, pass)) return Merge::kDuplicate;
-  const Rect& r = tiles_[tile];
-  if (sums.size() != size_t(r.area())) return Merge::kInvalid;
-  const uint32_t pass_len = passes_[pass].second - passes_[pass].first;
+std::optional<CheckedSums> FramePlan::check(std::vector<PixelSums> sums, uint32_t pass_len) {
   uint64_t n = 0;
   for (const PixelSums& p : sums) {
-    if (p.n > pass_len || !plausible(p)) return Merge::kInvalid;
+    if (p.n > pass_len || !plausible(p)) return std::nullopt;
     n += p.n;
   }
+  return CheckedSums(std::move(sums), pass_len, n);
+}
+
+FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const std::vector<PixelSums>& sums, uint64_t* samples) {
+  if (!wants(tile, pass)) return Merge::kDuplicate;
+  std::optional<CheckedSums> checked = check(sums, passes_[pass].second - passes_[pass].first);
+  if (!checked) return Merge::kInvalid;
+  const Merge m = merge(tile, pass, *checked);
+  if (m == Merge::kMerged && samples) *samples = checked->samples();
+  return m;
+}
+
+FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const CheckedSums& checked) {
+  if (!wants(tile, pass)) return Merge::kDuplicate;
+  const Rect& r = tiles_[tile];
+  const uint32_t pass_len = passes_[pass].second - passes_[pass].first;
+  if (checked.sums().size() != size_t(r.area()) || checked.pass_len() != pass_len) return Merge::kInvalid;
   ready_.erase({pass, tile});  // a late result for a tile waiting to be re-issued
-  film_.add_tile(r, sums);
+  film_.add_tile(r, checked.sums());
   ++merges_;
-  samples_merged_ += n;
+  samples_merged_ += checked.samples();
   work_done_ += double(pass_len) * double(r.area());
-  if (samples) *samples = n;
   finish_pass(tile);
   return Merge::kMerged;
 }

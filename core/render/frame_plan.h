@@ -47,6 +47,23 @@ struct PlanState {
   double work_done = 0, work_total = 0;
 };
 
+// A task's sums found fit for a pass of pass_len samples a pixel (FramePlan::check): the
+// per-pixel check needs no plan, so a coordinator makes it before taking its lock.
+class CheckedSums {
+ public:
+  const std::vector<PixelSums>& sums() const { return sums_; }
+  uint32_t pass_len() const { return pass_len_; }
+  uint64_t samples() const { return samples_; }
+
+ private:
+  friend class FramePlan;
+  CheckedSums(std::vector<PixelSums> sums, uint32_t pass_len, uint64_t samples)
+      : sums_(std::move(sums)), pass_len_(pass_len), samples_(samples) {}
+  std::vector<PixelSums> sums_;
+  uint32_t pass_len_;
+  uint64_t samples_;
+};
+
 class FramePlan {
  public:
   enum class Merge { kMerged, kDuplicate, kInvalid };
@@ -67,6 +84,12 @@ class FramePlan {
   // changes unless
   // kMerged. `samples` receives the samples merged.
   Merge merge(uint32_t tile, uint32_t pass, const std::vector<PixelSums>& sums, uint64_t* samples = nullptr);
+  // The per-pixel part of merge()'s check: nothing unless no pixel has more than pass_len
+  // samples and every one is plausible().
+  static std::optional<CheckedSums> check(std::vector<PixelSums> sums, uint32_t pass_len);
+  // merge() of checked sums: kInvalid unless they were checked for this pass's length and
+  // fit the tile.
+  Merge merge(uint32_t tile, uint32_t pass, const CheckedSums& sums);
 
   bool done() const { return tiles_done_ == tiles_.size(); }
   size_t ready() const { return ready_.size(); }  // tasks take() could hand out now

@@ -80,6 +80,11 @@ TEST(FramePlan, DuplicatesAndSumsThatDoNotFitChangeNothing) {
   EXPECT_EQ(plan.merge(t.tile, t.pass, too_many), FramePlan::Merge::kInvalid);
   EXPECT_EQ(plan.merge(t.tile, 1, sums_for(t, 1)), FramePlan::Merge::kDuplicate);  // not its pass yet
   EXPECT_EQ(plan.merge(99, 0, sums_for(t, 1)), FramePlan::Merge::kDuplicate);      // no such tile
+  // Checked beforehand (as a coordinator does outside its lock): for another pass length,
+  // or for another tile's size, they still do not fit.
+  EXPECT_FALSE(FramePlan::check(too_many, 4));
+  EXPECT_EQ(plan.merge(t.tile, t.pass, *FramePlan::check(sums_for(t, 1), 8)), FramePlan::Merge::kInvalid);
+  EXPECT_EQ(plan.merge(t.tile, t.pass, *FramePlan::check(wrong_size, 4)), FramePlan::Merge::kInvalid);
   EXPECT_EQ(plan.merges(), 0u);
   EXPECT_EQ(plan.samples_merged(), 0u);
   uint64_t samples = 0;

@@ -226,6 +226,37 @@ TEST_F(CoordinatorTest, HostileResultsAreRejectedAndCounted) {
   EXPECT_TRUE(c->submit_result(render_task(task, w)).accepted());  // the real one still merges
 }
 
+TEST_F(CoordinatorTest, ABatchOfResultsIsAnsweredResultByResultInOrder) {
+  const std::string id = c->submit(request(job_settings()));
+  const uint64_t w = worker();
+  const v1::GetTaskResponse tasks = c->get_task(w, 3);
+  ASSERT_EQ(tasks.tasks_size(), 3);
+  const v1::TaskResult first = render_task(tasks.tasks(0), w), third = render_task(tasks.tasks(2), w);
+  v1::TaskResult broken = render_task(tasks.tasks(1), w);
+  broken.set_sums_zstd("not zstd at all");
+  v1::TaskResult stranger = third;
+  stranger.set_worker_id(w + 1000);  // not the lease's holder
+  // Good, malformed, good, the first again in the same batch, someone else's answer.
+  const std::vector<v1::ResultAck> acks = c->submit_results({&first, &broken, &third, &first, &stranger});
+  ASSERT_EQ(acks.size(), 5u);
+  EXPECT_TRUE(acks[0].accepted());
+  EXPECT_FALSE(acks[1].accepted());
+  EXPECT_FALSE(acks[1].duplicate());
+  EXPECT_TRUE(acks[2].accepted());
+  EXPECT_FALSE(acks[3].accepted());
+  EXPECT_TRUE(acks[3].duplicate());
+  EXPECT_FALSE(acks[4].accepted());
+  EXPECT_EQ(c->counters().results_merged, 2u);
+  EXPECT_EQ(c->counters().results_duplicate, 1u);
+  EXPECT_EQ(c->counters().results_rejected, 2u);
+  // The malformed one's tile is still wanted: its real result merges, and the job ends
+  // with the image a local render makes.
+  EXPECT_TRUE(c->submit_result(render_task(tasks.tasks(1), w)).accepted());
+  drain(w);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(job_settings()), read_exr(image_path(id, "image.exr"))));
+}
+
 TEST_F(CoordinatorTest, MalformedSceneIsRefusedAtSubmitAndOthersStillRun) {
   v1::SubmitJobRequest bad = request(job_settings());
   bad.mutable_files(0)->set_content("<COLLADA><scene><instance_visual_scene url=\"#gone\"/></scene></COLLADA>");

@@ -3,9 +3,11 @@
 
 #include <gtest/gtest.h>
 
+#include <cstddef>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <random>
 
 #include "core/scene/load.h"
 #include "scene_bundle.h"
@@ -85,6 +87,18 @@ TEST(WireCodec, SumsRoundTripExactlyAndHostileDataIsRefused) {
     EXPECT_EQ(std::memcmp(&dec[i].r, &sums[i].r, 8), 0);
     EXPECT_EQ(std::memcmp(&dec[i].g, &sums[i].g, 8), 0);
     EXPECT_EQ(dec[i].n, sums[i].n);
+  }
+  // Every byte of every field, for sizes around the decoder's groups of eight pixels.
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> value(-1e10, 1e10);
+  for (size_t n : {1, 7, 8, 9, 16, 23, 1024, 1031}) {
+    std::vector<PixelSums> many(n);
+    for (PixelSums& p : many) p = PixelSums{value(rng), value(rng), value(rng), value(rng), uint32_t(rng())};
+    const std::vector<PixelSums> back = decode_sums(encode_sums(many), n);
+    for (size_t i = 0; i < n; ++i) {
+      EXPECT_EQ(std::memcmp(&back[i], &many[i], offsetof(PixelSums, n)), 0) << n << " " << i;
+      EXPECT_EQ(back[i].n, many[i].n) << n << " " << i;
+    }
   }
   EXPECT_THROW(decode_sums(enc, sums.size() + 1), WireError);  // size mismatch
   EXPECT_THROW(decode_sums("garbage", 1), WireError);
