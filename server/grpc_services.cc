@@ -72,8 +72,8 @@ grpc::Status as(const Authenticator* auth, grpc::ServerContext* ctx, Action acti
 void configure_server(grpc::ServerBuilder& builder) {
   builder.SetMaxReceiveMessageSize(kMaxMessageBytes);
   builder.SetMaxSendMessageSize(kMaxMessageBytes);
-  const int threads = int(std::max(4u, std::thread::hardware_concurrency()));
-  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, 4 * threads);
+  const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
+  builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, std::max(8, 2 * cores));
 }
 
 grpc::Status ClientService::SubmitJob(grpc::ServerContext* ctx, const v1::SubmitJobRequest* req, v1::JobId* out) {
