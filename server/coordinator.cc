@@ -328,8 +328,7 @@ void Coordinator::end_sequence_locked(Sequence& s, v1::JobStatus::State state, d
       end_job_locked(*j, v1::JobStatus::CANCELLED, now);
       unwritten_.push_back(j);  // its image keeps what it rendered
     }
-  scenes_.release(s.scene_hash);
-  changed_.notify_all();
+  changed_.notify_all();  // (its scene goes once its end is recorded: record_sequence_end)
 }
 
 void Coordinator::record_sequence_end(const std::string& id) {
@@ -359,6 +358,7 @@ void Coordinator::record_sequence_end(const std::string& id) {
   } catch (const std::exception& e) {
     std::fprintf(stderr, "tessera-coordinator: job %s: recording its end: %s\n", s.id.c_str(), e.what());
   }
+  if (ok) scenes_.release(s.scene_hash);
   std::lock_guard<std::mutex> lock(mu_);
   s.end_recording = false;
   s.end_recorded = ok;
@@ -861,13 +861,11 @@ void Coordinator::end_job_locked(Job& job, v1::JobStatus::State state, double no
   for (uint64_t lease : job.tile_lease)
     if (lease) end_lease_locked(lease, false);
   leases_.forget_job(job.id);
-  // Its scene is dropped, from memory and disk, once no live job uses it; the film (and
-  // so the image) stays. Submitting the scene again checks it again. A sequence holds the
-  // scene for its frames.
-  if (job.sequence.empty())
-    scenes_.release(job.scene_hash);
-  else
-    frame_ended_locked(job, now);
+  // Its scene is dropped, from memory and disk, once its end is on disk (write_snapshot)
+  // and no live job uses it: a crash before then finds the job live and its scene there.
+  // The film (and so the image) stays. Submitting the scene again checks it again. A
+  // sequence holds the scene for its frames until its own end is recorded.
+  if (!job.sequence.empty()) frame_ended_locked(job, now);
 }
 
 void Coordinator::unregister(uint64_t worker_id) {
@@ -1213,7 +1211,10 @@ void Coordinator::write_snapshot(ImageSnapshot& snap) {
     const bool whole = job.checkpoint_written_merges == snap.merges;
     if (snap.ended && !job.end_recorded && (whole || snap.state != v1::JobStatus::DONE)) {
       try {
-        if (job.sequence.empty()) store_->end(job.id, snap.state, snap.error, snap.elapsed);  // a frame has no row
+        if (job.sequence.empty()) {  // (a frame has no row; its sequence holds the scene)
+          store_->end(job.id, snap.state, snap.error, snap.elapsed);
+          scenes_.release(job.scene_hash);
+        }
         job.end_recorded = true;
       } catch (const std::exception& e) {
         std::fprintf(stderr, "tessera-coordinator: job %s: recording its end: %s\n", job.id.c_str(), e.what());

@@ -778,6 +778,37 @@ TEST_F(CoordinatorTest, ARestartedCoordinatorGoesOnWithEveryJobInItsState) {
   EXPECT_EQ(c->list().back().id(), next);  // after the restored ones
 }
 
+// A crash after a job's last merge but before its end is on disk (its final checkpoint
+// not yet renamed into place; here no checkpoint ever is): the restarted coordinator still
+// has the scene and renders what the checkpoints lack. (The scene used to be deleted at
+// the end in memory, and such a job came back FAILED, its scene lost.) The same for a
+// sequence.
+TEST_F(CoordinatorTest, ACrashBeforeTheEndIsRecordedKeepsTheScene) {
+  const RenderSettings s = job_settings();
+  CoordinatorOptions o = options();
+  o.before_checkpoint_rename = [] { throw std::runtime_error("simulated crash before the rename"); };
+  restart(c, o, &t);
+  const std::string id = c->submit(request(s));
+  v1::SubmitJobRequest seq = request(s);
+  seq.add_frames(1);
+  seq.add_frames(2);
+  const std::string sequence = c->submit(seq);
+  drain(worker());
+  ASSERT_EQ(c->status(sequence, false).state(), v1::JobStatus::DONE);
+  ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);  // in memory; not on disk
+  restart(c, options(), &t);
+  for (const std::string& j : {id, sequence}) EXPECT_NE(c->status(j, false).state(), v1::JobStatus::FAILED) << j;
+  drain(worker());
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_EQ(c->status(sequence, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+  // Recorded now: the scene goes, and another restart finds both ended.
+  restart(c, options(), &t);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_EQ(c->status(sequence, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(fs::is_empty(dir + "/scenes"));
+}
+
 TEST_F(CoordinatorTest, ADamagedCheckpointRendersTheJobAgainAndAMissingSceneFailsIt) {
   const RenderSettings s = job_settings();
   const uint64_t w = worker();
