@@ -1,6 +1,7 @@
 // A job: a scene, its frame plan, and what the coordinator knows of its progress.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -58,7 +59,7 @@ struct Job {
   uint64_t written_merges = 0;          // the film version it holds
   uint64_t checkpoint_seq = 0;          // newest snapshot whose checkpoint was written
   uint64_t checkpoint_written_merges = 0;
-  bool end_recorded = false;  // the job database has its end
+  std::atomic<bool> end_recorded{false};  // the job database has its end (also read under mu_)
 
   bool live() const { return state == v1::JobStatus::QUEUED || state == v1::JobStatus::RUNNING; }
   // `now` for the elapsed time; `workers` with live leases on it.
