@@ -1,6 +1,6 @@
 // The cost of a tile's sums on the wire: encode_sums on the worker, decode_sums on the
 // coordinator (where every merged result pays it), for a 32x32 tile and a 1920x1080 film
-// in one piece; and a coordinator's checkpoint of a 1920x1080 film (its sums in pieces),
+// in one piece; and a coordinator's checkpoint of a 1920x1080 and a 480x360 film (sums in pieces),
 // written and read. Google Benchmark; --benchmark_repetitions=N for spreads.
 #include <benchmark/benchmark.h>
 
@@ -51,11 +51,11 @@ void Decode(benchmark::State& state) {
 }
 
 void CheckpointFilm(benchmark::State& state) {
-  Film film(Rect{0, 0, 1920, 1080});
+  Film film(Rect{0, 0, int(state.range(1)), int(state.range(2))});
   const auto sums = render_like(film.pixels().size(), 16);
   film.add_tile(film.window(), sums);
   PlanState plan;
-  plan.progress.resize(60 * 34);
+  plan.progress.resize(size_t((state.range(1) + 31) / 32 * ((state.range(2) + 31) / 32)));
   for (auto _ : state) {
     const std::string bytes = encode_checkpoint(plan, film, 1);
     benchmark::DoNotOptimize(bytes.data());
@@ -68,6 +68,11 @@ void CheckpointFilm(benchmark::State& state) {
 // A 32x32 tile of 1 and of 16 samples a pixel; a 1080p film (a checkpoint's sums).
 BENCHMARK(Encode)->Args({1024, 1})->Args({1024, 16})->Args({1920 * 1080, 16})->Unit(benchmark::kMicrosecond);
 BENCHMARK(Decode)->Args({1024, 1})->Args({1024, 16})->Args({1920 * 1080, 16})->Unit(benchmark::kMicrosecond);
-// A checkpoint written (0), written and read back (1).
-BENCHMARK(CheckpointFilm)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+// A checkpoint written (0), written and read back (1), of a 1920x1080 and a 480x360 film.
+BENCHMARK(CheckpointFilm)
+    ->Args({0, 1920, 1080})
+    ->Args({1, 1920, 1080})
+    ->Args({0, 480, 360})
+    ->Args({1, 480, 360})
+    ->Unit(benchmark::kMillisecond);
 BENCHMARK_MAIN();
