@@ -1,7 +1,8 @@
 // The cost of a tile's sums on the wire: encode_sums on the worker, decode_sums on the
 // coordinator (where every merged result pays it), for a 32x32 tile and a 1920x1080 film
-// in one piece; and a coordinator's checkpoint of a 1920x1080 and a 480x360 film (sums in pieces),
-// written and read. Google Benchmark; --benchmark_repetitions=N for spreads.
+// in one piece; and a coordinator's checkpoint of a 1920x1080 and a 480x360 film (the
+// sums in pieces), written and read. Google Benchmark; --benchmark_repetitions=N for
+// spreads.
 #include <benchmark/benchmark.h>
 
 #include <random>
