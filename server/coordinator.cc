@@ -489,14 +489,20 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
     job->seq = next_job_++;
   }
   record_submit(req, job->id, job->name, owner, hash, job->seq, job->settings_proto, {});
-  std::lock_guard<std::mutex> lock(mu_);
-  job->submitted = clock_->now();
-  job->last_checkpoint = job->submitted;
   const std::string id = job->id;
-  Job& added = *(jobs_[id] = std::move(job));
-  if (added.plan.done()) end_job_locked(added, v1::JobStatus::DONE, added.submitted);  // releases the scene too
-  ++counters_.jobs_submitted;
-  changed_.notify_all();
+  Job* added;
+  bool ended;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    job->submitted = clock_->now();
+    job->last_checkpoint = job->submitted;
+    added = (jobs_[id] = std::move(job)).get();
+    if (added->plan.done()) end_job_locked(*added, v1::JobStatus::DONE, added->submitted);  // nothing to render
+    ended = !added->live();
+    ++counters_.jobs_submitted;
+    changed_.notify_all();
+  }
+  if (ended) write_image(*added);  // records the end, which lets the scene go
   return id;
 }
 
