@@ -214,8 +214,25 @@ void fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::op
     if (has_ext(out, ".exr")) req.set_exr(true);
     if (has_ext(out, ".png")) req.set_png(true);
   }
+  // A lost connection (the coordinator restarting just as the job ended) is retried with
+  // back-off for up to c.reconnect_seconds, as watching is: the image is on its disk.
   v1::Image img;
-  check(stub.FetchImage(deadline(c, 120).get(), req, &img), c);
+  double backoff = 0.25;
+  for (const auto since = std::chrono::steady_clock::now();;) {
+    const grpc::Status st = stub.FetchImage(deadline(c, 120).get(), req, &img);
+    const bool transient =
+        st.error_code() == grpc::StatusCode::UNAVAILABLE || st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
+    if (!transient ||
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count() > c.reconnect_seconds) {
+      check(st, c);
+      break;
+    }
+    if (!c.quiet && !c.json)
+      std::fprintf(c.err, "tessera: lost coordinator %s (%s); fetching again in %.1f s\n", c.coordinator.c_str(),
+                   st.error_message().c_str(), backoff);
+    std::this_thread::sleep_for(std::chrono::duration<double>(backoff));
+    backoff = std::min(5.0, backoff * 2);
+  }
   for (const std::string& out : outputs) {
     const std::string path = frame ? frame_path(out, *frame) : out;
     try {

@@ -507,7 +507,10 @@ TEST_F(Farm, CoordinatorKilledAtAnyMomentLosesNothingAndTheImageIsUnchanged) {
     start_coordinator(addr, "2", crashy);
     ASSERT_EQ(grpc_addr, addr);
   };
-  // 1. Accepted, nothing rendered: no workers yet.
+  // 1. Accepted, nothing rendered: no workers yet. (Killed only once the client has the
+  // job's id: a submit whose answer is lost is not retried, since it could run the job
+  // twice, so the client would stop there.)
+  ASSERT_TRUE(wait_for([&] { return slurp((dir / "client.err").string()).find("submitted") != std::string::npos; }));
   ASSERT_TRUE(wait_for([&] { return !job().is_null(); }));
   const std::string id = job()["id"];
   crash_and_restart();
