@@ -937,7 +937,8 @@ std::vector<v1::ResultAck> Coordinator::submit_results(const std::vector<const v
       }
       const FramePlan& plan = jobs_.at(lease.job)->plan;
       const auto& [s0, s1] = plan.passes()[lease.pass];
-      incoming.push_back({i, std::move(lease), size_t(plan.tiles()[lease.tile].area()), s1 - s0, std::nullopt});
+      const size_t pixels = size_t(plan.tiles()[lease.tile].area());
+      incoming.push_back({i, std::move(lease), pixels, s1 - s0, std::nullopt});
     }
   }
   uint64_t malformed = 0;
