@@ -17,12 +17,33 @@
 namespace tessera {
 namespace {
 
+// The coordinator could not be reached (down, restarting, a network blip): worth retrying.
+bool unreachable(const grpc::Status& st) {
+  return st.error_code() == grpc::StatusCode::UNAVAILABLE || st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
+}
+
 void check(const grpc::Status& st, const FarmContext& c) {
   if (st.ok()) return;
-  if (st.error_code() == grpc::StatusCode::UNAVAILABLE || st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED)
-    throw FarmError("coordinator " + c.coordinator + " unreachable: " + st.error_message());
+  if (unreachable(st)) throw FarmError("coordinator " + c.coordinator + " unreachable: " + st.error_message());
   throw FarmError(st.error_message());
 }
+
+// The wait before trying a coordinator that went away again: 0.25 s, doubling up to 5 s,
+// said on stderr unless quiet. `then` names what comes next ("reconnecting").
+class Backoff {
+ public:
+  void reset() { seconds_ = 0.25; }
+  void wait(const FarmContext& c, const grpc::Status& st, const char* lead, const char* then) {
+    if (!c.quiet && !c.json)
+      std::fprintf(c.err, "%stessera: lost coordinator %s (%s); %s in %.1f s\n", lead, c.coordinator.c_str(),
+                   st.error_message().c_str(), then, seconds_);
+    std::this_thread::sleep_for(std::chrono::duration<double>(seconds_));
+    seconds_ = std::min(5.0, seconds_ * 2);
+  }
+
+ private:
+  double seconds_ = 0.25;
+};
 
 std::unique_ptr<grpc::ClientContext> deadline(const FarmContext& c, double seconds = 30) {
   auto ctx = std::make_unique<grpc::ClientContext>();
@@ -111,7 +132,7 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
   ProgressBar bar(c.quiet || c.json);
   v1::JobStatus s, last;
   bool any = false;
-  double backoff = 0.25;
+  Backoff backoff;
   auto lost_since = std::chrono::steady_clock::now();
   while (true) {
     grpc::ClientContext ctx;
@@ -122,7 +143,7 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
     while (reader->Read(&s)) {
       any = true;
       last = s;
-      backoff = 0.25;
+      backoff.reset();
       if (on_status) on_status(s);
       char what[128];
       if (s.frames_total() > 0)
@@ -141,9 +162,7 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
       lost_since = std::chrono::steady_clock::now();
     }
     const grpc::Status st = reader->Finish();
-    const bool transient = st.ok() || st.error_code() == grpc::StatusCode::UNAVAILABLE ||
-                           st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED ||
-                           st.error_code() == grpc::StatusCode::CANCELLED;
+    const bool transient = st.ok() || unreachable(st) || st.error_code() == grpc::StatusCode::CANCELLED;
     if (st.error_code() == grpc::StatusCode::NOT_FOUND && any)
       throw FarmError("job " + id + " is no longer known to coordinator " + c.coordinator +
                       " (it restarted without it?): " + st.error_message());
@@ -153,11 +172,7 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
       check(st, c);  // says why, naming the coordinator
       throw FarmError("lost coordinator " + c.coordinator + " while watching job " + id);
     }
-    if (!c.quiet && !c.json)
-      std::fprintf(c.err, "\ntessera: lost coordinator %s (%s); reconnecting in %.1f s\n", c.coordinator.c_str(),
-                   st.error_message().c_str(), backoff);
-    std::this_thread::sleep_for(std::chrono::duration<double>(backoff));
-    backoff = std::min(5.0, backoff * 2);
+    backoff.wait(c, st, "\n", "reconnecting");  // (a new line: the progress bar is on this one)
   }
 }
 
@@ -217,21 +232,15 @@ void fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::op
   // A lost connection (the coordinator restarting just as the job ended) is retried with
   // back-off for up to c.reconnect_seconds, as watching is: the image is on its disk.
   v1::Image img;
-  double backoff = 0.25;
+  Backoff backoff;
   for (const auto since = std::chrono::steady_clock::now();;) {
     const grpc::Status st = stub.FetchImage(deadline(c, 120).get(), req, &img);
-    const bool transient =
-        st.error_code() == grpc::StatusCode::UNAVAILABLE || st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
-    if (!transient ||
+    if (!unreachable(st) ||
         std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count() > c.reconnect_seconds) {
       check(st, c);
       break;
     }
-    if (!c.quiet && !c.json)
-      std::fprintf(c.err, "tessera: lost coordinator %s (%s); fetching again in %.1f s\n", c.coordinator.c_str(),
-                   st.error_message().c_str(), backoff);
-    std::this_thread::sleep_for(std::chrono::duration<double>(backoff));
-    backoff = std::min(5.0, backoff * 2);
+    backoff.wait(c, st, "", "fetching again");
   }
   for (const std::string& out : outputs) {
     const std::string path = frame ? frame_path(out, *frame) : out;

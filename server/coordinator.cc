@@ -32,6 +32,12 @@ uint64_t sums_digest(const std::vector<PixelSums>& sums) {
   return XXH3_64bits_digest(&st);
 }
 
+// A result's tile sums, for a tile of `pixels` pixels; throws WireError for any mismatch.
+std::vector<PixelSums> result_sums(const v1::TaskResult& result, size_t pixels) {
+  if (result.raw_size() != pixels * kBytesPerPixel) throw WireError("raw size does not match the tile");
+  return decode_sums(result.sums_zstd(), pixels);
+}
+
 }  // namespace
 
 Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> clock, std::unique_ptr<ImageSink> sink)
@@ -919,7 +925,6 @@ std::vector<v1::ResultAck> Coordinator::submit_results(const std::vector<const v
   };
   struct Incoming {
     size_t index;
-    Lease lease;
     size_t pixels = 0;
     uint32_t pass_len = 0;
     std::optional<CheckedSums> sums;
@@ -938,15 +943,13 @@ std::vector<v1::ResultAck> Coordinator::submit_results(const std::vector<const v
       const FramePlan& plan = jobs_.at(lease.job)->plan;
       const auto& [s0, s1] = plan.passes()[lease.pass];
       const size_t pixels = size_t(plan.tiles()[lease.tile].area());
-      incoming.push_back({i, std::move(lease), pixels, s1 - s0, std::nullopt});
+      incoming.push_back({i, pixels, s1 - s0, std::nullopt});
     }
   }
   uint64_t malformed = 0;
   for (Incoming& in : incoming) {
-    const v1::TaskResult& result = *results[in.index];
     try {
-      if (result.raw_size() != in.pixels * kBytesPerPixel) throw WireError("raw size does not match the tile");
-      in.sums = FramePlan::check(decode_sums(result.sums_zstd(), in.pixels), in.pass_len);
+      in.sums = FramePlan::check(result_sums(*results[in.index], in.pixels), in.pass_len);
     } catch (const WireError&) {
     }
     malformed += !in.sums;
@@ -1013,8 +1016,7 @@ v1::ResultAck Coordinator::check_result(const v1::TaskResult& result, const Leas
   const Rect rect = from_proto(c.task->tile());
   uint64_t digest;
   try {
-    if (result.raw_size() != size_t(rect.area()) * kBytesPerPixel) throw WireError("raw size does not match the tile");
-    digest = sums_digest(decode_sums(result.sums_zstd(), size_t(rect.area())));
+    digest = sums_digest(result_sums(result, size_t(rect.area())));
   } catch (const WireError&) {
     std::lock_guard<std::mutex> lock(mu_);
     ++counters_.results_rejected;
