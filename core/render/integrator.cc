@@ -1,5 +1,6 @@
 #include "core/render/integrator.h"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstdio>
@@ -15,8 +16,15 @@ constexpr float kMachineEps = std::numeric_limits<float>::epsilon() * 0.5f;
 constexpr float gamma(int n) { return (n * kMachineEps) / (1 - n * kMachineEps); }
 // Margin over the error bound for Embree's own rounding in its plane test.
 constexpr float kOffsetSafety = 2.0f;
+// Offsets never below this over |Ng| (clamped to 1): 4 FLT_MIN, see make_surface_point.
+constexpr float kUnderflowFloor = 4 * std::numeric_limits<float>::min();
+// The double-precision sphere test's error in the sign of |o - c|^2 - r^2, relative to r,
+// with a wide margin (2^-40 against about 2^-51).
+constexpr float kSphereTestError = 0x1p-40f;
 // Russian roulette leaves paths whose throughput is above this alone (see radiance()).
 constexpr float kRouletteFloor = 0.25f;
+
+Vec3 splat(float v) { return {v, v, v}; }
 
 // std::nextafter is an out-of-line libm call; these are a few integer operations.
 float next_float_up(float v) {
@@ -48,8 +56,10 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
     const double k = len > 0 ? s.radius / len : 0;
     sp.ng = len > 0 ? Vec3{float(px / len), float(py / len), float(pz / len)} : Vec3{0, 0, 1};
     sp.p = Vec3{float(s.center.x + px * k), float(s.center.y + py * k), float(s.center.z + pz * k)};
-    // Computed in double: the only error left is rounding each coordinate to float.
-    sp.p_err = abs(sp.p) * gamma(2);
+    // Computed in double: the only error left is rounding each coordinate to float. The
+    // intersection test (double) is exact to about 2^-50 of the radius: where |p| is tiny
+    // (a sphere touching the origin) the rounding bound vanishes and that error is left.
+    sp.p_err = max(abs(sp.p) * gamma(2), splat(s.radius * kSphereTestError));
     sp.ns = sp.ng;
     sp.material = s.material;
     sp.light = s.light;
@@ -72,6 +82,14 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
     len = length(ng);
   }
   sp.ng = len > 0 ? ng / len : Vec3{0, 0, 1};
+  // The intersector's absolute error. The bound above is relative (pbrt-v4's model,
+  // |fl(x) - x| <= eps |x|), which fails where products underflow: Embree's plane test
+  // computes T = 2 dot(v0 - o, Ng) with |Ng| = len, so an origin 1 ulp off a plane through
+  // 0 (a denormal) times len < 1 rounds to T = 0, a hit at t = 0 (Embree accepts t >=
+  // tnear). The floor keeps |Ng| x offset above FLT_MIN (and the offset itself normal, for
+  // flush-to-zero), whatever the triangle's size; at any other position the relative
+  // bound is larger by orders of magnitude, so nothing else moves (docs/ray-offsets.md).
+  sp.p_err = max(sp.p_err, splat(kUnderflowFloor / std::clamp(len, 1e-20f, 1.0f)));
   Vec3 ns = m.normals[i0] * b0 + m.normals[i1] * b1 + m.normals[i2] * b2;
   const float ns_len = length(ns);
   sp.ns = ns_len > 0 ? ns / ns_len : sp.ng;
@@ -201,7 +219,9 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
     }
     // A ray leaving a flat triangle can never meet that triangle again: if it does, the
     // origin offset failed (acne). Counted so the stability tests can assert zero.
-    if (depth > 0 && !hit.is_sphere && !prev_hit.is_sphere && hit.shape == prev_hit.shape && hit.prim == prev_hit.prim)
+    // Likewise a ray that left a sphere outward (it is convex).
+    if (depth > 0 && hit.is_sphere == prev_hit.is_sphere && hit.shape == prev_hit.shape &&
+        (hit.is_sphere ? dot(ray.d, prev.ng) > 0 : hit.prim == prev_hit.prim))
       ++counters.self_hits;
     prev_hit = hit;
     SurfacePoint sp = make_surface_point(scene_, ray, hit);
