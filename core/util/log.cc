@@ -1,0 +1,16 @@
+#include "core/util/log.h"
+
+#include <spdlog/sinks/stdout_sinks.h>
+
+namespace tessera {
+
+void init_logging(const std::string& program, bool verbose) {
+  auto logger = spdlog::stderr_logger_mt(program);
+  // 2026-11-24T09:15:02.118+0000 tessera-coordinator warning: ...
+  logger->set_pattern("%Y-%m-%dT%H:%M:%S.%e%z %n %l: %v");
+  logger->set_level(verbose ? spdlog::level::debug : spdlog::level::info);
+  logger->flush_on(spdlog::level::trace);  // every line at once: operators tail these
+  spdlog::set_default_logger(std::move(logger));
+}
+
+}  // namespace tessera
