@@ -1,0 +1,147 @@
+#include "core/scene/gltf/gltf_accessors.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+namespace tessera {
+namespace {
+
+// Where `count` elements of `comps` components of `type` start in a buffer view, after
+// checking that every byte of them lies inside the view and the view inside its buffer.
+struct ViewSpan {
+  const unsigned char* base;
+  size_t stride;
+  int csize;
+};
+ViewSpan checked_view(const GltfContext& ctx, int view_index, size_t offset, int type, size_t count, int comps,
+                      const std::string& el) {
+  const tinygltf::Model& model = ctx.model;
+  if (view_index < 0 || size_t(view_index) >= model.bufferViews.size())
+    ctx.fail(el, "bufferView " + std::to_string(view_index) + " does not exist");
+  const tinygltf::BufferView& v = model.bufferViews[size_t(view_index)];
+  if (v.buffer < 0 || size_t(v.buffer) >= model.buffers.size())
+    ctx.fail(el, "buffer " + std::to_string(v.buffer) + " does not exist");
+  const std::vector<unsigned char>& data = model.buffers[size_t(v.buffer)].data;
+  const int csize = tinygltf::GetComponentSizeInBytes(uint32_t(type));
+  if (csize <= 0) ctx.fail(el, "unknown component type " + std::to_string(type));
+  const uint64_t elem = uint64_t(csize) * uint64_t(comps);
+  const uint64_t stride = v.byteStride ? v.byteStride : elem;
+  if (stride < elem) ctx.fail(el, "byteStride " + std::to_string(v.byteStride) + " is smaller than an element");
+  if (uint64_t(v.byteOffset) + v.byteLength > data.size())
+    ctx.fail(el, "bufferView " + std::to_string(view_index) + " runs past the end of its buffer (" +
+                     std::to_string(v.byteOffset + v.byteLength) + " > " + std::to_string(data.size()) + " bytes)");
+  if (count > 0 && uint64_t(offset) + stride * (count - 1) + elem > v.byteLength)
+    ctx.fail(el, "byteOffset " + std::to_string(offset) + " with " + std::to_string(count) +
+                     " elements runs past the end of bufferView " + std::to_string(view_index));
+  return {data.data() + v.byteOffset + offset, size_t(stride), csize};
+}
+
+void read_view(const GltfContext& ctx, int view_index, size_t offset, int type, bool normalized, size_t count,
+               int comps, const std::string& el, float* out) {
+  const auto [base, stride, csize] = checked_view(ctx, view_index, offset, type, count, comps, el);
+  for (size_t i = 0; i < count; ++i)
+    for (int c = 0; c < comps; ++c) {
+      const unsigned char* p = base + i * stride + size_t(c) * size_t(csize);
+      float f = 0;
+      switch (type) {
+        case TINYGLTF_COMPONENT_TYPE_BYTE: {
+          int8_t x;
+          std::memcpy(&x, p, 1);
+          f = normalized ? std::max(float(x) / 127.0f, -1.0f) : float(x);
+          break;
+        }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE:
+          f = normalized ? float(*p) / 255.0f : float(*p);
+          break;
+        case TINYGLTF_COMPONENT_TYPE_SHORT: {
+          int16_t x;
+          std::memcpy(&x, p, 2);
+          f = normalized ? std::max(float(x) / 32767.0f, -1.0f) : float(x);
+          break;
+        }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+          uint16_t x;
+          std::memcpy(&x, p, 2);
+          f = normalized ? float(x) / 65535.0f : float(x);
+          break;
+        }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+          uint32_t x;
+          std::memcpy(&x, p, 4);
+          f = float(x);
+          break;
+        }
+        case TINYGLTF_COMPONENT_TYPE_FLOAT:
+          std::memcpy(&f, p, 4);
+          break;
+        default:
+          ctx.fail(el, "component type " + std::to_string(type) + " is not allowed here");
+      }
+      out[i * size_t(comps) + size_t(c)] = f;
+    }
+}
+
+// accessors[index]; one that does not exist is refused naming its use.
+const tinygltf::Accessor& accessor_at(const GltfContext& ctx, int index, const std::string& what) {
+  if (index < 0 || size_t(index) >= ctx.model.accessors.size())
+    ctx.fail(what, "accessor " + std::to_string(index) + " does not exist");
+  return ctx.model.accessors[size_t(index)];
+}
+
+}  // namespace
+
+std::vector<float> read_accessor_floats(const GltfContext& ctx, int index, int want_components,
+                                        const std::string& what) {
+  const std::string el = "accessors[" + std::to_string(index) + "] (" + what + ")";
+  const tinygltf::Accessor& a = accessor_at(ctx, index, what);
+  const int comps = tinygltf::GetNumComponentsInType(uint32_t(a.type));
+  if (comps != want_components)
+    ctx.fail(el, "has " + std::to_string(comps) + " components, expected " + std::to_string(want_components));
+  if (a.count > (size_t(1) << 28)) ctx.fail(el, "count " + std::to_string(a.count) + " is too large");
+  std::vector<float> out(a.count * size_t(comps), 0.0f);
+  if (a.bufferView >= 0)
+    read_view(ctx, a.bufferView, a.byteOffset, a.componentType, a.normalized, a.count, comps, el, out.data());
+  if (a.sparse.isSparse) {
+    const auto& sp = a.sparse;
+    if (sp.count < 0 || size_t(sp.count) > a.count) ctx.fail(el, "sparse count out of range");
+    std::vector<float> idx(size_t(sp.count)), val(size_t(sp.count) * comps);
+    read_view(ctx, sp.indices.bufferView, size_t(std::max(0, sp.indices.byteOffset)), sp.indices.componentType, false,
+              size_t(sp.count), 1, el + " sparse indices", idx.data());
+    read_view(ctx, sp.values.bufferView, size_t(std::max(0, sp.values.byteOffset)), a.componentType, a.normalized,
+              size_t(sp.count), comps, el + " sparse values", val.data());
+    for (size_t k = 0; k < idx.size(); ++k) {
+      const double i = idx[k];
+      if (!(i >= 0 && i < double(a.count))) ctx.fail(el, "sparse index " + std::to_string(i) + " out of range");
+      std::copy(val.begin() + long(k * comps), val.begin() + long((k + 1) * comps),
+                out.begin() + long(size_t(i) * comps));
+    }
+  }
+  for (float v : out)
+    if (!std::isfinite(v)) ctx.fail(el, "contains a NaN or infinite value");
+  return out;
+}
+
+std::vector<uint32_t> read_accessor_indices(const GltfContext& ctx, int index, size_t vertex_count,
+                                            const std::string& what) {
+  const std::string el = "accessors[" + std::to_string(index) + "] (" + what + ")";
+  const tinygltf::Accessor& a = accessor_at(ctx, index, what);
+  if (a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+      a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+      a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+    ctx.fail(el, "indices must be unsigned byte, short or int");
+  if (a.bufferView < 0) ctx.fail(el, "indices need a bufferView");
+  // Read as integers, not through read_view's floats, which lose precision past 2^24.
+  const auto [base, stride, csize] = checked_view(ctx, a.bufferView, a.byteOffset, a.componentType, a.count, 1, el);
+  std::vector<uint32_t> out(a.count);
+  for (size_t i = 0; i < a.count; ++i) {
+    uint32_t x = 0;
+    std::memcpy(&x, base + i * stride, size_t(csize));
+    if (x >= vertex_count)
+      ctx.fail(el, "index " + std::to_string(x) + " out of range (" + std::to_string(vertex_count) + " vertices)");
+    out[i] = x;
+  }
+  return out;
+}
+
+}  // namespace tessera

@@ -1,0 +1,116 @@
+#include "core/scene/gltf/gltf_animation.h"
+
+#include <algorithm>
+#include <set>
+#include <utility>
+
+#include "core/scene/gltf/gltf_accessors.h"
+
+namespace tessera {
+
+int32_t GltfAnimationBuilder::add_node(const SceneAnimation::Node& node) {
+  animation_.nodes.push_back(node);
+  return int32_t(animation_.nodes.size() - 1);
+}
+
+void GltfAnimationBuilder::add_mesh(uint32_t scene_mesh, int32_t node_entry, const GltfPrimitive& primitive) {
+  const std::vector<float>& p3 = primitive.positions;
+  const std::vector<float>& n3 = primitive.normals;
+  SceneAnimation::MeshBinding b;
+  b.mesh = scene_mesh;
+  b.node = uint32_t(node_entry);
+  b.positions.resize(p3.size() / 3);
+  for (size_t i = 0; i < b.positions.size(); ++i) b.positions[i] = Vec3{p3[3 * i], p3[3 * i + 1], p3[3 * i + 2]};
+  b.normals.resize(n3.size() / 3);
+  for (size_t i = 0; i < b.normals.size(); ++i) b.normals[i] = Vec3{n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]};
+  b.indices = primitive.mesh.indices;
+  if (primitive.mirrored)  // back to the file's winding: each pose fixes it for its own transform
+    for (size_t t = 0; t < b.indices.size(); t += 3) std::swap(b.indices[t + 1], b.indices[t + 2]);
+  animation_.meshes.push_back(std::move(b));
+}
+
+void GltfAnimationBuilder::add_light(uint32_t scene_light, int32_t node_entry) {
+  animation_.lights.push_back({scene_light, uint32_t(node_entry)});
+}
+
+void GltfAnimationBuilder::set_camera(int32_t node_entry) { animation_.camera_node = node_entry; }
+
+std::shared_ptr<const SceneAnimation> GltfAnimationBuilder::finish(GltfContext& ctx) {
+  const tinygltf::Model& model = ctx.model;
+  for (size_t ai = 0; ai < model.animations.size(); ++ai) {
+    const tinygltf::Animation& an = model.animations[ai];
+    const std::string el = "animations[" + std::to_string(ai) + "]";
+    SceneAnimation::Clip clip;
+    clip.name = an.name;
+    for (size_t ci = 0; ci < an.channels.size(); ++ci) {
+      const tinygltf::AnimationChannel& ch = an.channels[ci];
+      const std::string cel = el + ".channels[" + std::to_string(ci) + "]";
+      if (ch.sampler < 0 || size_t(ch.sampler) >= an.samplers.size())
+        ctx.fail(cel, "sampler " + std::to_string(ch.sampler) + " does not exist");
+      if (ch.target_node < 0 || size_t(ch.target_node) >= model.nodes.size())
+        ctx.fail(cel, "target node " + std::to_string(ch.target_node) + " does not exist");
+      SceneAnimation::Channel c;
+      c.gltf_node = uint32_t(ch.target_node);
+      size_t comps = 3;
+      if (ch.target_path == "translation") {
+        c.path = SceneAnimation::Path::kTranslation;
+      } else if (ch.target_path == "rotation") {
+        c.path = SceneAnimation::Path::kRotation;
+        comps = 4;
+      } else if (ch.target_path == "scale") {
+        c.path = SceneAnimation::Path::kScale;
+      } else if (ch.target_path == "weights") {
+        ctx.warn_once(cel + ": morph target weights are not supported; ignored");
+        continue;
+      } else {
+        ctx.fail(cel, "unknown target path '" + ch.target_path + "' (translation, rotation, scale or weights)");
+      }
+      if (!model.nodes[size_t(ch.target_node)].matrix.empty())
+        ctx.fail(cel, "targets nodes[" + std::to_string(ch.target_node) +
+                          "], which has a matrix: only nodes given by translation, rotation and scale can be animated");
+      const tinygltf::AnimationSampler& smp = an.samplers[size_t(ch.sampler)];
+      const std::string sel = el + ".samplers[" + std::to_string(ch.sampler) + "]";
+      if (smp.interpolation == "LINEAR" || smp.interpolation.empty())
+        c.interpolation = SceneAnimation::Interpolation::kLinear;
+      else if (smp.interpolation == "STEP")
+        c.interpolation = SceneAnimation::Interpolation::kStep;
+      else if (smp.interpolation == "CUBICSPLINE")
+        c.interpolation = SceneAnimation::Interpolation::kCubicSpline;
+      else
+        ctx.fail(sel, "unknown interpolation '" + smp.interpolation + "' (LINEAR, STEP or CUBICSPLINE)");
+      const std::vector<float> times = read_accessor_floats(ctx, smp.input, 1, sel + " input");
+      if (times.empty()) ctx.fail(sel, "input has no keys");
+      for (size_t k = 1; k < times.size(); ++k)
+        if (!(times[k] > times[k - 1]))
+          ctx.fail(sel, "input times must increase: key " + std::to_string(k) + " (" + std::to_string(times[k]) +
+                            " s) does not come after key " + std::to_string(k - 1) + " (" +
+                            std::to_string(times[k - 1]) + " s)");
+      const std::vector<float> values = read_accessor_floats(ctx, smp.output, int(comps), sel + " output");
+      const bool cubic = c.interpolation == SceneAnimation::Interpolation::kCubicSpline;
+      const size_t want = times.size() * (cubic ? 3 : 1);
+      if (values.size() / comps != want)
+        ctx.fail(sel, "output has " + std::to_string(values.size() / comps) + " elements for " +
+                          std::to_string(times.size()) + " input keys; " + (cubic ? "CUBICSPLINE" : smp.interpolation) +
+                          " needs " + std::to_string(want));
+      c.times.assign(times.begin(), times.end());
+      c.values.assign(values.begin(), values.end());
+      clip.duration = std::max(clip.duration, c.times.back());
+      clip.channels.push_back(std::move(c));
+    }
+    animation_.clips.push_back(std::move(clip));
+  }
+  // Keep only what some animation moves.
+  std::set<uint32_t> targets;
+  for (const auto& clip : animation_.clips)
+    for (const auto& c : clip.channels) targets.insert(c.gltf_node);
+  std::vector<bool> moves(animation_.nodes.size());
+  for (size_t i = 0; i < animation_.nodes.size(); ++i) {
+    const auto& e = animation_.nodes[i];
+    moves[i] = targets.count(e.gltf_node) || (e.parent >= 0 && moves[size_t(e.parent)]);
+  }
+  auto& ms = animation_.meshes;
+  ms.erase(std::remove_if(ms.begin(), ms.end(), [&](const auto& b) { return !moves[b.node]; }), ms.end());
+  return std::make_shared<const SceneAnimation>(std::move(animation_));
+}
+
+}  // namespace tessera

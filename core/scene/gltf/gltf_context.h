@@ -1,0 +1,42 @@
+// What the units of one glTF load share: the file's name, which starts every error and
+// warning; tinygltf's model of the file; the scene being built.
+//
+// The load, in order (gltf_loader.cc): gltf_document reads the file and parses its JSON,
+// gltf_prechecks checks it, tinygltf makes the model; gltf_nodes walks the scene's node
+// graph and places what each node carries: meshes (gltf_meshes, over gltf_accessors, with
+// gltf_materials and gltf_textures), lights and the camera (gltf_lights_cameras);
+// gltf_animation keeps what posing needs and reads the animations.
+#pragma once
+
+#include <tiny_gltf.h>
+
+#include <set>
+#include <string>
+#include <utility>
+
+#include "core/scene/scene.h"
+#include "core/scene/scene_error.h"
+
+namespace tessera {
+
+struct GltfContext {
+  explicit GltfContext(std::string file) : path(std::move(file)) { scene.source = path; }
+
+  // Throws SceneError "file: element: reason".
+  [[noreturn]] void fail(const std::string& element, const std::string& reason) const {
+    throw SceneError(path, element, reason);
+  }
+  // A warning naming the file, given once however often the file repeats its cause.
+  void warn_once(const std::string& w) {
+    if (warned_.insert(w).second) scene.warnings.push_back(path + ": " + w);
+  }
+
+  const std::string path;
+  tinygltf::Model model;
+  Scene scene;
+
+ private:
+  std::set<std::string> warned_;
+};
+
+}  // namespace tessera

@@ -1,0 +1,202 @@
+#include "core/scene/gltf/gltf_document.h"
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <set>
+
+#include "core/scene/gltf/gltf_extensions.h"
+#include "core/scene/gltf/gltf_prechecks.h"
+#include "core/scene/gltf/gltf_textures.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr uint32_t kGlbJsonChunk = 0x4E4F534Au;  // "JSON"
+
+std::string read_file(const std::string& path) {
+  std::error_code ec;
+  const auto size = fs::file_size(path, ec);
+  if (ec) throw SceneError(path, "", "cannot open file");
+  if (size > kMaxGltfBufferBytes) throw SceneError(path, "", "file larger than the 1 GiB limit");
+  std::ifstream in(path, std::ios::binary);
+  std::string s(size, '\0');
+  in.read(s.data(), std::streamsize(size));
+  if (!in) throw SceneError(path, "", "cannot read file");
+  return s;
+}
+
+// tinygltf's and nlohmann's messages span lines: join them into one.
+std::string first_line(const std::string& s) {
+  std::string t;
+  for (char c : s) {
+    if (c == '\r') continue;
+    if (c == '\n') {
+      while (!t.empty() && t.back() == ' ') t.pop_back();
+      if (!t.empty() && t.back() != ':' && t.back() != ';') t += ';';
+      t += ' ';
+    } else {
+      t += c;
+    }
+  }
+  while (!t.empty() && (t.back() == ' ' || t.back() == ';')) t.pop_back();
+  return t;
+}
+
+// ---- GLB container -------------------------------------------------------------------
+// A little-endian 32-bit word of a GLB at byte `at` (the caller checks the size).
+uint32_t glb_u32(const std::string& b, size_t at) {
+  uint32_t v;
+  std::memcpy(&v, b.data() + at, 4);
+  return v;
+}
+
+std::string glb_json(const std::string& b, const std::string& path) {
+  auto u32 = [&](size_t at) { return glb_u32(b, at); };
+  if (b.size() < 20) throw SceneError(path, "GLB header", "file too short");
+  if (u32(4) != 2) throw SceneError(path, "GLB header", "version " + std::to_string(u32(4)) + " (expected 2)");
+  if (u32(8) > b.size())
+    throw SceneError(path, "GLB header",
+                     "declares " + std::to_string(u32(8)) + " bytes, file has " + std::to_string(b.size()));
+  const uint32_t json_len = u32(12);
+  if (u32(16) != kGlbJsonChunk) throw SceneError(path, "GLB chunk 0", "is not JSON");
+  if (uint64_t(json_len) + 20 > b.size())
+    throw SceneError(path, "GLB chunk 0", "length " + std::to_string(json_len) + " runs past the end of the file");
+  return b.substr(20, json_len);
+}
+
+// A GLB with its JSON chunk replaced (padded with spaces to 4 bytes, as the spec asks).
+std::string replace_glb_json(const std::string& b, std::string json) {
+  const size_t old_end = 20 + size_t(glb_u32(b, 12));
+  while (json.size() % 4) json += ' ';
+  std::string out = b.substr(0, 12);
+  const uint32_t len = uint32_t(json.size()), type = kGlbJsonChunk;
+  out.append(reinterpret_cast<const char*>(&len), 4);
+  out.append(reinterpret_cast<const char*>(&type), 4);
+  out += json;
+  out += b.substr(std::min(old_end, b.size()));
+  const uint32_t total = uint32_t(out.size());
+  std::memcpy(out.data() + 8, &total, 4);
+  return out;
+}
+
+// ---- tinygltf's file access: only files inside the scene's folder, none too large ------
+struct FsGuard {
+  fs::path base;
+};
+
+bool guarded_exists(const std::string& path, void*) {
+  std::error_code ec;
+  return fs::exists(path, ec);
+}
+std::string guarded_expand(const std::string& path, void*) { return path; }
+bool guarded_read(std::vector<unsigned char>* out, std::string* err, const std::string& path, void* user) {
+  const FsGuard& g = *static_cast<FsGuard*>(user);
+  std::error_code ec;
+  const fs::path p = fs::weakly_canonical(path, ec);
+  const std::string base = g.base.string() + "/";
+  if (ec || p.string().compare(0, base.size(), base) != 0) {
+    *err = "'" + path + "' is outside the scene's folder";
+    return false;
+  }
+  const auto size = fs::file_size(p, ec);
+  if (ec) {
+    *err = "cannot open '" + path + "'";
+    return false;
+  }
+  if (size > kMaxGltfBufferBytes) {
+    *err = "'" + path + "' is larger than the 1 GiB limit";
+    return false;
+  }
+  std::ifstream in(p, std::ios::binary);
+  out->resize(size);
+  in.read(reinterpret_cast<char*>(out->data()), std::streamsize(size));
+  if (!in) {
+    *err = "cannot read '" + path + "'";
+    return false;
+  }
+  return true;
+}
+bool guarded_write(std::string* err, const std::string&, const std::vector<unsigned char>&, void*) {
+  *err = "writing is not allowed";
+  return false;
+}
+
+std::string percent_decode(const std::string& s) {
+  std::string out;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (s[i] == '%' && i + 2 < s.size() && std::isxdigit(uint8_t(s[i + 1])) && std::isxdigit(uint8_t(s[i + 2]))) {
+      out.push_back(char(std::stoi(s.substr(i + 1, 2), nullptr, 16)));
+      i += 2;
+    } else {
+      out.push_back(s[i]);
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+GltfDocument read_gltf_document(const std::string& path) {
+  GltfDocument doc;
+  doc.bytes = read_file(path);
+  doc.binary = doc.bytes.size() >= 4 && doc.bytes.compare(0, 4, "glTF") == 0;
+  try {  // the one nlohmann parse of a load (tinygltf's own is in parse_gltf_model)
+    doc.json = nlohmann::json::parse(doc.binary ? glb_json(doc.bytes, path) : doc.bytes);
+  } catch (const nlohmann::json::exception& e) {  // parse_error, and out_of_range for numbers like 1e999
+    throw SceneError(path, "JSON", first_line(e.what()));
+  }
+  return doc;
+}
+
+std::vector<std::string> gltf_document_external_files(const nlohmann::json& j) {
+  std::vector<std::string> out;
+  std::set<std::string> seen;
+  for (const char* key : {"buffers", "images"}) {
+    if (!j.is_object() || !j.contains(key) || !j[key].is_array()) continue;
+    for (const auto& item : j[key]) {
+      if (!item.is_object() || !item.contains("uri") || !item["uri"].is_string()) continue;
+      const std::string uri = item["uri"];
+      if (uri.rfind("data:", 0) == 0) continue;
+      const std::string rel = percent_decode(uri);
+      if (seen.insert(rel).second) out.push_back(rel);
+    }
+  }
+  return out;
+}
+
+void parse_gltf_model(GltfDocument doc, GltfContext& ctx) {
+  // The JSON is parsed twice, the fewest the libraries allow: by nlohmann in
+  // read_gltf_document, for the pre-checks, which must see it before tinygltf allocates
+  // anything; and by tinygltf here. Debian's tinygltf 2.7 (a shared library) takes only
+  // text: LoadASCIIFromString and LoadBinaryFromMemory parse it themselves (JsonParse, in
+  // the private LoadFromString), and no public entry point takes a parsed document. When
+  // the pre-checks change the JSON, tinygltf reads its dump instead of the file's text.
+  if (precheck_gltf_json(doc.json, ctx.path, ctx.scene.warnings)) {
+    std::string fixed = doc.json.dump();
+    doc.bytes = doc.binary ? replace_glb_json(doc.bytes, std::move(fixed)) : std::move(fixed);
+  }
+  doc.json = nullptr;  // freed before tinygltf builds its own tree of the same text
+  tinygltf::TinyGLTF loader;
+  const fs::path folder = fs::absolute(ctx.path).parent_path();
+  FsGuard guard{fs::weakly_canonical(folder)};
+  tinygltf::FsCallbacks cb{guarded_exists, guarded_expand, guarded_read, guarded_write, &guard};
+  loader.SetFsCallbacks(cb);
+  loader.SetImageLoader(keep_image_encoded, nullptr);
+  std::string err, warn;
+  const std::string base = folder.string();
+  const bool ok = doc.binary ? loader.LoadBinaryFromMemory(&ctx.model, &err, &warn,
+                                                           reinterpret_cast<const unsigned char*>(doc.bytes.data()),
+                                                           unsigned(doc.bytes.size()), base)
+                             : loader.LoadASCIIFromString(&ctx.model, &err, &warn, doc.bytes.data(),
+                                                          unsigned(doc.bytes.size()), base);
+  if (!ok) throw SceneError(ctx.path, "", first_line(err.empty() ? "glTF parse error" : err));
+  if (!warn.empty()) ctx.scene.warnings.push_back(ctx.path + ": " + first_line(warn));
+  for (const std::string& ext : ctx.model.extensionsUsed)
+    if (!gltf_extension_supported(ext))
+      ctx.scene.warnings.push_back(ctx.path + ": optional extension '" + ext + "' is not supported; ignored");
+}
+
+}  // namespace tessera

@@ -1,0 +1,23 @@
+// The glTF extensions Tessera reads (docs/gltf.md, Extensions). One in extensionsRequired
+// that is not here refuses the file (gltf_prechecks.cc); one only in extensionsUsed is a
+// warning (gltf_document.cc). Supporting another: its name here, and its reading in the
+// unit of what it extends: gltf_materials.cc (KHR_materials_*), gltf_textures.cc
+// (KHR_texture_transform), gltf_lights_cameras.cc (KHR_lights_punctual), gltf_meshes.cc
+// (primitives: KHR_draco_mesh_compression), gltf_accessors.cc (buffer views and component
+// types: EXT_meshopt_compression, KHR_mesh_quantization), gltf_nodes.cc (node
+// extensions: EXT_mesh_gpu_instancing).
+#pragma once
+
+#include <set>
+#include <string>
+
+namespace tessera {
+
+inline bool gltf_extension_supported(const std::string& name) {
+  static const std::set<std::string> kSupported = {
+      "KHR_lights_punctual",  "KHR_materials_transmission",      "KHR_materials_ior",
+      "KHR_materials_volume", "KHR_materials_emissive_strength", "KHR_texture_transform"};
+  return kSupported.count(name) > 0;
+}
+
+}  // namespace tessera

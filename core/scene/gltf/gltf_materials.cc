@@ -1,0 +1,134 @@
+#include "core/scene/gltf/gltf_materials.h"
+
+#include <algorithm>
+#include <cmath>
+#include <utility>
+#include <vector>
+
+namespace tessera {
+namespace {
+
+// A value of a material extension, when the file gives one.
+const tinygltf::Value* ext_value(const tinygltf::ExtensionMap& exts, const char* ext, const char* key) {
+  auto it = exts.find(ext);
+  if (it == exts.end() || !it->second.IsObject() || !it->second.Has(key)) return nullptr;
+  return &it->second.Get(key);
+}
+// A number of a material extension, `fallback` when absent; NaN or infinity refused.
+double ext_number(const GltfContext& ctx, const tinygltf::ExtensionMap& exts, const char* ext, const char* key,
+                  double fallback, const std::string& el) {
+  const tinygltf::Value* v = ext_value(exts, ext, key);
+  if (!v) return fallback;
+  if (!v->IsNumber()) ctx.fail(el, std::string(ext) + "." + key + " is not a number");
+  const double d = v->GetNumberAsDouble();
+  if (!std::isfinite(d)) ctx.fail(el, std::string(ext) + "." + key + " is not finite");
+  return d;
+}
+// A factor the specification bounds to [0, 1]: out of range refused.
+double unit_factor(const GltfContext& ctx, double v, const std::string& el, const std::string& what) {
+  if (!(v >= 0 && v <= 1)) ctx.fail(el, what + " " + std::to_string(v) + " is outside [0, 1]");
+  return v;
+}
+Rgb color_factor(const GltfContext& ctx, const std::vector<double>& f, Rgb fallback, const std::string& el,
+                 const std::string& what, double hi = 1) {
+  if (f.empty()) return fallback;
+  if (f.size() < 3) ctx.fail(el, what + " has " + std::to_string(f.size()) + " numbers, expected 3 or 4");
+  for (size_t i = 0; i < 3; ++i)
+    if (!(f[i] >= 0 && f[i] <= hi)) ctx.fail(el, what + " component " + std::to_string(f[i]) + " is out of range");
+  return Rgb(float(f[0]), float(f[1]), float(f[2]));
+}
+
+// KHR_materials_volume: thickness > 0 makes a solid; absorption from the attenuation colour
+// reached after the attenuation distance: sigma = -ln(colour) / distance.
+void read_volume(const GltfContext& ctx, const tinygltf::ExtensionMap& ex, const std::string& el, Material& m) {
+  const double thickness = ext_number(ctx, ex, "KHR_materials_volume", "thicknessFactor", 0, el);
+  if (!(thickness >= 0)) ctx.fail(el, "KHR_materials_volume.thicknessFactor is negative");
+  m.thin = thickness == 0;
+  const double distance = ext_number(ctx, ex, "KHR_materials_volume", "attenuationDistance", HUGE_VAL, el);
+  if (!(distance > 0)) ctx.fail(el, "KHR_materials_volume.attenuationDistance must be positive");
+  Rgb att(1.0f);
+  if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_volume", "attenuationColor")) {
+    std::vector<double> f;
+    if (v->IsArray())
+      for (size_t i = 0; i < v->ArrayLen(); ++i)
+        f.push_back(v->Get(int(i)).IsNumber() ? v->Get(int(i)).GetNumberAsDouble() : NAN);
+    att = color_factor(ctx, f, Rgb(1.0f), el, "KHR_materials_volume.attenuationColor");
+  }
+  if (!m.thin && std::isfinite(distance)) {
+    auto sigma = [&](float c) { return float(-std::log(std::max(double(c), 1e-30)) / distance); };
+    m.absorption = Rgb(sigma(att.r), sigma(att.g), sigma(att.b));
+  }
+}
+
+}  // namespace
+
+uint32_t GltfMaterials::material(int index) {
+  if (auto it = made_.find(index); it != made_.end()) return it->second;
+  Material m;
+  m.kind = Material::Kind::kPbr;
+  const std::string el = "materials[" + std::to_string(index) + "]";
+  // No material: the specification's default, white, metallic 1, roughness 1.
+  m.reflectance = Rgb(1.0f);
+  m.metallic = 1;
+  m.roughness = 1;
+  Rgb emissive(0.0f);
+  double strength = 1;
+  bool double_sided = false;
+  TextureRef emissive_texture;
+  if (index >= 0) {
+    if (size_t(index) >= ctx_.model.materials.size()) ctx_.fail(el, "does not exist");
+    const tinygltf::Material& g = ctx_.model.materials[size_t(index)];
+    m.name = g.name;
+    const auto& pbr = g.pbrMetallicRoughness;
+    m.reflectance = color_factor(ctx_, pbr.baseColorFactor, Rgb(1.0f), el, "baseColorFactor");
+    m.metallic = float(unit_factor(ctx_, pbr.metallicFactor, el, "metallicFactor"));
+    m.roughness = float(unit_factor(ctx_, pbr.roughnessFactor, el, "roughnessFactor"));
+    emissive = color_factor(ctx_, g.emissiveFactor, Rgb(0.0f), el, "emissiveFactor");
+    double_sided = g.doubleSided;
+    const auto& ex = g.extensions;
+    strength = ext_number(ctx_, ex, "KHR_materials_emissive_strength", "emissiveStrength", 1, el);
+    if (!(strength >= 0)) ctx_.fail(el, "KHR_materials_emissive_strength.emissiveStrength is negative");
+    m.transmission =
+        float(unit_factor(ctx_, ext_number(ctx_, ex, "KHR_materials_transmission", "transmissionFactor", 0, el), el,
+                          "transmissionFactor"));
+    const double ior = ext_number(ctx_, ex, "KHR_materials_ior", "ior", 1.5, el);
+    if (!(ior >= 1 && ior < 10))
+      ctx_.fail(el, "KHR_materials_ior ior " + std::to_string(ior) + " out of range [1, 10)");
+    m.ior = float(ior);
+    read_volume(ctx_, ex, el, m);
+    m.texture = textures_.texture_ref(pbr.baseColorTexture.index, pbr.baseColorTexture.texCoord,
+                                      pbr.baseColorTexture.extensions, true, el, "baseColorTexture");
+    m.metal_rough_texture =
+        textures_.texture_ref(pbr.metallicRoughnessTexture.index, pbr.metallicRoughnessTexture.texCoord,
+                              pbr.metallicRoughnessTexture.extensions, false, el, "metallicRoughnessTexture");
+    m.normal_texture = textures_.texture_ref(g.normalTexture.index, g.normalTexture.texCoord,
+                                             g.normalTexture.extensions, false, el, "normalTexture");
+    m.normal_scale = float(g.normalTexture.scale);
+    if (!std::isfinite(m.normal_scale)) ctx_.fail(el, "normalTexture.scale is not finite");
+    emissive_texture = textures_.texture_ref(g.emissiveTexture.index, g.emissiveTexture.texCoord,
+                                             g.emissiveTexture.extensions, true, el, "emissiveTexture");
+    if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_transmission", "transmissionTexture"))
+      if (v->IsObject() && v->Has("index"))
+        ctx_.warn_once(el + ": transmissionTexture is not supported; transmissionFactor is used");
+    if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty())
+      ctx_.warn_once(el + ": alphaMode " + g.alphaMode + " is rendered opaque");
+  }
+  m.alpha = m.roughness * m.roughness;  // glTF's alpha = roughness^2
+  const Rgb radiance = emissive * float(strength);
+  if (!radiance.is_black()) {
+    const Rgb base = m.reflectance;
+    const std::string name = m.name;
+    m = Material();
+    m.kind = Material::Kind::kEmission;  // emitters do not reflect (docs/gltf.md)
+    m.name = name;
+    m.reflectance = base;
+    m.radiance = radiance;
+    m.two_sided_emission = double_sided;
+    m.emissive_texture = emissive_texture;
+  }
+  const uint32_t id = ctx_.scene.add_material(std::move(m));
+  made_[index] = id;
+  return id;
+}
+
+}  // namespace tessera

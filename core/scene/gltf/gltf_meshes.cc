@@ -1,0 +1,73 @@
+#include "core/scene/gltf/gltf_meshes.h"
+
+#include <utility>
+
+#include "core/scene/gltf/gltf_accessors.h"
+
+namespace tessera {
+
+std::vector<GltfPrimitive> read_gltf_mesh(const GltfContext& ctx, GltfMaterials& materials, int index, const Mat4& w,
+                                          const std::string& node_el, bool keep_object_space) {
+  if (size_t(index) >= ctx.model.meshes.size()) ctx.fail(node_el, "mesh " + std::to_string(index) + " does not exist");
+  const tinygltf::Mesh& mesh = ctx.model.meshes[size_t(index)];
+  // det < 0 mirrors the mesh: swap winding so geometric normals stay outward.
+  const double det = w.det3();
+  std::vector<GltfPrimitive> out;
+  for (size_t p = 0; p < mesh.primitives.size(); ++p) {
+    const tinygltf::Primitive& prim = mesh.primitives[p];
+    const std::string el = "meshes[" + std::to_string(index) + "].primitives[" + std::to_string(p) + "]";
+    static const char* kModes[] = {"POINTS",    "LINES",          "LINE_LOOP",   "LINE_STRIP",
+                                   "TRIANGLES", "TRIANGLE_STRIP", "TRIANGLE_FAN"};
+    const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
+    if (mode != TINYGLTF_MODE_TRIANGLES)
+      ctx.fail(el, std::string("mode ") + (mode >= 0 && mode < 7 ? kModes[mode] : std::to_string(mode).c_str()) +
+                       " is not supported (only TRIANGLES)");
+    auto pos = prim.attributes.find("POSITION");
+    if (pos == prim.attributes.end()) ctx.fail(el, "has no POSITION attribute");
+    std::vector<float> p3 = read_accessor_floats(ctx, pos->second, 3, el + " POSITION");
+    GltfPrimitive g;
+    Mesh& m = g.mesh;
+    m.name = mesh.name.empty() ? "mesh" + std::to_string(index) : mesh.name;
+    const size_t nv = p3.size() / 3;
+    m.positions.resize(nv);
+    for (size_t i = 0; i < nv; ++i) {
+      m.positions[i] = w.point(p3[3 * i], p3[3 * i + 1], p3[3 * i + 2]).to_float();
+      if (!is_finite(m.positions[i])) ctx.fail(el, "vertex " + std::to_string(i) + " is not finite after transform");
+    }
+    if (prim.indices >= 0) {
+      m.indices = read_accessor_indices(ctx, prim.indices, nv, el + " indices");
+    } else {
+      m.indices.resize(nv);
+      for (size_t i = 0; i < nv; ++i) m.indices[i] = uint32_t(i);
+    }
+    if (m.indices.size() % 3) ctx.fail(el, std::to_string(m.indices.size()) + " indices is not a multiple of 3");
+    g.mirrored = det < 0;
+    if (g.mirrored)
+      for (size_t t = 0; t < m.indices.size(); t += 3) std::swap(m.indices[t + 1], m.indices[t + 2]);
+    std::vector<float> n3;  // the file's normals, object space
+    if (auto nrm = prim.attributes.find("NORMAL"); nrm != prim.attributes.end()) {
+      n3 = read_accessor_floats(ctx, nrm->second, 3, el + " NORMAL");
+      if (n3.size() != p3.size()) ctx.fail(el, "NORMAL count differs from POSITION count");
+      const Mat4 nt = w.normal_matrix();
+      m.normals.resize(nv);
+      for (size_t i = 0; i < nv; ++i) m.normals[i] = nt.unit_vector(n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]);
+      m.file_normals = true;
+    }
+    if (auto uv = prim.attributes.find("TEXCOORD_0"); uv != prim.attributes.end()) {
+      const std::vector<float> t2 = read_accessor_floats(ctx, uv->second, 2, el + " TEXCOORD_0");
+      if (t2.size() / 2 != nv) ctx.fail(el, "TEXCOORD_0 count differs from POSITION count");
+      m.uvs.resize(nv);
+      for (size_t i = 0; i < nv; ++i) m.uvs[i] = {t2[2 * i], t2[2 * i + 1]};
+    }
+    m.material = materials.material(prim.material);
+    if (m.indices.empty()) continue;
+    if (keep_object_space) {
+      g.positions = std::move(p3);
+      g.normals = std::move(n3);
+    }
+    out.push_back(std::move(g));
+  }
+  return out;
+}
+
+}  // namespace tessera

@@ -1,0 +1,103 @@
+#include "core/scene/gltf/gltf_prechecks.h"
+
+#include <cstdio>
+#include <set>
+
+#include "core/scene/gltf/gltf_extensions.h"
+#include "core/scene/scene_error.h"
+
+namespace tessera {
+namespace {
+
+// The accessor's problem, or empty when tinygltf will parse it.
+std::string accessor_problem(const nlohmann::json& a) {
+  static const std::set<std::string> kTypes = {"SCALAR", "VEC2", "VEC3", "VEC4", "MAT2", "MAT3", "MAT4"};
+  static const std::set<int64_t> kComponents = {5120, 5121, 5122, 5123, 5125, 5126};
+  if (!a.is_object()) return "is not an object";
+  if (!a.contains("componentType") || !a["componentType"].is_number_integer() ||
+      !kComponents.count(a["componentType"].get<int64_t>()))
+    return "has no valid componentType";
+  if (!a.contains("count") || !a["count"].is_number_integer() || a["count"].get<int64_t>() < 0)
+    return "has no valid count";
+  if (!a.contains("type") || !a["type"].is_string() || !kTypes.count(a["type"].get<std::string>()))
+    return "has no valid type";
+  if (a.contains("bufferView") && !(a["bufferView"].is_number_integer() && a["bufferView"].get<int64_t>() >= 0))
+    return "has an invalid bufferView";
+  if (a.contains("sparse") && !a["sparse"].is_object()) return "has an invalid sparse";
+  return "";
+}
+
+// The accessors something refers to: mesh attributes, indices and morph targets,
+// animation samplers, skins' inverse bind matrices. (A new feature that reads accessors
+// from elsewhere, e.g. EXT_mesh_gpu_instancing's node attributes, adds them here.)
+std::set<int64_t> used_accessors(const nlohmann::json& j) {
+  std::set<int64_t> used;
+  auto take = [&](const nlohmann::json& v) {
+    if (v.is_number_integer()) used.insert(v.get<int64_t>());
+  };
+  auto values_of = [&](const nlohmann::json& o) {
+    if (o.is_object())
+      for (const auto& [k, v] : o.items()) take(v);
+  };
+  if (j.contains("meshes") && j["meshes"].is_array())
+    for (const auto& m : j["meshes"])
+      if (m.is_object() && m.contains("primitives") && m["primitives"].is_array())
+        for (const auto& p : m["primitives"]) {
+          if (!p.is_object()) continue;
+          if (p.contains("attributes")) values_of(p["attributes"]);
+          if (p.contains("indices")) take(p["indices"]);
+          if (p.contains("targets") && p["targets"].is_array())
+            for (const auto& t : p["targets"]) values_of(t);
+        }
+  if (j.contains("animations") && j["animations"].is_array())
+    for (const auto& a : j["animations"])
+      if (a.is_object() && a.contains("samplers") && a["samplers"].is_array())
+        for (const auto& sm : a["samplers"])
+          if (sm.is_object()) {
+            if (sm.contains("input")) take(sm["input"]);
+            if (sm.contains("output")) take(sm["output"]);
+          }
+  if (j.contains("skins") && j["skins"].is_array())
+    for (const auto& sk : j["skins"])
+      if (sk.is_object() && sk.contains("inverseBindMatrices")) take(sk["inverseBindMatrices"]);
+  return used;
+}
+
+}  // namespace
+
+bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<std::string>& warnings) {
+  if (!j.is_object()) throw SceneError(path, "JSON", "top level is not an object");
+  if (j.contains("extensionsRequired") && j["extensionsRequired"].is_array())
+    for (const auto& e : j["extensionsRequired"])
+      if (e.is_string() && !gltf_extension_supported(e.get<std::string>()))
+        throw SceneError(path, "extensionsRequired",
+                         "required extension '" + e.get<std::string>() + "' is not supported");
+  if (j.contains("buffers") && j["buffers"].is_array())
+    for (size_t i = 0; i < j["buffers"].size(); ++i) {
+      const auto& b = j["buffers"][i];
+      const std::string el = "buffers[" + std::to_string(i) + "]";
+      if (!b.is_object() || !b.contains("byteLength") || !b["byteLength"].is_number())
+        throw SceneError(path, el, "missing byteLength");
+      const double len = b["byteLength"].get<double>();
+      if (!(len >= 0) || len > double(kMaxGltfBufferBytes)) {
+        char shown[64];
+        std::snprintf(shown, sizeof shown, "%.0f", len);
+        throw SceneError(path, el, std::string("byteLength ") + shown + " is over the 1 GiB limit");
+      }
+    }
+  bool changed = false;
+  if (j.contains("accessors") && j["accessors"].is_array()) {
+    const std::set<int64_t> used = used_accessors(j);
+    for (size_t i = 0; i < j["accessors"].size(); ++i) {
+      if (used.count(int64_t(i))) continue;
+      const std::string problem = accessor_problem(j["accessors"][i]);
+      if (problem.empty()) continue;
+      warnings.push_back(path + ": accessors[" + std::to_string(i) + "] " + problem + "; nothing uses it: ignored");
+      j["accessors"][i] = {{"componentType", 5126}, {"count", 0}, {"type", "SCALAR"}};
+      changed = true;
+    }
+  }
+  return changed;
+}
+
+}  // namespace tessera

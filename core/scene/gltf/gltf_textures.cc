@@ -1,0 +1,131 @@
+#include "core/scene/gltf/gltf_textures.h"
+
+#include <stb/stb_image.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <utility>
+
+namespace tessera {
+namespace {
+
+constexpr uint64_t kMaxImagePixels = uint64_t(1) << 26;  // 64 M texels
+constexpr int kEncoded = -1;                             // tinygltf::Image::component of bytes not yet decoded
+
+float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f); }
+
+}  // namespace
+
+bool keep_image_encoded(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
+                        const unsigned char* bytes, int size, void*) {
+  image->image.assign(bytes, bytes + size);
+  image->width = image->height = 0;
+  image->component = kEncoded;
+  return true;
+}
+
+TextureRef GltfTextures::texture_ref(int index, int tex_coord, const tinygltf::ExtensionMap& exts, bool srgb,
+                                     const std::string& el, const std::string& what) {
+  TextureRef r;
+  if (index < 0) return r;
+  r.index = load_texture(index, el + " " + what, srgb);
+  if (auto it = exts.find("KHR_texture_transform"); it != exts.end() && it->second.IsObject()) {
+    const tinygltf::Value& t = it->second;
+    auto pair = [&](const char* key, double x, double y) -> std::pair<double, double> {
+      if (!t.Has(key)) return {x, y};
+      const tinygltf::Value& v = t.Get(key);
+      if (!v.IsArray() || v.ArrayLen() != 2 || !v.Get(0).IsNumber() || !v.Get(1).IsNumber())
+        ctx_.fail(el, what + " KHR_texture_transform." + key + " is not two numbers");
+      const double a = v.Get(0).GetNumberAsDouble(), b = v.Get(1).GetNumberAsDouble();
+      if (!std::isfinite(a) || !std::isfinite(b))
+        ctx_.fail(el, what + " KHR_texture_transform." + key + " is not finite");
+      return {a, b};
+    };
+    const auto [ox, oy] = pair("offset", 0, 0);
+    const auto [sx, sy] = pair("scale", 1, 1);
+    double rot = 0;
+    if (t.Has("rotation")) {
+      if (!t.Get("rotation").IsNumber() || !std::isfinite(t.Get("rotation").GetNumberAsDouble()))
+        ctx_.fail(el, what + " KHR_texture_transform.rotation is not a finite number");
+      rot = t.Get("rotation").GetNumberAsDouble();
+    }
+    // uv' = T R S uv, R = [cos sin; -sin cos] (the extension's matrix).
+    const double c = std::cos(rot), sn = std::sin(rot);
+    const double m[6] = {c * sx, sn * sy, ox, -sn * sx, c * sy, oy};
+    for (int i = 0; i < 6; ++i) r.xform[i] = float(m[i]);
+    if (t.Has("texCoord") && t.Get("texCoord").IsInt()) tex_coord = t.Get("texCoord").GetNumberAsInt();
+  }
+  if (tex_coord > 0)
+    ctx_.warn_once(el + ": " + what + " uses TEXCOORD_" + std::to_string(tex_coord) + "; TEXCOORD_0 is used");
+  return r;
+}
+
+// Colour textures (base colour, emission) are sRGB-encoded, data (metallic-roughness,
+// normals) linear: a texture used both ways is decoded twice.
+int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
+  const tinygltf::Model& model = ctx_.model;
+  if (index < 0 || size_t(index) >= model.textures.size())
+    ctx_.fail(el, "texture " + std::to_string(index) + " does not exist");
+  const int key = 2 * index + (srgb ? 1 : 0);
+  if (auto it = loaded_.find(key); it != loaded_.end()) return it->second;
+  const tinygltf::Texture& t = model.textures[size_t(index)];
+  const std::string tel = "textures[" + std::to_string(index) + "]";
+  if (t.source < 0 || size_t(t.source) >= model.images.size())
+    ctx_.fail(tel, "image " + std::to_string(t.source) + " does not exist");
+  const tinygltf::Image& img = decode_image(t.source);
+  Texture tex;
+  tex.width = img.width;
+  tex.height = img.height;
+  tex.texels.resize(size_t(img.width) * size_t(img.height));
+  auto decode = [srgb](unsigned char c) { return srgb ? srgb_to_linear(c / 255.0f) : c / 255.0f; };
+  for (size_t i = 0; i < tex.texels.size(); ++i)
+    tex.texels[i] = Rgb(decode(img.image[4 * i]), decode(img.image[4 * i + 1]), decode(img.image[4 * i + 2]));
+  if (t.sampler >= 0) {
+    if (size_t(t.sampler) >= model.samplers.size())
+      ctx_.fail(tel, "sampler " + std::to_string(t.sampler) + " does not exist");
+    auto wrap = [&](int mode) {
+      switch (mode) {
+        case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE:
+          return Texture::Wrap::kClamp;
+        case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT:
+          return Texture::Wrap::kMirror;
+        default:
+          return Texture::Wrap::kRepeat;
+      }
+    };
+    tex.wrap_s = wrap(model.samplers[size_t(t.sampler)].wrapS);
+    tex.wrap_t = wrap(model.samplers[size_t(t.sampler)].wrapT);
+  }
+  ctx_.scene.textures.push_back(std::move(tex));
+  return loaded_[key] = int(ctx_.scene.textures.size() - 1);
+}
+
+// Decodes images[index] (PNG or JPEG, RGBA 8-bit), refusing absurd sizes before
+// allocating; once, whatever number of textures use it.
+const tinygltf::Image& GltfTextures::decode_image(int index) {
+  tinygltf::Image& img = ctx_.model.images[size_t(index)];
+  const std::string el = "images[" + std::to_string(index) + "]";
+  if (img.component != kEncoded) {
+    if (img.width <= 0 || img.height <= 0 || img.image.size() < size_t(img.width) * size_t(img.height) * 4)
+      ctx_.fail(el, "has no pixel data");
+    return img;
+  }
+  if (img.image.empty()) ctx_.fail(el, "has no data (a missing file?)");
+  int w = 0, h = 0, comp = 0;
+  const int size = int(std::min<size_t>(img.image.size(), size_t(INT32_MAX)));
+  if (!stbi_info_from_memory(img.image.data(), size, &w, &h, &comp)) ctx_.fail(el, "not a readable PNG or JPEG");
+  if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels)
+    ctx_.fail(el, std::to_string(w) + "x" + std::to_string(h) + " is over the 64 M texel limit");
+  unsigned char* data = stbi_load_from_memory(img.image.data(), size, &w, &h, &comp, 4);
+  if (!data) ctx_.fail(el, stbi_failure_reason());
+  img.width = w;
+  img.height = h;
+  img.component = 4;
+  img.bits = 8;
+  img.image.assign(data, data + size_t(w) * size_t(h) * 4);
+  stbi_image_free(data);
+  return img;
+}
+
+}  // namespace tessera

@@ -1,0 +1,39 @@
+// glTF textures as materials use them (docs/gltf.md, Materials): a textureInfo with its
+// KHR_texture_transform, the texture's image decoded (PNG or JPEG, to RGBA 8-bit) the
+// first time a material uses it, sRGB or linear as the slot wants, its sampler's wrap
+// modes. An image no material uses is never decoded: a broken one costs nothing and
+// refuses nothing, as in viewers.
+#pragma once
+
+#include <map>
+#include <string>
+
+#include "core/scene/gltf/gltf_context.h"
+
+namespace tessera {
+
+class GltfTextures {
+ public:
+  explicit GltfTextures(GltfContext& ctx) : ctx_(ctx) {}
+
+  // A material's textureInfo: textures[index] (none for index -1), decoded into the
+  // scene's textures once per colour space, and its KHR_texture_transform. A texCoord
+  // other than 0 is a warning (only TEXCOORD_0 is read). `el` names the material, `what`
+  // the slot ("baseColorTexture").
+  TextureRef texture_ref(int index, int tex_coord, const tinygltf::ExtensionMap& extensions, bool srgb,
+                         const std::string& el, const std::string& what);
+
+ private:
+  int load_texture(int index, const std::string& el, bool srgb);
+  const tinygltf::Image& decode_image(int index);
+
+  GltfContext& ctx_;
+  std::map<int, int> loaded_;  // 2 x texture index + sRGB -> scene texture
+};
+
+// tinygltf's image loader (TinyGLTF::SetImageLoader): keeps each image's encoded bytes
+// for GltfTextures to decode when a material first uses the image.
+bool keep_image_encoded(tinygltf::Image* image, int image_index, std::string* err, std::string* warn, int req_width,
+                        int req_height, const unsigned char* bytes, int size, void* user);
+
+}  // namespace tessera
