@@ -25,6 +25,9 @@ class WireError : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// QUEUED or RUNNING: the one definition of a job that has not ended.
+inline bool job_live(v1::JobStatus::State s) { return s == v1::JobStatus::QUEUED || s == v1::JobStatus::RUNNING; }
+
 // A path that stays inside a folder when joined to it: relative, no "..", no NUL.
 bool bundle_relative(const std::string& path);
 v1::RenderSettings to_proto(const RenderSettings& s);

@@ -4,6 +4,9 @@
 #include <chrono>
 #include <thread>
 
+#include "core/util/invariant.h"
+#include "core/util/log.h"
+
 namespace tessera {
 namespace {
 
@@ -32,8 +35,11 @@ grpc::Status guarded(F&& f) {
         break;
     }
     return grpc::Status(code, e.what());
-  } catch (const std::exception& e) {
+  } catch (const InvariantError& e) {  // a bug, logged where it was found
     return grpc::Status(grpc::StatusCode::INTERNAL, e.what());
+  } catch (const std::exception& e) {
+    spdlog::error("a call failed unexpectedly: {}", e.what());
+    return grpc::Status(grpc::StatusCode::INTERNAL, std::string("internal error: ") + e.what());
   }
 }
 
@@ -95,9 +101,7 @@ grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* 
   return as(auth_, ctx, Action::kRead, [&](const Principal&) {
     // Progress only: a watcher that wants every tile asks GetJob.
     v1::JobStatus s = c_.status(req->id(), false);
-    const auto ended = [](const v1::JobStatus& st) {
-      return st.state() != v1::JobStatus::QUEUED && st.state() != v1::JobStatus::RUNNING;
-    };
+    const auto ended = [](const v1::JobStatus& st) { return !job_live(st.state()); };
     while (!ctx->IsCancelled()) {
       if (!w->Write(s) || ended(s)) return;
       const auto next = std::chrono::steady_clock::now() + std::chrono::duration<double>(1 / kUpdatesPerSecond);

@@ -4,9 +4,9 @@ namespace tessera {
 
 v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   v1::JobStatus s;
-  s.set_id(id);
-  s.set_name(name);
-  s.set_state(state);
+  s.set_id(meta.id);
+  s.set_name(meta.name);
+  s.set_state(state_);
   // A job whose image cannot be written still renders (the film is in memory and writes
   // are retried with the next snapshot); the user is told why its image is missing.
   std::string e = error;
@@ -22,14 +22,14 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   s.set_tiles_total(uint32_t(plan.tiles().size()));
   s.set_passes_total(uint32_t(plan.passes().size()));
   s.set_frame_passes_done(plan.frame_passes_done());
-  s.set_priority(priority);
+  s.set_priority(meta.priority);
   const double elapsed = started > 0 ? (live() ? now : finished_at) - started : 0;
   s.set_elapsed_seconds(elapsed);
-  s.set_owner(owner);
+  s.set_owner(meta.owner);
   const double f = plan.fraction_done();
   if (live() && f > 0) s.set_eta_seconds(elapsed * (1 - f) / f);
   s.set_active_workers(workers);
-  *s.mutable_settings() = settings_proto;
+  *s.mutable_settings() = meta.settings;
   s.set_sequence(sequence);
   if (with_tiles)
     for (uint32_t i = 0; i < plan.tiles().size(); ++i) {
@@ -46,43 +46,43 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
 
 uint64_t Sequence::samples_merged() const {
   uint64_t n = 0;
-  for (const Job* j : jobs)
+  for (const auto& j : jobs)
     if (j) n += j->plan.samples_merged();
   return n;
 }
 
 v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>& workers, bool with_frames) const {
   v1::JobStatus s;
-  s.set_id(id);
-  s.set_name(name);
-  s.set_state(state);
-  s.set_priority(priority);
-  s.set_owner(owner);
-  *s.mutable_settings() = settings_proto;
+  s.set_id(meta.id);
+  s.set_name(meta.name);
+  s.set_state(state_);
+  s.set_priority(meta.priority);
+  s.set_owner(meta.owner);
+  *s.mutable_settings() = meta.settings;
   s.set_frames_total(uint32_t(frames.size()));
   s.set_passes_total(uint32_t(settings.passes().size()));
   uint64_t done = 0, total = 0;
   uint32_t tiles_done = 0, frames_done = 0, active = 0;
   std::string e = error;
   for (size_t i = 0; i < frames.size(); ++i) {
-    const Job* j = jobs[i];
+    const Job* j = jobs[i].get();
     const uint64_t fd = j ? j->plan.samples_merged() : 0, ft = j ? j->plan.samples_total() : frame_samples();
     done += fd;
     total += ft;
     if (j) {
       tiles_done += j->plan.tiles_done();
-      frames_done += j->state == v1::JobStatus::DONE;
-      if (auto w = workers.find(j->id); w != workers.end()) active += w->second;
+      frames_done += j->state() == v1::JobStatus::DONE;
+      if (auto w = workers.find(j->id()); w != workers.end()) active += w->second;
       for (const std::string* why : {&j->image_error, &j->checkpoint_error})
         if (!why->empty()) e += (e.empty() ? "" : "; ") + ("frame " + std::to_string(frames[i]) + ": ") + *why;
     }
     if (!with_frames) continue;
     v1::FrameStatus* f = s.add_frames();
     f->set_frame(frames[i]);
-    f->set_state(j ? j->state : live() ? v1::JobStatus::QUEUED : v1::JobStatus::CANCELLED);
+    f->set_state(j ? j->state() : live() ? v1::JobStatus::QUEUED : v1::JobStatus::CANCELLED);
     f->set_samples_done(fd);
     f->set_samples_total(ft);
-    if (j) f->set_job_id(j->id);
+    if (j) f->set_job_id(j->id());
   }
   s.set_error(e);
   s.set_samples_done(done);
@@ -90,7 +90,7 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
   s.set_tiles_done(tiles_done);
   s.set_tiles_total(uint32_t(std::min<uint64_t>(UINT32_MAX, uint64_t(frame_tiles()) * frames.size())));
   s.set_frames_done(frames_done);
-  s.set_frame_passes_done(state == v1::JobStatus::DONE ? s.passes_total() : 0);
+  s.set_frame_passes_done(state_ == v1::JobStatus::DONE ? s.passes_total() : 0);
   s.set_active_workers(active);
   const double elapsed = started > 0 ? (live() ? now : finished_at) - started : 0;
   s.set_elapsed_seconds(elapsed);

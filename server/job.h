@@ -1,36 +1,35 @@
-// A job: a scene, its frame plan, and what the coordinator knows of its progress.
+// A job: a scene, its frame plan, and what the coordinator knows of its progress; a
+// sequence: a job per frame. Plain data, guarded by the coordinator's lock (Job::write_mu
+// guards what is on disk). Their states change in one place, JobLifecycle.
 #pragma once
 
 #include <atomic>
 #include <cstdint>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <set>
 #include <string>
 #include <vector>
 
 #include "core/render/frame_plan.h"
-#include "wire.h"
+#include "core/util/mutex.h"
+#include "server/job_meta.h"
 
 namespace tessera {
 
 struct Job {
-  Job(std::string id, const RenderSettings& settings) : id(std::move(id)), plan(settings) {}
+  using State = v1::JobStatus::State;
+  Job(JobMeta meta, const RenderSettings& settings, State state = v1::JobStatus::QUEUED)
+      : meta(std::move(meta)), plan(settings), tile_lease(plan.tiles().size(), 0), state_(state) {}
 
-  std::string id, name, scene_hash;
+  JobMeta meta;
+  const std::string& id() const { return meta.id; }
   // A frame of a sequence: the sequence's id and the frame's place in its list (empty for a
   // job of its own). Such a job has no row in the job database: its sequence has.
   std::string sequence;
   uint32_t frame_index = 0;
-  std::string owner;         // the submitting token's name
-  uint64_t scene_bytes = 0;  // its bundle's, counted against the owner's limit
-  int32_t priority = 0;
-  uint64_t seq = 0;  // submission order
-  v1::RenderSettings settings_proto;
   FramePlan plan;
   std::vector<uint64_t> tile_lease;  // the live task id of each tile, 0 = none
-  v1::JobStatus::State state = v1::JobStatus::QUEUED;
   std::string error;
   std::string image_error;       // the last image write's failure; empty once one succeeds
   std::string checkpoint_error;  // the same for checkpoints
@@ -42,28 +41,40 @@ struct Job {
   uint32_t pending_checks = 0;
   double submitted = 0, started = 0, finished_at = 0;
 
-  // Progressive images: a snapshot is taken under the coordinator's lock, written outside.
-  uint32_t image_frame_passes = 0;  // frame passes in the last image taken
-  double last_image = -1e9;
-  double image_write_seconds = 0;  // how long the last write took
-  uint64_t image_seq = 0;          // snapshots taken
-  // A film to copy the next snapshot into: its pages are already mapped, so the copy under
-  // the coordinator's lock is a memory copy, not thousands of page faults (231 ms for a
-  // fresh 1920x1080 film here, against a few for a reused one).
-  std::unique_ptr<Film> spare_film;
-  double last_checkpoint = 0;           // when the last snapshot with a checkpoint was taken
-  double checkpoint_write_seconds = 0;  // how long the last checkpoint write took
-  uint64_t checkpoint_merges = 0;       // the film version of the last checkpoint taken
-  std::mutex write_mu;                  // one writer at a time; guards the five below
-  uint64_t written_seq = 0;             // newest snapshot whose image was written (0: none yet)
-  uint64_t written_merges = 0;          // the film version it holds
-  uint64_t checkpoint_seq = 0;          // newest snapshot whose checkpoint was written
-  uint64_t checkpoint_written_merges = 0;
-  std::atomic<bool> end_recorded{false};  // the job database has its end (also read under mu_)
+  // Snapshots (Snapshotter): taken under the coordinator's lock, written outside it.
+  struct Snapshots {
+    uint32_t image_frame_passes = 0;  // frame passes in the last image taken
+    double last_image = -1e9;
+    double image_write_seconds = 0;  // how long the last write took
+    uint64_t taken = 0;              // snapshots taken (each one's sequence number)
+    // A film to copy the next snapshot into: its pages are already mapped, so the copy
+    // under the lock is a memory copy, not thousands of page faults (231 ms for a fresh
+    // 1920x1080 film here, against a few for a reused one).
+    std::unique_ptr<Film> spare_film;
+    double last_checkpoint = 0;           // when the last snapshot with a checkpoint was taken
+    double checkpoint_write_seconds = 0;  // how long the last checkpoint write took
+    uint64_t checkpoint_merges = 0;       // the film version of the last checkpoint taken
+  } snaps;
+  // What is on disk. One writer at a time (SnapshotWriter); taken before the coordinator's
+  // lock, never while holding it.
+  struct Written {
+    uint64_t image_seq = 0;  // newest snapshot whose image was written (0: none yet)
+    uint64_t image_merges = 0;  // the film version it holds
+    uint64_t checkpoint_seq = 0;  // newest snapshot whose checkpoint was written
+    uint64_t checkpoint_merges = 0;
+  };
+  Mutex write_mu;
+  Written written TESSERA_GUARDED_BY(write_mu);
+  std::atomic<bool> end_recorded{false};  // the job database has its end
 
-  bool live() const { return state == v1::JobStatus::QUEUED || state == v1::JobStatus::RUNNING; }
+  State state() const { return state_; }
+  bool live() const { return job_live(state_); }
   // `now` for the elapsed time; `workers` with live leases on it.
   v1::JobStatus status(double now, uint32_t workers, bool with_tiles) const;
+
+ private:
+  friend class JobLifecycle;  // the one writer of state_
+  State state_;
 };
 
 // A sequence: one job per frame, each made when the scheduler first needs its tiles (so a
@@ -71,32 +82,41 @@ struct Job {
 // frames are ordinary jobs to the scheduler, leases, checkpoints and images; the sequence
 // keeps the order, the scene, the database row and the end.
 struct Sequence {
-  std::string id, name, owner, scene_hash;
-  uint64_t scene_bytes = 0;
-  int32_t priority = 0;
-  uint64_t seq = 0;
+  using State = v1::JobStatus::State;
+  Sequence(JobMeta meta, const RenderSettings& settings, std::vector<int> frames,
+           State state = v1::JobStatus::QUEUED)
+      : meta(std::move(meta)), settings(settings), frames(std::move(frames)), jobs(this->frames.size()),
+        state_(state) {}
+
+  JobMeta meta;
+  const std::string& id() const { return meta.id; }
   RenderSettings settings;  // every frame's, but for its number
-  v1::RenderSettings settings_proto;
   std::vector<int> frames;
-  std::vector<Job*> jobs;         // per frame: its job once started (the coordinator owns it)
-  size_t next = 0;                // frames before this one have started
-  uint32_t live_frames = 0;       // started and not ended
-  uint32_t frames_done = 0;       // DONE
-  uint64_t changes = 0;           // merges into its frames and frame ends: watchers wait on it
-  std::unique_ptr<Job> prepared;  // frames[next]'s job, made outside the coordinator's lock
-  // One frame's counts, as its plan will have them, before any frame has started.
-  uint64_t frame_samples() const { return uint64_t(settings.effective_window().area()) * uint64_t(settings.spp); }
-  uint32_t frame_tiles() const { return uint32_t(settings.tile_count()); }
-  v1::JobStatus::State state = v1::JobStatus::QUEUED;
+  std::vector<std::shared_ptr<Job>> jobs;  // per frame: its job once started (also in JobTable)
+  size_t next = 0;              // frames before this one have started (later ones may have, after a restart)
+  uint32_t frames_started = 0;  // jobs that are not null
+  uint32_t live_frames = 0;     // started and not ended
+  uint32_t frames_done = 0;     // DONE
+  uint64_t changes = 0;         // merges into its frames and frame ends: watchers wait on it
+  std::shared_ptr<Job> prepared;  // frames[next]'s job, made outside the coordinator's lock
   std::string error;
   double submitted = 0, started = 0, finished_at = 0;
   bool end_recording = false, end_recorded = false;
 
-  bool live() const { return state == v1::JobStatus::QUEUED || state == v1::JobStatus::RUNNING; }
-  std::string frame_job_id(size_t i) const { return id + "-f" + std::to_string(frames[i]); }
+  // One frame's counts, as its plan will have them, before any frame has started.
+  uint64_t frame_samples() const { return uint64_t(settings.effective_window().area()) * uint64_t(settings.spp); }
+  uint32_t frame_tiles() const { return uint32_t(settings.tile_count()); }
+  std::string frame_job_id(size_t i) const { return meta.id + "-f" + std::to_string(frames[i]); }
   uint64_t samples_merged() const;
+
+  State state() const { return state_; }
+  bool live() const { return job_live(state_); }
   // `workers`: with live leases on each frame's job (by id).
   v1::JobStatus status(double now, const std::map<std::string, uint32_t>& workers, bool with_frames) const;
+
+ private:
+  friend class JobLifecycle;
+  State state_;
 };
 
 }  // namespace tessera

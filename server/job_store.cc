@@ -1,12 +1,7 @@
 #include "server/job_store.h"
 
 #include <sqlite3.h>
-#include <zstd.h>
-#define XXH_INLINE_ALL  // header only: nothing to link
-#include <xxhash.h>
 
-#include <algorithm>
-#include <cstring>
 #include <filesystem>
 #include <stdexcept>
 
@@ -18,56 +13,6 @@ namespace tessera {
 namespace fs = std::filesystem;
 
 namespace {
-
-constexpr char kMagic[4] = {'T', 'S', 'C', 'K'};
-// Version 2: the film's sums in chunks of kChunkPixels, each compressed on its own (a
-// whole film as one buffer took 8 times as long per pixel: caches, and page faults for
-// buffers of the film's size). Version 1 is still read.
-constexpr uint32_t kCheckpointVersion = 2;
-constexpr uint32_t kChunkPixels = 1 << 16;
-
-// Little-endian fields, appended and read back in order.
-class Writer {
- public:
-  template <typename T>
-  void put(T v) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    out.append(reinterpret_cast<const char*>(&v), sizeof v);
-  }
-  void bytes(const std::string& b) {
-    put(uint64_t(b.size()));
-    out += b;
-  }
-  std::string out;
-};
-
-class Reader {
- public:
-  explicit Reader(const std::string& in) : in_(in) {}
-  template <typename T>
-  T get() {
-    T v;
-    need(sizeof v);
-    std::memcpy(&v, in_.data() + at_, sizeof v);
-    at_ += sizeof v;
-    return v;
-  }
-  std::string bytes() {
-    const uint64_t n = get<uint64_t>();
-    need(n);
-    std::string b = in_.substr(at_, n);
-    at_ += n;
-    return b;
-  }
-  size_t at() const { return at_; }
-
- private:
-  void need(uint64_t n) const {
-    if (n > in_.size() - at_) throw std::runtime_error("checkpoint: truncated");
-  }
-  const std::string& in_;
-  size_t at_ = 0;
-};
 
 std::string sqlite_error(sqlite3* db, const std::string& what) {
   return "job database: " + what + ": " + (db ? sqlite3_errmsg(db) : "out of memory");
@@ -116,100 +61,7 @@ class Statement {
 
 }  // namespace
 
-std::string encode_checkpoint(const PlanState& state, const Film& film, double elapsed) {
-  Writer w;
-  w.out.append(kMagic, 4);
-  w.put(kCheckpointVersion);
-  w.put(uint32_t(state.progress.size()));
-  for (const TileProgress& t : state.progress) {
-    w.put(t.passes_done);
-    w.put(uint8_t(t.finished));
-    w.put(t.relative_error);
-  }
-  w.put(state.samples_merged);
-  w.put(state.merges);
-  w.put(state.work_done);
-  w.put(state.work_total);
-  w.put(elapsed);
-  const Rect& r = film.window();
-  for (int v : {r.x, r.y, r.w, r.h}) w.put(int32_t(v));
-  std::string active(ZSTD_compressBound(state.active.size()), '\0');
-  const size_t n = ZSTD_compress(active.data(), active.size(), state.active.data(), state.active.size(), 1);
-  if (ZSTD_isError(n)) throw std::runtime_error("checkpoint: cannot compress the active mask");
-  active.resize(n);
-  w.put(uint64_t(state.active.size()));
-  w.bytes(active);
-  const std::vector<PixelSums>& pixels = film.pixels();
-  std::vector<std::string> chunks;
-  size_t size = w.out.size() + 4 + 8;
-  for (size_t at = 0; at < pixels.size(); at += kChunkPixels) {
-    chunks.push_back(encode_sums(pixels.data() + at, std::min<size_t>(kChunkPixels, pixels.size() - at)));
-    size += 8 + chunks.back().size();
-  }
-  w.out.reserve(size);  // (appending a film's worth piece by piece would copy it many times)
-  w.put(kChunkPixels);
-  for (const std::string& c : chunks) w.bytes(c);
-  w.put(uint64_t(XXH64(w.out.data(), w.out.size(), 0)));
-  return std::move(w.out);
-}
-
-Checkpoint decode_checkpoint(const std::string& bytes, bool with_film) {
-  if (bytes.size() < 4 + 8 || std::memcmp(bytes.data(), kMagic, 4) != 0)
-    throw std::runtime_error("checkpoint: not a checkpoint file");
-  uint64_t sum;
-  std::memcpy(&sum, bytes.data() + bytes.size() - 8, 8);
-  if (XXH64(bytes.data(), bytes.size() - 8, 0) != sum) throw std::runtime_error("checkpoint: checksum mismatch");
-  Reader in(bytes);
-  in.get<uint32_t>();  // magic
-  const uint32_t version = in.get<uint32_t>();
-  if (version != 1 && version != kCheckpointVersion)
-    throw std::runtime_error("checkpoint: version " + std::to_string(version) + " not supported");
-  Checkpoint c;
-  const uint32_t tiles = in.get<uint32_t>();
-  if (uint64_t(tiles) * 9 > bytes.size()) throw std::runtime_error("checkpoint: truncated");
-  c.state.progress.resize(tiles);
-  for (TileProgress& t : c.state.progress) {
-    t.passes_done = in.get<uint32_t>();
-    t.finished = in.get<uint8_t>() != 0;
-    t.relative_error = in.get<float>();
-  }
-  c.state.samples_merged = in.get<uint64_t>();
-  c.state.merges = in.get<uint64_t>();
-  c.state.work_done = in.get<double>();
-  c.state.work_total = in.get<double>();
-  c.elapsed = in.get<double>();
-  Rect r;
-  r.x = in.get<int32_t>();
-  r.y = in.get<int32_t>();
-  r.w = in.get<int32_t>();
-  r.h = in.get<int32_t>();
-  if (r.w < 0 || r.h < 0 || r.area() > (int64_t(1) << 32)) throw std::runtime_error("checkpoint: bad film window");
-  const uint64_t active_size = in.get<uint64_t>();
-  if (active_size != 0 && active_size != uint64_t(r.area())) throw std::runtime_error("checkpoint: bad active mask");
-  const std::string active = in.bytes();
-  c.state.active.resize(active_size);
-  if (active_size) {
-    const size_t n = ZSTD_decompress(c.state.active.data(), active_size, active.data(), active.size());
-    if (ZSTD_isError(n) || n != active_size) throw std::runtime_error("checkpoint: bad active mask");
-  }
-  const size_t pixels = size_t(r.area());
-  const uint32_t chunk = version == 1 ? uint32_t(std::max<size_t>(1, pixels)) : in.get<uint32_t>();
-  if (chunk == 0) throw std::runtime_error("checkpoint: bad film chunk size");
-  std::vector<std::string> chunks;
-  for (size_t at = 0; at < pixels || (version == 1 && chunks.empty()); at += chunk) chunks.push_back(in.bytes());
-  if (in.at() != bytes.size() - 8) throw std::runtime_error("checkpoint: trailing bytes");
-  if (!with_film) return c;
-  c.film = Film(r);
-  try {
-    for (size_t i = 0, at = 0; i < chunks.size() && at < pixels; ++i, at += chunk)
-      decode_sums(chunks[i], &c.film.at(0, 0) + at, std::min<size_t>(chunk, pixels - at));
-  } catch (const WireError& e) {
-    throw std::runtime_error(std::string("checkpoint: film: ") + e.what());
-  }
-  return c;
-}
-
-JobStore::JobStore(const std::string& data_dir) : dir_(data_dir) {
+SqliteJobStore::SqliteJobStore(const std::string& data_dir) : dir_(data_dir) {
   fs::create_directories(dir_);
   const std::string path = (fs::path(dir_) / "coordinator.db").string();
   if (sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX,
@@ -235,9 +87,9 @@ JobStore::JobStore(const std::string& data_dir) : dir_(data_dir) {
   if (!has_frames) exec("ALTER TABLE jobs ADD COLUMN frames TEXT NOT NULL DEFAULT ''");
 }
 
-JobStore::~JobStore() { sqlite3_close(db_); }
+SqliteJobStore::~SqliteJobStore() { sqlite3_close(db_); }
 
-void JobStore::exec(const char* sql) const {
+void SqliteJobStore::exec(const char* sql) const {
   char* err = nullptr;
   if (sqlite3_exec(db_, sql, nullptr, nullptr, &err) != SQLITE_OK) {
     const std::string why = std::string("job database: ") + (err ? err : "error") + " (" + sql + ")";
@@ -257,8 +109,8 @@ std::string frames_text(const std::vector<int>& frames) {  // as parse_frames re
 }
 }  // namespace
 
-uint64_t JobStore::next_generation() {
-  std::lock_guard<std::mutex> lock(mu_);
+uint64_t SqliteJobStore::next_generation() {
+  MutexLock lock(mu_);
   Statement(db_,
             "INSERT INTO meta(key, value) VALUES('generation', 1) "
             "ON CONFLICT(key) DO UPDATE SET value = value + 1")
@@ -268,19 +120,19 @@ uint64_t JobStore::next_generation() {
   return uint64_t(q.column_int(0));
 }
 
-void JobStore::add(const StoredJob& j) {
-  std::lock_guard<std::mutex> lock(mu_);
+void SqliteJobStore::add(const StoredJob& j) {
+  MutexLock lock(mu_);
   Statement(db_,
             "INSERT INTO jobs(id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, "
             "frames) VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)")
-      .text(1, j.id)
-      .integer(2, int64_t(j.seq))
-      .text(3, j.name)
-      .text(4, j.owner)
-      .integer(5, j.priority)
-      .text(6, j.scene_hash)
-      .text(7, j.main_file)
-      .blob(8, j.settings.SerializeAsString())
+      .text(1, j.meta.id)
+      .integer(2, int64_t(j.meta.seq))
+      .text(3, j.meta.name)
+      .text(4, j.meta.owner)
+      .integer(5, j.meta.priority)
+      .text(6, j.meta.scene_hash)
+      .text(7, j.meta.main_file)
+      .blob(8, j.meta.settings.SerializeAsString())
       .integer(9, j.state)
       .text(10, j.error)
       .real(11, j.elapsed)
@@ -288,8 +140,8 @@ void JobStore::add(const StoredJob& j) {
       .step();
 }
 
-void JobStore::end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) {
-  std::lock_guard<std::mutex> lock(mu_);
+void SqliteJobStore::end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) {
+  MutexLock lock(mu_);
   Statement(db_, "UPDATE jobs SET state = ?2, error = ?3, elapsed = ?4 WHERE id = ?1")
       .text(1, id)
       .integer(2, state)
@@ -298,23 +150,23 @@ void JobStore::end(const std::string& id, v1::JobStatus::State state, const std:
       .step();
 }
 
-std::vector<StoredJob> JobStore::jobs() const {
-  std::lock_guard<std::mutex> lock(mu_);
+std::vector<StoredJob> SqliteJobStore::jobs() const {
+  MutexLock lock(mu_);
   Statement q(db_,
               "SELECT id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, frames "
               "FROM jobs ORDER BY seq");
   std::vector<StoredJob> out;
   while (q.step()) {
     StoredJob j;
-    j.id = q.column_text(0);
-    j.seq = uint64_t(q.column_int(1));
-    j.name = q.column_text(2);
-    j.owner = q.column_text(3);
-    j.priority = int32_t(q.column_int(4));
-    j.scene_hash = q.column_text(5);
-    j.main_file = q.column_text(6);
-    if (!j.settings.ParseFromString(q.column_text(7)))
-      throw std::runtime_error("job database: job " + j.id + ": unreadable settings");
+    j.meta.id = q.column_text(0);
+    j.meta.seq = uint64_t(q.column_int(1));
+    j.meta.name = q.column_text(2);
+    j.meta.owner = q.column_text(3);
+    j.meta.priority = int32_t(q.column_int(4));
+    j.meta.scene_hash = q.column_text(5);
+    j.meta.main_file = q.column_text(6);
+    if (!j.meta.settings.ParseFromString(q.column_text(7)))
+      throw std::runtime_error("job database: job " + j.meta.id + ": unreadable settings");
     const int64_t state = q.column_int(8);
     j.state = v1::JobStatus::State_IsValid(int(state)) ? v1::JobStatus::State(state) : v1::JobStatus::FAILED;
     j.error = q.column_text(9);
@@ -323,33 +175,107 @@ std::vector<StoredJob> JobStore::jobs() const {
       const std::string frames = q.column_text(11);
       if (!frames.empty()) j.frames = parse_frames(frames);
     } catch (const std::exception& e) {
-      throw std::runtime_error("job database: job " + j.id + ": unreadable frames: " + e.what());
+      throw std::runtime_error("job database: job " + j.meta.id + ": unreadable frames: " + e.what());
     }
     out.push_back(std::move(j));
   }
   return out;
 }
 
-void JobStore::ping() const {
-  std::lock_guard<std::mutex> lock(mu_);
-  Statement(db_, "SELECT count(*) FROM jobs").step();
+void SqliteJobStore::ping() const {
+  {
+    MutexLock lock(mu_);
+    Statement(db_, "SELECT count(*) FROM jobs").step();
+  }
+  const fs::path probe = fs::path(dir_) / ".ready-probe";
+  try {
+    write_file_atomic(probe.string(), "ok\n");
+  } catch (const std::exception&) {
+    throw std::runtime_error("the data folder does not take writes");
+  }
+  std::error_code ec;
+  fs::remove(probe, ec);
 }
 
-std::string JobStore::checkpoint_path(const std::string& id) const {
+std::string SqliteJobStore::checkpoint_path(const std::string& id) const {
   return (fs::path(dir_) / "jobs" / id / "checkpoint").string();
 }
 
-void JobStore::write_checkpoint(const std::string& id, const PlanState& state, const Film& film, double elapsed) const {
+void SqliteJobStore::write_checkpoint(const std::string& id, const PlanState& state, const Film& film, double elapsed) const {
   const fs::path path = checkpoint_path(id);
   fs::create_directories(path.parent_path());
   write_file_atomic(path.string(), encode_checkpoint(state, film, elapsed), {true, before_checkpoint_rename});
 }
 
-std::optional<Checkpoint> JobStore::read_checkpoint(const std::string& id, bool with_film) const {
+void SqliteJobStore::discard_partial_writes(const std::string& id) const {
+  for (const char* tmp : {"checkpoint.tmp", "image.exr.tmp"}) {
+    std::error_code ec;
+    fs::remove(fs::path(dir_) / "jobs" / id / tmp, ec);
+  }
+}
+
+std::optional<Checkpoint> SqliteJobStore::read_checkpoint(const std::string& id, bool with_film) const {
   const std::string path = checkpoint_path(id);
   std::error_code ec;
   if (!fs::exists(path, ec)) return std::nullopt;
   return decode_checkpoint(read_file_bytes(path), with_film);
+}
+
+// ---- MemoryJobStore ----
+
+uint64_t MemoryJobStore::next_generation() { return ++generation_; }
+
+void MemoryJobStore::add(const StoredJob& job) {
+  MutexLock lock(mu_);
+  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  rows_.push_back(job);
+}
+
+void MemoryJobStore::end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) {
+  MutexLock lock(mu_);
+  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  for (StoredJob& j : rows_)
+    if (j.meta.id == id) {
+      j.state = state;
+      j.error = error;
+      j.elapsed = elapsed;
+    }
+}
+
+std::vector<StoredJob> MemoryJobStore::jobs() const {
+  MutexLock lock(mu_);
+  return rows_;
+}
+
+void MemoryJobStore::ping() const {
+  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+}
+
+void MemoryJobStore::write_checkpoint(const std::string& id, const PlanState& state, const Film& film,
+                                      double elapsed) const {
+  std::string bytes = encode_checkpoint(state, film, elapsed);
+  MutexLock lock(mu_);
+  if (fail_writes) throw std::runtime_error("checkpoint: disk I/O error (a test's)");
+  checkpoints_[id] = std::move(bytes);
+}
+
+std::optional<Checkpoint> MemoryJobStore::read_checkpoint(const std::string& id, bool with_film) const {
+  std::string bytes;
+  {
+    MutexLock lock(mu_);
+    auto it = checkpoints_.find(id);
+    if (it == checkpoints_.end()) return std::nullopt;
+    bytes = it->second;
+  }
+  return decode_checkpoint(bytes, with_film);
+}
+
+void MemoryJobStore::set_checkpoint_bytes(const std::string& id, std::optional<std::string> bytes) {
+  MutexLock lock(mu_);
+  if (bytes)
+    checkpoints_[id] = std::move(*bytes);
+  else
+    checkpoints_.erase(id);
 }
 
 }  // namespace tessera

@@ -1,8 +1,8 @@
-// What the coordinator keeps across a crash, under its data folder:
+// What the coordinator keeps across a crash. A seam: SqliteJobStore is the real one, under
+// the data folder; MemoryJobStore keeps the same in memory for tests.
 //   coordinator.db         SQLite in WAL mode: every job's settings, owner, scene and state,
 //                          and the run generation (task ids of one run never meet another's)
-//   jobs/<id>/checkpoint   the job's film and frame plan, replaced atomically every few seconds
-//   scenes/<hash>/         the unpacked scene of each live job (SceneStore)
+//   jobs/<id>/checkpoint   the job's film and frame plan (checkpoint.h), replaced atomically
 // A job row is written when a submit is acknowledged and when the job ends; a job's end is
 // recorded only once its final checkpoint is on disk, so a DONE row always has its whole
 // film. Leases are not kept: they last seconds, a restart hands their tasks out again, and
@@ -10,23 +10,21 @@
 #pragma once
 
 #include <functional>
-#include <mutex>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
-#include "core/render/frame_plan.h"
-#include "wire.h"
+#include "core/util/mutex.h"
+#include "server/checkpoint.h"
+#include "server/job_meta.h"
 
 struct sqlite3;
 
 namespace tessera {
 
 struct StoredJob {
-  std::string id, name, owner, scene_hash, main_file;
-  int32_t priority = 0;
-  uint64_t seq = 0;
-  v1::RenderSettings settings;
+  JobMeta meta;  // (scene_bytes is not stored: a restart counts the bundle again)
   v1::JobStatus::State state = v1::JobStatus::QUEUED;
   std::string error;
   double elapsed = 0;  // render seconds, once the job has ended
@@ -34,34 +32,44 @@ struct StoredJob {
   std::vector<int> frames;
 };
 
-struct Checkpoint {
-  PlanState state;
-  Film film{Rect{}};
-  double elapsed = 0;  // render seconds when it was taken
-};
-
 class JobStore {
  public:
-  // Opens (or creates) <data_dir>/coordinator.db. Throws std::runtime_error.
-  explicit JobStore(const std::string& data_dir);
-  ~JobStore();
-  JobStore(const JobStore&) = delete;
-  JobStore& operator=(const JobStore&) = delete;
-
+  virtual ~JobStore() = default;
   // Counts this run: 1 for the first run on a data folder, then 2, ...
-  uint64_t next_generation();
+  virtual uint64_t next_generation() = 0;
   // Durable when it returns (the submit is acknowledged after it). Throws std::runtime_error.
-  void add(const StoredJob& job);
-  void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed);
-  std::vector<StoredJob> jobs() const;  // in submission order
-  void ping() const;                    // a query; throws std::runtime_error if it fails
-
-  // Replaces the job's checkpoint: written to a temporary file, synced, renamed into place.
-  // Throws std::runtime_error naming the file.
-  void write_checkpoint(const std::string& id, const PlanState& state, const Film& film, double elapsed) const;
+  virtual void add(const StoredJob& job) = 0;
+  virtual void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) = 0;
+  virtual std::vector<StoredJob> jobs() const = 0;  // in submission order
+  virtual void ping() const = 0;                    // a query; throws std::runtime_error if it fails
+  // Replaces the job's checkpoint atomically. Throws std::runtime_error naming the file.
+  virtual void write_checkpoint(const std::string& id, const PlanState& state, const Film& film,
+                                double elapsed) const = 0;
   // Nothing when the job has none; throws std::runtime_error when it is damaged. Without
-  // `with_film` the film is left empty (its bytes are checksummed, not decoded).
-  std::optional<Checkpoint> read_checkpoint(const std::string& id, bool with_film = true) const;
+  // `with_film` the film is left empty.
+  virtual std::optional<Checkpoint> read_checkpoint(const std::string& id, bool with_film = true) const = 0;
+  // Removes what a crash cut short (temporary files of the job's checkpoint and image).
+  virtual void discard_partial_writes(const std::string&) const {}
+};
+
+class SqliteJobStore : public JobStore {
+ public:
+  // Opens (or creates) <data_dir>/coordinator.db. Throws std::runtime_error.
+  explicit SqliteJobStore(const std::string& data_dir);
+  ~SqliteJobStore() override;
+  SqliteJobStore(const SqliteJobStore&) = delete;
+  SqliteJobStore& operator=(const SqliteJobStore&) = delete;
+
+  uint64_t next_generation() override;
+  void add(const StoredJob& job) override;
+  void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) override;
+  std::vector<StoredJob> jobs() const override;
+  void ping() const override;
+  // Written to a temporary file, synced, renamed into place.
+  void write_checkpoint(const std::string& id, const PlanState& state, const Film& film,
+                        double elapsed) const override;
+  std::optional<Checkpoint> read_checkpoint(const std::string& id, bool with_film = true) const override;
+  void discard_partial_writes(const std::string& id) const override;
   std::string checkpoint_path(const std::string& id) const;
 
   // Test seam: runs between a checkpoint's temporary file being written and its rename.
@@ -71,13 +79,29 @@ class JobStore {
   void exec(const char* sql) const;
   std::string dir_;
   sqlite3* db_ = nullptr;
-  mutable std::mutex mu_;  // one statement at a time on db_
+  mutable Mutex mu_;  // one statement at a time on db_
 };
 
-// A checkpoint's bytes, and back (the file format; exposed for tests and the fuzzer).
-std::string encode_checkpoint(const PlanState& state, const Film& film, double elapsed);
-// Throws std::runtime_error unless the bytes are a whole, undamaged checkpoint. Without
-// `with_film`, Checkpoint::film stays empty.
-Checkpoint decode_checkpoint(const std::string& bytes, bool with_film = true);
+// The same in memory, for unit tests: no disk. Checkpoints are kept encoded, so a test
+// can damage or remove one.
+class MemoryJobStore : public JobStore {
+ public:
+  uint64_t next_generation() override;
+  void add(const StoredJob& job) override;
+  void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) override;
+  std::vector<StoredJob> jobs() const override;
+  void ping() const override;
+  void write_checkpoint(const std::string& id, const PlanState& state, const Film& film,
+                        double elapsed) const override;
+  std::optional<Checkpoint> read_checkpoint(const std::string& id, bool with_film = true) const override;
+  void set_checkpoint_bytes(const std::string& id, std::optional<std::string> bytes);  // nullopt: remove
+  bool fail_writes = false;  // every write throws, as a full disk would
+
+ private:
+  mutable Mutex mu_;
+  uint64_t generation_ = 0;
+  std::vector<StoredJob> rows_ TESSERA_GUARDED_BY(mu_);
+  mutable std::map<std::string, std::string> checkpoints_ TESSERA_GUARDED_BY(mu_);
+};
 
 }  // namespace tessera

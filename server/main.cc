@@ -9,6 +9,7 @@
 #include <thread>
 
 #include "core/io/files.h"
+#include "core/util/log.h"
 #include "server/grpc_services.h"
 #include "server/status_http.h"
 
@@ -89,8 +90,9 @@ int main(int argc, char** argv) {
   app.add_flag("--insecure", insecure,
                "allow listening beyond loopback without access tokens (anyone who can connect may do anything)");
   CLI11_PARSE(app, argc, argv);
+  tessera::init_logging("tessera-coordinator");
   if (tls_cert.empty() != tls_key.empty()) {
-    std::fprintf(stderr, "tessera-coordinator: error: --tls-cert and --tls-key go together\n");
+    spdlog::error("--tls-cert and --tls-key go together");
     return 2;
   }
   if (tokens_file.empty())
@@ -112,13 +114,13 @@ int main(int argc, char** argv) {
     const bool open_network = !is_loopback(grpc_host) || !is_loopback(http_host);
     if (!auth.enabled()) {
       if (open_network && !insecure) {
-        std::fprintf(stderr,
-                     "tessera-coordinator: error: refusing to listen beyond loopback (%s, %s) without access tokens: "
-                     "give --tokens FILE, or --insecure to allow anyone who can connect to do anything\n",
-                     listen.c_str(), http.c_str());
+        spdlog::error(
+            "refusing to listen beyond loopback ({}, {}) without access tokens: give --tokens FILE, or --insecure "
+            "to allow anyone who can connect to do anything",
+            listen, http);
         return 2;
       }
-      std::fprintf(stderr, "tessera-coordinator: no access tokens: every caller may do anything (%s)\n",
+      spdlog::warn("no access tokens: every caller may do anything ({})",
                    open_network ? "--insecure, reachable beyond loopback" : "loopback only");
     }
     std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
@@ -134,10 +136,8 @@ int main(int argc, char** argv) {
     tessera::Coordinator coordinator(opt);
     if (const uint64_t restored = coordinator.counters().jobs_restored) {
       size_t live = 0;
-      for (const auto& j : coordinator.list())
-        live += j.state() == tessera::v1::JobStatus::QUEUED || j.state() == tessera::v1::JobStatus::RUNNING;
-      std::fprintf(stderr, "tessera-coordinator: took up %llu jobs from %s (%zu to finish)\n",
-                   (unsigned long long)restored, opt.data_dir.c_str(), live);
+      for (const auto& j : coordinator.list()) live += tessera::job_live(j.state());
+      spdlog::info("took up {} jobs from {} ({} to finish)", restored, opt.data_dir, live);
     }
     tessera::ClientService client(coordinator, &auth);
     tessera::WorkerService worker(coordinator, &auth);
@@ -149,7 +149,7 @@ int main(int argc, char** argv) {
     builder.RegisterService(&worker);
     std::unique_ptr<grpc::Server> server = builder.BuildAndStart();
     if (!server || bound == 0) {
-      std::fprintf(stderr, "tessera-coordinator: error: cannot listen on %s\n", listen.c_str());
+      spdlog::error("cannot listen on {}", listen);
       return 1;
     }
     tessera::StatusHttp status(coordinator, &auth, tls_cert, tls_key);
@@ -168,14 +168,14 @@ int main(int argc, char** argv) {
     });
     int sig = 0;
     sigwait(&sigs, &sig);
-    std::fprintf(stderr, "tessera-coordinator: signal %d, stopping\n", sig);
+    spdlog::info("signal {}, stopping", sig);
     stopping = true;
     reaper.join();
     server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
     status.stop();
     coordinator.checkpoint_all();  // results merged since the last checkpoint are kept too
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "tessera-coordinator: error: %s\n", e.what());
+    spdlog::error("{}", e.what());
     return 1;
   }
   return 0;

@@ -82,4 +82,15 @@ double WorkerRegistry::utilization() const {
   return threads > 0 ? std::min(1.0, busy / threads) : 0;
 }
 
+double WorkerRegistry::thread_speed() const {
+  double speed = 0, threads = 0;
+  for (const auto& [id, w] : workers_)
+    if (w.samples_per_second > 0) {
+      speed += w.samples_per_second;
+      threads += w.threads;
+    }
+  if (threads > 0) last_thread_speed_ = speed / threads;
+  return last_thread_speed_;
+}
+
 }  // namespace tessera

@@ -45,11 +45,15 @@ class WorkerRegistry {
                      double now);
   // Busy over available render-thread time of every worker, over their windows.
   double utilization() const;
+  // Samples a second per render thread, over the workers that have measured theirs; the
+  // last such figure while none has (0 before any).
+  double thread_speed() const;
 
  private:
   std::map<uint64_t, WorkerInfo> workers_;
   std::mt19937_64 ids_{std::random_device{}()};  // ids are unguessable: results are checked by id
   uint64_t threads_ = 0;
+  mutable double last_thread_speed_ = 0;
 };
 
 }  // namespace tessera

@@ -1165,6 +1165,34 @@ TEST_F(SequenceTest, ARestartedCoordinatorGoesOnWithASequenceBitForBit) {
   EXPECT_TRUE(fs::is_empty(dir + "/scenes"));  // the ended sequence's scene is gone
 }
 
+// A restart can bring a sequence back with a gap: frames 1 and 3 have checkpoints, frame 2
+// (started, but killed before its first checkpoint) has none. Its load is then the two
+// restored frames' samples left plus one whole frame, not two: the admission limit
+// double-counted frame 3 (a bug of the three load formulas that disagreed).
+TEST_F(SequenceTest, ASequenceRestoredWithAGapInItsFramesIsCountedOnce) {
+  const std::string id = c->submit(sequence({1, 2, 3}), "someone");
+  const uint64_t w = worker();
+  const v1::GetTaskResponse r = c->get_task(w, 27);  // every frame's first pass: all three start
+  ASSERT_EQ(r.tasks_size(), 27);
+  std::set<std::string> merged;
+  for (const v1::Task& task : r.tasks())
+    if (merged.insert(task.job_id()).second) ASSERT_TRUE(c->submit_result(render_task(task, w)).accepted());
+  ASSERT_EQ(merged.size(), 3u);
+  c->checkpoint_all();
+  fs::remove(dir + "/jobs/" + id + "-f2/checkpoint");  // frame 2 never reached its first checkpoint
+  restart(c, options(), &t);
+  EXPECT_EQ(frame_states(id).at(2), v1::JobStatus::QUEUED);
+  const uint64_t frame = 48 * 36 * 10, tile_pass = 16 * 16 * 4;
+  const uint64_t left = 2 * (frame - tile_pass) + frame;
+  EXPECT_EQ(c->queue().samples_remaining, left);
+  // A still of one frame's samples fits exactly under a limit of what is left plus it.
+  CoordinatorOptions o = options();
+  o.max_queued_samples_per_client = left + frame;
+  restart(c, o, &t);
+  EXPECT_NO_THROW(c->submit(request(job_settings()), "someone"));
+  EXPECT_THROW(c->submit(request(job_settings()), "someone"), RequestError);
+}
+
 TEST_F(SequenceTest, AFrameFailingOnTwoWorkersFailsTheSequenceAndKeepsTheFinishedFrames) {
   const std::string id = c->submit(sequence({1, 2}));
   const uint64_t a = worker(), b = worker();

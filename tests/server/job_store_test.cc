@@ -115,43 +115,43 @@ TEST(JobStore, JobsAndGenerationsSurviveReopening) {
   const fs::path dir = fs::temp_directory_path() / ("tessera_store_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   {
-    JobStore store(dir.string());
+    SqliteJobStore store(dir.string());
     EXPECT_EQ(store.next_generation(), 1u);
     StoredJob j;
-    j.id = "00000000000000ab";
-    j.name = "it's \"quoted\"; DROP TABLE jobs; --";
-    j.owner = "ann";
-    j.scene_hash = "h";
-    j.main_file = "scene.dae";
-    j.priority = -3;
-    j.seq = 7;
-    j.settings.set_spp(99);
+    j.meta.id = "00000000000000ab";
+    j.meta.name = "it's \"quoted\"; DROP TABLE jobs; --";
+    j.meta.owner = "ann";
+    j.meta.scene_hash = "h";
+    j.meta.main_file = "scene.dae";
+    j.meta.priority = -3;
+    j.meta.seq = 7;
+    j.meta.settings.set_spp(99);
     store.add(j);
     StoredJob k = j;
-    k.id = "00000000000000cd";
-    k.seq = 8;
+    k.meta.id = "00000000000000cd";
+    k.meta.seq = 8;
     store.add(k);
     EXPECT_THROW(store.add(k), std::runtime_error);  // one row per id
-    store.end(j.id, v1::JobStatus::CANCELLED, "by ann", 4.5);
+    store.end(j.meta.id, v1::JobStatus::CANCELLED, "by ann", 4.5);
     const Saved s = sample();
-    store.write_checkpoint(k.id, s.state, s.film, 2);
+    store.write_checkpoint(k.meta.id, s.state, s.film, 2);
   }
-  JobStore store(dir.string());
+  SqliteJobStore store(dir.string());
   EXPECT_EQ(store.next_generation(), 2u);
   const std::vector<StoredJob> jobs = store.jobs();
   ASSERT_EQ(jobs.size(), 2u);
-  EXPECT_EQ(jobs[0].name, "it's \"quoted\"; DROP TABLE jobs; --");
+  EXPECT_EQ(jobs[0].meta.name, "it's \"quoted\"; DROP TABLE jobs; --");
   EXPECT_EQ(jobs[0].state, v1::JobStatus::CANCELLED);
   EXPECT_EQ(jobs[0].error, "by ann");
   EXPECT_EQ(jobs[0].elapsed, 4.5);
-  EXPECT_EQ(jobs[0].priority, -3);
-  EXPECT_EQ(jobs[0].settings.spp(), 99u);
+  EXPECT_EQ(jobs[0].meta.priority, -3);
+  EXPECT_EQ(jobs[0].meta.settings.spp(), 99u);
   EXPECT_EQ(jobs[1].state, v1::JobStatus::QUEUED);
-  EXPECT_FALSE(store.read_checkpoint(jobs[0].id));
-  const std::optional<Checkpoint> c = store.read_checkpoint(jobs[1].id);
+  EXPECT_FALSE(store.read_checkpoint(jobs[0].meta.id));
+  const std::optional<Checkpoint> c = store.read_checkpoint(jobs[1].meta.id);
   ASSERT_TRUE(c);
   EXPECT_EQ(c->state.merges, 5u);
-  EXPECT_FALSE(fs::exists(store.checkpoint_path(jobs[1].id) + ".tmp"));
+  EXPECT_FALSE(fs::exists(store.checkpoint_path(jobs[1].meta.id) + ".tmp"));
   fs::remove_all(dir);
 }
 

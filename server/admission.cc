@@ -1,0 +1,58 @@
+#include "server/admission.h"
+
+#include <set>
+
+#include "core/render/frames.h"
+#include "server/request_error.h"
+
+namespace tessera {
+
+Admission admit(const v1::SubmitJobRequest& req) {
+  auto refuse = [](const std::string& why) { return RequestError(RequestError::Code::kInvalidArgument, why); };
+  if (req.version() != kProtocolVersion)
+    throw refuse("protocol version " + std::to_string(req.version()) + " not supported (this coordinator speaks " +
+                 std::to_string(kProtocolVersion) + ")");
+  Admission a;
+  try {
+    a.settings = from_proto(req.settings());
+  } catch (const WireError& e) {
+    throw refuse(e.what());
+  }
+  a.frames.assign(req.frames().begin(), req.frames().end());
+  if (!a.frames.empty()) {
+    if (a.settings.frame) throw refuse("a sequence's settings have no frame number: its frames are listed in frames");
+    if (a.frames.size() > kMaxFrames)
+      throw refuse(std::to_string(a.frames.size()) + " frames; at most " + std::to_string(kMaxFrames) + " in one job");
+    std::set<int> seen;
+    for (const int f : a.frames) {
+      if (f < -RenderSettings::kMaxFrame || f > RenderSettings::kMaxFrame)
+        throw refuse("frame " + std::to_string(f) + " out of range (at most " +
+                     std::to_string(RenderSettings::kMaxFrame) + " either side of 0)");
+      if (!seen.insert(f).second) throw refuse("frame " + std::to_string(f) + " given twice");
+    }
+  }
+  a.pixels = a.settings.effective_window().area();
+  a.samples = uint64_t(a.pixels) * uint64_t(a.settings.spp) * std::max<uint64_t>(1, a.frames.size());
+  for (const v1::SceneFile& f : req.files()) a.scene_bytes += f.path().size() + f.content().size();
+  return a;
+}
+
+std::string over_limit(const Admission& a, const Load& load, const CoordinatorOptions& o, const std::string& owner) {
+  const std::string who = owner.empty() ? std::string("this coordinator") : "client '" + owner + "'";
+  if (load.client_scene_bytes + a.scene_bytes > o.max_scene_bytes_per_client)
+    return who + "'s live jobs hold " + std::to_string(load.client_scene_bytes) + " scene bytes; this job's " +
+           std::to_string(a.scene_bytes) + " would pass the limit of " + std::to_string(o.max_scene_bytes_per_client) +
+           " (--max-scene-bytes-per-client)";
+  if (load.client_samples_remaining + a.samples > o.max_queued_samples_per_client)
+    return who + " has " + std::to_string(load.client_samples_remaining) + " samples queued; this job's " +
+           std::to_string(a.samples) + " would pass the limit of " + std::to_string(o.max_queued_samples_per_client) +
+           " (--max-queued-samples-per-client)";
+  if (load.client_jobs >= o.max_jobs_per_client)
+    return who + " has " + std::to_string(load.client_jobs) + " live jobs, the most allowed (--max-jobs-per-client)";
+  if (load.live_pixels + a.pixels > o.max_live_pixels)
+    return "live frames hold " + std::to_string(load.live_pixels) + " pixels; this job's " + std::to_string(a.pixels) +
+           " would pass the limit of " + std::to_string(o.max_live_pixels) + " (--max-live-pixels); try again later";
+  return "";
+}
+
+}  // namespace tessera

@@ -1,0 +1,29 @@
+// What a submit asks for, checked before anything large is allocated or any scene is
+// unpacked: the protocol, the settings, the frame list, and the limits on live work (per
+// client: jobs, scene bytes, samples queued; for everyone: pixels of live films). The
+// limits bound memory and keep clients fair; submits racing each other may pass together.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "server/job_table.h"
+#include "server/options.h"
+
+namespace tessera {
+
+struct Admission {
+  RenderSettings settings;
+  std::vector<int> frames;   // empty: a still
+  int64_t pixels = 0;        // of one frame
+  uint64_t samples = 0;      // of every frame, at most
+  uint64_t scene_bytes = 0;  // paths and contents of the bundle's files
+};
+
+// Throws RequestError (kInvalidArgument) naming what is wrong.
+Admission admit(const v1::SubmitJobRequest& request);
+// The limit the job would pass, said for the client ("" when it fits).
+std::string over_limit(const Admission& a, const Load& load, const CoordinatorOptions& o, const std::string& owner);
+
+}  // namespace tessera

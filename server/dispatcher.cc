@@ -1,0 +1,105 @@
+#include "server/dispatcher.h"
+
+#include <algorithm>
+
+#include "server/request_error.h"
+
+namespace tessera {
+
+v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples, double now,
+                                         Effects& fx) {
+  v1::GetTaskResponse resp;
+  if (p_.leasing.expire(now) > 0) fx.changed = true;
+  if (p_.verifier.quarantined(worker_id))
+    throw RequestError(RequestError::Code::kPermissionDenied,
+                       "worker " + std::to_string(worker_id) +
+                           " is quarantined: its results differed from the same tasks rendered elsewhere");
+  WorkerInfo* w = p_.workers.find(worker_id);
+  if (!w)
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "unknown worker " + std::to_string(worker_id) + "; register again");
+  w->last_seen = now;
+  struct Source {
+    int32_t priority;
+    uint64_t seq;
+    size_t frame;
+    Job* job;
+    Sequence* sequence;  // a sequence's frames to start
+  };
+  std::vector<Source> order;
+  uint64_t outstanding = p_.leases.live_count() + p_.checks.waiting();  // out now or ready to go
+  for (const auto& [id, job] : p_.jobs.jobs())
+    if (job->live()) {
+      order.push_back({job->meta.priority, job->meta.seq, job->frame_index, job.get(), nullptr});
+      outstanding += job->plan.ready();
+    }
+  for (const auto& [id, sq] : p_.jobs.sequences())
+    if (sq->live() && sq->next < sq->frames.size()) {
+      order.push_back({sq->meta.priority, sq->meta.seq, sq->frames.size(), nullptr, sq.get()});
+      // As if the frames it may start were ready: a worker's share counts them.
+      const uint64_t unstarted = sq->frames.size() - sq->frames_started;
+      const uint32_t startable = SequenceScheduler::kMaxLiveFrames -
+                                 std::min(SequenceScheduler::kMaxLiveFrames, sq->live_frames);
+      outstanding += uint64_t(sq->frame_tiles()) * std::min<uint64_t>(unstarted, startable);
+    }
+  std::sort(order.begin(), order.end(), [](const Source& a, const Source& b) {
+    if (a.priority != b.priority) return a.priority > b.priority;
+    return a.seq != b.seq ? a.seq < b.seq : a.frame < b.frame;
+  });
+  const uint64_t threads = std::max<uint64_t>(1, p_.workers.threads());
+  const uint64_t share = (outstanding * w->threads + threads - 1) / threads;
+  const uint64_t unshared = share > w->leases ? share - w->leases : 0;
+  max_tasks = uint32_t(std::min<uint64_t>(std::clamp<uint32_t>(max_tasks, 1, kMaxTasksPerRequest), unshared));
+  p_.verifier.lease_checks(*w, max_tasks, now, resp);
+
+  const bool verify = p_.verifier.active();
+  uint64_t samples = 0;
+  auto room = [&] { return uint32_t(resp.tasks_size()) < max_tasks && (max_samples == 0 || samples < max_samples); };
+  auto take_from = [&](Job& job) {
+    while (room()) {
+      std::optional<TileTask> t = job.plan.take();
+      if (!t) break;
+      const uint64_t task_id = p_.leasing.grant(job, *t, *w, now);
+      p_.lifecycle.start(job, now);
+      v1::Task* task = resp.add_tasks();
+      task->set_task_id(task_id);
+      task->set_job_id(job.id());
+      task->set_scene_hash(job.meta.scene_hash);
+      *task->mutable_settings() = job.meta.settings;
+      *task->mutable_tile() = to_proto(t->rect);
+      task->set_pass(t->pass);
+      task->set_sample_begin(t->sample_begin);
+      task->set_sample_end(t->sample_end);
+      uint64_t pixels = uint64_t(t->rect.area());
+      if (!t->active.empty()) {
+        task->set_active(t->active.data(), t->active.size());
+        pixels = uint64_t(std::count(t->active.begin(), t->active.end(), 1));
+      }
+      samples += pixels * (t->sample_end - t->sample_begin);
+      if (verify && p_.verifier.pick()) p_.leases.live(task_id)->task = std::make_shared<const v1::Task>(*task);
+    }
+  };
+  int64_t live_pixels = -1;  // counted when first needed
+  for (const Source& src : order) {
+    if (src.job) {
+      take_from(*src.job);
+      continue;
+    }
+    // The worker has room and the sequence's started frames have no ready task: start the
+    // next frame, within the limits on films in memory.
+    Sequence& sq = *src.sequence;
+    while (room() && SequenceScheduler::may_start(sq)) {
+      if (live_pixels < 0) live_pixels = p_.jobs.load().live_pixels;
+      const int64_t pixels = sq.settings.effective_window().area();
+      if (sq.live_frames > 0 && live_pixels + pixels > max_live_pixels_) break;
+      Job* job = p_.sequences.start_next(sq, now, fx);
+      if (!job) break;
+      live_pixels += pixels;
+      take_from(*job);
+    }
+  }
+  if (resp.tasks_size() == 0) resp.set_retry_after_ms(200);
+  return resp;
+}
+
+}  // namespace tessera

@@ -1,0 +1,43 @@
+// Which tasks a worker gets (GetTask). Live jobs, frames of sequences among them, and
+// sequences with frames still to start, by priority, then submission, then frame: a
+// sequence's next frame comes after its started ones and before later jobs, so its first
+// frames finish first and workers go from one frame to the next without waiting. Checks
+// come first (they are few, and a job waits for them). A worker gets at most its share,
+// by threads, of the work outstanding, less what it holds: on a small frame the first to
+// ask cannot take every ready task while the others idle. Runs under the coordinator's lock.
+#pragma once
+
+#include <cstdint>
+
+#include "server/sequence_scheduler.h"
+#include "server/verifier.h"
+
+namespace tessera {
+
+class Dispatcher {
+ public:
+  static constexpr uint32_t kMaxTasksPerRequest = 256;
+
+  struct Parts {
+    JobTable& jobs;
+    LeaseTable& leases;
+    Leasing& leasing;
+    WorkerRegistry& workers;
+    CheckBook& checks;
+    Verifier& verifier;
+    SequenceScheduler& sequences;
+    JobLifecycle& lifecycle;
+  };
+  Dispatcher(Parts parts, int64_t max_live_pixels) : p_(parts), max_live_pixels_(max_live_pixels) {}
+
+  // Up to max_tasks tasks, stopping once they hold max_samples samples (0: no such limit);
+  // always one if any is ready and the worker's share allows. Expires overdue leases
+  // first. Throws RequestError for a quarantined or unknown worker.
+  v1::GetTaskResponse get_task(uint64_t worker, uint32_t max_tasks, uint64_t max_samples, double now, Effects& fx);
+
+ private:
+  Parts p_;
+  int64_t max_live_pixels_;
+};
+
+}  // namespace tessera

@@ -1,0 +1,119 @@
+#include "server/job_lifecycle.h"
+
+#include "core/util/invariant.h"
+#include "server/request_error.h"
+
+namespace tessera {
+
+void JobLifecycle::start(Job& job, double now) {
+  if (job.state_ != v1::JobStatus::QUEUED) return;
+  job.state_ = v1::JobStatus::RUNNING;
+  job.started = now;
+}
+
+void JobLifecycle::start(Sequence& s, double now) {
+  if (s.state_ != v1::JobStatus::QUEUED) return;
+  s.state_ = v1::JobStatus::RUNNING;
+  s.started = now;
+}
+
+void JobLifecycle::end(Job& job, Job::State state, double now, Effects& fx) {
+  TESSERA_INVARIANT(job.live() && !job_live(state), "job " + job.id() + " ended twice, or into a live state");
+  job.state_ = state;
+  job.finished_at = now;
+  job.pending_checks = 0;
+  leasing_.end_job(job, now);
+  // Its scene is dropped, from memory and disk, once its end is on disk (SnapshotWriter)
+  // and no live job uses it: a crash before then finds the job live and its scene there.
+  // A sequence holds the scene for its frames until its own end is recorded.
+  if (!job.sequence.empty()) frame_ended(job, now, fx);
+  fx.changed = true;
+}
+
+void JobLifecycle::frame_ended(Job& job, double now, Effects& fx) {
+  Sequence* sp = jobs_.find_sequence(job.sequence);
+  TESSERA_INVARIANT(sp, "frame " + job.id() + " has no sequence");
+  Sequence& s = *sp;
+  if (s.live_frames > 0) --s.live_frames;
+  fx.sequence_ends.push_back(s.id());  // (recorded once every frame's end is)
+  if (!s.live()) return;  // the sequence ended first and ends its frames itself
+  if (job.state() == v1::JobStatus::FAILED) {
+    s.error = "frame " + std::to_string(s.frames[job.frame_index]) + ": " + job.error;
+    end(s, v1::JobStatus::FAILED, now, fx);
+    return;
+  }
+  ++s.changes;
+  if (job.state() == v1::JobStatus::DONE && ++s.frames_done == s.frames.size())  // O(1): long sequences end often
+    end(s, v1::JobStatus::DONE, now, fx);
+}
+
+void JobLifecycle::end(Sequence& s, Sequence::State state, double now, Effects& fx) {
+  TESSERA_INVARIANT(s.live() && !job_live(state), "sequence " + s.id() + " ended twice, or into a live state");
+  s.state_ = state;
+  s.finished_at = now;
+  s.prepared.reset();
+  for (const std::shared_ptr<Job>& j : s.jobs)
+    if (j && j->live()) {
+      end(*j, v1::JobStatus::CANCELLED, now, fx);
+      fx.final_images.push_back(j);  // its image keeps what it rendered
+    }
+  fx.sequence_ends.push_back(s.id());
+  fx.changed = true;
+}
+
+bool JobLifecycle::finish_if_done(Job& job, double now, Effects& fx) {
+  if (!job.live() || !job.plan.done() || job.pending_checks > 0) return false;
+  end(job, v1::JobStatus::DONE, now, fx);
+  fx.snapshots.push_back(snapshots_.final_snapshot(jobs_.shared(job.id()), now));
+  return true;
+}
+
+void JobLifecycle::cancel(const std::string& id, const std::string& requester, bool any, double now, Effects& fx) {
+  auto refuse_other = [&](const std::string& owner) {
+    if (!any && owner != requester)
+      throw RequestError(RequestError::Code::kPermissionDenied,
+                         "job " + id + " belongs to '" + owner + "': a client may cancel only its own jobs");
+  };
+  if (Sequence* s = jobs_.find_sequence(id)) {
+    refuse_other(s->meta.owner);
+    if (s->live()) end(*s, v1::JobStatus::CANCELLED, now, fx);
+    return;
+  }
+  Job& job = jobs_.job(id);
+  refuse_other(job.meta.owner);
+  if (!job.sequence.empty())
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "job " + id + " is a frame of sequence " + job.sequence + ": cancel the sequence");
+  if (!job.live()) return;
+  end(job, v1::JobStatus::CANCELLED, now, fx);
+  fx.final_images.push_back(jobs_.shared(id));  // keep what was rendered
+}
+
+void JobLifecycle::task_failed(Job& job, uint64_t worker, const std::string& error, double now, Effects& fx) {
+  if (!job.live()) return;
+  ++counters_.tasks_failed;
+  job.failed_on.insert(worker);
+  if (job.failed_on.size() < kFailuresToFail) return;  // maybe that worker's trouble: another tries
+  job.error = "tasks failed on " + std::to_string(job.failed_on.size()) + " workers: " + error.substr(0, 1024);
+  end(job, v1::JobStatus::FAILED, now, fx);
+  fx.final_images.push_back(jobs_.shared(job.id()));  // keep what was rendered
+}
+
+std::optional<RowEnd> JobLifecycle::sequence_end_due(const std::string& id) {
+  Sequence* s = jobs_.find_sequence(id);
+  if (!s || s->live() || s->end_recorded || s->end_recording) return std::nullopt;
+  if (s->state() == v1::JobStatus::DONE)
+    for (const auto& j : s->jobs)
+      if (!j || !j->end_recorded) return std::nullopt;  // a frame's final checkpoint is not on disk yet
+  s->end_recording = true;
+  return RowEnd{s->id(), s->state(), s->error, s->started > 0 ? s->finished_at - s->started : 0};
+}
+
+void JobLifecycle::sequence_end_recorded(const std::string& id, bool ok) {
+  Sequence* s = jobs_.find_sequence(id);
+  TESSERA_INVARIANT(s && s->end_recording, "sequence " + id + " was not being recorded");
+  s->end_recording = false;
+  s->end_recorded = ok;
+}
+
+}  // namespace tessera

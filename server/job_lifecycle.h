@@ -1,0 +1,59 @@
+// The one writer of job and sequence states: QUEUED -> RUNNING at the first lease, then
+// DONE, CANCELLED or FAILED. An end releases what the job held (leases, undecided checks)
+// and reports a frame's end to its sequence; the slow part (its last image and checkpoint,
+// the database row) goes into the Effects. Runs under the coordinator's lock.
+#pragma once
+
+#include <optional>
+#include <string>
+
+#include "server/effects.h"
+#include "server/job_table.h"
+#include "server/leasing.h"
+
+namespace tessera {
+
+class JobLifecycle {
+ public:
+  // Tasks of a job failed on this many different workers: the job fails.
+  static constexpr size_t kFailuresToFail = 2;
+
+  JobLifecycle(JobTable& jobs, Leasing& leasing, const Snapshotter& snapshots, CoordinatorCounters& counters)
+      : jobs_(jobs), leasing_(leasing), snapshots_(snapshots), counters_(counters) {}
+
+  // A job or sequence read back after a restart comes back in the state it was in.
+  void restore(Job& job, Job::State state) { job.state_ = state; }
+  void restore(Sequence& s, Sequence::State state) { s.state_ = state; }
+  void start(Job& job, double now);  // its first lease
+  void start(Sequence& s, double now);  // its first frame
+
+  // Ends a live job: its leases and checks end; a frame's end goes to its sequence. The
+  // caller writes its last image (final_snapshot, or Effects::final_images).
+  void end(Job& job, Job::State state, double now, Effects& fx);
+  // Ends a live sequence; its live frames end CANCELLED, keeping what they rendered.
+  void end(Sequence& s, Sequence::State state, double now, Effects& fx);
+  // A live job whose plan is done and whose checks are all decided ends DONE, with its
+  // final snapshot in the Effects. True if it ended.
+  bool finish_if_done(Job& job, double now, Effects& fx);
+  // Cancels a job or a sequence (finished frames stay as they are); only its owner may
+  // unless `any`. Throws RequestError. Nothing happens to a job that has ended.
+  void cancel(const std::string& id, const std::string& requester, bool any, double now, Effects& fx);
+  // A worker could not render a task of the job: once tasks failed on kFailuresToFail
+  // different workers, the job fails with the error, keeping its image.
+  void task_failed(Job& job, uint64_t worker, const std::string& error, double now, Effects& fx);
+
+  // A sequence's end can be recorded when it has ended and, if DONE, every frame's final
+  // checkpoint is on disk: then it is marked as being recorded and returned.
+  std::optional<RowEnd> sequence_end_due(const std::string& id);
+  void sequence_end_recorded(const std::string& id, bool ok);
+
+ private:
+  void frame_ended(Job& job, double now, Effects& fx);
+
+  JobTable& jobs_;
+  Leasing& leasing_;
+  const Snapshotter& snapshots_;
+  CoordinatorCounters& counters_;
+};
+
+}  // namespace tessera

@@ -1,0 +1,105 @@
+#include "server/job_table.h"
+
+#include <algorithm>
+#include <cstdio>
+
+#include "core/util/invariant.h"
+#include "server/request_error.h"
+
+namespace tessera {
+
+std::string JobTable::new_id() {
+  char buf[17];
+  do std::snprintf(buf, sizeof buf, "%016llx", (unsigned long long)ids_());
+  while (jobs_.count(buf) || sequences_.count(buf));
+  return buf;
+}
+
+Job& JobTable::add(std::shared_ptr<Job> job) {
+  TESSERA_INVARIANT(job && !jobs_.count(job->id()), "a job added twice");
+  Job& j = *job;
+  jobs_[j.id()] = std::move(job);
+  return j;
+}
+
+Sequence& JobTable::add(std::unique_ptr<Sequence> sequence) {
+  TESSERA_INVARIANT(sequence && !sequences_.count(sequence->id()), "a sequence added twice");
+  Sequence& s = *sequence;
+  sequences_[s.id()] = std::move(sequence);
+  return s;
+}
+
+Job* JobTable::find_job(const std::string& id) const {
+  auto it = jobs_.find(id);
+  return it == jobs_.end() ? nullptr : it->second.get();
+}
+
+Sequence* JobTable::find_sequence(const std::string& id) const {
+  auto it = sequences_.find(id);
+  return it == sequences_.end() ? nullptr : it->second.get();
+}
+
+std::shared_ptr<Job> JobTable::shared(const std::string& id) const {
+  auto it = jobs_.find(id);
+  return it == jobs_.end() ? nullptr : it->second;
+}
+
+Job& JobTable::job(const std::string& id) const {
+  Job* j = find_job(id);
+  if (!j) throw RequestError(RequestError::Code::kNotFound, "no job '" + id + "'");
+  return *j;
+}
+
+Job& JobTable::frame_job(const std::string& id, std::optional<int> frame) const {
+  const Sequence* s = find_sequence(id);
+  if (!s) {
+    Job& j = job(id);
+    if (frame && j.plan.settings().frame != frame)
+      throw RequestError(RequestError::Code::kInvalidArgument, "job " + id + " has no frame " + std::to_string(*frame));
+    return j;
+  }
+  if (!frame)
+    throw RequestError(RequestError::Code::kInvalidArgument, "job " + id + " is a sequence of " +
+                                                                 std::to_string(s->frames.size()) +
+                                                                 " frames: name one (fetch --frame N, or --all)");
+  const auto at = std::find(s->frames.begin(), s->frames.end(), *frame);
+  if (at == s->frames.end())
+    throw RequestError(RequestError::Code::kNotFound, "job " + id + " has no frame " + std::to_string(*frame));
+  Job* j = s->jobs[size_t(at - s->frames.begin())].get();
+  if (!j)
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "job " + id + ": frame " + std::to_string(*frame) +
+                           (s->live() ? " has not started yet" : " was never rendered (the job ended first)"));
+  return *j;
+}
+
+Load JobTable::load(const std::string& owner) const {
+  Load l;
+  for (const auto& [id, j] : jobs_) {
+    if (!j->live()) continue;
+    const uint64_t total = j->plan.samples_total();
+    const uint64_t left = total - std::min(total, j->plan.samples_merged());
+    l.live_pixels += j->plan.film().window().area();
+    l.tasks_ready += j->plan.ready();
+    l.samples_remaining += left;
+    if (j->meta.owner != owner) continue;
+    l.client_samples_remaining += left;
+    if (!j->sequence.empty()) continue;  // its sequence counts as the job
+    ++l.client_jobs;
+    l.client_scene_bytes += j->meta.scene_bytes;
+  }
+  for (const auto& [id, s] : sequences_) {
+    if (!s->live()) continue;
+    // Frames not started: after a restart these need not be the ones past `next`.
+    const uint64_t unstarted = s->frame_samples() * (s->frames.size() - s->frames_started);
+    l.samples_remaining += unstarted;
+    if (s->next < s->frames.size()) l.tasks_ready += s->frame_tiles();  // the next frame's first pass
+    if (s->meta.owner != owner) continue;
+    ++l.client_jobs;
+    l.client_scene_bytes += s->meta.scene_bytes;
+    l.client_samples_remaining += unstarted;
+  }
+  return l;
+}
+
+}  // namespace tessera

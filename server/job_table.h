@@ -1,0 +1,60 @@
+// Every job and sequence the coordinator knows, by id, and the one count of what the live
+// ones weigh (Load). Plain data: the coordinator's lock guards it.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "server/job.h"
+
+namespace tessera {
+
+// What the live work weighs, counted in one place for admission (one client's share),
+// for starting frames (films in memory) and for autoscalers (what is left).
+struct Load {
+  int64_t live_pixels = 0;         // of every live frame's film (each costs two films in memory)
+  uint64_t tasks_ready = 0;        // ready tasks of live jobs, and each sequence's next frame's first pass
+  uint64_t samples_remaining = 0;  // not merged yet, frames not started included
+  // The same for one client (Load::of): its live jobs, a sequence counting as one.
+  size_t client_jobs = 0;
+  uint64_t client_scene_bytes = 0, client_samples_remaining = 0;
+};
+
+class JobTable {
+ public:
+  // 64 random bits in hex, used by no job or sequence: unguessable, so one client cannot
+  // name another's job by counting.
+  std::string new_id();
+  uint64_t next_seq() { return next_seq_++; }
+  void saw_seq(uint64_t seq) { next_seq_ = std::max(next_seq_, seq + 1); }  // restored jobs
+
+  Job& add(std::shared_ptr<Job> job);
+  Sequence& add(std::unique_ptr<Sequence> sequence);
+
+  Job* find_job(const std::string& id) const;  // null if none
+  Sequence* find_sequence(const std::string& id) const;
+  std::shared_ptr<Job> shared(const std::string& id) const;
+  // Throws RequestError (kNotFound) naming the id.
+  Job& job(const std::string& id) const;
+  // The job of `id`, or of its frame `frame` when `id` is a sequence; throws RequestError
+  // saying what is missing (a frame not named, not one of its frames, not started).
+  Job& frame_job(const std::string& id, std::optional<int> frame) const;
+
+  const std::map<std::string, std::shared_ptr<Job>>& jobs() const { return jobs_; }
+  const std::map<std::string, std::unique_ptr<Sequence>>& sequences() const { return sequences_; }
+
+  // The whole load, and `owner`'s part of it.
+  Load load(const std::string& owner = "") const;
+
+ private:
+  std::map<std::string, std::shared_ptr<Job>> jobs_;  // stills and frames
+  std::map<std::string, std::unique_ptr<Sequence>> sequences_;
+  uint64_t next_seq_ = 1;
+  std::mt19937_64 ids_{std::random_device{}()};
+};
+
+}  // namespace tessera

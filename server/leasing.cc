@@ -1,0 +1,63 @@
+#include "server/leasing.h"
+
+#include "core/util/invariant.h"
+
+namespace tessera {
+
+uint64_t Leasing::grant(Job& job, const TileTask& task, WorkerInfo& worker, double now) {
+  const uint64_t id = leases_.grant({job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr});
+  job.tile_lease[task.tile] = id;
+  ++worker.leases;
+  ++counters_.tasks_dispatched;
+  return id;
+}
+
+uint64_t Leasing::grant_check(uint64_t check, WorkerInfo& worker, double now) {
+  Check* c = checks_.find(check);
+  TESSERA_INVARIANT(c && c->lease == 0, "check " + std::to_string(check) + " is not waiting for a worker");
+  Lease l{c->job, c->tile, c->pass, worker.id, now + lease_seconds_, nullptr};
+  l.check = check;
+  c->lease = leases_.grant(std::move(l));
+  ++worker.leases;
+  ++counters_.tasks_dispatched;
+  return c->lease;
+}
+
+void Leasing::ended(uint64_t id, const Lease& l, bool requeue, double now) {
+  if (l.check) {  // a check waits for another worker
+    if (Check* c = checks_.find(l.check); c && c->lease == id) {
+      c->lease = 0;
+      c->since = now;
+    }
+  } else if (Job* job = jobs_.find_job(l.job); job && job->tile_lease[l.tile] == id) {
+    job->tile_lease[l.tile] = 0;
+    if (requeue) job->plan.put_back(l.tile);
+  }
+  if (WorkerInfo* w = workers_.find(l.worker); w && w->leases > 0) --w->leases;
+}
+
+void Leasing::end(uint64_t id, bool requeue, double now) {
+  if (const std::optional<Lease> l = leases_.end(id)) ended(id, *l, requeue, now);
+}
+
+size_t Leasing::expire(double now) {
+  const auto expired = leases_.expire(now);
+  for (const auto& [id, l] : expired) ended(id, l, true, now);
+  counters_.leases_expired += expired.size();
+  return expired.size();
+}
+
+size_t Leasing::end_worker(uint64_t worker, double now) {
+  const std::vector<uint64_t> held = leases_.held_by(worker);
+  for (uint64_t id : held) end(id, true, now);
+  return held.size();
+}
+
+void Leasing::end_job(Job& job, double now) {
+  for (uint64_t lease : checks_.erase_job(job.id())) end(lease, false, now);  // undecided checks: moot now
+  for (uint64_t lease : job.tile_lease)
+    if (lease) end(lease, false, now);
+  leases_.forget_job(job.id());
+}
+
+}  // namespace tessera

@@ -1,0 +1,43 @@
+// The coordinator's settings (tessera-coordinator's flags set them; tests set them directly).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+namespace tessera {
+
+struct CoordinatorOptions {
+  std::string data_dir = "tessera-data";
+  double lease_seconds = 10;
+  double heartbeat_seconds = 2;
+  double image_interval_seconds = 5;  // progressive images at most this often
+  // A live job's film and plan are saved at least this often while it merges results: a
+  // coordinator killed and restarted renders again at most the results of this long.
+  double checkpoint_seconds = 5;
+  // A worker not heard from for this long is forgotten (it registers again if it returns).
+  double worker_timeout_seconds = 60;
+  // Registered workers at most: a Register loop cannot grow the coordinator without bound.
+  size_t max_workers = 10000;
+  // Live (queued or running) jobs one client (token name) may have at once.
+  size_t max_jobs_per_client = 100;
+  // Pixels of all live frames together: each costs two 40-byte films in memory (the plan's
+  // and the snapshot's), so the default, 2^27, is about 10 GB at most.
+  int64_t max_live_pixels = int64_t(1) << 27;
+  // Scene bytes and samples still to render of one client's live jobs together.
+  uint64_t max_scene_bytes_per_client = uint64_t(4) << 30;
+  uint64_t max_queued_samples_per_client = uint64_t(1) << 40;  // ~12 core-days at 1M samples/s
+  // Verify by replay: this fraction of tasks, picked at random, is rendered again by a
+  // second worker and the sums compared bit for bit. When they differ, the coordinator
+  // renders the task itself, and a worker whose sums differ from its render is
+  // quarantined: its leases end, the tiles it merged into live jobs are rendered again,
+  // and, with access tokens, its token may not register again.
+  double verify_fraction = 0.01;  // costs this fraction of the farm's render time
+  // Test seams: between an image snapshot leaving the lock and its write; between a
+  // checkpoint's temporary file being written and its rename.
+  std::function<void()> before_image_write;
+  std::function<void()> before_checkpoint_rename;
+};
+
+}  // namespace tessera

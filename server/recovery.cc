@@ -1,0 +1,163 @@
+#include "server/recovery.h"
+
+#include "core/util/log.h"
+#include "server/sequence_scheduler.h"
+
+namespace tessera {
+
+void Recovery::restore(double now, Effects& fx) {
+  for (const StoredJob& row : p_.store.jobs()) {
+    if (row.frames.empty())
+      restore_job(row, now, fx);
+    else
+      restore_sequence(row, now, fx);
+  }
+}
+
+void Recovery::as_ended(Job& job, double now, double elapsed) {
+  job.started = now - elapsed;
+  job.finished_at = now;
+  job.snaps.image_frame_passes = job.plan.frame_passes_done();
+  job.snaps.spare_film.reset();
+  job.plan.release_film();  // (restored without one; a plan without a checkpoint has its own)
+  job.snaps.taken = 1;
+  {
+    MutexLock wl(job.write_mu);
+    job.written = {1, job.plan.merges(), 1, job.plan.merges()};
+  }
+  job.end_recorded = true;
+}
+
+void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
+  const std::string& id = row.meta.id;
+  RenderSettings settings;
+  try {
+    settings = from_proto(row.meta.settings);
+  } catch (const WireError& e) {  // checked at submit: only a damaged database gets here
+    spdlog::error("job {}: stored settings: {}; skipped", id, e.what());
+    return;
+  }
+  p_.jobs.saw_seq(row.meta.seq);
+  auto shared = std::make_shared<Job>(row.meta, settings, row.state);
+  Job& j = p_.jobs.add(shared);
+  j.error = row.error;
+  j.submitted = now;
+  ++p_.counters.jobs_restored;
+  double elapsed = row.elapsed;
+  try {
+    // An ended job's film stays on disk: start-up decodes only what live jobs go on with.
+    if (std::optional<Checkpoint> cp = p_.store.read_checkpoint(id, j.live())) {
+      j.plan.restore(cp->state, std::move(cp->film));
+      if (j.live()) elapsed = cp->elapsed;
+    }
+  } catch (const std::exception& e) {
+    spdlog::warn("job {}: {}; its samples are rendered again", id, e.what());
+  }
+  p_.store.discard_partial_writes(id);
+  if (!j.live()) {  // its image is on disk and its film is not needed; status comes from the plan
+    as_ended(j, now, elapsed);
+    return;
+  }
+  std::string lost;  // why it cannot go on
+  try {
+    j.meta.scene_bytes = p_.restore_scene(j.meta.scene_hash);
+  } catch (const std::exception& e) {
+    lost = e.what();
+  }
+  const bool rendered = j.plan.merges() > 0 || elapsed > 0;
+  p_.lifecycle.restore(j, rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED);
+  if (rendered) j.started = now - elapsed;
+  j.snaps.last_checkpoint = now;
+  j.snaps.checkpoint_merges = j.plan.merges();
+  if (!lost.empty()) {
+    j.error = "cannot go on after the coordinator restarted: " + lost;
+    p_.lifecycle.end(j, v1::JobStatus::FAILED, now, fx);
+    fx.final_images.push_back(shared);
+  } else if (j.plan.done()) {  // the crash came between its last checkpoint and recording its end
+    p_.lifecycle.end(j, v1::JobStatus::DONE, now, fx);
+    fx.final_images.push_back(shared);
+  } else {
+    j.snaps.spare_film = std::make_unique<Film>(j.plan.film());
+  }
+}
+
+void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
+  RenderSettings settings;
+  try {
+    settings = from_proto(row.meta.settings);
+  } catch (const WireError& e) {  // checked at submit: only a damaged database gets here
+    spdlog::error("job {}: stored settings: {}; skipped", row.meta.id, e.what());
+    return;
+  }
+  p_.jobs.saw_seq(row.meta.seq);
+  Sequence& s = p_.jobs.add(std::make_unique<Sequence>(row.meta, settings, row.frames, row.state));
+  s.error = row.error;
+  s.submitted = now;
+  ++p_.counters.jobs_restored;
+  std::string lost;
+  if (s.live()) try {
+      s.meta.scene_bytes = p_.restore_scene(s.meta.scene_hash);
+    } catch (const std::exception& e) {
+      lost = e.what();
+    }
+  double elapsed = 0;
+  bool all_done = true;
+  for (size_t i = 0; i < s.frames.size(); ++i) {
+    const std::string id = s.frame_job_id(i);
+    std::optional<Checkpoint> cp;
+    std::shared_ptr<Job> job;
+    try {
+      // A frame that started has a checkpoint (or is rendered again from the start).
+      if (!(cp = p_.store.read_checkpoint(id, s.live()))) {
+        all_done = false;
+        continue;
+      }
+      job = SequenceScheduler::make_frame(s, i);
+      job->plan.restore(cp->state, std::move(cp->film));
+    } catch (const std::exception& e) {
+      spdlog::warn("job {}: {}; its samples are rendered again", id, e.what());
+      all_done = false;
+      continue;
+    }
+    p_.store.discard_partial_writes(id);
+    Job& j = p_.jobs.add(job);
+    s.jobs[i] = job;
+    ++s.frames_started;
+    j.submitted = now;
+    elapsed = std::max(elapsed, cp->elapsed);
+    all_done &= j.plan.done();
+    s.frames_done += j.plan.done();
+    if (s.live() && !j.plan.done()) {
+      p_.lifecycle.restore(j, j.plan.merges() > 0 ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED);
+      j.started = now - cp->elapsed;
+      j.snaps.last_checkpoint = now;
+      j.snaps.checkpoint_merges = j.plan.merges();
+      ++s.live_frames;
+    } else if (s.live() && j.plan.has_film()) {  // done: its image is written again in case it was not
+      p_.lifecycle.restore(j, v1::JobStatus::DONE);
+      j.started = now - cp->elapsed;
+      j.finished_at = now;
+      j.snaps.spare_film.reset();
+      fx.final_images.push_back(job);
+    } else {
+      p_.lifecycle.restore(j, j.plan.done() ? v1::JobStatus::DONE : v1::JobStatus::CANCELLED);
+      as_ended(j, now, cp->elapsed);
+    }
+  }
+  if (!s.live()) {
+    s.end_recorded = true;
+    s.started = now - elapsed;
+    s.finished_at = now;
+  } else if (!lost.empty()) {
+    s.error = "cannot go on after the coordinator restarted: " + lost;
+    p_.lifecycle.end(s, v1::JobStatus::FAILED, now, fx);
+  } else if (all_done) {
+    p_.lifecycle.end(s, v1::JobStatus::DONE, now, fx);
+  } else {
+    s.started = now - elapsed;
+    p_.lifecycle.restore(s, elapsed > 0 ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED);
+    while (s.next < s.jobs.size() && s.jobs[s.next]) ++s.next;
+  }
+}
+
+}  // namespace tessera

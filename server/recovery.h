@@ -1,0 +1,42 @@
+// A coordinator started on a data folder an earlier run used takes up every job where its
+// last checkpoint left it. An ended job comes back with its counts and image (no film in
+// memory); a live one with its plan restored from the checkpoint (FramePlan::restore; a
+// damaged or missing checkpoint means it starts over) and its scene checked again from its
+// bundle (a lost scene fails it). A sequence's frames are found by their checkpoints: one
+// that has none had not started, or starts again. Jobs found done, or unable to go on, end
+// here, their images and database rows written through the Effects.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "server/job_lifecycle.h"
+#include "server/job_store.h"
+
+namespace tessera {
+
+class Recovery {
+ public:
+  struct Parts {
+    JobStore& store;
+    JobTable& jobs;
+    JobLifecycle& lifecycle;
+    CoordinatorCounters& counters;
+    // Makes a scene kept by the earlier run usable again; returns its bundle's bytes.
+    // Throws (naming the problem) when it is missing or damaged.
+    std::function<uint64_t(const std::string& hash)> restore_scene;
+  };
+  explicit Recovery(Parts parts) : p_(std::move(parts)) {}
+  void restore(double now, Effects& fx);
+
+ private:
+  void restore_job(const StoredJob& row, double now, Effects& fx);
+  void restore_sequence(const StoredJob& row, double now, Effects& fx);
+  // An ended job as it is on disk: image and checkpoint written, end recorded, no film.
+  static void as_ended(Job& job, double now, double elapsed);
+
+  Parts p_;
+};
+
+}  // namespace tessera

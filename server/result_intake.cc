@@ -1,0 +1,93 @@
+#include "server/result_intake.h"
+
+#include <chrono>
+
+namespace tessera {
+
+std::vector<PixelSums> result_sums(const v1::TaskResult& result, size_t pixels) {
+  if (result.raw_size() != pixels * kBytesPerPixel) throw WireError("raw size does not match the tile");
+  return decode_sums(result.sums_zstd(), pixels);
+}
+
+std::optional<Lease> ResultIntake::wanted(const v1::TaskResult& result, v1::ResultAck& ack) {
+  const Lease* l = p_.leases.known(result.task_id());
+  // Never issued, or issued to another worker: only the lease's holder may answer it.
+  if (!l || l->worker != result.worker_id() || p_.verifier.quarantined(l->worker)) {
+    ++p_.counters.results_rejected;
+    return std::nullopt;
+  }
+  if (l->check) return *l;  // the Verifier's
+  const Job* job = p_.jobs.find_job(l->job);
+  if (!job || !job->live()) return std::nullopt;
+  if (!job->plan.wants(l->tile, l->pass)) {
+    ++p_.counters.results_duplicate;
+    ack.set_duplicate(true);
+    return std::nullopt;
+  }
+  return *l;
+}
+
+ResultIntake::Batch ResultIntake::screen(const std::vector<const v1::TaskResult*>& results) {
+  Batch b;
+  b.results = results;
+  b.acks.resize(results.size());
+  for (size_t i = 0; i < results.size(); ++i) {
+    std::optional<Lease> lease = wanted(*results[i], b.acks[i]);
+    if (!lease) continue;
+    if (lease->check) {
+      b.checks.emplace_back(i, std::move(*lease));
+      continue;
+    }
+    const FramePlan& plan = p_.jobs.job(lease->job).plan;
+    const auto& [s0, s1] = plan.passes()[lease->pass];
+    b.incoming.push_back({i, size_t(plan.tiles()[lease->tile].area()), s1 - s0, std::nullopt});
+  }
+  return b;
+}
+
+void ResultIntake::decode(Batch& b) {
+  for (Incoming& in : b.incoming) try {
+      in.sums = FramePlan::check(result_sums(*b.results[in.index], in.pixels), in.pass_len);
+    } catch (const WireError&) {  // counted as rejected by merge()
+    }
+}
+
+void ResultIntake::merge(Batch& b, double now, Effects& fx) {
+  for (Incoming& in : b.incoming) {
+    if (!in.sums) {
+      ++p_.counters.results_rejected;
+      continue;
+    }
+    const v1::TaskResult& result = *b.results[in.index];
+    const std::optional<Lease> lease = wanted(result, b.acks[in.index]);
+    if (!lease || lease->check) continue;
+    const std::shared_ptr<Job> shared = p_.jobs.shared(lease->job);
+    Job& job = *shared;
+    const auto t0 = std::chrono::steady_clock::now();
+    if (job.plan.merge(lease->tile, lease->pass, *in.sums) != FramePlan::Merge::kMerged) {
+      ++p_.counters.results_rejected;
+      continue;
+    }
+    p_.counters.merge_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    p_.counters.samples_merged += in.sums->samples();
+    ++p_.counters.results_merged;
+    // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends
+    // (kept known, so a repeat of this result is recognised as a duplicate).
+    const uint64_t other = job.tile_lease[lease->tile];
+    p_.leasing.end(result.task_id(), false, now);
+    if (other) p_.leasing.end(other, false, now);
+    job.merged_by[result.worker_id()].push_back(lease->tile);
+    if (!job.sequence.empty()) ++p_.jobs.find_sequence(job.sequence)->changes;
+    if (lease->task)  // picked for verification: another worker renders it again
+      p_.verifier.issue(job, *lease, result.worker_id(), sums_digest(in.sums->sums()), now);
+    p_.workers.record_result(result.worker_id(), result.samples(), result.render_seconds(),
+                             result.busy_thread_seconds(), result.thread_seconds(), now);
+    if (!p_.lifecycle.finish_if_done(job, now, fx))
+      if (std::optional<ImageSnapshot> snap = p_.snapshots.after_merge(shared, now))
+        fx.snapshots.push_back(std::move(*snap));
+    b.acks[in.index].set_accepted(true);
+    fx.changed = true;
+  }
+}
+
+}  // namespace tessera

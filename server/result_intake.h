@@ -1,0 +1,59 @@
+// Results coming back (SubmitResults), in three steps so that the slow part runs without
+// the coordinator's lock: screen() under the lock (is each result's task known, answered by
+// its lease's holder, still wanted?), decode() outside it (zstd, and FramePlan::check's
+// per-pixel plausibility), merge() under the lock again for the whole batch (each looked at
+// again: another copy may have been merged meanwhile). The first result for a (tile, pass)
+// wins, even from an expired lease (the bits are the same); later copies are duplicates.
+// Results of verification tasks are set aside for the Verifier.
+#pragma once
+
+#include <optional>
+#include <utility>
+#include <vector>
+
+#include "server/verifier.h"
+
+namespace tessera {
+
+// A result's tile sums, for a tile of `pixels` pixels; throws WireError for any mismatch.
+std::vector<PixelSums> result_sums(const v1::TaskResult& result, size_t pixels);
+
+class ResultIntake {
+ public:
+  struct Parts {
+    JobTable& jobs;
+    LeaseTable& leases;
+    Leasing& leasing;
+    WorkerRegistry& workers;
+    Verifier& verifier;
+    JobLifecycle& lifecycle;
+    const Snapshotter& snapshots;
+    CoordinatorCounters& counters;
+  };
+  explicit ResultIntake(Parts parts) : p_(parts) {}
+
+  struct Incoming {
+    size_t index = 0;  // in the batch
+    size_t pixels = 0;
+    uint32_t pass_len = 0;
+    std::optional<CheckedSums> sums;  // decoded and plausible
+  };
+  struct Batch {
+    std::vector<const v1::TaskResult*> results;
+    std::vector<v1::ResultAck> acks;                 // one each, in order
+    std::vector<Incoming> incoming;                  // to decode and merge
+    std::vector<std::pair<size_t, Lease>> checks;    // results of verification tasks
+  };
+  Batch screen(const std::vector<const v1::TaskResult*>& results);
+  static void decode(Batch& batch);
+  void merge(Batch& batch, double now, Effects& fx);
+
+ private:
+  // The result's lease if it is known, from its holder, and still wanted (counting and
+  // acknowledging duplicates and strangers' results); nullopt otherwise.
+  std::optional<Lease> wanted(const v1::TaskResult& result, v1::ResultAck& ack);
+
+  Parts p_;
+};
+
+}  // namespace tessera

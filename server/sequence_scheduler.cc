@@ -1,0 +1,45 @@
+#include "server/sequence_scheduler.h"
+
+namespace tessera {
+
+std::shared_ptr<Job> SequenceScheduler::make_frame(const Sequence& s, size_t index) {
+  RenderSettings settings = s.settings;
+  settings.frame = s.frames[index];
+  JobMeta meta = s.meta;
+  meta.id = s.frame_job_id(index);
+  meta.name = s.meta.name + " frame " + std::to_string(s.frames[index]);
+  meta.settings = to_proto(settings);
+  auto job = std::make_shared<Job>(std::move(meta), settings);
+  job->sequence = s.id();
+  job->frame_index = uint32_t(index);
+  job->snaps.spare_film = std::make_unique<Film>(job->plan.film());
+  return job;
+}
+
+Job* SequenceScheduler::start_next(Sequence& s, double now, Effects& fx) {
+  while (s.next < s.frames.size() && s.jobs[s.next]) ++s.next;
+  if (s.next == s.frames.size() || !s.live()) return nullptr;
+  std::shared_ptr<Job> job = std::move(s.prepared);
+  if (!job || job->frame_index != s.next) job = make_frame(s, s.next);  // (none made in time: here)
+  job->submitted = job->snaps.last_checkpoint = now;
+  Job& j = jobs_.add(job);
+  s.jobs[s.next++] = std::move(job);
+  ++s.frames_started;
+  ++s.live_frames;
+  lifecycle_.start(s, now);
+  if (j.plan.done()) lifecycle_.finish_if_done(j, now, fx);  // nothing to render (cannot happen today)
+  return &j;
+}
+
+std::vector<std::pair<Sequence*, size_t>> SequenceScheduler::to_prepare() const {
+  std::vector<std::pair<Sequence*, size_t>> out;
+  for (const auto& [id, s] : jobs_.sequences())
+    if (s->live() && !s->prepared && s->next < s->frames.size()) out.emplace_back(s.get(), s->next);
+  return out;
+}
+
+void SequenceScheduler::offer(Sequence& s, size_t index, std::shared_ptr<Job> job) {
+  if (s.live() && !s.prepared && s.next == index && !s.jobs[index]) s.prepared = std::move(job);
+}
+
+}  // namespace tessera

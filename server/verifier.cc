@@ -1,0 +1,148 @@
+#include "server/verifier.h"
+
+#include <algorithm>
+#include <set>
+
+#include "core/util/log.h"
+#define XXH_INLINE_ALL  // header only: nothing to link
+#include <xxhash.h>
+
+namespace tessera {
+
+uint64_t sums_digest(const std::vector<PixelSums>& sums) {
+  XXH3_state_t st;
+  XXH3_64bits_reset(&st);
+  for (const PixelSums& p : sums) {
+    const double v[4] = {p.r, p.g, p.b, p.lum2};
+    XXH3_64bits_update(&st, v, sizeof v);
+    XXH3_64bits_update(&st, &p.n, sizeof p.n);
+  }
+  return XXH3_64bits_digest(&st);
+}
+
+void Verifier::issue(Job& job, const Lease& lease, uint64_t worker, uint64_t digest, double now) {
+  Check c;
+  c.job = job.id();
+  c.tile = lease.tile;
+  c.pass = lease.pass;
+  c.task = lease.task;
+  c.first_worker = worker;
+  c.digest = digest;
+  c.since = now;
+  checks_.add(std::move(c));
+  ++job.pending_checks;
+  ++counters_.checks_issued;
+}
+
+void Verifier::lease_checks(WorkerInfo& worker, uint32_t max, double now, v1::GetTaskResponse& out) {
+  for (auto& [id, c] : checks_.all()) {  // few, and a job waits for its checks to end
+    if (uint32_t(out.tasks_size()) >= max) break;
+    if (c.lease || c.first_worker == worker.id) continue;
+    v1::Task* task = out.add_tasks();
+    *task = *c.task;
+    task->set_task_id(leasing_.grant_check(id, worker, now));
+  }
+}
+
+std::optional<Check> Verifier::pending(uint64_t check, uint64_t task_id) const {
+  const auto& all = checks_.all();
+  auto it = all.find(check);
+  if (it == all.end() || it->second.lease != task_id) return std::nullopt;
+  return it->second;
+}
+
+Verifier::Verdict Verifier::judge(const Check& c, uint64_t digest, uint64_t checker, const Referee& referee) {
+  Verdict v;
+  v.same = digest == c.digest;
+  if (v.same) return v;
+  // Two workers differ: this process renders the task too, and whoever differs from it is
+  // quarantined (both, if all three differ). Rare, so done here, outside the lock.
+  try {
+    const uint64_t ours = sums_digest(referee(*c.task));
+    if (ours != c.digest) v.liars.push_back(c.first_worker);
+    if (ours != digest) v.liars.push_back(checker);
+    v.why = "job " + c.job + " tile " + std::to_string(c.tile) + " pass " + std::to_string(c.pass) +
+            ": its sums differ from the coordinator's render of the same task";
+  } catch (const std::exception& e) {
+    spdlog::error("check of job {} tile {}: cannot render it here: {}", c.job, c.tile, e.what());
+  }
+  return v;
+}
+
+bool Verifier::decide(uint64_t check, uint64_t task_id, uint64_t checker, const Verdict& v, double now, Effects& fx) {
+  if (!v.same) ++counters_.check_mismatches;
+  const std::optional<Check> c = pending(check, task_id);
+  if (!c) return false;  // moot meanwhile
+  drop(check, false, now);
+  if (v.same) ++counters_.checks_passed;
+  for (uint64_t w : v.liars) quarantine(w, v.why, now, fx);
+  if (Job* job = jobs_.find_job(c->job)) lifecycle_.finish_if_done(*job, now, fx);
+  fx.changed = true;
+  return std::find(v.liars.begin(), v.liars.end(), checker) == v.liars.end();
+}
+
+void Verifier::drop(uint64_t check, bool skipped, double now) {
+  Check* c = checks_.find(check);
+  if (!c) return;
+  if (c->lease) leasing_.end(c->lease, false, now);
+  if (Job* job = jobs_.find_job(c->job); job && job->pending_checks > 0) --job->pending_checks;
+  counters_.checks_skipped += skipped;
+  checks_.erase(check);
+}
+
+void Verifier::skip_stale(double now, Effects& fx) {
+  std::set<std::string> touched;
+  std::vector<uint64_t> stale;
+  for (const auto& [id, c] : checks_.all()) {
+    const size_t others = workers_.size() - (workers_.find(c.first_worker) ? 1 : 0);
+    if (c.lease == 0 && (others == 0 || now - c.since > 2 * lease_seconds_)) stale.push_back(id);
+  }
+  for (uint64_t id : stale) {
+    touched.insert(checks_.find(id)->job);
+    drop(id, true, now);
+  }
+  for (const std::string& id : touched)
+    if (Job* job = jobs_.find_job(id)) lifecycle_.finish_if_done(*job, now, fx);
+}
+
+void Verifier::quarantine(uint64_t worker, const std::string& why, double now, Effects& fx) {
+  std::string name = std::to_string(worker);
+  std::string principal;
+  if (const WorkerInfo* w = workers_.find(worker)) {
+    name = "'" + w->name + "' (" + (w->principal.empty() ? "" : "token '" + w->principal + "', ") + name + ")";
+    principal = w->principal;
+  }
+  if (!checks_.quarantine(worker, principal)) return;
+  ++counters_.workers_quarantined;
+  spdlog::warn("worker {} quarantined: {}", name, why);
+  leasing_.end_worker(worker, now);
+  // What it merged is rendered again: every tile of a live job it added sums to starts
+  // over (a tile's passes build on each other). An ended job is flagged.
+  for (const auto& [id, job] : jobs_.jobs()) {
+    auto mine = job->merged_by.find(worker);
+    if (mine == job->merged_by.end()) continue;
+    const std::set<uint32_t> tiles(mine->second.begin(), mine->second.end());
+    job->merged_by.erase(mine);
+    if (job->live()) {
+      for (uint32_t t : tiles) {
+        if (job->tile_lease[t]) leasing_.end(job->tile_lease[t], false, now);
+        job->plan.reset_tile(t);
+        ++counters_.tiles_rendered_again;
+      }
+      std::vector<uint64_t> moot;  // checks of those tiles
+      for (const auto& [check, c] : checks_.all())
+        if (c.job == id && tiles.count(c.tile)) moot.push_back(check);
+      for (uint64_t check : moot) drop(check, false, now);
+    } else if (job->state() == v1::JobStatus::DONE) {
+      job->error += std::string(job->error.empty() ? "" : "; ") + std::to_string(tiles.size()) +
+                    " tiles hold results of worker " + name +
+                    ", quarantined after the job ended (its results differed from the same tasks rendered "
+                    "elsewhere): submit the job again for an image without them";
+      fx.rows.push_back({job->id(), job->state(), job->error, job->finished_at - job->started});
+    }
+  }
+  workers_.remove(worker);
+  fx.changed = true;
+}
+
+}  // namespace tessera

@@ -1,0 +1,54 @@
+#include "server/worker_lifecycle.h"
+
+#include "server/request_error.h"
+
+namespace tessera {
+
+v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest& req, const std::string& principal,
+                                                      double now) {
+  if (req.version() != kProtocolVersion)
+    throw RequestError(RequestError::Code::kInvalidArgument,
+                       "protocol version " + std::to_string(req.version()) + " not supported");
+  if (!principal.empty() && p_.checks.quarantined(principal))
+    throw RequestError(
+        RequestError::Code::kPermissionDenied,
+        "worker token '" + principal + "' is quarantined: its results differed from the same tasks rendered elsewhere");
+  if (p_.workers.size() >= options_.max_workers) forget_silent(now);
+  if (p_.workers.size() >= options_.max_workers)
+    throw RequestError(RequestError::Code::kResourceExhausted,
+                       "the coordinator has its " + std::to_string(options_.max_workers) + " workers");
+  WorkerInfo& w = p_.workers.add(req.name(), req.threads(), now);
+  w.principal = principal;
+  v1::RegisterResponse r;
+  r.set_worker_id(w.id);
+  r.set_heartbeat_interval_ms(uint32_t(options_.heartbeat_seconds * 1000));
+  r.set_lease_ms(uint32_t(options_.lease_seconds * 1000));
+  return r;
+}
+
+std::vector<uint64_t> WorkerLifecycle::heartbeat(uint64_t worker, const std::vector<uint64_t>& tasks, double now) {
+  if (WorkerInfo* w = p_.workers.find(worker)) w->last_seen = now;
+  std::vector<uint64_t> refused;
+  for (uint64_t id : tasks)
+    if (!p_.leasing.renew(id, worker, now)) refused.push_back(id);
+  return refused;
+}
+
+void WorkerLifecycle::release(uint64_t worker, uint64_t task, const std::string& error, double now, Effects& fx) {
+  const Lease* l = p_.leases.live(task);
+  if (!l || l->worker != worker) return;
+  const std::string job_id = l->job;
+  p_.leasing.end(task, true, now);
+  ++p_.counters.leases_released;
+  fx.changed = true;
+  if (error.empty()) return;
+  if (Job* job = p_.jobs.find_job(job_id)) p_.lifecycle.task_failed(*job, worker, error, now, fx);
+}
+
+void WorkerLifecycle::unregister(uint64_t worker, double now, Effects& fx) {
+  p_.counters.leases_released += p_.leasing.end_worker(worker, now);
+  p_.workers.remove(worker);
+  fx.changed = true;
+}
+
+}  // namespace tessera

@@ -1,0 +1,44 @@
+// Workers coming and going: registration (bounded, quarantined tokens refused), heartbeats
+// (renewing leases, refusing tasks no longer theirs), a task given back (with the error
+// when the worker could not render it), and unregistering. Runs under the coordinator's lock.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "server/job_lifecycle.h"
+#include "server/options.h"
+
+namespace tessera {
+
+class WorkerLifecycle {
+ public:
+  struct Parts {
+    WorkerRegistry& workers;
+    JobTable& jobs;
+    LeaseTable& leases;
+    Leasing& leasing;
+    CheckBook& checks;
+    JobLifecycle& lifecycle;
+    CoordinatorCounters& counters;
+  };
+  WorkerLifecycle(Parts parts, const CoordinatorOptions& options) : p_(parts), options_(options) {}
+
+  // `principal`: the worker's access token name. Throws RequestError.
+  v1::RegisterResponse register_worker(const v1::RegisterRequest& request, const std::string& principal, double now);
+  // Renews the worker's leases; returns the tasks it must not go on with.
+  std::vector<uint64_t> heartbeat(uint64_t worker, const std::vector<uint64_t>& tasks, double now);
+  // The worker gives a lease back; with an error, it could not render the task.
+  void release(uint64_t worker, uint64_t task, const std::string& error, double now, Effects& fx);
+  // The worker stops: its leases go back to their jobs and it is forgotten.
+  void unregister(uint64_t worker, double now, Effects& fx);
+  // Forgets workers silent for longer than the timeout (they register again if they return).
+  void forget_silent(double now) { p_.workers.forget_silent(now, options_.worker_timeout_seconds); }
+
+ private:
+  Parts p_;
+  const CoordinatorOptions& options_;
+};
+
+}  // namespace tessera
