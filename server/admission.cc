@@ -4,6 +4,7 @@
 
 #include "core/render/frames.h"
 #include "server/request_error.h"
+#include "server/scene_store.h"
 
 namespace tessera {
 
@@ -33,7 +34,7 @@ Admission admit(const v1::SubmitJobRequest& req) {
   }
   a.pixels = a.settings.effective_window().area();
   a.samples = uint64_t(a.pixels) * uint64_t(a.settings.spp) * std::max<uint64_t>(1, a.frames.size());
-  for (const v1::SceneFile& f : req.files()) a.scene_bytes += f.path().size() + f.content().size();
+  a.scene_bytes = bundle_bytes(req.files());
   return a;
 }
 

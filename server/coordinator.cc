@@ -2,12 +2,11 @@
 
 #include <filesystem>
 
-#include "core/render/tile_renderer.h"
-#include "core/scene/scene_error.h"
 #include "core/util/log.h"
-#include "server/admission.h"
 #include "server/recovery.h"
+#include "server/job_status.h"
 #include "server/referee.h"
+#include "server/submission.h"
 
 namespace tessera {
 
@@ -49,13 +48,7 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
   Effects fx;
   {
     MutexLock lock(mu_);
-    const auto restore_scene = [this](const std::string& hash) {
-      scenes_.restore(hash);
-      const v1::SceneBundle bundle = scenes_.get(hash);
-      uint64_t bytes = 0;
-      for (const v1::SceneFile& f : bundle.files()) bytes += f.path().size() + f.content().size();
-      return bytes;
-    };
+    const auto restore_scene = [this](const std::string& hash) { return scenes_.restore(hash); };
     Recovery({*store_, jobs_, lifecycle_, counters_, restore_scene}).restore(clock_->now(), fx);
     for (const auto& [id, s] : jobs_.sequences()) fx.sequence_ends.push_back(id);  // ended, not yet recorded
   }
@@ -130,140 +123,60 @@ void Coordinator::refused() {
   ++counters_.jobs_refused;
 }
 
-std::string Coordinator::check_scene(const v1::SubmitJobRequest& req, const RenderSettings& settings) {
-  try {
-    // A bad scene is refused here, and settings that ask it for what it has not.
-    return scenes_.add(req.main_file(), req.files(),
-                       [&](const Scene& scene) { TileRenderer::check_settings(scene, settings); });
-  } catch (const WireError& e) {
-    refused();
-    throw RequestError(RequestError::Code::kInvalidArgument, e.what());
-  } catch (const SettingsError& e) {
-    refused();
-    throw RequestError(RequestError::Code::kInvalidArgument, e.what());
-  } catch (const SceneError& e) {
-    refused();
-    throw RequestError(RequestError::Code::kInvalidArgument, e.what());
-  }
-}
-
-void Coordinator::record(const JobMeta& meta, const std::vector<int>& frames) {
-  StoredJob row;
-  row.meta = meta;
-  row.frames = frames;
-  try {
-    store_->add(row);
-  } catch (const std::exception& e) {
-    spdlog::error("submit: {}", e.what());
-    scenes_.release(meta.scene_hash);
-    refused();
-    throw RequestError(RequestError::Code::kResourceExhausted,
-                       "the coordinator cannot record the job: " + without_dir(e.what(), options_.data_dir));
-  }
-}
-
 std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::string& owner) {
-  Admission a;
+  Submission sub;
   try {
-    a = admit(req);
-    std::string over;
+    const Admission a = admit(req);
+    JobMeta meta;
+    meta.owner = owner;
     {
       MutexLock lock(mu_);
-      over = over_limit(a, jobs_.load(owner), options_, owner);
+      const std::string over = over_limit(a, jobs_.load(owner), options_, owner);
+      if (!over.empty()) throw RequestError(RequestError::Code::kResourceExhausted, over);
+      meta.id = jobs_.new_id();
+      meta.seq = jobs_.next_seq();
     }
-    if (!over.empty()) throw RequestError(RequestError::Code::kResourceExhausted, over);
+    sub = prepare_submission(req, a, std::move(meta), scenes_, *store_, options_.data_dir);
   } catch (const RequestError&) {
     refused();
     throw;
   }
-  JobMeta meta;
-  meta.scene_hash = check_scene(req, a.settings);
-  meta.name = req.name().empty() ? req.main_file() : req.name();
-  meta.owner = owner;
-  meta.main_file = req.main_file();
-  meta.priority = req.priority();
-  meta.scene_bytes = a.scene_bytes;
-  meta.settings = to_proto(a.settings);
-  {
-    MutexLock lock(mu_);
-    meta.id = jobs_.new_id();
-    meta.seq = jobs_.next_seq();
-  }
-  // The films are made here, outside the lock: for a large frame, allocating and zeroing
-  // one takes long enough to stall every worker.
-  std::shared_ptr<Job> job;
-  std::unique_ptr<Sequence> sequence;
-  if (a.frames.empty()) {
-    job = std::make_shared<Job>(meta, a.settings);
-  } else {
-    sequence = std::make_unique<Sequence>(meta, a.settings, a.frames);
-    sequence->prepared = SequenceScheduler::make_frame(*sequence, 0);
-  }
-  record(meta, a.frames);  // durable before the client hears of it
-  Effects fx;
-  bool live = false;
-  {
-    MutexLock lock(mu_);
+  const std::string id = sub.job ? sub.job->id() : sub.sequence->id();
+  const bool live = locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     const double now = clock_->now();
     ++counters_.jobs_submitted;
     fx.changed = true;
-    if (sequence) {
-      sequence->submitted = now;
-      jobs_.add(std::move(sequence));
-    } else {
-      job->submitted = job->snaps.last_checkpoint = now;
-      lifecycle_.finish_if_done(jobs_.add(job), now, fx);  // nothing to render: its end is written at once
-      live = job->live();
+    if (sub.sequence) {
+      sub.sequence->submitted = now;
+      jobs_.add(std::move(sub.sequence));
+      return false;
     }
-  }
-  apply(std::move(fx));
+    sub.job->submitted = sub.job->snaps.last_checkpoint = now;
+    lifecycle_.finish_if_done(jobs_.add(sub.job), now, fx);  // nothing to render: its end is written at once
+    return sub.job->live();
+  });
   if (live) {
-    // The snapshot film is made the same way, once workers can start on the job (25 ms
-    // for 480 x 360 on a 2-core VM).
-    auto spare = std::make_unique<Film>(a.settings.effective_window());
+    // The snapshot film is made outside the lock too, once workers can start on the job
+    // (25 ms for 480 x 360 on a 2-core VM).
+    auto spare = std::make_unique<Film>(sub.job->plan.settings().effective_window());
     MutexLock lock(mu_);
-    if (job->live() && !job->snaps.spare_film) job->snaps.spare_film = std::move(spare);
+    if (sub.job->live() && !sub.job->snaps.spare_film) sub.job->snaps.spare_film = std::move(spare);
   }
-  return meta.id;
-}
-
-std::map<std::string, uint32_t> Coordinator::workers_on_frames_locked(const Sequence& s) const {
-  std::map<std::string, uint32_t> out;
-  for (const auto& j : s.jobs)
-    if (j && j->live()) out[j->id()] = leases_.workers_on(j->id());
-  return out;
-}
-
-v1::JobStatus Coordinator::status_locked(const std::string& id, bool with_tiles) const {
-  if (const Sequence* s = jobs_.find_sequence(id)) return s->status(clock_->now(), workers_on_frames_locked(*s), true);
-  const Job& job = jobs_.job(id);
-  return job.status(clock_->now(), leases_.workers_on(job.id()), with_tiles);
+  return id;
 }
 
 v1::JobStatus Coordinator::status(const std::string& id, bool with_tiles) const {
   MutexLock lock(mu_);
-  return status_locked(id, with_tiles);
+  return job_status(jobs_, leases_, id, with_tiles, clock_->now());
 }
 
 std::vector<v1::JobStatus> Coordinator::list() const {
   MutexLock lock(mu_);
-  std::vector<std::pair<uint64_t, v1::JobStatus>> out;  // stills and sequences; frames are in their sequences
-  for (const auto& [id, job] : jobs_.jobs())
-    if (job->sequence.empty()) out.emplace_back(job->meta.seq, status_locked(id, false));
-  for (const auto& [id, s] : jobs_.sequences()) out.emplace_back(s->meta.seq, status_locked(id, false));
-  std::sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-  std::vector<v1::JobStatus> statuses;
-  for (auto& [seq, st] : out) statuses.push_back(std::move(st));
-  return statuses;
+  return job_list(jobs_, leases_, clock_->now());
 }
 
 v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requester, bool any) {
-  Effects fx;
-  {
-    MutexLock lock(mu_);
-    lifecycle_.cancel(id, requester, any, clock_->now(), fx);
-  }
-  apply(std::move(fx));
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { lifecycle_.cancel(id, requester, any, clock_->now(), fx); });
   return status(id, false);
 }
 
@@ -280,19 +193,9 @@ v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::opt
   // A live job gets its latest image. An ended job's film no longer changes, and the image
   // must hold all of it: the merge (or cancel) that ended the job writes its last snapshot
   // after releasing mu_, so a client that saw the end can get here first.
-  auto current = [&] {
-    MutexLock wl(job->write_mu);
-    return job->written.image_seq > 0 && (live || job->written.image_merges == merges);
-  };
-  if (!current()) write_image(job);
+  if (!SnapshotWriter::image_current(*job, live, merges)) write_image(job);
   v1::Image img;
-  bool ok;
-  {
-    MutexLock wl(job->write_mu);
-    ok = job->written.image_seq > 0 && (live || job->written.image_merges == merges);
-    if (ok && exr) img.set_exr(sink_->exr(job->id()));
-    if (ok && png) img.set_png(sink_->png(job->id()));
-  }
+  const bool ok = writer_.read_image(*job, live, merges, exr, png, &img);
   MutexLock lock(mu_);
   if (!ok)
     throw RequestError(RequestError::Code::kFailedPrecondition,
@@ -310,14 +213,9 @@ v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& req
 }
 
 v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples) {
-  Effects fx;
-  v1::GetTaskResponse r;
-  {
-    MutexLock lock(mu_);
-    r = dispatcher_.get_task(worker_id, max_tasks, max_samples, clock_->now(), fx);
-  }
-  apply(std::move(fx));
-  return r;
+  return locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    return dispatcher_.get_task(worker_id, max_tasks, max_samples, clock_->now(), fx);
+  });
 }
 
 v1::SceneBundle Coordinator::scene(const std::string& hash) const {
@@ -340,12 +238,7 @@ std::vector<v1::ResultAck> Coordinator::submit_results(const std::vector<const v
     batch = intake_.screen(results);
   }
   ResultIntake::decode(batch);  // the slow part, outside the lock
-  Effects fx;
-  {
-    MutexLock lock(mu_);
-    intake_.merge(batch, clock_->now(), fx);
-  }
-  apply(std::move(fx));
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { intake_.merge(batch, clock_->now(), fx); });
   for (const auto& [i, lease] : batch.checks) batch.acks[i] = check_result(*results[i], lease);
   return std::move(batch.acks);
 }
@@ -367,47 +260,31 @@ v1::ResultAck Coordinator::check_result(const v1::TaskResult& result, const Leas
     return ack;
   }
   const Verifier::Verdict verdict = Verifier::judge(*check, digest, result.worker_id(), referee_);
-  Effects fx;
-  {
-    MutexLock lock(mu_);
-    ack.set_accepted(verifier_.decide(lease.check, result.task_id(), result.worker_id(), verdict, clock_->now(), fx));
-  }
-  apply(std::move(fx));
+  ack.set_accepted(locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    return verifier_.decide(lease.check, result.task_id(), result.worker_id(), verdict, clock_->now(), fx);
+  }));
   return ack;
 }
 
 void Coordinator::release(uint64_t worker_id, uint64_t task_id, const std::string& error) {
-  Effects fx;
-  {
-    MutexLock lock(mu_);
-    worker_lifecycle_.release(worker_id, task_id, error, clock_->now(), fx);
-  }
-  apply(std::move(fx));
+  locked([&](Effects& fx)
+             TESSERA_REQUIRES(mu_) { worker_lifecycle_.release(worker_id, task_id, error, clock_->now(), fx); });
 }
 
 void Coordinator::unregister(uint64_t worker_id) {
-  Effects fx;
-  {
-    MutexLock lock(mu_);
-    worker_lifecycle_.unregister(worker_id, clock_->now(), fx);
-  }
-  apply(std::move(fx));
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { worker_lifecycle_.unregister(worker_id, clock_->now(), fx); });
 }
 
 size_t Coordinator::expire_leases() {
-  Effects fx;
-  size_t expired;
-  {
-    MutexLock lock(mu_);
+  return locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     const double now = clock_->now();
     worker_lifecycle_.forget_silent(now);  // here, on the reaper's tick, not in every GetTask
-    expired = leasing_.expire(now);
+    const size_t expired = leasing_.expire(now);
     fx.changed = expired > 0;
     verifier_.skip_stale(now, fx);
     fx.prepare = sequences_.to_prepare();  // made off every worker's path
-  }
-  apply(std::move(fx));
-  return expired;
+    return expired;
+  });
 }
 
 void Coordinator::checkpoint_all() {
@@ -435,15 +312,15 @@ v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_
     // Any merge into any frame since the caller's status (whose samples it passed); the
     // condition is O(1) however long the sequence (it is looked at on every merge).
     const uint64_t since = s->changes;
-    if (s->samples_merged() != last_samples) return status_locked(id, false);
+    if (s->samples_merged() != last_samples) return job_status(jobs_, leases_, id, false, clock_->now());
     while (s->live() && s->changes == since && changed_.wait_until(mu_, deadline)) {
     }
-    return status_locked(id, false);
+    return job_status(jobs_, leases_, id, false, clock_->now());
   }
   const Job& job = jobs_.job(id);
   while (job.live() && job.plan.samples_merged() == last_samples && changed_.wait_until(mu_, deadline)) {
   }
-  return status_locked(id, false);
+  return job_status(jobs_, leases_, id, false, clock_->now());
 }
 
 bool Coordinator::wait_for_end(const std::string& id, double timeout) const {

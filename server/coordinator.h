@@ -1,7 +1,7 @@
 // The coordinator: the farm's state behind one lock, the units that act on it, and the
 // calls gRPC (grpc_services.cc) and HTTP (status_http.cc) make. It decides nothing itself:
 //
-//   submit       admission.h (request, limits) -> SceneStore (scene checked) -> JobStore (recorded)
+//   submit       admission.h (request, limits) -> submission.h (scene checked, films made, recorded)
 //   lease        dispatcher.h (which tasks, fair shares, checks first); leasing.h (grant, renew, expire)
 //   frames       sequence_scheduler.h (which frame starts next; frames made outside the lock)
 //   result       result_intake.h (screen, decode outside the lock, merge)
@@ -11,6 +11,7 @@
 //   images       snapshotter.h (progressive images and checkpoints: taken, then written)
 //   restart      recovery.h (jobs back from the JobStore and checkpoints)
 //   load         job_table.h (Load: what live work weighs, counted once)
+//   status       job_status.h (what clients see of a job, and the list)
 // A new feature gets its own unit beside these, reached from here by one forwarding call;
 // docs/architecture.md says where each step of a task's life is.
 //
@@ -19,7 +20,7 @@
 //     acting on it: both are members declared TESSERA_GUARDED_BY(mu_), reached only through
 //     this class. The units hold references to each other and to the state, and are called
 //     only with mu_ held; they take no lock themselves.
-//  2. Functions named *_locked need mu_ (TESSERA_REQUIRES); public ones take it.
+//  2. Public functions take mu_ (and say so: TESSERA_EXCLUDES where it matters).
 //  3. Nothing slow under mu_: no disk, no encoding, no waiting. An operation under mu_ puts
 //     the slow work in one Effects (effects.h), which apply() carries out after releasing it.
 //  4. Never two of the coordinator's locks at once: a job's write_mu (one image and
@@ -32,6 +33,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "core/util/mutex.h"
@@ -133,15 +135,30 @@ class Coordinator {
  private:
   // Carries out what operations under the lock left to do (rule 3). mu_ not held.
   void apply(Effects fx) TESSERA_EXCLUDES(mu_);
+  // Runs op(effects) under mu_, then apply()s the effects; returns what op returns.
+  template <typename Op>
+  auto locked(Op&& op) TESSERA_EXCLUDES(mu_) {
+    Effects fx;
+    if constexpr (std::is_void_v<std::invoke_result_t<Op&, Effects&>>) {
+      {
+        MutexLock lock(mu_);
+        op(fx);
+      }
+      apply(std::move(fx));
+    } else {
+      auto result = [&] {
+        MutexLock lock(mu_);
+        return op(fx);
+      }();
+      apply(std::move(fx));
+      return result;
+    }
+  }
   void write(ImageSnapshot& snap) TESSERA_EXCLUDES(mu_);
   void write_image(const std::shared_ptr<Job>& job) TESSERA_EXCLUDES(mu_);  // snapshot, then write
   void record_sequence_end(const std::string& id) TESSERA_EXCLUDES(mu_);
   void refused() TESSERA_EXCLUDES(mu_);  // a submit refused: counted
-  std::string check_scene(const v1::SubmitJobRequest& req, const RenderSettings& settings) TESSERA_EXCLUDES(mu_);
-  void record(const JobMeta& meta, const std::vector<int>& frames) TESSERA_EXCLUDES(mu_);
   v1::ResultAck check_result(const v1::TaskResult& result, const Lease& lease) TESSERA_EXCLUDES(mu_);
-  v1::JobStatus status_locked(const std::string& id, bool with_tiles) const TESSERA_REQUIRES(mu_);
-  std::map<std::string, uint32_t> workers_on_frames_locked(const Sequence& s) const TESSERA_REQUIRES(mu_);
 
   const CoordinatorOptions options_;
   const std::unique_ptr<Clock> clock_;

@@ -64,7 +64,13 @@ std::string SceneStore::add(const std::string& main_file, const SceneFiles& file
   return hash;
 }
 
-void SceneStore::restore(const std::string& hash) {
+uint64_t bundle_bytes(const SceneFiles& files) {
+  uint64_t n = 0;
+  for (const v1::SceneFile& f : files) n += f.path().size() + f.content().size();
+  return n;
+}
+
+uint64_t SceneStore::restore(const std::string& hash) {
   const fs::path kept = fs::path(dir_) / (hash + ".bundle");
   v1::SceneBundle b;
   std::ifstream in(kept, std::ios::binary);
@@ -72,6 +78,7 @@ void SceneStore::restore(const std::string& hash) {
   if (bundle_hash(b.main_file(), b.files()) != hash)
     throw std::runtime_error("its scene in the data folder is damaged");
   add(b.main_file(), b.files());
+  return bundle_bytes(b.files());
 }
 
 void SceneStore::remove_unused() {

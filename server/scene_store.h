@@ -13,6 +13,9 @@
 
 namespace tessera {
 
+// Paths and contents of a bundle's files: what a scene weighs against its owner's limit.
+uint64_t bundle_bytes(const SceneFiles& files);
+
 class SceneStore {
  public:
   explicit SceneStore(std::string dir);
@@ -25,9 +28,10 @@ class SceneStore {
   // and may throw to refuse it.
   std::string add(const std::string& main_file, const SceneFiles& files,
                   const std::function<void(const Scene&)>& check = nullptr);
-  // add() for a scene kept on disk by an earlier run; throws std::runtime_error (or what
-  // add() throws) when it is missing or its bytes no longer have this hash.
-  void restore(const std::string& hash);
+  // add() for a scene kept on disk by an earlier run; returns its bundle_bytes(). Throws
+  // std::runtime_error (or what add() throws) when it is missing or its bytes no longer
+  // have this hash.
+  uint64_t restore(const std::string& hash);
   // Removes from the folder everything no scene in memory needs (after restore()s).
   void remove_unused();
   // Throws std::out_of_range for an unknown hash.

@@ -148,4 +148,23 @@ SnapshotOutcome SnapshotWriter::write(ImageSnapshot& snap) const {
   return out;
 }
 
+namespace {
+bool current_locked(const Job& job, bool live, uint64_t merges) TESSERA_REQUIRES(job.write_mu) {
+  return job.written.image_seq > 0 && (live || job.written.image_merges == merges);
+}
+}  // namespace
+
+bool SnapshotWriter::image_current(Job& job, bool live, uint64_t merges) {
+  MutexLock wl(job.write_mu);
+  return current_locked(job, live, merges);
+}
+
+bool SnapshotWriter::read_image(Job& job, bool live, uint64_t merges, bool exr, bool png, v1::Image* out) const {
+  MutexLock wl(job.write_mu);  // no write replaces the files meanwhile
+  if (!current_locked(job, live, merges)) return false;
+  if (exr) out->set_exr(sink_.exr(job.id()));
+  if (png) out->set_png(sink_.png(job.id()));
+  return true;
+}
+
 }  // namespace tessera

@@ -77,6 +77,11 @@ class SnapshotWriter {
   // (a DONE one's once its whole film is in a checkpoint). Never throws: failures are in
   // the outcome (and logged), and retried by the next snapshot.
   SnapshotOutcome write(ImageSnapshot& snap) const;
+  // Whether the image on disk is the one to fetch: any image of a live job, the whole film
+  // (version `merges`) of an ended one.
+  static bool image_current(Job& job, bool live, uint64_t merges);
+  // Reads it (as EXR and/or PNG) into `out` if it is current; false if not.
+  bool read_image(Job& job, bool live, uint64_t merges, bool exr, bool png, v1::Image* out) const;
 
  private:
   ImageSink& sink_;

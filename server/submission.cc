@@ -1,0 +1,51 @@
+#include "server/submission.h"
+
+#include "core/render/tile_renderer.h"
+#include "core/scene/scene_error.h"
+#include "core/util/log.h"
+#include "server/request_error.h"
+#include "server/sequence_scheduler.h"
+
+namespace tessera {
+
+Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& a, JobMeta meta, SceneStore& scenes,
+                              JobStore& store, const std::string& data_dir) {
+  const auto refuse = [](const char* what) { return RequestError(RequestError::Code::kInvalidArgument, what); };
+  try {
+    // A bad scene is refused here, and settings that ask it for what it has not.
+    meta.scene_hash = scenes.add(req.main_file(), req.files(),
+                                 [&](const Scene& scene) { TileRenderer::check_settings(scene, a.settings); });
+  } catch (const WireError& e) {
+    throw refuse(e.what());
+  } catch (const SettingsError& e) {
+    throw refuse(e.what());
+  } catch (const SceneError& e) {
+    throw refuse(e.what());
+  }
+  meta.name = req.name().empty() ? req.main_file() : req.name();
+  meta.main_file = req.main_file();
+  meta.priority = req.priority();
+  meta.scene_bytes = a.scene_bytes;
+  meta.settings = to_proto(a.settings);
+  Submission sub;
+  if (a.frames.empty()) {
+    sub.job = std::make_shared<Job>(meta, a.settings);
+  } else {
+    sub.sequence = std::make_unique<Sequence>(meta, a.settings, a.frames);
+    sub.sequence->prepared = SequenceScheduler::make_frame(*sub.sequence, 0);
+  }
+  StoredJob row;
+  row.meta = std::move(meta);
+  row.frames = a.frames;
+  try {
+    store.add(row);
+  } catch (const std::exception& e) {
+    spdlog::error("submit: {}", e.what());
+    scenes.release(row.meta.scene_hash);
+    throw RequestError(RequestError::Code::kResourceExhausted,
+                       "the coordinator cannot record the job: " + without_dir(e.what(), data_dir));
+  }
+  return sub;
+}
+
+}  // namespace tessera
