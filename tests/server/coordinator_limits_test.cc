@@ -1,0 +1,189 @@
+// The coordinator's bounds: batched leases, fair shares, live jobs, pixels, scene bytes and
+// samples per client, registered workers, results only from the lease holder.
+#include "tests/server/coordinator_fixture.h"
+
+namespace tessera {
+namespace {
+
+TEST_F(CoordinatorTest, BatchedLeasesFollowTheCountAndSampleLimits) {
+  const RenderSettings s = job_settings();  // 48x36 in 16-pixel tiles: 9 tiles, passes of 4, 4, 2
+  const std::string id = c->submit(request(s));
+  const uint64_t w = worker();
+  EXPECT_EQ(c->get_task(w, 3).tasks_size(), 3);
+  // 16 x 16 pixels x 4 samples = 1024 samples a task: a budget of 1500 takes two.
+  EXPECT_EQ(c->get_task(w, 100, 1500).tasks_size(), 2);
+  const v1::GetTaskResponse rest = c->get_task(w, 100);
+  EXPECT_EQ(rest.tasks_size(), 4);  // every tile's first pass is out: nothing else is ready
+  EXPECT_EQ(c->heartbeat(w, std::vector<uint64_t>{rest.tasks(0).task_id(), 999999}),
+            std::vector<uint64_t>{999999});  // renewed, and refused the unknown one
+  for (const v1::Task& t : rest.tasks()) ASSERT_TRUE(c->submit_result(render_task(t, w)).accepted());
+  for (v1::GetTaskResponse r = c->get_task(w, 100); r.tasks_size() > 0; r = c->get_task(w, 100))
+    for (const v1::Task& t : r.tasks()) ASSERT_TRUE(c->submit_result(render_task(t, w)).accepted());
+  EXPECT_NE(c->status(id, false).state(), v1::JobStatus::DONE);  // the first five were never returned
+  t += 10;                                                       // their leases expire and the tiles go out again
+  drain(w);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
+// A small frame has fewer tasks than eager workers would queue: each gets its share by
+// threads, so the first to ask does not take everything while the others idle.
+TEST_F(CoordinatorTest, WorkersGetTheirShareOfTheReadyWorkByThreads) {
+  c->submit(request(job_settings()));  // 9 tiles: 9 tasks ready at first
+  auto join = [&](uint32_t threads) {
+    v1::RegisterRequest r;
+    r.set_version(kProtocolVersion);
+    r.set_name("w");
+    r.set_threads(threads);
+    return c->register_worker(r).worker_id();
+  };
+  const uint64_t big = join(2), small = join(1);
+  const v1::GetTaskResponse a = c->get_task(big, 100);
+  EXPECT_EQ(a.tasks_size(), 6);                      // 2 of 3 threads: 6 of 9
+  EXPECT_EQ(c->get_task(big, 100).tasks_size(), 0);  // it holds its share already
+  EXPECT_EQ(c->get_task(small, 100).tasks_size(), 3);
+  // As results come back, the work there is shrinks, and so do the shares; a worker with
+  // nothing always gets at least one task.
+  for (const v1::Task& task : a.tasks()) ASSERT_TRUE(c->submit_result(render_task(task, big)).accepted());
+  EXPECT_EQ(c->get_task(big, 100).tasks_size(), 6);
+  // A claimed thread count is bounded: it only weighs shares.
+  const uint64_t liar = join(4000000000u);
+  for (const WorkerInfo& info : c->workers()) {
+    if (info.id == liar) {
+      EXPECT_EQ(info.threads, WorkerRegistry::kMaxThreads);
+    }
+  }
+}
+
+// Per-client and memory limits refuse a job before anything large is allocated, with a
+// message that names the limit; ending jobs makes room again.
+TEST_F(CoordinatorTest, LiveJobsPerClientAndLivePixelsAreBounded) {
+  CoordinatorOptions o = options();
+  o.max_jobs_per_client = 2;
+  o.max_live_pixels = 4 * 48 * 36;  // four of job_settings()'s frames
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  const std::string a1 = c->submit(request(job_settings()), "alice");
+  c->submit(request(job_settings()), "alice");
+  try {
+    c->submit(request(job_settings()), "alice");
+    ADD_FAILURE() << "a third live job for alice";
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kResourceExhausted);
+    EXPECT_NE(std::string(e.what()).find("--max-jobs-per-client"), std::string::npos) << e.what();
+  }
+  c->submit(request(job_settings()), "bob");  // others are not held back by alice
+  c->cancel(a1, "alice", false);
+  c->submit(request(job_settings()), "alice");  // a live job ended: room again
+  RenderSettings big = job_settings();
+  big.camera.width = 96;  // two frames' worth: 4 live frames already
+  try {
+    c->submit(request(big), "carol");
+    ADD_FAILURE() << "past the live pixel limit";
+  } catch (const RequestError& e) {
+    EXPECT_NE(std::string(e.what()).find("--max-live-pixels"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(c->list().size(), 4u);  // nothing was kept of the refused ones
+}
+
+TEST_F(CoordinatorTest, SceneBytesAndQueuedSamplesPerClientAreBounded) {
+  const v1::SubmitJobRequest one = request(job_settings());
+  uint64_t bytes = 0;
+  for (const v1::SceneFile& f : one.files()) bytes += f.path().size() + f.content().size();
+  CoordinatorOptions o = options();
+  o.max_scene_bytes_per_client = 2 * bytes;  // two jobs' scenes
+  o.max_queued_samples_per_client = 3 * 48 * 36 * 10;
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  c->submit(one, "alice");
+  c->submit(one, "alice");
+  try {
+    c->submit(one, "alice");
+    ADD_FAILURE() << "a third scene's bytes for alice";
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kResourceExhausted);
+    EXPECT_NE(std::string(e.what()).find("--max-scene-bytes-per-client"), std::string::npos) << e.what();
+  }
+  RenderSettings more = job_settings();
+  more.spp = 40;  // four frames' samples
+  try {
+    c->submit(request(more), "bob");
+    ADD_FAILURE() << "past bob's queued samples";
+  } catch (const RequestError& e) {
+    EXPECT_NE(std::string(e.what()).find("--max-queued-samples-per-client"), std::string::npos) << e.what();
+  }
+  c->submit(one, "bob");  // within both
+  EXPECT_EQ(c->list().size(), 3u);
+}
+
+// A worker that stops says so: its leases go back at once and it no longer counts.
+TEST_F(CoordinatorTest, UnregisteredWorkersGiveTheirLeasesBackAndLeave) {
+  c->submit(request(job_settings()));
+  const uint64_t leaving = worker(), staying = worker();
+  const v1::GetTaskResponse held = c->get_task(leaving, 3);
+  ASSERT_EQ(held.tasks_size(), 3);
+  c->unregister(leaving);
+  EXPECT_EQ(c->workers().size(), 1u);
+  EXPECT_EQ(c->counters().leases_released, 3u);
+  EXPECT_THROW(c->get_task(leaving), RequestError);
+  // The three tiles are ready again at once, for the worker that stays (no expiry wait).
+  std::set<uint32_t> again;
+  const v1::GetTaskResponse reissued = c->get_task(staying, 100);
+  for (const v1::Task& t : reissued.tasks()) again.insert(t.tile().x() * 1000 + t.tile().y());
+  for (const v1::Task& t : held.tasks()) EXPECT_TRUE(again.count(t.tile().x() * 1000 + t.tile().y()));
+}
+
+// Issue 10, row 7: results for tasks leased to another worker, or from a worker id that
+// never registered, were merged (the honest ones then dropped as duplicates). A result
+// counts only from the worker that holds, or held, the task's lease.
+TEST_F(CoordinatorTest, ResultsCountOnlyFromTheLeaseHolder) {
+  const RenderSettings s = job_settings();
+  const std::string id = c->submit(request(s));
+  const uint64_t honest = worker(), rogue = worker();
+  const v1::GetTaskResponse held = c->get_task(honest, 4);
+  ASSERT_EQ(held.tasks_size(), 4);
+  for (const v1::Task& task : held.tasks()) {
+    v1::TaskResult forged = render_task(task, rogue);  // a registered worker, not the holder
+    EXPECT_FALSE(c->submit_result(forged).accepted());
+    forged.set_worker_id(987654);  // never registered
+    EXPECT_FALSE(c->submit_result(forged).accepted());
+  }
+  EXPECT_EQ(c->counters().results_rejected, 8u);
+  EXPECT_EQ(c->counters().results_merged, 0u);
+  // The holder's results still merge, also after its lease expired.
+  t += 10;
+  c->expire_leases();
+  for (const v1::Task& task : held.tasks()) EXPECT_TRUE(c->submit_result(render_task(task, honest)).accepted());
+  drain(honest);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
+// Issue 10, row 5: a Register loop made 20,000 workers that were never removed. Workers
+// are capped, silent ones are forgotten, and leaving frees a place.
+TEST_F(CoordinatorTest, RegisteredWorkersAreBounded) {
+  CoordinatorOptions o = options();
+  o.max_workers = 3;
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  const uint64_t first = worker();
+  worker();
+  worker();
+  try {
+    worker();
+    ADD_FAILURE();
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kResourceExhausted);
+    EXPECT_NE(std::string(e.what()).find("3 workers"), std::string::npos) << e.what();
+  }
+  c->unregister(first);
+  EXPECT_NO_THROW(worker());
+  t += o.worker_timeout_seconds + 1;  // all silent: forgotten when the next one registers
+  EXPECT_NO_THROW(worker());
+  EXPECT_EQ(c->workers().size(), 1u);
+}
+
+// Issue 10, row 3: with the data folder full or read-only, the write error went back to
+// the worker as a failed result (so it resent), nothing was logged, and a DONE job could
+// not be fetched. Now results are accepted, the job says why its image is missing without
+// naming server paths, a fetch gets a clear error, and the write is retried.
+
+}  // namespace
+}  // namespace tessera

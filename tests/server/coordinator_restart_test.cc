@@ -1,0 +1,150 @@
+// The coordinator made again on the same data folder, as after kill -9.
+#include "tests/server/coordinator_fixture.h"
+
+namespace tessera {
+namespace {
+
+// ---- crash safety: a coordinator made again on the same data folder ----------------------
+
+TEST_F(CoordinatorTest, ARestartedCoordinatorGoesOnWithEveryJobInItsState) {
+  const RenderSettings s = job_settings();
+  const uint64_t w = worker();
+  const std::string done = c->submit(request(s));
+  drain(w);
+  const std::string cancelled = c->submit(request(s));
+  ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  c->cancel(cancelled);
+  const std::string live = c->submit(request(s));
+  const std::string waiting = c->submit(request(s), "someone");
+  for (int k = 0; k < 5; ++k) ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  t += 6;  // past checkpoint_seconds: the next merge writes a checkpoint
+  ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  const uint64_t at_checkpoint = c->status(live, false).samples_done();
+  for (int k = 0; k < 2; ++k)  // merged after the checkpoint: lost with the coordinator
+    ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  const v1::Task in_flight = c->get_task(w).tasks(0);
+  const std::vector<v1::JobStatus> before = c->list();
+
+  restart(c, options(), &t);
+  const std::vector<v1::JobStatus> after = c->list();
+  ASSERT_EQ(after.size(), before.size());
+  for (size_t i = 0; i < after.size(); ++i) {
+    EXPECT_EQ(after[i].id(), before[i].id());
+    EXPECT_EQ(after[i].name(), before[i].name());
+    EXPECT_EQ(after[i].owner(), before[i].owner());
+    EXPECT_EQ(after[i].state(), before[i].state()) << i;
+  }
+  EXPECT_EQ(c->status(done, false).state(), v1::JobStatus::DONE);
+  EXPECT_EQ(c->status(done, false).samples_done(), c->status(done, false).samples_total());
+  EXPECT_EQ(c->status(cancelled, false).state(), v1::JobStatus::CANCELLED);
+  EXPECT_EQ(c->status(live, false).state(), v1::JobStatus::RUNNING);
+  EXPECT_EQ(c->status(live, false).samples_done(), at_checkpoint);
+  EXPECT_EQ(c->status(waiting, false).state(), v1::JobStatus::QUEUED);
+  EXPECT_EQ(c->counters().jobs_restored, before.size());
+  // The old run's worker must register again, and its task of the old run counts no more.
+  EXPECT_THROW(c->get_task(w), RequestError);
+  EXPECT_FALSE(c->submit_result(render_task(in_flight, w)).accepted());
+  const uint64_t w2 = worker();
+  drain(w2);
+  for (const std::string& id : {done, live, waiting}) {
+    EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE) << id;
+    EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr")))) << id;
+    EXPECT_GT(c->image(id, true, false).exr().size(), 0u);
+  }
+  EXPECT_GT(c->image(cancelled, true, false).exr().size(), 0u);  // what was rendered stays
+  restart(c, options(), &t);                                     // and once more, with everything ended
+  for (const std::string& id : {done, live, waiting}) EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_THROW(c->cancel(waiting, "another", false), RequestError);  // owners are kept
+  const std::string next = c->submit(request(s));
+  EXPECT_EQ(c->list().back().id(), next);  // after the restored ones
+}
+
+// A crash after a job's last merge but before its end is on disk (its final checkpoint
+// not yet renamed into place; here no checkpoint ever is): the restarted coordinator still
+// has the scene and renders what the checkpoints lack. (The scene used to be deleted at
+// the end in memory, and such a job came back FAILED, its scene lost.) The same for a
+// sequence.
+TEST_F(CoordinatorTest, ACrashBeforeTheEndIsRecordedKeepsTheScene) {
+  const RenderSettings s = job_settings();
+  CoordinatorOptions o = options();
+  o.before_checkpoint_rename = [] { throw std::runtime_error("simulated crash before the rename"); };
+  restart(c, o, &t);
+  const std::string id = c->submit(request(s));
+  v1::SubmitJobRequest seq = request(s);
+  seq.add_frames(1);
+  seq.add_frames(2);
+  const std::string sequence = c->submit(seq);
+  drain(worker());
+  ASSERT_EQ(c->status(sequence, false).state(), v1::JobStatus::DONE);
+  ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);  // in memory; not on disk
+  restart(c, options(), &t);
+  for (const std::string& j : {id, sequence}) EXPECT_NE(c->status(j, false).state(), v1::JobStatus::FAILED) << j;
+  drain(worker());
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_EQ(c->status(sequence, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+  // Recorded now: the scene goes, and another restart finds both ended.
+  restart(c, options(), &t);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_EQ(c->status(sequence, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(fs::is_empty(dir + "/scenes"));
+}
+
+TEST_F(CoordinatorTest, ADamagedCheckpointRendersTheJobAgainAndAMissingSceneFailsIt) {
+  const RenderSettings s = job_settings();
+  const uint64_t w = worker();
+  const std::string a = c->submit(request(s));
+  RenderSettings other = s;
+  other.seed = 9;  // a second job, with no checkpoint yet
+  const std::string b = c->submit(request(other));
+  ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  t += 6;
+  ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  const std::string cp = dir + "/jobs/" + a + "/checkpoint";
+  ASSERT_TRUE(fs::exists(cp));
+  {  // one byte flipped in the film
+    std::string bytes = read_file_bytes(cp);
+    bytes[bytes.size() / 2] ^= 0x10;
+    write_file_atomic(cp, bytes);
+  }
+  restart(c, options(), &t);
+  EXPECT_EQ(c->status(a, false).samples_done(), 0u);  // rendered again, from the start
+  const uint64_t w2 = worker();
+  drain(w2);
+  EXPECT_EQ(c->status(a, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(a, "image.exr"))));
+  EXPECT_TRUE(same_film_as_exr(local(other), read_exr(image_path(b, "image.exr"))));
+
+  // A live job whose scene is gone from the data folder fails, saying why, without a path.
+  const std::string c1 = c->submit(request(s));
+  for (const auto& e : fs::directory_iterator(fs::path(dir) / "scenes")) fs::remove_all(e.path());
+  restart(c, options(), &t);
+  const v1::JobStatus st = c->status(c1, false);
+  EXPECT_EQ(st.state(), v1::JobStatus::FAILED);
+  EXPECT_NE(st.error().find("scene is missing"), std::string::npos) << st.error();
+  EXPECT_EQ(st.error().find(dir), std::string::npos) << st.error();
+  restart(c, options(), &t);
+  EXPECT_EQ(c->status(c1, false).state(), v1::JobStatus::FAILED);  // recorded
+}
+
+TEST_F(CoordinatorTest, ScenesOfEndedOrUnrecordedJobsAreNotKeptAcrossARestart) {
+  const std::string a = c->submit(request(job_settings()));
+  c->cancel(a);
+  fs::create_directories(fs::path(dir) / "scenes" / "0123.staging-7");  // a crash mid-submit
+  std::ofstream(fs::path(dir) / "scenes" / "feedfeedfeedfeedfeedfeedfeedfeed.bundle") << "x";
+  restart(c, options(), &t);
+  EXPECT_TRUE(fs::is_empty(fs::path(dir) / "scenes"));
+}
+
+TEST_F(CoordinatorTest, AStoppedCoordinatorSavesEveryResultItMerged) {
+  const std::string a = c->submit(request(job_settings()));
+  const uint64_t w = worker();
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  const uint64_t merged = c->status(a, false).samples_done();
+  c->checkpoint_all();  // what main does on SIGTERM
+  restart(c, options(), &t);
+  EXPECT_EQ(c->status(a, false).samples_done(), merged);
+}
+
+}  // namespace
+}  // namespace tessera

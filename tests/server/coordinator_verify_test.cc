@@ -1,0 +1,149 @@
+// Verify by replay through the whole coordinator: liars caught, honest workers not.
+#include "tests/server/coordinator_fixture.h"
+
+namespace tessera {
+namespace {
+
+// ---- verify by replay -------------------------------------------------------------------
+
+// Plausible sums that are not the render's: what a subtly broken or dishonest worker sends.
+v1::TaskResult lie(v1::TaskResult r) {
+  const size_t n = r.raw_size() / kBytesPerPixel;
+  std::vector<PixelSums> sums = decode_sums(r.sums_zstd(), n);
+  for (PixelSums& p : sums) p = PixelSums{p.r * 0.8, p.g * 0.8, p.b * 0.8, p.lum2 * 0.64, p.n};
+  r.set_sums_zstd(encode_sums(sums));
+  return r;
+}
+
+class VerifyTest : public CoordinatorTest {
+ protected:
+  void SetUp() override {}
+  void start(double fraction) {
+    CoordinatorOptions o = options();
+    o.verify_fraction = fraction;
+    c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  }
+  uint64_t worker_as(const std::string& principal) {
+    v1::RegisterRequest r;
+    r.set_version(kProtocolVersion);
+    r.set_name(principal);
+    return c->register_worker(r, principal).worker_id();
+  }
+  // One task for worker w, rendered (and falsified if `lying`) and returned; false if it
+  // got none or is refused.
+  bool step(uint64_t w, bool lying) {
+    v1::GetTaskResponse r;
+    try {
+      r = c->get_task(w, 1);
+    } catch (const RequestError&) {
+      return false;
+    }
+    if (r.tasks_size() == 0) return false;
+    const v1::TaskResult res = render_task(r.tasks(0), w);
+    c->submit_result(lying ? lie(res) : res);
+    return true;
+  }
+  // Both workers take turns until every job has ended; time moves on when neither has
+  // work (expiring leases and checks nobody else can take).
+  void run(uint64_t honest, uint64_t liar, bool lying) {
+    for (int guard = 0; guard < 20000; ++guard) {
+      bool any_live = false;
+      for (const v1::JobStatus& j : c->list())
+        any_live |= j.state() == v1::JobStatus::QUEUED || j.state() == v1::JobStatus::RUNNING;
+      if (!any_live) return;
+      const bool a = step(honest, false), b = step(liar, lying);
+      if (!a && !b) {
+        t += 11;
+        c->expire_leases();
+      }
+    }
+    FAIL() << "jobs did not end";
+  }
+};
+
+TEST_F(VerifyTest, HonestWorkersPassEveryCheckAndTheImageIsUnchanged) {
+  start(1.0);
+  const RenderSettings s = job_settings();
+  const std::string id = c->submit(request(s));
+  const double t0 = t;
+  run(worker(), worker(), false);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  // Checks count in the workers' shares: the last ones are taken at once, and the job
+  // never waits for a check to be skipped (time never had to move on).
+  EXPECT_EQ(t, t0);
+  const CoordinatorCounters k = c->counters();
+  EXPECT_GT(k.checks_issued, 10u);
+  EXPECT_EQ(k.checks_passed, k.checks_issued);
+  EXPECT_EQ(k.checks_skipped, 0u);
+  EXPECT_EQ(k.check_mismatches, 0u);
+  EXPECT_EQ(k.workers_quarantined, 0u);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
+TEST_F(VerifyTest, ALyingWorkerIsQuarantinedAndWhatItMergedIsRenderedAgain) {
+  start(0.5);  // 27 tasks a job: the chance that no task of the liar's is checked is 2^-27
+  const RenderSettings s = job_settings();
+  RenderSettings other = s;
+  other.seed = 17;
+  const uint64_t honest = worker_as("honest"), liar = worker_as("liar");
+  const std::string before = c->submit(request(other));
+  run(honest, liar, false);  // the liar is honest at first: a job with its results ends DONE
+  ASSERT_EQ(c->status(before, false).state(), v1::JobStatus::DONE);
+  EXPECT_EQ(c->counters().workers_quarantined, 0u);
+  const std::string id = c->submit(request(s));
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(step(liar, true));  // lies merged before anyone checks
+  run(honest, liar, true);
+  const CoordinatorCounters k = c->counters();
+  EXPECT_EQ(k.workers_quarantined, 1u);
+  EXPECT_GE(k.check_mismatches, 1u);
+  EXPECT_GE(k.tiles_rendered_again, 3u);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  // Every lie it got merged was rendered again: the image is the honest one, bit for bit.
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+  // It gets no more work, and its token may not register again; the honest one goes on.
+  EXPECT_THROW(c->get_task(liar), RequestError);
+  EXPECT_THROW(worker_as("liar"), RequestError);
+  EXPECT_NO_THROW(c->get_task(honest));
+  // The job that ended before it was caught is flagged, not silently trusted.
+  const std::string flag = c->status(before, false).error();
+  EXPECT_NE(flag.find("quarantined"), std::string::npos) << flag;
+  EXPECT_EQ(c->status(id, false).error(), "");
+}
+
+TEST_F(VerifyTest, AWorkerLyingOnlyAsTheCheckerIsTheOneQuarantined) {
+  start(1.0);
+  const RenderSettings s = job_settings();
+  const uint64_t honest = worker_as("honest"), liar = worker_as("liar");
+  const std::string id = c->submit(request(s));
+  // The honest worker renders first; the liar gets only checks of its results, and lies.
+  ASSERT_TRUE(step(honest, false));
+  ASSERT_EQ(c->counters().checks_issued, 1u);
+  // The liar's first task is the check of the honest worker's result (checks go first).
+  const v1::GetTaskResponse r = c->get_task(liar, 1);
+  ASSERT_EQ(r.tasks_size(), 1);
+  c->submit_result(lie(render_task(r.tasks(0), liar)));
+  EXPECT_EQ(c->counters().workers_quarantined, 1u);
+  EXPECT_THROW(c->get_task(liar), RequestError);
+  EXPECT_NO_THROW(c->get_task(honest));
+  run(honest, honest, false);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
+TEST_F(VerifyTest, NoChecksWithOneWorkerOrAZeroFraction) {
+  start(0);
+  const std::string id = c->submit(request(job_settings()));
+  run(worker(), worker(), false);
+  EXPECT_EQ(c->counters().checks_issued, 0u);
+  start(1.0);
+  const std::string alone = c->submit(request(job_settings()));
+  const uint64_t w = worker();
+  drain(w);
+  EXPECT_EQ(c->status(alone, false).state(), v1::JobStatus::DONE);
+  EXPECT_EQ(c->counters().checks_issued, 0u);
+  (void)id;
+}
+
+// The autoscaling signal: what is left, in tasks, samples and core-seconds.
+
+}  // namespace
+}  // namespace tessera
