@@ -1,0 +1,117 @@
+// What the glTF tests share: documents built in memory (Doc), written to a temporary
+// folder and loaded (the Gltf fixture).
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "core/scene/animation.h"
+#include "core/scene/gltf/gltf_accessors.h"
+#include "core/scene/gltf/gltf_document.h"
+#include "core/scene/gltf/gltf_loader.h"
+#include "core/scene/gltf/gltf_prechecks.h"
+#include "core/scene/load.h"
+#include "core/scene/scene_error.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+
+namespace fs = std::filesystem;
+using json = nlohmann::json;
+
+inline std::string base64(const std::string& in) {
+  static const char* t = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+  std::string out;
+  int val = 0, bits = -6;
+  for (unsigned char c : in) {
+    val = (val << 8) + c;
+    bits += 8;
+    while (bits >= 0) {
+      out.push_back(t[(val >> bits) & 0x3F]);
+      bits -= 6;
+    }
+  }
+  if (bits > -6) out.push_back(t[((val << 8) >> (bits + 8)) & 0x3F]);
+  while (out.size() % 4) out.push_back('=');
+  return out;
+}
+
+template <typename T>
+inline void put(std::string& blob, std::initializer_list<T> values) {
+  for (T v : values) blob.append(reinterpret_cast<const char*>(&v), sizeof v);
+}
+
+// One triangle (positions, normals, uvs, ushort indices) in a buffer, a node, a camera.
+struct Doc {
+  json j;
+  std::string blob;
+  Doc() {
+    put<float>(blob, {0, 0, 0, 1, 0, 0, 0, 1, 0});     // positions, 36 bytes at 0
+    put<float>(blob, {0, 0, 1, 0, 0, 1, 0, 0, 1});     // normals, 36 bytes at 36
+    put<uint8_t>(blob, {0, 0, 255, 0, 0, 255, 0, 0});  // normalized ubyte uvs, 6 bytes (+2 pad) at 72
+    put<uint16_t>(blob, {0, 1, 2, 0});                 // indices, 6 bytes (+2 pad) at 80
+    j = {{"asset", {{"version", "2.0"}}},
+         {"scene", 0},
+         {"scenes", {{{"nodes", {0, 1}}}}},
+         {"nodes", {{{"mesh", 0}}, {{"camera", 0}, {"translation", {0.25, 0.25, 3}}}}},
+         {"cameras", {{{"type", "perspective"}, {"perspective", {{"yfov", 0.5}, {"znear", 0.1}}}}}},
+         {"meshes",
+          {{{"primitives",
+             {{{"attributes", {{"POSITION", 0}, {"NORMAL", 1}, {"TEXCOORD_0", 2}}},
+               {"indices", 3},
+               {"material", 0}}}}}}},
+         {"materials", {{{"pbrMetallicRoughness", {{"baseColorFactor", {0.5, 0.6, 0.7, 1}}, {"metallicFactor", 0}}}}}},
+         {"accessors",
+          {{{"bufferView", 0}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"}},
+           {{"bufferView", 1}, {"componentType", 5126}, {"count", 3}, {"type", "VEC3"}},
+           {{"bufferView", 2}, {"componentType", 5121}, {"normalized", true}, {"count", 3}, {"type", "VEC2"}},
+           {{"bufferView", 3}, {"componentType", 5123}, {"count", 3}, {"type", "SCALAR"}}}},
+         {"bufferViews",
+          {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 36}},
+           {{"buffer", 0}, {"byteOffset", 36}, {"byteLength", 36}},
+           {{"buffer", 0}, {"byteOffset", 72}, {"byteLength", 6}},
+           {{"buffer", 0}, {"byteOffset", 80}, {"byteLength", 6}}}},
+         {"buffers", {{{"byteLength", 88}}}}};
+  }
+  void embed() { j["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64(blob); }
+};
+
+class Gltf : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_gltf_" + std::to_string(::getpid()));
+  void SetUp() override { fs::create_directories(dir); }
+  void TearDown() override { fs::remove_all(dir); }
+  std::string write(const std::string& name, const std::string& content) {
+    const fs::path p = dir / name;
+    std::ofstream(p, std::ios::binary) << content;
+    return p.string();
+  }
+  std::string write(Doc d, bool embed = true) {
+    if (embed) d.embed();
+    return write("scene.gltf", d.j.dump());
+  }
+  Scene load(Doc d) { return load_gltf_file(write(std::move(d))); }
+  void expect_error(const std::string& path, const std::string& reason) {
+    try {
+      load_scene(path);
+      ADD_FAILURE() << "loaded without error; expected: " << reason;
+    } catch (const SceneError& e) {
+      const std::string what = e.what();
+      EXPECT_NE(what.find(fs::path(path).filename().string()), std::string::npos) << what;
+      EXPECT_NE(what.find(reason), std::string::npos) << what;
+      EXPECT_EQ(what.find('\n'), std::string::npos) << "one line: " << what;
+    }
+  }
+  void expect_error(Doc d, const std::string& reason) { expect_error(write(std::move(d)), reason); }
+};
+
+// Issue 10, row 1: coordinates the ray tracer cannot handle are refused on load, whether
+// in the vertices or through a node's transform.
+
+}  // namespace tessera

@@ -1,0 +1,174 @@
+// The glTF loader refuses hostile and damaged files with a clear error, never a crash or a
+// huge allocation.
+#include "tests/core/gltf_fixture.h"
+
+namespace tessera {
+namespace {
+
+// ---- refused, with a clear message ---------------------------------------------------
+
+TEST_F(Gltf, RequiredUnsupportedExtensionIsRefusedByName) {
+  Doc d;
+  d.j["extensionsUsed"] = {"KHR_draco_mesh_compression"};
+  d.j["extensionsRequired"] = {"KHR_draco_mesh_compression"};
+  expect_error(d, "required extension 'KHR_draco_mesh_compression' is not supported");
+}
+
+TEST_F(Gltf, NonTriangleModeIsRefused) {
+  Doc d;
+  d.j["meshes"][0]["primitives"][0]["mode"] = 1;
+  expect_error(d, "mode LINES is not supported (only TRIANGLES)");
+}
+
+TEST_F(Gltf, OrthographicCameraIsRefused) {
+  Doc d;
+  d.j["cameras"][0] = {{"type", "orthographic"},
+                       {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.1}, {"zfar", 10}}}};
+  expect_error(d, "orthographic cameras are not supported");
+}
+
+TEST_F(Gltf, AccessorOffsetPastTheBufferView) {
+  Doc d;
+  d.j["accessors"][0]["byteOffset"] = 8;
+  expect_error(d, "runs past the end of bufferView 0");
+}
+
+TEST_F(Gltf, BufferViewPastTheBuffer) {
+  Doc d;
+  d.j["bufferViews"][1]["byteLength"] = 4000;
+  expect_error(d, "runs past the end of its buffer");
+}
+
+TEST_F(Gltf, IndexOutOfRange) {
+  Doc d;
+  std::memcpy(d.blob.data() + 82, "\x09\x00", 2);  // second index = 9 with 3 vertices
+  expect_error(d, "index 9 out of range (3 vertices)");
+}
+
+TEST_F(Gltf, BufferShorterThanDeclared) {
+  Doc d;
+  d.j["buffers"][0]["uri"] = "short.bin";
+  write("short.bin", d.blob.substr(0, 40));
+  expect_error(write(d, false), "short.bin");
+}
+
+// Found by fuzz_gltf: a number too large for a double (1e999) made the JSON parser throw
+// an exception the loader did not expect, and the process ended.
+TEST_F(Gltf, NumberBeyondADoubleIsAnError) {
+  expect_error(write("scene.gltf", R"({"asset":{"version":"2.0"},"scenes":[{"nodes":[]}],"x":1e999})"), "JSON");
+}
+
+// Tolerant where viewers and the course's renderer are: data nothing uses is never read, so
+// a malformed unused accessor is a warning and a broken unused image nothing at all; the
+// same data in use is still the one-line error.
+TEST_F(Gltf, MalformedDataNothingUsesIsToleratedAndInUseRefused) {
+  Doc d;
+  d.j["accessors"].push_back({{"count", "many"}, {"type", "VEC3"}});  // no componentType, count not a number
+  const size_t bad = d.j["accessors"].size() - 1;
+  d.j["images"] = {{{"uri", "data:image/png;base64,bm90IGFuIGltYWdl"}}};  // "not an image"
+  d.j["textures"] = {{{"source", 0}}};
+  const Scene s = load(d);
+  EXPECT_EQ(s.meshes.size(), 1u);
+  bool warned = false;
+  for (const std::string& w : s.warnings)
+    warned |= w.find("accessors[" + std::to_string(bad) + "] has no valid componentType; nothing uses it: ignored") !=
+              std::string::npos;
+  EXPECT_TRUE(warned);
+  // The same image used by a material: refused, naming it.
+  Doc used = d;
+  used.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+  expect_error(used, "images[0]: not a readable PNG or JPEG");
+  // The same accessor used as indices: refused (by tinygltf's parser).
+  Doc idx = d;
+  idx.j["meshes"][0]["primitives"][0]["indices"] = bad;
+  std::string error;
+  try {
+    load(idx);
+  } catch (const SceneError& e) {
+    error = e.what();
+  }
+  EXPECT_FALSE(error.empty()) << "a malformed accessor in use loaded";
+  // In a .glb too: the JSON chunk is rewritten around the unused accessor.
+  Doc glb = d;
+  glb.j["buffers"][0].erase("uri");
+  std::string json = glb.j.dump();
+  while (json.size() % 4) json += ' ';
+  std::string bin = glb.blob;
+  while (bin.size() % 4) bin += '\0';
+  auto u32 = [](uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
+  const std::string file = "glTF" + u32(2) + u32(uint32_t(12 + 8 + json.size() + 8 + bin.size())) +
+                           u32(uint32_t(json.size())) + "JSON" + json + u32(uint32_t(bin.size())) + "BIN" +
+                           std::string(1, '\0') + bin;
+  const Scene g = load_gltf_file(write("scene.glb", file));
+  EXPECT_EQ(g.meshes.size(), 1u);
+}
+
+TEST_F(Gltf, BrokenBase64) {
+  Doc d;
+  d.embed();
+  std::string uri = d.j["buffers"][0]["uri"];
+  uri.replace(uri.size() - 20, 10, "!!**??%%^^");
+  d.j["buffers"][0]["uri"] = uri;
+  try {
+    load_gltf_file(write("scene.gltf", d.j.dump()));
+    ADD_FAILURE() << "broken base64 loaded";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("scene.gltf"), std::string::npos) << e.what();
+  }
+}
+
+TEST_F(Gltf, TenGigabyteByteLengthIsRefusedBeforeAllocating) {
+  Doc d;
+  d.j["buffers"][0]["byteLength"] = 10737418240.0;
+  expect_error(d, "byteLength 10737418240 is over the 1 GiB limit");
+}
+
+TEST_F(Gltf, CyclicNodeGraph) {
+  Doc d;
+  d.j["nodes"][0]["children"] = {2};
+  d.j["nodes"].push_back({{"children", {0}}});
+  expect_error(d, "the node graph has a cycle");
+}
+
+TEST_F(Gltf, SelfParentNode) {
+  Doc d;
+  d.j["nodes"][0]["children"] = {0};
+  expect_error(d, "nodes[0]: the node graph has a cycle");
+}
+
+TEST_F(Gltf, UriOutsideTheScenesFolderIsRefused) {
+  Doc d;
+  write("secret.bin", d.blob);
+  fs::create_directories(dir / "sub");
+  d.j["buffers"][0]["uri"] = "../secret.bin";
+  const std::string path = (dir / "sub" / "scene.gltf").string();
+  std::ofstream(path) << d.j.dump();
+  expect_error(path, "outside the scene's folder");
+}
+
+TEST_F(Gltf, GarbageAndTruncatedFiles) {
+  expect_error(write("junk.gltf", std::string(100, '\x07')), "JSON");
+  Doc d;
+  d.embed();
+  const std::string full = d.j.dump();
+  expect_error(write("cut.gltf", full.substr(0, full.size() / 2)), "JSON");
+  std::string glb = "glTF";
+  put<uint32_t>(glb, {2, 1000000, 50, 0x4E4F534Au});
+  expect_error(write("cut.glb", glb), "GLB header");
+}
+
+TEST_F(Gltf, NaNPositionIsRefused) {
+  Doc d;
+  const float nan = std::nanf("");
+  std::memcpy(d.blob.data() + 4, &nan, 4);
+  expect_error(d, "NaN or infinite");
+}
+
+TEST_F(Gltf, AccessorWithTheWrongShape) {
+  Doc d;
+  d.j["accessors"][0]["type"] = "VEC2";
+  expect_error(d, "has 2 components, expected 3");
+}
+
+}  // namespace
+}  // namespace tessera

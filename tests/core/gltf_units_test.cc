@@ -1,0 +1,99 @@
+// The loader's units (core/scene/gltf/) on their own.
+#include "tests/core/gltf_fixture.h"
+
+namespace tessera {
+namespace {
+
+// The pre-checks on JSON alone: what tinygltf would refuse is set aside only when nothing
+// uses it, and anything a mesh (attributes, indices, morph targets), an animation or a
+// skin names counts as used.
+TEST(GltfPrechecks, OnlyMalformedAccessorsNothingUsesAreSetAside) {
+  const json bad = {{"count", 3}, {"type", "VEC3"}};  // no componentType
+  json j = {{"asset", {{"version", "2.0"}}},
+            {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}, {"targets", {{{"POSITION", 1}}}}}}}}}},
+            {"animations", {{{"samplers", {{{"input", 2}, {"output", 2}}}}}}},
+            {"skins", {{{"inverseBindMatrices", 3}}}},
+            {"accessors", {bad, bad, bad, bad, bad}}};
+  std::vector<std::string> warnings;
+  EXPECT_TRUE(precheck_gltf_json(j, "f.gltf", warnings));
+  ASSERT_EQ(warnings.size(), 1u);
+  EXPECT_EQ(warnings[0], "f.gltf: accessors[4] has no valid componentType; nothing uses it: ignored");
+  for (size_t i = 0; i < 4; ++i) EXPECT_EQ(j["accessors"][i], bad) << i;
+  EXPECT_EQ(j["accessors"][4], json({{"componentType", 5126}, {"count", 0}, {"type", "SCALAR"}}));
+  // Nothing left to set aside: unchanged.
+  warnings.clear();
+  EXPECT_FALSE(precheck_gltf_json(j, "f.gltf", warnings));
+  EXPECT_TRUE(warnings.empty());
+}
+
+TEST(GltfPrechecks, RefusalsNameTheElement) {
+  auto refusal = [](json j) -> std::string {
+    std::vector<std::string> warnings;
+    try {
+      precheck_gltf_json(j, "f.gltf", warnings);
+    } catch (const SceneError& e) {
+      return e.what();
+    }
+    return "";
+  };
+  EXPECT_NE(refusal(json::array()).find("JSON: top level is not an object"), std::string::npos);
+  EXPECT_NE(refusal({{"extensionsRequired", {"KHR_draco_mesh_compression"}}})
+                .find("extensionsRequired: required extension 'KHR_draco_mesh_compression' is not supported"),
+            std::string::npos);
+  EXPECT_NE(refusal({{"buffers", {{{"byteLength", 8}}, {{"uri", "a.bin"}}}}}).find("buffers[1]: missing byteLength"),
+            std::string::npos);
+  EXPECT_EQ(refusal({{"extensionsRequired", {"KHR_materials_volume"}}, {"buffers", {{{"byteLength", 1 << 30}}}}}), "");
+}
+
+class GltfDocumentTest : public Gltf {};
+
+// The JSON of a .glb is its chunk 0, found by the file's first bytes whatever its name;
+// external files are those outside it, percent-decoded, each once.
+TEST_F(GltfDocumentTest, GlbChunkAndExternalFiles) {
+  const json j = {{"buffers", {{{"uri", "a%20b.bin"}}, {{"uri", "data:application/octet-stream;base64,AAAA"}}}},
+                  {"images", {{{"uri", "tex/c.png"}}, {{"uri", "a b.bin"}}, {{"bufferView", 0}}}}};
+  std::string text = j.dump();
+  while (text.size() % 4) text += ' ';
+  std::string glb = "glTF";
+  put<uint32_t>(glb, {2, uint32_t(20 + text.size()), uint32_t(text.size()), 0x4E4F534Au});
+  glb += text;
+  const GltfDocument doc = read_gltf_document(write("named.gltf", glb));
+  EXPECT_TRUE(doc.binary);
+  EXPECT_EQ(doc.json, j);
+  EXPECT_EQ(gltf_document_external_files(doc.json), (std::vector<std::string>{"a b.bin", "tex/c.png"}));
+  EXPECT_EQ(gltf_external_files(write("text.gltf", j.dump())), (std::vector<std::string>{"a b.bin", "tex/c.png"}));
+}
+
+// Accessors read from an in-memory model: interleaved (byteStride), normalized signed
+// shorts clamped to -1 as the specification says, and a stride too small refused.
+TEST(GltfAccessors, StrideAndNormalizedIntegers) {
+  GltfContext ctx("m.gltf");
+  std::string bytes;
+  put<int16_t>(bytes, {-32768, 32767, 7, 0, 0, -32767, 9, 0});  // two VEC2 shorts, 8-byte stride
+  ctx.model.buffers.resize(1);
+  ctx.model.buffers[0].data.assign(bytes.begin(), bytes.end());
+  ctx.model.bufferViews.resize(1);
+  ctx.model.bufferViews[0].buffer = 0;
+  ctx.model.bufferViews[0].byteLength = bytes.size();
+  ctx.model.bufferViews[0].byteStride = 8;
+  tinygltf::Accessor a;
+  a.bufferView = 0;
+  a.componentType = TINYGLTF_COMPONENT_TYPE_SHORT;
+  a.normalized = true;
+  a.count = 2;
+  a.type = TINYGLTF_TYPE_VEC2;
+  ctx.model.accessors.push_back(a);
+  EXPECT_EQ(read_accessor_floats(ctx, 0, 2, "test"), (std::vector<float>{-1, 1, 0, -1}));
+  ctx.model.bufferViews[0].byteStride = 2;
+  try {
+    read_accessor_floats(ctx, 0, 2, "test");
+    ADD_FAILURE() << "a stride smaller than an element was read";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("accessors[0] (test): byteStride 2 is smaller than an element"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace tessera
