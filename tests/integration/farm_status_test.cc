@@ -1,0 +1,83 @@
+// The coordinator's status endpoint through a real farm: JSON, metrics, preview, page.
+#include "tests/integration/farm_fixture.h"
+
+namespace tessera {
+namespace {
+
+TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
+  start_coordinator();
+  start_worker();
+  const CommandResult r = submit_wait(kScene, "-r 64 48 -s 8 --tile 16", (dir / "x.png").string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json s = get_json("/api/status");
+  ASSERT_NE(s, nullptr);
+  ASSERT_EQ(s["jobs"].size(), 1u);
+  const std::string id = s["jobs"][0]["id"];
+  EXPECT_EQ(s["jobs"][0]["state"], "DONE");
+  EXPECT_EQ(s["workers"].size(), 1u);
+  EXPECT_GT(s["workers"][0]["samples_per_second"].get<double>(), 0);
+  // The worker reported its render threads' time: busy part of it, never more than all.
+  const double busy = s["workers"][0]["busy_thread_seconds"], total = s["workers"][0]["thread_seconds"];
+  EXPECT_GT(busy, 0);
+  EXPECT_LE(busy, total);
+  EXPECT_GT(s["workers"][0]["utilization"].get<double>(), 0);
+  EXPECT_LE(s["workers"][0]["utilization"].get<double>(), 1);
+  const nlohmann::json j = get_json("/api/jobs/" + id);
+  EXPECT_EQ(j["tiles"].size(), size_t(4 * 3));  // 64x48 in 16-pixel tiles
+  EXPECT_EQ(get_json("/api/jobs/no-such-job"), nullptr);
+  httplib::Client cli("127.0.0.1", http_port);
+  // Prometheus text: comments, or `name{labels} value` with a numeric value.
+  const std::string metrics = cli.Get("/metrics")->body;
+  std::istringstream lines(metrics);
+  int samples = 0;
+  for (std::string line; std::getline(lines, line);) {
+    if (line.empty() || line[0] == '#') continue;
+    std::smatch m;
+    ASSERT_TRUE(std::regex_match(line, m, std::regex(R"(([a-z_]+)(\{[a-z_]+="[a-z0-9]+"\})? (-?[0-9.e+-]+))"))) << line;
+    std::stod(m[3]);
+    ++samples;
+  }
+  EXPECT_GT(samples, 10);
+  EXPECT_NE(metrics.find("tessera_jobs{state=\"done\"} 1"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_worker_utilization{worker=\""), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_workers_utilization "), std::string::npos) << metrics;
+  // Autoscaling signals (issue 11): nothing left once the job is done.
+  EXPECT_NE(metrics.find("tessera_queue_tasks{state=\"ready\"} 0"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_remaining_core_seconds 0"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_thread_samples_per_second "), std::string::npos) << metrics;
+  // Probes for Kubernetes.
+  EXPECT_EQ(cli.Get("/healthz")->status, 200);
+  const auto ready = cli.Get("/readyz");
+  EXPECT_EQ(ready->status, 200);
+  EXPECT_EQ(ready->body, "ready\n");
+  const auto png = cli.Get(("/jobs/" + id + "/preview.png").c_str());
+  ASSERT_TRUE(png);
+  EXPECT_EQ(png->status, 200);
+  EXPECT_EQ(png->body.substr(1, 3), "PNG");
+  const auto page = cli.Get("/");
+  EXPECT_NE(page->body.find("<canvas"), std::string::npos);
+  // Issue 10, row 8: names went into innerHTML as they were, with no policy. Now the page
+  // has no inline script, a policy that forbids it, and every value written as markup is
+  // escaped.
+  const std::string csp = page->get_header_value("Content-Security-Policy");
+  EXPECT_NE(csp.find("default-src 'none'"), std::string::npos) << csp;
+  EXPECT_NE(csp.find("script-src 'self';"), std::string::npos) << csp;  // no 'unsafe-inline'
+  EXPECT_EQ(csp.find("unsafe"), std::string::npos) << csp;
+  EXPECT_EQ(page->body.find("<script>"), std::string::npos);
+  EXPECT_EQ(png->get_header_value("X-Content-Type-Options"), "nosniff");
+  const auto js = cli.Get("/app.js");
+  ASSERT_TRUE(js);
+  EXPECT_EQ(js->status, 200);
+  std::istringstream script(js->body);
+  int markup_lines = 0;
+  for (std::string line; std::getline(script, line);) {
+    if (line.find("innerHTML") == std::string::npos && line.find("<td>") == std::string::npos) continue;
+    ++markup_lines;
+    for (size_t at = line.find("${"); at != std::string::npos; at = line.find("${", at + 2))
+      EXPECT_EQ(line.compare(at + 2, 4, "esc("), 0) << "unescaped value in markup: " << line.substr(at, 40);
+  }
+  EXPECT_GE(markup_lines, 4);
+}
+
+}  // namespace
+}  // namespace tessera
