@@ -6,21 +6,16 @@
 #include <filesystem>
 #include <functional>
 #include <set>
-#include <thread>
 
 #include "client/progress.h"
 #include "core/io/files.h"
 #include "core/render/frames.h"
+#include "rpc.h"
 #include "scene_bundle.h"
 #include "wire.h"
 
 namespace tessera {
 namespace {
-
-// The coordinator could not be reached (down, restarting, a network blip): worth retrying.
-bool unreachable(const grpc::Status& st) {
-  return st.error_code() == grpc::StatusCode::UNAVAILABLE || st.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
-}
 
 void check(const grpc::Status& st, const FarmContext& c) {
   if (st.ok()) return;
@@ -28,33 +23,22 @@ void check(const grpc::Status& st, const FarmContext& c) {
   throw FarmError(st.error_message());
 }
 
-// The wait before trying a coordinator that went away again: 0.25 s, doubling up to 5 s,
-// said on stderr unless quiet. `then` names what comes next ("reconnecting").
-class Backoff {
- public:
-  void reset() { seconds_ = 0.25; }
-  void wait(const FarmContext& c, const grpc::Status& st, const char* lead, const char* then) {
-    if (!c.quiet && !c.json)
-      std::fprintf(c.err, "%stessera: lost coordinator %s (%s); %s in %.1f s\n", lead, c.coordinator.c_str(),
-                   st.error_message().c_str(), then, seconds_);
-    std::this_thread::sleep_for(std::chrono::duration<double>(seconds_));
-    seconds_ = std::min(5.0, seconds_ * 2);
-  }
-
- private:
-  double seconds_ = 0.25;
-};
+// Waits before trying a coordinator that went away again, said on stderr unless quiet.
+// `then` names what comes next ("reconnecting").
+void wait_to_retry(Backoff& backoff, const FarmContext& c, const grpc::Status& st, const char* lead, const char* then) {
+  if (!c.quiet && !c.json)
+    std::fprintf(c.err, "%stessera: lost coordinator %s (%s); %s in %.1f s\n", lead, c.coordinator.c_str(),
+                 st.error_message().c_str(), then, backoff.seconds());
+  backoff.wait();
+}
 
 std::unique_ptr<grpc::ClientContext> deadline(const FarmContext& c, double seconds = 30) {
-  auto ctx = std::make_unique<grpc::ClientContext>();
-  authorize(*ctx, c.access);
-  ctx->set_deadline(std::chrono::system_clock::now() + std::chrono::milliseconds(int64_t(seconds * 1000)));
-  return ctx;
+  return call_context(c.access, seconds);
 }
 
 const char* state_name(v1::JobStatus::State s) { return v1::JobStatus::State_Name(s).c_str(); }
 
-bool ended(const v1::JobStatus& s) { return s.state() != v1::JobStatus::QUEUED && s.state() != v1::JobStatus::RUNNING; }
+bool ended(const v1::JobStatus& s) { return !job_live(s.state()); }
 
 std::string describe(const v1::JobStatus& s) {
   char buf[512];
@@ -132,7 +116,7 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
   ProgressBar bar(c.quiet || c.json);
   v1::JobStatus s, last;
   bool any = false;
-  Backoff backoff;
+  Backoff backoff(Backoff::kClientFirstSeconds);
   auto lost_since = std::chrono::steady_clock::now();
   while (true) {
     grpc::ClientContext ctx;
@@ -172,17 +156,14 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
       check(st, c);  // says why, naming the coordinator
       throw FarmError("lost coordinator " + c.coordinator + " while watching job " + id);
     }
-    backoff.wait(c, st, "\n", "reconnecting");  // (a new line: the progress bar is on this one)
+    wait_to_retry(backoff, c, st, "\n", "reconnecting");  // (a new line: the progress bar is on this one)
   }
 }
 
 }  // namespace
 
 std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::string& address, const Access& access) {
-  grpc::ChannelArguments args;
-  args.SetMaxReceiveMessageSize(kMaxMessageBytes);
-  args.SetMaxSendMessageSize(kMaxMessageBytes);
-  return v1::Tessera::NewStub(grpc::CreateCustomChannel(address, channel_credentials(access), args));
+  return v1::Tessera::NewStub(coordinator_channel(address, access));
 }
 
 int list_jobs(v1::Tessera::StubInterface& stub, const FarmContext& c) {
@@ -232,7 +213,7 @@ void fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::op
   // A lost connection (the coordinator restarting just as the job ended) is retried with
   // back-off for up to c.reconnect_seconds, as watching is: the image is on its disk.
   v1::Image img;
-  Backoff backoff;
+  Backoff backoff(Backoff::kClientFirstSeconds);
   for (const auto since = std::chrono::steady_clock::now();;) {
     const grpc::Status st = stub.FetchImage(deadline(c, 120).get(), req, &img);
     if (!unreachable(st) ||
@@ -240,7 +221,7 @@ void fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::op
       check(st, c);
       break;
     }
-    backoff.wait(c, st, "", "fetching again");
+    wait_to_retry(backoff, c, st, "", "fetching again");
   }
   for (const std::string& out : outputs) {
     const std::string path = frame ? frame_path(out, *frame) : out;

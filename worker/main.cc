@@ -1,10 +1,11 @@
 // tessera-worker: renders tiles for a coordinator.
 #include <signal.h>
+#include <spdlog/spdlog.h>
 
 #include <CLI/CLI.hpp>
 #include <atomic>
-#include <cstdio>
 
+#include "core/util/log.h"
 #include "worker/worker.h"
 
 namespace {
@@ -39,10 +40,11 @@ int main(int argc, char** argv) {
                  "file holding a worker access token (else $TESSERA_TOKEN_FILE, or the token in $TESSERA_TOKEN)");
   app.add_option("--tls-ca", tls_ca, "PEM certificate authority: connect over TLS (else $TESSERA_TLS_CA)");
   CLI11_PARSE(app, argc, argv);
+  tessera::init_logging("tessera-worker", opt.verbose);
   try {
     opt.access = tessera::load_access(token_file, tls_ca);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "tessera-worker: error: %s\n", e.what());
+    spdlog::error("{}", e.what());
     return 2;
   }
   struct sigaction sa {};
@@ -52,10 +54,10 @@ int main(int argc, char** argv) {
   try {
     tessera::Worker worker(opt);
     const bool ok = worker.run(g_stop);
-    std::fprintf(stderr, "tessera-worker: stopped after %llu tasks\n", (unsigned long long)worker.tasks_done());
+    spdlog::info("stopped after {} tasks", worker.tasks_done());
     if (!ok) return 1;
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "tessera-worker: error: %s\n", e.what());
+    spdlog::error("{}", e.what());
     return 1;
   }
   return 0;

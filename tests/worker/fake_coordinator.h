@@ -1,0 +1,171 @@
+// A coordinator in the test's process, behind the worker's stub interface: it hands out the
+// tasks a test queues, answers the other calls as the test says, and records every call.
+#pragma once
+
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <set>
+#include <vector>
+
+#include "tessera.grpc.pb.h"
+
+namespace tessera::testing {
+
+class FakeCoordinator : public v1::TesseraWorker::StubInterface {
+ public:
+  using Clock = std::chrono::steady_clock;
+
+  // What the test sets (under mu, or before the worker starts) ...
+  std::deque<grpc::Status> register_failures;  // answers before Register succeeds
+  uint32_t heartbeat_interval_ms = 50;
+  std::deque<std::vector<v1::Task>> task_batches;  // GetTask: the front batch, up to max_tasks
+  std::deque<grpc::Status> get_task_failures;      // answers before GetTask works again
+  std::map<std::string, v1::SceneBundle> scenes;   // FetchScene, by hash
+  std::set<uint64_t> refuse;                       // Heartbeat refuses these tasks
+  grpc::Status unregister_status;
+  bool hold_submissions = false;  // SubmitResults waits until this is false again
+
+  // ... and what the worker did.
+  std::vector<v1::RegisterRequest> registrations;
+  std::vector<Clock::time_point> register_times;  // of every Register call, failed or not
+  std::vector<v1::GetTaskRequest> task_requests;
+  std::vector<uint64_t> handed_out;  // task ids, in order
+  int scene_fetches = 0;
+  std::vector<v1::HeartbeatRequest> heartbeats;
+  std::vector<v1::TaskResult> results;
+  int submissions = 0;  // SubmitResults calls begun
+  std::vector<v1::ReleaseRequest> releases;
+  int unregisters = 0;
+
+  std::mutex mu;
+
+  // Waits up to 10 s for `done` (called under mu); whether it came true.
+  bool wait_until(const std::function<bool()>& done) {
+    std::unique_lock<std::mutex> lock(mu);
+    return changed_.wait_for(lock, std::chrono::seconds(10), done);
+  }
+  // Changes the test's settings under the lock and wakes waiting calls.
+  void set(const std::function<void()>& change) {
+    std::lock_guard<std::mutex> lock(mu);
+    change();
+    changed_.notify_all();
+  }
+  const v1::TaskResult* result_for(uint64_t task_id) {
+    for (const v1::TaskResult& r : results)
+      if (r.task_id() == task_id) return &r;
+    return nullptr;
+  }
+
+  grpc::Status Register(grpc::ClientContext*, const v1::RegisterRequest& req, v1::RegisterResponse* resp) override {
+    std::lock_guard<std::mutex> lock(mu);
+    register_times.push_back(Clock::now());
+    changed_.notify_all();
+    if (!register_failures.empty()) {
+      const grpc::Status st = register_failures.front();
+      register_failures.pop_front();
+      return st;
+    }
+    registrations.push_back(req);
+    resp->set_worker_id(registrations.size());  // a new id each time
+    resp->set_heartbeat_interval_ms(heartbeat_interval_ms);
+    resp->set_lease_ms(10 * heartbeat_interval_ms);
+    return grpc::Status::OK;
+  }
+
+  grpc::Status GetTask(grpc::ClientContext*, const v1::GetTaskRequest& req, v1::GetTaskResponse* resp) override {
+    std::unique_lock<std::mutex> lock(mu);
+    task_requests.push_back(req);
+    changed_.notify_all();
+    if (!get_task_failures.empty()) {
+      const grpc::Status st = get_task_failures.front();
+      get_task_failures.pop_front();
+      return st;
+    }
+    if (task_batches.empty()) {  // no work: a short long-poll
+      changed_.wait_for(lock, std::chrono::milliseconds(10));
+      return grpc::Status::OK;
+    }
+    std::vector<v1::Task>& batch = task_batches.front();
+    const size_t n = std::min<size_t>(batch.size(), std::max(1u, req.max_tasks()));
+    for (size_t i = 0; i < n; ++i) {
+      *resp->add_tasks() = batch[i];
+      handed_out.push_back(batch[i].task_id());
+    }
+    batch.erase(batch.begin(), batch.begin() + ptrdiff_t(n));
+    if (batch.empty()) task_batches.pop_front();
+    return grpc::Status::OK;
+  }
+
+  grpc::Status FetchScene(grpc::ClientContext*, const v1::FetchSceneRequest& req, v1::SceneBundle* resp) override {
+    std::lock_guard<std::mutex> lock(mu);
+    ++scene_fetches;
+    const auto it = scenes.find(req.scene_hash());
+    if (it == scenes.end()) return grpc::Status(grpc::StatusCode::NOT_FOUND, "no scene " + req.scene_hash());
+    *resp = it->second;
+    return grpc::Status::OK;
+  }
+
+  grpc::Status Heartbeat(grpc::ClientContext*, const v1::HeartbeatRequest& req, v1::HeartbeatResponse* resp) override {
+    std::lock_guard<std::mutex> lock(mu);
+    heartbeats.push_back(req);
+    for (uint64_t id : req.task_ids())
+      if (refuse.count(id)) resp->add_refused(id);
+    changed_.notify_all();
+    return grpc::Status::OK;
+  }
+
+  grpc::Status SubmitResults(grpc::ClientContext*, const v1::ResultBatch& req, v1::ResultAcks* resp) override {
+    std::unique_lock<std::mutex> lock(mu);
+    ++submissions;
+    changed_.notify_all();
+    changed_.wait(lock, [this] { return !hold_submissions; });
+    for (const v1::TaskResult& r : req.results()) {
+      results.push_back(r);
+      resp->add_acks()->set_accepted(true);
+    }
+    changed_.notify_all();
+    return grpc::Status::OK;
+  }
+
+  grpc::Status ReleaseTask(grpc::ClientContext*, const v1::ReleaseRequest& req, v1::ReleaseResponse*) override {
+    std::lock_guard<std::mutex> lock(mu);
+    releases.push_back(req);
+    changed_.notify_all();
+    return grpc::Status::OK;
+  }
+
+  grpc::Status Unregister(grpc::ClientContext*, const v1::UnregisterRequest&, v1::UnregisterResponse*) override {
+    std::lock_guard<std::mutex> lock(mu);
+    ++unregisters;
+    changed_.notify_all();
+    return unregister_status;
+  }
+
+ private:
+  std::condition_variable changed_;
+
+  // The worker makes only blocking calls.
+#define TESSERA_NO_ASYNC(Rpc, Request, Response)                                                                    \
+  grpc::ClientAsyncResponseReaderInterface<v1::Response>* Async##Rpc##Raw(grpc::ClientContext*, const v1::Request&, \
+                                                                          grpc::CompletionQueue*) override {        \
+    return nullptr;                                                                                                 \
+  }                                                                                                                 \
+  grpc::ClientAsyncResponseReaderInterface<v1::Response>* PrepareAsync##Rpc##Raw(                                   \
+      grpc::ClientContext*, const v1::Request&, grpc::CompletionQueue*) override {                                  \
+    return nullptr;                                                                                                 \
+  }
+  TESSERA_NO_ASYNC(Register, RegisterRequest, RegisterResponse)
+  TESSERA_NO_ASYNC(GetTask, GetTaskRequest, GetTaskResponse)
+  TESSERA_NO_ASYNC(FetchScene, FetchSceneRequest, SceneBundle)
+  TESSERA_NO_ASYNC(Heartbeat, HeartbeatRequest, HeartbeatResponse)
+  TESSERA_NO_ASYNC(SubmitResults, ResultBatch, ResultAcks)
+  TESSERA_NO_ASYNC(ReleaseTask, ReleaseRequest, ReleaseResponse)
+  TESSERA_NO_ASYNC(Unregister, UnregisterRequest, UnregisterResponse)
+#undef TESSERA_NO_ASYNC
+};
+
+}  // namespace tessera::testing

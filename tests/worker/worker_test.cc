@@ -1,0 +1,369 @@
+// The worker against a fake coordinator in this process (fake_coordinator.h): what it asks
+// for, what it renders, what it sends and gives back, without gRPC or another process.
+// Heartbeats come every 50 ms and back-off starts at 0.1 s, so no test takes long.
+#include "worker/worker.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <filesystem>
+#include <thread>
+
+#include "core/scene/load.h"
+#include "scene_bundle.h"
+#include "tests/core/test_paths.h"
+#include "tests/worker/fake_coordinator.h"
+#include "wire.h"
+#include "worker/lookahead.h"
+#include "worker/scene_cache.h"
+#include "worker/task_queue.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::FakeCoordinator;
+using worker::Held;
+using worker::LeaseRequest;
+using worker::Lookahead;
+using worker::QueueLoad;
+using worker::TaskQueue;
+
+const std::string kScene = testing::source_path("scenes/cornell-spheres.dae");
+
+v1::SceneBundle bundle_of(const std::string& path, std::string* hash) {
+  v1::SceneBundle b;
+  std::string main;
+  pack_scene(path, &main, b.mutable_files());
+  b.set_main_file(main);
+  *hash = bundle_hash(b.main_file(), b.files());
+  return b;
+}
+
+class WorkerTest : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_worker_" + std::to_string(::getpid()) + "_" +
+                                              ::testing::UnitTest::GetInstance()->current_test_info()->name());
+  std::shared_ptr<FakeCoordinator> fake = std::make_shared<FakeCoordinator>();
+  std::atomic<bool> stop{false};
+  std::thread thread;
+  bool returned = false;  // run()'s answer
+  uint64_t tasks_done = 0;
+  std::string hash;
+  RenderSettings settings;
+
+  void SetUp() override {
+    const v1::SceneBundle bundle = bundle_of(kScene, &hash);
+    fake->scenes[hash] = bundle;
+    settings.camera.width = 32;
+    settings.camera.height = 24;
+    settings.max_depth = 4;
+    settings.seed = 7;
+  }
+  void TearDown() override {
+    if (thread.joinable()) finish();
+    fs::remove_all(dir);
+  }
+  WorkerOptions options(int threads = 2) const {
+    WorkerOptions o;
+    o.threads = threads;
+    o.cache_dir = (dir / "cache").string();
+    o.name = "test-worker";
+    return o;
+  }
+  void start(const WorkerOptions& o) {
+    thread = std::thread([this, o] {
+      Worker w(o, fake);
+      returned = w.run(stop);
+      tasks_done = w.tasks_done();
+    });
+  }
+  // Stops the worker as SIGTERM does and waits for it; run()'s answer.
+  bool finish() {
+    stop = true;
+    thread.join();
+    return returned;
+  }
+  v1::Task task(uint64_t id, Rect tile, uint32_t s0, uint32_t s1, const std::string& active = "") const {
+    v1::Task t;
+    t.set_task_id(id);
+    t.set_job_id("job");
+    t.set_scene_hash(hash);
+    *t.mutable_settings() = to_proto(settings);
+    *t.mutable_tile() = to_proto(tile);
+    t.set_sample_begin(s0);
+    t.set_sample_end(s1);
+    t.set_active(active);
+    return t;
+  }
+  // A task that takes seconds at least: it is still rendering when a test acts on it.
+  v1::Task huge_task(uint64_t id) const { return task(id, {0, 0, 32, 24}, 0, 1 << 14); }
+};
+
+bool same_bits(const PixelSums& a, const PixelSums& b) {
+  return a.r == b.r && a.g == b.g && a.b == b.b && a.lum2 == b.lum2 && a.n == b.n;
+}
+
+TEST_F(WorkerTest, RegistersAndRendersTasksBitForBitAsTileRendererDoes) {
+  std::string mask(16 * 16, '\1');
+  for (size_t i = 0; i < mask.size(); i += 3) mask[i] = 0;  // some pixels converged
+  const std::vector<v1::Task> tasks = {task(11, {0, 0, 16, 8}, 0, 4), task(12, {16, 8, 16, 16}, 4, 12, mask)};
+  fake->task_batches.push_back(tasks);
+  start(options());
+  ASSERT_TRUE(fake->wait_until([&] { return fake->results.size() == 2; }));
+  EXPECT_TRUE(finish());
+  EXPECT_EQ(tasks_done, 2u);
+
+  ASSERT_EQ(fake->registrations.size(), 1u);
+  EXPECT_EQ(fake->registrations[0].version(), kProtocolVersion);
+  EXPECT_EQ(fake->registrations[0].name(), "test-worker");
+  EXPECT_EQ(fake->registrations[0].threads(), 2u);
+  EXPECT_EQ(fake->scene_fetches, 1);  // one scene for both tasks
+  EXPECT_EQ(fake->unregisters, 1);
+  EXPECT_TRUE(fake->releases.empty());
+
+  // The sums are those of the local renderer, bit for bit.
+  const Scene scene = load_scene(kScene);
+  const TileRenderer renderer(scene, settings);
+  for (const v1::Task& t : tasks) {
+    const v1::TaskResult* r = fake->result_for(t.task_id());
+    ASSERT_NE(r, nullptr) << t.task_id();
+    const Rect rect = from_proto(t.tile());
+    TileStats stats;
+    const std::vector<PixelSums> local =
+        renderer.render(rect, t.sample_begin(), t.sample_end(),
+                        t.active().empty() ? nullptr : reinterpret_cast<const uint8_t*>(t.active().data()), &stats);
+    EXPECT_EQ(r->worker_id(), 1u);
+    EXPECT_EQ(r->raw_size(), rect.area() * kBytesPerPixel);
+    EXPECT_EQ(r->samples(), stats.samples);
+    const std::vector<PixelSums> farm = decode_sums(r->sums_zstd(), size_t(rect.area()));
+    int differ = 0;
+    for (size_t i = 0; i < local.size(); ++i) differ += !same_bits(local[i], farm[i]);
+    EXPECT_EQ(differ, 0) << "task " << t.task_id();
+  }
+}
+
+TEST_F(WorkerTest, AHeartbeatRefusalDropsTheTaskWhichIsNeverSubmitted) {
+  fake->refuse = {21};
+  fake->task_batches.push_back({huge_task(21)});
+  fake->unregister_status = grpc::Status(grpc::StatusCode::UNAVAILABLE, "gone");  // leftovers: released
+  start(options());
+  size_t asked = 0;  // GetTask calls until the refusal
+  ASSERT_TRUE(fake->wait_until([&] {
+    for (const v1::HeartbeatRequest& hb : fake->heartbeats)
+      if (hb.task_ids_size() == 1 && hb.task_ids(0) == 21) return (asked = fake->task_requests.size()) > 0;
+    return false;
+  }));
+  // Dropped, the task no longer fills the queue: the fetcher asks for work again, and
+  // renders what it gets.
+  ASSERT_TRUE(fake->wait_until([&] { return fake->task_requests.size() > asked; }));
+  fake->set([&] { fake->task_batches.push_back({task(22, {0, 0, 8, 8}, 0, 2)}); });
+  ASSERT_TRUE(fake->wait_until([&] { return fake->result_for(22) != nullptr; }));
+  EXPECT_TRUE(finish());
+  EXPECT_EQ(fake->result_for(21), nullptr);
+  EXPECT_TRUE(fake->releases.empty());  // refused, so not the worker's to give back
+  for (size_t i = 0; i < fake->heartbeats.size(); ++i)
+    if (fake->heartbeats[i].task_ids_size() == 1 && fake->heartbeats[i].task_ids(0) == 21) {
+      for (size_t j = i + 1; j < fake->heartbeats.size(); ++j)  // never renewed again
+        for (uint64_t id : fake->heartbeats[j].task_ids()) EXPECT_NE(id, 21u);
+      break;
+    }
+}
+
+TEST_F(WorkerTest, OnStopUnfinishedLeasesAreReleasedAndFinishedResultsSent) {
+  fake->task_batches.push_back({task(31, {0, 0, 4, 1}, 0, 1), task(32, {4, 0, 4, 1}, 0, 1)});
+  fake->task_batches.push_back({huge_task(33)});
+  fake->hold_submissions = true;  // the first results are still on their way at the stop
+  fake->unregister_status = grpc::Status(grpc::StatusCode::UNAVAILABLE, "gone");
+  start(options(1));
+  ASSERT_TRUE(fake->wait_until([&] {
+    return fake->submissions > 0 && fake->handed_out.size() == 3;  // 33 is being rendered
+  }));
+  stop = true;
+  fake->set([&] { fake->hold_submissions = false; });
+  EXPECT_TRUE(finish());
+  EXPECT_NE(fake->result_for(31), nullptr);
+  EXPECT_NE(fake->result_for(32), nullptr);
+  EXPECT_EQ(fake->result_for(33), nullptr);
+  EXPECT_EQ(tasks_done, 2u);
+  EXPECT_EQ(fake->unregisters, 1);
+  // Unregistering failed, so the unfinished lease goes back by itself.
+  ASSERT_EQ(fake->releases.size(), 1u);
+  EXPECT_EQ(fake->releases[0].task_id(), 33u);
+  EXPECT_EQ(fake->releases[0].error(), "");
+}
+
+TEST_F(WorkerTest, OnStopAnUnregisteredWorkerLeavesItsLeasesToTheCoordinator) {
+  fake->task_batches.push_back({huge_task(34)});
+  start(options());
+  ASSERT_TRUE(fake->wait_until([&] { return fake->handed_out.size() == 1; }));
+  EXPECT_TRUE(finish());
+  EXPECT_EQ(fake->unregisters, 1);  // which gives back every lease at once
+  EXPECT_TRUE(fake->releases.empty());
+  EXPECT_TRUE(fake->results.empty());
+}
+
+TEST_F(WorkerTest, AnUnreachableCoordinatorIsRetriedWithBackOffAndAForgottenWorkerRegistersAgain) {
+  const grpc::Status down(grpc::StatusCode::UNAVAILABLE, "connection refused");
+  fake->register_failures = {down, down};
+  fake->get_task_failures = {grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, "unknown worker 1; register again")};
+  start(options());
+  ASSERT_TRUE(fake->wait_until([&] {
+    for (const v1::GetTaskRequest& r : fake->task_requests)
+      if (r.worker_id() == 2) return true;
+    return false;
+  }));
+  EXPECT_TRUE(finish());
+  ASSERT_EQ(fake->register_times.size(), 4u);  // down, down, registered as 1, then as 2
+  const auto gap = [&](int i) {
+    return std::chrono::duration<double>(fake->register_times[i + 1] - fake->register_times[i]).count();
+  };
+  EXPECT_GE(gap(0), 0.1);  // the first back-off
+  EXPECT_GE(gap(1), 0.2);  // doubled
+  EXPECT_GE(gap(2), 0.1);  // reset by the registration, then waited after "unknown worker"
+  ASSERT_EQ(fake->registrations.size(), 2u);
+  EXPECT_EQ(fake->task_requests[0].worker_id(), 1u);
+}
+
+TEST_F(WorkerTest, ARefusedWorkerStopsAtOnce) {
+  fake->register_failures = {grpc::Status(grpc::StatusCode::PERMISSION_DENIED, "a client token may not register")};
+  start(options());
+  thread.join();
+  EXPECT_FALSE(returned);
+  EXPECT_EQ(fake->register_times.size(), 1u);  // retrying cannot help
+  EXPECT_TRUE(fake->task_requests.empty());
+}
+
+TEST_F(WorkerTest, ItAsksForTwoTasksThenForItsLookaheadOnceItsSpeedIsMeasured) {
+  WorkerOptions o = options();
+  o.max_tasks = 8;
+  fake->task_batches.push_back({task(51, {0, 0, 16, 16}, 0, 4)});
+  start(o);
+  size_t measured = 0;  // requests before the result (and so its speed) was known
+  ASSERT_TRUE(fake->wait_until([&] {
+    measured = fake->task_requests.size();
+    return fake->result_for(51) != nullptr;
+  }));
+  ASSERT_TRUE(fake->wait_until([&] { return fake->task_requests.size() > measured; }));
+  EXPECT_TRUE(finish());
+  EXPECT_EQ(fake->task_requests[0].max_tasks(), 2u);  // no speed yet
+  EXPECT_EQ(fake->task_requests[0].max_samples(), 0u);
+  const v1::GetTaskRequest& later = fake->task_requests[measured];
+  EXPECT_GE(later.max_tasks(), 7u);    // its room: 8 leases, less the one not yet sent
+  EXPECT_GT(later.max_samples(), 0u);  // the lookahead at its speed
+}
+
+TEST_F(WorkerTest, ATaskWhoseSceneCannotLoadIsReleasedWithTheError) {
+  v1::SceneBundle broken;
+  broken.set_main_file("broken.dae");
+  v1::SceneFile* f = broken.add_files();
+  f->set_path("broken.dae");
+  f->set_content("<COLLADA><asset><up_axis>Q_UP</up_axis></asset></COLLADA>");
+  const std::string broken_hash = bundle_hash(broken.main_file(), broken.files());
+  fake->scenes[broken_hash] = broken;
+  v1::Task bad = task(61, {0, 0, 8, 8}, 0, 1), missing = task(62, {0, 0, 8, 8}, 0, 1);
+  bad.set_scene_hash(broken_hash);
+  missing.set_scene_hash(std::string(32, 'f'));  // the coordinator has no such scene
+  fake->task_batches.push_back({bad, missing});
+  start(options());
+  ASSERT_TRUE(fake->wait_until([&] { return fake->releases.size() == 2; }));
+  EXPECT_TRUE(finish());
+  EXPECT_EQ(fake->releases[0].task_id(), 61u);
+  EXPECT_NE(fake->releases[0].error().find("broken.dae"), std::string::npos) << fake->releases[0].error();
+  EXPECT_NE(fake->releases[0].error().find("Q_UP"), std::string::npos) << fake->releases[0].error();
+  EXPECT_EQ(fake->releases[1].task_id(), 62u);
+  EXPECT_NE(fake->releases[1].error().find("fetch scene " + std::string(32, 'f')), std::string::npos)
+      << fake->releases[1].error();
+  EXPECT_EQ(fake->releases[0].worker_id(), 1u);
+  EXPECT_TRUE(fake->results.empty());
+}
+
+// The lookahead rule with numbers: 2 threads at 1000 samples per thread-second keep 0.5 s
+// of work, 1000 samples, refilled below half of it.
+TEST(Lookahead, RefillsBelowHalfTheLookaheadUpToAllOfIt) {
+  const Lookahead l{2, 0.5, 8};
+  EXPECT_TRUE(l.wants_more({0, 0, 0, 0}));
+  EXPECT_EQ(l.request({0, 0, 0, 0}).max_tasks, 2u);  // unmeasured: two tasks
+  EXPECT_EQ(l.request({0, 0, 0, 0}).max_samples, 0u);
+  EXPECT_FALSE(l.wants_more({2, 4, 5000, 0}));    // two rows a thread queued, speed unknown
+  EXPECT_TRUE(l.wants_more({2, 3, 5000, 1000}));  // threads about to run dry
+  EXPECT_TRUE(l.wants_more({2, 4, 499, 1000}));
+  EXPECT_FALSE(l.wants_more({2, 4, 500, 1000}));
+  const LeaseRequest r = l.request({3, 4, 400, 1000});
+  EXPECT_EQ(r.max_tasks, 5u);
+  EXPECT_EQ(r.max_samples, 600u);
+  EXPECT_FALSE(l.wants_more({8, 0, 0, 1000}));  // every lease it may hold
+}
+
+// The queue measures the speed from the rows' render times, which sizes the next request.
+TEST(TaskQueue, MeasuresTheSpeedThatSizesTheNextRequest) {
+  TaskQueue q(Lookahead{2, 0.5, 8});
+  auto h = std::make_shared<Held>();
+  h->task.set_task_id(1);
+  h->task.set_sample_begin(0);
+  h->task.set_sample_end(100);
+  h->rect = {0, 0, 4, 2};
+  h->sums.resize(8);
+  q.add(h);
+  EXPECT_EQ(q.load().queued_rows, 2u);
+  EXPECT_EQ(q.load().queued_samples, 800);
+  const auto r0 = q.next_row(), r1 = q.next_row();
+  ASSERT_TRUE(r0 && r1);
+  EXPECT_EQ(r1->row, 1);
+  TileStats row;
+  row.samples = 400;
+  q.row_done(*r0, std::vector<PixelSums>(4), row, 1.0, 1.015625);  // 1/64 s each, on two threads
+  q.row_done(*r1, std::vector<PixelSums>(4), row, 1.0, 1.015625);
+  EXPECT_EQ(q.load().samples_per_thread_second, 25600);  // 800 samples in 1/32 thread-seconds
+  const std::optional<LeaseRequest> next = q.wait_for_room(std::chrono::milliseconds(0));
+  ASSERT_TRUE(next);
+  EXPECT_EQ(next->max_tasks, 7u);        // the finished task is held until sent
+  EXPECT_EQ(next->max_samples, 25600u);  // 2 threads x 25600 x 0.5 s
+  const TaskQueue::Batch b = q.take_finished(std::chrono::milliseconds(0));
+  ASSERT_EQ(b.tasks.size(), 1u);
+  EXPECT_EQ(b.busy_thread_seconds, 0.03125);
+  q.sent(b, true);
+  EXPECT_EQ(q.tasks_done(), 1u);
+  EXPECT_FALSE(q.holds_tasks());
+  q.stop();
+  EXPECT_FALSE(q.next_row());
+}
+
+// Scenes are fetched once per content hash and kept on disk for the next worker.
+TEST(SceneCache, FetchesASceneOnceAndKeepsItOnDisk) {
+  const fs::path dir = fs::temp_directory_path() / ("tessera_scene_cache_" + std::to_string(::getpid()));
+  std::string hash;
+  const v1::SceneBundle bundle = bundle_of(kScene, &hash);
+  int fetches = 0;
+  const auto fetch = [&](const std::string& h) {
+    ++fetches;
+    EXPECT_EQ(h, hash);
+    return bundle;
+  };
+  RenderSettings s;
+  s.camera.width = 8;
+  s.camera.height = 8;
+  v1::Task t;
+  t.set_scene_hash(hash);
+  *t.mutable_settings() = to_proto(s);
+  {
+    worker::SceneCache cache(dir.string(), fetch);
+    const auto a = cache.prepare(t);
+    s.max_depth = 3;
+    *t.mutable_settings() = to_proto(s);
+    const auto b = cache.prepare(t);  // other settings: another renderer of the same scene
+    EXPECT_NE(a, b);
+    EXPECT_EQ(a->scene, b->scene);
+    EXPECT_EQ(cache.prepare(t), b);
+  }
+  worker::SceneCache again(dir.string(), fetch);
+  EXPECT_NE(again.prepare(t), nullptr);
+  EXPECT_EQ(fetches, 1);
+  t.set_scene_hash("../../etc");
+  EXPECT_THROW(again.prepare(t), WireError);
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace tessera

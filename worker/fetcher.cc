@@ -1,0 +1,55 @@
+#include "worker/fetcher.h"
+
+#include <spdlog/spdlog.h>
+
+#include "wire.h"
+#include "worker/clock.h"
+
+namespace tessera::worker {
+
+Fetcher::Fetcher(const Link& link, TaskQueue& queue, const std::string& cache_dir, Backoff& backoff)
+    : link_(link), queue_(queue), backoff_(backoff), scenes_(cache_dir, [this](const std::string& hash) {
+        v1::FetchSceneRequest req;
+        req.set_scene_hash(hash);
+        v1::SceneBundle bundle;
+        const grpc::Status st = link_.stub->FetchScene(link_.context(120).get(), req, &bundle);
+        if (!st.ok()) throw std::runtime_error("fetch scene " + hash + ": " + st.error_message());
+        return bundle;
+      }) {}
+
+Fetcher::Leased Fetcher::lease(const std::atomic<bool>& stop) {
+  const std::optional<LeaseRequest> size = queue_.wait_for_room(kStopPoll);
+  if (!size) return {};
+  v1::GetTaskRequest req;
+  req.set_worker_id(link_.worker_id);
+  req.set_max_tasks(size->max_tasks);
+  if (size->max_samples > 0) req.set_max_samples(size->max_samples);
+  v1::GetTaskResponse resp;
+  const grpc::Status st = link_.stub->GetTask(link_.context(10).get(), req, &resp);
+  if (!st.ok()) return {st, 0};
+  backoff_.reset();
+  for (const v1::Task& task : resp.tasks()) enqueue(task, stop);
+  return {st, resp.tasks_size()};
+}
+
+void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
+  auto h = std::make_shared<Held>();
+  h->task = task;
+  try {
+    h->rect = from_proto(h->task.tile());
+    if (!h->task.active().empty() && h->task.active().size() != size_t(h->rect.area()))
+      throw WireError("active mask size");
+    if (h->rect.area() <= 0) throw WireError("empty tile");
+    h->prepared = scenes_.prepare(h->task);
+  } catch (const std::exception& e) {
+    spdlog::warn("task {}: {}", h->task.task_id(), e.what());
+    link_.release(h->task.task_id(), e.what());  // another worker may manage; this one backs off
+    backoff_.wait(&stop);
+    return;
+  }
+  if (!h->task.active().empty()) h->mask = reinterpret_cast<const uint8_t*>(h->task.active().data());
+  h->sums.resize(size_t(h->rect.area()));
+  queue_.add(std::move(h));
+}
+
+}  // namespace tessera::worker

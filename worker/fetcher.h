@@ -1,0 +1,40 @@
+// A worker's fetcher: leases tasks while the queued work is below the lookahead
+// (lookahead.h), fetches and loads each task's scene and builds its renderer (SceneCache)
+// before queuing it, so that no render thread waits for the network.
+#pragma once
+
+#include <atomic>
+#include <string>
+
+#include "rpc.h"
+#include "worker/link.h"
+#include "worker/scene_cache.h"
+#include "worker/task_queue.h"
+
+namespace tessera::worker {
+
+class Fetcher {
+ public:
+  // Scenes are cached under `cache_dir`; `backoff` is the worker's (reset by a call that
+  // gets through, waited on after a task that cannot be rendered).
+  Fetcher(const Link& link, TaskQueue& queue, const std::string& cache_dir, Backoff& backoff);
+
+  struct Leased {
+    grpc::Status status;  // of GetTask; OK when nothing was asked for
+    int tasks = 0;        // given by the coordinator
+  };
+  // Waits up to kStopPoll until the queue wants more work, then asks for it (the call
+  // long-polls when there is none) and queues each task. A task this worker cannot render
+  // (its scene will not load here) is given back with the error, after a back-off.
+  Leased lease(const std::atomic<bool>& stop);
+
+ private:
+  void enqueue(const v1::Task& task, const std::atomic<bool>& stop);
+
+  const Link& link_;
+  TaskQueue& queue_;
+  Backoff& backoff_;
+  SceneCache scenes_;
+};
+
+}  // namespace tessera::worker

@@ -1,0 +1,24 @@
+#include "worker/render_pool.h"
+
+#include "worker/clock.h"
+
+namespace tessera::worker {
+
+RenderPool::RenderPool(TaskQueue& queue, int threads) : queue_(queue), pool_(threads) {
+  for (int i = 0; i < pool_.size(); ++i) pool_.run([this] { render_loop(); });
+}
+
+void RenderPool::render_loop() {
+  while (const std::optional<TaskQueue::Row> r = queue_.next_row()) {
+    const Held& h = *r->task;
+    const double t0 = now_seconds();
+    TileStats stats;
+    const Rect rect{h.rect.x, h.rect.y + r->row, h.rect.w, 1};
+    const std::vector<PixelSums> sums =
+        h.prepared->renderer->render(rect, h.task.sample_begin(), h.task.sample_end(),
+                                     h.mask ? h.mask + size_t(r->row) * h.rect.w : nullptr, &stats, &h.cancel);
+    queue_.row_done(*r, sums, stats, t0, now_seconds());
+  }
+}
+
+}  // namespace tessera::worker

@@ -1,0 +1,63 @@
+#include "worker/sender.h"
+
+#include <spdlog/spdlog.h>
+
+#include "core/util/thread_pool.h"
+#include "wire.h"
+#include "worker/clock.h"
+
+namespace tessera::worker {
+
+Sender::Sender(const Link& link, TaskQueue& queue, Options options)
+    : link_(link), queue_(queue), options_(options), thread_([this] {
+        set_thread_name("send");
+        send_loop();
+      }) {}
+
+Sender::~Sender() { thread_.join(); }
+
+v1::ResultBatch Sender::encode(const TaskQueue::Batch& batch, double now) const {
+  v1::ResultBatch results;
+  const double threads = options_.threads * (now - options_.since);
+  for (const std::shared_ptr<Held>& h : batch.tasks) {
+    v1::TaskResult* r = results.add_results();
+    r->set_worker_id(link_.worker_id);
+    r->set_task_id(h->task.task_id());
+    r->set_raw_size(uint32_t(h->sums.size() * kBytesPerPixel));
+    if (options_.lie) {
+      std::vector<PixelSums> wrong = h->sums;
+      for (PixelSums& p : wrong) p = PixelSums{p.r * 0.8, p.g * 0.8, p.b * 0.8, p.lum2 * 0.64, p.n};
+      r->set_sums_zstd(encode_sums(wrong));
+    } else {
+      r->set_sums_zstd(encode_sums(h->sums));
+    }
+    r->set_samples(h->stats.samples);
+    r->set_rays(h->stats.rays.rays + h->stats.rays.shadow_rays);
+    r->set_nan_samples(h->stats.nan_samples);
+    r->set_render_seconds(h->last_row - h->first_row);
+    r->set_busy_thread_seconds(batch.busy_thread_seconds);
+    r->set_thread_seconds(threads);
+  }
+  return results;
+}
+
+void Sender::send_loop() {
+  while (true) {
+    const TaskQueue::Batch batch = queue_.take_finished(std::chrono::milliseconds(kLingerMs));
+    if (batch.tasks.empty()) return;  // stopped, and everything finished was sent
+    const v1::ResultBatch results = encode(batch, now_seconds());
+    bool sent = false;
+    for (int attempt = 0; attempt < kAttempts && !sent; ++attempt) {
+      v1::ResultAcks acks;
+      const grpc::Status st = link_.stub->SubmitResults(link_.context(30).get(), results, &acks);
+      sent = st.ok();
+      if (!sent) {
+        spdlog::debug("submit: {}", st.error_message());
+        std::this_thread::sleep_for(std::chrono::milliseconds(100 << attempt));
+      }
+    }
+    queue_.sent(batch, sent);  // unsent: their leases expire and other workers render them
+  }
+}
+
+}  // namespace tessera::worker

@@ -1,0 +1,39 @@
+// A worker's sender: a thread that encodes finished tasks' sums (byte planes, zstd) and
+// submits every finished task in one SubmitResults call, with retries, along with the
+// worker's busy and total render-thread seconds (its utilization).
+#pragma once
+
+#include <thread>
+
+#include "worker/link.h"
+#include "worker/task_queue.h"
+
+namespace tessera::worker {
+
+class Sender {
+ public:
+  static constexpr int kLingerMs = 50;  // how long finished results may wait for company
+  static constexpr int kAttempts = 5;   // then the batch is dropped: its leases expire
+
+  struct Options {
+    int threads = 1;   // render threads, for thread-seconds
+    double since = 0;  // steady seconds the threads started counting (registration)
+    bool lie = false;  // verification tests: every sum scaled by 0.8
+  };
+  // Starts the thread ("send").
+  Sender(const Link& link, TaskQueue& queue, Options options);
+  // Returns once the queue has stopped and everything finished was sent.
+  ~Sender();
+
+ private:
+  void send_loop();
+  // The batch's request: every result with the worker's thread-seconds until `now`.
+  v1::ResultBatch encode(const TaskQueue::Batch& batch, double now) const;
+
+  const Link& link_;
+  TaskQueue& queue_;
+  const Options options_;
+  std::thread thread_;  // last: it uses the members above
+};
+
+}  // namespace tessera::worker

@@ -1,0 +1,172 @@
+#include "worker/task_queue.h"
+
+#include <algorithm>
+
+namespace tessera::worker {
+
+double Held::row_samples(int row) const {
+  const uint32_t n = task.sample_end() - task.sample_begin();
+  if (!mask) return double(rect.w) * n;
+  int active = 0;
+  for (int x = 0; x < rect.w; ++x) active += mask[size_t(row) * rect.w + x] != 0;
+  return double(active) * n;
+}
+
+QueueLoad TaskQueue::load_locked() const {
+  return {held_.size(), queued_rows_, queued_samples_, samples_per_thread_second_};
+}
+
+QueueLoad TaskQueue::load() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return load_locked();
+}
+
+std::optional<LeaseRequest> TaskQueue::wait_for_room(std::chrono::milliseconds timeout) {
+  std::unique_lock<std::mutex> lock(mu_);
+  more_.wait_for(lock, timeout, [this] { return stopping_ || lookahead_.wants_more(load_locked()); });
+  if (stopping_ || !lookahead_.wants_more(load_locked())) return std::nullopt;
+  return lookahead_.request(load_locked());
+}
+
+void TaskQueue::add(std::shared_ptr<Held> h) {
+  std::lock_guard<std::mutex> lock(mu_);
+  held_[h->task.task_id()] = h;
+  queued_rows_ += uint64_t(h->rect.h);
+  for (int row = 0; row < h->rect.h; ++row) queued_samples_ += h->row_samples(row);
+  queue_.push_back(std::move(h));
+  work_.notify_all();
+}
+
+bool TaskQueue::holds_tasks() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return !held_.empty();
+}
+
+void TaskQueue::drop_all() {
+  std::lock_guard<std::mutex> lock(mu_);
+  while (!held_.empty()) drop_locked(held_.begin()->first);
+}
+
+std::optional<TaskQueue::Row> TaskQueue::next_row() {
+  std::unique_lock<std::mutex> lock(mu_);
+  work_.wait(lock, [this] { return stopping_ || !queue_.empty(); });
+  if (stopping_) return std::nullopt;
+  Row r{queue_.front(), queue_.front()->next_row++};
+  if (r.task->next_row == r.task->rect.h) {
+    queue_.pop_front();
+    if (queue_.empty() && !outbox_.empty()) outbox_cv_.notify_one();  // results stop lingering
+  }
+  --queued_rows_;
+  queued_samples_ -= r.task->row_samples(r.row);
+  // Wake the fetcher only when it has something to do: a wake-up per row cost a 2-core
+  // machine 4% of its render time in context switches.
+  if (lookahead_.wants_more(load_locked())) more_.notify_one();
+  return r;
+}
+
+void TaskQueue::row_done(const Row& r, const std::vector<PixelSums>& sums, const TileStats& stats, double t0,
+                         double t1) {
+  std::lock_guard<std::mutex> lock(mu_);
+  Held& h = *r.task;
+  busy_thread_seconds_ += t1 - t0;
+  h.busy += t1 - t0;
+  h.first_row = h.rows_done == 0 ? t0 : std::min(h.first_row, t0);
+  h.last_row = std::max(h.last_row, t1);
+  std::copy(sums.begin(), sums.end(), h.sums.begin() + ptrdiff_t(r.row) * h.rect.w);
+  h.stats.add(stats);
+  if (++h.rows_done == h.rect.h && !h.cancel) {
+    if (h.busy > 0) {
+      const double rate = double(h.stats.samples) / h.busy;
+      samples_per_thread_second_ =
+          samples_per_thread_second_ > 0 ? 0.7 * samples_per_thread_second_ + 0.3 * rate : rate;
+    }
+    // The sender sleeps through its linger: only the first result of a batch wakes it.
+    if (outbox_.empty()) outbox_cv_.notify_one();
+    outbox_.push_back(r.task);
+  }
+}
+
+TaskQueue::Batch TaskQueue::take_finished(std::chrono::milliseconds linger) {
+  std::unique_lock<std::mutex> lock(mu_);
+  outbox_cv_.wait(lock, [this] { return stopping_ || !outbox_.empty(); });
+  if (outbox_.empty()) return {};  // stopping, and everything finished was sent
+  // While the render threads still have work, let results gather for a moment: one call
+  // for several results. With nothing queued, a result may be what frees the next pass
+  // of a tile, so it goes at once. (The render thread that takes the last queued row
+  // wakes the sender early.)
+  outbox_cv_.wait_for(lock, linger, [this] { return stopping_ || queue_.empty(); });
+  Batch b{std::move(outbox_), busy_thread_seconds_};
+  outbox_.clear();
+  return b;
+}
+
+void TaskQueue::sent(const Batch& batch, bool ok) {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (const std::shared_ptr<Held>& h : batch.tasks) {
+    if (ok) ++tasks_done_;
+    held_.erase(h->task.task_id());
+  }
+  more_.notify_one();
+}
+
+std::vector<uint64_t> TaskQueue::held_ids() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::vector<uint64_t> ids;
+  for (const auto& [id, h] : held_) ids.push_back(id);
+  return ids;
+}
+
+void TaskQueue::drop_unfinished(const std::vector<uint64_t>& refused) {
+  std::lock_guard<std::mutex> lock(mu_);
+  for (uint64_t id : refused)
+    if (auto it = held_.find(id); it != held_.end() && it->second->rows_done < it->second->rect.h) drop_locked(id);
+}
+
+void TaskQueue::drop_locked(uint64_t task_id) {
+  auto it = held_.find(task_id);
+  if (it == held_.end()) return;
+  const std::shared_ptr<Held> h = it->second;
+  h->cancel = true;
+  for (auto q = queue_.begin(); q != queue_.end(); ++q)
+    if (*q == h) {
+      for (int row = h->next_row; row < h->rect.h; ++row) {
+        --queued_rows_;
+        queued_samples_ -= h->row_samples(row);
+      }
+      queue_.erase(q);
+      break;
+    }
+  held_.erase(it);
+  more_.notify_one();
+}
+
+bool TaskQueue::wait_stopped(std::chrono::milliseconds timeout) {
+  std::unique_lock<std::mutex> lock(mu_);
+  return stopped_cv_.wait_for(lock, timeout, [this] { return stopping_; });
+}
+
+void TaskQueue::stop() {
+  std::lock_guard<std::mutex> lock(mu_);
+  stopping_ = true;
+  for (auto& [id, h] : held_) h->cancel = true;
+  work_.notify_all();
+  more_.notify_all();
+  outbox_cv_.notify_all();
+  stopped_cv_.notify_all();
+}
+
+bool TaskQueue::stopping() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return stopping_;
+}
+
+std::vector<uint64_t> TaskQueue::take_held() {
+  std::lock_guard<std::mutex> lock(mu_);
+  std::vector<uint64_t> ids;
+  for (const auto& [id, h] : held_) ids.push_back(id);
+  held_.clear();
+  queue_.clear();
+  return ids;
+}
+
+}  // namespace tessera::worker

@@ -1,0 +1,115 @@
+// The leased tasks on their way through a worker, under one mutex: the fetcher queues
+// them, the render threads take their rows and hand back sums, the sender takes the
+// finished ones, the lease keeper renews and drops them. The queue also measures the
+// worker's speed, which sizes the fetcher's requests (lookahead.h).
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <vector>
+
+#include "core/math/rect.h"
+#include "core/render/film.h"
+#include "core/render/tile_renderer.h"
+#include "tessera.grpc.pb.h"
+#include "worker/lookahead.h"
+#include "worker/scene_cache.h"
+
+namespace tessera::worker {
+
+// A leased task: its renderer, its rows handed out and done, its sums so far.
+struct Held {
+  v1::Task task;
+  std::shared_ptr<const PreparedRenderer> prepared;
+  Rect rect;
+  const uint8_t* mask = nullptr;  // into task.active; null: every pixel
+  int next_row = 0, rows_done = 0;
+  std::vector<PixelSums> sums;  // rect-sized
+  TileStats stats;
+  std::atomic<bool> cancel{false};
+  double first_row = 0, last_row = 0;  // steady seconds
+  double busy = 0;                     // thread-seconds spent on it
+
+  double row_samples(int row) const;  // camera samples in a row (for queue sizing)
+};
+
+class TaskQueue {
+ public:
+  explicit TaskQueue(Lookahead lookahead) : lookahead_(lookahead) {}
+
+  // The fetcher's side.
+  // Waits up to `timeout` until more work is wanted (lookahead.h); what to ask for then,
+  // or nothing (stopping, or enough still queued).
+  std::optional<LeaseRequest> wait_for_room(std::chrono::milliseconds timeout);
+  // Queues a task's rows; the task must have its renderer and rect-sized sums.
+  void add(std::shared_ptr<Held> task);
+  bool holds_tasks() const;
+  // Cancels and forgets every held task (the coordinator no longer knows its leases).
+  void drop_all();
+
+  // The render threads' side.
+  struct Row {
+    std::shared_ptr<Held> task;
+    int row = 0;  // within task->rect
+  };
+  // The next row to render, of the front task; blocks; nothing once stopping.
+  std::optional<Row> next_row();
+  // A row's sums, rendered from t0 to t1 (steady seconds). After a task's last row, the
+  // task measures the speed and goes to the sender (unless it was cancelled).
+  void row_done(const Row& row, const std::vector<PixelSums>& sums, const TileStats& stats, double t0, double t1);
+
+  // The sender's side.
+  struct Batch {
+    std::deque<std::shared_ptr<Held>> tasks;
+    double busy_thread_seconds = 0;  // rendering, summed over threads, until now
+  };
+  // Blocks until a task is finished; then, while rows are still queued, lets results
+  // gather for up to `linger`. Every finished task; none once stopping with none left.
+  Batch take_finished(std::chrono::milliseconds linger);
+  // The batch was submitted (`ok`) or given up (its leases expire; others render them).
+  void sent(const Batch& batch, bool ok);
+  uint64_t tasks_done() const { return tasks_done_; }
+
+  // The lease keeper's side.
+  std::vector<uint64_t> held_ids() const;
+  // Cancels and forgets the tasks the coordinator refused (cancelled, reassigned), unless
+  // they are finished: those results are sent anyway.
+  void drop_unfinished(const std::vector<uint64_t>& refused);
+  // Sleeps for up to `timeout`, waking early when stopped; whether stopped.
+  bool wait_stopped(std::chrono::milliseconds timeout);
+
+  // Abandons unfinished work at once (renders look at their task's cancel flag per pixel)
+  // and wakes every part; finished tasks are still sent.
+  void stop();
+  bool stopping() const;
+  // What is still held once the parts have stopped (unfinished leases); forgets it.
+  std::vector<uint64_t> take_held();
+
+  QueueLoad load() const;
+
+ private:
+  QueueLoad load_locked() const;
+  void drop_locked(uint64_t task_id);
+
+  const Lookahead lookahead_;
+  mutable std::mutex mu_;  // guards everything below
+  std::condition_variable work_, more_, outbox_cv_, stopped_cv_;
+  std::map<uint64_t, std::shared_ptr<Held>> held_;  // leased and not yet submitted
+  std::deque<std::shared_ptr<Held>> queue_;         // with rows not yet handed out
+  std::deque<std::shared_ptr<Held>> outbox_;        // finished, to submit
+  uint64_t queued_rows_ = 0;
+  double queued_samples_ = 0;
+  double busy_thread_seconds_ = 0;
+  double samples_per_thread_second_ = 0;  // measured, smoothed
+  bool stopping_ = false;
+  std::atomic<uint64_t> tasks_done_{0};
+};
+
+}  // namespace tessera::worker
