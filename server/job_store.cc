@@ -2,6 +2,7 @@
 
 #include <sqlite3.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <stdexcept>
 
@@ -228,7 +229,10 @@ uint64_t MemoryJobStore::next_generation() { return ++generation_; }
 void MemoryJobStore::add(const StoredJob& job) {
   MutexLock lock(mu_);
   if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
-  rows_.push_back(job);
+  for (const StoredJob& j : rows_)  // as SQLite's primary key
+    if (j.meta.id == job.meta.id) throw std::runtime_error("job database: UNIQUE constraint failed: jobs.id");
+  StoredJob& row = rows_.emplace_back(job);
+  row.meta.scene_bytes = 0;  // not stored: a restart counts the bundle again
 }
 
 void MemoryJobStore::end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) {
@@ -243,8 +247,13 @@ void MemoryJobStore::end(const std::string& id, v1::JobStatus::State state, cons
 }
 
 std::vector<StoredJob> MemoryJobStore::jobs() const {
-  MutexLock lock(mu_);
-  return rows_;
+  std::vector<StoredJob> rows;
+  {
+    MutexLock lock(mu_);
+    rows = rows_;
+  }
+  std::stable_sort(rows.begin(), rows.end(), [](const StoredJob& a, const StoredJob& b) { return a.meta.seq < b.meta.seq; });
+  return rows;
 }
 
 void MemoryJobStore::ping() const {

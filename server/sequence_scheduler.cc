@@ -16,8 +16,14 @@ std::shared_ptr<Job> SequenceScheduler::make_frame(const Sequence& s, size_t ind
   return job;
 }
 
+size_t SequenceScheduler::next_unstarted(const Sequence& s) {
+  size_t i = s.next;
+  while (i < s.frames.size() && s.jobs[i]) ++i;
+  return i;
+}
+
 Job* SequenceScheduler::start_next(Sequence& s, double now, Effects& fx) {
-  while (s.next < s.frames.size() && s.jobs[s.next]) ++s.next;
+  s.next = next_unstarted(s);
   if (s.next == s.frames.size() || !s.live()) return nullptr;
   std::shared_ptr<Job> job = std::move(s.prepared);
   if (!job || job->frame_index != s.next) job = make_frame(s, s.next);  // (none made in time: here)
@@ -33,13 +39,15 @@ Job* SequenceScheduler::start_next(Sequence& s, double now, Effects& fx) {
 
 std::vector<std::pair<Sequence*, size_t>> SequenceScheduler::to_prepare() const {
   std::vector<std::pair<Sequence*, size_t>> out;
-  for (const auto& [id, s] : jobs_.sequences())
-    if (s->live() && !s->prepared && s->next < s->frames.size()) out.emplace_back(s.get(), s->next);
+  for (const auto& [id, s] : jobs_.sequences()) {
+    const size_t i = next_unstarted(*s);
+    if (s->live() && !s->prepared && i < s->frames.size()) out.emplace_back(s.get(), i);
+  }
   return out;
 }
 
 void SequenceScheduler::offer(Sequence& s, size_t index, std::shared_ptr<Job> job) {
-  if (s.live() && !s.prepared && s.next == index && !s.jobs[index]) s.prepared = std::move(job);
+  if (s.live() && !s.prepared && next_unstarted(s) == index) s.prepared = std::move(job);
 }
 
 }  // namespace tessera

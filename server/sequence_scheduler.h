@@ -30,6 +30,9 @@ class SequenceScheduler {
   // Starts the next frame (its prepared job if there is one, else made here); null when
   // every frame has started.
   Job* start_next(Sequence& s, double now, Effects& fx);
+  // The first frame from `next` on that has not started (after a restart, frames past
+  // `next` may have); frames.size() when every one has.
+  static size_t next_unstarted(const Sequence& s);
   // Sequences whose next frame has no job made yet, and that frame's index.
   std::vector<std::pair<Sequence*, size_t>> to_prepare() const;
   // A job made by make_frame() for frame `index`: kept unless the sequence moved on.

@@ -105,6 +105,21 @@ void Verifier::skip_stale(double now, Effects& fx) {
     if (Job* job = jobs_.find_job(id)) lifecycle_.finish_if_done(*job, now, fx);
 }
 
+void Verifier::flag_ended(Job& job, const std::string& flag, Effects& fx) {
+  auto add = [&](std::string& error, const std::string& what) { error += (error.empty() ? "" : "; ") + what; };
+  add(job.error, flag);
+  if (job.sequence.empty()) {
+    fx.rows.push_back({job.id(), job.state(), job.error, job.finished_at - job.started});
+    return;
+  }
+  // A frame has no row: its sequence carries the flag (recorded with its end, or now if it
+  // has ended).
+  Sequence* s = jobs_.find_sequence(job.sequence);
+  if (!s) return;
+  add(s->error, "frame " + std::to_string(s->frames[job.frame_index]) + ": " + flag);
+  if (!s->live()) fx.rows.push_back({s->id(), s->state(), s->error, s->finished_at - s->started});
+}
+
 void Verifier::quarantine(uint64_t worker, const std::string& why, double now, Effects& fx) {
   std::string name = std::to_string(worker);
   std::string principal;
@@ -134,11 +149,11 @@ void Verifier::quarantine(uint64_t worker, const std::string& why, double now, E
         if (c.job == id && tiles.count(c.tile)) moot.push_back(check);
       for (uint64_t check : moot) drop(check, false, now);
     } else if (job->state() == v1::JobStatus::DONE) {
-      job->error += std::string(job->error.empty() ? "" : "; ") + std::to_string(tiles.size()) +
-                    " tiles hold results of worker " + name +
-                    ", quarantined after the job ended (its results differed from the same tasks rendered "
-                    "elsewhere): submit the job again for an image without them";
-      fx.rows.push_back({job->id(), job->state(), job->error, job->finished_at - job->started});
+      flag_ended(*job,
+                 std::to_string(tiles.size()) + " tiles hold results of worker " + name +
+                     ", quarantined after the job ended (its results differed from the same tasks rendered "
+                     "elsewhere): submit the job again for an image without them",
+                 fx);
     }
   }
   workers_.remove(worker);

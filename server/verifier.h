@@ -60,6 +60,9 @@ class Verifier {
  private:
   void drop(uint64_t check, bool skipped, double now);
   void quarantine(uint64_t worker, const std::string& why, double now, Effects& fx);
+  // An ended job holds a liar's tiles: said in its error and its database row (a frame's
+  // in its sequence's).
+  void flag_ended(Job& job, const std::string& flag, Effects& fx);
 
   double fraction_, lease_seconds_;
   CheckBook& checks_;

@@ -148,8 +148,11 @@ TEST_F(SequenceTest, ASequenceRestoredWithAGapInItsFramesIsCountedOnce) {
   const v1::GetTaskResponse r = c->get_task(w, 27);  // every frame's first pass: all three start
   ASSERT_EQ(r.tasks_size(), 27);
   std::set<std::string> merged;
-  for (const v1::Task& task : r.tasks())
-    if (merged.insert(task.job_id()).second) ASSERT_TRUE(c->submit_result(render_task(task, w)).accepted());
+  for (const v1::Task& task : r.tasks()) {
+    if (merged.insert(task.job_id()).second) {
+      ASSERT_TRUE(c->submit_result(render_task(task, w)).accepted());
+    }
+  }
   ASSERT_EQ(merged.size(), 3u);
   c->checkpoint_all();
   fs::remove(dir + "/jobs/" + id + "-f2/checkpoint");  // frame 2 never reached its first checkpoint

@@ -1,0 +1,167 @@
+// MemoryJobStore, the unit tests' JobStore, against SqliteJobStore, the real one: the same
+// tests over both, so that what a test learns from the fake holds for the coordinator.
+// (job_store_test.cc tests the SQLite store and the checkpoint format themselves.)
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <type_traits>
+
+#include "server/job_store.h"
+#include "tests/server/parts_fixture.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+
+template <typename Store>
+class JobStoreContract : public ::testing::Test {
+ protected:
+  const fs::path dir = fs::temp_directory_path() / ("tessera_stores_" + std::to_string(::getpid()));
+  std::unique_ptr<Store> store = open();
+
+  std::unique_ptr<Store> open() const {
+    if constexpr (std::is_same_v<Store, SqliteJobStore>)
+      return std::make_unique<SqliteJobStore>(dir.string());
+    else
+      return std::make_unique<Store>();
+  }
+  void TearDown() override {
+    store.reset();
+    fs::remove_all(dir);
+  }
+  // The job's checkpoint replaced by these bytes, as a crash or a bad disk may leave it.
+  void replace_checkpoint(const std::string& id, const std::string& bytes) {
+    if constexpr (std::is_same_v<Store, SqliteJobStore>) {
+      const fs::path path = store->checkpoint_path(id);
+      fs::create_directories(path.parent_path());
+      std::ofstream(path, std::ios::binary) << bytes;
+    } else {
+      store->set_checkpoint_bytes(id, bytes);
+    }
+  }
+  static StoredJob row(const std::string& id, uint64_t seq) {
+    StoredJob j;
+    j.meta.id = id;
+    j.meta.name = "it's \"quoted\"";
+    j.meta.owner = "ann";
+    j.meta.scene_hash = "0123abcd";
+    j.meta.main_file = "scenes/a.dae";
+    j.meta.priority = -3;
+    j.meta.seq = seq;
+    j.meta.settings = to_proto(testing::small_settings());
+    j.frames = {4, -2, 7};
+    return j;
+  }
+};
+
+using Stores = ::testing::Types<MemoryJobStore, SqliteJobStore>;
+TYPED_TEST_SUITE(JobStoreContract, Stores);
+
+TYPED_TEST(JobStoreContract, GenerationsCountFromOne) {
+  EXPECT_EQ(this->store->next_generation(), 1u);
+  EXPECT_EQ(this->store->next_generation(), 2u);
+}
+
+TYPED_TEST(JobStoreContract, ARowComesBackFieldForField) {
+  const StoredJob in = this->row("00000000000000ab", 5);
+  this->store->add(in);
+  const std::vector<StoredJob> rows = this->store->jobs();
+  ASSERT_EQ(rows.size(), 1u);
+  const StoredJob& out = rows[0];
+  EXPECT_EQ(out.meta.id, in.meta.id);
+  EXPECT_EQ(out.meta.name, in.meta.name);
+  EXPECT_EQ(out.meta.owner, in.meta.owner);
+  EXPECT_EQ(out.meta.scene_hash, in.meta.scene_hash);
+  EXPECT_EQ(out.meta.main_file, in.meta.main_file);
+  EXPECT_EQ(out.meta.priority, in.meta.priority);
+  EXPECT_EQ(out.meta.seq, in.meta.seq);
+  EXPECT_EQ(out.meta.settings.SerializeAsString(), in.meta.settings.SerializeAsString());
+  EXPECT_EQ(out.state, v1::JobStatus::QUEUED);
+  EXPECT_EQ(out.error, "");
+  EXPECT_EQ(out.elapsed, 0);
+  EXPECT_EQ(out.frames, in.frames);
+  this->store->ping();  // it answers
+}
+
+TYPED_TEST(JobStoreContract, AnEndRewritesThatRowsStateErrorAndElapsedOnly) {
+  this->store->add(this->row("00000000000000ab", 1));
+  this->store->add(this->row("00000000000000cd", 2));
+  this->store->end("00000000000000ab", v1::JobStatus::FAILED, "tasks failed", 12.5);
+  this->store->end("ffffffffffffffff", v1::JobStatus::DONE, "", 1);  // no such row: nothing
+  const std::vector<StoredJob> rows = this->store->jobs();
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0].state, v1::JobStatus::FAILED);
+  EXPECT_EQ(rows[0].error, "tasks failed");
+  EXPECT_EQ(rows[0].elapsed, 12.5);
+  EXPECT_EQ(rows[0].meta.owner, "ann");
+  EXPECT_EQ(rows[1].state, v1::JobStatus::QUEUED);
+  EXPECT_EQ(rows[1].elapsed, 0);
+}
+
+TYPED_TEST(JobStoreContract, ACheckpointComesBackWithOrWithoutItsFilm) {
+  EXPECT_FALSE(this->store->read_checkpoint("00000000000000ab"));
+  FramePlan plan(testing::small_settings());
+  testing::merge_passes(plan, 1);
+  this->store->write_checkpoint("00000000000000ab", plan.state(), plan.film(), 2.5);
+  std::optional<Checkpoint> cp = this->store->read_checkpoint("00000000000000ab");
+  ASSERT_TRUE(cp);
+  EXPECT_EQ(cp->elapsed, 2.5);
+  EXPECT_EQ(cp->state.merges, plan.merges());
+  ASSERT_EQ(cp->film.window(), plan.film().window());
+  for (size_t i = 0; i < plan.film().pixels().size(); ++i)
+    ASSERT_EQ(cp->film.pixels()[i].lum2, plan.film().pixels()[i].lum2) << i;
+  cp = this->store->read_checkpoint("00000000000000ab", false);
+  ASSERT_TRUE(cp);
+  EXPECT_EQ(cp->film.window(), Rect{});
+  EXPECT_EQ(cp->state.samples_merged, plan.samples_merged());
+  testing::merge_passes(plan, 2);  // a later checkpoint replaces it
+  this->store->write_checkpoint("00000000000000ab", plan.state(), plan.film(), 4);
+  EXPECT_EQ(this->store->read_checkpoint("00000000000000ab")->state.merges, plan.merges());
+  EXPECT_FALSE(this->store->read_checkpoint("00000000000000cd"));  // each job its own
+}
+
+TYPED_TEST(JobStoreContract, ADamagedCheckpointIsRefusedNotTrusted) {
+  FramePlan plan(testing::small_settings());
+  testing::merge_passes(plan, 1);
+  std::string bytes = encode_checkpoint(plan.state(), plan.film(), 1);
+  bytes[bytes.size() / 3] ^= 0x04;
+  this->replace_checkpoint("00000000000000ab", bytes);
+  EXPECT_THROW(this->store->read_checkpoint("00000000000000ab"), std::runtime_error);
+  EXPECT_THROW(this->store->read_checkpoint("00000000000000ab", false), std::runtime_error);
+}
+
+// Where the fake once differed from SQLite (found writing these tests):
+
+// SQLite returns rows ORDER BY seq; MemoryJobStore in the order they were added. Two
+// submits racing each other record their rows outside the lock, so the order added can
+// differ from the order of submission.
+TYPED_TEST(JobStoreContract, RowsComeBackInSubmissionOrderWhateverTheOrderAdded) {
+  this->store->add(this->row("00000000000000cd", 2));
+  this->store->add(this->row("00000000000000ab", 1));
+  const std::vector<StoredJob> rows = this->store->jobs();
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0].meta.seq, 1u);
+  EXPECT_EQ(rows[1].meta.seq, 2u);
+}
+
+// SQLite refuses a second row with the same id (its primary key); MemoryJobStore keeps both.
+TYPED_TEST(JobStoreContract, AnIdIsRecordedOnce) {
+  this->store->add(this->row("00000000000000ab", 1));
+  EXPECT_THROW(this->store->add(this->row("00000000000000ab", 2)), std::runtime_error);
+  EXPECT_EQ(this->store->jobs().size(), 1u);
+}
+
+// A row's scene_bytes is not stored (a restart counts the bundle again): SQLite gives 0,
+// MemoryJobStore what was added.
+TYPED_TEST(JobStoreContract, SceneBytesAreNotStored) {
+  StoredJob in = this->row("00000000000000ab", 1);
+  in.meta.scene_bytes = 99;
+  this->store->add(in);
+  EXPECT_EQ(this->store->jobs().at(0).meta.scene_bytes, 0u);
+}
+
+}  // namespace
+}  // namespace tessera

@@ -1,0 +1,195 @@
+// ResultIntake: results screened (known task, from its lease's holder, still wanted),
+// decoded and checked outside the lock, then merged: the first copy of a (tile, pass) wins.
+#include "server/result_intake.h"
+
+#include <gtest/gtest.h>
+
+#include <limits>
+
+#include "tests/server/parts_fixture.h"
+
+namespace tessera {
+namespace {
+
+using testing::kTiles;
+
+class ResultIntakeTest : public testing::OneJobTest {
+ protected:
+  // The ack of a result that was refused: neither accepted nor a duplicate.
+  static bool rejected(const v1::ResultAck& ack) { return !ack.accepted() && !ack.duplicate(); }
+};
+
+TEST_F(ResultIntakeTest, TheHoldersResultIsMergedAndItsLeaseEnds) {
+  const uint64_t t = lease_next(*job, a);
+  const v1::ResultAck ack = submit(result(t));
+  EXPECT_TRUE(ack.accepted());
+  EXPECT_EQ(job->plan.progress(0).passes_done, 1u);
+  EXPECT_EQ(job->plan.samples_merged(), testing::kFirstPassSamples);
+  EXPECT_EQ(counters.results_merged, 1u);
+  EXPECT_EQ(counters.samples_merged, testing::kFirstPassSamples);
+  EXPECT_EQ(leases.live(t), nullptr);
+  EXPECT_EQ(job->tile_lease[0], 0u);
+  EXPECT_EQ(worker(a).leases, 0u);
+  EXPECT_EQ(worker(a).tasks_done, 1u);
+  EXPECT_TRUE(fx.changed);
+}
+
+TEST_F(ResultIntakeTest, AStrangersResultIsRejectedAndCounted) {
+  const uint64_t t = lease_next(*job, a);
+  v1::TaskResult r = result(t);
+  r.set_worker_id(b);
+  EXPECT_TRUE(rejected(submit(r)));
+  EXPECT_EQ(counters.results_rejected, 1u);
+  EXPECT_EQ(job->plan.merges(), 0u);
+  EXPECT_NE(leases.live(t), nullptr);  // a's lease stands
+}
+
+TEST_F(ResultIntakeTest, AResultForATaskNeverIssuedIsRejectedAndCounted) {
+  const uint64_t t = lease_next(*job, a);
+  v1::TaskResult r = result(t);
+  r.set_task_id(t + 1000);
+  EXPECT_TRUE(rejected(submit(r)));
+  EXPECT_EQ(counters.results_rejected, 1u);
+  EXPECT_EQ(job->plan.merges(), 0u);
+}
+
+TEST_F(ResultIntakeTest, AQuarantinedWorkersResultIsRejectedAndCounted) {
+  const uint64_t t = lease_next(*job, a);
+  checks.quarantine(a, "");
+  EXPECT_TRUE(rejected(submit(result(t))));
+  EXPECT_EQ(counters.results_rejected, 1u);
+  EXPECT_EQ(job->plan.merges(), 0u);
+}
+
+TEST_F(ResultIntakeTest, ASecondCopyIsAckedAsADuplicate) {
+  const v1::TaskResult r = result(lease_next(*job, a));
+  ASSERT_TRUE(submit(r).accepted());
+  const v1::ResultAck again = submit(r);
+  EXPECT_FALSE(again.accepted());
+  EXPECT_TRUE(again.duplicate());
+  EXPECT_EQ(counters.results_duplicate, 1u);
+  EXPECT_EQ(counters.results_merged, 1u);
+  EXPECT_EQ(job->plan.merges(), 1u);
+}
+
+TEST_F(ResultIntakeTest, TwoCopiesInOneBatchMergeOnce) {
+  const v1::TaskResult r = result(lease_next(*job, a));
+  const std::vector<v1::ResultAck> acks = submit(std::vector<v1::TaskResult>{r, r});
+  EXPECT_TRUE(acks[0].accepted());
+  EXPECT_TRUE(acks[1].duplicate());  // looked at again when merging
+  EXPECT_EQ(job->plan.merges(), 1u);
+}
+
+TEST_F(ResultIntakeTest, SumsOfTheWrongSizeAreRejected) {
+  const uint64_t t = lease_next(*job, a);
+  v1::TaskResult r = result(t);
+  r.set_raw_size(r.raw_size() - uint32_t(kBytesPerPixel));
+  EXPECT_TRUE(rejected(submit(r)));
+  r = result(t);  // a whole tile's sums, but for another tile's size
+  r.set_sums_zstd(encode_sums(std::vector<PixelSums>(64)));
+  EXPECT_TRUE(rejected(submit(r)));
+  EXPECT_EQ(counters.results_rejected, 2u);
+  EXPECT_EQ(job->plan.merges(), 0u);
+  EXPECT_TRUE(submit(result(t)).accepted());  // the lease still waits for a good one
+}
+
+TEST_F(ResultIntakeTest, SumsThatAreNotZstdAreRejected) {
+  v1::TaskResult r = result(lease_next(*job, a));
+  r.set_sums_zstd("not zstd at all");
+  EXPECT_TRUE(rejected(submit(r)));
+  EXPECT_EQ(counters.results_rejected, 1u);
+}
+
+TEST_F(ResultIntakeTest, ImplausibleSumsAreRejected) {
+  const uint64_t t = lease_next(*job, a);
+  const FramePlan& plan = job->plan;
+  auto with = [&](auto&& change) {
+    std::vector<PixelSums> sums = testing::plausible_sums(plan, 0, 0);
+    change(sums[7]);
+    v1::TaskResult r = result(t);
+    r.set_sums_zstd(encode_sums(sums));
+    return submit(r);
+  };
+  EXPECT_TRUE(rejected(with([](PixelSums& p) { p.g = -1; })));    // radiance is never negative
+  EXPECT_TRUE(rejected(with([](PixelSums& p) { ++p.n; })));       // more samples than the pass has
+  EXPECT_TRUE(rejected(with([](PixelSums& p) { p.lum2 = 0; })));  // (sum l)^2 > n sum l^2
+  EXPECT_TRUE(rejected(with([](PixelSums& p) { p.b = std::numeric_limits<double>::infinity(); })));
+  EXPECT_EQ(counters.results_rejected, 4u);
+  EXPECT_EQ(job->plan.merges(), 0u);
+  // A pixel whose every sample was dropped (NaN or infinite radiance) is empty, and fine.
+  EXPECT_TRUE(with([](PixelSums& p) { p = PixelSums{}; }).accepted());
+}
+
+TEST_F(ResultIntakeTest, TheFirstCopyWinsAndEndsTheOtherLease) {
+  const uint64_t late = lease_next(*job, a);
+  now += options.lease_seconds + 1;
+  ASSERT_EQ(leasing.expire(now), 1u);  // a is slow: tile 0 goes to b
+  const uint64_t again = lease_next(*job, b);
+  ASSERT_EQ(leases.live(again)->tile, 0u);
+  EXPECT_TRUE(submit(result(late)).accepted());  // the bits are the same, whoever sends them
+  EXPECT_EQ(leases.live(again), nullptr);
+  EXPECT_EQ(worker(b).leases, 0u);
+  EXPECT_TRUE(submit(result(again)).duplicate());
+  EXPECT_EQ(job->plan.merges(), 1u);
+}
+
+TEST_F(ResultIntakeTest, WhoMergedEachTileIsRecorded) {
+  const uint64_t t0 = lease_next(*job, a), t1 = lease_next(*job, b), t2 = lease_next(*job, a);
+  submit(std::vector<v1::TaskResult>{result(t0), result(t1), result(t2)});
+  EXPECT_EQ(job->merged_by[a], (std::vector<uint32_t>{0, 2}));
+  EXPECT_EQ(job->merged_by[b], (std::vector<uint32_t>{1}));
+}
+
+TEST_F(ResultIntakeTest, APickedTasksResultIssuesACheck) {
+  const uint64_t t = lease_next(*job, a);
+  leases.live(t)->task = std::make_shared<const v1::Task>();  // as the Dispatcher picks one
+  ASSERT_TRUE(submit(result(t)).accepted());
+  ASSERT_EQ(checks.all().size(), 1u);
+  const Check& c = checks.all().begin()->second;
+  EXPECT_EQ(c.job, job->id());
+  EXPECT_EQ(c.tile, 0u);
+  EXPECT_EQ(c.pass, 0u);
+  EXPECT_EQ(c.first_worker, a);
+  EXPECT_EQ(c.digest, sums_digest(testing::plausible_sums(job->plan, 0, 0)));
+  EXPECT_EQ(c.lease, 0u);
+  EXPECT_EQ(job->pending_checks, 1u);
+  EXPECT_EQ(counters.checks_issued, 1u);
+}
+
+TEST_F(ResultIntakeTest, TheLastMergeEndsTheJobDoneWithItsFinalSnapshot) {
+  render_all(*job, a);
+  EXPECT_EQ(job->state(), v1::JobStatus::DONE);
+  EXPECT_EQ(counters.results_merged, kTiles * testing::kPasses);
+  EXPECT_EQ(job->plan.samples_merged(), testing::kSamples);
+  ASSERT_FALSE(fx.snapshots.empty());
+  const ImageSnapshot& last = fx.snapshots.back();
+  EXPECT_TRUE(last.ended);
+  EXPECT_EQ(last.state, v1::JobStatus::DONE);
+  EXPECT_EQ(last.merges, job->plan.merges());
+  EXPECT_TRUE(last.image && last.checkpoint);
+}
+
+TEST_F(ResultIntakeTest, AProgressiveSnapshotOnlyOnceItsIntervalPassed) {
+  // A merge right after the submit: no frame pass is complete and the checkpoint interval
+  // has not passed.
+  ASSERT_TRUE(submit(result(lease_next(*job, a))).accepted());
+  EXPECT_TRUE(fx.snapshots.empty());
+  now += options.checkpoint_seconds;
+  ASSERT_TRUE(submit(result(lease_next(*job, a))).accepted());
+  ASSERT_EQ(fx.snapshots.size(), 1u);
+  EXPECT_TRUE(fx.snapshots[0].checkpoint);
+  EXPECT_FALSE(fx.snapshots[0].image);
+  EXPECT_FALSE(fx.snapshots[0].ended);
+}
+
+TEST_F(ResultIntakeTest, AResultForAnEndedJobIsNotMerged) {
+  const uint64_t t = lease_next(*job, a);
+  const v1::TaskResult r = result(t);
+  lifecycle.cancel(job->id(), "", true, now, fx);
+  EXPECT_TRUE(rejected(submit(r)));
+  EXPECT_EQ(counters.results_rejected, 1u);  // its lease is forgotten with the job
+  EXPECT_EQ(job->plan.merges(), 0u);
+}
+
+}  // namespace
+}  // namespace tessera

@@ -1,0 +1,266 @@
+// Verifier: verify by replay. A picked task's merged result is rendered again by another
+// worker; equal digests pass, different ones go to the Referee (here a lambda), and
+// whoever differs from it is quarantined: its leases end, the tiles of live jobs it merged
+// into start over, ended jobs are flagged.
+#include "server/verifier.h"
+
+#include <gtest/gtest.h>
+
+#include "server/job_status.h"
+#include "tests/server/parts_fixture.h"
+
+namespace tessera {
+namespace {
+
+using testing::has;
+using testing::kTiles;
+using testing::plausible_sums;
+
+CoordinatorOptions verifying() {
+  CoordinatorOptions o = testing::parts_options();
+  o.verify_fraction = 1;
+  return o;
+}
+
+class VerifierTest : public testing::PartsTest {
+ protected:
+  VerifierTest() : PartsTest(verifying()) {}
+  std::shared_ptr<Job> job = add_still();
+  uint64_t a = add_worker(1, "liar"), b = add_worker(1, "checker");
+
+  // `first`'s result for the job's next task, picked for a check and merged; the check's id.
+  uint64_t merged_and_picked(Job& j, uint64_t first) {
+    const uint64_t t = lease_next(j, first);
+    leases.live(t)->task = std::make_shared<const v1::Task>();
+    const size_t before = checks.all().size();
+    EXPECT_TRUE(submit(result(t)).accepted());
+    EXPECT_EQ(checks.all().size(), before + 1);
+    return checks.all().rbegin()->first;  // ids count up
+  }
+  // The check leased to the checker, as GetTask leases it; the lease's id.
+  uint64_t lease_check(uint64_t checker) {
+    v1::GetTaskResponse out;
+    verifier.lease_checks(worker(checker), 1, now, out);
+    EXPECT_EQ(out.tasks_size(), 1);
+    return out.tasks_size() ? out.tasks(0).task_id() : 0;
+  }
+  // The digest of the sums a worker rendering (tile, pass) with this value sends.
+  uint64_t digest(uint32_t tile, uint32_t pass, double value) const {
+    return sums_digest(plausible_sums(job->plan, tile, pass, value));
+  }
+  // A referee that renders (tile 0, pass 0) as a worker sending `value` does.
+  Referee renders(double value) const {
+    const std::vector<PixelSums> sums = plausible_sums(job->plan, 0, 0, value);
+    return [sums](const v1::Task&) { return sums; };
+  }
+};
+
+TEST_F(VerifierTest, ItNeedsASecondWorkerAndAFraction) {
+  EXPECT_TRUE(verifier.active());
+  workers.remove(b);
+  EXPECT_FALSE(verifier.active());
+  add_worker();
+  const Verifier off(0, options.lease_seconds, checks, jobs, leasing, workers, lifecycle, counters);
+  EXPECT_FALSE(off.active());
+}
+
+TEST_F(VerifierTest, AnIssuedCheckWaitsForAnotherWorkerAndHoldsTheJobOpen) {
+  testing::merge_passes(job->plan, testing::kPasses);  // every tile merged
+  Lease l{job->id(), 4, 2, a, now + 5, std::make_shared<const v1::Task>()};
+  verifier.issue(*job, l, a, 1234, now);
+  ASSERT_EQ(checks.all().size(), 1u);
+  const Check& c = checks.all().begin()->second;
+  EXPECT_EQ(c.job, job->id());
+  EXPECT_EQ(c.tile, 4u);
+  EXPECT_EQ(c.pass, 2u);
+  EXPECT_EQ(c.task, l.task);
+  EXPECT_EQ(c.first_worker, a);
+  EXPECT_EQ(c.digest, 1234u);
+  EXPECT_EQ(c.lease, 0u);
+  EXPECT_EQ(c.since, now);
+  EXPECT_EQ(job->pending_checks, 1u);
+  EXPECT_EQ(counters.checks_issued, 1u);
+  EXPECT_FALSE(lifecycle.finish_if_done(*job, now, fx));
+}
+
+TEST_F(VerifierTest, ChecksGoOnlyWhileWaitingNeverToTheirFirstWorkerAndUpToMax) {
+  for (int i = 0; i < 3; ++i) merged_and_picked(*job, a);
+  const uint64_t c = add_worker();
+  v1::GetTaskResponse out;
+  verifier.lease_checks(worker(a), 5, now, out);
+  EXPECT_EQ(out.tasks_size(), 0);  // its own results
+  verifier.lease_checks(worker(b), 1, now, out);
+  ASSERT_EQ(out.tasks_size(), 1);
+  const Check& first = checks.all().begin()->second;
+  EXPECT_EQ(out.tasks(0).task_id(), first.lease);
+  EXPECT_EQ(leases.live(first.lease)->worker, b);
+  verifier.lease_checks(worker(c), 5, now, out);  // `max` counts what `out` holds
+  EXPECT_EQ(out.tasks_size(), 3);
+  verifier.lease_checks(worker(b), 5, now, out);
+  EXPECT_EQ(out.tasks_size(), 3);  // none waiting
+  EXPECT_EQ(checks.waiting(), 0u);
+}
+
+TEST_F(VerifierTest, EqualDigestsPassAndTheJobEndsOnceItsChecksAreDecided) {
+  testing::merge_passes(job->plan, testing::kPasses);
+  Lease l{job->id(), 0, 0, a, now + 5, std::make_shared<const v1::Task>()};
+  verifier.issue(*job, l, a, 1234, now);
+  const uint64_t check = checks.all().begin()->first;
+  const uint64_t lease = lease_check(b);
+  const Referee never = [](const v1::Task&) -> std::vector<PixelSums> {
+    ADD_FAILURE() << "the referee is asked only when two workers differ";
+    return {};
+  };
+  const Verifier::Verdict v = Verifier::judge(*verifier.pending(check, lease), 1234, b, never);
+  EXPECT_TRUE(v.same);
+  EXPECT_TRUE(v.liars.empty());
+  EXPECT_TRUE(verifier.decide(check, lease, b, v, now, fx));
+  EXPECT_EQ(counters.checks_passed, 1u);
+  EXPECT_EQ(checks.find(check), nullptr);
+  EXPECT_EQ(leases.live(lease), nullptr);
+  EXPECT_EQ(job->pending_checks, 0u);
+  EXPECT_EQ(job->state(), v1::JobStatus::DONE);
+  EXPECT_FALSE(verifier.decide(check, lease, b, v, now, fx));  // decided once
+}
+
+TEST_F(VerifierTest, OnlyTheChecksCurrentLeaseDecidesIt) {
+  const uint64_t check = merged_and_picked(*job, a);
+  const uint64_t lease = lease_check(b);
+  EXPECT_FALSE(verifier.pending(check, lease + 1));
+  EXPECT_TRUE(verifier.pending(check, lease));
+  EXPECT_FALSE(verifier.decide(check, lease + 1, b, Verifier::Verdict{}, now, fx));
+  EXPECT_NE(checks.find(check), nullptr);
+}
+
+TEST_F(VerifierTest, AWorkerTheRefereeDisagreesWithIsQuarantinedAndItsWorkUndone) {
+  // Before it is caught: a job it rendered alone ended DONE.
+  const std::shared_ptr<Job> before = add_still();
+  render_all(*before, a);
+  ASSERT_EQ(before->state(), v1::JobStatus::DONE);
+  // In the live job: its results for tiles 0 and 1 merged (both picked), a lease on tile 2.
+  const uint64_t check = merged_and_picked(*job, a);
+  const uint64_t moot = merged_and_picked(*job, a);
+  const uint64_t held = lease_next(*job, a);
+  const uint64_t other = lease_next(*job, b);
+  ASSERT_EQ(job->pending_checks, 2u);
+  // b renders tile 0 differently (value 0.7), and so does the referee.
+  const uint64_t lease = lease_check(b);
+  const Verifier::Verdict v = Verifier::judge(*verifier.pending(check, lease), digest(0, 0, 0.7), b, renders(0.7));
+  EXPECT_FALSE(v.same);
+  EXPECT_EQ(v.liars, std::vector<uint64_t>{a});
+  fx = {};
+  EXPECT_TRUE(verifier.decide(check, lease, b, v, now, fx));  // the checker's result counts
+  EXPECT_TRUE(verifier.quarantined(a));
+  EXPECT_TRUE(verifier.quarantined("liar"));  // its token may not register again
+  EXPECT_FALSE(verifier.quarantined(b));
+  EXPECT_EQ(workers.find(a), nullptr);
+  EXPECT_EQ(counters.check_mismatches, 1u);
+  EXPECT_EQ(counters.workers_quarantined, 1u);
+  // Its lease ended and its tile is ready again; b's lease stands.
+  EXPECT_EQ(leases.live(held), nullptr);
+  EXPECT_NE(leases.live(other), nullptr);
+  // The tiles it merged into start over: no pass merged, no sum left in their pixels.
+  for (uint32_t t : {0u, 1u}) {
+    EXPECT_EQ(job->plan.progress(t).passes_done, 0u) << t;
+    EXPECT_TRUE(job->plan.wants(t, 0)) << t;
+    const Rect r = job->plan.tiles()[t];
+    EXPECT_EQ(job->plan.film().at(r.x, r.y).n, 0u) << t;
+  }
+  EXPECT_EQ(job->plan.samples_merged(), 0u);
+  EXPECT_EQ(job->plan.ready(), kTiles - 1);  // all but b's tile 3
+  EXPECT_EQ(counters.tiles_rendered_again, 2u);
+  EXPECT_EQ(job->merged_by.count(a), 0u);
+  // The check of tile 1 is moot: the tile is rendered again anyway.
+  EXPECT_EQ(checks.find(moot), nullptr);
+  EXPECT_EQ(job->pending_checks, 0u);
+  EXPECT_TRUE(job->live());
+  // The ended job is flagged, and its database row is rewritten after the lock.
+  EXPECT_TRUE(has(before->error, "9 tiles hold results of worker 'liar' (token 'liar', " + std::to_string(a) + ")"))
+      << before->error;
+  ASSERT_EQ(fx.rows.size(), 1u);
+  EXPECT_EQ(fx.rows[0].id, before->id());
+  EXPECT_EQ(fx.rows[0].state, v1::JobStatus::DONE);
+  EXPECT_EQ(fx.rows[0].error, before->error);
+  EXPECT_TRUE(fx.changed);
+}
+
+// BUG (server/verifier.cc, Verifier::quarantine): a sequence's frame that ended DONE with
+// a liar's tiles is flagged with a RowEnd for the frame's own id, but a frame has no row in
+// the job database (its sequence has): store->end() updates nothing, the flag is lost at
+// a restart, and the sequence's status (what clients see) never shows it.
+TEST_F(VerifierTest, AnEndedFrameWithALiarsTilesFlagsItsSequence) {
+  Sequence& s = add_sequence({1});
+  render_all(start_frame(s), a);
+  ASSERT_EQ(s.state(), v1::JobStatus::DONE);
+  const uint64_t check = merged_and_picked(*job, a);
+  const uint64_t lease = lease_check(b);
+  const Verifier::Verdict v = Verifier::judge(*verifier.pending(check, lease), digest(0, 0, 0.7), b, renders(0.7));
+  fx = {};
+  verifier.decide(check, lease, b, v, now, fx);
+  ASSERT_TRUE(verifier.quarantined(a));
+  ASSERT_FALSE(fx.rows.empty());
+  for (const RowEnd& row : fx.rows) EXPECT_NE(jobs.find_sequence(row.id), nullptr) << row.id << " has no row";
+  const std::string error = job_status(jobs, leases, s.id(), false, now).error();
+  EXPECT_TRUE(has(error, "quarantined")) << error;
+}
+
+TEST_F(VerifierTest, ACheckerTheRefereeDisagreesWithIsTheOneQuarantined) {
+  const uint64_t check = merged_and_picked(*job, a);
+  const uint64_t lease = lease_check(b);
+  const Verifier::Verdict v = Verifier::judge(*verifier.pending(check, lease), digest(0, 0, 0.7), b, renders(0.5));
+  EXPECT_EQ(v.liars, std::vector<uint64_t>{b});
+  EXPECT_FALSE(verifier.decide(check, lease, b, v, now, fx));  // its result does not count
+  EXPECT_TRUE(verifier.quarantined(b));
+  EXPECT_FALSE(verifier.quarantined(a));
+  EXPECT_EQ(job->plan.progress(0).passes_done, 1u);  // a's merge stands
+}
+
+TEST_F(VerifierTest, WhenTheRefereeCannotRenderNobodyIsQuarantined) {
+  const uint64_t check = merged_and_picked(*job, a);
+  const uint64_t lease = lease_check(b);
+  const Referee broken = [](const v1::Task&) -> std::vector<PixelSums> { throw std::runtime_error("no scene"); };
+  const Verifier::Verdict v = Verifier::judge(*verifier.pending(check, lease), digest(0, 0, 0.7), b, broken);
+  EXPECT_FALSE(v.same);
+  EXPECT_TRUE(v.liars.empty());
+  verifier.decide(check, lease, b, v, now, fx);
+  EXPECT_EQ(counters.check_mismatches, 1u);
+  EXPECT_EQ(counters.workers_quarantined, 0u);
+  EXPECT_EQ(checks.find(check), nullptr);
+}
+
+TEST_F(VerifierTest, ACheckNoOtherWorkerCanTakeIsSkipped) {
+  testing::merge_passes(job->plan, testing::kPasses);
+  Lease l{job->id(), 0, 0, a, now + 5, std::make_shared<const v1::Task>()};
+  verifier.issue(*job, l, a, 1234, now);
+  verifier.skip_stale(now, fx);
+  EXPECT_EQ(checks.all().size(), 1u);  // b could take it
+  workers.remove(b);
+  verifier.skip_stale(now, fx);
+  EXPECT_TRUE(checks.all().empty());
+  EXPECT_EQ(counters.checks_skipped, 1u);
+  EXPECT_EQ(job->pending_checks, 0u);
+  EXPECT_EQ(job->state(), v1::JobStatus::DONE);  // it waited only for the check
+  ASSERT_EQ(fx.snapshots.size(), 1u);
+  EXPECT_TRUE(fx.snapshots[0].ended);
+}
+
+TEST_F(VerifierTest, ACheckWaitingForMoreThanTwoLeasePeriodsIsSkipped) {
+  const uint64_t check = merged_and_picked(*job, a);
+  const double since = checks.find(check)->since;
+  verifier.skip_stale(since + 2 * options.lease_seconds, fx);
+  EXPECT_NE(checks.find(check), nullptr);
+  verifier.skip_stale(since + 2 * options.lease_seconds + 0.001, fx);
+  EXPECT_EQ(checks.find(check), nullptr);
+  EXPECT_EQ(counters.checks_skipped, 1u);
+}
+
+TEST_F(VerifierTest, ALeasedCheckIsNeverSkipped) {
+  const uint64_t check = merged_and_picked(*job, a);
+  lease_check(b);
+  workers.remove(b);  // even with nobody else left: its lease expires first, then it waits again
+  verifier.skip_stale(now + 100 * options.lease_seconds, fx);
+  EXPECT_NE(checks.find(check), nullptr);
+}
+
+}  // namespace
+}  // namespace tessera

@@ -1,0 +1,136 @@
+// WorkerLifecycle: workers registering (bounded, quarantined tokens refused), renewing
+// their leases, giving a task back (failed, or not) and leaving.
+#include "server/worker_lifecycle.h"
+
+#include <gtest/gtest.h>
+
+#include <set>
+
+#include "tests/server/parts_fixture.h"
+
+namespace tessera {
+namespace {
+
+using testing::has;
+using testing::kTiles;
+using testing::refusal;
+using Code = RequestError::Code;
+
+CoordinatorOptions two_workers_at_most() {
+  CoordinatorOptions o = testing::parts_options();
+  o.max_workers = 2;
+  o.worker_timeout_seconds = 60;
+  o.heartbeat_seconds = 2;
+  return o;
+}
+
+class WorkerLifecycleTest : public testing::PartsTest {
+ protected:
+  WorkerLifecycleTest() : PartsTest(two_workers_at_most()) {}
+  static v1::RegisterRequest request(const std::string& name, uint32_t threads = 4) {
+    v1::RegisterRequest r;
+    r.set_version(kProtocolVersion);
+    r.set_name(name);
+    r.set_threads(threads);
+    return r;
+  }
+  uint64_t join(const std::string& name, const std::string& principal = "") {
+    return worker_lifecycle.register_worker(request(name), principal, now).worker_id();
+  }
+};
+
+TEST_F(WorkerLifecycleTest, ARegisteredWorkerIsToldItsIdAndTimings) {
+  const v1::RegisterResponse r = worker_lifecycle.register_worker(request("render-1", 8), "tok", now);
+  const WorkerInfo& w = worker(r.worker_id());
+  EXPECT_EQ(w.name, "render-1");
+  EXPECT_EQ(w.principal, "tok");
+  EXPECT_EQ(w.threads, 8u);
+  EXPECT_EQ(w.last_seen, now);
+  EXPECT_EQ(r.heartbeat_interval_ms(), 2000u);
+  EXPECT_EQ(r.lease_ms(), uint32_t(options.lease_seconds * 1000));
+}
+
+TEST_F(WorkerLifecycleTest, AnotherProtocolVersionIsRefused) {
+  v1::RegisterRequest r = request("old");
+  r.set_version(kProtocolVersion - 1);
+  const std::string why = refusal([&] { worker_lifecycle.register_worker(r, "", now); }, Code::kInvalidArgument);
+  EXPECT_TRUE(has(why, "protocol version " + std::to_string(kProtocolVersion - 1))) << why;
+  EXPECT_EQ(workers.size(), 0u);
+}
+
+TEST_F(WorkerLifecycleTest, AQuarantinedTokenMayNotRegister) {
+  checks.quarantine(12345, "liar");
+  const std::string why = refusal([&] { join("again", "liar"); }, Code::kPermissionDenied);
+  EXPECT_TRUE(has(why, "worker token 'liar' is quarantined")) << why;
+  EXPECT_NO_THROW(join("honest", "honest"));
+}
+
+TEST_F(WorkerLifecycleTest, WorkersAreBoundedSilentOnesForgottenFirst) {
+  const uint64_t quiet = join("quiet");
+  now += options.worker_timeout_seconds / 2;
+  const uint64_t busy = join("busy");
+  const std::string why = refusal([&] { join("third"); }, Code::kResourceExhausted);
+  EXPECT_EQ(why, "the coordinator has its 2 workers");
+  now += options.worker_timeout_seconds / 2 + 1;  // quiet has been silent past the timeout; busy not
+  const uint64_t third = join("third");
+  EXPECT_EQ(workers.find(quiet), nullptr);
+  EXPECT_NE(workers.find(busy), nullptr);
+  EXPECT_NE(workers.find(third), nullptr);
+}
+
+TEST_F(WorkerLifecycleTest, AHeartbeatRenewsOnlyTheWorkersOwnLiveLeases) {
+  Job& job = *add_still();
+  const uint64_t a = join("a"), b = join("b");
+  const uint64_t mine = lease_next(job, a), theirs = lease_next(job, b), ended = lease_next(job, a);
+  leasing.end(ended, true, now);
+  now += 3;
+  const std::vector<uint64_t> refused = worker_lifecycle.heartbeat(a, {mine, theirs, ended, 999}, now);
+  EXPECT_EQ(refused, (std::vector<uint64_t>{theirs, ended, 999}));  // it must not go on with these
+  EXPECT_EQ(leases.live(mine)->deadline, now + options.lease_seconds);
+  EXPECT_EQ(leases.live(theirs)->deadline, now - 3 + options.lease_seconds);
+  EXPECT_EQ(worker(a).last_seen, now);
+}
+
+TEST_F(WorkerLifecycleTest, ATaskGivenBackIsReadyAgain) {
+  Job& job = *add_still();
+  const uint64_t a = join("a"), b = join("b");
+  const uint64_t t = lease_next(job, a);
+  worker_lifecycle.release(b, t, "", now, fx);  // not b's to give back
+  EXPECT_NE(leases.live(t), nullptr);
+  worker_lifecycle.release(a, t, "", now, fx);
+  EXPECT_EQ(leases.live(t), nullptr);
+  EXPECT_EQ(job.plan.ready(), kTiles);
+  EXPECT_EQ(counters.leases_released, 1u);
+  EXPECT_EQ(counters.tasks_failed, 0u);
+  EXPECT_TRUE(fx.changed);
+}
+
+TEST_F(WorkerLifecycleTest, ATaskGivenBackWithAnErrorCountsAsFailedOnThatWorker) {
+  const std::shared_ptr<Job> job = add_still();
+  const uint64_t a = join("a"), b = join("b");
+  worker_lifecycle.release(a, lease_next(*job, a), "out of memory", now, fx);
+  EXPECT_EQ(counters.tasks_failed, 1u);
+  EXPECT_EQ(job->failed_on, std::set<uint64_t>{a});
+  EXPECT_TRUE(job->live());
+  worker_lifecycle.release(b, lease_next(*job, b), "out of memory", now, fx);
+  EXPECT_EQ(job->state(), v1::JobStatus::FAILED);
+  EXPECT_EQ(job->error, "tasks failed on 2 workers: out of memory");
+}
+
+TEST_F(WorkerLifecycleTest, AWorkerLeavingGivesItsLeasesBack) {
+  Job& job = *add_still();
+  const uint64_t a = join("a"), b = join("b");
+  lease_next(job, a);
+  lease_next(job, a);
+  const uint64_t kept = lease_next(job, b);
+  worker_lifecycle.unregister(a, now, fx);
+  EXPECT_EQ(workers.find(a), nullptr);
+  EXPECT_EQ(counters.leases_released, 2u);
+  EXPECT_EQ(job.plan.ready(), kTiles - 1);
+  EXPECT_NE(leases.live(kept), nullptr);
+  EXPECT_EQ(workers.threads(), worker(b).threads);
+  EXPECT_TRUE(fx.changed);
+}
+
+}  // namespace
+}  // namespace tessera
