@@ -99,9 +99,11 @@ void check_outputs(const std::vector<std::string>& outputs) {
       throw FarmError(out + ": unknown image format (use .exr or .png)");
 }
 
-// One image of a job (a frame's, with `frame`) to each output.
-void fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::optional<int> frame,
-               const std::vector<std::string>& outputs, const FarmContext& c);
+// One image of a job (a frame's, with `frame`) to each output. With `final`, only the
+// ended job's whole image is written: false (nothing written) if the coordinator serves a
+// progressive one (it restarted and is rendering the job again from an earlier checkpoint).
+bool fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::optional<int> frame,
+               const std::vector<std::string>& outputs, const FarmContext& c, bool final = false);
 
 void print_status(const v1::JobStatus& s, const FarmContext& c) {
   std::fprintf(c.out, "%s\n", c.json ? proto_json(s).c_str() : describe(s).c_str());
@@ -201,8 +203,8 @@ int watch_job(v1::Tessera::StubInterface& stub, const std::string& job, const Fa
 
 namespace {
 
-void fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::optional<int> frame,
-               const std::vector<std::string>& outputs, const FarmContext& c) {
+bool fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::optional<int> frame,
+               const std::vector<std::string>& outputs, const FarmContext& c, bool final) {
   v1::FetchImageRequest req;
   req.set_id(job);
   if (frame) req.set_frame(*frame);
@@ -223,6 +225,7 @@ void fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::op
     }
     wait_to_retry(backoff, c, st, "", "fetching again");
   }
+  if (final && !img.final()) return false;
   for (const std::string& out : outputs) {
     const std::string path = frame ? frame_path(out, *frame) : out;
     try {
@@ -231,6 +234,7 @@ void fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::op
       throw FarmError(e.what());
     }
   }
+  return true;
 }
 
 }  // namespace
@@ -254,10 +258,7 @@ int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const 
         throw FarmError("--all: several frames need a #### in every -f path (got '" + out + "')");
   int written = 0;
   for (const v1::FrameStatus& f : s.frames())
-    if (f.state() == v1::JobStatus::DONE) {
-      fetch_one(stub, job, f.frame(), outputs, c);
-      ++written;
-    }
+    if (f.state() == v1::JobStatus::DONE) written += fetch_one(stub, job, f.frame(), outputs, c, true);
   if (!c.json)
     std::fprintf(c.err, "%d of %d frames finished and written%s\n", written, s.frames_size(),
                  written < s.frames_size() ? (" (the others: " + describe_frames(s) + ")").c_str() : "");
@@ -327,27 +328,37 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
     return 0;
   }
   if (!c.json) std::fprintf(c.err, "job %s submitted\n", id.id().c_str());
+  // Only final images are written. One that is not (the coordinator restarted after
+  // saying the job ended, and renders it again from an earlier checkpoint) is fetched
+  // again once the job has ended again.
   if (frames.empty()) {
-    const v1::JobStatus final = watch(stub, id.id(), c);
-    fetch_one(stub, id.id(), std::nullopt, outputs, c);
-    return report_submitted(id.id(), final, outputs, c);
+    while (true) {
+      const v1::JobStatus final = watch(stub, id.id(), c);
+      if (fetch_one(stub, id.id(), std::nullopt, outputs, c, true)) return report_submitted(id.id(), final, outputs, c);
+    }
   }
   // A sequence: each frame's files are written as soon as the frame is done.
   std::set<int> written;
   auto write_done = [&](const v1::JobStatus& s) {
+    bool all = true;  // every DONE frame written
     for (const v1::FrameStatus& f : s.frames())
       if (f.state() == v1::JobStatus::DONE && !written.count(f.frame())) {
-        fetch_one(stub, id.id(), f.frame(), outputs, c);
-        written.insert(f.frame());
+        if (fetch_one(stub, id.id(), f.frame(), outputs, c, true))
+          written.insert(f.frame());
+        else
+          all = false;
       }
+    return all;
   };
-  const v1::JobStatus final = watch(stub, id.id(), c, [&](const v1::JobStatus& s) {
-    try {
-      write_done(s);
-    } catch (const FarmError&) {  // (a coordinator restarting, say) fetched again at the end
-    }
-  });
-  write_done(final);
+  v1::JobStatus final;
+  do {
+    final = watch(stub, id.id(), c, [&](const v1::JobStatus& s) {
+      try {
+        write_done(s);
+      } catch (const FarmError&) {  // (a coordinator restarting, say) fetched again at the end
+      }
+    });
+  } while (!write_done(final));
   std::vector<std::string> patterns;
   for (const std::string& out : outputs)
     patterns.push_back(out + " (" + std::to_string(written.size()) + " of " + std::to_string(frames.size()) +

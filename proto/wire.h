@@ -14,7 +14,8 @@ namespace tessera {
 
 // Version 2: tile size, noise target and the estimator switches moved into RenderSettings.
 // Version 3: tile sums in byte planes.
-constexpr uint32_t kProtocolVersion = 3;
+// Version 4: Image.final (a client writes no image of an ended job that is not final).
+constexpr uint32_t kProtocolVersion = 4;
 constexpr size_t kBytesPerPixel = 36;  // r, g, b, lum2 (float64) + n (uint32)
 // gRPC message limit for scene uploads and images.
 constexpr int kMaxMessageBytes = 512 << 20;

@@ -202,6 +202,7 @@ v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::opt
                        "job " + job->id() + ": its image could not be written (" + job->image_error +
                            "); the samples are kept and the write is retried");
   img.set_frame_passes_done(job->snaps.image_frame_passes);
+  img.set_final(!live);  // (an ended job's image holds its whole film: checked above)
   return img;
 }
 

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <thread>
 
 #include "core/io/image_io.h"
@@ -110,6 +111,104 @@ class FarmClient : public ::testing::Test {
     return r;
   }
 };
+
+// The real coordinator's stub, but the first FetchImage of each image is answered as a
+// coordinator killed just after saying the job ended would answer it once restarted: it
+// took the job up again from an earlier checkpoint and serves its progressive image, not
+// final (here: bytes that are no EXR at all, so writing them could not pass unnoticed).
+class RestartedOnceStub : public v1::Tessera::StubInterface {
+ public:
+  explicit RestartedOnceStub(v1::Tessera::StubInterface& real) : real_(real) {}
+  grpc::Status SubmitJob(grpc::ClientContext* c, const v1::SubmitJobRequest& r, v1::JobId* o) override {
+    return real_.SubmitJob(c, r, o);
+  }
+  grpc::Status GetJob(grpc::ClientContext* c, const v1::JobId& r, v1::JobStatus* o) override {
+    return real_.GetJob(c, r, o);
+  }
+  grpc::Status ListJobs(grpc::ClientContext* c, const v1::ListJobsRequest& r, v1::JobList* o) override {
+    return real_.ListJobs(c, r, o);
+  }
+  grpc::Status CancelJob(grpc::ClientContext* c, const v1::JobId& r, v1::JobStatus* o) override {
+    return real_.CancelJob(c, r, o);
+  }
+  grpc::Status FetchImage(grpc::ClientContext* c, const v1::FetchImageRequest& r, v1::Image* o) override {
+    if (served_.insert(r.id() + "#" + std::to_string(r.frame())).second) {
+      o->set_exr("a progressive image");
+      o->set_final(false);
+      ++not_final;
+      return grpc::Status::OK;
+    }
+    return real_.FetchImage(c, r, o);
+  }
+  int not_final = 0;
+
+ private:
+  grpc::ClientReaderInterface<v1::JobStatus>* WatchJobRaw(grpc::ClientContext* c, const v1::JobId& r) override {
+    return real_.WatchJob(c, r).release();
+  }
+#define TESSERA_NO_ASYNC(Rpc, Request, Response)                                                                     \
+  grpc::ClientAsyncResponseReaderInterface<Response>* Async##Rpc##Raw(grpc::ClientContext*, const Request&,          \
+                                                                      grpc::CompletionQueue*) override {            \
+    return nullptr;                                                                                                 \
+  }                                                                                                                 \
+  grpc::ClientAsyncResponseReaderInterface<Response>* PrepareAsync##Rpc##Raw(grpc::ClientContext*, const Request&,   \
+                                                                             grpc::CompletionQueue*) override {     \
+    return nullptr;                                                                                                 \
+  }
+  TESSERA_NO_ASYNC(SubmitJob, v1::SubmitJobRequest, v1::JobId)
+  TESSERA_NO_ASYNC(GetJob, v1::JobId, v1::JobStatus)
+  TESSERA_NO_ASYNC(ListJobs, v1::ListJobsRequest, v1::JobList)
+  TESSERA_NO_ASYNC(CancelJob, v1::JobId, v1::JobStatus)
+  TESSERA_NO_ASYNC(FetchImage, v1::FetchImageRequest, v1::Image)
+#undef TESSERA_NO_ASYNC
+  grpc::ClientAsyncReaderInterface<v1::JobStatus>* AsyncWatchJobRaw(grpc::ClientContext*, const v1::JobId&,
+                                                                    grpc::CompletionQueue*, void*) override {
+    return nullptr;
+  }
+  grpc::ClientAsyncReaderInterface<v1::JobStatus>* PrepareAsyncWatchJobRaw(grpc::ClientContext*, const v1::JobId&,
+                                                                           grpc::CompletionQueue*) override {
+    return nullptr;
+  }
+  v1::Tessera::StubInterface& real_;
+  std::set<std::string> served_;
+};
+
+// submit --wait writes only final images: one that is not (the coordinator restarted after
+// saying the job ended and renders it again) is fetched again once the job has ended
+// again, and the file is the whole image. (Found as a flaky kill test: a frame written with
+// 7 of its 8 passes.)
+TEST_F(FarmClient, SubmitWaitWritesNoImageThatIsNotFinal) {
+  start_worker();
+  RestartedOnceStub restarted(*stub);
+  const std::string exr = (dir / "farm.exr").string();
+  SubmitRequest r = request({exr});
+  r.wait = true;
+  ASSERT_EQ(submit_job(restarted, r, ctx), 0) << err.text();
+  EXPECT_EQ(restarted.not_final, 1);
+  const Film local = render_image(TileRenderer(load_scene(r.flags.scene), to_settings(r.flags)), 2).film;
+  const ExrImage img = read_exr(exr);  // an EXR: not the bytes of the progressive answer
+  for (size_t i = 0; i < local.pixels().size(); ++i) ASSERT_EQ(img.channels.at("spp")[i], float(local.pixels()[i].n));
+}
+
+TEST_F(FarmClient, SubmitWaitWritesNoFrameThatIsNotFinal) {
+  start_worker();
+  RestartedOnceStub restarted(*stub);
+  const std::string pattern = (dir / "f.####.exr").string();
+  SubmitRequest r = request({pattern});
+  r.flags.frames = "1-2";
+  r.wait = true;
+  ASSERT_EQ(submit_job(restarted, r, ctx), 0) << err.text();
+  EXPECT_EQ(restarted.not_final, 2);
+  for (int f : {1, 2}) {
+    RenderFlags flags = r.flags;
+    flags.frames.clear();
+    flags.settings.frame = f;
+    const Film local = render_image(TileRenderer(load_scene(r.flags.scene), to_settings(flags)), 2).film;
+    const ExrImage img = read_exr((dir / ("f.000" + std::to_string(f) + ".exr")).string());
+    for (size_t i = 0; i < local.pixels().size(); ++i)
+      ASSERT_EQ(img.channels.at("spp")[i], float(local.pixels()[i].n)) << "frame " << f;
+  }
+}
 
 TEST_F(FarmClient, SubmitWaitsAndWritesTheLocalImageThenListsStatusAndFetch) {
   start_worker();

@@ -190,6 +190,18 @@ TEST_F(CoordinatorTest, CancelStopsDispatchAndKeepsWhatWasRendered) {
 // so a client that saw DONE and fetched at once got the previous progressive image (seen
 // in CI as a farm image with fewer samples than the local one). The seam holds the merging
 // thread inside that window.
+// An image is final only once its job has ended (and then it holds the whole film): a
+// client told the job ended writes no other (FarmClient.SubmitWaitWritesNoImageThatIsNotFinal).
+TEST_F(CoordinatorTest, OnlyAnEndedJobsImageIsFinal) {
+  const std::string id = c->submit(request(job_settings()));
+  const uint64_t w = worker();
+  ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  EXPECT_FALSE(c->image(id, true, false).final());
+  drain(w);
+  ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(c->image(id, true, false).final());
+}
+
 TEST_F(CoordinatorTest, ImageFetchedAsSoonAsTheJobEndsHoldsEverySample) {
   std::atomic<std::thread::id> slow;
   CoordinatorOptions o = options();
