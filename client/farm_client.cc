@@ -12,6 +12,7 @@
 #include "core/render/frames.h"
 #include "rpc.h"
 #include "scene_bundle.h"
+#include "scene_chunks.h"
 #include "wire.h"
 
 namespace tessera {
@@ -276,6 +277,39 @@ int cancel_job(v1::Tessera::StubInterface& stub, const std::string& job, const F
 
 namespace {
 
+// Sends the scene in pieces (UploadScene) and returns the upload's id, for SubmitJob. The
+// coordinator out of reach (restarting, a network blip) is retried with back-off for up to
+// c.reconnect_seconds: an upload is only bytes until a submit names it, so sending it again
+// is harmless.
+std::string upload_scene(v1::Tessera::StubInterface& stub, const SceneSource& scene, const FarmContext& c) {
+  uint64_t bytes = 0;
+  for (const v1::SceneFileInfo& f : scene.manifest.files()) bytes += f.size();
+  Backoff backoff(Backoff::kClientFirstSeconds);
+  for (const auto since = std::chrono::steady_clock::now();;) {
+    const auto ctx = deadline(c, 120 + double(bytes) / (1 << 20));  // two minutes, then 1 MiB/s at least
+    v1::SceneUpload upload;
+    const auto writer = stub.UploadScene(ctx.get(), &upload);
+    v1::SceneChunk first;
+    *first.mutable_manifest() = scene.manifest;
+    bool sent = writer->Write(first);
+    try {
+      sent = sent &&
+             send_pieces(scene, 0, 0, c.scene_chunk_bytes, [&](v1::SceneChunk& piece) { return writer->Write(piece); });
+    } catch (const std::exception& e) {  // a file that can no longer be read
+      ctx->TryCancel();
+      writer->Finish();
+      throw FarmError(e.what());
+    }
+    if (sent) writer->WritesDone();
+    const grpc::Status st = writer->Finish();
+    if (st.ok()) return upload.upload_id();
+    if (!unreachable(st) ||
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count() > c.reconnect_seconds)
+      check(st, c);
+    wait_to_retry(backoff, c, st, "", "sending the scene again");
+  }
+}
+
 int report_submitted(const std::string& id, const v1::JobStatus& final, const std::vector<std::string>& outputs,
                      const FarmContext& c) {
   if (c.json) {
@@ -300,22 +334,22 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
   for (const int f : frames) req.add_frames(f);
   const auto outputs = output_paths(r.flags);
   if (r.wait) check_outputs(outputs);
-  std::string main;
+  SceneSource scene;
   try {
-    pack_scene(r.flags.scene, &main, req.mutable_files());
+    auto files = scene_bundle_files(r.flags.scene);
     if (!settings.environment_map.empty()) {
       // The environment map travels in the bundle, named apart from the scene's own files;
       // workers find it relative to the main file.
-      v1::SceneFile* f = req.mutable_files()->Add();
-      f->set_path(".tessera-env/" + std::filesystem::path(settings.environment_map).filename().string());
-      f->set_content(read_file_bytes(settings.environment_map));
-      settings.environment_map = f->path();
+      files.emplace_back(".tessera-env/" + std::filesystem::path(settings.environment_map).filename().string(),
+                         settings.environment_map);
+      settings.environment_map = files.back().first;
     }
+    scene = scene_source(files[0].first, files);
   } catch (const std::exception& e) {
     throw FarmError(e.what());
   }
   *req.mutable_settings() = to_proto(settings);
-  req.set_main_file(main);
+  req.set_upload_id(upload_scene(stub, scene, c));
   req.set_priority(r.priority);
   req.set_name(r.name.empty() ? r.flags.scene : r.name);
   v1::JobId id;

@@ -32,6 +32,8 @@ struct FarmContext {
   // How long watching a job (watch, submit --wait) keeps reconnecting to a coordinator
   // that went away before giving up.
   double reconnect_seconds = 300;
+  // A scene is sent in pieces of at most this many bytes (tests send small ones).
+  size_t scene_chunk_bytes = size_t(1) << 20;
 };
 
 std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::string& address,

@@ -44,17 +44,23 @@ bool safe_relative(const std::string& p) {
 
 }  // namespace
 
-void pack_scene(const std::string& path, std::string* main_file, SceneFiles* files) {
+std::vector<std::pair<std::string, std::string>> scene_bundle_files(const std::string& path) {
   const std::vector<std::string> extra = scene_files(path);
-  *main_file = fs::path(path).filename().string();
-  v1::SceneFile* f = files->Add();
-  f->set_path(*main_file);
-  f->set_content(read_file_bytes(path));
+  std::vector<std::pair<std::string, std::string>> files{{fs::path(path).filename().string(), path}};
   for (const std::string& rel : extra) {
     if (!safe_relative(rel)) throw std::runtime_error(path + ": '" + rel + "' is not a path inside the scene's folder");
-    v1::SceneFile* e = files->Add();
-    e->set_path(rel);
-    e->set_content(read_file_bytes((fs::path(path).parent_path() / rel).string()));
+    files.emplace_back(rel, (fs::path(path).parent_path() / rel).string());
+  }
+  return files;
+}
+
+void pack_scene(const std::string& path, std::string* main_file, SceneFiles* files) {
+  const auto listed = scene_bundle_files(path);
+  *main_file = listed[0].first;
+  for (const auto& [rel, source] : listed) {
+    v1::SceneFile* f = files->Add();
+    f->set_path(rel);
+    f->set_content(read_file_bytes(source));
   }
 }
 

@@ -4,6 +4,8 @@
 #pragma once
 
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "tessera.grpc.pb.h"
 
@@ -13,6 +15,10 @@ using SceneFiles = google::protobuf::RepeatedPtrField<v1::SceneFile>;
 
 // Content hash of a bundle (main file name, paths and bytes): 32 hex digits.
 std::string bundle_hash(const std::string& main_file, const SceneFiles& files);
+// The files a bundle of the scene at `path` holds, without their bytes: (path in the
+// bundle, path on disk), the scene file first. Throws SceneError (unreadable scene) or
+// std::runtime_error (a referenced file outside the scene's folder).
+std::vector<std::pair<std::string, std::string>> scene_bundle_files(const std::string& path);
 // Reads the scene at `path` and the files it needs. Throws SceneError (unreadable scene)
 // or std::runtime_error (a referenced file outside the scene's folder or unreadable).
 void pack_scene(const std::string& path, std::string* main_file, SceneFiles* files);

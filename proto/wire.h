@@ -15,9 +15,11 @@ namespace tessera {
 // Version 2: tile size, noise target and the estimator switches moved into RenderSettings.
 // Version 3: tile sums in byte planes.
 // Version 4: Image.final (a client writes no image of an ended job that is not final).
-constexpr uint32_t kProtocolVersion = 4;
+// Version 5: scenes stream in pieces (UploadScene, FetchSceneChunks instead of FetchScene).
+constexpr uint32_t kProtocolVersion = 5;
 constexpr size_t kBytesPerPixel = 36;  // r, g, b, lum2 (float64) + n (uint32)
-// gRPC message limit for scene uploads and images.
+// gRPC message limit, for images and inline scene bundles (scenes of any size stream in
+// pieces: scene_chunks.h).
 constexpr int kMaxMessageBytes = 512 << 20;
 
 // Input from the network that does not make sense: handled and reported, never fatal.

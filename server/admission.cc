@@ -19,6 +19,8 @@ Admission admit(const v1::SubmitJobRequest& req) {
   } catch (const WireError& e) {
     throw refuse(e.what());
   }
+  if (!req.upload_id().empty() && (req.files_size() > 0 || !req.main_file().empty()))
+    throw refuse("a job's scene is its files or an upload (upload_id), not both");
   a.frames.assign(req.frames().begin(), req.frames().end());
   if (!a.frames.empty()) {
     if (a.settings.frame) throw refuse("a sequence's settings have no frame number: its frames are listed in frames");
@@ -34,7 +36,7 @@ Admission admit(const v1::SubmitJobRequest& req) {
   }
   a.pixels = a.settings.effective_window().area();
   a.samples = uint64_t(a.pixels) * uint64_t(a.settings.spp) * std::max<uint64_t>(1, a.frames.size());
-  a.scene_bytes = bundle_bytes(req.files());
+  a.scene_bytes = bundle_bytes(req.files());  // an upload's: SceneUploads::bytes
   return a;
 }
 

@@ -29,10 +29,11 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
       sink_(sink ? std::move(sink) : std::make_unique<DiskImageSink>((fs::path(options_.data_dir) / "jobs").string())),
       store_(store ? std::move(store) : sqlite_store(options_)),
       scenes_((fs::path(options_.data_dir) / "scenes").string()),
+      uploads_(scenes_, *clock_, options_.upload_kept_seconds),
       writer_(*sink_, *store_,
               {[this](const std::string& hash) { scenes_.release(hash); }, options_.before_image_write,
                options_.data_dir}),
-      referee_(local_referee(scenes_, (fs::path(options_.data_dir) / "scenes").string())),
+      referee_(local_referee(scenes_)),
       snapshotter_(options_.image_interval_seconds, options_.checkpoint_seconds),
       leases_(store_->next_generation() << 40),  // 2^40 tasks a run: ids of different runs never meet
       leasing_(leases_, jobs_, workers_, checks_, counters_, options_.lease_seconds),
@@ -126,7 +127,8 @@ void Coordinator::refused() {
 std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::string& owner) {
   Submission sub;
   try {
-    const Admission a = admit(req);
+    Admission a = admit(req);
+    if (!req.upload_id().empty()) a.scene_bytes = uploads_.bytes(req.upload_id(), owner);
     JobMeta meta;
     meta.owner = owner;
     {
@@ -136,7 +138,7 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
       meta.id = jobs_.new_id();
       meta.seq = jobs_.next_seq();
     }
-    sub = prepare_submission(req, a, std::move(meta), scenes_, *store_, options_.data_dir);
+    sub = prepare_submission(req, a, std::move(meta), scenes_, *store_, options_.data_dir, &uploads_);
   } catch (const RequestError&) {
     refused();
     throw;
@@ -163,6 +165,15 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
     if (sub.job->live() && !sub.job->snaps.spare_film) sub.job->snaps.spare_film = std::move(spare);
   }
   return id;
+}
+
+v1::SceneUpload Coordinator::upload_scene(const std::function<bool(v1::SceneChunk*)>& next, const std::string& owner) {
+  uint64_t in_jobs;
+  {
+    MutexLock lock(mu_);
+    in_jobs = jobs_.load(owner).client_scene_bytes;
+  }
+  return uploads_.receive(owner, next, in_jobs, options_.max_scene_bytes_per_client);  // the disk, without mu_
 }
 
 v1::JobStatus Coordinator::status(const std::string& id, bool with_tiles) const {
@@ -219,11 +230,25 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
   });
 }
 
-v1::SceneBundle Coordinator::scene(const std::string& hash) const {
+v1::SceneManifest Coordinator::scene(const std::string& hash) const {
   try {
-    return scenes_.get(hash);
+    return scenes_.manifest(hash);
   } catch (const std::out_of_range&) {
     throw RequestError(RequestError::Code::kNotFound, "no scene with hash " + hash);
+  }
+}
+
+void Coordinator::scene_chunks(const v1::FetchSceneRequest& req,
+                               const std::function<bool(const v1::SceneChunk&)>& write) const {
+  try {
+    scenes_.send(req, options_.scene_chunk_bytes, write);
+  } catch (const std::out_of_range&) {
+    throw RequestError(RequestError::Code::kNotFound, "no scene with hash " + req.scene_hash());
+  } catch (const WireError& e) {
+    throw RequestError(RequestError::Code::kInvalidArgument, e.what());
+  } catch (const std::runtime_error&) {
+    scene(req.scene_hash());  // released while it was read: not found
+    throw;
   }
 }
 

@@ -25,8 +25,8 @@
 //     the slow work in one Effects (effects.h), which apply() carries out after releasing it.
 //  4. Never two of the coordinator's locks at once: a job's write_mu (one image and
 //     checkpoint writer at a time) is taken without mu_ held, and mu_ without write_mu.
-//     SceneStore's, JobStore's and ImageSink's own locks are leaves: nothing is taken
-//     while one is held.
+//     SceneStore's, SceneUploads', JobStore's and ImageSink's own locks are leaves: nothing
+//     is taken while one is held.
 #pragma once
 
 #include <map>
@@ -46,6 +46,7 @@
 #include "server/request_error.h"
 #include "server/result_intake.h"
 #include "server/scene_store.h"
+#include "server/scene_uploads.h"
 #include "server/worker_lifecycle.h"
 
 namespace tessera {
@@ -66,6 +67,10 @@ class Coordinator {
   // Client side. Throw RequestError.
   // `owner`: the submitting token's name; only it (or an admin) may cancel the job.
   std::string submit(const v1::SubmitJobRequest& request, const std::string& owner = "");
+  // A scene in pieces (UploadScene; scene_uploads.h): `next` gives each message of the
+  // stream, false at its end; written to disk as it comes. SubmitJobRequest.upload_id then
+  // names it.
+  v1::SceneUpload upload_scene(const std::function<bool(v1::SceneChunk*)>& next, const std::string& owner = "");
   v1::JobStatus status(const std::string& id, bool with_tiles) const;
   std::vector<v1::JobStatus> list() const;  // in submission order
   // `requester` may cancel only its own jobs unless `any` (an admin, or no access tokens).
@@ -80,7 +85,13 @@ class Coordinator {
   // Up to max_tasks tasks, stopping once they hold max_samples samples (0: no such limit);
   // always one if any is ready.
   v1::GetTaskResponse get_task(uint64_t worker_id, uint32_t max_tasks = 1, uint64_t max_samples = 0);
-  v1::SceneBundle scene(const std::string& hash) const;
+  // A kept scene's manifest; throws RequestError (kNotFound).
+  v1::SceneManifest scene(const std::string& hash) const;
+  // FetchSceneChunks: `write` gets the scene's manifest, then its pieces from the request's
+  // (file, offset) on, read from disk one at a time; stops when `write` returns false.
+  // Throws RequestError (kNotFound, kInvalidArgument).
+  void scene_chunks(const v1::FetchSceneRequest& request,
+                    const std::function<bool(const v1::SceneChunk&)>& write) const;
   // Renews the worker's leases; returns the tasks it must not go on with.
   std::vector<uint64_t> heartbeat(uint64_t worker_id, const std::vector<uint64_t>& task_ids);
   bool heartbeat(uint64_t worker_id, uint64_t task_id) {
@@ -165,6 +176,7 @@ class Coordinator {
   const std::unique_ptr<ImageSink> sink_;
   const std::unique_ptr<JobStore> store_;
   SceneStore scenes_;
+  SceneUploads uploads_;  // used without mu_, as scenes_ is
   double started_ = 0;
   const SnapshotWriter writer_;  // used without mu_
   const Referee referee_;        // likewise

@@ -75,9 +75,9 @@ grpc::Status as(const Authenticator* auth, grpc::ServerContext* ctx, Action acti
 
 }  // namespace
 
-void configure_server(grpc::ServerBuilder& builder) {
-  builder.SetMaxReceiveMessageSize(kMaxMessageBytes);
-  builder.SetMaxSendMessageSize(kMaxMessageBytes);
+void configure_server(grpc::ServerBuilder& builder, int max_message_bytes) {
+  builder.SetMaxReceiveMessageSize(max_message_bytes);
+  builder.SetMaxSendMessageSize(max_message_bytes);
   const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
   builder.SetSyncServerOption(grpc::ServerBuilder::SyncServerOption::MAX_POLLERS, std::max(8, 2 * cores));
 }
@@ -125,6 +125,13 @@ grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::Fetch
   });
 }
 
+grpc::Status ClientService::UploadScene(grpc::ServerContext* ctx, grpc::ServerReader<v1::SceneChunk>* reader,
+                                        v1::SceneUpload* out) {
+  return as(auth_, ctx, Action::kSubmit, [&](const Principal& who) {
+    *out = c_.upload_scene([&](v1::SceneChunk* chunk) { return reader->Read(chunk); }, who.name);
+  });
+}
+
 grpc::Status WorkerService::Register(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
                                      v1::RegisterResponse* out) {
   return as(auth_, ctx, Action::kWork, [&](const Principal& who) { *out = c_.register_worker(*req, who.name); });
@@ -141,9 +148,11 @@ grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskR
     }
   });
 }
-grpc::Status WorkerService::FetchScene(grpc::ServerContext* ctx, const v1::FetchSceneRequest* req,
-                                       v1::SceneBundle* out) {
-  return as(auth_, ctx, Action::kWork, [&](const Principal&) { *out = c_.scene(req->scene_hash()); });
+grpc::Status WorkerService::FetchSceneChunks(grpc::ServerContext* ctx, const v1::FetchSceneRequest* req,
+                                             grpc::ServerWriter<v1::SceneChunk>* w) {
+  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+    c_.scene_chunks(*req, [&](const v1::SceneChunk& chunk) { return !ctx->IsCancelled() && w->Write(chunk); });
+  });
 }
 grpc::Status WorkerService::Heartbeat(grpc::ServerContext* ctx, const v1::HeartbeatRequest* req,
                                       v1::HeartbeatResponse* out) {

@@ -12,7 +12,8 @@ namespace tessera {
 // message limits, and enough gRPC threads kept alive between calls. (The sync server's
 // default keeps 2 idle threads and ends the rest after each call, so a busy coordinator
 // made and ended a thread for most calls, and its per-thread decoding scratch with it.)
-void configure_server(grpc::ServerBuilder& builder);
+// `max_message_bytes`: tests lower it (scenes of any size stream in pieces below it).
+void configure_server(grpc::ServerBuilder& builder, int max_message_bytes = kMaxMessageBytes);
 
 // Without an Authenticator (or with an open one) every caller may do everything.
 class ClientService final : public v1::Tessera::Service {
@@ -24,6 +25,8 @@ class ClientService final : public v1::Tessera::Service {
   grpc::Status WatchJob(grpc::ServerContext* ctx, const v1::JobId* req, grpc::ServerWriter<v1::JobStatus>* w) override;
   grpc::Status CancelJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) override;
   grpc::Status FetchImage(grpc::ServerContext*, const v1::FetchImageRequest* req, v1::Image* out) override;
+  grpc::Status UploadScene(grpc::ServerContext*, grpc::ServerReader<v1::SceneChunk>* reader,
+                           v1::SceneUpload* out) override;
 
  private:
   Coordinator& c_;
@@ -35,7 +38,8 @@ class WorkerService final : public v1::TesseraWorker::Service {
   explicit WorkerService(Coordinator& c, const Authenticator* auth = nullptr) : c_(c), auth_(auth) {}
   grpc::Status Register(grpc::ServerContext*, const v1::RegisterRequest* req, v1::RegisterResponse* out) override;
   grpc::Status GetTask(grpc::ServerContext*, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) override;
-  grpc::Status FetchScene(grpc::ServerContext*, const v1::FetchSceneRequest* req, v1::SceneBundle* out) override;
+  grpc::Status FetchSceneChunks(grpc::ServerContext* ctx, const v1::FetchSceneRequest* req,
+                                grpc::ServerWriter<v1::SceneChunk>* w) override;
   grpc::Status Heartbeat(grpc::ServerContext*, const v1::HeartbeatRequest* req, v1::HeartbeatResponse* out) override;
   grpc::Status SubmitResults(grpc::ServerContext*, const v1::ResultBatch* req, v1::ResultAcks* out) override;
   grpc::Status ReleaseTask(grpc::ServerContext*, const v1::ReleaseRequest* req, v1::ReleaseResponse* out) override;

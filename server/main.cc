@@ -69,7 +69,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(int64_t(1), int64_t(1) << 40));
   app.add_option("--max-scene-bytes-per-client", opt.max_scene_bytes_per_client,
-                 "scene bytes of one client's live jobs together, at most")
+                 "scene bytes of one client's live jobs and scene uploads together, at most")
       ->capture_default_str()
       ->check(CLI::Range(uint64_t(1), uint64_t(1) << 50));
   app.add_option("--max-queued-samples-per-client", opt.max_queued_samples_per_client,

@@ -25,9 +25,14 @@ struct CoordinatorOptions {
   // Pixels of all live frames together: each costs two 40-byte films in memory (the plan's
   // and the snapshot's), so the default, 2^27, is about 10 GB at most.
   int64_t max_live_pixels = int64_t(1) << 27;
-  // Scene bytes and samples still to render of one client's live jobs together.
+  // Scene bytes (of live jobs and of scene uploads) and samples still to render of one
+  // client's live jobs together.
   uint64_t max_scene_bytes_per_client = uint64_t(4) << 30;
   uint64_t max_queued_samples_per_client = uint64_t(1) << 40;  // ~12 core-days at 1M samples/s
+  // A finished scene upload waits this long for the submit that names it (scene_uploads.h).
+  double upload_kept_seconds = 600;
+  // Workers get scenes in pieces of at most this many bytes (proto/scene_chunks.h).
+  size_t scene_chunk_bytes = size_t(1) << 20;
   // Verify by replay: this fraction of tasks, picked at random, is rendered again by a
   // second worker and the sums compared bit for bit. When they differ, the coordinator
   // renders the task itself, and a worker whose sums differ from its render is

@@ -4,65 +4,27 @@
 #include <filesystem>
 #include <fstream>
 
+#include "core/io/files.h"
 #include "core/scene/load.h"
 #include "core/scene/scene_error.h"
+#include "wire.h"
 
 namespace tessera {
 
 namespace fs = std::filesystem;
 
-SceneStore::SceneStore(std::string dir) : dir_(std::move(dir)) { fs::create_directories(dir_); }
+namespace {
 
-std::string SceneStore::add(const std::string& main_file, const SceneFiles& files,
-                            const std::function<void(const Scene&)>& check) {
-  const std::string hash = bundle_hash(main_file, files);
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (scenes_.count(hash)) {  // the same bytes were checked before
-      ++uses_[hash];
-      return hash;
-    }
+// Removes a folder when it goes out of scope (a staged scene, whatever became of it).
+struct RemoveAll {
+  fs::path dir;
+  ~RemoveAll() {
+    std::error_code ec;
+    fs::remove_all(dir, ec);
   }
-  // Unpacked into a folder of its own, so that two submits of one scene never share
-  // files, loaded, and removed: the bundle itself is what is kept.
-  static std::atomic<uint64_t> staging_seq{0};
-  const fs::path staging = fs::path(dir_) / (hash + ".staging-" + std::to_string(++staging_seq));
-  std::error_code ec;
-  try {
-    const Scene scene = load_scene(unpack_bundle(staging.string(), main_file, files));  // outside the lock: slow
-    if (check) check(scene);
-  } catch (const SceneError& e) {
-    fs::remove_all(staging, ec);
-    throw SceneError(main_file, e.element(), e.reason());
-  } catch (...) {
-    fs::remove_all(staging, ec);
-    throw;
-  }
-  fs::remove_all(staging, ec);
-  v1::SceneBundle b;
-  b.set_main_file(main_file);
-  *b.mutable_files() = files;
-  // Written under a name of its own and renamed into place: two adds of the same bytes
-  // write the same file, and a reader sees one whole.
-  const fs::path kept = fs::path(dir_) / (hash + ".bundle");
-  const fs::path tmp = staging.string() + ".bundle";
-  {
-    std::ofstream out(tmp, std::ios::binary);
-    if (!b.SerializeToOstream(&out) || !out.flush()) {
-      fs::remove(tmp, ec);
-      throw std::runtime_error("cannot keep the scene on the coordinator's disk");
-    }
-  }
-  std::lock_guard<std::mutex> lock(mu_);  // renamed under it: a release() of the same bytes removes it before or after
-  fs::rename(tmp, kept, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    throw std::runtime_error("cannot keep the scene on the coordinator's disk");
-  }
-  scenes_[hash] = std::move(b);
-  ++uses_[hash];
-  return hash;
-}
+};
+
+}  // namespace
 
 uint64_t bundle_bytes(const SceneFiles& files) {
   uint64_t n = 0;
@@ -70,46 +32,167 @@ uint64_t bundle_bytes(const SceneFiles& files) {
   return n;
 }
 
+SceneStore::SceneStore(std::string dir) : dir_(std::move(dir)) { fs::create_directories(dir_); }
+
+std::string SceneStore::staging_folder(const std::string& name) const {
+  static std::atomic<uint64_t> seq{0};
+  return (fs::path(dir_) / (name + ".staging-" + std::to_string(++seq))).string();
+}
+
+SceneSource SceneStore::source(const std::string& hash, const v1::SceneManifest& m) const {
+  SceneSource s;
+  s.manifest = m;
+  for (const v1::SceneFileInfo& f : m.files()) s.paths.push_back((fs::path(dir_) / hash / "files" / f.path()).string());
+  return s;
+}
+
+std::string SceneStore::add(const std::string& main_file, const SceneFiles& files, const Check& check) {
+  v1::SceneManifest m;
+  m.set_main_file(main_file);
+  m.set_scene_hash(bundle_hash(main_file, files));
+  for (const v1::SceneFile& f : files) {
+    v1::SceneFileInfo* info = m.add_files();
+    info->set_path(f.path());
+    info->set_size(f.content().size());
+  }
+  check_manifest(m);  // throws WireError: an unsafe path, the main file missing
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (auto it = scenes_.find(m.scene_hash()); it != scenes_.end()) {  // the same bytes were checked before
+      ++it->second.uses;
+      return m.scene_hash();
+    }
+  }
+  const std::string staged = staging_folder(m.scene_hash());
+  try {
+    for (const v1::SceneFile& f : files) {
+      const fs::path p = fs::path(staged) / "files" / f.path();
+      fs::create_directories(p.parent_path());
+      std::ofstream out(p, std::ios::binary);
+      if (!out.write(f.content().data(), std::streamsize(f.content().size())) || !out.flush())
+        throw std::runtime_error("cannot keep the scene on the coordinator's disk");
+    }
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(staged, ec);
+    throw;
+  }
+  return keep(staged, m, check);
+}
+
+std::string SceneStore::keep(const std::string& staged, const v1::SceneManifest& m, const Check& check) {
+  const RemoveAll cleanup{staged};
+  const std::string& hash = m.scene_hash();
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (auto it = scenes_.find(hash); it != scenes_.end()) {
+      ++it->second.uses;
+      return hash;
+    }
+  }
+  try {
+    const Scene scene = load_scene((fs::path(staged) / "files" / m.main_file()).string());  // outside the lock: slow
+    if (check) check(scene);
+  } catch (const SceneError& e) {
+    throw SceneError(m.main_file(), e.element(), e.reason());
+  }
+  write_file_atomic((fs::path(staged) / "manifest").string(), m.SerializeAsString());
+  // Renamed into place under the lock: a release() of the same bytes removes it before or
+  // after, and two keeps of the same bytes rename one of them.
+  std::lock_guard<std::mutex> lock(mu_);
+  if (auto it = scenes_.find(hash); it != scenes_.end()) {
+    ++it->second.uses;
+    return hash;
+  }
+  const fs::path kept = fs::path(dir_) / hash;
+  std::error_code ec;
+  fs::remove_all(kept, ec);  // a leftover no scene uses
+  fs::rename(staged, kept, ec);
+  if (ec) throw std::runtime_error("cannot keep the scene on the coordinator's disk: " + ec.message());
+  scenes_[hash] = Kept{m, 1};
+  return hash;
+}
+
 uint64_t SceneStore::restore(const std::string& hash) {
-  const fs::path kept = fs::path(dir_) / (hash + ".bundle");
-  v1::SceneBundle b;
-  std::ifstream in(kept, std::ios::binary);
-  if (!in || !b.ParseFromIstream(&in)) throw std::runtime_error("its scene is missing from the data folder");
-  if (bundle_hash(b.main_file(), b.files()) != hash)
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (auto it = scenes_.find(hash); it != scenes_.end()) {
+      ++it->second.uses;
+      return check_manifest(it->second.manifest);
+    }
+  }
+  const fs::path dir = fs::path(dir_) / hash;
+  v1::SceneManifest m;
+  std::ifstream in(dir / "manifest", std::ios::binary);
+  if (!in) {
+    // Kept whole by a coordinator before protocol 5: unpacked once, as an add.
+    const fs::path bundle = fs::path(dir_) / (hash + ".bundle");
+    v1::SceneBundle b;
+    std::ifstream old(bundle, std::ios::binary);
+    if (!old || !b.ParseFromIstream(&old)) throw std::runtime_error("its scene is missing from the data folder");
+    if (bundle_hash(b.main_file(), b.files()) != hash)
+      throw std::runtime_error("its scene in the data folder is damaged");
+    add(b.main_file(), b.files());
+    std::error_code ec;
+    fs::remove(bundle, ec);
+    return bundle_bytes(b.files());
+  }
+  uint64_t bytes = 0;
+  try {
+    if (!m.ParseFromIstream(&in) || m.scene_hash() != hash) throw WireError("manifest");
+    bytes = check_manifest(m);
+    if (hash_files(source(hash, m)) != hash) throw WireError("bytes");
+  } catch (const std::exception&) {  // unreadable, or other bytes
     throw std::runtime_error("its scene in the data folder is damaged");
-  add(b.main_file(), b.files());
-  return bundle_bytes(b.files());
+  }
+  try {
+    (void)load_scene((dir / "files" / m.main_file()).string());  // as keep() checks it
+  } catch (const SceneError& e) {
+    throw SceneError(m.main_file(), e.element(), e.reason());
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  ++scenes_[hash].uses;
+  scenes_[hash].manifest = std::move(m);
+  return bytes;
 }
 
 void SceneStore::remove_unused() {
   std::lock_guard<std::mutex> lock(mu_);
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(dir_, ec)) {
-    const std::string name = entry.path().filename().string();
-    const size_t dot = name.find('.');
-    if (name.substr(dot == std::string::npos ? name.size() : dot) == ".bundle" && scenes_.count(name.substr(0, dot)))
-      continue;
+    if (scenes_.count(entry.path().filename().string())) continue;
     std::error_code rm;
     fs::remove_all(entry.path(), rm);
   }
 }
 
-v1::SceneBundle SceneStore::get(const std::string& hash) const {
+v1::SceneManifest SceneStore::manifest(const std::string& hash) const {
   std::lock_guard<std::mutex> lock(mu_);
-  return scenes_.at(hash);
+  return scenes_.at(hash).manifest;
+}
+
+std::string SceneStore::main_path(const std::string& hash) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return (fs::path(dir_) / hash / "files" / scenes_.at(hash).manifest.main_file()).string();
+}
+
+bool SceneStore::send(const v1::FetchSceneRequest& req, size_t chunk_bytes,
+                      const std::function<bool(const v1::SceneChunk&)>& write) const {
+  const SceneSource s = source(req.scene_hash(), manifest(req.scene_hash()));
+  v1::SceneChunk first;
+  *first.mutable_manifest() = s.manifest;
+  if (!write(first)) return false;
+  return send_pieces(s, req.file(), req.offset(), chunk_bytes, [&](v1::SceneChunk& piece) { return write(piece); });
 }
 
 void SceneStore::release(const std::string& hash) {
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    auto it = uses_.find(hash);
-    if (it == uses_.end() || --it->second > 0) return;
-    uses_.erase(it);
-    scenes_.erase(hash);
-    // Under the lock: an add() of the same bytes waits, then checks afresh.
-    std::error_code ec;
-    fs::remove(fs::path(dir_) / (hash + ".bundle"), ec);
-  }
+  std::lock_guard<std::mutex> lock(mu_);
+  auto it = scenes_.find(hash);
+  if (it == scenes_.end() || --it->second.uses > 0) return;
+  scenes_.erase(it);
+  // Under the lock: a keep() of the same bytes waits, then checks afresh.
+  std::error_code ec;
+  fs::remove_all(fs::path(dir_) / hash, ec);
 }
 
 }  // namespace tessera

@@ -1,6 +1,9 @@
-// Scenes by content hash: checked when submitted, kept in memory for the workers that fetch
-// them and on disk (<dir>/<hash>.bundle, the bundle as received) for a restarted
-// coordinator.
+// Scenes by content hash, on disk: <dir>/<hash>/manifest (its SceneManifest) and
+// <dir>/<hash>/files/ (the bundle's files), checked (loaded as a worker will) when added and
+// kept while a live job uses them. In memory, only each live scene's manifest and uses: no
+// scene bytes, whatever their size. Unpacked rather than kept as one bundle file: a scene is
+// loaded where it lies (at submit, by the referee, after a restart) with no copy unpacked
+// first, and the pieces workers fetch are read straight from its files.
 #pragma once
 
 #include <functional>
@@ -10,6 +13,7 @@
 
 #include "core/scene/scene.h"
 #include "scene_bundle.h"
+#include "scene_chunks.h"
 
 namespace tessera {
 
@@ -18,33 +22,57 @@ uint64_t bundle_bytes(const SceneFiles& files);
 
 class SceneStore {
  public:
-  explicit SceneStore(std::string dir);
-  // Unpacks the bundle into a folder of its own and loads it as a worker will, so a bad scene is
-  // refused here and never reaches a worker. Returns the content hash; the caller holds one
-  // use of the scene until it calls release(). Throws WireError
-  // (unsafe bundle) or SceneError naming the file as the user knows it, not by its path
-  // here; a refused scene leaves nothing on disk. Thread-safe.
   // `check`, when given, is called with the loaded scene (a job's settings against it, say)
   // and may throw to refuse it.
-  std::string add(const std::string& main_file, const SceneFiles& files,
-                  const std::function<void(const Scene&)>& check = nullptr);
-  // add() for a scene kept on disk by an earlier run; returns its bundle_bytes(). Throws
-  // std::runtime_error (or what add() throws) when it is missing or its bytes no longer
-  // have this hash.
+  using Check = std::function<void(const Scene&)>;
+
+  explicit SceneStore(std::string dir);
+
+  // A folder for a scene arriving, <dir>/<name>.staging-<n> (not made): its files go in
+  // <folder>/files, then keep() takes it. Beside the scenes, so that a checked scene is
+  // renamed into place; remove_unused() removes what a crash left.
+  std::string staging_folder(const std::string& name) const;
+  // A scene sent whole (SubmitJobRequest.files): written to a staging folder, then keep().
+  std::string add(const std::string& main_file, const SceneFiles& files, const Check& check = nullptr);
+  // The scene whose files are in <staged>/files (a staging_folder(), its bytes already
+  // hashed to m.scene_hash()): loaded as a worker will, so a bad scene is refused here and
+  // never reaches a worker, then renamed into place. Skips the check when the same bytes are
+  // kept already. Returns the content hash; the caller holds one use of the scene until it
+  // calls release(). Throws SceneError naming the main file as the user knows it (not by its
+  // path here), what `check` throws, or std::runtime_error (the disk). `staged` is gone
+  // afterwards whatever happened. Thread-safe, as is everything here.
+  std::string keep(const std::string& staged, const v1::SceneManifest& m, const Check& check = nullptr);
+  // keep() for a scene kept on disk by an earlier run (or, before protocol 5, as
+  // <hash>.bundle); returns what it weighs (bundle_bytes). Throws std::runtime_error (or
+  // what keep() throws) when it is missing or its bytes no longer have this hash.
   uint64_t restore(const std::string& hash);
-  // Removes from the folder everything no scene in memory needs (after restore()s).
+  // Removes from the folder everything no kept scene needs: scenes of no live job, staging
+  // folders (after restore()s, before any upload).
   void remove_unused();
-  // Throws std::out_of_range for an unknown hash.
-  v1::SceneBundle get(const std::string& hash) const;
+
+  // Throw std::out_of_range for a hash not kept.
+  v1::SceneManifest manifest(const std::string& hash) const;
+  std::string main_path(const std::string& hash) const;  // the main file on disk, to load
+  // Calls `write` with the scene's manifest, then with its pieces from the request's (file,
+  // offset) on, each at most `chunk_bytes`, read from disk one at a time; false as soon as
+  // `write` is. Throws std::out_of_range (not kept), WireError (a start past its end) or
+  // std::runtime_error (its files unreadable: released meanwhile, say).
+  bool send(const v1::FetchSceneRequest& req, size_t chunk_bytes,
+            const std::function<bool(const v1::SceneChunk&)>& write) const;
   // Each add() is a use of the scene (a job); when its last use is released the scene
-  // is forgotten, in memory and on disk.
+  // is forgotten, and removed from disk.
   void release(const std::string& hash);
 
  private:
+  struct Kept {
+    v1::SceneManifest manifest;
+    int uses = 0;
+  };
+  SceneSource source(const std::string& hash, const v1::SceneManifest& m) const;  // its files on disk
+
   std::string dir_;
   mutable std::mutex mu_;
-  std::map<std::string, v1::SceneBundle> scenes_;
-  std::map<std::string, int> uses_;
+  std::map<std::string, Kept> scenes_;
 };
 
 }  // namespace tessera

@@ -9,12 +9,18 @@
 namespace tessera {
 
 Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& a, JobMeta meta, SceneStore& scenes,
-                              JobStore& store, const std::string& data_dir) {
+                              JobStore& store, const std::string& data_dir, SceneUploads* uploads) {
   const auto refuse = [](const char* what) { return RequestError(RequestError::Code::kInvalidArgument, what); };
+  std::string main_file = req.main_file();
   try {
     // A bad scene is refused here, and settings that ask it for what it has not.
-    meta.scene_hash = scenes.add(req.main_file(), req.files(),
-                                 [&](const Scene& scene) { TileRenderer::check_settings(scene, a.settings); });
+    const auto check = [&](const Scene& scene) { TileRenderer::check_settings(scene, a.settings); };
+    if (req.upload_id().empty())
+      meta.scene_hash = scenes.add(req.main_file(), req.files(), check);
+    else if (uploads)
+      meta.scene_hash = uploads->submit(req.upload_id(), meta.owner, check, &main_file);
+    else
+      throw RequestError(RequestError::Code::kFailedPrecondition, "this coordinator takes no scene uploads");
   } catch (const WireError& e) {
     throw refuse(e.what());
   } catch (const SettingsError& e) {
@@ -22,8 +28,8 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
   } catch (const SceneError& e) {
     throw refuse(e.what());
   }
-  meta.name = req.name().empty() ? req.main_file() : req.name();
-  meta.main_file = req.main_file();
+  meta.name = req.name().empty() ? main_file : req.name();
+  meta.main_file = main_file;
   meta.priority = req.priority();
   meta.scene_bytes = a.scene_bytes;
   meta.settings = to_proto(a.settings);

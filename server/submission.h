@@ -10,6 +10,7 @@
 #include "server/admission.h"
 #include "server/job_store.h"
 #include "server/scene_store.h"
+#include "server/scene_uploads.h"
 
 namespace tessera {
 
@@ -18,11 +19,12 @@ struct Submission {
   std::unique_ptr<Sequence> sequence;  // or a sequence, its first frame's job prepared
 };
 
-// `meta` has its id and submission order; the rest comes from the request. Throws
-// RequestError: the scene refused (kInvalidArgument, the loader's message), or the row
-// not recorded (kResourceExhausted; the scene's use is released). `data_dir` is hidden
-// from messages.
+// `meta` has its id, owner and submission order; the rest comes from the request, whose
+// scene is its files or the finished upload it names (in `uploads`). Throws RequestError:
+// the scene refused (kInvalidArgument, the loader's message), no such upload (kNotFound),
+// or the row not recorded (kResourceExhausted; the scene's use is released). `data_dir` is
+// hidden from messages.
 Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& a, JobMeta meta, SceneStore& scenes,
-                              JobStore& store, const std::string& data_dir);
+                              JobStore& store, const std::string& data_dir, SceneUploads* uploads = nullptr);
 
 }  // namespace tessera

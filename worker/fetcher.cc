@@ -8,14 +8,29 @@
 namespace tessera::worker {
 
 Fetcher::Fetcher(const Link& link, TaskQueue& queue, const std::string& cache_dir, Backoff& backoff)
-    : link_(link), queue_(queue), backoff_(backoff), scenes_(cache_dir, [this](const std::string& hash) {
-        v1::FetchSceneRequest req;
-        req.set_scene_hash(hash);
-        v1::SceneBundle bundle;
-        const grpc::Status st = link_.stub->FetchScene(link_.context(120).get(), req, &bundle);
-        if (!st.ok()) throw std::runtime_error("fetch scene " + hash + ": " + st.error_message());
-        return bundle;
+    : link_(link),
+      queue_(queue),
+      backoff_(backoff),
+      scenes_(cache_dir, [this](const v1::FetchSceneRequest& req, const SceneCache::Piece& piece) {
+        return fetch_scene(req, piece);
       }) {}
+
+grpc::Status Fetcher::fetch_scene(const v1::FetchSceneRequest& req, const SceneCache::Piece& piece) const {
+  // Each call has two minutes; a larger scene's fetch goes on in the next (SceneCache).
+  const auto ctx = link_.context(120);
+  const auto reader = link_.stub->FetchSceneChunks(ctx.get(), req);
+  v1::SceneChunk chunk;
+  try {
+    while (reader->Read(&chunk)) piece(chunk);
+  } catch (...) {  // a piece refused: the call ends here
+    ctx->TryCancel();
+    while (reader->Read(&chunk)) {
+    }
+    reader->Finish();
+    throw;
+  }
+  return reader->Finish();
+}
 
 Fetcher::Leased Fetcher::lease(const std::atomic<bool>& stop) {
   const std::optional<LeaseRequest> size = queue_.wait_for_room(kStopPoll);

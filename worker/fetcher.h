@@ -30,6 +30,8 @@ class Fetcher {
 
  private:
   void enqueue(const v1::Task& task, const std::atomic<bool>& stop);
+  // One FetchSceneChunks call (SceneCache::FetchChunks).
+  grpc::Status fetch_scene(const v1::FetchSceneRequest& req, const SceneCache::Piece& piece) const;
 
   const Link& link_;
   TaskQueue& queue_;

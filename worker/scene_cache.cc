@@ -4,7 +4,8 @@
 #include <fstream>
 
 #include "core/scene/load.h"
-#include "scene_bundle.h"
+#include "rpc.h"
+#include "scene_chunks.h"
 #include "wire.h"
 
 namespace tessera::worker {
@@ -22,13 +23,60 @@ std::shared_ptr<Scene> SceneCache::scene(const std::string& hash) {
     std::getline(in, main);  // cached on disk by an earlier run
     main = (dir / main).string();
   } else {
-    const v1::SceneBundle bundle = fetch_(hash);
-    if (bundle_hash(bundle.main_file(), bundle.files()) != hash)
-      throw WireError("scene bundle does not match its hash");
-    main = unpack_bundle(dir.string(), bundle.main_file(), bundle.files());
-    std::ofstream(marker) << bundle.main_file() << "\n";
+    main = fetch(hash);
   }
   return scenes_[hash] = std::make_shared<Scene>(load_scene(main));
+}
+
+std::string SceneCache::fetch(const std::string& hash) {
+  // Into a folder of its own, renamed into place once whole and checked.
+  const fs::path dir = fs::path(dir_) / hash, part = fs::path(dir_) / (hash + ".partial");
+  struct Cleanup {
+    fs::path part;
+    ~Cleanup() {
+      std::error_code ec;
+      fs::remove_all(part, ec);
+    }
+  } cleanup{part};
+  fs::remove_all(part);  // an earlier run's, cut short
+  const std::string what = "scene " + hash;
+  std::unique_ptr<SceneReceiver> rx;
+  v1::FetchSceneRequest req;
+  req.set_scene_hash(hash);
+  Backoff backoff(Backoff::kWorkerFirstSeconds);
+  for (int failures = 0;;) {
+    const auto at = [&] { return rx ? std::pair(rx->next_file(), rx->next_offset()) : std::pair(0u, uint64_t(0)); };
+    const auto before = at();
+    bool first = true;
+    const grpc::Status st = fetch_(req, [&](const v1::SceneChunk& chunk) {
+      if (!first) return rx->add(chunk);
+      first = false;  // the manifest
+      if (!chunk.has_manifest() || chunk.manifest().scene_hash() != hash)
+        throw WireError(what + ": the coordinator sent no manifest of it");
+      if (!rx)
+        rx = std::make_unique<SceneReceiver>(part.string(), chunk.manifest(), what);
+      else if (chunk.manifest().SerializeAsString() != rx->manifest().SerializeAsString())
+        throw WireError(what + ": its manifest changed between two fetches");
+    });
+    if (st.ok()) break;
+    failures = at() > before ? 0 : failures + 1;
+    if (!unreachable(st) || failures >= kFetchAttempts)
+      throw std::runtime_error("fetch scene " + hash + ": " + st.error_message());
+    if (rx) {  // goes on from the first byte it lacks
+      req.set_file(rx->next_file());
+      req.set_offset(rx->next_offset());
+    }
+    backoff.wait();
+  }
+  if (!rx) throw WireError(what + ": the coordinator sent no manifest of it");
+  rx->finish();  // every byte, hashing to `hash`
+  const std::string main = rx->manifest().main_file();
+  rx.reset();
+  if (!(std::ofstream(part / ".main") << main << "\n")) throw std::runtime_error("cannot write the scene cache");
+  std::error_code ec;
+  fs::remove_all(dir, ec);  // an earlier run's, unfinished
+  fs::rename(part, dir);
+  return (dir / main).string();
 }
 
 std::shared_ptr<const PreparedRenderer> SceneCache::prepare(const v1::Task& task) {

@@ -1,7 +1,8 @@
-// A worker's scenes and renderers: each scene fetched once per content hash and kept on
-// disk (a restarted worker does not fetch it again), loaded once, and a renderer built per
-// (scene, settings), a few of them kept. Renderers of frames of one sequence share one
-// acceleration structure.
+// A worker's scenes and renderers: each scene fetched once per content hash, in pieces
+// written to disk as they come (proto/scene_chunks.h; a fetch cut short goes on from the
+// first byte it lacks) and kept there (a restarted worker does not fetch it again), loaded
+// once, and a renderer built per (scene, settings), a few of them kept. Renderers of frames
+// of one sequence share one acceleration structure.
 #pragma once
 
 #include <deque>
@@ -25,22 +26,28 @@ struct PreparedRenderer {
 
 class SceneCache {
  public:
-  // Asks the coordinator for a scene's bundle; throws what the call failed with.
-  using FetchBundle = std::function<v1::SceneBundle(const std::string& hash)>;
+  // Streams a scene from the coordinator (FetchSceneChunks) from the request's (file,
+  // offset) on: calls `piece` with each message in order (it may throw, which ends the
+  // call) and returns the call's status.
+  using Piece = std::function<void(const v1::SceneChunk&)>;
+  using FetchChunks = std::function<grpc::Status(const v1::FetchSceneRequest& request, const Piece& piece)>;
   static constexpr size_t kKeptRenderers = 8;  // jobs alternate by priority, frames follow each other
+  // Calls in a row that find the coordinator out of reach without bringing a byte.
+  static constexpr int kFetchAttempts = 4;
 
-  SceneCache(std::string dir, FetchBundle fetch) : dir_(std::move(dir)), fetch_(std::move(fetch)) {}
+  SceneCache(std::string dir, FetchChunks fetch) : dir_(std::move(dir)), fetch_(std::move(fetch)) {}
 
-  // The renderer for a task's scene and settings. Throws WireError (a bad hash, a bundle
-  // that does not match it), SceneError and SettingsError (a scene or settings this
-  // worker cannot render), or what fetching throws.
+  // The renderer for a task's scene and settings. Throws WireError (a bad hash, pieces or
+  // bytes that do not match it), SceneError and SettingsError (a scene or settings this
+  // worker cannot render), or std::runtime_error saying why the fetch failed.
   std::shared_ptr<const PreparedRenderer> prepare(const v1::Task& task);
 
  private:
   std::shared_ptr<Scene> scene(const std::string& hash);  // loaded once per content hash
+  std::string fetch(const std::string& hash);             // into the disk cache: the main file's path
 
   std::string dir_;
-  FetchBundle fetch_;
+  FetchChunks fetch_;
   std::map<std::string, std::shared_ptr<Scene>> scenes_;  // by content hash
   std::map<std::string, std::shared_ptr<const PreparedRenderer>> prepared_;
   std::deque<std::string> prepared_order_;

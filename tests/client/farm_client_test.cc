@@ -16,6 +16,7 @@
 #include "core/io/image_io.h"
 #include "core/render/local_renderer.h"
 #include "core/scene/load.h"
+#include "scene_bundle.h"
 #include "server/grpc_services.h"
 #include "tests/core/test_paths.h"
 #include "worker/worker.h"
@@ -57,11 +58,14 @@ class FarmClient : public ::testing::Test {
   std::string address;
   Output out, err;
   FarmContext ctx;
+  static constexpr size_t kSceneChunk = 16 << 10;  // scenes to workers in pieces of 16 KiB
+  int max_message_bytes = 0;                       // > 0: the server's limit, each way
 
   void SetUp() override {
     CoordinatorOptions o;
     o.data_dir = (dir / "data").string();
     o.image_interval_seconds = 0;
+    o.scene_chunk_bytes = kSceneChunk;
     coordinator = std::make_unique<Coordinator>(o);
     client_service = std::make_unique<ClientService>(*coordinator);
     worker_service = std::make_unique<WorkerService>(*coordinator);
@@ -81,6 +85,7 @@ class FarmClient : public ::testing::Test {
     b.AddListeningPort("127.0.0.1:" + std::to_string(port), grpc::InsecureServerCredentials(), &bound);
     b.RegisterService(client_service.get());
     b.RegisterService(worker_service.get());
+    if (max_message_bytes > 0) configure_server(b, max_message_bytes);
     server = b.BuildAndStart();
     return bound;
   }
@@ -131,6 +136,9 @@ class RestartedOnceStub : public v1::Tessera::StubInterface {
   grpc::Status CancelJob(grpc::ClientContext* c, const v1::JobId& r, v1::JobStatus* o) override {
     return real_.CancelJob(c, r, o);
   }
+  grpc::ClientWriterInterface<v1::SceneChunk>* UploadSceneRaw(grpc::ClientContext* c, v1::SceneUpload* o) override {
+    return real_.UploadScene(c, o).release();
+  }
   grpc::Status FetchImage(grpc::ClientContext* c, const v1::FetchImageRequest& r, v1::Image* o) override {
     if (served_.insert(r.id() + "#" + std::to_string(r.frame())).second) {
       o->set_exr("a progressive image");
@@ -161,6 +169,14 @@ class RestartedOnceStub : public v1::Tessera::StubInterface {
   TESSERA_NO_ASYNC(CancelJob, v1::JobId, v1::JobStatus)
   TESSERA_NO_ASYNC(FetchImage, v1::FetchImageRequest, v1::Image)
 #undef TESSERA_NO_ASYNC
+  grpc::ClientAsyncWriterInterface<v1::SceneChunk>* AsyncUploadSceneRaw(grpc::ClientContext*, v1::SceneUpload*,
+                                                                        grpc::CompletionQueue*, void*) override {
+    return nullptr;
+  }
+  grpc::ClientAsyncWriterInterface<v1::SceneChunk>* PrepareAsyncUploadSceneRaw(grpc::ClientContext*, v1::SceneUpload*,
+                                                                               grpc::CompletionQueue*) override {
+    return nullptr;
+  }
   grpc::ClientAsyncReaderInterface<v1::JobStatus>* AsyncWatchJobRaw(grpc::ClientContext*, const v1::JobId&,
                                                                     grpc::CompletionQueue*, void*) override {
     return nullptr;
@@ -247,6 +263,45 @@ TEST_F(FarmClient, SubmitWaitsAndWritesTheLocalImageThenListsStatusAndFetch) {
   const std::string again = (dir / "again.exr").string();
   EXPECT_EQ(fetch_image(*stub, id, {again}, ctx), 0);
   EXPECT_EQ(read_exr(again).channels.at("R"), img.channels.at("R"));
+}
+
+// Issue 22: a scene larger than any one message the coordinator takes or sends (here 64
+// KiB each way: a glTF of 454 KB and an environment map of 131 KB) streams in pieces, up
+// to the coordinator's disk and down to the worker's, and the image is tessera render's.
+// The same scene in one message is refused by gRPC itself.
+TEST_F(FarmClient, ASceneLargerThanAnyMessageStreamsThroughAndRendersAsLocally) {
+  server->Shutdown();
+  max_message_bytes = 64 << 10;
+  address = "127.0.0.1:" + std::to_string(serve(0));
+  stub = connect_coordinator(address);
+  ctx.coordinator = address;
+  ctx.scene_chunk_bytes = 24 << 10;
+  start_worker();
+  const std::string exr = (dir / "farm.exr").string();
+  SubmitRequest r = request({exr});
+  r.flags.scene = testing::source_path("scenes/cornell-spheres.gltf");
+  r.flags.settings.environment_map = testing::source_path("scenes/sky.hdr");
+  r.wait = true;
+  ASSERT_GT(fs::file_size(r.flags.scene), size_t(max_message_bytes));
+  ASSERT_EQ(submit_job(*stub, r, ctx), 0) << err.text();
+  const Film local = render_image(TileRenderer(load_scene(r.flags.scene), to_settings(r.flags)), 2).film;
+  const ExrImage img = read_exr(exr);
+  for (size_t i = 0; i < local.pixels().size(); ++i) {
+    const Rgb m = local.pixels()[i].mean();
+    ASSERT_EQ(std::memcmp(&m.r, &img.channels.at("R")[i], 4), 0) << i;
+    ASSERT_EQ(std::memcmp(&m.g, &img.channels.at("G")[i], 4), 0) << i;
+    ASSERT_EQ(std::memcmp(&m.b, &img.channels.at("B")[i], 4), 0) << i;
+    ASSERT_EQ(img.channels.at("spp")[i], float(local.pixels()[i].n)) << i;
+  }
+  v1::SubmitJobRequest whole;  // the old way: every byte in one message
+  whole.set_version(kProtocolVersion);
+  std::string main;
+  pack_scene(r.flags.scene, &main, whole.mutable_files());
+  whole.set_main_file(main);
+  *whole.mutable_settings() = to_proto(to_settings(r.flags));
+  v1::JobId id;
+  grpc::ClientContext call;
+  EXPECT_EQ(stub->SubmitJob(&call, whole, &id).error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
 }
 
 TEST_F(FarmClient, ErrorsNameTheProblem) {

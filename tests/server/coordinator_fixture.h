@@ -18,6 +18,7 @@
 #include "core/io/image_io.h"
 #include "core/render/local_renderer.h"
 #include "core/scene/load.h"
+#include "scene_chunks.h"
 #include "server/coordinator.h"
 #include "tests/core/test_paths.h"
 
@@ -72,6 +73,33 @@ class CoordinatorTest : public ::testing::Test {
     std::string main;
     pack_scene(scene_path, &main, r.mutable_files());
     r.set_main_file(main);
+    *r.mutable_settings() = to_proto(s);
+    return r;
+  }
+  // The scene sent in pieces of 1000 bytes (UploadScene), as `owner`.
+  v1::SceneUpload upload(const std::string& owner = "") {
+    const auto files = scene_bundle_files(scene_path);
+    const SceneSource s = scene_source(files[0].first, files);
+    std::vector<v1::SceneChunk> msgs(1);
+    *msgs[0].mutable_manifest() = s.manifest;
+    send_pieces(s, 0, 0, 1000, [&](v1::SceneChunk& piece) {
+      msgs.push_back(piece);
+      return true;
+    });
+    size_t i = 0;
+    return c->upload_scene(
+        [&](v1::SceneChunk* m) {
+          if (i == msgs.size()) return false;
+          *m = msgs[i++];
+          return true;
+        },
+        owner);
+  }
+  // A job naming an upload instead of carrying its scene.
+  static v1::SubmitJobRequest request(const RenderSettings& s, const v1::SceneUpload& up) {
+    v1::SubmitJobRequest r;
+    r.set_version(kProtocolVersion);
+    r.set_upload_id(up.upload_id());
     *r.mutable_settings() = to_proto(s);
     return r;
   }

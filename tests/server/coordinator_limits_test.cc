@@ -114,6 +114,38 @@ TEST_F(CoordinatorTest, SceneBytesAndQueuedSamplesPerClientAreBounded) {
   EXPECT_EQ(c->list().size(), 3u);
 }
 
+// An upload counts against its client's scene bytes from its manifest on, with the
+// client's live jobs and its other uploads: a client cannot fill the coordinator's disk.
+TEST_F(CoordinatorTest, UploadsCountAgainstTheClientsSceneBytes) {
+  const v1::SubmitJobRequest one = request(job_settings());
+  uint64_t bytes = 0;
+  for (const v1::SceneFile& f : one.files()) bytes += f.path().size() + f.content().size();
+  CoordinatorOptions o = options();
+  o.max_scene_bytes_per_client = 2 * bytes;
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  c->submit(one, "alice");  // a live job's scene
+  const v1::SceneUpload up = upload("alice");
+  try {
+    upload("alice");
+    ADD_FAILURE() << "a third scene's bytes for alice";
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kResourceExhausted);
+    EXPECT_EQ(std::string(e.what()), "client 'alice''s live jobs and uploads hold " + std::to_string(2 * bytes) +
+                                         " scene bytes; this upload's " + std::to_string(bytes) +
+                                         " would pass the limit of " + std::to_string(2 * bytes) +
+                                         " (--max-scene-bytes-per-client)");
+  }
+  EXPECT_NO_THROW(upload("bob"));
+  try {  // an upload is its uploader's
+    c->submit(request(job_settings(), up), "bob");
+    ADD_FAILURE() << "bob used alice's upload";
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kNotFound);
+  }
+  c->submit(request(job_settings(), up), "alice");
+  EXPECT_EQ(c->list().size(), 2u);
+}
+
 // A worker that stops says so: its leases go back at once and it no longer counts.
 TEST_F(CoordinatorTest, UnregisteredWorkersGiveTheirLeasesBackAndLeave) {
   c->submit(request(job_settings()));

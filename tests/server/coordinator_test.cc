@@ -411,7 +411,7 @@ TEST_F(CoordinatorTest, ScenesGoWhenTheirLastJobEnds) {
   const std::string a = c->submit(request(job_settings())), b = c->submit(request(job_settings()));
   const uint64_t w = worker();
   const std::string hash = c->get_task(w).tasks(0).scene_hash();
-  const fs::path on_disk = fs::path(dir) / "scenes" / (hash + ".bundle");
+  const fs::path on_disk = fs::path(dir) / "scenes" / hash;
   EXPECT_TRUE(fs::exists(on_disk));
   c->cancel(a);
   EXPECT_NO_THROW(c->scene(hash));  // b still needs it
@@ -425,6 +425,37 @@ TEST_F(CoordinatorTest, ScenesGoWhenTheirLastJobEnds) {
   EXPECT_NO_THROW(c->scene(hash));
   drain(w);
   EXPECT_EQ(c->status(again, false).state(), v1::JobStatus::DONE);
+}
+
+// Issue 22: a scene sent in pieces is a scene like one sent whole: the same hash, the same
+// image; workers get it in pieces from the coordinator's disk, and it goes with its job.
+TEST_F(CoordinatorTest, AnUploadedSceneRendersAsOneSentWhole) {
+  const v1::SceneUpload up = upload();
+  const v1::SubmitJobRequest whole = request(job_settings());
+  EXPECT_EQ(up.scene_hash(), bundle_hash(whole.main_file(), whole.files()));
+  const std::string id = c->submit(request(job_settings(), up));
+  EXPECT_EQ(c->status(id, false).name(), "cornell-spheres.dae");
+  EXPECT_EQ(c->scene(up.scene_hash()).main_file(), "cornell-spheres.dae");
+  v1::FetchSceneRequest fetch;
+  fetch.set_scene_hash(up.scene_hash());
+  std::string bytes;
+  c->scene_chunks(fetch, [&](const v1::SceneChunk& piece) {
+    bytes += piece.data();
+    return true;
+  });
+  EXPECT_EQ(bytes, whole.files(0).content());
+  const uint64_t w = worker();
+  drain(w);
+  ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(job_settings()), read_exr(image_path(id, "image.exr"))));
+  EXPECT_THROW(c->scene(up.scene_hash()), RequestError);  // gone with its job
+  EXPECT_FALSE(fs::exists(fs::path(dir) / "scenes" / up.scene_hash()));
+  try {
+    c->submit(request(job_settings(), up));  // an upload names one submit
+    ADD_FAILURE() << "an upload used twice";
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kNotFound);
+  }
 }
 
 TEST_F(CoordinatorTest, QueueDepthCountsWhatIsLeft) {

@@ -68,7 +68,7 @@ TEST_F(SubmissionTest, AGoodSceneGivesAJobAndARecordedRow) {
   EXPECT_EQ(m.scene_bytes, bundle_bytes(r.files()));
   EXPECT_EQ(sub.job->state(), v1::JobStatus::QUEUED);
   EXPECT_EQ(sub.job->plan.tiles().size(), testing::kTiles);
-  EXPECT_EQ(scenes.get(m.scene_hash).main_file(), r.main_file());  // kept for workers
+  EXPECT_EQ(scenes.manifest(m.scene_hash).main_file(), r.main_file());  // kept for workers
   const std::vector<StoredJob> rows = store.jobs();
   ASSERT_EQ(rows.size(), 1u);
   EXPECT_EQ(rows[0].meta.id, m.id);
@@ -117,7 +117,7 @@ TEST_F(SubmissionTest, AStoreThatCannotRecordTheJobRefusesItAndReleasesTheScene)
   store.fail_writes = true;
   const std::string why = refusal([&] { prepare(r); }, Code::kResourceExhausted);
   EXPECT_EQ(why, "the coordinator cannot record the job: job database: disk I/O error (a test's)");
-  EXPECT_THROW(scenes.get(bundle_hash(r.main_file(), r.files())), std::out_of_range);
+  EXPECT_THROW(scenes.manifest(bundle_hash(r.main_file(), r.files())), std::out_of_range);
   EXPECT_EQ(files_kept(), 0u);
 }
 
@@ -126,7 +126,7 @@ TEST_F(SubmissionTest, ASceneAnotherJobUsesStaysWhenASubmitIsRefused) {
   prepare(r);
   store.fail_writes = true;
   refusal([&] { prepare(r); }, Code::kResourceExhausted);
-  EXPECT_NO_THROW(scenes.get(bundle_hash(r.main_file(), r.files())));
+  EXPECT_NO_THROW(scenes.manifest(bundle_hash(r.main_file(), r.files())));
 }
 
 TEST_F(SubmissionTest, TheDataFolderIsHiddenFromTheRefusal) {

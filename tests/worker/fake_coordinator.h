@@ -11,6 +11,7 @@
 #include <set>
 #include <vector>
 
+#include "scene_bundle.h"
 #include "tessera.grpc.pb.h"
 
 namespace tessera::testing {
@@ -24,7 +25,13 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   uint32_t heartbeat_interval_ms = 50;
   std::deque<std::vector<v1::Task>> task_batches;  // GetTask: the front batch, up to max_tasks
   std::deque<grpc::Status> get_task_failures;      // answers before GetTask works again
-  std::map<std::string, v1::SceneBundle> scenes;   // FetchScene, by hash
+  std::map<std::string, v1::SceneBundle> scenes;   // FetchSceneChunks, by hash
+  size_t scene_chunk_bytes = 1000;                 // the pieces it sends them in
+  // The next `scene_streams_to_cut` scene streams break after `cut_after_pieces` pieces
+  // each (UNAVAILABLE), as a lost connection would.
+  int scene_streams_to_cut = 0;
+  int cut_after_pieces = 2;
+  bool damage_scenes = false;  // a byte of every piece flipped: bytes that do not hash to the scene's hash
   std::set<uint64_t> refuse;                       // Heartbeat refuses these tasks
   grpc::Status unregister_status;
   bool hold_submissions = false;  // SubmitResults waits until this is false again
@@ -35,6 +42,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   std::vector<v1::GetTaskRequest> task_requests;
   std::vector<uint64_t> handed_out;  // task ids, in order
   int scene_fetches = 0;
+  std::vector<v1::FetchSceneRequest> scene_requests;
   std::vector<v1::HeartbeatRequest> heartbeats;
   std::vector<v1::TaskResult> results;
   int submissions = 0;  // SubmitResults calls begun
@@ -100,13 +108,62 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
     return grpc::Status::OK;
   }
 
-  grpc::Status FetchScene(grpc::ClientContext*, const v1::FetchSceneRequest& req, v1::SceneBundle* resp) override {
+  // A server stream of messages made in advance, then its status.
+  class Stream : public grpc::ClientReaderInterface<v1::SceneChunk> {
+   public:
+    Stream(std::deque<v1::SceneChunk> chunks, grpc::Status end) : chunks_(std::move(chunks)), end_(std::move(end)) {}
+    bool Read(v1::SceneChunk* msg) override {
+      if (chunks_.empty()) return false;
+      *msg = std::move(chunks_.front());
+      chunks_.pop_front();
+      return true;
+    }
+    bool NextMessageSize(uint32_t* sz) override {
+      *sz = chunks_.empty() ? 0 : uint32_t(chunks_.front().ByteSizeLong());
+      return !chunks_.empty();
+    }
+    grpc::Status Finish() override { return end_; }
+    void WaitForInitialMetadata() override {}
+
+   private:
+    std::deque<v1::SceneChunk> chunks_;
+    grpc::Status end_;
+  };
+
+  grpc::ClientReaderInterface<v1::SceneChunk>* FetchSceneChunksRaw(grpc::ClientContext*,
+                                                                   const v1::FetchSceneRequest& req) override {
     std::lock_guard<std::mutex> lock(mu);
     ++scene_fetches;
+    scene_requests.push_back(req);
     const auto it = scenes.find(req.scene_hash());
-    if (it == scenes.end()) return grpc::Status(grpc::StatusCode::NOT_FOUND, "no scene " + req.scene_hash());
-    *resp = it->second;
-    return grpc::Status::OK;
+    if (it == scenes.end())
+      return new Stream({}, grpc::Status(grpc::StatusCode::NOT_FOUND, "no scene " + req.scene_hash()));
+    const v1::SceneBundle& b = it->second;
+    std::deque<v1::SceneChunk> out(1);
+    v1::SceneManifest* m = out[0].mutable_manifest();
+    m->set_main_file(b.main_file());
+    m->set_scene_hash(bundle_hash(b.main_file(), b.files()));
+    for (const v1::SceneFile& f : b.files()) {
+      v1::SceneFileInfo* info = m->add_files();
+      info->set_path(f.path());
+      info->set_size(f.content().size());
+    }
+    for (uint32_t i = req.file(); i < uint32_t(b.files_size()); ++i)
+      for (uint64_t at = i == req.file() ? req.offset() : 0; at < b.files(int(i)).content().size();
+           at += scene_chunk_bytes) {
+        v1::SceneChunk& piece = out.emplace_back();
+        piece.set_file(i);
+        piece.set_offset(at);
+        piece.set_data(b.files(int(i)).content().substr(at, scene_chunk_bytes));
+        if (damage_scenes) (*piece.mutable_data())[0] ^= 1;
+      }
+    grpc::Status end;
+    if (scene_streams_to_cut > 0) {
+      --scene_streams_to_cut;
+      out.resize(std::min<size_t>(out.size(), size_t(1 + cut_after_pieces)));
+      end = grpc::Status(grpc::StatusCode::UNAVAILABLE, "connection lost (a test's)");
+    }
+    return new Stream(std::move(out), end);
   }
 
   grpc::Status Heartbeat(grpc::ClientContext*, const v1::HeartbeatRequest& req, v1::HeartbeatResponse* resp) override {
@@ -160,12 +217,21 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   }
   TESSERA_NO_ASYNC(Register, RegisterRequest, RegisterResponse)
   TESSERA_NO_ASYNC(GetTask, GetTaskRequest, GetTaskResponse)
-  TESSERA_NO_ASYNC(FetchScene, FetchSceneRequest, SceneBundle)
   TESSERA_NO_ASYNC(Heartbeat, HeartbeatRequest, HeartbeatResponse)
   TESSERA_NO_ASYNC(SubmitResults, ResultBatch, ResultAcks)
   TESSERA_NO_ASYNC(ReleaseTask, ReleaseRequest, ReleaseResponse)
   TESSERA_NO_ASYNC(Unregister, UnregisterRequest, UnregisterResponse)
 #undef TESSERA_NO_ASYNC
+  grpc::ClientAsyncReaderInterface<v1::SceneChunk>* AsyncFetchSceneChunksRaw(grpc::ClientContext*,
+                                                                             const v1::FetchSceneRequest&,
+                                                                             grpc::CompletionQueue*, void*) override {
+    return nullptr;
+  }
+  grpc::ClientAsyncReaderInterface<v1::SceneChunk>* PrepareAsyncFetchSceneChunksRaw(grpc::ClientContext*,
+                                                                                    const v1::FetchSceneRequest&,
+                                                                                    grpc::CompletionQueue*) override {
+    return nullptr;
+  }
 };
 
 }  // namespace tessera::testing

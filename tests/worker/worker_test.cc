@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <thread>
 
+#include "core/io/files.h"
 #include "core/scene/load.h"
 #include "scene_bundle.h"
 #include "tests/core/test_paths.h"
@@ -330,26 +331,68 @@ TEST(TaskQueue, MeasuresTheSpeedThatSizesTheNextRequest) {
   EXPECT_FALSE(q.next_row());
 }
 
-// Scenes are fetched once per content hash and kept on disk for the next worker.
-TEST(SceneCache, FetchesASceneOnceAndKeepsItOnDisk) {
-  const fs::path dir = fs::temp_directory_path() / ("tessera_scene_cache_" + std::to_string(::getpid()));
-  std::string hash;
-  const v1::SceneBundle bundle = bundle_of(kScene, &hash);
-  int fetches = 0;
-  const auto fetch = [&](const std::string& h) {
-    ++fetches;
-    EXPECT_EQ(h, hash);
-    return bundle;
+// The fetcher's call (worker/fetcher.cc), made to a fake coordinator.
+worker::SceneCache::FetchChunks fetch_from(FakeCoordinator& fake) {
+  return [&fake](const v1::FetchSceneRequest& req, const std::function<void(const v1::SceneChunk&)>& piece) {
+    grpc::ClientContext ctx;
+    const auto reader = fake.FetchSceneChunks(&ctx, req);
+    v1::SceneChunk chunk;
+    while (reader->Read(&chunk)) piece(chunk);
+    return reader->Finish();
   };
+}
+
+v1::Task scene_task(const std::string& hash) {
   RenderSettings s;
   s.camera.width = 8;
   s.camera.height = 8;
   v1::Task t;
   t.set_scene_hash(hash);
   *t.mutable_settings() = to_proto(s);
+  return t;
+}
+
+// What a folder holds: relative path -> bytes.
+std::map<std::string, std::string> files_in(const fs::path& dir) {
+  std::map<std::string, std::string> out;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.is_regular_file()) out[fs::relative(e.path(), dir).string()] = read_file_bytes(e.path().string());
+  return out;
+}
+
+// The scene cache over a fake coordinator: the cornell scene, fetched in pieces of 1000 bytes.
+class SceneCacheTest : public ::testing::Test {
+ protected:
+  const fs::path dir = fs::temp_directory_path() / ("tessera_scene_cache_" + std::to_string(::getpid()) + "_" +
+                                                    ::testing::UnitTest::GetInstance()->current_test_info()->name());
+  FakeCoordinator fake;
+  std::string hash;
+
+  void SetUp() override {
+    const v1::SceneBundle bundle = bundle_of(kScene, &hash);
+    fake.scenes[hash] = bundle;
+  }
+  void TearDown() override { fs::remove_all(dir); }
+  // What prepare() throws, as E, for a task of this scene.
+  template <typename E>
+  std::string refusal() {
+    try {
+      worker::SceneCache(dir.string(), fetch_from(fake)).prepare(scene_task(hash));
+    } catch (const E& e) {
+      return e.what();
+    }
+    ADD_FAILURE() << "not refused";
+    return "";
+  }
+};
+
+// Scenes are fetched once per content hash and kept on disk for the next worker.
+TEST_F(SceneCacheTest, FetchesASceneOnceAndKeepsItOnDisk) {
+  v1::Task t = scene_task(hash);
   {
-    worker::SceneCache cache(dir.string(), fetch);
+    worker::SceneCache cache(dir.string(), fetch_from(fake));
     const auto a = cache.prepare(t);
+    RenderSettings s = from_proto(t.settings());
     s.max_depth = 3;
     *t.mutable_settings() = to_proto(s);
     const auto b = cache.prepare(t);  // other settings: another renderer of the same scene
@@ -357,12 +400,54 @@ TEST(SceneCache, FetchesASceneOnceAndKeepsItOnDisk) {
     EXPECT_EQ(a->scene, b->scene);
     EXPECT_EQ(cache.prepare(t), b);
   }
-  worker::SceneCache again(dir.string(), fetch);
+  worker::SceneCache again(dir.string(), fetch_from(fake));
   EXPECT_NE(again.prepare(t), nullptr);
-  EXPECT_EQ(fetches, 1);
+  EXPECT_EQ(fake.scene_fetches, 1);
   t.set_scene_hash("../../etc");
   EXPECT_THROW(again.prepare(t), WireError);
-  fs::remove_all(dir);
+}
+
+// A bundle of three files, 7475 + 5000 + 0 bytes. The connection is lost twice, after 3
+// pieces each time: each fetch goes on from the first byte it lacks, and the files on disk
+// are the bundle's, byte for byte.
+TEST_F(SceneCacheTest, AFetchCutShortGoesOnFromTheFirstByteItLacks) {
+  v1::SceneBundle b = fake.scenes[hash];
+  v1::SceneFile* tex = b.add_files();
+  tex->set_path("textures/noise.bin");
+  for (int i = 0; i < 5000; ++i) tex->mutable_content()->push_back(char(i * 7));
+  b.add_files()->set_path("empty.txt");
+  hash = bundle_hash(b.main_file(), b.files());
+  fake.scenes[hash] = b;
+  fake.scene_streams_to_cut = 2;
+  fake.cut_after_pieces = 3;
+  worker::SceneCache cache(dir.string(), fetch_from(fake));
+  ASSERT_NE(cache.prepare(scene_task(hash)), nullptr);
+  ASSERT_EQ(fake.scene_requests.size(), 3u);
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(fake.scene_requests[size_t(i)].file(), 0u);
+    EXPECT_EQ(fake.scene_requests[size_t(i)].offset(), 3000u * uint64_t(i));
+  }
+  std::map<std::string, std::string> want{{".main", b.main_file() + "\n"}};
+  for (const v1::SceneFile& f : b.files()) want[f.path()] = f.content();
+  EXPECT_EQ(files_in(dir / hash), want);
+  EXPECT_FALSE(fs::exists(dir / (hash + ".partial")));
+}
+
+TEST_F(SceneCacheTest, BytesThatDoNotHashToTheSceneAreRefusedAndLeaveNothing) {
+  fake.damage_scenes = true;
+  const std::string why = refusal<WireError>();
+  EXPECT_NE(why.find("scene " + hash + ": its bytes hash to"), std::string::npos) << why;
+  EXPECT_TRUE(fs::is_empty(dir));
+}
+
+// A coordinator that stays out of reach: a few tries without a byte, then the error (the
+// fetcher gives the task back with it); nothing is left half-written.
+TEST_F(SceneCacheTest, ACoordinatorOutOfReachFailsTheFetchAfterAFewTries) {
+  fake.scene_streams_to_cut = 100;
+  fake.cut_after_pieces = 0;
+  EXPECT_EQ(refusal<std::runtime_error>(), "fetch scene " + hash + ": connection lost (a test's)");
+  EXPECT_EQ(fake.scene_fetches, worker::SceneCache::kFetchAttempts);
+  EXPECT_TRUE(fs::is_empty(dir));
 }
 
 }  // namespace

@@ -1,0 +1,101 @@
+// Scenes in pieces, for the streams that carry them (UploadScene from the client,
+// FetchSceneChunks to workers: tessera.proto's SceneChunk): the manifest first (the main
+// file; each file's path and size; the content hash), then each file's bytes in the
+// manifest's order, a piece at most a chunk. The sender reads a piece at a time from disk
+// and the receiver writes each to disk as it comes, checking it against the manifest, so a
+// scene of any size passes through a fixed amount of memory and under any message limit.
+#pragma once
+
+#include <cstdint>
+#include <fstream>
+#include <functional>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "tessera.grpc.pb.h"
+
+namespace tessera {
+
+constexpr size_t kSceneChunkBytes = size_t(1) << 20;      // a piece, as senders cut them
+constexpr size_t kMaxSceneChunkBytes = size_t(16) << 20;  // the most a receiver takes in one
+constexpr size_t kMaxSceneFiles = size_t(1) << 16;
+
+// bundle_hash() a piece at a time: the same digest for the same bundle.
+class BundleHasher {
+ public:
+  explicit BundleHasher(const std::string& main_file);
+  ~BundleHasher();
+  BundleHasher(const BundleHasher&) = delete;
+  BundleHasher& operator=(const BundleHasher&) = delete;
+  // A file begins: then exactly `size` bytes of update().
+  void file(const std::string& path, uint64_t size);
+  void update(const void* data, size_t n);
+  std::string digest() const;
+
+ private:
+  struct State;
+  std::unique_ptr<State> st_;
+};
+
+// Checks a manifest before anything is written: paths inside the bundle's folder, in
+// normal form, each once, none also a folder of another; the main file among them; at most
+// kMaxSceneFiles files; a hash of 32 hex digits. Throws WireError naming the problem.
+// Returns what the scene weighs against its owner's limit (bundle_bytes: paths and sizes).
+uint64_t check_manifest(const v1::SceneManifest& m);
+
+// A bundle's files on disk, to send.
+struct SceneSource {
+  v1::SceneManifest manifest;
+  std::vector<std::string> paths;  // on disk, one per manifest file
+};
+// The bundle of `files` (path in the bundle, path on disk), its main file `main_file`,
+// with each file's size and the content hash (one read of every file). Throws
+// std::runtime_error naming a file it cannot read.
+SceneSource scene_source(const std::string& main_file, const std::vector<std::pair<std::string, std::string>>& files);
+// Reads the files and returns their bundle_hash (the manifest's own is not looked at).
+// Throws std::runtime_error when a file cannot be read or is not its listed size.
+std::string hash_files(const SceneSource& s);
+// Calls `send` with each piece from byte `offset` of file `file` on, in order, each at most
+// `chunk_bytes`; returns false as soon as `send` does. Throws WireError for a start past
+// the end, std::runtime_error when a file cannot be read or is shorter than listed.
+bool send_pieces(const SceneSource& s, uint32_t file, uint64_t offset, size_t chunk_bytes,
+                 const std::function<bool(v1::SceneChunk&)>& send);
+
+// Writes a scene's pieces into a folder as they come, each checked against the manifest:
+// the piece expected next (in order, no gaps, none past its file's size), then, once all
+// came, the content hash. Files of size 0 are made as the pieces pass them.
+class SceneReceiver {
+ public:
+  // check_manifest()s `m` and makes `dir`. Throws WireError. Messages begin with `what`.
+  SceneReceiver(std::string dir, v1::SceneManifest m, std::string what = "scene upload");
+  const v1::SceneManifest& manifest() const { return m_; }
+  uint64_t bytes() const { return bytes_; }  // check_manifest's
+  // Throws WireError naming what is wrong with the piece, std::runtime_error when the disk
+  // refuses it.
+  void add(const v1::SceneChunk& piece);
+  // The next byte expected: where a stream cut short goes on.
+  uint32_t next_file() const { return file_; }
+  uint64_t next_offset() const { return offset_; }
+  bool complete() const { return file_ == uint32_t(m_.files_size()); }
+  // Where the pieces stopped, for messages: "file 'a.dae' at byte 10 of 7475".
+  std::string position() const;
+  // Throws WireError unless every byte came and their hash is the manifest's.
+  void finish();
+
+ private:
+  void open(const v1::SceneFileInfo& f);
+  void settle();  // past a file with all its bytes, and files of size 0
+
+  std::string dir_;
+  v1::SceneManifest m_;
+  std::string what_;
+  uint64_t bytes_ = 0;
+  BundleHasher hasher_;
+  uint32_t file_ = 0;
+  uint64_t offset_ = 0;
+  std::ofstream out_;  // file_'s, once its first piece came
+};
+
+}  // namespace tessera
