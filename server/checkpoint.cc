@@ -18,7 +18,8 @@ constexpr char kMagic[4] = {'T', 'S', 'C', 'K'};
 // Version 2: the film's sums in chunks of kChunkPixels, each compressed on its own (a
 // whole film as one buffer took 8 times as long per pixel: caches, and page faults for
 // buffers of the film's size). Version 1 is still read.
-constexpr uint32_t kCheckpointVersion = 2;
+// Version 3: band by band (checkpoint.h).
+constexpr uint32_t kVersion2 = 2, kVersion3 = 3;
 constexpr uint32_t kChunkPixels = 1 << 16;
 
 // Little-endian fields, appended and read back in order.
@@ -66,10 +67,10 @@ class Reader {
 
 }  // namespace
 
-std::string encode_checkpoint(const PlanState& state, const Film& film, double elapsed) {
+std::string encode_checkpoint_v2(const PlanState& state, const Film& film, double elapsed) {
   Writer w;
   w.out.append(kMagic, 4);
-  w.put(kCheckpointVersion);
+  w.put(kVersion2);
   w.put(uint32_t(state.progress.size()));
   for (const TileProgress& t : state.progress) {
     w.put(t.passes_done);
@@ -112,7 +113,7 @@ Checkpoint decode_checkpoint(const std::string& bytes, bool with_film) {
   Reader in(bytes);
   in.get<uint32_t>();  // magic
   const uint32_t version = in.get<uint32_t>();
-  if (version != 1 && version != kCheckpointVersion)
+  if (version != 1 && version != kVersion2)
     throw std::runtime_error("checkpoint: version " + std::to_string(version) + " not supported");
   Checkpoint c;
   const uint32_t tiles = in.get<uint32_t>();
@@ -157,6 +158,225 @@ Checkpoint decode_checkpoint(const std::string& bytes, bool with_film) {
     throw std::runtime_error(std::string("checkpoint: film: ") + e.what());
   }
   return c;
+}
+
+// ---- version 3 ----
+
+struct CheckpointEncoder::Hash {
+  XXH64_state_t* st = XXH64_createState();
+  Hash() { XXH64_reset(st, 0); }
+  ~Hash() { XXH64_freeState(st); }
+};
+
+CheckpointEncoder::CheckpointEncoder(const FramePlan& plan, double elapsed,
+                                     std::function<void(const std::string&)> out)
+    : out_(std::move(out)), hash_(std::make_unique<Hash>()), adaptive_(plan.settings().adaptive) {
+  Writer w;
+  w.out.append(kMagic, 4);
+  w.put(kVersion3);
+  const Rect r = plan.settings().effective_window();
+  for (int v : {r.x, r.y, r.w, r.h}) w.put(int32_t(v));
+  w.put(uint32_t(plan.tiles().size()));
+  w.put(plan.bands());
+  w.put(uint8_t(adaptive_));
+  w.put(elapsed);
+  emit(std::move(w.out));
+}
+
+CheckpointEncoder::~CheckpointEncoder() = default;
+
+void CheckpointEncoder::emit(std::string bytes) {
+  XXH64_update(hash_->st, bytes.data(), bytes.size());
+  out_(bytes);
+}
+
+void CheckpointEncoder::band(const BandCopy& b) {
+  Writer w;
+  w.put(b.band);
+  w.put(uint32_t(b.progress.size()));
+  for (const TileProgress& t : b.progress) {
+    w.put(t.passes_done);
+    w.put(uint8_t(t.finished));
+    w.put(t.relative_error);
+  }
+  w.put(b.samples);
+  if (adaptive_) {
+    std::string mask(ZSTD_compressBound(b.active.size()), '\0');
+    const size_t n = ZSTD_compress(mask.data(), mask.size(), b.active.data(), b.active.size(), 1);
+    if (ZSTD_isError(n)) throw std::runtime_error("checkpoint: cannot compress the active mask");
+    mask.resize(n);
+    w.put(uint64_t(b.active.size()));
+    w.bytes(mask);
+  }
+  w.bytes(encode_sums(b.pixels.data(), b.pixels.size()));
+  emit(std::move(w.out));
+}
+
+void CheckpointEncoder::finish() {
+  Writer w;
+  w.put(uint64_t(XXH64_digest(hash_->st)));
+  out_(w.out);
+}
+
+std::string encode_checkpoint(const FramePlan& plan, double elapsed) {
+  std::string out;
+  CheckpointEncoder enc(plan, elapsed, [&](const std::string& bytes) { out += bytes; });
+  BandCopy band;
+  for (uint32_t b = 0; b < plan.bands(); ++b) {
+    plan.copy_band(b, &band);
+    enc.band(band);
+  }
+  enc.finish();
+  return out;
+}
+
+namespace {
+
+// Fields read from a stream, hashed as they go.
+class StreamReader {
+ public:
+  StreamReader(const std::function<size_t(char*, size_t)>& read, XXH64_state_t* hash) : read_(read), hash_(hash) {}
+  void exactly(char* out, size_t n, bool hashed = true) {
+    for (size_t at = 0; at < n;) {
+      const size_t k = read_(out + at, n - at);
+      if (k == 0) throw std::runtime_error("checkpoint: truncated");
+      at += k;
+    }
+    if (hashed) XXH64_update(hash_, out, n);
+  }
+  template <typename T>
+  T get() {
+    T v;
+    exactly(reinterpret_cast<char*>(&v), sizeof v);
+    return v;
+  }
+  bool at_end() {
+    char c;
+    return read_(&c, 1) == 0;
+  }
+  std::string bytes(uint64_t limit) {
+    const uint64_t n = get<uint64_t>();
+    if (n > limit) throw std::runtime_error("checkpoint: a field of " + std::to_string(n) + " bytes");
+    std::string b(n, '\0');
+    exactly(b.data(), n);
+    return b;
+  }
+
+ private:
+  const std::function<size_t(char*, size_t)>& read_;
+  XXH64_state_t* hash_;
+};
+
+double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with_film) {
+  const double elapsed = in.get<double>();
+  BandCopy band;
+  std::vector<bool> seen(plan.bands(), false);
+  const Rect w = plan.settings().effective_window();
+  for (uint32_t k = 0; k < plan.bands(); ++k) {
+    band.band = in.get<uint32_t>();
+    if (band.band >= plan.bands() || seen[band.band]) throw std::runtime_error("checkpoint: bands out of order");
+    seen[band.band] = true;
+    const uint32_t tiles = in.get<uint32_t>();
+    if (tiles != plan.tiles_per_band()) throw std::runtime_error("checkpoint: a band of another size");
+    band.progress.resize(tiles);
+    for (TileProgress& t : band.progress) {
+      t.passes_done = in.get<uint32_t>();
+      t.finished = in.get<uint8_t>() != 0;
+      t.relative_error = in.get<float>();
+    }
+    band.samples = in.get<uint64_t>();
+    const Rect& first = plan.tiles()[size_t(band.band) * plan.tiles_per_band()];
+    band.y0 = first.y - w.y;
+    band.rows = first.h;
+    band.width = w.w;
+    const size_t pixels = size_t(band.rows) * size_t(band.width);
+    band.active.clear();
+    if (plan.settings().adaptive) {
+      const uint64_t size = in.get<uint64_t>();
+      const std::string mask = in.bytes(ZSTD_compressBound(pixels) + 64);
+      if (size != pixels) throw std::runtime_error("checkpoint: bad active mask");
+      if (with_film) {
+        band.active.resize(pixels);
+        const size_t n = ZSTD_decompress(band.active.data(), pixels, mask.data(), mask.size());
+        if (ZSTD_isError(n) || n != pixels) throw std::runtime_error("checkpoint: bad active mask");
+      }
+    }
+    const std::string sums = in.bytes(uint64_t(pixels) * kBytesPerPixel * 2 + 4096);
+    band.pixels.clear();
+    if (with_film) try {
+        band.pixels.resize(pixels);
+        decode_sums(sums, band.pixels.data(), pixels);
+      } catch (const WireError& e) {
+        throw std::runtime_error(std::string("checkpoint: film: ") + e.what());
+      }
+    try {
+      plan.restore_band(band);
+    } catch (const std::invalid_argument& e) {
+      throw std::runtime_error(std::string("checkpoint: ") + e.what());
+    }
+  }
+  const uint64_t digest = XXH64_digest(hash);
+  uint64_t sum;
+  in.exactly(reinterpret_cast<char*>(&sum), sizeof sum, false);
+  if (sum != digest) throw std::runtime_error("checkpoint: checksum mismatch");
+  if (!in.at_end()) throw std::runtime_error("checkpoint: trailing bytes");
+  plan.restore_finish();
+  return elapsed;
+}
+
+}  // namespace
+
+double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePlan& plan, bool with_film) {
+  XXH64_state_t* hash = XXH64_createState();
+  struct Free {
+    XXH64_state_t* h;
+    ~Free() { XXH64_freeState(h); }
+  } free_hash{hash};
+  XXH64_reset(hash, 0);
+  StreamReader in(read, hash);
+  char magic[4];
+  in.exactly(magic, 4);
+  if (std::memcmp(magic, kMagic, 4) != 0) throw std::runtime_error("checkpoint: not a checkpoint file");
+  const uint32_t version = in.get<uint32_t>();
+  if (version == kVersion3) {
+    Rect r;
+    r.x = in.get<int32_t>();
+    r.y = in.get<int32_t>();
+    r.w = in.get<int32_t>();
+    r.h = in.get<int32_t>();
+    const uint32_t tiles = in.get<uint32_t>(), bands = in.get<uint32_t>();
+    const bool adaptive = in.get<uint8_t>() != 0;
+    if (!(r == plan.settings().effective_window()) || tiles != plan.tiles().size() || bands != plan.bands() ||
+        adaptive != plan.settings().adaptive)
+      throw std::runtime_error("checkpoint: it does not fit the job's frame");
+    return read_v3(in, hash, plan, with_film);
+  }
+  if (version != 1 && version != kVersion2)
+    throw std::runtime_error("checkpoint: version " + std::to_string(version) + " not supported");
+  // The old formats, whole: as they were written.
+  std::string bytes(kMagic, 4);
+  bytes.append(reinterpret_cast<const char*>(&version), 4);
+  char buf[1 << 16];
+  for (size_t k; (k = read(buf, sizeof buf)) > 0;) bytes.append(buf, k);
+  Checkpoint c = decode_checkpoint(bytes, with_film);
+  try {
+    plan.restore(c.state, std::move(c.film));
+  } catch (const std::invalid_argument& e) {
+    throw std::runtime_error(std::string("checkpoint: ") + e.what());
+  }
+  return c.elapsed;
+}
+
+double read_checkpoint(const std::string& bytes, FramePlan& plan, bool with_film) {
+  size_t at = 0;
+  return read_checkpoint(
+      [&](char* out, size_t n) {
+        const size_t k = std::min(n, bytes.size() - at);
+        std::memcpy(out, bytes.data() + at, k);
+        at += k;
+        return k;
+      },
+      plan, with_film);
 }
 
 }  // namespace tessera

@@ -1,24 +1,60 @@
-// A job's checkpoint file: its frame plan's state and its film, checksummed (xxh64), the
-// film's sums in chunks of 65,536 pixels each encoded like a tile's sums (version 2;
-// version 1, one chunk, is still read). docs/architecture.md has where and when.
+// A job's checkpoint file: its frame plan's progress and its film's sums, checksummed
+// (xxh64). docs/architecture.md has where and when.
+//
+// Version 3 is written band by band (FramePlan::copy_band: a row of tiles, each tile's sums
+// with its progress), so a coordinator never holds a second copy of a large film, and read
+// band by band into the plan's own film; every counter of the plan follows from its tiles.
+//   header  "TSCK", u32 3, i32 window x y w h, u32 tiles, u32 bands, u8 adaptive, f64 elapsed
+//   band    u32 band, u32 tiles, per tile (u32 passes, u8 finished, f32 relative error),
+//           u64 samples, [adaptive: u64 mask bytes, bytes zstd(mask)], bytes sums (wire.h)
+//   end     u64 xxh64 of everything before it
+// (bytes = u64 length + the bytes.) Versions 1 and 2 (the whole PlanState, then the film in
+// one or in 65,536-pixel pieces) are still read.
 #pragma once
 
+#include <cstdint>
+#include <functional>
 #include <string>
 
 #include "core/render/frame_plan.h"
 
 namespace tessera {
 
+// Version 3, band by band: the header at construction, then band() for every band in
+// order, then finish(); each piece of the file goes to `out` as it is made.
+class CheckpointEncoder {
+ public:
+  CheckpointEncoder(const FramePlan& plan, double elapsed, std::function<void(const std::string&)> out);
+  ~CheckpointEncoder();
+  void band(const BandCopy& band);
+  void finish();
+
+ private:
+  void emit(std::string bytes);
+  std::function<void(const std::string&)> out_;
+  struct Hash;
+  std::unique_ptr<Hash> hash_;
+  bool adaptive_;
+};
+
+// The whole file for a plan, band by band (tests, and small plans).
+std::string encode_checkpoint(const FramePlan& plan, double elapsed);
+
+// Reads a checkpoint of any version from `read` (which fills up to n bytes of its buffer
+// and returns how many, 0 at the end) into `plan`, whose settings it must fit; returns the
+// render seconds it was taken at. Without `with_film` only the progress is restored (an
+// ended job's). Throws std::runtime_error ("checkpoint: ...") when the bytes are damaged,
+// cut short or do not fit the plan; the plan is then unusable.
+double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePlan& plan, bool with_film = true);
+double read_checkpoint(const std::string& bytes, FramePlan& plan, bool with_film = true);
+
+// Versions 1 and 2: the file as one PlanState and film (exposed for tests and the fuzzer).
 struct Checkpoint {
   PlanState state;
   Film film{Rect{}};
   double elapsed = 0;  // render seconds when it was taken
 };
-
-// A checkpoint's bytes, and back (exposed for tests, the fuzzer and the benchmark).
-std::string encode_checkpoint(const PlanState& state, const Film& film, double elapsed);
-// Throws std::runtime_error unless the bytes are a whole, undamaged checkpoint. Without
-// `with_film`, Checkpoint::film stays empty (its bytes are checksummed, not decoded).
+std::string encode_checkpoint_v2(const PlanState& state, const Film& film, double elapsed);
 Checkpoint decode_checkpoint(const std::string& bytes, bool with_film = true);
 
 }  // namespace tessera

@@ -50,7 +50,7 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
   {
     MutexLock lock(mu_);
     const auto restore_scene = [this](const std::string& hash) { return scenes_.restore(hash); };
-    Recovery({*store_, jobs_, lifecycle_, counters_, restore_scene}).restore(clock_->now(), fx);
+    Recovery({*store_, jobs_, lifecycle_, snapshotter_, counters_, restore_scene}).restore(clock_->now(), fx);
     for (const auto& [id, s] : jobs_.sequences()) fx.sequence_ends.push_back(id);  // ended, not yet recorded
   }
   scenes_.remove_unused();  // scenes of jobs that ended, or whose submit the crash cut short
@@ -63,8 +63,7 @@ Coordinator::~Coordinator() = default;
 
 void Coordinator::apply(Effects fx) {
   if (fx.changed) changed_.notify_all();
-  for (ImageSnapshot& snap : fx.snapshots) write(snap);
-  for (const std::shared_ptr<Job>& job : fx.final_images) write_image(job);
+  for (const std::shared_ptr<Job>& job : fx.writes) write(job);
   for (const RowEnd& r : fx.rows) try {
       store_->end(r.id, r.state, r.error, r.elapsed);
     } catch (const std::exception& e) {
@@ -78,22 +77,28 @@ void Coordinator::apply(Effects fx) {
   }
 }
 
-void Coordinator::write(ImageSnapshot& snap) {
-  const SnapshotOutcome out = writer_.write(snap);
-  {
-    MutexLock lock(mu_);
-    snapshotter_.written(snap, out, counters_);
+void Coordinator::write(const std::shared_ptr<Job>& job) {
+  // This thread is the job's one writer until next() finds nothing more due.
+  for (;;) {
+    SnapshotPlan plan;
+    {
+      MutexLock lock(mu_);
+      plan = snapshotter_.next(*job, clock_->now());
+    }
+    if (!plan.image && !plan.checkpoint) return;
+    const SnapshotOutcome out = writer_.write(*job, plan, [&](uint32_t band, BandCopy* copy) {
+      MutexLock lock(mu_);  // one band at a time: merges go on between them
+      if (!job->plan.has_film()) return false;
+      job->plan.copy_band(band, copy);
+      return true;
+    });
+    {
+      MutexLock lock(mu_);
+      snapshotter_.written(*job, plan, out, counters_);
+    }
+    changed_.notify_all();  // an image fetch may wait for this write; an end may be durable now
+    if (out.end_recorded && !job->sequence.empty()) record_sequence_end(job->sequence);
   }
-  if (snap.ended && !snap.job->sequence.empty()) record_sequence_end(snap.job->sequence);
-}
-
-void Coordinator::write_image(const std::shared_ptr<Job>& job) {
-  ImageSnapshot snap;
-  {
-    MutexLock lock(mu_);
-    snap = snapshotter_.take(job, true, true, clock_->now());
-  }
-  write(snap);
 }
 
 void Coordinator::record_sequence_end(const std::string& id) {
@@ -113,8 +118,11 @@ void Coordinator::record_sequence_end(const std::string& id) {
     spdlog::error("job {}: recording its end: {}", id, e.what());
   }
   if (ok) scenes_.release(scene);
-  MutexLock lock(mu_);
-  lifecycle_.sequence_end_recorded(id, ok);
+  {
+    MutexLock lock(mu_);
+    lifecycle_.sequence_end_recorded(id, ok);
+  }
+  changed_.notify_all();
 }
 
 // ---- clients ----
@@ -144,26 +152,18 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
     throw;
   }
   const std::string id = sub.job ? sub.job->id() : sub.sequence->id();
-  const bool live = locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     const double now = clock_->now();
     ++counters_.jobs_submitted;
     fx.changed = true;
     if (sub.sequence) {
       sub.sequence->submitted = now;
       jobs_.add(std::move(sub.sequence));
-      return false;
+      return;
     }
     sub.job->submitted = sub.job->snaps.last_checkpoint = now;
     lifecycle_.finish_if_done(jobs_.add(sub.job), now, fx);  // nothing to render: its end is written at once
-    return sub.job->live();
   });
-  if (live) {
-    // The snapshot film is made outside the lock too, once workers can start on the job
-    // (25 ms for 480 x 360 on a 2-core VM).
-    auto spare = std::make_unique<Film>(sub.job->plan.settings().effective_window());
-    MutexLock lock(mu_);
-    if (sub.job->live() && !sub.job->snaps.spare_film) sub.job->snaps.spare_film = std::move(spare);
-  }
   return id;
 }
 
@@ -193,27 +193,37 @@ v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requ
 
 v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::optional<int> frame) {
   std::shared_ptr<Job> job;
-  bool live;
+  bool live, writer = false;
   uint64_t merges;
   {
     MutexLock lock(mu_);
     job = jobs_.shared(jobs_.frame_job(id, frame).id());
     live = job->live();
     merges = job->plan.merges();
+    // A live job gets its latest image. An ended job's film no longer changes, and the image
+    // must hold all of it: the merge (or cancel) that ended the job asks for its last image,
+    // which may still be being written, so a client that saw the end can get here first.
+    if (!Snapshotter::image_current(*job, live, merges)) writer = snapshotter_.request(*job, true, !live);
   }
-  // A live job gets its latest image. An ended job's film no longer changes, and the image
-  // must hold all of it: the merge (or cancel) that ended the job writes its last snapshot
-  // after releasing mu_, so a client that saw the end can get here first.
-  if (!SnapshotWriter::image_current(*job, live, merges)) write_image(job);
+  if (writer) write(job);
   v1::Image img;
-  const bool ok = writer_.read_image(*job, live, merges, exr, png, &img);
-  MutexLock lock(mu_);
-  if (!ok)
-    throw RequestError(RequestError::Code::kFailedPrecondition,
-                       "job " + job->id() + ": its image could not be written (" + job->image_error +
-                           "); the samples are kept and the write is retried");
-  img.set_frame_passes_done(job->snaps.image_frame_passes);
-  img.set_final(!live);  // (an ended job's image holds its whole film: checked above)
+  {
+    const auto deadline = deadline_in(kImageWaitSeconds);
+    MutexLock lock(mu_);
+    while (!Snapshotter::image_current(*job, live, merges) && job->snaps.writing &&
+           changed_.wait_until(mu_, deadline)) {
+    }
+    if (!Snapshotter::image_current(*job, live, merges))
+      throw RequestError(RequestError::Code::kFailedPrecondition,
+                         "job " + job->id() + ": its image could not be written (" + job->image_error +
+                             "); the samples are kept and the write is retried");
+    img.set_frame_passes_done(job->snaps.image_frame_passes);
+    // Final: the job has ended durably (an ended job's image holds its whole film: checked above).
+    img.set_final(!live && job->end_recorded);
+  }
+  // The files are replaced by rename, never changed in place: read outside the lock.
+  if (exr) img.set_exr(sink_->exr(job->id()));
+  if (png) img.set_png(sink_->png(job->id()));
   return img;
 }
 
@@ -314,13 +324,19 @@ size_t Coordinator::expire_leases() {
 }
 
 void Coordinator::checkpoint_all() {
-  std::vector<ImageSnapshot> snaps;
+  std::vector<std::shared_ptr<Job>> mine, others;  // others: a writer is at work on them
   {
     MutexLock lock(mu_);
     for (const auto& [id, job] : jobs_.jobs())
-      if (auto snap = snapshotter_.checkpoint_if_changed(job, clock_->now())) snaps.push_back(std::move(*snap));
+      if (job->live() && job->plan.merges() != job->snaps.checkpoint_merges)
+        (snapshotter_.checkpoint_if_changed(*job, clock_->now()) ? mine : others).push_back(job);
   }
-  for (ImageSnapshot& snap : snaps) write(snap);
+  for (const std::shared_ptr<Job>& job : mine) write(job);
+  const auto deadline = deadline_in(kImageWaitSeconds);
+  MutexLock lock(mu_);
+  for (const std::shared_ptr<Job>& job : others)  // their writers take the checkpoint too
+    while (job->snaps.writing && changed_.wait_until(mu_, deadline)) {
+    }
 }
 
 // ---- waiting ----
@@ -339,12 +355,12 @@ v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_
     // condition is O(1) however long the sequence (it is looked at on every merge).
     const uint64_t since = s->changes;
     if (s->samples_merged() != last_samples) return job_status(jobs_, leases_, id, false, clock_->now());
-    while (s->live() && s->changes == since && changed_.wait_until(mu_, deadline)) {
+    while (!s->ended_durably() && s->changes == since && changed_.wait_until(mu_, deadline)) {
     }
     return job_status(jobs_, leases_, id, false, clock_->now());
   }
   const Job& job = jobs_.job(id);
-  while (job.live() && job.plan.samples_merged() == last_samples && changed_.wait_until(mu_, deadline)) {
+  while (!job.ended_durably() && job.plan.samples_merged() == last_samples && changed_.wait_until(mu_, deadline)) {
   }
   return job_status(jobs_, leases_, id, false, clock_->now());
 }
@@ -354,10 +370,10 @@ bool Coordinator::wait_for_end(const std::string& id, double timeout) const {
   MutexLock lock(mu_);
   const Sequence* s = jobs_.find_sequence(id);
   const Job* job = s ? nullptr : &jobs_.job(id);
-  auto live = [&]() TESSERA_REQUIRES(mu_) { return s ? s->live() : job->live(); };
-  while (live() && changed_.wait_until(mu_, deadline)) {
+  auto ended = [&]() TESSERA_REQUIRES(mu_) { return s ? s->ended_durably() : job->ended_durably(); };
+  while (!ended() && changed_.wait_until(mu_, deadline)) {
   }
-  return !live();
+  return ended();
 }
 
 // ---- for operators ----

@@ -23,10 +23,10 @@
 //  2. Public functions take mu_ (and say so: TESSERA_EXCLUDES where it matters).
 //  3. Nothing slow under mu_: no disk, no encoding, no waiting. An operation under mu_ puts
 //     the slow work in one Effects (effects.h), which apply() carries out after releasing it.
-//  4. Never two of the coordinator's locks at once: a job's write_mu (one image and
-//     checkpoint writer at a time) is taken without mu_ held, and mu_ without write_mu.
-//     SceneStore's, SceneUploads', JobStore's and ImageSink's own locks are leaves: nothing
-//     is taken while one is held.
+//  4. A job's image and checkpoint are written by one writer at a time (Snapshotter: the
+//     first to ask becomes it, later asks are marked due), copying the film one band at a
+//     time under mu_ and writing without it. SceneStore's, SceneUploads', JobStore's and
+//     ImageSink's own locks are leaves: nothing is taken while one is held.
 #pragma once
 
 #include <map>
@@ -113,10 +113,11 @@ class Coordinator {
   // silent workers, skips checks nobody can take, and makes the next frame of each
   // sequence ready to start. Returns how many leases expired.
   size_t expire_leases();
-  // Blocks until a job ends, its samples change from `last_samples`, or `timeout` passes;
-  // returns its status without tiles.
+  // Blocks until a job's end is durable, its samples change from `last_samples`, or
+  // `timeout` passes; returns its status without tiles. (Clients are told of an end only
+  // once it is durable: Job::reported_state.)
   v1::JobStatus wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const;
-  // Blocks until the job has ended (true) or `timeout` passes (false).
+  // Blocks until the job's end is durable (true) or `timeout` passes (false).
   bool wait_for_end(const std::string& id, double timeout) const;
 
   // Saves every running job's film and plan now (a coordinator told to stop): a restart
@@ -165,8 +166,11 @@ class Coordinator {
       return result;
     }
   }
-  void write(ImageSnapshot& snap) TESSERA_EXCLUDES(mu_);
-  void write_image(const std::shared_ptr<Job>& job) TESSERA_EXCLUDES(mu_);  // snapshot, then write
+  // Writes the job's due image and checkpoint, band by band, as its one writer (the caller
+  // became it: Snapshotter::request), until nothing more is due.
+  void write(const std::shared_ptr<Job>& job) TESSERA_EXCLUDES(mu_);
+  // How long an image fetch or a stopping coordinator waits for another thread's writer.
+  static constexpr double kImageWaitSeconds = 120;
   void record_sequence_end(const std::string& id) TESSERA_EXCLUDES(mu_);
   void refused() TESSERA_EXCLUDES(mu_);  // a submit refused: counted
   v1::ResultAck check_result(const v1::TaskResult& result, const Lease& lease) TESSERA_EXCLUDES(mu_);

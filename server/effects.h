@@ -1,8 +1,8 @@
 // The slow work a state change leaves for after the coordinator's lock. Nothing under the
 // lock writes to disk, encodes an image or waits: each operation appends what it needs
 // done to one Effects, and the coordinator carries it out once the lock is released
-// (Coordinator::apply), in this order: snapshots, final images, database rows, sequence
-// ends, frames to prepare, then waking the waiters.
+// (Coordinator::apply): waking the waiters, then images and checkpoints, database rows,
+// sequence ends, frames to prepare.
 #pragma once
 
 #include <memory>
@@ -23,16 +23,14 @@ struct RowEnd {
 };
 
 struct Effects {
-  std::vector<ImageSnapshot> snapshots;            // taken: write them
-  std::vector<std::shared_ptr<Job>> final_images;  // ended: snapshot each one at a time, then write it
-  std::vector<RowEnd> rows;                        // database rows to rewrite
+  std::vector<std::shared_ptr<Job>> writes;  // jobs whose snapshot writer this operation became
+  std::vector<RowEnd> rows;                  // database rows to rewrite
   std::vector<std::string> sequence_ends;          // sequences whose end to record (once it can be)
   std::vector<std::pair<Sequence*, size_t>> prepare;  // sequences whose next frame's job to make
   bool changed = false;                            // something waiters wait for happened
 
   bool empty() const {
-    return snapshots.empty() && final_images.empty() && rows.empty() && sequence_ends.empty() && prepare.empty() &&
-           !changed;
+    return writes.empty() && rows.empty() && sequence_ends.empty() && prepare.empty() && !changed;
   }
 };
 

@@ -2,6 +2,7 @@
 
 #include <filesystem>
 
+#include "core/io/exr_writer.h"
 #include "core/io/files.h"
 
 namespace tessera {
@@ -12,10 +13,56 @@ std::string DiskImageSink::path(const std::string& job, const char* file) const 
   return (fs::path(dir_) / job / file).string();
 }
 
-void DiskImageSink::write(const std::string& job, const Film& film, const ImageMetadata& meta) {
+void ImageSink::write(const std::string& job, const Film& film, const ImageMetadata& meta) {
+  std::unique_ptr<Writer> w = begin(job, film.width(), film.height(), meta);
+  if (film.height() > 0) w->write_rows(film.pixels().data(), film.height());
+  w->commit();
+}
+
+namespace {
+class DiskWriter : public ImageSink::Writer {
+ public:
+  DiskWriter(std::string path, int width, int height, const ImageMetadata& meta, std::function<void()> done)
+      : exr_(std::move(path), width, height, meta), done_(std::move(done)) {}
+  void write_rows(const PixelSums* sums, int rows) override { exr_.write_rows(sums, rows); }
+  void commit() override {
+    exr_.commit();
+    done_();
+  }
+
+ private:
+  ExrWriter exr_;
+  std::function<void()> done_;
+};
+
+class FilmWriter : public ImageSink::Writer {
+ public:
+  FilmWriter(int width, int height, std::function<void(const Film&)> done)
+      : film_(Rect{0, 0, width, height}), done_(std::move(done)) {}
+  void write_rows(const PixelSums* sums, int rows) override {
+    if (rows <= 0) return;
+    std::copy_n(sums, size_t(rows) * size_t(film_.width()), &film_.at(0, next_));
+    next_ += rows;
+  }
+  void commit() override { done_(film_); }
+
+ private:
+  Film film_;
+  int next_ = 0;
+  std::function<void(const Film&)> done_;
+};
+}  // namespace
+
+std::unique_ptr<ImageSink::Writer> DiskImageSink::begin(const std::string& job, int width, int height,
+                                                        const ImageMetadata& meta) {
   fs::create_directories(fs::path(dir_) / job);
-  write_exr(path(job, "image.exr"), film, meta, true);
-  forget_preview(job);
+  return std::make_unique<DiskWriter>(path(job, "image.exr"), width, height, meta,
+                                      [this, job] { forget_preview(job); });
+}
+
+std::unique_ptr<ImageSink::Writer> MemoryImageSink::begin(const std::string& job, int width, int height,
+                                                          const ImageMetadata& meta) {
+  return std::make_unique<FilmWriter>(width, height, [this, job, meta](const Film& f) { write(job, f, meta); });
 }
 
 void DiskImageSink::forget_preview(const std::string& job) {

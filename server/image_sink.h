@@ -1,7 +1,9 @@
 // Where a job's images go: a seam, so that coordinator tests need no disk.
 #pragma once
 
+#include <functional>
 #include <list>
+#include <memory>
 #include <map>
 #include <mutex>
 #include <string>
@@ -13,23 +15,33 @@ namespace tessera {
 
 class ImageSink {
  public:
+  // A new image being written band by band (rows top to bottom); commit() replaces the
+  // job's last image with it. Destroyed before commit(), it leaves the last image as it was.
+  class Writer {
+   public:
+    virtual ~Writer() = default;
+    virtual void write_rows(const PixelSums* sums, int rows) = 0;
+    virtual void commit() = 0;
+  };
   virtual ~ImageSink() = default;
-  // Replaces the job's image with this film. Slow (encoding, disk): the coordinator calls
-  // it without holding its lock. Throws std::runtime_error on failure.
-  virtual void write(const std::string& job, const Film& film, const ImageMetadata& meta) = 0;
+  // Slow (encoding, disk): the coordinator calls it, and the writer, without holding its
+  // lock. Throws std::runtime_error on failure.
+  virtual std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta) = 0;
+  // The whole film at once.
+  void write(const std::string& job, const Film& film, const ImageMetadata& meta);
   // The last image written, as EXR and PNG bytes; empty if none was written.
   virtual std::string exr(const std::string& job) const = 0;
   virtual std::string png(const std::string& job) const = 0;
 };
 
-// <dir>/<job>/image.exr, written to a temporary file and renamed into place, uncompressed:
-// progressive images are frequent, and the final one is on the path between the last tile
-// and the client's download. The sRGB PNG preview is made from that file when somebody
-// asks for it (the live page, a client writing .png), and kept until the next write.
+// <dir>/<job>/image.exr, written band by band to a temporary file and renamed into place,
+// ZIP-compressed as tessera render's are (core/io/exr_writer.h: the same pixels). The sRGB
+// PNG preview is made from that file when somebody asks for it (the live page, a client
+// writing .png), and kept until the next write.
 class DiskImageSink : public ImageSink {
  public:
   explicit DiskImageSink(std::string dir) : dir_(std::move(dir)) {}
-  void write(const std::string& job, const Film& film, const ImageMetadata& meta) override;
+  std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta) override;
   std::string exr(const std::string& job) const override;
   std::string png(const std::string& job) const override;
   std::string path(const std::string& job, const char* file) const;
@@ -46,7 +58,10 @@ class DiskImageSink : public ImageSink {
 // Keeps the films in memory, unencoded: for tests, which compare them bit for bit.
 class MemoryImageSink : public ImageSink {
  public:
-  void write(const std::string& job, const Film& film, const ImageMetadata& meta) override;
+  // Collects the rows; commit() hands the film to write(film).
+  std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta) override;
+  // Keeps the film (tests override it to fail).
+  virtual void write(const std::string& job, const Film& film, const ImageMetadata& meta);
   std::string exr(const std::string&) const override { return {}; }
   std::string png(const std::string&) const override { return {}; }
   // The last film written for the job (an empty film if none), and how many were written.

@@ -6,7 +6,7 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   v1::JobStatus s;
   s.set_id(meta.id);
   s.set_name(meta.name);
-  s.set_state(state_);
+  s.set_state(reported_state());
   // A job whose image cannot be written still renders (the film is in memory and writes
   // are retried with the next snapshot); the user is told why its image is missing.
   std::string e = error;
@@ -55,7 +55,7 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
   v1::JobStatus s;
   s.set_id(meta.id);
   s.set_name(meta.name);
-  s.set_state(state_);
+  s.set_state(reported_state());
   s.set_priority(meta.priority);
   s.set_owner(meta.owner);
   *s.mutable_settings() = meta.settings;
@@ -71,7 +71,7 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
     total += ft;
     if (j) {
       tiles_done += j->plan.tiles_done();
-      frames_done += j->state() == v1::JobStatus::DONE;
+      frames_done += j->reported_state() == v1::JobStatus::DONE;
       if (auto w = workers.find(j->id()); w != workers.end()) active += w->second;
       for (const std::string* why : {&j->image_error, &j->checkpoint_error})
         if (!why->empty()) e += (e.empty() ? "" : "; ") + ("frame " + std::to_string(frames[i]) + ": ") + *why;
@@ -79,7 +79,7 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
     if (!with_frames) continue;
     v1::FrameStatus* f = s.add_frames();
     f->set_frame(frames[i]);
-    f->set_state(j ? j->state() : live() ? v1::JobStatus::QUEUED : v1::JobStatus::CANCELLED);
+    f->set_state(j ? j->reported_state() : live() ? v1::JobStatus::QUEUED : v1::JobStatus::CANCELLED);
     f->set_samples_done(fd);
     f->set_samples_total(ft);
     if (j) f->set_job_id(j->id());
@@ -90,7 +90,7 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
   s.set_tiles_done(tiles_done);
   s.set_tiles_total(uint32_t(std::min<uint64_t>(UINT32_MAX, uint64_t(frame_tiles()) * frames.size())));
   s.set_frames_done(frames_done);
-  s.set_frame_passes_done(state_ == v1::JobStatus::DONE ? s.passes_total() : 0);
+  s.set_frame_passes_done(reported_state() == v1::JobStatus::DONE ? s.passes_total() : 0);
   s.set_active_workers(active);
   const double elapsed = started > 0 ? (live() ? now : finished_at) - started : 0;
   s.set_elapsed_seconds(elapsed);

@@ -1,6 +1,6 @@
 // A job: a scene, its frame plan, and what the coordinator knows of its progress; a
-// sequence: a job per frame. Plain data, guarded by the coordinator's lock (Job::write_mu
-// guards what is on disk). Their states change in one place, JobLifecycle.
+// sequence: a job per frame. Plain data, guarded by the coordinator's lock. Their states
+// change in one place, JobLifecycle.
 #pragma once
 
 #include <atomic>
@@ -12,7 +12,6 @@
 #include <vector>
 
 #include "core/render/frame_plan.h"
-#include "core/util/mutex.h"
 #include "server/job_meta.h"
 
 namespace tessera {
@@ -41,34 +40,32 @@ struct Job {
   uint32_t pending_checks = 0;
   double submitted = 0, started = 0, finished_at = 0;
 
-  // Snapshots (Snapshotter): taken under the coordinator's lock, written outside it.
+  // Snapshots (Snapshotter): progressive images and checkpoints, written band by band by
+  // one writer at a time; requests while it writes are marked due and it writes again.
   struct Snapshots {
-    uint32_t image_frame_passes = 0;  // frame passes in the last image taken
+    uint32_t image_frame_passes = 0;  // frame passes in the last image begun
     double last_image = -1e9;
-    double image_write_seconds = 0;  // how long the last write took
-    uint64_t taken = 0;              // snapshots taken (each one's sequence number)
-    // A film to copy the next snapshot into: its pages are already mapped, so the copy
-    // under the lock is a memory copy, not thousands of page faults (231 ms for a fresh
-    // 1920x1080 film here, against a few for a reused one).
-    std::unique_ptr<Film> spare_film;
-    double last_checkpoint = 0;           // when the last snapshot with a checkpoint was taken
-    double checkpoint_write_seconds = 0;  // how long the last checkpoint write took
-    uint64_t checkpoint_merges = 0;       // the film version of the last checkpoint taken
+    double last_checkpoint = 0;       // when the last checkpoint was begun
+    uint64_t checkpoint_merges = 0;   // the film version it began at
+    double write_seconds = 0;         // how long the last write took
+    bool writing = false;             // a writer is at work on this job
+    bool image_due = false, checkpoint_due = false;
   } snaps;
-  // What is on disk. One writer at a time (SnapshotWriter); taken before the coordinator's
-  // lock, never while holding it.
+  // What is on disk (an image's or checkpoint's film version: the film's at the write's
+  // start, exact for an ended job, whose film no longer changes).
   struct Written {
-    uint64_t image_seq = 0;  // newest snapshot whose image was written (0: none yet)
-    uint64_t image_merges = 0;  // the film version it holds
-    uint64_t checkpoint_seq = 0;  // newest snapshot whose checkpoint was written
-    uint64_t checkpoint_merges = 0;
-  };
-  Mutex write_mu;
-  Written written TESSERA_GUARDED_BY(write_mu);
+    uint64_t images = 0, image_merges = 0;
+    uint64_t checkpoints = 0, checkpoint_merges = 0;
+  } written;
   std::atomic<bool> end_recorded{false};  // the job database has its end
 
   State state() const { return state_; }
   bool live() const { return job_live(state_); }
+  // What clients are told: an end only once it is durable (the final checkpoint and the
+  // database record on disk; for a frame, its final checkpoint), RUNNING until then however
+  // finished. A client that saw DONE can then never meet the job live again after a crash.
+  bool ended_durably() const { return !live() && end_recorded; }
+  State reported_state() const { return live() || end_recorded ? state_ : v1::JobStatus::RUNNING; }
   // `now` for the elapsed time; `workers` with live leases on it.
   v1::JobStatus status(double now, uint32_t workers, bool with_tiles) const;
 
@@ -111,6 +108,8 @@ struct Sequence {
 
   State state() const { return state_; }
   bool live() const { return job_live(state_); }
+  bool ended_durably() const { return !live() && end_recorded; }  // as Job's
+  State reported_state() const { return live() || end_recorded ? state_ : v1::JobStatus::RUNNING; }
   // `workers`: with live leases on each frame's job (by id).
   v1::JobStatus status(double now, const std::map<std::string, uint32_t>& workers, bool with_frames) const;
 

@@ -55,7 +55,7 @@ void JobLifecycle::end(Sequence& s, Sequence::State state, double now, Effects& 
   for (const std::shared_ptr<Job>& j : s.jobs)
     if (j && j->live()) {
       end(*j, v1::JobStatus::CANCELLED, now, fx);
-      fx.final_images.push_back(j);  // its image keeps what it rendered
+      if (snapshots_.final_snapshot(*j, now)) fx.writes.push_back(j);  // its image keeps what it rendered
     }
   fx.sequence_ends.push_back(s.id());
   fx.changed = true;
@@ -64,7 +64,7 @@ void JobLifecycle::end(Sequence& s, Sequence::State state, double now, Effects& 
 bool JobLifecycle::finish_if_done(Job& job, double now, Effects& fx) {
   if (!job.live() || !job.plan.done() || job.pending_checks > 0) return false;
   end(job, v1::JobStatus::DONE, now, fx);
-  fx.snapshots.push_back(snapshots_.final_snapshot(jobs_.shared(job.id()), now));
+  if (snapshots_.final_snapshot(job, now)) fx.writes.push_back(jobs_.shared(job.id()));
   return true;
 }
 
@@ -86,7 +86,7 @@ void JobLifecycle::cancel(const std::string& id, const std::string& requester, b
                        "job " + id + " is a frame of sequence " + job.sequence + ": cancel the sequence");
   if (!job.live()) return;
   end(job, v1::JobStatus::CANCELLED, now, fx);
-  fx.final_images.push_back(jobs_.shared(id));  // keep what was rendered
+  if (snapshots_.final_snapshot(job, now)) fx.writes.push_back(jobs_.shared(id));  // keep what was rendered
 }
 
 void JobLifecycle::task_failed(Job& job, uint64_t worker, const std::string& error, double now, Effects& fx) {
@@ -96,7 +96,7 @@ void JobLifecycle::task_failed(Job& job, uint64_t worker, const std::string& err
   if (job.failed_on.size() < kFailuresToFail) return;  // maybe that worker's trouble: another tries
   job.error = "tasks failed on " + std::to_string(job.failed_on.size()) + " workers: " + error.substr(0, 1024);
   end(job, v1::JobStatus::FAILED, now, fx);
-  fx.final_images.push_back(jobs_.shared(job.id()));  // keep what was rendered
+  if (snapshots_.final_snapshot(job, now)) fx.writes.push_back(jobs_.shared(job.id()));  // keep what was rendered
 }
 
 std::optional<RowEnd> JobLifecycle::sequence_end_due(const std::string& id) {

@@ -28,12 +28,12 @@ class JobLifecycle {
   void start(Sequence& s, double now);  // its first frame
 
   // Ends a live job: its leases and checks end; a frame's end goes to its sequence. The
-  // caller writes its last image (final_snapshot, or Effects::final_images).
+  // caller asks for its last image and checkpoint (Snapshotter::final_snapshot).
   void end(Job& job, Job::State state, double now, Effects& fx);
   // Ends a live sequence; its live frames end CANCELLED, keeping what they rendered.
   void end(Sequence& s, Sequence::State state, double now, Effects& fx);
-  // A live job whose plan is done and whose checks are all decided ends DONE, with its
-  // final snapshot in the Effects. True if it ended.
+  // A live job whose plan is done and whose checks are all decided ends DONE, its final
+  // image and checkpoint asked for. True if it ended.
   bool finish_if_done(Job& job, double now, Effects& fx);
   // Cancels a job or a sequence (finished frames stay as they are); only its owner may
   // unless `any`. Throws RequestError. Nothing happens to a job that has ended.

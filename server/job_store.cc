@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <fstream>
 #include <stdexcept>
 
 #include "core/io/files.h"
@@ -202,10 +203,51 @@ std::string SqliteJobStore::checkpoint_path(const std::string& id) const {
   return (fs::path(dir_) / "jobs" / id / "checkpoint").string();
 }
 
-void SqliteJobStore::write_checkpoint(const std::string& id, const PlanState& state, const Film& film, double elapsed) const {
+namespace {
+class FileCheckpoint : public CheckpointFile {
+ public:
+  FileCheckpoint(const std::string& path, std::function<void()> before_rename)
+      : file_(path), before_rename_(std::move(before_rename)) {}
+  void append(const std::string& bytes) override { file_.append(bytes); }
+  void commit() override { file_.commit({true, before_rename_}); }
+
+ private:
+  AtomicFile file_;
+  std::function<void()> before_rename_;
+};
+
+class MemoryCheckpoint : public CheckpointFile {
+ public:
+  MemoryCheckpoint(std::function<void(std::string)> done) : done_(std::move(done)) {}
+  void append(const std::string& bytes) override { bytes_ += bytes; }
+  void commit() override { done_(std::move(bytes_)); }
+
+ private:
+  std::string bytes_;
+  std::function<void(std::string)> done_;
+};
+}  // namespace
+
+std::unique_ptr<CheckpointFile> SqliteJobStore::begin_checkpoint(const std::string& id) const {
   const fs::path path = checkpoint_path(id);
   fs::create_directories(path.parent_path());
-  write_file_atomic(path.string(), encode_checkpoint(state, film, elapsed), {true, before_checkpoint_rename});
+  return std::make_unique<FileCheckpoint>(path.string(), before_checkpoint_rename);
+}
+
+std::optional<double> SqliteJobStore::read_checkpoint(const std::string& id, FramePlan& plan, bool with_film) const {
+  const std::string path = checkpoint_path(id);
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    std::error_code ec;
+    if (!fs::exists(path, ec)) return std::nullopt;
+    throw std::runtime_error(path + ": cannot open file");
+  }
+  return tessera::read_checkpoint(
+      [&](char* out, size_t n) {
+        in.read(out, std::streamsize(n));
+        return size_t(in.gcount());
+      },
+      plan, with_film);
 }
 
 void SqliteJobStore::discard_partial_writes(const std::string& id) const {
@@ -213,13 +255,6 @@ void SqliteJobStore::discard_partial_writes(const std::string& id) const {
     std::error_code ec;
     fs::remove(fs::path(dir_) / "jobs" / id / tmp, ec);
   }
-}
-
-std::optional<Checkpoint> SqliteJobStore::read_checkpoint(const std::string& id, bool with_film) const {
-  const std::string path = checkpoint_path(id);
-  std::error_code ec;
-  if (!fs::exists(path, ec)) return std::nullopt;
-  return decode_checkpoint(read_file_bytes(path), with_film);
 }
 
 // ---- MemoryJobStore ----
@@ -260,23 +295,29 @@ void MemoryJobStore::ping() const {
   if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
 }
 
-void MemoryJobStore::write_checkpoint(const std::string& id, const PlanState& state, const Film& film,
-                                      double elapsed) const {
-  std::string bytes = encode_checkpoint(state, film, elapsed);
-  MutexLock lock(mu_);
-  if (fail_writes) throw std::runtime_error("checkpoint: disk I/O error (a test's)");
-  checkpoints_[id] = std::move(bytes);
-}
-
-std::optional<Checkpoint> MemoryJobStore::read_checkpoint(const std::string& id, bool with_film) const {
-  std::string bytes;
+std::unique_ptr<CheckpointFile> MemoryJobStore::begin_checkpoint(const std::string& id) const {
   {
     MutexLock lock(mu_);
-    auto it = checkpoints_.find(id);
-    if (it == checkpoints_.end()) return std::nullopt;
-    bytes = it->second;
+    if (fail_writes) throw std::runtime_error("checkpoint: disk I/O error (a test's)");
   }
-  return decode_checkpoint(bytes, with_film);
+  return std::make_unique<MemoryCheckpoint>([this, id](std::string bytes) {
+    MutexLock lock(mu_);
+    if (fail_writes) throw std::runtime_error("checkpoint: disk I/O error (a test's)");
+    checkpoints_[id] = std::move(bytes);
+  });
+}
+
+std::optional<double> MemoryJobStore::read_checkpoint(const std::string& id, FramePlan& plan, bool with_film) const {
+  const std::optional<std::string> bytes = checkpoint_bytes(id);
+  if (!bytes) return std::nullopt;
+  return tessera::read_checkpoint(*bytes, plan, with_film);
+}
+
+std::optional<std::string> MemoryJobStore::checkpoint_bytes(const std::string& id) const {
+  MutexLock lock(mu_);
+  auto it = checkpoints_.find(id);
+  if (it == checkpoints_.end()) return std::nullopt;
+  return it->second;
 }
 
 void MemoryJobStore::set_checkpoint_bytes(const std::string& id, std::optional<std::string> bytes) {
@@ -285,6 +326,18 @@ void MemoryJobStore::set_checkpoint_bytes(const std::string& id, std::optional<s
     checkpoints_[id] = std::move(*bytes);
   else
     checkpoints_.erase(id);
+}
+
+void write_checkpoint(const JobStore& store, const std::string& id, const FramePlan& plan, double elapsed) {
+  std::unique_ptr<CheckpointFile> file = store.begin_checkpoint(id);
+  CheckpointEncoder enc(plan, elapsed, [&](const std::string& bytes) { file->append(bytes); });
+  BandCopy band;
+  for (uint32_t b = 0; b < plan.bands(); ++b) {
+    plan.copy_band(b, &band);
+    enc.band(band);
+  }
+  enc.finish();
+  file->commit();
 }
 
 }  // namespace tessera

@@ -11,6 +11,7 @@
 
 #include <functional>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -32,6 +33,15 @@ struct StoredJob {
   std::vector<int> frames;
 };
 
+// A checkpoint being written: CheckpointEncoder's pieces in order, then commit() puts it in
+// place (durably, replacing the last one); destroyed before commit() it leaves nothing.
+class CheckpointFile {
+ public:
+  virtual ~CheckpointFile() = default;
+  virtual void append(const std::string& bytes) = 0;
+  virtual void commit() = 0;
+};
+
 class JobStore {
  public:
   virtual ~JobStore() = default;
@@ -42,12 +52,13 @@ class JobStore {
   virtual void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) = 0;
   virtual std::vector<StoredJob> jobs() const = 0;  // in submission order
   virtual void ping() const = 0;                    // a query; throws std::runtime_error if it fails
-  // Replaces the job's checkpoint atomically. Throws std::runtime_error naming the file.
-  virtual void write_checkpoint(const std::string& id, const PlanState& state, const Film& film,
-                                double elapsed) const = 0;
-  // Nothing when the job has none; throws std::runtime_error when it is damaged. Without
-  // `with_film` the film is left empty.
-  virtual std::optional<Checkpoint> read_checkpoint(const std::string& id, bool with_film = true) const = 0;
+  // A new checkpoint of the job. Throws std::runtime_error naming the file.
+  virtual std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const = 0;
+  // Reads the job's checkpoint into `plan` (checkpoint.h's read_checkpoint) and returns its
+  // render seconds; nothing when the job has none. Throws std::runtime_error when it is
+  // damaged or does not fit (the plan is then unusable). Without `with_film`, progress only.
+  virtual std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan,
+                                                bool with_film = true) const = 0;
   // Removes what a crash cut short (temporary files of the job's checkpoint and image).
   virtual void discard_partial_writes(const std::string&) const {}
 };
@@ -66,9 +77,8 @@ class SqliteJobStore : public JobStore {
   std::vector<StoredJob> jobs() const override;
   void ping() const override;
   // Written to a temporary file, synced, renamed into place.
-  void write_checkpoint(const std::string& id, const PlanState& state, const Film& film,
-                        double elapsed) const override;
-  std::optional<Checkpoint> read_checkpoint(const std::string& id, bool with_film = true) const override;
+  std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
+  std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;
   void discard_partial_writes(const std::string& id) const override;
   std::string checkpoint_path(const std::string& id) const;
 
@@ -91,9 +101,9 @@ class MemoryJobStore : public JobStore {
   void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) override;
   std::vector<StoredJob> jobs() const override;
   void ping() const override;
-  void write_checkpoint(const std::string& id, const PlanState& state, const Film& film,
-                        double elapsed) const override;
-  std::optional<Checkpoint> read_checkpoint(const std::string& id, bool with_film = true) const override;
+  std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
+  std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;
+  std::optional<std::string> checkpoint_bytes(const std::string& id) const;
   void set_checkpoint_bytes(const std::string& id, std::optional<std::string> bytes);  // nullopt: remove
   bool fail_writes = false;  // every write throws, as a full disk would
 
@@ -103,5 +113,8 @@ class MemoryJobStore : public JobStore {
   std::vector<StoredJob> rows_ TESSERA_GUARDED_BY(mu_);
   mutable std::map<std::string, std::string> checkpoints_ TESSERA_GUARDED_BY(mu_);
 };
+
+// The plan's whole checkpoint, band by band (tests, and plans written outside a coordinator).
+void write_checkpoint(const JobStore& store, const std::string& id, const FramePlan& plan, double elapsed);
 
 }  // namespace tessera

@@ -18,13 +18,8 @@ void Recovery::as_ended(Job& job, double now, double elapsed) {
   job.started = now - elapsed;
   job.finished_at = now;
   job.snaps.image_frame_passes = job.plan.frame_passes_done();
-  job.snaps.spare_film.reset();
   job.plan.release_film();  // (restored without one; a plan without a checkpoint has its own)
-  job.snaps.taken = 1;
-  {
-    MutexLock wl(job.write_mu);
-    job.written = {1, job.plan.merges(), 1, job.plan.merges()};
-  }
+  job.written = {1, job.plan.merges(), 1, job.plan.merges()};
   job.end_recorded = true;
 }
 
@@ -39,20 +34,22 @@ void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
   }
   p_.jobs.saw_seq(row.meta.seq);
   auto shared = std::make_shared<Job>(row.meta, settings, row.state);
+  double elapsed = row.elapsed;
+  bool checkpointed = false;
+  try {
+    // An ended job's film stays on disk: start-up decodes only what live jobs go on with.
+    if (const std::optional<double> e = p_.store.read_checkpoint(id, shared->plan, shared->live())) {
+      checkpointed = true;
+      if (shared->live()) elapsed = *e;
+    }
+  } catch (const std::exception& e) {
+    spdlog::warn("job {}: {}; its samples are rendered again", id, e.what());
+    shared = std::make_shared<Job>(row.meta, settings, row.state);  // the damaged read left its plan unusable
+  }
   Job& j = p_.jobs.add(shared);
   j.error = row.error;
   j.submitted = now;
   ++p_.counters.jobs_restored;
-  double elapsed = row.elapsed;
-  try {
-    // An ended job's film stays on disk: start-up decodes only what live jobs go on with.
-    if (std::optional<Checkpoint> cp = p_.store.read_checkpoint(id, j.live())) {
-      j.plan.restore(cp->state, std::move(cp->film));
-      if (j.live()) elapsed = cp->elapsed;
-    }
-  } catch (const std::exception& e) {
-    spdlog::warn("job {}: {}; its samples are rendered again", id, e.what());
-  }
   p_.store.discard_partial_writes(id);
   if (!j.live()) {  // its image is on disk and its film is not needed; status comes from the plan
     as_ended(j, now, elapsed);
@@ -69,16 +66,14 @@ void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
   if (rendered) j.started = now - elapsed;
   j.snaps.last_checkpoint = now;
   j.snaps.checkpoint_merges = j.plan.merges();
+  if (checkpointed) j.written.checkpoints = 1, j.written.checkpoint_merges = j.plan.merges();
   if (!lost.empty()) {
     j.error = "cannot go on after the coordinator restarted: " + lost;
     p_.lifecycle.end(j, v1::JobStatus::FAILED, now, fx);
-    fx.final_images.push_back(shared);
   } else if (j.plan.done()) {  // the crash came between its last checkpoint and recording its end
     p_.lifecycle.end(j, v1::JobStatus::DONE, now, fx);
-    fx.final_images.push_back(shared);
-  } else {
-    j.snaps.spare_film = std::make_unique<Film>(j.plan.film());
   }
+  if (!j.live() && p_.snapshots.final_snapshot(j, now)) fx.writes.push_back(shared);
 }
 
 void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
@@ -104,16 +99,14 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
   bool all_done = true;
   for (size_t i = 0; i < s.frames.size(); ++i) {
     const std::string id = s.frame_job_id(i);
-    std::optional<Checkpoint> cp;
-    std::shared_ptr<Job> job;
+    std::optional<double> cp;  // its render seconds
+    std::shared_ptr<Job> job = SequenceScheduler::make_frame(s, i);
     try {
       // A frame that started has a checkpoint (or is rendered again from the start).
-      if (!(cp = p_.store.read_checkpoint(id, s.live()))) {
+      if (!(cp = p_.store.read_checkpoint(id, job->plan, s.live()))) {
         all_done = false;
         continue;
       }
-      job = SequenceScheduler::make_frame(s, i);
-      job->plan.restore(cp->state, std::move(cp->film));
     } catch (const std::exception& e) {
       spdlog::warn("job {}: {}; its samples are rendered again", id, e.what());
       all_done = false;
@@ -124,24 +117,25 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
     s.jobs[i] = job;
     ++s.frames_started;
     j.submitted = now;
-    elapsed = std::max(elapsed, cp->elapsed);
+    elapsed = std::max(elapsed, *cp);
+    j.written.checkpoints = 1;
+    j.written.checkpoint_merges = j.plan.merges();
     all_done &= j.plan.done();
     s.frames_done += j.plan.done();
     if (s.live() && !j.plan.done()) {
       p_.lifecycle.restore(j, j.plan.merges() > 0 ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED);
-      j.started = now - cp->elapsed;
+      j.started = now - *cp;
       j.snaps.last_checkpoint = now;
       j.snaps.checkpoint_merges = j.plan.merges();
       ++s.live_frames;
     } else if (s.live() && j.plan.has_film()) {  // done: its image is written again in case it was not
       p_.lifecycle.restore(j, v1::JobStatus::DONE);
-      j.started = now - cp->elapsed;
+      j.started = now - *cp;
       j.finished_at = now;
-      j.snaps.spare_film.reset();
-      fx.final_images.push_back(job);
+      if (p_.snapshots.final_snapshot(j, now)) fx.writes.push_back(job);
     } else {
       p_.lifecycle.restore(j, j.plan.done() ? v1::JobStatus::DONE : v1::JobStatus::CANCELLED);
-      as_ended(j, now, cp->elapsed);
+      as_ended(j, now, *cp);
     }
   }
   if (!s.live()) {

@@ -13,6 +13,7 @@
 
 #include "server/job_lifecycle.h"
 #include "server/job_store.h"
+#include "server/snapshotter.h"
 
 namespace tessera {
 
@@ -22,6 +23,7 @@ class Recovery {
     JobStore& store;
     JobTable& jobs;
     JobLifecycle& lifecycle;
+    const Snapshotter& snapshots;
     CoordinatorCounters& counters;
     // Makes a scene kept by the earlier run usable again; returns its bundle's bytes.
     // Throws (naming the problem) when it is missing or damaged.

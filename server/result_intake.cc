@@ -82,9 +82,7 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
       p_.verifier.issue(job, *lease, result.worker_id(), sums_digest(in.sums->sums()), now);
     p_.workers.record_result(result.worker_id(), result.samples(), result.render_seconds(),
                              result.busy_thread_seconds(), result.thread_seconds(), now);
-    if (!p_.lifecycle.finish_if_done(job, now, fx))
-      if (std::optional<ImageSnapshot> snap = p_.snapshots.after_merge(shared, now))
-        fx.snapshots.push_back(std::move(*snap));
+    if (!p_.lifecycle.finish_if_done(job, now, fx) && p_.snapshots.after_merge(job, now)) fx.writes.push_back(shared);
     b.acks[in.index].set_accepted(true);
     fx.changed = true;
   }

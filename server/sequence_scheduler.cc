@@ -12,7 +12,6 @@ std::shared_ptr<Job> SequenceScheduler::make_frame(const Sequence& s, size_t ind
   auto job = std::make_shared<Job>(std::move(meta), settings);
   job->sequence = s.id();
   job->frame_index = uint32_t(index);
-  job->snaps.spare_film = std::make_unique<Film>(job->plan.film());
   return job;
 }
 

@@ -1,8 +1,13 @@
-// Progressive images and checkpoints. A snapshot copies a job's film (and, for a
-// checkpoint, its plan's state) under the coordinator's lock: Snapshotter decides when one
-// is due and takes it. SnapshotWriter writes it outside the lock, one writer per job
-// (Job::write_mu), newest wins; then Snapshotter::written applies the outcome under the
-// lock again (timings, errors, the film kept for the next copy).
+// Progressive images and checkpoints, in bounded memory. A job's film is never copied
+// whole: its writer copies one band (a row of tiles, FramePlan::copy_band) at a time under
+// the coordinator's lock and encodes it outside, into the image (ImageSink) and the
+// checkpoint (JobStore) at once. Each job has at most one writer: a request while it
+// writes only marks what is due (Snapshotter::request), and the writer looks again before
+// it stops, so a snapshot that cannot keep up is merged into the next, never queued.
+//
+// Snapshotter runs under the coordinator's lock: when images and checkpoints are due,
+// what a write is to do (next), and its outcome (written). SnapshotWriter does the write
+// without the lock.
 #pragma once
 
 #include <functional>
@@ -17,28 +22,24 @@
 
 namespace tessera {
 
-// A film to write outside the lock: the image, the checkpoint, or both. One taken after
-// the job ended also records the end in the job database, once its checkpoint is on disk.
-struct ImageSnapshot {
-  std::shared_ptr<Job> job;
-  std::unique_ptr<Film> film;  // null: nothing to write (an ended job's film was released)
+// What one write of a job is to do, decided under the lock as it begins.
+struct SnapshotPlan {
+  bool image = false, checkpoint = false;  // neither: nothing is due, the writer stops
+  bool ended = false;                      // the job had ended: its film no longer changes
+  uint64_t merges = 0;                     // the film version as it began
+  bool checkpoint_on_disk = false;         // a checkpoint of that version is on disk already
+  double elapsed = 0;                      // render seconds
   ImageMetadata meta;
-  uint64_t seq = 0;     // Job::Snapshots::taken when it was taken
-  uint64_t merges = 0;  // the film version copied
-  bool image = true, checkpoint = true;
-  PlanState plan;
-  double elapsed = 0;
-  bool ended = false;
   v1::JobStatus::State state = v1::JobStatus::QUEUED;
   std::string error;
 };
 
 struct SnapshotOutcome {
-  enum Result { kSkipped, kWritten, kFailed };  // skipped: a newer one was written first
+  enum Result { kSkipped, kWritten, kFailed };  // skipped: the film was gone
   Result image = kSkipped, checkpoint = kSkipped;
   std::string image_why, checkpoint_why;  // for clients: no server path
-  double image_seconds = 0, checkpoint_seconds = 0;
-  bool release_film = false;  // the job ended and disk holds all of it
+  double seconds = 0;
+  bool end_recorded = false;  // this write recorded the job's end
 };
 
 class Snapshotter {
@@ -49,17 +50,25 @@ class Snapshotter {
   Snapshotter(double image_interval, double checkpoint_interval)
       : image_interval_(image_interval), checkpoint_interval_(checkpoint_interval) {}
 
-  ImageSnapshot take(const std::shared_ptr<Job>& job, bool image, bool checkpoint, double now) const;
-  // After a merge into a live job: a snapshot when a progressive image (a frame pass more
-  // than the last one, the interval passed) or a checkpoint (the interval passed) is due.
-  std::optional<ImageSnapshot> after_merge(const std::shared_ptr<Job>& job, double now) const;
-  // The final image and checkpoint of a job that just ended DONE.
-  ImageSnapshot final_snapshot(const std::shared_ptr<Job>& job, double now) const;
-  // A checkpoint of a live job that has merged since its last one (nullopt otherwise).
-  std::optional<ImageSnapshot> checkpoint_if_changed(const std::shared_ptr<Job>& job, double now) const;
-  // What the write did: timings and errors recorded, counted; the film kept for the next
-  // snapshot of a live job, released for an ended one that disk holds whole.
-  void written(ImageSnapshot& snap, const SnapshotOutcome& out, CoordinatorCounters& counters) const;
+  // Marks an image and/or a checkpoint of the job due. True: no write of it is under way,
+  // and the caller is now its writer (it calls Coordinator::write after the lock). False:
+  // the writer at work takes it too.
+  bool request(Job& job, bool image, bool checkpoint) const;
+  // After a merge into a live job: a progressive image (a frame pass more than the last
+  // one, the interval passed) and/or a checkpoint (the interval passed) requested when due.
+  bool after_merge(Job& job, double now) const;
+  // The final image and checkpoint of a job that has ended.
+  bool final_snapshot(Job& job, double now) const;
+  // A checkpoint of a live job that has merged since its last one.
+  bool checkpoint_if_changed(Job& job, double now) const;
+  // The writer's next write: what is due, now no longer due. Nothing due: the writer stops.
+  SnapshotPlan next(Job& job, double now) const;
+  // Whether the image on disk is the one to fetch: any image of a live job, the whole film
+  // (version `merges`) of an ended one.
+  static bool image_current(const Job& job, bool live, uint64_t merges);
+  // A write's outcome: what is on disk, timings, errors, counts; an ended job that disk
+  // holds whole gives its film up.
+  void written(Job& job, const SnapshotPlan& plan, const SnapshotOutcome& out, CoordinatorCounters& counters) const;
 
  private:
   double image_interval_, checkpoint_interval_;
@@ -73,15 +82,12 @@ class SnapshotWriter {
     std::string data_dir;                                        // named "<data>" in messages
   };
   SnapshotWriter(ImageSink& sink, JobStore& store, Hooks hooks) : sink_(sink), store_(store), hooks_(std::move(hooks)) {}
-  // Writes what is newer than what is on disk; records an ended job's end once durable
-  // (a DONE one's once its whole film is in a checkpoint). Never throws: failures are in
-  // the outcome (and logged), and retried by the next snapshot.
-  SnapshotOutcome write(ImageSnapshot& snap) const;
-  // Whether the image on disk is the one to fetch: any image of a live job, the whole film
-  // (version `merges`) of an ended one.
-  static bool image_current(Job& job, bool live, uint64_t merges);
-  // Reads it (as EXR and/or PNG) into `out` if it is current; false if not.
-  bool read_image(Job& job, bool live, uint64_t merges, bool exr, bool png, v1::Image* out) const;
+  // Writes the plan's image and/or checkpoint, band by band through `copy_band` (which
+  // takes the coordinator's lock for one band, and says false once the film is gone).
+  // Records an ended job's end once durable (a DONE one's once its whole film is in a
+  // checkpoint). Never throws: failures are in the outcome (and logged).
+  SnapshotOutcome write(Job& job, const SnapshotPlan& plan,
+                        const std::function<bool(uint32_t band, BandCopy* out)>& copy_band) const;
 
  private:
   ImageSink& sink_;

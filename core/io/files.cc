@@ -19,39 +19,72 @@ std::string read_file_bytes(const std::string& path) {
   return ss.str();
 }
 
-void write_file_atomic(const std::string& path, const std::string& bytes, const AtomicWrite& how) {
-  const std::string tmp = path + ".tmp";
-  auto fail = [&](const std::string& what) {
+namespace {
+void sync_folder_of(const std::string& path) {
+  const size_t slash = path.find_last_of('/');
+  const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+  if (const int d = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC); d >= 0) {
+    ::fsync(d);
+    ::close(d);
+  }
+}
+}  // namespace
+
+AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), tmp_(path_ + ".tmp") {
+  fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) fail("write");
+}
+
+AtomicFile::~AtomicFile() {
+  if (fd_ >= 0) {
+    ::close(fd_);
+    ::unlink(tmp_.c_str());
+  }
+}
+
+void AtomicFile::fail(const std::string& what) {
+  const std::string why = std::strerror(errno);
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  ::unlink(tmp_.c_str());
+  throw std::runtime_error(path_ + ": cannot " + what + ": " + why);
+}
+
+void AtomicFile::append(const char* data, size_t n) {
+  for (size_t at = 0; at < n;) {
+    const ssize_t k = ::write(fd_, data + at, n - at);
+    if (k < 0 && errno == EINTR) continue;
+    if (k <= 0) fail("write");
+    at += size_t(k);
+  }
+  size_ += n;
+}
+
+void AtomicFile::commit(const AtomicWrite& how) {
+  if (how.durable && ::fsync(fd_) != 0) fail("sync");
+  const int fd = fd_;
+  fd_ = -1;
+  if (::close(fd) != 0) {
+    ::unlink(tmp_.c_str());
+    throw std::runtime_error(path_ + ": cannot write: " + std::strerror(errno));
+  }
+  commit_file(tmp_, path_, how);
+}
+
+void commit_file(const std::string& tmp, const std::string& path, const AtomicWrite& how) {
+  if (how.before_rename) how.before_rename();
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
     const std::string why = std::strerror(errno);
     ::unlink(tmp.c_str());
-    throw std::runtime_error(path + ": cannot " + what + ": " + why);
-  };
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) fail("write");
-  for (size_t at = 0; at < bytes.size();) {
-    const ssize_t n = ::write(fd, bytes.data() + at, bytes.size() - at);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      ::close(fd);
-      fail("write");
-    }
-    at += size_t(n);
+    throw std::runtime_error(path + ": cannot replace: " + why);
   }
-  if (how.durable && ::fsync(fd) != 0) {
-    ::close(fd);
-    fail("sync");
-  }
-  if (::close(fd) != 0) fail("write");
-  if (how.before_rename) how.before_rename();
-  if (::rename(tmp.c_str(), path.c_str()) != 0) fail("replace");
-  if (how.durable) {
-    const size_t slash = path.find_last_of('/');
-    const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
-    if (const int d = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC); d >= 0) {
-      ::fsync(d);
-      ::close(d);
-    }
-  }
+  if (how.durable) sync_folder_of(path);
+}
+
+void write_file_atomic(const std::string& path, const std::string& bytes, const AtomicWrite& how) {
+  AtomicFile f(path);
+  f.append(bytes);
+  f.commit(how);
 }
 
 }  // namespace tessera

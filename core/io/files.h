@@ -1,6 +1,7 @@
 // Whole-file reads and atomic whole-file writes.
 #pragma once
 
+#include <cstdint>
 #include <functional>
 #include <string>
 
@@ -19,5 +20,29 @@ struct AtomicWrite {
 // Writes to PATH.tmp and renames it into place: a reader sees the old file or the new one,
 // never half of one. Throws std::runtime_error naming the path.
 void write_file_atomic(const std::string& path, const std::string& bytes, const AtomicWrite& how = {});
+
+// The same, written piece by piece: PATH.tmp is filled by append() and renamed into place
+// by commit(); destroyed before commit() (an error, an exception) it removes PATH.tmp.
+// Throws std::runtime_error naming the path.
+class AtomicFile {
+ public:
+  explicit AtomicFile(std::string path);
+  ~AtomicFile();
+  AtomicFile(const AtomicFile&) = delete;
+  AtomicFile& operator=(const AtomicFile&) = delete;
+  void append(const char* data, size_t n);
+  void append(const std::string& bytes) { append(bytes.data(), bytes.size()); }
+  uint64_t size() const { return size_; }
+  void commit(const AtomicWrite& how = {});
+
+ private:
+  [[noreturn]] void fail(const std::string& what);
+  std::string path_, tmp_;
+  int fd_ = -1;
+  uint64_t size_ = 0;
+};
+
+// Renames `tmp` to `path`, then (durable) syncs the folder. Throws naming `path`.
+void commit_file(const std::string& tmp, const std::string& path, const AtomicWrite& how = {});
 
 }  // namespace tessera

@@ -12,6 +12,7 @@
 #include <mutex>
 #include <stdexcept>
 
+#include "core/io/exr_writer.h"
 #include "core/io/files.h"
 
 namespace tessera {
@@ -43,39 +44,9 @@ uint8_t srgb_byte(float v) {
 }
 
 void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata, bool fast) {
-  const int w = film.width(), h = film.height();
-  const size_t n = size_t(w) * h;
-  std::vector<float> r(n), g(n), b(n), spp(n), var(n);
-  for (size_t i = 0; i < n; ++i) {
-    const PixelSums& p = film.pixels()[i];
-    const Rgb m = p.mean();
-    r[i] = m.r;
-    g[i] = m.g;
-    b[i] = m.b;
-    spp[i] = float(p.n);
-    var[i] = float(p.mean_variance());
-  }
-  Imf::Header header(w, h);
-  header.compression() = fast ? Imf::NO_COMPRESSION : Imf::ZIP_COMPRESSION;
-  for (const auto& [key, value] : metadata) header.insert("tessera/" + key, Imf::StringAttribute(value));
-  Imf::FrameBuffer fb;
-  const std::pair<const char*, std::vector<float>*> channels[] = {
-      {"R", &r}, {"G", &g}, {"B", &b}, {"spp", &spp}, {"variance", &var}};
-  for (const auto& [name, data] : channels) {
-    header.channels().insert(name, Imf::Channel(Imf::FLOAT));
-    fb.insert(name,
-              Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(data->data()), sizeof(float), sizeof(float) * size_t(w)));
-  }
-  const std::string tmp = temp_path(path);
-  try {
-    Imf::OutputFile file(tmp.c_str(), header);
-    file.setFrameBuffer(fb);
-    file.writePixels(h);
-  } catch (const std::exception& e) {
-    std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": cannot write EXR: " + e.what());
-  }
-  commit(tmp, path);
+  ExrWriter out(path, film.width(), film.height(), metadata, !fast);
+  if (film.height() > 0) out.write_rows(film.pixels().data(), film.height());
+  out.commit();
 }
 
 std::string encode_png(int w, int h, const float* r, const float* g, const float* b, bool fast) {

@@ -30,11 +30,14 @@ FramePlan::FramePlan(const RenderSettings& settings)
     : settings_(settings), film_(settings.effective_window()), passes_(settings.passes()) {
   const Rect w = film_.window();
   const int ts = std::max(1, settings.tile_size);
-  for (int y = w.y; y < w.y + w.h; y += ts)
+  for (int y = w.y; y < w.y + w.h; y += ts) {
+    ++bands_;
     for (int x = w.x; x < w.x + w.w; x += ts)
       tiles_.push_back({x, y, std::min(ts, w.x + w.w - x), std::min(ts, w.y + w.h - y)});
+  }
+  tiles_per_band_ = bands_ ? uint32_t(tiles_.size() / bands_) : 0;
   progress_.resize(tiles_.size());
-  active_.assign(size_t(w.area()), 1);
+  if (settings.adaptive) active_.assign(size_t(w.area()), 1);  // (1 byte a pixel: only when needed)
   for (uint32_t t = 0; t < tiles_.size(); ++t) ready_.emplace(0, t);
   unfinished_at_.assign(passes_.size() + 1, 0);
   unfinished_at_[0] = passes_.empty() ? 0 : uint32_t(tiles_.size());
@@ -124,8 +127,12 @@ void FramePlan::finish_pass(uint32_t tile) {
       const PixelSums& p = film_.pixels()[k];
       const double mu = p.n ? p.lum_sum() / p.n : 0;
       rel += p.mean_variance() / (mu * mu + 0.01);
-      if (settings_.adaptive && active_[k] && pixel_converged(p, settings_.adaptive_tolerance)) active_[k] = 0;
-      any_active |= active_[k] != 0;
+      if (!settings_.adaptive) {
+        any_active = true;
+      } else {
+        if (active_[k] && pixel_converged(p, settings_.adaptive_tolerance)) active_[k] = 0;
+        any_active |= active_[k] != 0;
+      }
     }
   t.relative_error = float(std::sqrt(rel / double(std::max<int64_t>(1, r.area()))));
   const bool noise_met = settings_.noise_target > 0 && t.passes_done >= 2 && t.relative_error <= settings_.noise_target;
@@ -167,13 +174,94 @@ void FramePlan::reset_tile(uint32_t tile) {
       PixelSums& px = film_.at(r.x - w.x + x, r.y - w.y + y);
       samples_merged_ -= px.n;
       px = PixelSums{};
-      active_[size_t(r.y - w.y + y) * w.w + (r.x - w.x + x)] = 1;
+      if (settings_.adaptive) active_[size_t(r.y - w.y + y) * w.w + (r.x - w.x + x)] = 1;
     }
   t = TileProgress{};
   ++unfinished_at_[0];
   ready_.emplace(0, tile);
   ++merges_;          // the film changed
   frame_passes_ = 0;  // a reset tile moves it down
+  advance_frame_passes();
+}
+
+void FramePlan::copy_band(uint32_t band, BandCopy* out) const {
+  const Rect& w = film_.window();
+  const Rect& first = tiles_[size_t(band) * tiles_per_band_];
+  out->band = band;
+  out->y0 = first.y - w.y;
+  out->rows = first.h;
+  out->width = w.w;
+  const size_t n = size_t(out->rows) * size_t(w.w), at = size_t(out->y0) * size_t(w.w);
+  out->pixels.assign(film_.pixels().begin() + ptrdiff_t(at), film_.pixels().begin() + ptrdiff_t(at + n));
+  out->progress.assign(progress_.begin() + ptrdiff_t(size_t(band) * tiles_per_band_),
+                       progress_.begin() + ptrdiff_t(size_t(band + 1) * tiles_per_band_));
+  if (settings_.adaptive)
+    out->active.assign(active_.begin() + ptrdiff_t(at), active_.begin() + ptrdiff_t(at + n));
+  else
+    out->active.clear();
+  out->samples = 0;
+  for (const PixelSums& p : out->pixels) out->samples += p.n;
+}
+
+void FramePlan::restore_band(const BandCopy& b) {
+  auto bad = [](const std::string& why) { throw std::invalid_argument("saved frame plan: " + why); };
+  const Rect& w = settings_.effective_window();
+  if (b.band >= bands_) bad("band " + std::to_string(b.band) + " of " + std::to_string(bands_));
+  const Rect& first = tiles_[size_t(b.band) * tiles_per_band_];
+  const size_t n = size_t(first.h) * size_t(w.w);
+  const bool with_film = !b.pixels.empty();
+  if (b.y0 != first.y - w.y || b.rows != first.h || b.width != w.w || (with_film && b.pixels.size() != n) ||
+      b.progress.size() != tiles_per_band_ || b.active.size() != (settings_.adaptive && with_film ? n : 0))
+    bad("band " + std::to_string(b.band) + " does not fit the frame");
+  for (const TileProgress& t : b.progress)
+    if (t.passes_done > passes_.size() || (!t.finished && t.passes_done == passes_.size() && !passes_.empty()))
+      bad("a tile has " + std::to_string(t.passes_done) + " passes merged of " + std::to_string(passes_.size()));
+  std::copy(b.progress.begin(), b.progress.end(), progress_.begin() + ptrdiff_t(size_t(b.band) * tiles_per_band_));
+  restored_samples_ += b.samples;
+  if (!with_film) {
+    film_ = Film(Rect{});
+    return;
+  }
+  if (!(film_.window() == w)) film_ = Film(w);
+  std::copy(b.pixels.begin(), b.pixels.end(), &film_.at(0, b.y0));
+  if (settings_.adaptive)
+    std::copy(b.active.begin(), b.active.end(), active_.begin() + ptrdiff_t(size_t(b.y0) * size_t(w.w)));
+}
+
+void FramePlan::restore_finish() {
+  std::vector<uint32_t> unfinished(passes_.size() + 1, 0);
+  uint32_t done = 0;
+  samples_merged_ = 0;
+  merges_ = 0;
+  work_done_ = 0;
+  work_total_ = double(samples_total_);
+  for (uint32_t t = 0; t < tiles_.size(); ++t) {
+    const TileProgress& p = progress_[t];
+    const double area = double(tiles_[t].area());
+    for (uint32_t k = 0; k < passes_.size(); ++k) {
+      const double len = double(passes_[k].second - passes_[k].first) * area;
+      if (k < p.passes_done)
+        work_done_ += len;
+      else if (p.finished)
+        work_total_ -= len;  // work that will not be done
+    }
+    merges_ += p.passes_done;
+    if (p.finished)
+      ++done;
+    else
+      ++unfinished[p.passes_done];
+  }
+  if (has_film())
+    for (const PixelSums& px : film_.pixels()) samples_merged_ += px.n;
+  else
+    samples_merged_ = restored_samples_;
+  restored_samples_ = 0;
+  unfinished_at_ = std::move(unfinished);
+  tiles_done_ = passes_.empty() ? uint32_t(tiles_.size()) : done;
+  ready_.clear();
+  for (uint32_t t = 0; t < tiles_.size() && !passes_.empty(); ++t)
+    if (!progress_[t].finished) ready_.emplace(progress_[t].passes_done, t);
+  frame_passes_ = 0;
   advance_frame_passes();
 }
 

@@ -47,6 +47,19 @@ struct PlanState {
   double work_done = 0, work_total = 0;
 };
 
+// One band of a plan: a row of tiles (tile_size rows of the film; the last band may be
+// shorter), the unit in which a coordinator copies a film under its lock and writes it
+// outside: each tile's sums and progress are copied together, so every tile is consistent
+// however the plan moves on between bands.
+struct BandCopy {
+  uint32_t band = 0;
+  int y0 = 0, rows = 0, width = 0;     // film rows [y0, y0 + rows), row 0 the film's first
+  std::vector<PixelSums> pixels;       // rows x width, row-major
+  std::vector<TileProgress> progress;  // the band's tiles, left to right
+  std::vector<uint8_t> active;         // rows x width; empty unless adaptive sampling
+  uint64_t samples = 0;                // the pixels' samples (n) together
+};
+
 // A task's sums found fit for a pass of pass_len samples a pixel (FramePlan::check): the
 // per-pixel check needs no plan, so a coordinator makes it before taking its lock.
 class CheckedSums {
@@ -112,6 +125,20 @@ class FramePlan {
   // had been rendered honestly the first time. A lease on the tile must be ended first.
   void reset_tile(uint32_t tile);
 
+  // Bands (BandCopy): the frame's rows of tiles, top to bottom in film rows.
+  uint32_t bands() const { return bands_; }
+  uint32_t tiles_per_band() const { return tiles_per_band_; }
+  // Copies band `band` into `out`, reusing its buffers.
+  void copy_band(uint32_t band, BandCopy* out) const;
+  // Restoring band by band (a checkpoint read piece by piece, into this plan's own film):
+  // restore_band() for every band once, in any order, then restore_finish(), which derives
+  // the counters (samples, work, film version) from the tiles and rebuilds the ready set. A
+  // band without pixels restores progress only (an ended job's: its film is kept on disk,
+  // and has_film() stays false). Throws std::invalid_argument when a band does not fit;
+  // the plan is then unusable (the caller makes a fresh one).
+  void restore_band(const BandCopy& band);
+  void restore_finish();
+
   PlanState state() const;
   // Takes up a saved state and film (from state() and film() of a plan with the same
   // settings) in place of this plan's; nothing is taken. An empty film (Film(Rect{}))
@@ -134,13 +161,15 @@ class FramePlan {
   std::vector<Rect> tiles_;
   std::vector<std::pair<uint32_t, uint32_t>> passes_;
   std::vector<TileProgress> progress_;
-  std::vector<uint8_t> active_;                    // per film pixel (adaptive sampling)
+  std::vector<uint8_t> active_;                    // per film pixel (adaptive sampling only)
   std::set<std::pair<uint32_t, uint32_t>> ready_;  // (passes merged, tile): O(log tiles)
   std::vector<uint32_t> unfinished_at_;            // [p]: unfinished tiles with p passes merged
   uint32_t frame_passes_ = 0;                      // the lowest p with any (passes_.size() if none)
   uint32_t tiles_done_ = 0;
   uint64_t samples_merged_ = 0, samples_total_ = 0, merges_ = 0;
   double work_done_ = 0, work_total_ = 0;  // pixel-samples scheduled
+  uint32_t bands_ = 0, tiles_per_band_ = 0;
+  uint64_t restored_samples_ = 0;  // of the bands restore_band() took, since restore_finish()
 };
 
 // A sample's radiance at most, per channel. Emitters are at most Scene::kMaxEmission

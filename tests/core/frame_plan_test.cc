@@ -268,6 +268,78 @@ TEST(FramePlan, ARestoredPlanGoesOnExactlyAsTheOriginal) {
   }
 }
 
+// Band by band (what the coordinator's snapshots do: a few rows under its lock at a time,
+// no second film): copies taken while the plan keeps merging, so each band comes from
+// another moment, restored into a fresh plan, finish with the film and progress the
+// original finishes with. Each tile's sums and progress are copied together, and every
+// counter follows from the tiles.
+TEST(FramePlan, BandsCopiedWhileMergingRestoreAPlanThatFinishesAsTheOriginal) {
+  for (const bool adaptive : {false, true}) {
+    const RenderSettings s = noisy_settings(adaptive);
+    FramePlan a(s);
+    auto step = [&](int n) {
+      for (int k = 0; k < n && !a.done(); ++k) {
+        const TileTask t = *a.take();
+        ASSERT_EQ(a.merge(t.tile, t.pass, noisy_sums_for(t)), FramePlan::Merge::kMerged);
+      }
+    };
+    step(23);
+    ASSERT_GE(a.bands(), 2u);
+    EXPECT_EQ(a.bands() * a.tiles_per_band(), a.tiles().size());
+    std::vector<BandCopy> copies(a.bands());
+    for (uint32_t b = 0; b < a.bands(); ++b) {
+      a.copy_band(b, &copies[b]);
+      step(3);  // the plan moves on between bands
+    }
+    FramePlan r(s);
+    for (uint32_t b = a.bands(); b-- > 0;) r.restore_band(copies[b]);  // any order
+    r.restore_finish();
+    uint64_t n = 0;
+    for (const PixelSums& p : r.film().pixels()) n += p.n;
+    EXPECT_EQ(r.samples_merged(), n);
+    int steps = 0;
+    for (; !r.done(); ++steps) {
+      const TileTask t = *r.take();
+      ASSERT_EQ(r.merge(t.tile, t.pass, noisy_sums_for(t)), FramePlan::Merge::kMerged);
+    }
+    step(100000);
+    ASSERT_TRUE(a.done());
+    EXPECT_GT(steps, 0);
+    expect_same_film(a.film(), r.film());
+    for (uint32_t t = 0; t < a.tiles().size(); ++t) {
+      EXPECT_EQ(a.progress(t).passes_done, r.progress(t).passes_done);
+      EXPECT_EQ(a.progress(t).relative_error, r.progress(t).relative_error);
+    }
+    EXPECT_EQ(r.samples_merged(), a.samples_merged());
+    EXPECT_EQ(r.fraction_done(), 1.0);
+  }
+}
+
+// A plan restored band by band at one moment has the original's counters.
+TEST(FramePlan, BandsRestoreTheCountersTheyImply) {
+  const RenderSettings s = noisy_settings(true);
+  FramePlan a(s);
+  for (int k = 0; k < 31; ++k) {
+    const TileTask t = *a.take();
+    ASSERT_EQ(a.merge(t.tile, t.pass, noisy_sums_for(t)), FramePlan::Merge::kMerged);
+  }
+  FramePlan r(s);
+  BandCopy band;
+  for (uint32_t b = 0; b < a.bands(); ++b) {
+    a.copy_band(b, &band);
+    r.restore_band(band);
+  }
+  r.restore_finish();
+  EXPECT_EQ(r.samples_merged(), a.samples_merged());
+  EXPECT_EQ(r.tiles_done(), a.tiles_done());
+  EXPECT_EQ(r.frame_passes_done(), a.frame_passes_done());
+  EXPECT_EQ(r.ready(), a.ready() + 0);
+  EXPECT_NEAR(r.fraction_done(), a.fraction_done(), 1e-12);
+  expect_same_film(a.film(), r.film());
+  band.progress.pop_back();  // a band that does not fit
+  EXPECT_THROW(r.restore_band(band), std::invalid_argument);
+}
+
 TEST(FramePlan, AStateThatDoesNotFitIsRefusedAndChangesNothing) {
   const RenderSettings s = settings(40, 24, 8, 24, 4);
   FramePlan a(s);

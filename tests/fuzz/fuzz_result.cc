@@ -1,7 +1,7 @@
 // libFuzzer target: what the coordinator decodes from bytes it did not write itself or
 // that a crash may have cut short: a worker's tile sums (decode_sums, then the plan's
-// plausibility check) and a film checkpoint (decode_checkpoint). The first input byte
-// picks which; refusals are WireError / std::runtime_error; a decoded tile must hold only
+// plausibility check) and a film checkpoint (read_checkpoint into a small plan: every
+// version; decode_checkpoint for versions 1 and 2). The first input byte picks which; refusals are WireError / std::runtime_error; a decoded tile must hold only
 // finite numbers. Seeds: TESSERA_FUZZ_SEEDS=DIR writes some and exits.
 #include <cmath>
 #include <cstddef>
@@ -13,13 +13,23 @@
 #include <string>
 
 #include "core/render/frame_plan.h"
-#include "server/job_store.h"
+#include "server/checkpoint.h"
 #include "wire.h"
 
 namespace {
 std::vector<tessera::PixelSums> tile(size_t n) {
   std::vector<tessera::PixelSums> s(n);
   for (size_t i = 0; i < n; ++i) s[i] = {0.25 * double(i), 0.5, 1.0 / 3, 0.125 * double(i), uint32_t(i % 5)};
+  return s;
+}
+// The plan fuzzed checkpoints are read into: 4 x 3 tiles of 4 pixels, 3 passes.
+tessera::RenderSettings checkpoint_settings() {
+  tessera::RenderSettings s;
+  s.camera.width = 16;
+  s.camera.height = 11;
+  s.tile_size = 4;
+  s.spp = 6;
+  s.pass_spp = 2;
   return s;
 }
 }  // namespace
@@ -40,7 +50,14 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
   tessera::Film film(tessera::Rect{0, 0, 4, 4});
   film.add_tile(film.window(), tile(16));
   std::ofstream(fs::path(seeds) / "checkpoint", std::ios::binary)
-      << char(1) << tessera::encode_checkpoint(st, film, 2.5);
+      << char(1) << tessera::encode_checkpoint_v2(st, film, 2.5);
+  tessera::FramePlan plan(checkpoint_settings());
+  for (int k = 0; k < 5; ++k) {
+    const tessera::TileTask t = *plan.take();
+    plan.merge(t.tile, t.pass, tile(size_t(t.rect.area())));
+  }
+  std::ofstream(fs::path(seeds) / "checkpoint3", std::ios::binary)
+      << char(1) << tessera::encode_checkpoint(plan, 2.5);
   std::exit(0);
 }
 
@@ -60,10 +77,18 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     } catch (const tessera::WireError&) {
     }
   } else {
+    const std::string bytes(reinterpret_cast<const char*>(data) + 1, size - 1);
     try {
-      const tessera::Checkpoint c =
-          tessera::decode_checkpoint(std::string(reinterpret_cast<const char*>(data) + 1, size - 1));
+      const tessera::Checkpoint c = tessera::decode_checkpoint(bytes);
       if (c.film.pixels().size() != size_t(c.film.window().area())) __builtin_trap();
+    } catch (const std::runtime_error&) {
+    }
+    try {  // into a plan, as a restarted coordinator reads it
+      tessera::FramePlan plan(checkpoint_settings());
+      tessera::read_checkpoint(bytes, plan);
+      uint64_t n = 0;
+      for (const tessera::PixelSums& p : plan.film().pixels()) n += p.n;
+      if (n != plan.samples_merged()) __builtin_trap();
     } catch (const std::runtime_error&) {
     }
   }

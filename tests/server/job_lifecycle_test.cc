@@ -61,7 +61,7 @@ TEST_F(JobLifecycleTest, AnEndReleasesTheJobsLeasesAndChecks) {
   EXPECT_EQ(checks.find(check), nullptr);
   EXPECT_EQ(worker(a).leases + worker(b).leases, 0u);
   EXPECT_TRUE(fx.changed);
-  EXPECT_TRUE(fx.final_images.empty());  // the caller writes a job's last image
+  EXPECT_TRUE(fx.writes.empty());  // the caller asks for a job's last image
 }
 
 TEST_F(JobLifecycleTest, AFramesEndIsMarkedInItsSequence) {
@@ -113,8 +113,9 @@ TEST_F(JobLifecycleTest, AFailedFrameFailsItsSequenceAndCancelsTheOtherLiveFrame
   EXPECT_EQ(s.state(), FAILED);
   EXPECT_EQ(s.error, "frame 4: out of memory");
   EXPECT_EQ(five.state(), CANCELLED);
-  EXPECT_TRUE(contains(fx.final_images, five_shared));              // it keeps what it rendered
-  EXPECT_FALSE(contains(fx.final_images, jobs.shared(four.id())));  // the caller's
+  EXPECT_TRUE(contains(fx.writes, five_shared));              // it keeps what it rendered
+  EXPECT_TRUE(five.snaps.image_due && five.snaps.checkpoint_due);
+  EXPECT_FALSE(contains(fx.writes, jobs.shared(four.id())));  // the caller's
   EXPECT_EQ(s.prepared, nullptr);
   EXPECT_EQ(s.frames_started, 2u);  // frame 6 never starts
   EXPECT_EQ(sequences.start_next(s, now, fx), nullptr);
@@ -128,17 +129,16 @@ TEST_F(JobLifecycleTest, AJobFinishesOnlyWhenItsPlanIsDoneAndItsChecksDecided) {
   job->pending_checks = 1;
   EXPECT_FALSE(lifecycle.finish_if_done(*job, now, fx));  // a check not decided
   EXPECT_TRUE(job->live());
-  EXPECT_TRUE(fx.snapshots.empty());
+  EXPECT_TRUE(fx.writes.empty());
   job->pending_checks = 0;
   EXPECT_TRUE(lifecycle.finish_if_done(*job, now, fx));
   EXPECT_EQ(job->state(), DONE);
-  ASSERT_EQ(fx.snapshots.size(), 1u);
-  const ImageSnapshot& final = fx.snapshots[0];
-  EXPECT_EQ(final.job, job);
+  ASSERT_EQ(fx.writes.size(), 1u);  // its final image and checkpoint, this caller to write them
+  EXPECT_EQ(fx.writes[0], job);
+  const SnapshotPlan final = snapshotter.next(*job, now);
   EXPECT_TRUE(final.ended);
   EXPECT_EQ(final.state, DONE);
   EXPECT_TRUE(final.image && final.checkpoint);
-  ASSERT_NE(final.film, nullptr);
   EXPECT_EQ(final.merges, job->plan.merges());
   EXPECT_FALSE(lifecycle.finish_if_done(*job, now, fx));  // once
 }
@@ -150,7 +150,7 @@ TEST_F(JobLifecycleTest, OnlyTheOwnerCancelsUnlessAny) {
   EXPECT_TRUE(job->live());
   lifecycle.cancel(job->id(), "ann", false, now, fx);
   EXPECT_EQ(job->state(), CANCELLED);
-  EXPECT_TRUE(contains(fx.final_images, job));  // what was rendered is kept
+  EXPECT_TRUE(contains(fx.writes, job));  // what was rendered is kept
   const std::shared_ptr<Job> other = add_still(testing::small_settings(), "ann");
   lifecycle.cancel(other->id(), "admin", true, now, fx);
   EXPECT_EQ(other->state(), CANCELLED);
@@ -189,7 +189,7 @@ TEST_F(JobLifecycleTest, TasksFailingOnTwoDistinctWorkersFailTheJob) {
   lifecycle.task_failed(*job, b, std::string(2000, 'e'), now, fx);
   EXPECT_EQ(job->state(), FAILED);
   EXPECT_EQ(job->error, "tasks failed on 2 workers: " + std::string(1024, 'e'));  // the error, cut short
-  EXPECT_TRUE(contains(fx.final_images, job));
+  EXPECT_TRUE(contains(fx.writes, job));
   lifecycle.task_failed(*job, add_worker(), "late", now, fx);  // an ended job counts no more
   EXPECT_EQ(counters.tasks_failed, 3u);
 }

@@ -94,6 +94,12 @@ TEST_F(JobStatusTest, FramesThatNeverStartedAreCancelledWithTheirSequence) {
   Sequence& s = add_sequence({3, 4});
   start_frame(s);
   lifecycle.cancel(s.id(), "", true, now, fx);
+  // Clients are told of an end once it is durable: before, the sequence and its frame read
+  // RUNNING; the coordinator records both ends after the lock (SnapshotWriter, JobLifecycle).
+  EXPECT_EQ(status(s.id()).state(), v1::JobStatus::RUNNING);
+  s.end_recorded = true;
+  for (const auto& j : s.jobs)
+    if (j) j->end_recorded = true;
   const v1::JobStatus st = status(s.id());
   EXPECT_EQ(st.state(), v1::JobStatus::CANCELLED);
   EXPECT_EQ(st.frames(0).state(), v1::JobStatus::CANCELLED);

@@ -11,6 +11,7 @@
 #include <xxhash.h>
 
 #include "proto/wire.h"
+#include "server/checkpoint.h"
 
 namespace tessera {
 namespace {
@@ -40,7 +41,7 @@ Saved sample() {
 
 TEST(JobStore, ACheckpointComesBackBitForBit) {
   const Saved s = sample();
-  const Checkpoint c = decode_checkpoint(encode_checkpoint(s.state, s.film, 12.5));
+  const Checkpoint c = decode_checkpoint(encode_checkpoint_v2(s.state, s.film, 12.5));
   EXPECT_EQ(c.elapsed, 12.5);
   EXPECT_EQ(c.film.window(), s.film.window());
   for (size_t i = 0; i < 20; ++i) {  // field by field: PixelSums has padding
@@ -58,7 +59,7 @@ TEST(JobStore, ACheckpointComesBackBitForBit) {
   EXPECT_EQ(c.state.work_done, 0.1);
   EXPECT_EQ(c.state.work_total, 3e9);
   // An ended job's progress without its film (start-up leaves finished films on disk).
-  const Checkpoint progress_only = decode_checkpoint(encode_checkpoint(s.state, s.film, 12.5), false);
+  const Checkpoint progress_only = decode_checkpoint(encode_checkpoint_v2(s.state, s.film, 12.5), false);
   EXPECT_EQ(progress_only.film.window(), Rect{});
   EXPECT_EQ(progress_only.state.merges, 5u);
   EXPECT_EQ(progress_only.state.progress[1].passes_done, 3u);
@@ -72,7 +73,7 @@ TEST(JobStore, ALargeFilmComesBackBitForBitAcrossItsChunks) {
       film.at(x, y) = PixelSums{x * 0.1, y / 3.0, x * 1e-3 + y, double(x * y), uint32_t(x + y)};
   PlanState state;
   state.progress = {{1, false, 0.5f}};
-  const Checkpoint c = decode_checkpoint(encode_checkpoint(state, film, 1));
+  const Checkpoint c = decode_checkpoint(encode_checkpoint_v2(state, film, 1));
   ASSERT_EQ(c.film.window(), film.window());
   for (size_t i = 0; i < film.pixels().size(); ++i) {
     const PixelSums &a = c.film.pixels()[i], &b = film.pixels()[i];
@@ -85,7 +86,7 @@ TEST(JobStore, ACheckpointOfTheFirstVersionIsStillRead) {
   // Version 1 kept the film's sums as one piece with no chunk size: what a coordinator
   // from before finds in its data folder after an upgrade.
   const Saved s = sample();
-  std::string v2 = encode_checkpoint(s.state, s.film, 7);
+  std::string v2 = encode_checkpoint_v2(s.state, s.film, 7);
   const size_t film_bytes = encode_sums(s.film.pixels()).size();
   const size_t chunk_at = v2.size() - 8 - film_bytes - 8 - 4;
   std::string v1 = v2.substr(0, chunk_at) + v2.substr(chunk_at + 4, v2.size() - 8 - chunk_at - 4);
@@ -102,13 +103,102 @@ TEST(JobStore, ACheckpointOfTheFirstVersionIsStillRead) {
 
 TEST(JobStore, EveryTruncatedOrDamagedCheckpointIsRefusedNeverTrusted) {
   const Saved s = sample();
-  const std::string good = encode_checkpoint(s.state, s.film, 1);
+  const std::string good = encode_checkpoint_v2(s.state, s.film, 1);
   for (size_t n = 0; n < good.size(); ++n) EXPECT_THROW(decode_checkpoint(good.substr(0, n)), std::runtime_error) << n;
   for (size_t i = 0; i < good.size(); ++i) {
     std::string bad = good;
     bad[i] ^= 0x01;
     EXPECT_THROW(decode_checkpoint(bad), std::runtime_error) << i;
   }
+}
+
+// ---- version 3: band by band ----
+
+RenderSettings plan_settings(bool adaptive = false) {
+  RenderSettings s;
+  s.camera.width = 37;
+  s.camera.height = 29;  // bands of 8 rows, the last one 5
+  s.tile_size = 8;
+  s.spp = 12;
+  s.pass_spp = 4;
+  s.adaptive = adaptive;
+  s.adaptive_batch = 4;
+  s.adaptive_tolerance = 0.3f;
+  return s;
+}
+
+// A plan part of the way, its sums not round in binary.
+FramePlan merged_plan(bool adaptive = false) {
+  FramePlan plan(plan_settings(adaptive));
+  for (int k = 0; k < 17; ++k) {
+    const TileTask t = *plan.take();
+    std::vector<PixelSums> sums(size_t(t.rect.area()));
+    for (size_t i = 0; i < sums.size(); ++i) {
+      if (!t.active.empty() && !t.active[i]) continue;
+      const double v = 0.1 * double(i % 7) + 1.0 / 3;
+      const uint32_t n = t.sample_end - t.sample_begin;
+      sums[i] = PixelSums{v * n, v * n, v * n, v * v * n * (1 + 0.5 * double(i % 3)), n};
+    }
+    EXPECT_EQ(plan.merge(t.tile, t.pass, sums), FramePlan::Merge::kMerged);
+  }
+  return plan;
+}
+
+void expect_same_film(const Film& a, const Film& b) {
+  ASSERT_EQ(a.window(), b.window());
+  for (size_t i = 0; i < a.pixels().size(); ++i) {  // field by field: PixelSums has padding
+    ASSERT_EQ(0, std::memcmp(&a.pixels()[i], &b.pixels()[i], offsetof(PixelSums, n))) << i;
+    ASSERT_EQ(a.pixels()[i].n, b.pixels()[i].n) << i;
+  }
+}
+
+TEST(JobStore, AVersion3CheckpointRestoresThePlanBitForBit) {
+  for (const bool adaptive : {false, true}) {
+    const FramePlan a = merged_plan(adaptive);
+    const std::string bytes = encode_checkpoint(a, 12.5);
+    FramePlan b(plan_settings(adaptive));
+    EXPECT_EQ(read_checkpoint(bytes, b), 12.5);
+    expect_same_film(a.film(), b.film());
+    EXPECT_EQ(b.samples_merged(), a.samples_merged());
+    EXPECT_EQ(b.tiles_done(), a.tiles_done());
+    EXPECT_EQ(b.frame_passes_done(), a.frame_passes_done());
+    for (uint32_t t = 0; t < a.tiles().size(); ++t) {
+      EXPECT_EQ(b.progress(t).passes_done, a.progress(t).passes_done);
+      EXPECT_EQ(b.progress(t).relative_error, a.progress(t).relative_error);
+    }
+    // An ended job's progress without its film.
+    FramePlan c(plan_settings(adaptive));
+    read_checkpoint(bytes, c, false);
+    EXPECT_FALSE(c.has_film());
+    EXPECT_EQ(c.samples_merged(), a.samples_merged());
+    EXPECT_EQ(c.tiles_done(), a.tiles_done());
+  }
+}
+
+TEST(JobStore, AVersion2CheckpointStillRestoresAPlan) {
+  const FramePlan a = merged_plan(true);
+  FramePlan b(plan_settings(true));
+  EXPECT_EQ(read_checkpoint(encode_checkpoint_v2(a.state(), a.film(), 3), b), 3);
+  expect_same_film(a.film(), b.film());
+  EXPECT_EQ(b.merges(), a.merges());
+}
+
+TEST(JobStore, EveryTruncatedOrDamagedVersion3CheckpointIsRefused) {
+  const std::string good = encode_checkpoint(merged_plan(true), 1);
+  for (size_t n = 0; n < good.size(); n += std::max<size_t>(1, n / 50)) {
+    FramePlan p(plan_settings(true));
+    EXPECT_THROW(read_checkpoint(good.substr(0, n), p), std::runtime_error) << n;
+  }
+  for (size_t i = 0; i < good.size(); i += 1 + i / 40) {
+    std::string bad = good;
+    bad[i] ^= 0x01;
+    FramePlan p(plan_settings(true));
+    EXPECT_THROW(read_checkpoint(bad, p), std::runtime_error) << i;
+  }
+  FramePlan other(plan_settings(false));  // another job's frame
+  EXPECT_THROW(read_checkpoint(good, other), std::runtime_error);
+  FramePlan p(plan_settings(true));
+  EXPECT_THROW(read_checkpoint(good + "x", p), std::runtime_error);  // trailing bytes
 }
 
 TEST(JobStore, JobsAndGenerationsSurviveReopening) {
@@ -133,8 +223,7 @@ TEST(JobStore, JobsAndGenerationsSurviveReopening) {
     store.add(k);
     EXPECT_THROW(store.add(k), std::runtime_error);  // one row per id
     store.end(j.meta.id, v1::JobStatus::CANCELLED, "by ann", 4.5);
-    const Saved s = sample();
-    store.write_checkpoint(k.meta.id, s.state, s.film, 2);
+    write_checkpoint(store, k.meta.id, merged_plan(), 2);
   }
   SqliteJobStore store(dir.string());
   EXPECT_EQ(store.next_generation(), 2u);
@@ -147,10 +236,12 @@ TEST(JobStore, JobsAndGenerationsSurviveReopening) {
   EXPECT_EQ(jobs[0].meta.priority, -3);
   EXPECT_EQ(jobs[0].meta.settings.spp(), 99u);
   EXPECT_EQ(jobs[1].state, v1::JobStatus::QUEUED);
-  EXPECT_FALSE(store.read_checkpoint(jobs[0].meta.id));
-  const std::optional<Checkpoint> c = store.read_checkpoint(jobs[1].meta.id);
-  ASSERT_TRUE(c);
-  EXPECT_EQ(c->state.merges, 5u);
+  FramePlan plan(plan_settings());
+  EXPECT_FALSE(store.read_checkpoint(jobs[0].meta.id, plan));
+  const std::optional<double> elapsed = store.read_checkpoint(jobs[1].meta.id, plan);
+  ASSERT_TRUE(elapsed);
+  EXPECT_EQ(*elapsed, 2);
+  expect_same_film(plan.film(), merged_plan().film());
   EXPECT_FALSE(fs::exists(store.checkpoint_path(jobs[1].meta.id) + ".tmp"));
   fs::remove_all(dir);
 }

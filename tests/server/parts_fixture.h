@@ -162,7 +162,6 @@ class PartsTest : public ::testing::Test {
                                  int32_t priority = 0) {
     auto job = std::make_shared<Job>(meta(s, owner, priority), s);
     job->submitted = job->snaps.last_checkpoint = now;
-    job->snaps.spare_film = std::make_unique<Film>(s.effective_window());
     jobs.add(job);
     return job;
   }

@@ -30,7 +30,7 @@ class RecoveryTest : public testing::PartsTest {
       ++scenes_restored;
       return 4321;
     };
-    Recovery({store, jobs, lifecycle, counters, restore_scene}).restore(now, fx);
+    Recovery({store, jobs, lifecycle, snapshotter, counters, restore_scene}).restore(now, fx);
   }
   // A job's row as the earlier run left it.
   StoredJob row(uint64_t seq, v1::JobStatus::State state, const std::vector<int>& frames = {}) {
@@ -51,7 +51,7 @@ class RecoveryTest : public testing::PartsTest {
     s.frame = frame;
     FramePlan plan(s);
     merge_passes(plan, passes);
-    return encode_checkpoint(plan.state(), plan.film(), elapsed);
+    return encode_checkpoint(plan, elapsed);
   }
   // The job's checkpoint as the earlier run wrote it.
   void checkpoint(const std::string& id, uint32_t passes, double elapsed, std::optional<int> frame = std::nullopt) {
@@ -72,15 +72,13 @@ TEST_F(RecoveryTest, AnEndedJobComesBackAsOnDiskWithoutItsFilm) {
   EXPECT_EQ(job.started, now - 7);
   EXPECT_EQ(job.finished_at, now);
   EXPECT_TRUE(job.end_recorded);
-  {
-    MutexLock lock(job.write_mu);  // its image and checkpoint are written: nothing to write again
-    EXPECT_EQ(job.written.image_seq, 1u);
-    EXPECT_EQ(job.written.image_merges, job.plan.merges());
-    EXPECT_EQ(job.written.checkpoint_merges, job.plan.merges());
-  }
-  EXPECT_TRUE(SnapshotWriter::image_current(job, false, job.plan.merges()));
+  // Its image and checkpoint are written: nothing to write again.
+  EXPECT_EQ(job.written.images, 1u);
+  EXPECT_EQ(job.written.image_merges, job.plan.merges());
+  EXPECT_EQ(job.written.checkpoint_merges, job.plan.merges());
+  EXPECT_TRUE(Snapshotter::image_current(job, false, job.plan.merges()));
   EXPECT_EQ(scenes_restored, 0);  // an ended job needs no scene
-  EXPECT_TRUE(fx.final_images.empty());
+  EXPECT_TRUE(fx.writes.empty());
   EXPECT_EQ(counters.jobs_restored, 1u);
 }
 
@@ -96,9 +94,8 @@ TEST_F(RecoveryTest, ALiveJobWithACheckpointGoesOnRunningWithItsMerges) {
   EXPECT_EQ(job.started, now - 3);
   EXPECT_EQ(job.meta.scene_bytes, 4321u);  // counted again from the bundle
   EXPECT_EQ(scenes_restored, 1);
-  ASSERT_NE(job.snaps.spare_film, nullptr);
   EXPECT_EQ(job.snaps.checkpoint_merges, kTiles);  // no checkpoint due before it merges more
-  EXPECT_TRUE(fx.final_images.empty());
+  EXPECT_TRUE(fx.writes.empty());
 }
 
 TEST_F(RecoveryTest, ALiveJobWithoutACheckpointStartsOverQueued) {
@@ -131,7 +128,7 @@ TEST_F(RecoveryTest, ALostSceneFailsTheJobKeepingItsImage) {
   Job& job = jobs.job(r.meta.id);
   EXPECT_EQ(job.state(), FAILED);
   EXPECT_EQ(job.error, "cannot go on after the coordinator restarted: its scene is missing from the data folder");
-  EXPECT_TRUE(contains(fx.final_images, jobs.shared(r.meta.id)));
+  EXPECT_TRUE(contains(fx.writes, jobs.shared(r.meta.id)));
   EXPECT_EQ(job.plan.merges(), kTiles);  // what was rendered is in its final image
 }
 
@@ -142,7 +139,7 @@ TEST_F(RecoveryTest, AJobDoneButNotRecordedEndsDone) {
   restore();
   Job& job = jobs.job(r.meta.id);
   EXPECT_EQ(job.state(), DONE);
-  EXPECT_TRUE(contains(fx.final_images, jobs.shared(r.meta.id)));
+  EXPECT_TRUE(contains(fx.writes, jobs.shared(r.meta.id)));
   EXPECT_EQ(job.started, now - 9);
 }
 
@@ -185,7 +182,7 @@ TEST_F(RecoveryTest, ASequenceWhoseEveryFrameIsDoneEndsDone) {
   Sequence& s = *jobs.find_sequence(r.meta.id);
   EXPECT_EQ(s.state(), DONE);
   EXPECT_EQ(s.frames_done, 2u);
-  EXPECT_EQ(fx.final_images.size(), 2u);  // each frame's image written again, in case it was not
+  EXPECT_EQ(fx.writes.size(), 2u);  // each frame's image written again, in case it was not
 }
 
 TEST_F(RecoveryTest, AnEndedSequenceComesBackRecorded) {
@@ -211,7 +208,7 @@ TEST_F(RecoveryTest, ASequenceWhoseSceneIsLostFails) {
   EXPECT_EQ(s.state(), FAILED);
   EXPECT_EQ(s.error, "cannot go on after the coordinator restarted: its scene in the data folder is damaged");
   EXPECT_EQ(s.jobs[0]->state(), v1::JobStatus::CANCELLED);
-  EXPECT_TRUE(contains(fx.final_images, s.jobs[0]));  // it keeps what it rendered
+  EXPECT_TRUE(contains(fx.writes, s.jobs[0]));  // it keeps what it rendered
 }
 
 }  // namespace

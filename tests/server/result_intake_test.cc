@@ -161,8 +161,8 @@ TEST_F(ResultIntakeTest, TheLastMergeEndsTheJobDoneWithItsFinalSnapshot) {
   EXPECT_EQ(job->state(), v1::JobStatus::DONE);
   EXPECT_EQ(counters.results_merged, kTiles * testing::kPasses);
   EXPECT_EQ(job->plan.samples_merged(), testing::kSamples);
-  ASSERT_FALSE(fx.snapshots.empty());
-  const ImageSnapshot& last = fx.snapshots.back();
+  ASSERT_TRUE(testing::contains(fx.writes, job));  // this caller writes its snapshots
+  const SnapshotPlan last = snapshotter.next(*job, now);  // what is due now: the final ones
   EXPECT_TRUE(last.ended);
   EXPECT_EQ(last.state, v1::JobStatus::DONE);
   EXPECT_EQ(last.merges, job->plan.merges());
@@ -173,13 +173,14 @@ TEST_F(ResultIntakeTest, AProgressiveSnapshotOnlyOnceItsIntervalPassed) {
   // A merge right after the submit: no frame pass is complete and the checkpoint interval
   // has not passed.
   ASSERT_TRUE(submit(result(lease_next(*job, a))).accepted());
-  EXPECT_TRUE(fx.snapshots.empty());
+  EXPECT_TRUE(fx.writes.empty());
   now += options.checkpoint_seconds;
   ASSERT_TRUE(submit(result(lease_next(*job, a))).accepted());
-  ASSERT_EQ(fx.snapshots.size(), 1u);
-  EXPECT_TRUE(fx.snapshots[0].checkpoint);
-  EXPECT_FALSE(fx.snapshots[0].image);
-  EXPECT_FALSE(fx.snapshots[0].ended);
+  ASSERT_EQ(fx.writes.size(), 1u);
+  const SnapshotPlan p = snapshotter.next(*job, now);
+  EXPECT_TRUE(p.checkpoint);
+  EXPECT_FALSE(p.image);
+  EXPECT_FALSE(p.ended);
 }
 
 TEST_F(ResultIntakeTest, AResultForAnEndedJobIsNotMerged) {

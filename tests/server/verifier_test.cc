@@ -240,8 +240,8 @@ TEST_F(VerifierTest, ACheckNoOtherWorkerCanTakeIsSkipped) {
   EXPECT_EQ(counters.checks_skipped, 1u);
   EXPECT_EQ(job->pending_checks, 0u);
   EXPECT_EQ(job->state(), v1::JobStatus::DONE);  // it waited only for the check
-  ASSERT_EQ(fx.snapshots.size(), 1u);
-  EXPECT_TRUE(fx.snapshots[0].ended);
+  ASSERT_EQ(fx.writes.size(), 1u);
+  EXPECT_TRUE(snapshotter.next(*job, now).ended);
 }
 
 TEST_F(VerifierTest, ACheckWaitingForMoreThanTwoLeasePeriodsIsSkipped) {

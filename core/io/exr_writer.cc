@@ -1,0 +1,79 @@
+#include "core/io/exr_writer.h"
+
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStringAttribute.h>
+
+#include <cstdio>
+#include <stdexcept>
+
+#include "core/io/files.h"
+
+namespace tessera {
+
+ExrWriter::ExrWriter(std::string path, int width, int height, const ImageMetadata& metadata, bool compress)
+    : path_(std::move(path)), tmp_(path_ + ".tmp"), width_(width), height_(height) {
+  Imf::Header header(width, height);
+  header.compression() = compress ? Imf::ZIP_COMPRESSION : Imf::NO_COMPRESSION;
+  for (const auto& [key, value] : metadata) header.insert("tessera/" + key, Imf::StringAttribute(value));
+  for (const char* name : {"R", "G", "B", "spp", "variance"}) header.channels().insert(name, Imf::Channel(Imf::FLOAT));
+  try {
+    file_ = std::make_unique<Imf::OutputFile>(tmp_.c_str(), header);
+  } catch (const std::exception& e) {
+    std::remove(tmp_.c_str());
+    throw std::runtime_error(path_ + ": cannot write EXR: " + e.what());
+  }
+}
+
+ExrWriter::~ExrWriter() {
+  if (!file_) return;
+  try {
+    file_.reset();
+  } catch (...) {
+  }
+  std::remove(tmp_.c_str());
+}
+
+void ExrWriter::write_rows(const PixelSums* sums, int rows) {
+  if (!file_ || rows <= 0 || next_row_ + rows > height_) throw std::runtime_error(path_ + ": EXR rows out of order");
+  const size_t n = size_t(rows) * size_t(width_);
+  for (std::vector<float>* v : {&r_, &g_, &b_, &spp_, &var_}) v->resize(n);
+  for (size_t i = 0; i < n; ++i) {
+    const PixelSums& p = sums[i];
+    const Rgb m = p.mean();
+    r_[i] = m.r;
+    g_[i] = m.g;
+    b_[i] = m.b;
+    spp_[i] = float(p.n);
+    var_[i] = float(p.mean_variance());
+  }
+  Imf::FrameBuffer fb;
+  const Imath::V2i origin(0, next_row_);  // these rows' place in the image
+  const std::pair<const char*, std::vector<float>*> channels[] = {
+      {"R", &r_}, {"G", &g_}, {"B", &b_}, {"spp", &spp_}, {"variance", &var_}};
+  for (const auto& [name, data] : channels)
+    fb.insert(name, Imf::Slice::Make(Imf::FLOAT, data->data(), origin, width_, rows, sizeof(float),
+                                     sizeof(float) * size_t(width_)));
+  try {
+    file_->setFrameBuffer(fb);
+    file_->writePixels(rows);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(path_ + ": cannot write EXR: " + e.what());
+  }
+  next_row_ += rows;
+}
+
+void ExrWriter::commit() {
+  if (next_row_ != height_) throw std::runtime_error(path_ + ": EXR closed with rows missing");
+  try {
+    file_.reset();  // writes the offset table and closes the file
+  } catch (const std::exception& e) {
+    std::remove(tmp_.c_str());
+    throw std::runtime_error(path_ + ": cannot write EXR: " + e.what());
+  }
+  commit_file(tmp_, path_);
+}
+
+}  // namespace tessera

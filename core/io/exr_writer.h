@@ -1,0 +1,43 @@
+// An EXR of film sums, written band by band: a coordinator copies a large film a few rows
+// at a time and never holds a second copy of it. R, G, B (the mean), spp and variance as
+// float channels, metadata as tessera/KEY strings, ZIP-compressed (or not, `compress`
+// false). The one conversion from sums to pixels: write_exr uses it too, so a farm's image
+// has the bits of tessera render's.
+#pragma once
+
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <OpenEXR/ImfForward.h>
+
+#include "core/render/film.h"
+
+
+namespace tessera {
+
+using ImageMetadata = std::map<std::string, std::string>;
+
+class ExrWriter {
+ public:
+  // Writes to PATH.tmp; commit() renames it into place. Throws std::runtime_error naming
+  // the path.
+  ExrWriter(std::string path, int width, int height, const ImageMetadata& metadata, bool compress = true);
+  ~ExrWriter();  // removes the temporary file unless committed
+  ExrWriter(const ExrWriter&) = delete;
+  ExrWriter& operator=(const ExrWriter&) = delete;
+  // The next `rows` rows of `width` sums each (row 0 the image's top).
+  void write_rows(const PixelSums* sums, int rows);
+  int rows_written() const { return next_row_; }
+  // Every row written: the file goes into place.
+  void commit();
+
+ private:
+  std::string path_, tmp_;
+  int width_, height_, next_row_ = 0;
+  std::unique_ptr<Imf::OutputFile> file_;
+  std::vector<float> r_, g_, b_, spp_, var_;
+};
+
+}  // namespace tessera
