@@ -4,7 +4,6 @@
 
 #include "core/util/log.h"
 #include "server/recovery.h"
-#include "server/job_status.h"
 #include "server/referee.h"
 #include "server/submission.h"
 
@@ -350,45 +349,26 @@ void Coordinator::wait_for_work(double timeout) const {
 v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const {
   const auto deadline = deadline_in(timeout);
   MutexLock lock(mu_);
-  if (const Sequence* s = jobs_.find_sequence(id)) {
-    // Any merge into any frame since the caller's status (whose samples it passed); the
-    // condition is O(1) however long the sequence (it is looked at on every merge).
-    const uint64_t since = s->changes;
-    if (s->samples_merged() != last_samples) return job_status(jobs_, leases_, id, false, clock_->now());
-    while (!s->ended_durably() && s->changes == since && changed_.wait_until(mu_, deadline)) {
+  const JobProgress since = job_progress(jobs_, id);
+  if (since.samples == last_samples)  // (else the caller's status is behind already)
+    while (!since.ended && job_progress(jobs_, id) == since && changed_.wait_until(mu_, deadline)) {
     }
-    return job_status(jobs_, leases_, id, false, clock_->now());
-  }
-  const Job& job = jobs_.job(id);
-  while (!job.ended_durably() && job.plan.samples_merged() == last_samples && changed_.wait_until(mu_, deadline)) {
-  }
   return job_status(jobs_, leases_, id, false, clock_->now());
 }
 
 bool Coordinator::wait_for_end(const std::string& id, double timeout) const {
   const auto deadline = deadline_in(timeout);
   MutexLock lock(mu_);
-  const Sequence* s = jobs_.find_sequence(id);
-  const Job* job = s ? nullptr : &jobs_.job(id);
-  auto ended = [&]() TESSERA_REQUIRES(mu_) { return s ? s->ended_durably() : job->ended_durably(); };
-  while (!ended() && changed_.wait_until(mu_, deadline)) {
+  while (!job_progress(jobs_, id).ended && changed_.wait_until(mu_, deadline)) {
   }
-  return ended();
+  return job_progress(jobs_, id).ended;
 }
 
 // ---- for operators ----
 
 Coordinator::Queue Coordinator::queue() const {
   MutexLock lock(mu_);
-  const Load load = jobs_.load();
-  Queue q;
-  q.tasks_leased = leases_.live_count();
-  q.tasks_ready = load.tasks_ready;
-  q.samples_remaining = load.samples_remaining;
-  const double speed = workers_.thread_speed();
-  q.samples_per_thread_second = speed > 0 ? speed : kAssumedThreadSpeed;
-  q.core_seconds_remaining = double(q.samples_remaining) / q.samples_per_thread_second;
-  return q;
+  return queue_depth(jobs_, leases_, workers_.thread_speed());
 }
 
 std::string Coordinator::unready_reason() const {

@@ -41,6 +41,7 @@
 #include "server/counters.h"
 #include "server/dispatcher.h"
 #include "server/image_sink.h"
+#include "server/job_status.h"
 #include "server/job_store.h"
 #include "server/options.h"
 #include "server/request_error.h"
@@ -124,15 +125,9 @@ class Coordinator {
   // then renders nothing again.
   void checkpoint_all();
 
-  // What is left to render, for autoscalers (Kubernetes HPA, Slurm scripts): tasks ready
-  // and leased, samples not yet merged (an upper bound with adaptive sampling), and those
-  // samples in core-seconds at the render speed per thread measured lately.
-  struct Queue {
-    uint64_t tasks_ready = 0, tasks_leased = 0, samples_remaining = 0;
-    double samples_per_thread_second = 0;  // measured; kAssumedThreadSpeed before any result
-    double core_seconds_remaining = 0;
-  };
-  static constexpr double kAssumedThreadSpeed = 1e6;  // samples/s a thread, about ours on CS184 scenes
+  // What is left to render, for autoscalers (job_status.h).
+  using Queue = QueueDepth;
+  static constexpr double kAssumedThreadSpeed = QueueDepth::kAssumedThreadSpeed;
   Queue queue() const;
   // Empty when the coordinator can serve (its job database answers and its data folder
   // takes writes); else what is wrong. For readiness probes.

@@ -16,6 +16,23 @@ v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const s
   return job.status(now, leases.workers_on(id), with_tiles);
 }
 
+JobProgress job_progress(const JobTable& jobs, const std::string& id) {
+  if (const Sequence* s = jobs.find_sequence(id)) return {s->samples_merged(), s->changes, s->ended_durably()};
+  const Job& j = jobs.job(id);
+  return {j.plan.samples_merged(), j.plan.samples_merged(), j.ended_durably()};
+}
+
+QueueDepth queue_depth(const JobTable& jobs, const LeaseTable& leases, double thread_speed) {
+  const Load load = jobs.load();
+  QueueDepth q;
+  q.tasks_leased = leases.live_count();
+  q.tasks_ready = load.tasks_ready;
+  q.samples_remaining = load.samples_remaining;
+  q.samples_per_thread_second = thread_speed > 0 ? thread_speed : QueueDepth::kAssumedThreadSpeed;
+  q.core_seconds_remaining = double(q.samples_remaining) / q.samples_per_thread_second;
+  return q;
+}
+
 std::vector<v1::JobStatus> job_list(const JobTable& jobs, const LeaseTable& leases, double now) {
   std::vector<std::pair<uint64_t, v1::JobStatus>> out;  // stills and sequences; frames are in their sequences
   for (const auto& [id, job] : jobs.jobs())

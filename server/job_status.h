@@ -11,6 +11,27 @@
 
 namespace tessera {
 
+// What a watcher waits on: a job's (or sequence's) samples, a version that changes with
+// every merge into it (a sequence's: O(1) however long it is), and whether its end is
+// durable (what clients are told; Job::reported_state). Throws RequestError (kNotFound).
+struct JobProgress {
+  uint64_t samples = 0, version = 0;
+  bool ended = false;
+  bool operator==(const JobProgress&) const = default;
+};
+JobProgress job_progress(const JobTable& jobs, const std::string& id);
+
+// What is left to render, for autoscalers (Kubernetes HPA, Slurm scripts): tasks ready
+// and leased, samples not yet merged (an upper bound with adaptive sampling), and those
+// samples in core-seconds at the render speed per thread measured lately.
+struct QueueDepth {
+  uint64_t tasks_ready = 0, tasks_leased = 0, samples_remaining = 0;
+  double samples_per_thread_second = 0;  // measured; kAssumedThreadSpeed before any result
+  double core_seconds_remaining = 0;
+  static constexpr double kAssumedThreadSpeed = 1e6;  // samples/s a thread, about ours on CS184 scenes
+};
+QueueDepth queue_depth(const JobTable& jobs, const LeaseTable& leases, double thread_speed);
+
 // Throws RequestError (kNotFound) for an unknown id.
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
                          double now);

@@ -1,10 +1,5 @@
 #include "core/io/image_io.h"
 
-#include <OpenEXR/ImfChannelList.h>
-#include <OpenEXR/ImfFrameBuffer.h>
-#include <OpenEXR/ImfHeader.h>
-#include <OpenEXR/ImfOutputFile.h>
-#include <OpenEXR/ImfStringAttribute.h>
 #include <stb/stb_image_write.h>
 
 #include <cmath>
@@ -17,15 +12,6 @@
 
 namespace tessera {
 namespace {
-
-std::string temp_path(const std::string& path) { return path + ".tmp"; }
-
-void commit(const std::string& tmp, const std::string& path) {
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    throw std::runtime_error(path + ": cannot move the finished image into place");
-  }
-}
 
 bool ends_with(const std::string& s, const std::string& suffix) {
   if (s.size() < suffix.size()) return false;
