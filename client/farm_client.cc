@@ -7,6 +7,7 @@
 #include <functional>
 #include <set>
 
+#include "client/image_download.h"
 #include "client/progress.h"
 #include "core/io/files.h"
 #include "core/render/frames.h"
@@ -209,33 +210,30 @@ bool fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::op
   v1::FetchImageRequest req;
   req.set_id(job);
   if (frame) req.set_frame(*frame);
-  for (const std::string& out : outputs) {  // only the formats written: a PNG is encoded on request
-    if (has_ext(out, ".exr")) req.set_exr(true);
-    if (has_ext(out, ".png")) req.set_png(true);
-  }
+  std::vector<std::string> paths;
+  for (const std::string& out : outputs) paths.push_back(frame ? frame_path(out, *frame) : out);
   // A lost connection (the coordinator restarting just as the job ended) is retried with
-  // back-off for up to c.reconnect_seconds, as watching is: the image is on its disk.
-  v1::Image img;
+  // back-off for up to c.reconnect_seconds, as watching is, resuming where it was cut.
   Backoff backoff(Backoff::kClientFirstSeconds);
-  for (const auto since = std::chrono::steady_clock::now();;) {
-    const grpc::Status st = stub.FetchImage(deadline(c, 120).get(), req, &img);
-    if (!unreachable(st) ||
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count() > c.reconnect_seconds) {
-      check(st, c);
-      break;
-    }
-    wait_to_retry(backoff, c, st, "", "fetching again");
+  const auto since = std::chrono::steady_clock::now();
+  try {
+    const ImageDownload got = download_image(
+        req, paths, final,
+        [&](grpc::ClientContext* ctx, const v1::FetchImageRequest& r) { return stub.FetchImageChunks(ctx, r); },
+        [&] { return deadline(c, 600); },
+        [&](const grpc::Status& st) {
+          if (!unreachable(st) ||
+              std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count() > c.reconnect_seconds) {
+            check(st, c);
+            return false;
+          }
+          wait_to_retry(backoff, c, st, "", "fetching again");
+          return true;
+        });
+    return !final || got.final;
+  } catch (const std::runtime_error& e) {
+    throw FarmError(e.what());
   }
-  if (final && !img.final()) return false;
-  for (const std::string& out : outputs) {
-    const std::string path = frame ? frame_path(out, *frame) : out;
-    try {
-      write_file_atomic(path, has_ext(out, ".exr") ? img.exr() : img.png());
-    } catch (const std::runtime_error& e) {
-      throw FarmError(e.what());
-    }
-  }
-  return true;
 }
 
 }  // namespace

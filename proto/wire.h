@@ -16,7 +16,9 @@ namespace tessera {
 // Version 3: tile sums in byte planes.
 // Version 4: Image.final (a client writes no image of an ended job that is not final).
 // Version 5: scenes stream in pieces (UploadScene, FetchSceneChunks instead of FetchScene).
-constexpr uint32_t kProtocolVersion = 5;
+// Version 6: images stream in pieces (FetchImageChunks); farm EXRs ZIP-compressed; an end
+// is reported only once durable.
+constexpr uint32_t kProtocolVersion = 6;
 constexpr size_t kBytesPerPixel = 36;  // r, g, b, lum2 (float64) + n (uint32)
 // gRPC message limit, for images and inline scene bundles (scenes of any size stream in
 // pieces: scene_chunks.h).

@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "core/util/log.h"
+#include "server/image_stream.h"
 #include "server/recovery.h"
 #include "server/referee.h"
 #include "server/submission.h"
@@ -29,9 +30,9 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
       store_(store ? std::move(store) : sqlite_store(options_)),
       scenes_((fs::path(options_.data_dir) / "scenes").string()),
       uploads_(scenes_, *clock_, options_.upload_kept_seconds),
-      writer_(*sink_, *store_,
-              {[this](const std::string& hash) { scenes_.release(hash); }, options_.before_image_write,
-               options_.data_dir}),
+      writer_(
+          *sink_, *store_,
+          {[this](const std::string& hash) { scenes_.release(hash); }, options_.before_image_write, options_.data_dir}),
       referee_(local_referee(scenes_)),
       snapshotter_(options_.image_interval_seconds, options_.checkpoint_seconds),
       leases_(store_->next_generation() << 40),  // 2^40 tasks a run: ids of different runs never meet
@@ -190,7 +191,8 @@ v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requ
   return status(id, false);
 }
 
-v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::optional<int> frame) {
+std::shared_ptr<Job> Coordinator::current_image(const std::string& id, std::optional<int> frame,
+                                                ImageStreamHeader* header) {
   std::shared_ptr<Job> job;
   bool live, writer = false;
   uint64_t merges;
@@ -205,25 +207,38 @@ v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::opt
     if (!Snapshotter::image_current(*job, live, merges)) writer = snapshotter_.request(*job, true, !live);
   }
   if (writer) write(job);
-  v1::Image img;
-  {
-    const auto deadline = deadline_in(kImageWaitSeconds);
-    MutexLock lock(mu_);
-    while (!Snapshotter::image_current(*job, live, merges) && job->snaps.writing &&
-           changed_.wait_until(mu_, deadline)) {
-    }
-    if (!Snapshotter::image_current(*job, live, merges))
-      throw RequestError(RequestError::Code::kFailedPrecondition,
-                         "job " + job->id() + ": its image could not be written (" + job->image_error +
-                             "); the samples are kept and the write is retried");
-    img.set_frame_passes_done(job->snaps.image_frame_passes);
-    // Final: the job has ended durably (an ended job's image holds its whole film: checked above).
-    img.set_final(!live && job->end_recorded);
+  const auto deadline = deadline_in(kImageWaitSeconds);
+  MutexLock lock(mu_);
+  while (!Snapshotter::image_current(*job, live, merges) && job->snaps.writing && changed_.wait_until(mu_, deadline)) {
   }
-  // The files are replaced by rename, never changed in place: read outside the lock.
+  if (!Snapshotter::image_current(*job, live, merges))
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "job " + job->id() + ": its image could not be written (" + job->image_error +
+                           "); the samples are kept and the write is retried");
+  header->frame_passes_done = job->snaps.image_frame_passes;
+  header->final = !live && job->end_recorded;  // ended durably (and the image holds the whole film)
+  return job;
+}
+
+v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::optional<int> frame) {
+  ImageStreamHeader h;
+  const std::shared_ptr<Job> job = current_image(id, frame, &h);
+  v1::Image img;  // (the files are replaced by rename, never changed in place: read without the lock)
   if (exr) img.set_exr(sink_->exr(job->id()));
   if (png) img.set_png(sink_->png(job->id()));
+  img.set_frame_passes_done(h.frame_passes_done);
+  img.set_final(h.final);
   return img;
+}
+
+void Coordinator::image_chunks(const v1::FetchImageRequest& req,
+                               const std::function<bool(const v1::ImageChunk&)>& write) {
+  ImageStreamHeader h;
+  const std::shared_ptr<Job> job =
+      current_image(req.id(), req.has_frame() ? std::optional(req.frame()) : std::nullopt, &h);
+  const std::unique_ptr<ImageSink::Reader> file = sink_->open(job->id());
+  if (!file) throw RequestError(RequestError::Code::kFailedPrecondition, "job " + job->id() + " has no image file");
+  stream_image(*file, req, h, options_.image_chunk_bytes, write);
 }
 
 // ---- workers ----
@@ -366,11 +381,6 @@ bool Coordinator::wait_for_end(const std::string& id, double timeout) const {
 
 // ---- for operators ----
 
-Coordinator::Queue Coordinator::queue() const {
-  MutexLock lock(mu_);
-  return queue_depth(jobs_, leases_, workers_.thread_speed());
-}
-
 std::string Coordinator::unready_reason() const {
   try {
     store_->ping();
@@ -378,21 +388,6 @@ std::string Coordinator::unready_reason() const {
     return without_dir(e.what(), options_.data_dir);
   }
   return "";
-}
-
-std::vector<WorkerInfo> Coordinator::workers() const {
-  MutexLock lock(mu_);
-  return workers_.list();
-}
-
-double Coordinator::utilization() const {
-  MutexLock lock(mu_);
-  return workers_.utilization();
-}
-
-CoordinatorCounters Coordinator::counters() const {
-  MutexLock lock(mu_);
-  return counters_;
 }
 
 }  // namespace tessera

@@ -41,6 +41,7 @@
 #include "server/counters.h"
 #include "server/dispatcher.h"
 #include "server/image_sink.h"
+#include "server/image_stream.h"
 #include "server/job_status.h"
 #include "server/job_store.h"
 #include "server/options.h"
@@ -79,6 +80,9 @@ class Coordinator {
   // The latest image in the formats asked for; an ended job's image holds its whole film.
   // A sequence's images are its frames': `frame` names one (it must for a sequence).
   v1::Image image(const std::string& id, bool exr = true, bool png = true, std::optional<int> frame = std::nullopt);
+  // The same EXR in pieces of options().image_chunk_bytes through `write` (FetchImageChunks:
+  // image_stream.h), resumable, with its checksum; stops when `write` returns false.
+  void image_chunks(const v1::FetchImageRequest& request, const std::function<bool(const v1::ImageChunk&)>& write);
 
   // Worker side.
   // `principal`: the worker's access token name (a quarantined one may not register).
@@ -128,14 +132,26 @@ class Coordinator {
   // What is left to render, for autoscalers (job_status.h).
   using Queue = QueueDepth;
   static constexpr double kAssumedThreadSpeed = QueueDepth::kAssumedThreadSpeed;
-  Queue queue() const;
+  Queue queue() const {
+    MutexLock lock(mu_);
+    return queue_depth(jobs_, leases_, workers_.thread_speed());
+  }
   // Empty when the coordinator can serve (its job database answers and its data folder
   // takes writes); else what is wrong. For readiness probes.
   std::string unready_reason() const;
 
-  std::vector<WorkerInfo> workers() const;
-  double utilization() const;  // of every live worker's render threads, recently
-  CoordinatorCounters counters() const;
+  std::vector<WorkerInfo> workers() const {
+    MutexLock lock(mu_);
+    return workers_.list();
+  }
+  double utilization() const {  // of every live worker's render threads, recently
+    MutexLock lock(mu_);
+    return workers_.utilization();
+  }
+  CoordinatorCounters counters() const {
+    MutexLock lock(mu_);
+    return counters_;
+  }
   double uptime() const { return clock_->now() - started_; }
   const CoordinatorOptions& options() const { return options_; }
 
@@ -168,6 +184,10 @@ class Coordinator {
   static constexpr double kImageWaitSeconds = 120;
   void record_sequence_end(const std::string& id) TESSERA_EXCLUDES(mu_);
   void refused() TESSERA_EXCLUDES(mu_);  // a submit refused: counted
+  // The job's (or frame's) image as a client is to get it: written first (or waited for)
+  // when the one on disk is not current. Throws RequestError when it cannot be.
+  std::shared_ptr<Job> current_image(const std::string& id, std::optional<int> frame, ImageStreamHeader* header)
+      TESSERA_EXCLUDES(mu_);
   v1::ResultAck check_result(const v1::TaskResult& result, const Lease& lease) TESSERA_EXCLUDES(mu_);
 
   const CoordinatorOptions options_;

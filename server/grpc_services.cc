@@ -132,6 +132,13 @@ grpc::Status ClientService::UploadScene(grpc::ServerContext* ctx, grpc::ServerRe
   });
 }
 
+grpc::Status ClientService::FetchImageChunks(grpc::ServerContext* ctx, const v1::FetchImageRequest* req,
+                                             grpc::ServerWriter<v1::ImageChunk>* w) {
+  return as(auth_, ctx, Action::kRead, [&](const Principal&) {
+    c_.image_chunks(*req, [&](const v1::ImageChunk& c) { return !ctx->IsCancelled() && w->Write(c); });
+  });
+}
+
 grpc::Status WorkerService::Register(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
                                      v1::RegisterResponse* out) {
   return as(auth_, ctx, Action::kWork, [&](const Principal& who) { *out = c_.register_worker(*req, who.name); });

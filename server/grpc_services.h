@@ -25,6 +25,8 @@ class ClientService final : public v1::Tessera::Service {
   grpc::Status WatchJob(grpc::ServerContext* ctx, const v1::JobId* req, grpc::ServerWriter<v1::JobStatus>* w) override;
   grpc::Status CancelJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) override;
   grpc::Status FetchImage(grpc::ServerContext*, const v1::FetchImageRequest* req, v1::Image* out) override;
+  grpc::Status FetchImageChunks(grpc::ServerContext* ctx, const v1::FetchImageRequest* req,
+                                grpc::ServerWriter<v1::ImageChunk>* w) override;
   grpc::Status UploadScene(grpc::ServerContext*, grpc::ServerReader<v1::SceneChunk>* reader,
                            v1::SceneUpload* out) override;
 

@@ -1,8 +1,16 @@
 #include "server/image_sink.h"
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
 #include <filesystem>
 
 #include "core/io/exr_writer.h"
+#include "core/io/preview.h"
 #include "core/io/files.h"
 
 namespace tessera {
@@ -89,12 +97,47 @@ std::string DiskImageSink::png(const std::string& job) const {
   std::error_code ec;
   const std::string exr_path = path(job, "image.exr");
   if (!fs::exists(exr_path, ec)) return {};
-  const ExrImage img = read_exr(exr_path);
-  std::string png = encode_png(img.width, img.height, img.channels.at("R").data(), img.channels.at("G").data(),
-                               img.channels.at("B").data(), true);
+  std::string png = preview_png(exr_path);  // a few rows at a time, at most 1280 pixels wide
   previews_.emplace_back(job, png);
   if (previews_.size() > kPreviewsKept) previews_.pop_front();
   return png;
+}
+
+namespace {
+class FileReader : public ImageSink::Reader {
+ public:
+  FileReader(int fd, uint64_t size, std::string version) : fd_(fd), size_(size), version_(std::move(version)) {}
+  ~FileReader() override { ::close(fd_); }
+  uint64_t size() const override { return size_; }
+  const std::string& version() const override { return version_; }
+  size_t read(uint64_t offset, char* out, size_t n) override {
+    for (;;) {
+      const ssize_t k = ::pread(fd_, out, n, off_t(offset));
+      if (k >= 0) return size_t(k);
+      if (errno != EINTR) throw std::runtime_error(std::string("cannot read the image: ") + std::strerror(errno));
+    }
+  }
+
+ private:
+  int fd_;
+  uint64_t size_;
+  std::string version_;
+};
+}  // namespace
+
+std::unique_ptr<ImageSink::Reader> DiskImageSink::open(const std::string& job) const {
+  const int fd = ::open(path(job, "image.exr").c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return nullptr;
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) {
+    ::close(fd);
+    return nullptr;
+  }
+  char version[96];  // the file itself: a rewrite is another inode, size or time
+  std::snprintf(version, sizeof version, "%llx.%llx.%llx.%lld.%ld", (unsigned long long)st.st_dev,
+                (unsigned long long)st.st_ino, (unsigned long long)st.st_size, (long long)st.st_mtim.tv_sec,
+                st.st_mtim.tv_nsec);
+  return std::make_unique<FileReader>(fd, uint64_t(st.st_size), version);
 }
 
 void MemoryImageSink::write(const std::string& job, const Film& film, const ImageMetadata& meta) {

@@ -29,7 +29,20 @@ class ImageSink {
   virtual std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta) = 0;
   // The whole film at once.
   void write(const std::string& job, const Film& film, const ImageMetadata& meta);
-  // The last image written, as EXR and PNG bytes; empty if none was written.
+  // The last image written, to stream: read from one open file (a newer write replaces the
+  // file by rename, so a reader keeps the version it opened), with its size and a version
+  // naming that file.
+  class Reader {
+   public:
+    virtual ~Reader() = default;
+    virtual uint64_t size() const = 0;
+    virtual const std::string& version() const = 0;
+    // Up to n bytes from `offset`; 0 at the end. Throws std::runtime_error.
+    virtual size_t read(uint64_t offset, char* out, size_t n) = 0;
+  };
+  // Null when none was written (or the sink keeps no files).
+  virtual std::unique_ptr<Reader> open(const std::string& job) const = 0;
+  // The last image written, as EXR bytes and a PNG preview; empty if none was written.
   virtual std::string exr(const std::string& job) const = 0;
   virtual std::string png(const std::string& job) const = 0;
 };
@@ -44,6 +57,7 @@ class DiskImageSink : public ImageSink {
   std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta) override;
   std::string exr(const std::string& job) const override;
   std::string png(const std::string& job) const override;
+  std::unique_ptr<Reader> open(const std::string& job) const override;
   std::string path(const std::string& job, const char* file) const;
 
  private:
@@ -64,6 +78,7 @@ class MemoryImageSink : public ImageSink {
   virtual void write(const std::string& job, const Film& film, const ImageMetadata& meta);
   std::string exr(const std::string&) const override { return {}; }
   std::string png(const std::string&) const override { return {}; }
+  std::unique_ptr<Reader> open(const std::string&) const override { return nullptr; }
   // The last film written for the job (an empty film if none), and how many were written.
   Film film(const std::string& job) const;
   ImageMetadata metadata(const std::string& job) const;

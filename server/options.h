@@ -39,6 +39,8 @@ struct CoordinatorOptions {
   // quarantined: its leases end, the tiles it merged into live jobs are rendered again,
   // and, with access tokens, its token may not register again.
   double verify_fraction = 0.01;  // costs this fraction of the farm's render time
+  // Pieces of an image sent by FetchImageChunks (a setting so tests can make them small).
+  size_t image_chunk_bytes = size_t(1) << 20;
   // Test seams: between an image snapshot leaving the lock and its write; between a
   // checkpoint's temporary file being written and its rename.
   std::function<void()> before_image_write;

@@ -5,15 +5,14 @@
 // has the bits of tessera render's.
 #pragma once
 
+#include <OpenEXR/ImfForward.h>
+
 #include <map>
 #include <memory>
 #include <string>
 #include <vector>
 
-#include <OpenEXR/ImfForward.h>
-
 #include "core/render/film.h"
-
 
 namespace tessera {
 

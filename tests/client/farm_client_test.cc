@@ -65,6 +65,7 @@ class FarmClient : public ::testing::Test {
     CoordinatorOptions o;
     o.data_dir = (dir / "data").string();
     o.image_interval_seconds = 0;
+    o.image_chunk_bytes = 4096;  // images come in many pieces (FetchImageChunks)
     o.scene_chunk_bytes = kSceneChunk;
     coordinator = std::make_unique<Coordinator>(o);
     client_service = std::make_unique<ClientService>(*coordinator);
@@ -117,7 +118,28 @@ class FarmClient : public ::testing::Test {
   }
 };
 
-// The real coordinator's stub, but the first FetchImage of each image is answered as a
+// A stream of given pieces, as a coordinator would send them.
+class CannedChunks : public grpc::ClientReaderInterface<v1::ImageChunk> {
+ public:
+  explicit CannedChunks(std::vector<v1::ImageChunk> chunks) : chunks_(std::move(chunks)) {}
+  bool Read(v1::ImageChunk* out) override {
+    if (next_ == chunks_.size()) return false;
+    *out = chunks_[next_++];
+    return true;
+  }
+  grpc::Status Finish() override { return grpc::Status::OK; }
+  bool NextMessageSize(uint32_t* size) override {
+    *size = 1 << 20;
+    return next_ < chunks_.size();
+  }
+  void WaitForInitialMetadata() override {}
+
+ private:
+  std::vector<v1::ImageChunk> chunks_;
+  size_t next_ = 0;
+};
+
+// The real coordinator's stub, but the first fetch of each image is answered as a
 // coordinator killed just after saying the job ended would answer it once restarted: it
 // took the job up again from an earlier checkpoint and serves its progressive image, not
 // final (here: bytes that are no EXR at all, so writing them could not pass unnoticed).
@@ -140,12 +162,6 @@ class RestartedOnceStub : public v1::Tessera::StubInterface {
     return real_.UploadScene(c, o).release();
   }
   grpc::Status FetchImage(grpc::ClientContext* c, const v1::FetchImageRequest& r, v1::Image* o) override {
-    if (served_.insert(r.id() + "#" + std::to_string(r.frame())).second) {
-      o->set_exr("a progressive image");
-      o->set_final(false);
-      ++not_final;
-      return grpc::Status::OK;
-    }
     return real_.FetchImage(c, r, o);
   }
   int not_final = 0;
@@ -153,6 +169,28 @@ class RestartedOnceStub : public v1::Tessera::StubInterface {
  private:
   grpc::ClientReaderInterface<v1::JobStatus>* WatchJobRaw(grpc::ClientContext* c, const v1::JobId& r) override {
     return real_.WatchJob(c, r).release();
+  }
+  grpc::ClientReaderInterface<v1::ImageChunk>* FetchImageChunksRaw(grpc::ClientContext* c,
+                                                                   const v1::FetchImageRequest& r) override {
+    if (!served_.insert(r.id() + "#" + std::to_string(r.frame())).second) return real_.FetchImageChunks(c, r).release();
+    ++not_final;
+    v1::ImageChunk chunk;
+    chunk.set_data("a progressive image");
+    chunk.set_size(chunk.data().size());
+    chunk.set_version("v1");
+    chunk.set_final(false);
+    chunk.set_last(true);
+    return new CannedChunks({chunk});
+  }
+  grpc::ClientAsyncReaderInterface<v1::ImageChunk>* AsyncFetchImageChunksRaw(grpc::ClientContext*,
+                                                                             const v1::FetchImageRequest&,
+                                                                             grpc::CompletionQueue*, void*) override {
+    return nullptr;
+  }
+  grpc::ClientAsyncReaderInterface<v1::ImageChunk>* PrepareAsyncFetchImageChunksRaw(grpc::ClientContext*,
+                                                                                    const v1::FetchImageRequest&,
+                                                                                    grpc::CompletionQueue*) override {
+    return nullptr;
   }
 #define TESSERA_NO_ASYNC(Rpc, Request, Response)                                                                     \
   grpc::ClientAsyncResponseReaderInterface<Response>* Async##Rpc##Raw(grpc::ClientContext*, const Request&,          \

@@ -1,0 +1,116 @@
+#include "client/image_download.h"
+
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <stdexcept>
+
+#include "core/io/files.h"
+#include "core/io/image_io.h"
+#define XXH_INLINE_ALL  // header only: nothing to link
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Warray-bounds"  // (GCC 12's false positive in xxhash's streaming code)
+#include <xxhash.h>
+#pragma GCC diagnostic pop
+
+namespace tessera {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+bool is_exr(const std::string& p) { return p.size() >= 4 && p.compare(p.size() - 4, 4, ".exr") == 0; }
+
+// The download's temporary file and the hash of what it holds.
+struct Part {
+  explicit Part(const std::string& path) : file(path), hash(XXH64_createState()) { XXH64_reset(hash, 0); }
+  ~Part() { XXH64_freeState(hash); }
+  AtomicFile file;
+  XXH64_state_t* hash;
+};
+
+}  // namespace
+
+ImageDownload download_image(const v1::FetchImageRequest& request, const std::vector<std::string>& paths,
+                             bool need_final,
+                             const std::function<std::unique_ptr<grpc::ClientReaderInterface<v1::ImageChunk>>(
+                                 grpc::ClientContext*, const v1::FetchImageRequest&)>& stream,
+                             const std::function<std::unique_ptr<grpc::ClientContext>()>& context,
+                             const std::function<bool(const grpc::Status&)>& retry) {
+  if (paths.empty()) throw std::runtime_error("no output to write the image to");
+  const std::string download = paths[0] + ".download.exr";
+  std::optional<Part> part;
+  v1::FetchImageRequest req = request;
+  ImageDownload got;
+  std::string version;
+  int damaged = 0;
+  for (;;) {
+    const std::unique_ptr<grpc::ClientContext> ctx = context();
+    auto reader = stream(ctx.get(), req);
+    v1::ImageChunk c;
+    bool first = true, done = false, restart = false;
+    while (reader->Read(&c)) {
+      if (first) {
+        first = false;
+        if (!c.resumed() || !part) {  // from the start: another version, or nothing yet
+          part.reset();
+          part.emplace(download);
+        }
+        version = c.version();
+        got.final = c.final();
+        got.frame_passes_done = c.frame_passes_done();
+        got.bytes = c.size();
+        if (need_final && !got.final) {
+          ctx->TryCancel();
+          break;
+        }
+      }
+      if (c.offset() != part->file.size()) throw std::runtime_error("the image came out of order");
+      part->file.append(c.data());
+      XXH64_update(part->hash, c.data().data(), c.data().size());
+      if (!c.last()) continue;
+      if (part->file.size() != got.bytes || XXH64_digest(part->hash) != c.xxh64()) {
+        if (++damaged > 2) throw std::runtime_error("the image arrived damaged three times (checksum mismatch)");
+        part.reset();  // damaged in transit: once more from the start
+        req.set_offset(0);
+        req.clear_version();
+        restart = true;
+        break;
+      }
+      done = true;
+    }
+    const grpc::Status st = reader->Finish();
+    if (need_final && !first && !got.final) return got;  // not final: nothing written
+    if (done) break;
+    if (restart) continue;
+    if (!retry(st)) throw std::runtime_error(st.ok() ? "the image stream ended early" : st.error_message());
+    if (part) {  // resume where it was cut
+      req.set_offset(part->file.size());
+      req.set_version(version);
+    }
+  }
+  part->file.commit();
+  part.reset();
+  // Each output: the EXR as it came (the download itself goes into the first EXR's place),
+  // a PNG made from it here.
+  std::string at = download;  // where the EXR is
+  std::optional<ExrImage> img;
+  for (const std::string& p : paths) {
+    if (is_exr(p)) {
+      if (at == download) {
+        fs::rename(download, p);
+        at = p;
+      } else {
+        write_file_atomic(p, read_file_bytes(at));
+      }
+      continue;
+    }
+    if (!img) img = read_exr(at);
+    write_file_atomic(p, encode_png(img->width, img->height, img->channels.at("R").data(), img->channels.at("G").data(),
+                                    img->channels.at("B").data()));
+  }
+  if (at == download) fs::remove(download);
+  return got;
+}
+
+}  // namespace tessera

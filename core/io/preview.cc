@@ -1,0 +1,57 @@
+#include "core/io/preview.h"
+
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
+
+#include <algorithm>
+#include <stdexcept>
+#include <vector>
+
+#include "core/io/image_io.h"
+
+namespace tessera {
+
+std::string preview_png(const std::string& exr_path, int max_width) {
+  try {
+    Imf::InputFile in(exr_path.c_str());
+    const Imath::Box2i dw = in.header().dataWindow();
+    const int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
+    const int k = std::max(1, (w + max_width - 1) / std::max(1, max_width));  // the box's side
+    const int pw = (w + k - 1) / k, ph = (h + k - 1) / k;
+    std::vector<float> pr(size_t(pw) * ph), pg(pr.size()), pb(pr.size());
+    std::vector<float> r(size_t(w) * k), g(r.size()), b(r.size());
+    for (int py = 0; py < ph; ++py) {
+      const int y0 = dw.min.y + py * k, rows = std::min(k, dw.max.y + 1 - y0);
+      Imf::FrameBuffer fb;
+      const Imath::V2i origin(dw.min.x, y0);
+      for (auto [name, data] : {std::pair{"R", &r}, std::pair{"G", &g}, std::pair{"B", &b}})
+        fb.insert(name, Imf::Slice::Make(Imf::FLOAT, data->data(), origin, w, rows, sizeof(float),
+                                         sizeof(float) * size_t(w)));
+      in.setFrameBuffer(fb);
+      in.readPixels(y0, y0 + rows - 1);
+      for (int px = 0; px < pw; ++px) {
+        const int x0 = px * k, cols = std::min(k, w - x0);
+        double sr = 0, sg = 0, sb = 0;
+        for (int y = 0; y < rows; ++y)
+          for (int x = x0; x < x0 + cols; ++x) {
+            const size_t i = size_t(y) * size_t(w) + size_t(x);
+            sr += r[i];
+            sg += g[i];
+            sb += b[i];
+          }
+        const double n = double(rows) * double(cols);
+        const size_t o = size_t(py) * size_t(pw) + size_t(px);
+        pr[o] = float(sr / n);
+        pg[o] = float(sg / n);
+        pb[o] = float(sb / n);
+      }
+    }
+    return encode_png(pw, ph, pr.data(), pg.data(), pb.data(), true);
+  } catch (const std::exception& e) {
+    throw std::runtime_error(exr_path + ": cannot make a preview: " + e.what());
+  }
+}
+
+}  // namespace tessera

@@ -1,0 +1,14 @@
+// A small sRGB PNG of an EXR image, for the live page: read a band of rows at a time and
+// box-filtered down to at most `max_width` pixels wide (a whole factor, so every preview
+// pixel averages the same number of image pixels), so an 8K image costs a few rows of
+// floats, not the image.
+#pragma once
+
+#include <string>
+
+namespace tessera {
+
+// Throws std::runtime_error naming the path.
+std::string preview_png(const std::string& exr_path, int max_width = 1280);
+
+}  // namespace tessera

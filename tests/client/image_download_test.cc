@@ -1,0 +1,177 @@
+// An image downloaded in pieces (client/image_download.h), over canned streams: a stream
+// cut midway is resumed where it was cut, a damaged download is fetched again, a PNG is
+// made from the EXR here, and an image that is not final is written nowhere when the job
+// was told to have ended.
+#include "client/image_download.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+
+#include "core/io/files.h"
+#include "core/io/image_io.h"
+#define XXH_INLINE_ALL
+#include <xxhash.h>
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+
+// Pieces, then the stream ends with `status` (a cut connection: UNAVAILABLE).
+class Canned : public grpc::ClientReaderInterface<v1::ImageChunk> {
+ public:
+  Canned(std::vector<v1::ImageChunk> chunks, grpc::Status status) : chunks_(std::move(chunks)), status_(status) {}
+  bool Read(v1::ImageChunk* out) override {
+    if (next_ == chunks_.size()) return false;
+    *out = chunks_[next_++];
+    return true;
+  }
+  grpc::Status Finish() override { return status_; }
+  bool NextMessageSize(uint32_t* size) override {
+    *size = 1 << 20;
+    return next_ < chunks_.size();
+  }
+  void WaitForInitialMetadata() override {}
+
+ private:
+  std::vector<v1::ImageChunk> chunks_;
+  grpc::Status status_;
+  size_t next_ = 0;
+};
+
+class ImageDownloadTest : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_download_" + std::to_string(::getpid()));
+  std::string exr;  // a real EXR's bytes
+  std::vector<v1::FetchImageRequest> requests;
+  // Answers, one per call: (first byte, last byte + 1, how the stream ends, flip a byte?)
+  struct Answer {
+    size_t from, to;
+    grpc::Status end = grpc::Status::OK;
+    bool damage = false;
+    bool final = true;
+  };
+  std::vector<Answer> answers;
+
+  void SetUp() override {
+    fs::create_directories(dir);
+    Film film(Rect{0, 0, 23, 17});
+    for (int y = 0; y < 17; ++y)
+      for (int x = 0; x < 23; ++x) film.at(x, y) = PixelSums{0.1 * x, 0.05 * y, 0.3, 0.01, 1};
+    write_exr((dir / "source.exr").string(), film, {});
+    exr = read_file_bytes((dir / "source.exr").string());
+  }
+  void TearDown() override { fs::remove_all(dir); }
+
+  ImageDownload download(const std::vector<std::string>& paths, bool need_final, int* retries) {
+    size_t call = 0;
+    return download_image(
+        v1::FetchImageRequest(), paths, need_final,
+        [&](grpc::ClientContext*, const v1::FetchImageRequest& r) {
+          requests.push_back(r);
+          const Answer a = answers.at(call++);
+          std::vector<v1::ImageChunk> chunks;
+          for (size_t at = a.from; at < a.to; at += 100) {
+            v1::ImageChunk c;
+            c.set_offset(at);
+            std::string data = exr.substr(at, std::min<size_t>(100, a.to - at));
+            if (a.damage && at == a.from) data[0] ^= 1;
+            c.set_data(data);
+            if (at == a.from) {
+              c.set_size(exr.size());
+              c.set_version("v1");
+              c.set_final(a.final);
+              c.set_resumed(a.from > 0);
+            }
+            if (at + 100 >= exr.size()) {
+              c.set_last(true);
+              c.set_xxh64(XXH64(exr.data(), exr.size(), 0));
+            }
+            chunks.push_back(c);
+          }
+          return std::make_unique<Canned>(chunks, a.end);
+        },
+        [] { return std::make_unique<grpc::ClientContext>(); },
+        [&](const grpc::Status& st) {
+          ++*retries;
+          return st.error_code() == grpc::StatusCode::UNAVAILABLE;
+        });
+  }
+};
+
+TEST_F(ImageDownloadTest, ACutStreamIsResumedWhereItWasCut) {
+  const grpc::Status cut(grpc::StatusCode::UNAVAILABLE, "connection reset");
+  answers = {{0, 300, cut}, {300, 701, cut}, {701, exr.size()}};
+  int retries = 0;
+  const std::string out = (dir / "out.exr").string();
+  const ImageDownload got = download({out}, false, &retries);
+  EXPECT_EQ(retries, 2);
+  ASSERT_EQ(requests.size(), 3u);
+  EXPECT_EQ(requests[1].offset(), 300u);
+  EXPECT_EQ(requests[1].version(), "v1");
+  EXPECT_EQ(requests[2].offset(), 701u);
+  EXPECT_EQ(read_file_bytes(out), exr);
+  EXPECT_EQ(got.bytes, exr.size());
+  EXPECT_TRUE(got.final);
+  EXPECT_FALSE(fs::exists(out + ".download.exr"));
+}
+
+TEST_F(ImageDownloadTest, ADamagedDownloadIsFetchedAgainWhole) {
+  answers = {{0, exr.size(), grpc::Status::OK, true}, {0, exr.size()}};
+  int retries = 0;
+  const std::string out = (dir / "out.exr").string();
+  download({out}, false, &retries);
+  ASSERT_EQ(requests.size(), 2u);
+  EXPECT_EQ(requests[1].offset(), 0u);  // from the start
+  EXPECT_EQ(read_file_bytes(out), exr);
+}
+
+TEST_F(ImageDownloadTest, AlwaysDamagedIsAnErrorAndWritesNothing) {
+  answers = {{0, exr.size(), grpc::Status::OK, true},
+             {0, exr.size(), grpc::Status::OK, true},
+             {0, exr.size(), grpc::Status::OK, true}};
+  int retries = 0;
+  const std::string out = (dir / "out.exr").string();
+  EXPECT_THROW(download({out}, false, &retries), std::runtime_error);
+  EXPECT_FALSE(fs::exists(out));
+}
+
+TEST_F(ImageDownloadTest, APngIsMadeFromTheExrAndEveryOutputWritten) {
+  answers = {{0, exr.size()}};
+  int retries = 0;
+  const std::string png = (dir / "a.png").string(), e1 = (dir / "b.exr").string(), e2 = (dir / "c.exr").string();
+  download({png, e1, e2}, false, &retries);
+  EXPECT_EQ(read_file_bytes(e1), exr);
+  EXPECT_EQ(read_file_bytes(e2), exr);
+  const ExrImage img = read_exr(e1);
+  EXPECT_EQ(read_file_bytes(png), encode_png(img.width, img.height, img.channels.at("R").data(),
+                                             img.channels.at("G").data(), img.channels.at("B").data()));
+}
+
+TEST_F(ImageDownloadTest, AnImageThatIsNotFinalIsWrittenNowhereWhenOneIsNeeded) {
+  Answer a{0, exr.size()};
+  a.final = false;
+  answers = {a};
+  int retries = 0;
+  const std::string out = (dir / "out.exr").string();
+  const ImageDownload got = download({out}, true, &retries);
+  EXPECT_FALSE(got.final);
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_FALSE(fs::exists(out + ".download.exr"));
+}
+
+TEST_F(ImageDownloadTest, AFinalErrorIsThrownWithItsMessage) {
+  answers = {{0, 0, grpc::Status(grpc::StatusCode::NOT_FOUND, "no job 'x'")}};
+  int retries = 0;
+  try {
+    download({(dir / "out.exr").string()}, false, &retries);
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), "no job 'x'");
+  }
+}
+
+}  // namespace
+}  // namespace tessera
