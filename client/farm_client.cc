@@ -171,12 +171,22 @@ std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::strin
 }
 
 int list_jobs(v1::Tessera::StubInterface& stub, const FarmContext& c) {
-  v1::JobList list;
-  check(stub.ListJobs(deadline(c).get(), v1::ListJobsRequest(), &list), c);
-  if (c.json)
-    std::fprintf(c.out, "%s\n", proto_json(list).c_str());
-  else
-    for (const auto& s : list.jobs()) std::fprintf(c.out, "%s\n", describe(s).c_str());
+  // A page at a time (a farm keeps thousands of jobs), each printed as it comes.
+  v1::ListJobsRequest req;
+  req.set_page_size(kListPageSize);
+  v1::JobList all;
+  for (;;) {
+    v1::JobList page;
+    check(stub.ListJobs(deadline(c).get(), req, &page), c);
+    for (const auto& s : page.jobs())
+      if (c.json)
+        *all.add_jobs() = s;
+      else
+        std::fprintf(c.out, "%s\n", describe(s).c_str());
+    if (page.next_page_token().empty()) break;
+    req.set_page_token(page.next_page_token());
+  }
+  if (c.json) std::fprintf(c.out, "%s\n", proto_json(all).c_str());
   return 0;
 }
 
@@ -270,6 +280,37 @@ int cancel_job(v1::Tessera::StubInterface& stub, const std::string& job, const F
   v1::JobStatus s;
   check(stub.CancelJob(deadline(c).get(), req, &s), c);
   print_status(s, c);
+  return 0;
+}
+
+int requeue_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c) {
+  v1::JobId req;
+  req.set_id(job);
+  v1::JobStatus s;
+  check(stub.RequeueJob(deadline(c, 120).get(), req, &s), c);  // (reads its films back from disk)
+  print_status(s, c);
+  return 0;
+}
+
+int set_job_priority(v1::Tessera::StubInterface& stub, const std::string& job, int priority, const FarmContext& c) {
+  v1::SetPriorityRequest req;
+  req.set_id(job);
+  req.set_priority(priority);
+  v1::JobStatus s;
+  check(stub.SetJobPriority(deadline(c).get(), req, &s), c);
+  print_status(s, c);
+  return 0;
+}
+
+int delete_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c) {
+  v1::JobId req;
+  req.set_id(job);
+  v1::DeleteJobResponse r;
+  check(stub.DeleteJob(deadline(c, 300).get(), req, &r), c);  // (waits for a write under way to stop)
+  if (c.json)
+    std::fprintf(c.out, "%s\n", proto_json(r).c_str());
+  else
+    std::fprintf(c.out, "job %s deleted (%.1f MB freed)\n", r.id().c_str(), double(r.bytes_freed()) / 1e6);
   return 0;
 }
 

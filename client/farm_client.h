@@ -1,4 +1,5 @@
-// The farm subcommands (`submit`, `status`, `jobs`, `watch`, `fetch`, `cancel`) as one
+// The farm subcommands (`submit`, `status`, `jobs`, `watch`, `fetch`, `cancel`, `requeue`,
+// `priority`, `delete`) as one
 // function each over a coordinator stub: farm_commands.cc binds them to flags, tests call
 // them against an in-process coordinator. Each returns the process exit code and throws
 // FarmError for what the user must be told (an unreachable coordinator, a refused job).
@@ -61,5 +62,12 @@ struct FetchWhat {
 int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const std::vector<std::string>& outputs,
                 const FarmContext& c, const FetchWhat& what = {});
 int cancel_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c);
+// A FAILED or CANCELLED job (a sequence: its frames not DONE) goes on from its checkpoints.
+int requeue_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c);
+int set_job_priority(v1::Tessera::StubInterface& stub, const std::string& job, int priority, const FarmContext& c);
+// The job and everything it left on the coordinator's disk (a live one is cancelled first).
+int delete_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c);
+// `jobs` asks for this many jobs a call.
+constexpr uint32_t kListPageSize = 500;
 
 }  // namespace tessera

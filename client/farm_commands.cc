@@ -80,6 +80,23 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
       });
   add("cancel", "Cancel a job (what was rendered is kept)", job_arg(true),
       [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return cancel_job(stub, *job, c); });
+  add("requeue", "Take a FAILED or CANCELLED job up again from what it rendered (a sequence: its unfinished frames)",
+      job_arg(true),
+      [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return requeue_job(stub, *job, c); });
+  auto priority = std::make_shared<int>(0);
+  add(
+      "priority", "Change a job's priority (higher runs first)",
+      [job_arg, priority](CLI::App* cmd, FarmContext& c) {
+        job_arg(true)(cmd, c);
+        cmd->add_option("priority", *priority, "the new priority")->required();
+      },
+      [job, priority](v1::Tessera::StubInterface& stub, const FarmContext& c) {
+        return set_job_priority(stub, *job, *priority, c);
+      });
+  add("delete", "Delete a job: its record, images, checkpoints, and scene if no other job uses it (a live job is "
+      "cancelled first)",
+      job_arg(true),
+      [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return delete_job(stub, *job, c); });
   return runs;
 }
 

@@ -2,9 +2,10 @@
 // command line); each gRPC call and HTTP request presents one, and its role decides:
 //
 //   viewer   read: job status, images, the live page, /api/*, /metrics
-//   client   what a viewer may, and submit jobs and cancel its own
+//   client   what a viewer may, and submit jobs; cancel, requeue, re-prioritise and delete
+//            its own
 //   worker   register, lease tasks, fetch scenes, return results; nothing else
-//   admin    everything, including cancelling anyone's job
+//   admin    everything, including changing or deleting anyone's job
 //
 // Without a token file every caller is an admin: the coordinator then listens on loopback
 // only unless the operator says --insecure (server/main.cc).
@@ -19,7 +20,7 @@
 namespace tessera {
 
 enum class Role { kViewer, kClient, kWorker, kAdmin };
-enum class Action { kRead, kSubmit, kCancel, kWork };
+enum class Action { kRead, kSubmit, kCancel, kWork };  // kCancel: any change to a job after submit
 
 struct Principal {
   std::string name;  // from the token file: whose jobs are whose

@@ -17,6 +17,7 @@ namespace {
 std::unique_ptr<JobStore> sqlite_store(const CoordinatorOptions& o) {
   auto store = std::make_unique<SqliteJobStore>(o.data_dir);
   store->before_checkpoint_rename = o.before_checkpoint_rename;
+  store->after_row_commit = o.after_row_commit;
   return store;
 }
 
@@ -44,7 +45,8 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
       dispatcher_({jobs_, leases_, leasing_, workers_, checks_, verifier_, sequences_, lifecycle_},
                   options_.max_live_pixels),
       intake_({jobs_, leases_, leasing_, workers_, verifier_, lifecycle_, snapshotter_, counters_}),
-      worker_lifecycle_({workers_, jobs_, leases_, leasing_, checks_, lifecycle_, counters_}, options_) {
+      worker_lifecycle_({workers_, jobs_, leases_, leasing_, checks_, lifecycle_, counters_}, options_),
+      control_(jobs_, lifecycle_, snapshotter_, counters_) {
   started_ = clock_->now();
   Effects fx;
   {
@@ -52,8 +54,10 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
     const auto restore_scene = [this](const std::string& hash) { return scenes_.restore(hash); };
     Recovery({*store_, jobs_, lifecycle_, snapshotter_, counters_, restore_scene}).restore(clock_->now(), fx);
     for (const auto& [id, s] : jobs_.sequences()) fx.sequence_ends.push_back(id);  // ended, not yet recorded
+    scenes_.remove_unused(jobs_.scene_hashes());  // scenes of deleted jobs, or of a submit the crash cut short
+    // Files of jobs deleted while their files were being removed: no row names them now.
+    sink_->remove_unknown([&](const std::string& id) TESSERA_REQUIRES(mu_) { return jobs_.names(id); });
   }
-  scenes_.remove_unused();  // scenes of jobs that ended, or whose submit the crash cut short
   apply(std::move(fx));
 }
 
@@ -88,7 +92,7 @@ void Coordinator::write(const std::shared_ptr<Job>& job) {
     if (!plan.image && !plan.checkpoint) return;
     const SnapshotOutcome out = writer_.write(*job, plan, [&](uint32_t band, BandCopy* copy) {
       MutexLock lock(mu_);  // one band at a time: merges go on between them
-      if (!job->plan.has_film()) return false;
+      if (!job->plan.has_film() || job->removed) return false;  // (a job being deleted: stop)
       job->plan.copy_band(band, copy);
       return true;
     });
@@ -106,23 +110,14 @@ void Coordinator::record_sequence_end(const std::string& id) {
   std::string scene;
   {
     MutexLock lock(mu_);
-    row = lifecycle_.sequence_end_due(id);
-    if (!row) return;
+    if (!(row = lifecycle_.sequence_end_due(id))) return;
     scene = jobs_.find_sequence(id)->meta.scene_hash;
   }
-  bool ok = false;
-  try {
-    store_->end(row->id, row->state, row->error, row->elapsed);
-    ok = true;
-  } catch (const std::exception& e) {
-    spdlog::error("job {}: recording its end: {}", id, e.what());
-  }
-  if (ok) scenes_.release(scene);
-  {
-    MutexLock lock(mu_);
+  const bool ok = writer_.record_end(*row, scene);
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     lifecycle_.sequence_end_recorded(id, ok);
-  }
-  changed_.notify_all();
+    fx.changed = true;
+  });
 }
 
 // ---- clients ----
@@ -186,9 +181,53 @@ std::vector<v1::JobStatus> Coordinator::list() const {
   return job_list(jobs_, leases_, clock_->now());
 }
 
+v1::JobList Coordinator::list(uint32_t page_size, const std::string& page_token) const {
+  MutexLock lock(mu_);
+  return job_page(jobs_, leases_, page_size, page_token, clock_->now());
+}
+
 v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requester, bool any) {
   locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { lifecycle_.cancel(id, requester, any, clock_->now(), fx); });
   return status(id, false);
+}
+
+v1::JobStatus Coordinator::set_priority(const std::string& id, int32_t priority, const std::string& requester,
+                                        bool any) {
+  locked([&](Effects&) TESSERA_REQUIRES(mu_) { control_.check(id, requester, any, "change the priority of"); });
+  try {
+    store_->set_priority(id, priority);  // the row first: a restart keeps it
+  } catch (const std::exception& e) {
+    throw RequestError(RequestError::Code::kResourceExhausted, without_dir(e.what(), options_.data_dir));
+  }
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.set_priority(id, priority, fx); });
+  return status(id, false);
+}
+
+v1::JobStatus Coordinator::requeue(const std::string& id, const std::string& requester, bool any) {
+  JobControl::Requeue q = locked([&](Effects&) TESSERA_REQUIRES(mu_) {
+    JobControl::Requeue r = control_.begin_requeue(id, requester, any);
+    await([&] { return JobControl::quiet(r); });  // (an ended job's writers are done, or nearly)
+    return r;
+  });
+  undo_on_throw([&] { load_requeue(q, *store_, scenes_, options_.data_dir); },  // the scene, the row, the films
+                [&](Effects&) TESSERA_REQUIRES(mu_) { control_.requeue_failed(q); });
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.finish_requeue(q, clock_->now(), fx); });
+  return status(id, false);
+}
+
+uint64_t Coordinator::remove(const std::string& id, const std::string& requester, bool any) {
+  bool holds_scene = false;
+  const JobControl::Removal r = locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    JobControl::Removal r = control_.begin_delete(id, requester, any, clock_->now(), fx);
+    await([&] { return JobControl::quiet(r); });  // a writer stops at its next band
+    holds_scene = JobControl::holds_scene(r);
+    return r;
+  });
+  const uint64_t bytes =
+      undo_on_throw([&] { return finish_removal(r, holds_scene, *store_, *sink_, scenes_, options_.data_dir); },
+                    [&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.delete_failed(r, clock_->now(), fx); });
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.removed(r, fx); });
+  return bytes;
 }
 
 std::shared_ptr<Job> Coordinator::current_image(const std::string& id, std::optional<int> frame,
@@ -207,10 +246,8 @@ std::shared_ptr<Job> Coordinator::current_image(const std::string& id, std::opti
     if (!Snapshotter::image_current(*job, live, merges)) writer = snapshotter_.request(*job, true, !live);
   }
   if (writer) write(job);
-  const auto deadline = deadline_in(kImageWaitSeconds);
   MutexLock lock(mu_);
-  while (!Snapshotter::image_current(*job, live, merges) && job->snaps.writing && changed_.wait_until(mu_, deadline)) {
-  }
+  await([&] { return Snapshotter::image_current(*job, live, merges) || !job->snaps.writing; });
   if (!Snapshotter::image_current(*job, live, merges))
     throw RequestError(RequestError::Code::kFailedPrecondition,
                        "job " + job->id() + ": its image could not be written (" + job->image_error +
@@ -223,12 +260,7 @@ std::shared_ptr<Job> Coordinator::current_image(const std::string& id, std::opti
 v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::optional<int> frame) {
   ImageStreamHeader h;
   const std::shared_ptr<Job> job = current_image(id, frame, &h);
-  v1::Image img;  // (the files are replaced by rename, never changed in place: read without the lock)
-  if (exr) img.set_exr(sink_->exr(job->id()));
-  if (png) img.set_png(sink_->png(job->id()));
-  img.set_frame_passes_done(h.frame_passes_done);
-  img.set_final(h.final);
-  return img;
+  return whole_image(*sink_, job->id(), exr, png, h);
 }
 
 void Coordinator::image_chunks(const v1::FetchImageRequest& req,
@@ -254,26 +286,11 @@ v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks
   });
 }
 
-v1::SceneManifest Coordinator::scene(const std::string& hash) const {
-  try {
-    return scenes_.manifest(hash);
-  } catch (const std::out_of_range&) {
-    throw RequestError(RequestError::Code::kNotFound, "no scene with hash " + hash);
-  }
-}
+v1::SceneManifest Coordinator::scene(const std::string& hash) const { return served_manifest(scenes_, hash); }
 
 void Coordinator::scene_chunks(const v1::FetchSceneRequest& req,
                                const std::function<bool(const v1::SceneChunk&)>& write) const {
-  try {
-    scenes_.send(req, options_.scene_chunk_bytes, write);
-  } catch (const std::out_of_range&) {
-    throw RequestError(RequestError::Code::kNotFound, "no scene with hash " + req.scene_hash());
-  } catch (const WireError& e) {
-    throw RequestError(RequestError::Code::kInvalidArgument, e.what());
-  } catch (const std::runtime_error&) {
-    scene(req.scene_hash());  // released while it was read: not found
-    throw;
-  }
+  serve_scene(scenes_, req, options_.scene_chunk_bytes, write);
 }
 
 std::vector<uint64_t> Coordinator::heartbeat(uint64_t worker_id, const std::vector<uint64_t>& task_ids) {
@@ -295,21 +312,16 @@ std::vector<v1::ResultAck> Coordinator::submit_results(const std::vector<const v
 
 v1::ResultAck Coordinator::check_result(const v1::TaskResult& result, const Lease& lease) {
   v1::ResultAck ack;
-  std::optional<Check> check;
-  {
-    MutexLock lock(mu_);
-    check = verifier_.pending(lease.check, result.task_id());
-  }
+  const std::optional<Check> check = locked([&](Effects&) TESSERA_REQUIRES(mu_) {
+    return verifier_.pending(lease.check, result.task_id());
+  });
   if (!check) return ack;  // decided, or moot
-  uint64_t digest;
-  try {
-    digest = sums_digest(result_sums(result, size_t(from_proto(check->task->tile()).area())));
-  } catch (const WireError&) {
-    MutexLock lock(mu_);
-    ++counters_.results_rejected;
+  const std::optional<uint64_t> digest = result_digest(result, *check);
+  if (!digest) {
+    locked([&](Effects&) TESSERA_REQUIRES(mu_) { ++counters_.results_rejected; });
     return ack;
   }
-  const Verifier::Verdict verdict = Verifier::judge(*check, digest, result.worker_id(), referee_);
+  const Verifier::Verdict verdict = Verifier::judge(*check, *digest, result.worker_id(), referee_);
   ack.set_accepted(locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     return verifier_.decide(lease.check, result.task_id(), result.worker_id(), verdict, clock_->now(), fx);
   }));
@@ -346,37 +358,28 @@ void Coordinator::checkpoint_all() {
         (snapshotter_.checkpoint_if_changed(*job, clock_->now()) ? mine : others).push_back(job);
   }
   for (const std::shared_ptr<Job>& job : mine) write(job);
-  const auto deadline = deadline_in(kImageWaitSeconds);
-  MutexLock lock(mu_);
-  for (const std::shared_ptr<Job>& job : others)  // their writers take the checkpoint too
-    while (job->snaps.writing && changed_.wait_until(mu_, deadline)) {
-    }
+  MutexLock lock(mu_);  // the writers of the others take the checkpoint too
+  await([&] { return std::none_of(others.begin(), others.end(), [](const auto& j) { return j->snaps.writing; }); });
 }
 
 // ---- waiting ----
 
 void Coordinator::wait_for_work(double timeout) const {
-  const auto deadline = deadline_in(timeout);
   MutexLock lock(mu_);
-  changed_.wait_until(mu_, deadline);
+  await([] { return false; }, timeout);
 }
 
 v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const {
-  const auto deadline = deadline_in(timeout);
   MutexLock lock(mu_);
   const JobProgress since = job_progress(jobs_, id);
   if (since.samples == last_samples)  // (else the caller's status is behind already)
-    while (!since.ended && job_progress(jobs_, id) == since && changed_.wait_until(mu_, deadline)) {
-    }
+    await([&]() TESSERA_REQUIRES(mu_) { return since.ended || !(job_progress(jobs_, id) == since); }, timeout);
   return job_status(jobs_, leases_, id, false, clock_->now());
 }
 
 bool Coordinator::wait_for_end(const std::string& id, double timeout) const {
-  const auto deadline = deadline_in(timeout);
   MutexLock lock(mu_);
-  while (!job_progress(jobs_, id).ended && changed_.wait_until(mu_, deadline)) {
-  }
-  return job_progress(jobs_, id).ended;
+  return await([&]() TESSERA_REQUIRES(mu_) { return job_progress(jobs_, id).ended; }, timeout);
 }
 
 // ---- for operators ----

@@ -12,6 +12,7 @@
 //   restart      recovery.h (jobs back from the JobStore and checkpoints)
 //   load         job_table.h (Load: what live work weighs, counted once)
 //   status       job_status.h (what clients see of a job, and the list)
+//   after submit job_control.h (priority, requeue, delete; the disk work between the steps)
 // A new feature gets its own unit beside these, reached from here by one forwarding call;
 // docs/architecture.md says where each step of a task's life is.
 //
@@ -42,6 +43,7 @@
 #include "server/dispatcher.h"
 #include "server/image_sink.h"
 #include "server/image_stream.h"
+#include "server/job_control.h"
 #include "server/job_status.h"
 #include "server/job_store.h"
 #include "server/options.h"
@@ -75,8 +77,23 @@ class Coordinator {
   v1::SceneUpload upload_scene(const std::function<bool(v1::SceneChunk*)>& next, const std::string& owner = "");
   v1::JobStatus status(const std::string& id, bool with_tiles) const;
   std::vector<v1::JobStatus> list() const;  // in submission order
-  // `requester` may cancel only its own jobs unless `any` (an admin, or no access tokens).
+  // A page of that list (ListJobsRequest: page_size 0 is every job).
+  v1::JobList list(uint32_t page_size, const std::string& page_token) const;
+  // `requester` may cancel (requeue, delete, re-prioritise) only its own jobs unless `any`
+  // (an admin, or no access tokens).
   v1::JobStatus cancel(const std::string& id, const std::string& requester = "", bool any = true);
+  // After submit (job_control.h): a job's priority; a FAILED or CANCELLED job (a sequence's
+  // frames not DONE) taken up again from its checkpoints; a job and everything it left on
+  // disk gone (a live one cancelled first), returning the bytes freed. Throw RequestError.
+  v1::JobStatus set_priority(const std::string& id, int32_t priority, const std::string& requester = "",
+                             bool any = true);
+  v1::JobStatus requeue(const std::string& id, const std::string& requester = "", bool any = true);
+  uint64_t remove(const std::string& id, const std::string& requester = "", bool any = true);
+  // Retention (--keep-ended): up to `limit` jobs whose end was recorded over `keep_seconds`
+  // ago, oldest first, for remove().
+  std::vector<std::string> ended_before(double keep_seconds, size_t limit = 100) const {
+    return store_->ended_before(keep_seconds, limit);
+  }
   // The latest image in the formats asked for; an ended job's image holds its whole film.
   // A sequence's images are its frames': `frame` names one (it must for a sequence).
   v1::Image image(const std::string& id, bool exr = true, bool png = true, std::optional<int> frame = std::nullopt);
@@ -177,11 +194,30 @@ class Coordinator {
       return result;
     }
   }
+  // Runs slow() without the lock; if it throws, undo(effects) runs under the lock, and the
+  // exception goes on to the caller.
+  template <typename Slow, typename Undo>
+  auto undo_on_throw(Slow&& slow, Undo&& undo) TESSERA_EXCLUDES(mu_) {
+    try {
+      return slow();
+    } catch (...) {
+      locked(undo);
+      throw;
+    }
+  }
   // Writes the job's due image and checkpoint, band by band, as its one writer (the caller
   // became it: Snapshotter::request), until nothing more is due.
   void write(const std::shared_ptr<Job>& job) TESSERA_EXCLUDES(mu_);
   // How long an image fetch or a stopping coordinator waits for another thread's writer.
   static constexpr double kImageWaitSeconds = 120;
+  // Waits (mu_ held) until `done()` or `timeout` seconds pass; returns done().
+  template <typename Done>
+  bool await(Done&& done, double timeout = kImageWaitSeconds) const TESSERA_REQUIRES(mu_) {
+    const auto deadline = deadline_in(timeout);
+    while (!done() && changed_.wait_until(mu_, deadline)) {
+    }
+    return done();
+  }
   void record_sequence_end(const std::string& id) TESSERA_EXCLUDES(mu_);
   void refused() TESSERA_EXCLUDES(mu_);  // a submit refused: counted
   // The job's (or frame's) image as a client is to get it: written first (or waited for)
@@ -217,6 +253,7 @@ class Coordinator {
   Dispatcher dispatcher_ TESSERA_GUARDED_BY(mu_);
   ResultIntake intake_ TESSERA_GUARDED_BY(mu_);
   WorkerLifecycle worker_lifecycle_ TESSERA_GUARDED_BY(mu_);
+  JobControl control_ TESSERA_GUARDED_BY(mu_);
 };
 
 }  // namespace tessera

@@ -10,7 +10,7 @@ struct CoordinatorCounters {
   uint64_t leases_expired = 0, leases_released = 0, tasks_failed = 0, samples_merged = 0, jobs_submitted = 0,
            jobs_refused = 0;
   uint64_t images_written = 0, image_errors = 0, checkpoints_written = 0, checkpoint_errors = 0;
-  uint64_t jobs_restored = 0;
+  uint64_t jobs_restored = 0, jobs_deleted = 0, jobs_requeued = 0;
   uint64_t checks_issued = 0, checks_passed = 0, check_mismatches = 0, checks_skipped = 0, workers_quarantined = 0,
            tiles_rendered_again = 0;
   double merge_seconds = 0;

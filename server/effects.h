@@ -14,19 +14,11 @@
 
 namespace tessera {
 
-// A job row to write again (an ended job's error changed: a liar's tiles are in it).
-struct RowEnd {
-  std::string id;
-  v1::JobStatus::State state = v1::JobStatus::QUEUED;
-  std::string error;
-  double elapsed = 0;
-};
-
 struct Effects {
   std::vector<std::shared_ptr<Job>> writes;  // jobs whose snapshot writer this operation became
   std::vector<RowEnd> rows;                  // database rows to rewrite
   std::vector<std::string> sequence_ends;          // sequences whose end to record (once it can be)
-  std::vector<std::pair<Sequence*, size_t>> prepare;  // sequences whose next frame's job to make
+  std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> prepare;  // sequences whose next frame's job to make
   bool changed = false;                            // something waiters wait for happened
 
   bool empty() const {

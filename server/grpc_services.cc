@@ -88,10 +88,9 @@ grpc::Status ClientService::SubmitJob(grpc::ServerContext* ctx, const v1::Submit
 grpc::Status ClientService::GetJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::JobStatus* out) {
   return as(auth_, ctx, Action::kRead, [&](const Principal&) { *out = c_.status(req->id(), true); });
 }
-grpc::Status ClientService::ListJobs(grpc::ServerContext* ctx, const v1::ListJobsRequest*, v1::JobList* out) {
-  return as(auth_, ctx, Action::kRead, [&](const Principal&) {
-    for (v1::JobStatus& s : c_.list()) *out->add_jobs() = std::move(s);
-  });
+grpc::Status ClientService::ListJobs(grpc::ServerContext* ctx, const v1::ListJobsRequest* req, v1::JobList* out) {
+  return as(auth_, ctx, Action::kRead,
+            [&](const Principal&) { *out = c_.list(req->page_size(), req->page_token()); });
 }
 grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* req,
                                      grpc::ServerWriter<v1::JobStatus>* w) {
@@ -116,6 +115,23 @@ grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* 
 grpc::Status ClientService::CancelJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::JobStatus* out) {
   return as(auth_, ctx, Action::kCancel,
             [&](const Principal& who) { *out = c_.cancel(req->id(), who.name, who.role == Role::kAdmin); });
+}
+// Requeue, priority and delete: a client's own jobs, an admin's any (as CancelJob).
+grpc::Status ClientService::RequeueJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::JobStatus* out) {
+  return as(auth_, ctx, Action::kCancel,
+            [&](const Principal& who) { *out = c_.requeue(req->id(), who.name, who.role == Role::kAdmin); });
+}
+grpc::Status ClientService::SetJobPriority(grpc::ServerContext* ctx, const v1::SetPriorityRequest* req,
+                                           v1::JobStatus* out) {
+  return as(auth_, ctx, Action::kCancel, [&](const Principal& who) {
+    *out = c_.set_priority(req->id(), req->priority(), who.name, who.role == Role::kAdmin);
+  });
+}
+grpc::Status ClientService::DeleteJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::DeleteJobResponse* out) {
+  return as(auth_, ctx, Action::kCancel, [&](const Principal& who) {
+    out->set_bytes_freed(c_.remove(req->id(), who.name, who.role == Role::kAdmin));
+    out->set_id(req->id());
+  });
 }
 grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::FetchImageRequest* req, v1::Image* out) {
   return as(auth_, ctx, Action::kRead, [&](const Principal&) {

@@ -24,6 +24,9 @@ class ClientService final : public v1::Tessera::Service {
   grpc::Status ListJobs(grpc::ServerContext*, const v1::ListJobsRequest*, v1::JobList* out) override;
   grpc::Status WatchJob(grpc::ServerContext* ctx, const v1::JobId* req, grpc::ServerWriter<v1::JobStatus>* w) override;
   grpc::Status CancelJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) override;
+  grpc::Status RequeueJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) override;
+  grpc::Status SetJobPriority(grpc::ServerContext*, const v1::SetPriorityRequest* req, v1::JobStatus* out) override;
+  grpc::Status DeleteJob(grpc::ServerContext*, const v1::JobId* req, v1::DeleteJobResponse* out) override;
   grpc::Status FetchImage(grpc::ServerContext*, const v1::FetchImageRequest* req, v1::Image* out) override;
   grpc::Status FetchImageChunks(grpc::ServerContext* ctx, const v1::FetchImageRequest* req,
                                 grpc::ServerWriter<v1::ImageChunk>* w) override;

@@ -140,6 +140,35 @@ std::unique_ptr<ImageSink::Reader> DiskImageSink::open(const std::string& job) c
   return std::make_unique<FileReader>(fd, uint64_t(st.st_size), version);
 }
 
+uint64_t DiskImageSink::remove(const std::string& job) {
+  forget_preview(job);
+  const fs::path dir = fs::path(dir_) / job;
+  uint64_t bytes = 0;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::recursive_directory_iterator();
+       it.increment(ec))
+    if (it->is_regular_file(ec)) bytes += it->file_size(ec);
+  fs::remove_all(dir, ec);
+  if (ec) throw std::runtime_error("cannot remove " + dir.string() + ": " + ec.message());
+  return bytes;
+}
+
+void DiskImageSink::remove_unknown(const std::function<bool(const std::string& job)>& known) {
+  std::error_code ec;
+  std::vector<std::string> gone;
+  for (const auto& entry : fs::directory_iterator(dir_, ec))
+    if (!known(entry.path().filename().string())) gone.push_back(entry.path().filename().string());
+  for (const std::string& job : gone) try {
+      remove(job);
+    } catch (const std::exception&) {  // tried again at the next start
+    }
+}
+
+uint64_t MemoryImageSink::remove(const std::string& job) {
+  std::lock_guard<std::mutex> lock(mu_);
+  return images_.erase(job);
+}
+
 void MemoryImageSink::write(const std::string& job, const Film& film, const ImageMetadata& meta) {
   std::lock_guard<std::mutex> lock(mu_);
   Entry& e = images_[job];

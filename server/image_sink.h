@@ -45,6 +45,12 @@ class ImageSink {
   // The last image written, as EXR bytes and a PNG preview; empty if none was written.
   virtual std::string exr(const std::string& job) const = 0;
   virtual std::string png(const std::string& job) const = 0;
+  // The job's images are gone (a deleted job); returns the bytes freed. Throws
+  // std::runtime_error when they cannot be removed.
+  virtual uint64_t remove(const std::string& job) = 0;
+  // Removes every job's folder that `known` says no longer names a job (what a crash in the
+  // middle of a delete left, after its record was gone).
+  virtual void remove_unknown(const std::function<bool(const std::string& job)>&) {}
 };
 
 // <dir>/<job>/image.exr, written band by band to a temporary file and renamed into place,
@@ -58,6 +64,9 @@ class DiskImageSink : public ImageSink {
   std::string exr(const std::string& job) const override;
   std::string png(const std::string& job) const override;
   std::unique_ptr<Reader> open(const std::string& job) const override;
+  // The job's whole folder (<dir>/<job>/: its image, preview and checkpoint).
+  uint64_t remove(const std::string& job) override;
+  void remove_unknown(const std::function<bool(const std::string& job)>& known) override;
   std::string path(const std::string& job, const char* file) const;
 
  private:
@@ -79,6 +88,7 @@ class MemoryImageSink : public ImageSink {
   std::string exr(const std::string&) const override { return {}; }
   std::string png(const std::string&) const override { return {}; }
   std::unique_ptr<Reader> open(const std::string&) const override { return nullptr; }
+  uint64_t remove(const std::string& job) override;
   // The last film written for the job (an empty film if none), and how many were written.
   Film film(const std::string& job) const;
   ImageMetadata metadata(const std::string& job) const;

@@ -11,6 +11,15 @@
 
 namespace tessera {
 
+v1::Image whole_image(const ImageSink& sink, const std::string& job, bool exr, bool png, const ImageStreamHeader& h) {
+  v1::Image img;
+  if (exr) img.set_exr(sink.exr(job));
+  if (png) img.set_png(sink.png(job));
+  img.set_frame_passes_done(h.frame_passes_done);
+  img.set_final(h.final);
+  return img;
+}
+
 void stream_image(ImageSink::Reader& file, const v1::FetchImageRequest& req, const ImageStreamHeader& header,
                   size_t chunk_bytes, const std::function<bool(const v1::ImageChunk&)>& write) {
   const uint64_t size = file.size();

@@ -58,6 +58,9 @@ struct Job {
     uint64_t checkpoints = 0, checkpoint_merges = 0;
   } written;
   std::atomic<bool> end_recorded{false};  // the job database has its end
+  // JobControl: a requeue or delete of it is under way; it is being deleted (no image or
+  // checkpoint of it is begun again).
+  bool changing = false, removed = false;
 
   State state() const { return state_; }
   bool live() const { return job_live(state_); }
@@ -99,6 +102,7 @@ struct Sequence {
   std::string error;
   double submitted = 0, started = 0, finished_at = 0;
   bool end_recording = false, end_recorded = false;
+  bool changing = false, removed = false;  // as Job's
 
   // One frame's counts, as its plan will have them, before any frame has started.
   uint64_t frame_samples() const { return uint64_t(settings.effective_window().area()) * uint64_t(settings.spp); }

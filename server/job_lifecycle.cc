@@ -1,6 +1,7 @@
 #include "server/job_lifecycle.h"
 
 #include "core/util/invariant.h"
+#include "server/job_control.h"
 #include "server/request_error.h"
 
 namespace tessera {
@@ -69,11 +70,7 @@ bool JobLifecycle::finish_if_done(Job& job, double now, Effects& fx) {
 }
 
 void JobLifecycle::cancel(const std::string& id, const std::string& requester, bool any, double now, Effects& fx) {
-  auto refuse_other = [&](const std::string& owner) {
-    if (!any && owner != requester)
-      throw RequestError(RequestError::Code::kPermissionDenied,
-                         "job " + id + " belongs to '" + owner + "': a client may cancel only its own jobs");
-  };
+  auto refuse_other = [&](const std::string& owner) { refuse_unless_owner(id, owner, requester, any, "cancel"); };
   if (Sequence* s = jobs_.find_sequence(id)) {
     refuse_other(s->meta.owner);
     if (s->live()) end(*s, v1::JobStatus::CANCELLED, now, fx);
@@ -101,7 +98,7 @@ void JobLifecycle::task_failed(Job& job, uint64_t worker, const std::string& err
 
 std::optional<RowEnd> JobLifecycle::sequence_end_due(const std::string& id) {
   Sequence* s = jobs_.find_sequence(id);
-  if (!s || s->live() || s->end_recorded || s->end_recording) return std::nullopt;
+  if (!s || s->live() || s->end_recorded || s->end_recording || s->removed) return std::nullopt;
   if (s->state() == v1::JobStatus::DONE)
     for (const auto& j : s->jobs)
       if (!j || !j->end_recorded) return std::nullopt;  // a frame's final checkpoint is not on disk yet

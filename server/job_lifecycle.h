@@ -24,6 +24,9 @@ class JobLifecycle {
   // A job or sequence read back after a restart comes back in the state it was in.
   void restore(Job& job, Job::State state) { job.state_ = state; }
   void restore(Sequence& s, Sequence::State state) { s.state_ = state; }
+  // A requeued job or sequence (JobControl) is live again: RUNNING once it has rendered.
+  void requeue(Job& job, bool rendered) { job.state_ = rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED; }
+  void requeue(Sequence& s, bool rendered) { s.state_ = rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED; }
   void start(Job& job, double now);  // its first lease
   void start(Sequence& s, double now);  // its first frame
 

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 
+#include "server/request_error.h"
+
 namespace tessera {
 
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
@@ -34,14 +36,32 @@ QueueDepth queue_depth(const JobTable& jobs, const LeaseTable& leases, double th
 }
 
 std::vector<v1::JobStatus> job_list(const JobTable& jobs, const LeaseTable& leases, double now) {
-  std::vector<std::pair<uint64_t, v1::JobStatus>> out;  // stills and sequences; frames are in their sequences
-  for (const auto& [id, job] : jobs.jobs())
-    if (job->sequence.empty()) out.emplace_back(job->meta.seq, job_status(jobs, leases, id, false, now));
-  for (const auto& [id, s] : jobs.sequences()) out.emplace_back(s->meta.seq, job_status(jobs, leases, id, false, now));
-  std::sort(out.begin(), out.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
-  std::vector<v1::JobStatus> statuses;
-  for (auto& [seq, st] : out) statuses.push_back(std::move(st));
+  std::vector<v1::JobStatus> statuses;  // stills and sequences; frames are in their sequences
+  for (const std::string& id : jobs.page(0, jobs.listed())) statuses.push_back(job_status(jobs, leases, id, false, now));
   return statuses;
+}
+
+v1::JobList job_page(const JobTable& jobs, const LeaseTable& leases, uint32_t page_size, const std::string& page_token,
+                     double now) {
+  uint64_t after = 0;  // the token: the submission number of the page's last job
+  if (!page_token.empty()) {
+    size_t used = 0;
+    try {
+      after = std::stoull(page_token, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != page_token.size())
+      throw RequestError(RequestError::Code::kInvalidArgument, "bad page_token '" + page_token.substr(0, 64) + "'");
+  }
+  const size_t n = page_size == 0 ? jobs.listed() : std::min(page_size, kMaxPage);
+  v1::JobList out;
+  out.set_total(jobs.listed());
+  const std::vector<std::string> ids = jobs.page(after, n);
+  for (const std::string& id : ids) *out.add_jobs() = job_status(jobs, leases, id, false, now);
+  if (!ids.empty() && !jobs.page(jobs.seq_of(ids.back()), 1).empty())
+    out.set_next_page_token(std::to_string(jobs.seq_of(ids.back())));
+  return out;
 }
 
 }  // namespace tessera

@@ -36,5 +36,10 @@ QueueDepth queue_depth(const JobTable& jobs, const LeaseTable& leases, double th
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
                          double now);
 std::vector<v1::JobStatus> job_list(const JobTable& jobs, const LeaseTable& leases, double now);
+// A page of the list (ListJobsRequest): `page_size` jobs (0: all; at most kMaxPage) after the
+// one `page_token` names. Throws RequestError (kInvalidArgument) for a token it never gave.
+constexpr uint32_t kMaxPage = 1000;
+v1::JobList job_page(const JobTable& jobs, const LeaseTable& leases, uint32_t page_size, const std::string& page_token,
+                     double now);
 
 }  // namespace tessera

@@ -87,6 +87,15 @@ SqliteJobStore::SqliteJobStore(const std::string& data_dir) : dir_(data_dir) {
   bool has_frames = false;
   for (Statement q(db_, "PRAGMA table_info(jobs)"); q.step();) has_frames |= q.column_text(1) == "frames";
   if (!has_frames) exec("ALTER TABLE jobs ADD COLUMN frames TEXT NOT NULL DEFAULT ''");
+  // ... and the wall-clock time of an end (retention): ended jobs of an older database get a
+  // full retention period from now.
+  bool has_ended_at = false;
+  for (Statement q(db_, "PRAGMA table_info(jobs)"); q.step();) has_ended_at |= q.column_text(1) == "ended_at";
+  if (!has_ended_at) {
+    exec("ALTER TABLE jobs ADD COLUMN ended_at REAL NOT NULL DEFAULT 0");
+    Statement(db_, "UPDATE jobs SET ended_at = ?1 WHERE state >= 2").real(1, wall()).step();
+  }
+  exec("CREATE INDEX IF NOT EXISTS jobs_scene ON jobs(scene_hash)");
 }
 
 SqliteJobStore::~SqliteJobStore() { sqlite3_close(db_); }
@@ -144,18 +153,69 @@ void SqliteJobStore::add(const StoredJob& j) {
 
 void SqliteJobStore::end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) {
   MutexLock lock(mu_);
-  Statement(db_, "UPDATE jobs SET state = ?2, error = ?3, elapsed = ?4 WHERE id = ?1")
+  // (an end written again, a liar's tiles found in it, keeps its time)
+  Statement(db_,
+            "UPDATE jobs SET state = ?2, error = ?3, elapsed = ?4, "
+            "ended_at = CASE WHEN ended_at > 0 THEN ended_at ELSE ?5 END WHERE id = ?1")
       .text(1, id)
       .integer(2, state)
       .text(3, error)
       .real(4, elapsed)
+      .real(5, wall())
       .step();
+}
+
+void SqliteJobStore::remove(const std::string& id, const std::vector<std::string>& with_checkpoints) {
+  {
+    MutexLock lock(mu_);
+    Statement(db_, "DELETE FROM jobs WHERE id = ?1").text(1, id).step();
+  }
+  if (after_row_commit) after_row_commit();
+  for (const std::string& j : with_checkpoints)
+    for (const char* name : {"checkpoint", "checkpoint.tmp"}) {
+      std::error_code ec;
+      fs::remove(fs::path(dir_) / "jobs" / j / name, ec);
+      if (ec) throw std::runtime_error("cannot remove " + (fs::path(dir_) / "jobs" / j / name).string() + ": " + ec.message());
+    }
+}
+
+void SqliteJobStore::requeue(const std::string& id) {
+  {
+    MutexLock lock(mu_);
+    Statement(db_, "UPDATE jobs SET state = ?2, error = '', elapsed = 0, ended_at = 0 WHERE id = ?1")
+        .text(1, id)
+        .integer(2, v1::JobStatus::QUEUED)
+        .step();
+  }
+  if (after_row_commit) after_row_commit();
+}
+
+void SqliteJobStore::set_priority(const std::string& id, int32_t priority) {
+  MutexLock lock(mu_);
+  Statement(db_, "UPDATE jobs SET priority = ?2 WHERE id = ?1").text(1, id).integer(2, priority).step();
+}
+
+size_t SqliteJobStore::scene_users(const std::string& hash) const {
+  MutexLock lock(mu_);
+  Statement q(db_, "SELECT count(*) FROM jobs WHERE scene_hash = ?1");
+  q.text(1, hash).step();
+  return size_t(q.column_int(0));
+}
+
+std::vector<std::string> SqliteJobStore::ended_before(double age, size_t limit) const {
+  MutexLock lock(mu_);
+  Statement q(db_, "SELECT id FROM jobs WHERE state >= 2 AND ended_at > 0 AND ended_at < ?1 ORDER BY ended_at LIMIT ?2");
+  q.real(1, wall() - age).integer(2, int64_t(limit));
+  std::vector<std::string> out;
+  while (q.step()) out.push_back(q.column_text(0));
+  return out;
 }
 
 std::vector<StoredJob> SqliteJobStore::jobs() const {
   MutexLock lock(mu_);
   Statement q(db_,
-              "SELECT id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, frames "
+              "SELECT id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, frames, "
+              "ended_at "
               "FROM jobs ORDER BY seq");
   std::vector<StoredJob> out;
   while (q.step()) {
@@ -179,6 +239,7 @@ std::vector<StoredJob> SqliteJobStore::jobs() const {
     } catch (const std::exception& e) {
       throw std::runtime_error("job database: job " + j.meta.id + ": unreadable frames: " + e.what());
     }
+    j.ended_at = q.column_real(12);
     out.push_back(std::move(j));
   }
   return out;
@@ -215,17 +276,6 @@ class FileCheckpoint : public CheckpointFile {
   AtomicFile file_;
   std::function<void()> before_rename_;
 };
-
-class MemoryCheckpoint : public CheckpointFile {
- public:
-  MemoryCheckpoint(std::function<void(std::string)> done) : done_(std::move(done)) {}
-  void append(const std::string& bytes) override { bytes_ += bytes; }
-  void commit() override { done_(std::move(bytes_)); }
-
- private:
-  std::string bytes_;
-  std::function<void(std::string)> done_;
-};
 }  // namespace
 
 std::unique_ptr<CheckpointFile> SqliteJobStore::begin_checkpoint(const std::string& id) const {
@@ -255,77 +305,6 @@ void SqliteJobStore::discard_partial_writes(const std::string& id) const {
     std::error_code ec;
     fs::remove(fs::path(dir_) / "jobs" / id / tmp, ec);
   }
-}
-
-// ---- MemoryJobStore ----
-
-uint64_t MemoryJobStore::next_generation() { return ++generation_; }
-
-void MemoryJobStore::add(const StoredJob& job) {
-  MutexLock lock(mu_);
-  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
-  for (const StoredJob& j : rows_)  // as SQLite's primary key
-    if (j.meta.id == job.meta.id) throw std::runtime_error("job database: UNIQUE constraint failed: jobs.id");
-  StoredJob& row = rows_.emplace_back(job);
-  row.meta.scene_bytes = 0;  // not stored: a restart counts the bundle again
-}
-
-void MemoryJobStore::end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) {
-  MutexLock lock(mu_);
-  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
-  for (StoredJob& j : rows_)
-    if (j.meta.id == id) {
-      j.state = state;
-      j.error = error;
-      j.elapsed = elapsed;
-    }
-}
-
-std::vector<StoredJob> MemoryJobStore::jobs() const {
-  std::vector<StoredJob> rows;
-  {
-    MutexLock lock(mu_);
-    rows = rows_;
-  }
-  std::stable_sort(rows.begin(), rows.end(), [](const StoredJob& a, const StoredJob& b) { return a.meta.seq < b.meta.seq; });
-  return rows;
-}
-
-void MemoryJobStore::ping() const {
-  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
-}
-
-std::unique_ptr<CheckpointFile> MemoryJobStore::begin_checkpoint(const std::string& id) const {
-  {
-    MutexLock lock(mu_);
-    if (fail_writes) throw std::runtime_error("checkpoint: disk I/O error (a test's)");
-  }
-  return std::make_unique<MemoryCheckpoint>([this, id](std::string bytes) {
-    MutexLock lock(mu_);
-    if (fail_writes) throw std::runtime_error("checkpoint: disk I/O error (a test's)");
-    checkpoints_[id] = std::move(bytes);
-  });
-}
-
-std::optional<double> MemoryJobStore::read_checkpoint(const std::string& id, FramePlan& plan, bool with_film) const {
-  const std::optional<std::string> bytes = checkpoint_bytes(id);
-  if (!bytes) return std::nullopt;
-  return tessera::read_checkpoint(*bytes, plan, with_film);
-}
-
-std::optional<std::string> MemoryJobStore::checkpoint_bytes(const std::string& id) const {
-  MutexLock lock(mu_);
-  auto it = checkpoints_.find(id);
-  if (it == checkpoints_.end()) return std::nullopt;
-  return it->second;
-}
-
-void MemoryJobStore::set_checkpoint_bytes(const std::string& id, std::optional<std::string> bytes) {
-  MutexLock lock(mu_);
-  if (bytes)
-    checkpoints_[id] = std::move(*bytes);
-  else
-    checkpoints_.erase(id);
 }
 
 void write_checkpoint(const JobStore& store, const std::string& id, const FramePlan& plan, double elapsed) {

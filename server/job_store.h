@@ -9,6 +9,7 @@
 // keeping them would cost a synchronous write per task. docs/architecture.md has the why.
 #pragma once
 
+#include <chrono>
 #include <functional>
 #include <map>
 #include <memory>
@@ -29,8 +30,17 @@ struct StoredJob {
   v1::JobStatus::State state = v1::JobStatus::QUEUED;
   std::string error;
   double elapsed = 0;  // render seconds, once the job has ended
+  double ended_at = 0;  // when its end was recorded (JobStore::wall), 0 while live
   // A sequence's frames (its frames' jobs have no rows: each is found by its checkpoint).
   std::vector<int> frames;
+};
+
+// A job row's end, to write (again: an ended job's error changed when a liar's tiles are in it).
+struct RowEnd {
+  std::string id;
+  v1::JobStatus::State state = v1::JobStatus::QUEUED;
+  std::string error;
+  double elapsed = 0;
 };
 
 // A checkpoint being written: CheckpointEncoder's pieces in order, then commit() puts it in
@@ -51,6 +61,18 @@ class JobStore {
   virtual void add(const StoredJob& job) = 0;
   virtual void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) = 0;
   virtual std::vector<StoredJob> jobs() const = 0;  // in submission order
+  // The job's row is gone (durably) when it returns, then the checkpoints of the jobs named
+  // in `with_checkpoints` (the job's own, a sequence's frames'). Throws std::runtime_error.
+  virtual void remove(const std::string& id, const std::vector<std::string>& with_checkpoints) = 0;
+  // An ended job is live again (QUEUED, no error, no end time): durable when it returns, so
+  // a restart takes it up from its checkpoint. Throws std::runtime_error.
+  virtual void requeue(const std::string& id) = 0;
+  virtual void set_priority(const std::string& id, int32_t priority) = 0;
+  // How many rows name this scene.
+  virtual size_t scene_users(const std::string& hash) const = 0;
+  // Ended jobs whose end was recorded more than `age` seconds ago, oldest first, at most
+  // `limit` of them (retention: --keep-ended).
+  virtual std::vector<std::string> ended_before(double age, size_t limit) const = 0;
   virtual void ping() const = 0;                    // a query; throws std::runtime_error if it fails
   // A new checkpoint of the job. Throws std::runtime_error naming the file.
   virtual std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const = 0;
@@ -61,6 +83,11 @@ class JobStore {
                                                 bool with_film = true) const = 0;
   // Removes what a crash cut short (temporary files of the job's checkpoint and image).
   virtual void discard_partial_writes(const std::string&) const {}
+
+  // The wall clock an end is stamped with (seconds since 1970): a seam for retention tests.
+  std::function<double()> wall = [] {
+    return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  };
 };
 
 class SqliteJobStore : public JobStore {
@@ -75,6 +102,11 @@ class SqliteJobStore : public JobStore {
   void add(const StoredJob& job) override;
   void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) override;
   std::vector<StoredJob> jobs() const override;
+  void remove(const std::string& id, const std::vector<std::string>& with_checkpoints) override;
+  void requeue(const std::string& id) override;
+  void set_priority(const std::string& id, int32_t priority) override;
+  size_t scene_users(const std::string& hash) const override;
+  std::vector<std::string> ended_before(double age, size_t limit) const override;
   void ping() const override;
   // Written to a temporary file, synced, renamed into place.
   std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
@@ -82,8 +114,9 @@ class SqliteJobStore : public JobStore {
   void discard_partial_writes(const std::string& id) const override;
   std::string checkpoint_path(const std::string& id) const;
 
-  // Test seam: runs between a checkpoint's temporary file being written and its rename.
-  std::function<void()> before_checkpoint_rename;
+  // Test seams: runs between a checkpoint's temporary file being written and its rename;
+  // after remove()'s and requeue()'s row change, before anything else.
+  std::function<void()> before_checkpoint_rename, after_row_commit;
 
  private:
   void exec(const char* sql) const;
@@ -100,6 +133,11 @@ class MemoryJobStore : public JobStore {
   void add(const StoredJob& job) override;
   void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) override;
   std::vector<StoredJob> jobs() const override;
+  void remove(const std::string& id, const std::vector<std::string>& with_checkpoints) override;
+  void requeue(const std::string& id) override;
+  void set_priority(const std::string& id, int32_t priority) override;
+  size_t scene_users(const std::string& hash) const override;
+  std::vector<std::string> ended_before(double age, size_t limit) const override;
   void ping() const override;
   std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
   std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;

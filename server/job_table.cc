@@ -18,15 +18,53 @@ std::string JobTable::new_id() {
 Job& JobTable::add(std::shared_ptr<Job> job) {
   TESSERA_INVARIANT(job && !jobs_.count(job->id()), "a job added twice");
   Job& j = *job;
+  if (j.sequence.empty()) listed_[j.meta.seq] = j.id();
   jobs_[j.id()] = std::move(job);
   return j;
 }
 
-Sequence& JobTable::add(std::unique_ptr<Sequence> sequence) {
+Sequence& JobTable::add(std::shared_ptr<Sequence> sequence) {
   TESSERA_INVARIANT(sequence && !sequences_.count(sequence->id()), "a sequence added twice");
   Sequence& s = *sequence;
+  listed_[s.meta.seq] = s.id();
   sequences_[s.id()] = std::move(sequence);
   return s;
+}
+
+std::shared_ptr<Job> JobTable::remove_job(const std::string& id) {
+  auto it = jobs_.find(id);
+  if (it == jobs_.end()) return nullptr;
+  std::shared_ptr<Job> job = std::move(it->second);
+  jobs_.erase(it);
+  if (job->sequence.empty()) listed_.erase(job->meta.seq);
+  return job;
+}
+
+std::shared_ptr<Sequence> JobTable::remove_sequence(const std::string& id) {
+  auto it = sequences_.find(id);
+  if (it == sequences_.end()) return nullptr;
+  std::shared_ptr<Sequence> s = std::move(it->second);
+  sequences_.erase(it);
+  listed_.erase(s->meta.seq);
+  return s;
+}
+
+void JobTable::replace(std::shared_ptr<Job> job) {
+  auto it = jobs_.find(job->id());
+  TESSERA_INVARIANT(it != jobs_.end(), "job " + job->id() + " replaced but never added");
+  it->second = std::move(job);
+}
+
+std::vector<std::string> JobTable::page(uint64_t after_seq, size_t n) const {
+  std::vector<std::string> out;
+  for (auto it = listed_.upper_bound(after_seq); it != listed_.end() && out.size() < n; ++it) out.push_back(it->second);
+  return out;
+}
+
+uint64_t JobTable::seq_of(const std::string& id) const {
+  if (const Sequence* s = find_sequence(id)) return s->meta.seq;
+  const Job* j = find_job(id);
+  return j && j->sequence.empty() ? j->meta.seq : 0;
 }
 
 Job* JobTable::find_job(const std::string& id) const {
@@ -37,6 +75,11 @@ Job* JobTable::find_job(const std::string& id) const {
 Sequence* JobTable::find_sequence(const std::string& id) const {
   auto it = sequences_.find(id);
   return it == sequences_.end() ? nullptr : it->second.get();
+}
+
+std::shared_ptr<Sequence> JobTable::shared_sequence(const std::string& id) const {
+  auto it = sequences_.find(id);
+  return it == sequences_.end() ? nullptr : it->second;
 }
 
 std::shared_ptr<Job> JobTable::shared(const std::string& id) const {
@@ -71,6 +114,19 @@ Job& JobTable::frame_job(const std::string& id, std::optional<int> frame) const 
                        "job " + id + ": frame " + std::to_string(*frame) +
                            (s->live() ? " has not started yet" : " was never rendered (the job ended first)"));
   return *j;
+}
+
+std::set<std::string> JobTable::scene_hashes() const {
+  std::set<std::string> out;
+  for (const auto& [id, j] : jobs_) out.insert(j->meta.scene_hash);
+  for (const auto& [id, s] : sequences_) out.insert(s->meta.scene_hash);
+  return out;
+}
+
+bool JobTable::names(const std::string& folder) const {
+  if (jobs_.count(folder) || sequences_.count(folder)) return true;
+  const size_t f = folder.rfind("-f");
+  return f != std::string::npos && sequences_.count(folder.substr(0, f));
 }
 
 Load JobTable::load(const std::string& owner) const {

@@ -6,6 +6,7 @@
 #include <memory>
 #include <optional>
 #include <random>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -33,10 +34,17 @@ class JobTable {
   void saw_seq(uint64_t seq) { next_seq_ = std::max(next_seq_, seq + 1); }  // restored jobs
 
   Job& add(std::shared_ptr<Job> job);
-  Sequence& add(std::unique_ptr<Sequence> sequence);
+  Sequence& add(std::shared_ptr<Sequence> sequence);
+  // A job (a still or a frame) or a sequence (its frames stay until removed too) is
+  // forgotten: a deleted job's. Returns what was removed (null if none).
+  std::shared_ptr<Job> remove_job(const std::string& id);
+  std::shared_ptr<Sequence> remove_sequence(const std::string& id);
+  // A job made anew (a requeue's, its plan read back) in place of the one with its id.
+  void replace(std::shared_ptr<Job> job);
 
   Job* find_job(const std::string& id) const;  // null if none
   Sequence* find_sequence(const std::string& id) const;
+  std::shared_ptr<Sequence> shared_sequence(const std::string& id) const;
   std::shared_ptr<Job> shared(const std::string& id) const;
   // Throws RequestError (kNotFound) naming the id.
   Job& job(const std::string& id) const;
@@ -45,14 +53,26 @@ class JobTable {
   Job& frame_job(const std::string& id, std::optional<int> frame) const;
 
   const std::map<std::string, std::shared_ptr<Job>>& jobs() const { return jobs_; }
-  const std::map<std::string, std::unique_ptr<Sequence>>& sequences() const { return sequences_; }
+  const std::map<std::string, std::shared_ptr<Sequence>>& sequences() const { return sequences_; }
+  // Stills and sequences (not frames) in submission order: up to `n` ids after submission
+  // number `after_seq`, and their count.
+  std::vector<std::string> page(uint64_t after_seq, size_t n) const;
+  size_t listed() const { return listed_.size(); }
+  // The submission number of a listed job or sequence (0 if none).
+  uint64_t seq_of(const std::string& id) const;
+
+  // The scenes every job and sequence names (ended ones' too: kept until deleted).
+  std::set<std::string> scene_hashes() const;
+  // Whether a job's folder name is a job's, a sequence's, or a frame's of a sequence here.
+  bool names(const std::string& folder) const;
 
   // The whole load, and `owner`'s part of it.
   Load load(const std::string& owner = "") const;
 
  private:
   std::map<std::string, std::shared_ptr<Job>> jobs_;  // stills and frames
-  std::map<std::string, std::unique_ptr<Sequence>> sequences_;
+  std::map<std::string, std::shared_ptr<Sequence>> sequences_;
+  std::map<uint64_t, std::string> listed_;  // stills and sequences by submission number
   uint64_t next_seq_ = 1;
   std::mt19937_64 ids_{std::random_device{}()};
 };

@@ -3,6 +3,7 @@
 #include <signal.h>
 
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
 #include <cstdlib>
@@ -32,6 +33,23 @@ bool is_loopback(const std::string& host) {
   return host.rfind("127.", 0) == 0 || host == "localhost" || host == "::1" || host == "[::1]";
 }
 
+// "7d", "12h", "30m", "45s" or plain seconds; "forever" (or 0) is no limit.
+double parse_keep(const std::string& s) {
+  if (s == "forever") return 0;
+  size_t end = 0;
+  double v = 0;
+  try {
+    v = std::stod(s, &end);
+  } catch (const std::exception&) {
+    end = 0;
+  }
+  const std::string unit = s.substr(end);
+  const double scale = unit == "d" ? 86400 : unit == "h" ? 3600 : unit == "m" ? 60 : unit == "s" || unit.empty() ? 1 : -1;
+  if (end == 0 || scale < 0 || !(v >= 0) || v * scale > 1e10)
+    throw CLI::ValidationError("--keep-ended", "expected a duration such as 7d, 12h, 30m, 45s or forever, got '" + s + "'");
+  return v * scale;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -53,8 +71,14 @@ int main(int argc, char** argv) {
                  "differs from the coordinator's own render is quarantined (0 turns it off)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
-  int write_delay_ms = 0;  // for the crash tests: a window in which to kill mid-write
+  int write_delay_ms = 0, commit_delay_ms = 0;  // for the crash tests: windows in which to kill
   app.add_option("--test-checkpoint-delay-ms", write_delay_ms)->group("")->check(CLI::Range(0, 60000));
+  app.add_option("--test-commit-delay-ms", commit_delay_ms)->group("")->check(CLI::Range(0, 60000));
+  std::string keep_ended = "7d";
+  app.add_option("--keep-ended", keep_ended,
+                 "delete ended jobs (record, images, checkpoints, scene if no other job uses it) this long after "
+                 "they end: 7d, 12h, 30m, 45s, or forever")
+      ->capture_default_str();
   app.add_option("--lease-seconds", opt.lease_seconds, "lease length; a silent worker's task moves on after it")
       ->capture_default_str()
       ->check(CLI::Range(0.1, 3600.0));
@@ -98,6 +122,13 @@ int main(int argc, char** argv) {
   if (tokens_file.empty())
     if (const char* env = std::getenv("TESSERA_TOKENS_FILE")) tokens_file = env;
   opt.heartbeat_seconds = std::min(2.0, opt.lease_seconds / 4);
+  double keep_seconds = 0;
+  try {
+    keep_seconds = parse_keep(keep_ended);
+  } catch (const CLI::ValidationError& e) {
+    spdlog::error("{}", e.what());
+    return 2;
+  }
 
   // Block the stop signals in every thread; main waits for them below.
   sigset_t sigs;
@@ -129,10 +160,9 @@ int main(int argc, char** argv) {
       tls.pem_key_cert_pairs.push_back({tessera::read_file_bytes(tls_key), tessera::read_file_bytes(tls_cert)});
       credentials = grpc::SslServerCredentials(tls);
     }
-    if (write_delay_ms > 0)
-      opt.before_checkpoint_rename = [write_delay_ms] {
-        std::this_thread::sleep_for(std::chrono::milliseconds(write_delay_ms));
-      };
+    const auto sleep_ms = [](int ms) { return [ms] { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }; };
+    if (write_delay_ms > 0) opt.before_checkpoint_rename = sleep_ms(write_delay_ms);
+    if (commit_delay_ms > 0) opt.after_row_commit = sleep_ms(commit_delay_ms);
     tessera::Coordinator coordinator(opt);
     if (const uint64_t restored = coordinator.counters().jobs_restored) {
       size_t live = 0;
@@ -166,11 +196,28 @@ int main(int argc, char** argv) {
         std::this_thread::sleep_for(std::chrono::milliseconds(200));
       }
     });
+    std::thread janitor([&] {  // --keep-ended: a delete may wait for a writer, so not on the reaper's tick
+      const double period = std::clamp(keep_seconds / 4, 1.0, 60.0);
+      for (auto next = std::chrono::steady_clock::now(); keep_seconds > 0 && !stopping;) {
+        if (std::chrono::steady_clock::now() >= next) {
+          for (const std::string& id : coordinator.ended_before(keep_seconds)) try {
+              coordinator.remove(id);
+              spdlog::info("job {}: deleted, ended over --keep-ended {} ago", id, keep_ended);
+            } catch (const std::exception& e) {
+              spdlog::warn("job {}: kept past --keep-ended: {}", id, e.what());
+            }
+          next = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+                                                        std::chrono::duration<double>(period));
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+      }
+    });
     int sig = 0;
     sigwait(&sigs, &sig);
     spdlog::info("signal {}, stopping", sig);
     stopping = true;
     reaper.join();
+    janitor.join();
     server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
     status.stop();
     coordinator.checkpoint_all();  // results merged since the last checkpoint are kept too

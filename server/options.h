@@ -42,9 +42,11 @@ struct CoordinatorOptions {
   // Pieces of an image sent by FetchImageChunks (a setting so tests can make them small).
   size_t image_chunk_bytes = size_t(1) << 20;
   // Test seams: between an image snapshot leaving the lock and its write; between a
-  // checkpoint's temporary file being written and its rename.
+  // checkpoint's temporary file being written and its rename; ...
   std::function<void()> before_image_write;
   std::function<void()> before_checkpoint_rename;
+  // ... after a delete's or requeue's database change, before the rest (files, memory).
+  std::function<void()> after_row_commit;
 };
 
 }  // namespace tessera

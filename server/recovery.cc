@@ -23,6 +23,15 @@ void Recovery::as_ended(Job& job, double now, double elapsed) {
   job.end_recorded = true;
 }
 
+void Recovery::resume(JobLifecycle& lifecycle, Job& j, double elapsed, bool checkpointed, double now) {
+  const bool rendered = j.plan.merges() > 0 || elapsed > 0;
+  lifecycle.requeue(j, rendered);
+  if (rendered) j.started = now - elapsed;
+  j.snaps.last_checkpoint = now;
+  j.snaps.checkpoint_merges = j.plan.merges();
+  if (checkpointed) j.written.checkpoints = 1, j.written.checkpoint_merges = j.plan.merges();
+}
+
 void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
   const std::string& id = row.meta.id;
   RenderSettings settings;
@@ -61,12 +70,7 @@ void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
   } catch (const std::exception& e) {
     lost = e.what();
   }
-  const bool rendered = j.plan.merges() > 0 || elapsed > 0;
-  p_.lifecycle.restore(j, rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED);
-  if (rendered) j.started = now - elapsed;
-  j.snaps.last_checkpoint = now;
-  j.snaps.checkpoint_merges = j.plan.merges();
-  if (checkpointed) j.written.checkpoints = 1, j.written.checkpoint_merges = j.plan.merges();
+  resume(p_.lifecycle, j, elapsed, checkpointed, now);
   if (!lost.empty()) {
     j.error = "cannot go on after the coordinator restarted: " + lost;
     p_.lifecycle.end(j, v1::JobStatus::FAILED, now, fx);
@@ -85,7 +89,7 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
     return;
   }
   p_.jobs.saw_seq(row.meta.seq);
-  Sequence& s = p_.jobs.add(std::make_unique<Sequence>(row.meta, settings, row.frames, row.state));
+  Sequence& s = p_.jobs.add(std::make_shared<Sequence>(row.meta, settings, row.frames, row.state));
   s.error = row.error;
   s.submitted = now;
   ++p_.counters.jobs_restored;

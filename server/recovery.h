@@ -31,6 +31,9 @@ class Recovery {
   };
   explicit Recovery(Parts parts) : p_(std::move(parts)) {}
   void restore(double now, Effects& fx);
+  // A job whose plan was read back from its checkpoint goes on (a restart's, a requeue's):
+  // live again, RUNNING if it rendered before, its checkpoint counted as on disk.
+  static void resume(JobLifecycle& lifecycle, Job& job, double elapsed, bool checkpointed, double now);
 
  private:
   void restore_job(const StoredJob& row, double now, Effects& fx);

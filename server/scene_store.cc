@@ -7,6 +7,7 @@
 #include "core/io/files.h"
 #include "core/scene/load.h"
 #include "core/scene/scene_error.h"
+#include "server/request_error.h"
 #include "wire.h"
 
 namespace tessera {
@@ -156,11 +157,12 @@ uint64_t SceneStore::restore(const std::string& hash) {
   return bytes;
 }
 
-void SceneStore::remove_unused() {
+void SceneStore::remove_unused(const std::set<std::string>& referenced) {
   std::lock_guard<std::mutex> lock(mu_);
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(dir_, ec)) {
-    if (scenes_.count(entry.path().filename().string())) continue;
+    const std::string name = entry.path().filename().string();
+    if (scenes_.count(name) || referenced.count(name)) continue;
     std::error_code rm;
     fs::remove_all(entry.path(), rm);
   }
@@ -189,10 +191,44 @@ void SceneStore::release(const std::string& hash) {
   std::lock_guard<std::mutex> lock(mu_);
   auto it = scenes_.find(hash);
   if (it == scenes_.end() || --it->second.uses > 0) return;
-  scenes_.erase(it);
-  // Under the lock: a keep() of the same bytes waits, then checks afresh.
+  scenes_.erase(it);  // (its files stay: remove_if_unused)
+}
+
+uint64_t SceneStore::remove_if_unused(const std::string& hash) {
+  if (hash.empty() || hash.find('/') != std::string::npos || hash.find("..") != std::string::npos) return 0;
+  std::lock_guard<std::mutex> lock(mu_);  // a keep() of the same bytes waits, then checks afresh
+  if (scenes_.count(hash)) return 0;
+  const fs::path dir = fs::path(dir_) / hash;
+  uint64_t bytes = 0;
   std::error_code ec;
-  fs::remove_all(fs::path(dir_) / hash, ec);
+  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::recursive_directory_iterator();
+       it.increment(ec))
+    if (it->is_regular_file(ec)) bytes += it->file_size(ec);
+  fs::remove_all(dir, ec);
+  fs::remove(fs::path(dir_) / (hash + ".bundle"), ec);  // kept whole before protocol 5
+  return bytes;
+}
+
+v1::SceneManifest served_manifest(const SceneStore& scenes, const std::string& hash) {
+  try {
+    return scenes.manifest(hash);
+  } catch (const std::out_of_range&) {
+    throw RequestError(RequestError::Code::kNotFound, "no scene with hash " + hash);
+  }
+}
+
+void serve_scene(const SceneStore& scenes, const v1::FetchSceneRequest& req, size_t chunk_bytes,
+                 const std::function<bool(const v1::SceneChunk&)>& write) {
+  try {
+    scenes.send(req, chunk_bytes, write);
+  } catch (const std::out_of_range&) {
+    throw RequestError(RequestError::Code::kNotFound, "no scene with hash " + req.scene_hash());
+  } catch (const WireError& e) {
+    throw RequestError(RequestError::Code::kInvalidArgument, e.what());
+  } catch (const std::runtime_error&) {
+    served_manifest(scenes, req.scene_hash());  // released while it was read: not found
+    throw;
+  }
 }
 
 }  // namespace tessera

@@ -9,6 +9,7 @@
 #include <functional>
 #include <map>
 #include <mutex>
+#include <set>
 #include <string>
 
 #include "core/scene/scene.h"
@@ -46,9 +47,13 @@ class SceneStore {
   // <hash>.bundle); returns what it weighs (bundle_bytes). Throws std::runtime_error (or
   // what keep() throws) when it is missing or its bytes no longer have this hash.
   uint64_t restore(const std::string& hash);
-  // Removes from the folder everything no kept scene needs: scenes of no live job, staging
-  // folders (after restore()s, before any upload).
-  void remove_unused();
+  // Removes from the folder everything no kept scene needs and `referenced` does not name
+  // (scenes of ended jobs, kept for requeue until the job is deleted), staging folders
+  // (after restore()s, before any upload).
+  void remove_unused(const std::set<std::string>& referenced);
+  // Removes the scene from disk unless a live job uses it (a deleted job's, which no other
+  // job names). Returns the bytes freed.
+  uint64_t remove_if_unused(const std::string& hash);
 
   // Throw std::out_of_range for a hash not kept.
   v1::SceneManifest manifest(const std::string& hash) const;
@@ -59,8 +64,9 @@ class SceneStore {
   // std::runtime_error (its files unreadable: released meanwhile, say).
   bool send(const v1::FetchSceneRequest& req, size_t chunk_bytes,
             const std::function<bool(const v1::SceneChunk&)>& write) const;
-  // Each add() is a use of the scene (a job); when its last use is released the scene
-  // is forgotten, and removed from disk.
+  // Each add() is a use of the scene (a live job); when its last use is released the scene
+  // is forgotten, but stays on disk: ended jobs keep it (a requeue goes on with it) until
+  // they are deleted (remove_if_unused).
   void release(const std::string& hash);
 
  private:
@@ -74,5 +80,11 @@ class SceneStore {
   mutable std::mutex mu_;
   std::map<std::string, Kept> scenes_;
 };
+
+// What the coordinator serves workers from the store: a kept scene's manifest, its pieces.
+// Throw RequestError (kNotFound: not kept, or released while read; kInvalidArgument).
+v1::SceneManifest served_manifest(const SceneStore& scenes, const std::string& hash);
+void serve_scene(const SceneStore& scenes, const v1::FetchSceneRequest& req, size_t chunk_bytes,
+                 const std::function<bool(const v1::SceneChunk&)>& write);
 
 }  // namespace tessera

@@ -36,11 +36,11 @@ Job* SequenceScheduler::start_next(Sequence& s, double now, Effects& fx) {
   return &j;
 }
 
-std::vector<std::pair<Sequence*, size_t>> SequenceScheduler::to_prepare() const {
-  std::vector<std::pair<Sequence*, size_t>> out;
+std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> SequenceScheduler::to_prepare() const {
+  std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> out;
   for (const auto& [id, s] : jobs_.sequences()) {
     const size_t i = next_unstarted(*s);
-    if (s->live() && !s->prepared && i < s->frames.size()) out.emplace_back(s.get(), i);
+    if (s->live() && !s->prepared && i < s->frames.size()) out.emplace_back(s, i);
   }
   return out;
 }

@@ -34,7 +34,7 @@ class SequenceScheduler {
   // `next` may have); frames.size() when every one has.
   static size_t next_unstarted(const Sequence& s);
   // Sequences whose next frame has no job made yet, and that frame's index.
-  std::vector<std::pair<Sequence*, size_t>> to_prepare() const;
+  std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> to_prepare() const;
   // A job made by make_frame() for frame `index`: kept unless the sequence moved on.
   void offer(Sequence& s, size_t index, std::shared_ptr<Job> job);
 

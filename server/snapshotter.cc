@@ -13,6 +13,7 @@ std::string without_dir(std::string message, const std::string& dir) {
 }
 
 bool Snapshotter::request(Job& job, bool image, bool checkpoint) const {
+  if (job.removed) return false;  // being deleted: nothing more of it is written
   job.snaps.image_due |= image;
   job.snaps.checkpoint_due |= checkpoint;
   if (job.snaps.writing) return false;
@@ -49,7 +50,7 @@ bool Snapshotter::checkpoint_if_changed(Job& job, double now) const {
 SnapshotPlan Snapshotter::next(Job& j, double now) const {
   SnapshotPlan p;
   Job::Snapshots& s = j.snaps;
-  if (!j.plan.has_film() || (!s.image_due && !s.checkpoint_due)) {  // nothing (more) to write
+  if (j.removed || !j.plan.has_film() || (!s.image_due && !s.checkpoint_due)) {  // nothing (more) to write
     s.image_due = s.checkpoint_due = s.writing = false;
     return p;
   }
@@ -105,6 +106,17 @@ void Snapshotter::written(Job& job, const SnapshotPlan& plan, const SnapshotOutc
   if (plan.ended && job.end_recorded && w.images && w.image_merges == plan.merges && w.checkpoints &&
       w.checkpoint_merges == plan.merges)
     job.plan.release_film();
+}
+
+bool SnapshotWriter::record_end(const RowEnd& row, const std::string& scene_hash) const {
+  try {
+    store_.end(row.id, row.state, row.error, row.elapsed);
+  } catch (const std::exception& e) {
+    spdlog::error("job {}: recording its end: {}", row.id, e.what());
+    return false;
+  }
+  if (hooks_.release_scene) hooks_.release_scene(scene_hash);
+  return true;
 }
 
 SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,

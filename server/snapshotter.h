@@ -88,6 +88,9 @@ class SnapshotWriter {
   // checkpoint). Never throws: failures are in the outcome (and logged).
   SnapshotOutcome write(Job& job, const SnapshotPlan& plan,
                         const std::function<bool(uint32_t band, BandCopy* out)>& copy_band) const;
+  // Records a sequence's end (its frames' are on disk) and drops its use of its scene;
+  // false (logged) when the record failed.
+  bool record_end(const RowEnd& row, const std::string& scene_hash) const;
 
  private:
   ImageSink& sink_;

@@ -225,6 +225,8 @@ std::string StatusHttp::metrics_text() const {
   counter("tessera_samples_merged_total", "Camera samples merged.", double(k.samples_merged));
   counter("tessera_jobs_submitted_total", "Jobs accepted.", double(k.jobs_submitted));
   counter("tessera_jobs_refused_total", "Jobs refused at submit.", double(k.jobs_refused));
+  counter("tessera_jobs_deleted_total", "Jobs deleted (tessera delete, or --keep-ended).", double(k.jobs_deleted));
+  counter("tessera_jobs_requeued_total", "FAILED or CANCELLED jobs requeued.", double(k.jobs_requeued));
   counter("tessera_images_written_total", "Progressive images written.", double(k.images_written));
   counter("tessera_image_errors_total", "Progressive image writes that failed.", double(k.image_errors));
   counter("tessera_checkpoints_written_total", "Film checkpoints written (crash safety).",

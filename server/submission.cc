@@ -37,7 +37,7 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
   if (a.frames.empty()) {
     sub.job = std::make_shared<Job>(meta, a.settings);
   } else {
-    sub.sequence = std::make_unique<Sequence>(meta, a.settings, a.frames);
+    sub.sequence = std::make_shared<Sequence>(meta, a.settings, a.frames);
     sub.sequence->prepared = SequenceScheduler::make_frame(*sub.sequence, 0);
   }
   StoredJob row;
@@ -48,6 +48,10 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
   } catch (const std::exception& e) {
     spdlog::error("submit: {}", e.what());
     scenes.release(row.meta.scene_hash);
+    try {  // off the disk too, unless a job the database knows names it (asked; if it cannot say, the next start prunes it)
+      if (store.scene_users(row.meta.scene_hash) == 0) scenes.remove_if_unused(row.meta.scene_hash);
+    } catch (const std::exception&) {
+    }
     throw RequestError(RequestError::Code::kResourceExhausted,
                        "the coordinator cannot record the job: " + without_dir(e.what(), data_dir));
   }

@@ -16,7 +16,7 @@ namespace tessera {
 
 struct Submission {
   std::shared_ptr<Job> job;            // a still
-  std::unique_ptr<Sequence> sequence;  // or a sequence, its first frame's job prepared
+  std::shared_ptr<Sequence> sequence;  // or a sequence, its first frame's job prepared
 };
 
 // `meta` has its id, owner and submission order; the rest comes from the request, whose

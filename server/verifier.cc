@@ -4,6 +4,7 @@
 #include <set>
 
 #include "core/util/log.h"
+#include "server/result_intake.h"
 #define XXH_INLINE_ALL  // header only: nothing to link
 #include <xxhash.h>
 
@@ -49,6 +50,14 @@ std::optional<Check> Verifier::pending(uint64_t check, uint64_t task_id) const {
   auto it = all.find(check);
   if (it == all.end() || it->second.lease != task_id) return std::nullopt;
   return it->second;
+}
+
+std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check) {
+  try {
+    return sums_digest(result_sums(result, size_t(from_proto(check.task->tile()).area())));
+  } catch (const WireError&) {
+    return std::nullopt;
+  }
 }
 
 Verifier::Verdict Verifier::judge(const Check& c, uint64_t digest, uint64_t checker, const Referee& referee) {

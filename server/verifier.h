@@ -23,6 +23,8 @@ using Referee = std::function<std::vector<PixelSums>(const v1::Task&)>;
 // Of the sums' values (not their padding or wire encoding, which may differ between two
 // honest workers): equal digests, equal bits.
 uint64_t sums_digest(const std::vector<PixelSums>& sums);
+// The digest of a check's result (decoded as for merging); nothing when it is malformed.
+std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check);
 
 class Verifier {
  public:

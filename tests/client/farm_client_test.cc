@@ -158,6 +158,15 @@ class RestartedOnceStub : public v1::Tessera::StubInterface {
   grpc::Status CancelJob(grpc::ClientContext* c, const v1::JobId& r, v1::JobStatus* o) override {
     return real_.CancelJob(c, r, o);
   }
+  grpc::Status RequeueJob(grpc::ClientContext* c, const v1::JobId& r, v1::JobStatus* o) override {
+    return real_.RequeueJob(c, r, o);
+  }
+  grpc::Status SetJobPriority(grpc::ClientContext* c, const v1::SetPriorityRequest& r, v1::JobStatus* o) override {
+    return real_.SetJobPriority(c, r, o);
+  }
+  grpc::Status DeleteJob(grpc::ClientContext* c, const v1::JobId& r, v1::DeleteJobResponse* o) override {
+    return real_.DeleteJob(c, r, o);
+  }
   grpc::ClientWriterInterface<v1::SceneChunk>* UploadSceneRaw(grpc::ClientContext* c, v1::SceneUpload* o) override {
     return real_.UploadScene(c, o).release();
   }
@@ -205,6 +214,9 @@ class RestartedOnceStub : public v1::Tessera::StubInterface {
   TESSERA_NO_ASYNC(GetJob, v1::JobId, v1::JobStatus)
   TESSERA_NO_ASYNC(ListJobs, v1::ListJobsRequest, v1::JobList)
   TESSERA_NO_ASYNC(CancelJob, v1::JobId, v1::JobStatus)
+  TESSERA_NO_ASYNC(RequeueJob, v1::JobId, v1::JobStatus)
+  TESSERA_NO_ASYNC(SetJobPriority, v1::SetPriorityRequest, v1::JobStatus)
+  TESSERA_NO_ASYNC(DeleteJob, v1::JobId, v1::DeleteJobResponse)
   TESSERA_NO_ASYNC(FetchImage, v1::FetchImageRequest, v1::Image)
 #undef TESSERA_NO_ASYNC
   grpc::ClientAsyncWriterInterface<v1::SceneChunk>* AsyncUploadSceneRaw(grpc::ClientContext*, v1::SceneUpload*,

@@ -85,10 +85,13 @@ TEST_F(CoordinatorTest, ACrashBeforeTheEndIsRecordedKeepsTheScene) {
   EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
   EXPECT_EQ(c->status(sequence, false).state(), v1::JobStatus::DONE);
   EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
-  // Recorded now: the scene goes, and another restart finds both ended.
+  // Recorded now: another restart finds both ended; their scene stays until they are deleted.
   restart(c, options(), &t);
   EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
   EXPECT_EQ(c->status(sequence, false).state(), v1::JobStatus::DONE);
+  EXPECT_FALSE(fs::is_empty(dir + "/scenes"));
+  c->remove(id);
+  c->remove(sequence);
   EXPECT_TRUE(fs::is_empty(dir + "/scenes"));
 }
 
@@ -129,12 +132,19 @@ TEST_F(CoordinatorTest, ADamagedCheckpointRendersTheJobAgainAndAMissingSceneFail
   EXPECT_EQ(c->status(c1, false).state(), v1::JobStatus::FAILED);  // recorded
 }
 
-TEST_F(CoordinatorTest, ScenesOfEndedOrUnrecordedJobsAreNotKeptAcrossARestart) {
-  const std::string a = c->submit(request(job_settings()));
+// Scenes no job names (a deleted job's, a submit the crash cut short) go at a restart; an
+// ended job's scene stays, for a requeue, until the job is deleted.
+TEST_F(CoordinatorTest, ScenesNoJobNamesAreNotKeptAcrossARestart) {
+  const v1::SubmitJobRequest req = request(job_settings());
+  const std::string a = c->submit(req);
   c->cancel(a);
   fs::create_directories(fs::path(dir) / "scenes" / "0123.staging-7");  // a crash mid-submit
   std::ofstream(fs::path(dir) / "scenes" / "feedfeedfeedfeedfeedfeedfeedfeed.bundle") << "x";
   restart(c, options(), &t);
+  std::set<std::string> left;
+  for (const auto& e : fs::directory_iterator(fs::path(dir) / "scenes")) left.insert(e.path().filename().string());
+  EXPECT_EQ(left, std::set<std::string>{bundle_hash(req.main_file(), req.files())});
+  c->remove(a);
   EXPECT_TRUE(fs::is_empty(fs::path(dir) / "scenes"));
 }
 

@@ -135,7 +135,10 @@ TEST_F(SequenceTest, ARestartedCoordinatorGoesOnWithASequenceBitForBit) {
   restart(c, options(), &t);
   EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
   for (int n : {1, 2, 3}) EXPECT_TRUE(frame_is_local(id, n)) << n;
-  EXPECT_TRUE(fs::is_empty(dir + "/scenes"));  // the ended sequence's scene is gone
+  EXPECT_FALSE(fs::is_empty(dir + "/scenes"));  // the ended sequence's scene stays until it is deleted
+  c->remove(id);
+  EXPECT_TRUE(fs::is_empty(dir + "/scenes"));
+  EXPECT_FALSE(fs::exists(dir + "/jobs/" + id + "-f1"));
 }
 
 // A restart can bring a sequence back with a gap: frames 1 and 3 have checkpoints, frame 2
@@ -200,6 +203,11 @@ TEST_F(SequenceTest, ASubmitTheDatabaseCannotRecordIsRefused) {
   }
   EXPECT_TRUE(c->list().empty());
   EXPECT_EQ(c->counters().jobs_refused, 2u);
+  // Its scene is not served; with no database to ask whether another job names it, its
+  // files stay until the next start prunes what no job names.
+  EXPECT_THROW(c->scene(bundle_hash(request(job_settings()).main_file(), request(job_settings()).files())),
+               RequestError);
+  restart(c, options(), &t);
   EXPECT_TRUE(fs::is_empty(dir + "/scenes"));
 }
 

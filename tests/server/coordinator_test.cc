@@ -405,9 +405,10 @@ TEST_F(CoordinatorTest, TasksFailingOnTwoWorkersFailTheJobAndTheQueueMovesOn) {
   EXPECT_EQ(c->status(next, false).state(), v1::JobStatus::DONE);
 }
 
-// Issue 10, row 9: scenes were kept in memory and on disk forever. A scene now lives as
-// long as a live job uses it; a job's image outlives it.
-TEST_F(CoordinatorTest, ScenesGoWhenTheirLastJobEnds) {
+// Issue 10, row 9: scenes were kept in memory and on disk forever. A scene is served to
+// workers (in memory) as long as a live job uses it, and stays on disk while any job names
+// it (a requeue goes on with it): it goes with the last of them to be deleted.
+TEST_F(CoordinatorTest, ScenesAreServedWhileALiveJobUsesThemAndGoWithTheirLastJob) {
   const std::string a = c->submit(request(job_settings())), b = c->submit(request(job_settings()));
   const uint64_t w = worker();
   const std::string hash = c->get_task(w).tasks(0).scene_hash();
@@ -419,12 +420,19 @@ TEST_F(CoordinatorTest, ScenesGoWhenTheirLastJobEnds) {
   drain(w);
   ASSERT_EQ(c->status(b, false).state(), v1::JobStatus::DONE);
   EXPECT_THROW(c->scene(hash), RequestError);
-  EXPECT_FALSE(fs::exists(on_disk));
-  EXPECT_GT(c->image(b).exr().size(), 0u);                       // the image stays
+  EXPECT_TRUE(fs::exists(on_disk));
+  EXPECT_GT(c->image(b).exr().size(), 0u);
   const std::string again = c->submit(request(job_settings()));  // checked afresh
   EXPECT_NO_THROW(c->scene(hash));
   drain(w);
   EXPECT_EQ(c->status(again, false).state(), v1::JobStatus::DONE);
+  for (const std::string& id : {a, b}) {
+    c->remove(id);
+    EXPECT_TRUE(fs::exists(on_disk));  // `again` names it
+  }
+  EXPECT_GT(c->remove(again), 0u);
+  EXPECT_FALSE(fs::exists(on_disk));
+  EXPECT_TRUE(fs::is_empty(fs::path(dir) / "jobs"));
 }
 
 // Issue 22: a scene sent in pieces is a scene like one sent whole: the same hash, the same
@@ -448,7 +456,8 @@ TEST_F(CoordinatorTest, AnUploadedSceneRendersAsOneSentWhole) {
   drain(w);
   ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
   EXPECT_TRUE(same_film_as_exr(local(job_settings()), read_exr(image_path(id, "image.exr"))));
-  EXPECT_THROW(c->scene(up.scene_hash()), RequestError);  // gone with its job
+  EXPECT_THROW(c->scene(up.scene_hash()), RequestError);  // no live job uses it
+  c->remove(id);
   EXPECT_FALSE(fs::exists(fs::path(dir) / "scenes" / up.scene_hash()));
   try {
     c->submit(request(job_settings(), up));  // an upload names one submit

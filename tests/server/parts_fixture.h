@@ -167,7 +167,7 @@ class PartsTest : public ::testing::Test {
   }
   Sequence& add_sequence(const std::vector<int>& frames, const RenderSettings& s = small_settings(),
                          const std::string& owner = "", int32_t priority = 0) {
-    auto sq = std::make_unique<Sequence>(meta(s, owner, priority), s, frames);
+    auto sq = std::make_shared<Sequence>(meta(s, owner, priority), s, frames);
     sq->submitted = now;
     return jobs.add(std::move(sq));
   }

@@ -144,8 +144,10 @@ TEST_F(SceneStoreTest, AnUploadInSmallPiecesIsKeptUnderItsHashOnceSubmitted) {
   EXPECT_EQ(scenes.manifest(hash).SerializeAsString(), s.manifest.SerializeAsString());
   EXPECT_EQ(scenes.main_path(hash), (dir / "scenes" / hash / "files" / "cornell-spheres.dae").string());
   scenes.release(hash);
-  EXPECT_TRUE(on_disk().empty());
   EXPECT_THROW(scenes.manifest(hash), std::out_of_range);
+  EXPECT_EQ(on_disk(), std::set<std::string>{hash});  // ended jobs keep it until deleted
+  EXPECT_GT(scenes.remove_if_unused(hash), 0u);
+  EXPECT_TRUE(on_disk().empty());
 }
 
 // Workers get a kept scene a piece at a time, read from disk: the manifest first, then the
@@ -314,8 +316,10 @@ TEST_F(SceneStoreTest, ABundleSentWholeSharesTheStorageOfUploads) {
   EXPECT_EQ(uploads.submit(upload(messages(source())).upload_id(), "ann", nullptr, &main), hash);
   EXPECT_EQ(on_disk(), std::set<std::string>{hash});
   scenes.release(hash);
-  EXPECT_EQ(on_disk(), std::set<std::string>{hash});  // one use left
+  EXPECT_EQ(scenes.remove_if_unused(hash), 0u);  // one use left
+  EXPECT_EQ(on_disk(), std::set<std::string>{hash});
   scenes.release(hash);
+  EXPECT_GT(scenes.remove_if_unused(hash), 0u);
   EXPECT_TRUE(on_disk().empty());
   SceneFiles unsafe = whole();
   unsafe[1].set_path("a/../../b");
@@ -331,8 +335,12 @@ TEST_F(SceneStoreTest, ARestartRestoresScenesFromDisk) {
   {
     SceneStore restarted((dir / "scenes").string());
     EXPECT_EQ(restarted.restore(hash), bundle_bytes(whole()));
-    restarted.remove_unused();
+    restarted.remove_unused({});
     EXPECT_EQ(restarted.manifest(hash).scene_hash(), hash);
+    restarted.release(hash);
+    restarted.remove_unused({hash});  // an ended job names it
+    EXPECT_EQ(on_disk(), std::set<std::string>{hash});
+    EXPECT_EQ(restarted.restore(hash), bundle_bytes(whole()));
     EXPECT_THROW(restarted.restore(std::string(32, 'e')), std::runtime_error);
   }
   {
@@ -360,7 +368,7 @@ TEST_F(SceneStoreTest, ARestartRestoresScenesFromDisk) {
   }
   SceneStore upgraded((dir / "scenes").string());
   EXPECT_EQ(upgraded.restore(hash), bundle_bytes(whole()));
-  upgraded.remove_unused();
+  upgraded.remove_unused({});
   EXPECT_EQ(on_disk(), std::set<std::string>{hash});
   EXPECT_EQ(read_file_bytes(upgraded.main_path(hash)), read_file_bytes((src / "cornell-spheres.dae").string()));
 }

@@ -9,7 +9,11 @@
 namespace tessera {
 namespace {
 
-using testing::contains;
+bool prepares(const std::vector<std::pair<std::shared_ptr<Sequence>, size_t>>& todo, const Sequence& s, size_t i) {
+  for (const auto& [sequence, index] : todo)
+    if (sequence.get() == &s && index == i) return true;
+  return false;
+}
 
 class SequenceSchedulerTest : public testing::PartsTest {};
 
@@ -77,7 +81,7 @@ TEST_F(SequenceSchedulerTest, ToPrepareNeverNamesAFrameAlreadyStarted) {
   start_frame(s);  // frame 1
   const auto todo = sequences.to_prepare();
   for (const auto& [sequence, index] : todo) EXPECT_FALSE(sequence->jobs[index]) << "frame " << index << " has started";
-  EXPECT_TRUE(contains(todo, {&s, size_t(3)}));
+  EXPECT_TRUE(prepares(todo, s, 3));
 }
 
 TEST_F(SequenceSchedulerTest, AnEndedSequenceStartsNoFrame) {
@@ -99,8 +103,8 @@ TEST_F(SequenceSchedulerTest, ToPrepareNamesLiveSequencesNextFramesWithNoJobMade
   start_frame(second);
   const auto todo = sequences.to_prepare();
   EXPECT_EQ(todo.size(), 2u);
-  EXPECT_TRUE(contains(todo, {&waiting, size_t(0)}));
-  EXPECT_TRUE(contains(todo, {&second, size_t(1)}));
+  EXPECT_TRUE(prepares(todo, waiting, 0));
+  EXPECT_TRUE(prepares(todo, second, 1));
 }
 
 TEST_F(SequenceSchedulerTest, AnOfferIsKeptOnlyForTheNextFrameOfALiveSequence) {

@@ -1,0 +1,129 @@
+#include "server/job_store.h"
+
+#include <algorithm>
+
+namespace tessera {
+
+namespace {
+class MemoryCheckpoint : public CheckpointFile {
+ public:
+  explicit MemoryCheckpoint(std::function<void(std::string)> done) : done_(std::move(done)) {}
+  void append(const std::string& bytes) override { bytes_ += bytes; }
+  void commit() override { done_(std::move(bytes_)); }
+
+ private:
+  std::string bytes_;
+  std::function<void(std::string)> done_;
+};
+}  // namespace
+
+uint64_t MemoryJobStore::next_generation() { return ++generation_; }
+
+void MemoryJobStore::add(const StoredJob& job) {
+  MutexLock lock(mu_);
+  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  for (const StoredJob& j : rows_)  // as SQLite's primary key
+    if (j.meta.id == job.meta.id) throw std::runtime_error("job database: UNIQUE constraint failed: jobs.id");
+  StoredJob& row = rows_.emplace_back(job);
+  row.meta.scene_bytes = 0;  // not stored: a restart counts the bundle again
+}
+
+void MemoryJobStore::end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) {
+  MutexLock lock(mu_);
+  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  for (StoredJob& j : rows_)
+    if (j.meta.id == id) {
+      j.state = state;
+      j.error = error;
+      j.elapsed = elapsed;
+      if (j.ended_at == 0) j.ended_at = wall();
+    }
+}
+
+void MemoryJobStore::remove(const std::string& id, const std::vector<std::string>& with_checkpoints) {
+  MutexLock lock(mu_);
+  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  std::erase_if(rows_, [&](const StoredJob& j) { return j.meta.id == id; });
+  for (const std::string& j : with_checkpoints) checkpoints_.erase(j);
+}
+
+void MemoryJobStore::requeue(const std::string& id) {
+  MutexLock lock(mu_);
+  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  for (StoredJob& j : rows_)
+    if (j.meta.id == id) {
+      j.state = v1::JobStatus::QUEUED;
+      j.error.clear();
+      j.elapsed = j.ended_at = 0;
+    }
+}
+
+void MemoryJobStore::set_priority(const std::string& id, int32_t priority) {
+  MutexLock lock(mu_);
+  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  for (StoredJob& j : rows_)
+    if (j.meta.id == id) j.meta.priority = priority;
+}
+
+size_t MemoryJobStore::scene_users(const std::string& hash) const {
+  MutexLock lock(mu_);
+  return size_t(std::count_if(rows_.begin(), rows_.end(), [&](const StoredJob& j) { return j.meta.scene_hash == hash; }));
+}
+
+std::vector<std::string> MemoryJobStore::ended_before(double age, size_t limit) const {
+  std::vector<StoredJob> rows = jobs();
+  std::stable_sort(rows.begin(), rows.end(), [](const StoredJob& a, const StoredJob& b) { return a.ended_at < b.ended_at; });
+  std::vector<std::string> out;
+  for (const StoredJob& j : rows)
+    if (!job_live(j.state) && j.ended_at > 0 && j.ended_at < wall() - age && out.size() < limit) out.push_back(j.meta.id);
+  return out;
+}
+
+std::vector<StoredJob> MemoryJobStore::jobs() const {
+  std::vector<StoredJob> rows;
+  {
+    MutexLock lock(mu_);
+    rows = rows_;
+  }
+  std::stable_sort(rows.begin(), rows.end(), [](const StoredJob& a, const StoredJob& b) { return a.meta.seq < b.meta.seq; });
+  return rows;
+}
+
+void MemoryJobStore::ping() const {
+  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+}
+
+std::unique_ptr<CheckpointFile> MemoryJobStore::begin_checkpoint(const std::string& id) const {
+  {
+    MutexLock lock(mu_);
+    if (fail_writes) throw std::runtime_error("checkpoint: disk I/O error (a test's)");
+  }
+  return std::make_unique<MemoryCheckpoint>([this, id](std::string bytes) {
+    MutexLock lock(mu_);
+    if (fail_writes) throw std::runtime_error("checkpoint: disk I/O error (a test's)");
+    checkpoints_[id] = std::move(bytes);
+  });
+}
+
+std::optional<double> MemoryJobStore::read_checkpoint(const std::string& id, FramePlan& plan, bool with_film) const {
+  const std::optional<std::string> bytes = checkpoint_bytes(id);
+  if (!bytes) return std::nullopt;
+  return tessera::read_checkpoint(*bytes, plan, with_film);
+}
+
+std::optional<std::string> MemoryJobStore::checkpoint_bytes(const std::string& id) const {
+  MutexLock lock(mu_);
+  auto it = checkpoints_.find(id);
+  if (it == checkpoints_.end()) return std::nullopt;
+  return it->second;
+}
+
+void MemoryJobStore::set_checkpoint_bytes(const std::string& id, std::optional<std::string> bytes) {
+  MutexLock lock(mu_);
+  if (bytes)
+    checkpoints_[id] = std::move(*bytes);
+  else
+    checkpoints_.erase(id);
+}
+
+}  // namespace tessera
