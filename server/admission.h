@@ -4,12 +4,23 @@
 // limits bound memory and keep clients fair; submits racing each other may pass together.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "server/job_table.h"
 #include "server/options.h"
+
+namespace tessera {
+// What a live pixel costs the coordinator: its film's sums (docs/performance.md).
+constexpr int64_t kFilmBytesPerPixel = int64_t(sizeof(PixelSums));
+// The default --max-live-pixels on a machine with `memory_bytes`: 2^27 (5.4 GB of films), or
+// as many as half its memory holds if fewer.
+inline int64_t live_pixel_default(uint64_t memory_bytes) {
+  return std::min<int64_t>(int64_t(1) << 27, int64_t(memory_bytes / 2 / kFilmBytesPerPixel));
+}
+}  // namespace tessera
 
 namespace tessera {
 

@@ -17,7 +17,7 @@ namespace tessera {
 // What the live work weighs, counted in one place for admission (one client's share),
 // for starting frames (films in memory) and for autoscalers (what is left).
 struct Load {
-  int64_t live_pixels = 0;         // of every live frame's film (each costs two films in memory)
+  int64_t live_pixels = 0;         // of every live frame's film (40 bytes a pixel)
   uint64_t tasks_ready = 0;        // ready tasks of live jobs, and each sequence's next frame's first pass
   uint64_t samples_remaining = 0;  // not merged yet, frames not started included
   // The same for one client (Load::of): its live jobs, a sequence counting as one.

@@ -1,6 +1,7 @@
 // tessera-coordinator: splits frames into tiles, leases them to workers, merges results.
 #include <grpcpp/grpcpp.h>
 #include <signal.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <algorithm>
@@ -11,6 +12,7 @@
 
 #include "core/io/files.h"
 #include "core/util/log.h"
+#include "server/admission.h"
 #include "server/grpc_services.h"
 #include "server/status_http.h"
 
@@ -89,7 +91,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
   app.add_option("--max-live-pixels", opt.max_live_pixels,
-                 "pixels of all live frames together (each pixel costs 80 bytes of memory)")
+                 "pixels of all live frames together (each costs 40 bytes of memory; default: 2^27, or half the machine's memory if less)")
       ->capture_default_str()
       ->check(CLI::Range(int64_t(1), int64_t(1) << 40));
   app.add_option("--max-scene-bytes-per-client", opt.max_scene_bytes_per_client,
@@ -114,6 +116,8 @@ int main(int argc, char** argv) {
   app.add_flag("--insecure", insecure,
                "allow listening beyond loopback without access tokens (anyone who can connect may do anything)");
   CLI11_PARSE(app, argc, argv);
+  if (app.count("--max-live-pixels") == 0)  // a frame the machine cannot hold is refused at submit
+    opt.max_live_pixels = tessera::live_pixel_default(uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGESIZE)));
   tessera::init_logging("tessera-coordinator");
   if (tls_cert.empty() != tls_key.empty()) {
     spdlog::error("--tls-cert and --tls-key go together");

@@ -22,8 +22,9 @@ struct CoordinatorOptions {
   size_t max_workers = 10000;
   // Live (queued or running) jobs one client (token name) may have at once.
   size_t max_jobs_per_client = 100;
-  // Pixels of all live frames together: each costs two 40-byte films in memory (the plan's
-  // and the snapshot's), so the default, 2^27, is about 10 GB at most.
+  // Pixels of all live frames together: each costs its film's sums, 40 bytes (a snapshot
+  // copies one band at a time), so 2^27 is 5.4 GB. tessera-coordinator lowers it to half
+  // the machine's memory when that is less (live_pixel_default).
   int64_t max_live_pixels = int64_t(1) << 27;
   // Scene bytes (of live jobs and of scene uploads) and samples still to render of one
   // client's live jobs together.

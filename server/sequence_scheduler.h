@@ -1,6 +1,6 @@
 // Which frame of a sequence starts next. Frames start in order, when the Dispatcher finds a
 // worker with room and the started frames have no ready task, at most kMaxLiveFrames at
-// once (each holds two films). A frame's job (its films, slow to allocate) is made ahead
+// once (each holds a film). A frame's job (its films, slow to allocate) is made ahead
 // of time outside the coordinator's lock: to_prepare() names it, make_frame() makes it
 // without the lock, offer() hands it over. Runs under the coordinator's lock but for
 // make_frame().

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <regex>
 #include <string>
+#include <thread>
 
 #include "core/io/files.h"
 #include "tests/integration/farm_helpers.h"
@@ -164,6 +165,31 @@ TEST_F(Access, EveryCallNeedsATokenWhoseRoleAllowsIt) {
   auto page = browser.Get("/");
   ASSERT_TRUE(page);
   EXPECT_EQ(page->status, 200);
+}
+
+// Issue 22: requeue, priority and delete follow the cancel rule: a client changes only its
+// own jobs, a viewer none, an admin any.
+TEST_F(Access, ChangingAJobAfterSubmitIsTheOwnersOrAnAdminsRight) {
+  start_coordinator();
+  const std::string a = submit(kAlice);
+  for (const std::string& cmd : {"priority " + a + " 3", "delete " + a, "cancel " + a}) {
+    CommandResult r = tessera(cmd, kBob);
+    EXPECT_EQ(r.code, 1) << cmd;
+    EXPECT_NE(r.err.find("only its own jobs"), std::string::npos) << cmd << ": " << r.err;
+    r = tessera(cmd, kViewer);
+    EXPECT_NE(r.err.find("a viewer token may not"), std::string::npos) << cmd << ": " << r.err;
+  }
+  EXPECT_EQ(tessera("priority " + a + " 3", kAlice).code, 0);
+  EXPECT_EQ(tessera("cancel " + a, kAlice).code, 0);
+  for (int i = 0; i < 100 && tessera("status " + a, kAlice).out.find("CANCELLED") == std::string::npos; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_NE(tessera("requeue " + a, kBob).err.find("only its own jobs"), std::string::npos);
+  const CommandResult requeued = tessera("requeue " + a, kAlice);
+  EXPECT_EQ(requeued.code, 0) << requeued.err;
+  EXPECT_NE(requeued.out.find("QUEUED"), std::string::npos) << requeued.out;
+  const CommandResult deleted = tessera("delete " + a, kAdmin);
+  EXPECT_EQ(deleted.code, 0) << deleted.err;
+  EXPECT_EQ(tessera("jobs", kViewer).out, "");
 }
 
 TEST_F(Access, WithoutTokensOnlyLoopbackUnlessInsecure) {

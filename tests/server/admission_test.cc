@@ -138,7 +138,21 @@ const Limit kLimits[] = {
        a.pixels = int64_t(100 + past);
      },
      {"live frames hold 900 pixels", "this job's 101 ", "limit of 1000 ", "(--max-live-pixels); try again later"}},
+    {"AFrameNoMachineHere",  // bigger than the limit alone: never, however empty the farm
+     [](Admission& a, Load&, CoordinatorOptions& o, uint64_t past) {
+       o.max_live_pixels = int64_t(1) << 20;
+       a.pixels = (int64_t(1) << 20) + int64_t(past);
+     },
+     {"a frame of 1048577 pixels needs 40 MiB of film (40 bytes a pixel)", "at most 1048576 live pixels (40 MiB",
+      "--max-live-pixels): render it in parts (-p)"}},
 };
+
+// An 8K frame's film is 1.33 GB: a 4 GB machine takes it, a 2 GB one refuses it at submit.
+TEST(LivePixelDefault, HalfTheMachinesMemoryAtMost) {
+  EXPECT_EQ(live_pixel_default(uint64_t(64) << 30), int64_t(1) << 27);
+  EXPECT_GT(live_pixel_default(uint64_t(4) << 30), 7680 * 4320);
+  EXPECT_LT(live_pixel_default(uint64_t(2) << 30), 7680 * 4320);
+}
 
 class OverLimit : public ::testing::TestWithParam<Limit> {
  protected:
