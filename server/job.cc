@@ -1,6 +1,18 @@
 #include "server/job.h"
 
+#include <algorithm>
+
 namespace tessera {
+
+void Job::compact() {
+  plan.compact();
+  std::vector<uint64_t>().swap(tile_lease);
+  for (auto& [worker, tiles] : merged_by) {
+    std::sort(tiles.begin(), tiles.end());
+    tiles.erase(std::unique(tiles.begin(), tiles.end()), tiles.end());
+    tiles.shrink_to_fit();
+  }
+}
 
 v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   v1::JobStatus s;
@@ -19,7 +31,7 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   s.set_samples_done(plan.samples_merged());
   s.set_samples_total(plan.samples_total());
   s.set_tiles_done(plan.tiles_done());
-  s.set_tiles_total(uint32_t(plan.tiles().size()));
+  s.set_tiles_total(plan.tile_count());
   s.set_passes_total(uint32_t(plan.passes().size()));
   s.set_frame_passes_done(plan.frame_passes_done());
   s.set_priority(meta.priority);

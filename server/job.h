@@ -71,6 +71,10 @@ struct Job {
   State reported_state() const { return live() || end_recorded ? state_ : v1::JobStatus::RUNNING; }
   // `now` for the elapsed time; `workers` with live leases on it.
   v1::JobStatus status(double now, uint32_t workers, bool with_tiles) const;
+  // An ended job whose image and checkpoint hold its whole film keeps only its counts
+  // (FramePlan::compact), no lease table, and each worker's merged tiles once (a liar
+  // found later flags it by them).
+  void compact();
 
  private:
   friend class JobLifecycle;  // the one writer of state_

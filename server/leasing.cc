@@ -29,7 +29,8 @@ void Leasing::ended(uint64_t id, const Lease& l, bool requeue, double now) {
       c->lease = 0;
       c->since = now;
     }
-  } else if (Job* job = jobs_.find_job(l.job); job && job->tile_lease[l.tile] == id) {
+  } else if (Job* job = jobs_.find_job(l.job);
+             job && l.tile < job->tile_lease.size() && job->tile_lease[l.tile] == id) {  // (an ended job has none)
     job->tile_lease[l.tile] = 0;
     if (requeue) job->plan.put_back(l.tile);
   }

@@ -18,7 +18,7 @@ void Recovery::as_ended(Job& job, double now, double elapsed) {
   job.started = now - elapsed;
   job.finished_at = now;
   job.snaps.image_frame_passes = job.plan.frame_passes_done();
-  job.plan.release_film();  // (restored without one; a plan without a checkpoint has its own)
+  job.compact();  // (restored without a film; a plan without a checkpoint has its own)
   job.written = {1, job.plan.merges(), 1, job.plan.merges()};
   job.end_recorded = true;
 }

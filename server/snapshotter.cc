@@ -105,7 +105,7 @@ void Snapshotter::written(Job& job, const SnapshotPlan& plan, const SnapshotOutc
   // The image and checkpoint on disk hold an ended job's whole film: memory lets it go.
   if (plan.ended && job.end_recorded && w.images && w.image_merges == plan.merges && w.checkpoints &&
       w.checkpoint_merges == plan.merges)
-    job.plan.release_film();
+    job.compact();
 }
 
 bool SnapshotWriter::record_end(const RowEnd& row, const std::string& scene_hash) const {

@@ -36,6 +36,7 @@ FramePlan::FramePlan(const RenderSettings& settings)
       tiles_.push_back({x, y, std::min(ts, w.x + w.w - x), std::min(ts, w.y + w.h - y)});
   }
   tiles_per_band_ = bands_ ? uint32_t(tiles_.size() / bands_) : 0;
+  tile_count_ = uint32_t(tiles_.size());
   progress_.resize(tiles_.size());
   if (settings.adaptive) active_.assign(size_t(w.area()), 1);  // (1 byte a pixel: only when needed)
   for (uint32_t t = 0; t < tiles_.size(); ++t) ready_.emplace(0, t);
@@ -308,6 +309,15 @@ void FramePlan::restore(const PlanState& s, Film film) {
     if (!progress_[t].finished) ready_.emplace(progress_[t].passes_done, t);
   frame_passes_ = 0;
   advance_frame_passes();
+}
+
+void FramePlan::compact() {
+  release_film();
+  std::vector<Rect>().swap(tiles_);
+  std::vector<TileProgress>().swap(progress_);
+  std::vector<uint8_t>().swap(active_);
+  std::vector<uint32_t>().swap(unfinished_at_);
+  ready_.clear();
 }
 
 }  // namespace tessera

@@ -104,7 +104,7 @@ class FramePlan {
   // fit the tile.
   Merge merge(uint32_t tile, uint32_t pass, const CheckedSums& sums);
 
-  bool done() const { return tiles_done_ == tiles_.size(); }
+  bool done() const { return tiles_done_ == tile_count_; }
   size_t ready() const { return ready_.size(); }  // tasks take() could hand out now
   const Film& film() const { return film_; }
   const RenderSettings& settings() const { return settings_; }
@@ -149,6 +149,12 @@ class FramePlan {
   // Frees the film of a plan whose image is kept elsewhere (an ended job's); film() is
   // then empty and has_film() false.
   void release_film() { film_ = Film(Rect{}); }
+  // An ended job whose film and plan are on disk keeps only its counts: the film and every
+  // per-tile table go, so an ended frame costs a few hundred bytes however big (a long
+  // sequence, a farm of many jobs). Afterwards tiles() is empty and nothing is wanted;
+  // tile_count() and the counts stay.
+  void compact();
+  uint32_t tile_count() const { return tile_count_; }
   bool has_film() const { return film_.window() == settings_.effective_window(); }
 
  private:
@@ -165,7 +171,7 @@ class FramePlan {
   std::set<std::pair<uint32_t, uint32_t>> ready_;  // (passes merged, tile): O(log tiles)
   std::vector<uint32_t> unfinished_at_;            // [p]: unfinished tiles with p passes merged
   uint32_t frame_passes_ = 0;                      // the lowest p with any (passes_.size() if none)
-  uint32_t tiles_done_ = 0;
+  uint32_t tiles_done_ = 0, tile_count_ = 0;
   uint64_t samples_merged_ = 0, samples_total_ = 0, merges_ = 0;
   double work_done_ = 0, work_total_ = 0;  // pixel-samples scheduled
   uint32_t bands_ = 0, tiles_per_band_ = 0;
