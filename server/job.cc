@@ -44,10 +44,10 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   *s.mutable_settings() = meta.settings;
   s.set_sequence(sequence);
   if (with_tiles)
-    for (uint32_t i = 0; i < plan.tiles().size(); ++i) {
-      const TileProgress& p = plan.progress(i);
+    for (uint32_t i = 0; i < plan.tile_count(); ++i) {
+      const TileProgress p = plan.tile_progress(i);  // (an ended job's: as its frame's)
       v1::TileProgress* t = s.add_tiles();
-      *t->mutable_rect() = to_proto(plan.tiles()[i]);
+      *t->mutable_rect() = to_proto(plan.tile_rect(i));
       t->set_passes_done(p.passes_done);
       t->set_samples(p.passes_done ? plan.passes()[p.passes_done - 1].second : 0);
       t->set_relative_error(p.relative_error);

@@ -311,6 +311,23 @@ void FramePlan::restore(const PlanState& s, Film film) {
   advance_frame_passes();
 }
 
+Rect FramePlan::tile_rect(uint32_t t) const {
+  if (t < tiles_.size()) return tiles_[t];
+  const Rect w = settings_.effective_window();
+  const int ts = std::max(1, settings_.tile_size);
+  const int x = w.x + int(t % tiles_per_band_) * ts, y = w.y + int(t / tiles_per_band_) * ts;
+  return {x, y, std::min(ts, w.x + w.w - x), std::min(ts, w.y + w.h - y)};
+}
+
+TileProgress FramePlan::tile_progress(uint32_t t) const {
+  if (t < progress_.size()) return progress_[t];
+  TileProgress p;
+  p.finished = done();
+  p.passes_done = done() ? uint32_t(passes_.size()) : frame_passes_;
+  p.relative_error = 0;
+  return p;
+}
+
 void FramePlan::compact() {
   release_film();
   std::vector<Rect>().swap(tiles_);

@@ -155,6 +155,11 @@ class FramePlan {
   // tile_count() and the counts stay.
   void compact();
   uint32_t tile_count() const { return tile_count_; }
+  // Tile t's rectangle and progress, also after compact(): the rectangle from the frame's
+  // geometry, the progress then as the frame's (every pass of a done frame; else the frame
+  // passes every tile has).
+  Rect tile_rect(uint32_t t) const;
+  TileProgress tile_progress(uint32_t t) const;
   bool has_film() const { return film_.window() == settings_.effective_window(); }
 
  private:

@@ -43,6 +43,29 @@ TEST(FramePlan, CutsTheWindowIntoTilesAndSamplesIntoPasses) {
   EXPECT_FALSE(plan.done());
 }
 
+// An ended job keeps only its counts (Job::compact): its tiles still read as the frame's.
+TEST(FramePlan, ACompactedPlanKeepsItsCountsAndTileGeometry) {
+  FramePlan plan(settings(70, 40, 32, 10, 4));
+  std::vector<Rect> tiles = plan.tiles();
+  while (auto t = plan.take()) ASSERT_EQ(plan.merge(t->tile, t->pass, sums_for(*t, 0.5)), FramePlan::Merge::kMerged);
+  ASSERT_TRUE(plan.done());
+  const uint64_t samples = plan.samples_merged(), merges = plan.merges();
+  plan.compact();
+  EXPECT_TRUE(plan.tiles().empty());
+  EXPECT_FALSE(plan.has_film());
+  EXPECT_TRUE(plan.done());
+  EXPECT_EQ(plan.tile_count(), 6u);
+  EXPECT_EQ(plan.samples_merged(), samples);
+  EXPECT_EQ(plan.merges(), merges);
+  for (uint32_t t = 0; t < 6; ++t) {
+    EXPECT_EQ(plan.tile_rect(t), tiles[t]) << t;
+    EXPECT_TRUE(plan.tile_progress(t).finished);
+    EXPECT_EQ(plan.tile_progress(t).passes_done, 3u);
+  }
+  EXPECT_FALSE(plan.wants(0, 0));
+  EXPECT_FALSE(plan.take());
+}
+
 TEST(FramePlan, EveryTileOncePerPassFewestPassesFirstAndNoTileTwiceAtOnce) {
   FramePlan plan(settings(64, 64, 16, 12, 4));  // 16 tiles, 3 passes
   std::set<uint32_t> out;
