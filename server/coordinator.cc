@@ -366,7 +366,7 @@ void Coordinator::checkpoint_all() {
 
 void Coordinator::wait_for_work(double timeout) const {
   MutexLock lock(mu_);
-  await([] { return false; }, timeout);
+  changed_.wait_until(mu_, deadline_in(timeout));  // the first change: GetTask looks again
 }
 
 v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const {

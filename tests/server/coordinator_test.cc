@@ -293,6 +293,19 @@ TEST_F(CoordinatorTest, ImagesGoToTheSinkAndHoldTheLocalFilmsExactBits) {
   EXPECT_GE(images->writes(id), 1);
 }
 
+// GetTask's long poll returns at the first change, not at its timeout (a regression that
+// left workers idle a second at a time was caught by the network namespace test).
+TEST_F(CoordinatorTest, WaitingForWorkEndsAtTheFirstChange) {
+  std::thread submitter([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    c->submit(request(job_settings()));
+  });
+  const auto start = std::chrono::steady_clock::now();
+  c->wait_for_work(30);
+  submitter.join();
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 20);
+}
+
 TEST_F(CoordinatorTest, UnknownWorkerMustRegisterAgain) { EXPECT_THROW(c->get_task(12345), RequestError); }
 
 // Workers report render-thread time with results; utilization is busy over available time
