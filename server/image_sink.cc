@@ -142,15 +142,7 @@ std::unique_ptr<ImageSink::Reader> DiskImageSink::open(const std::string& job) c
 
 uint64_t DiskImageSink::remove(const std::string& job) {
   forget_preview(job);
-  const fs::path dir = fs::path(dir_) / job;
-  uint64_t bytes = 0;
-  std::error_code ec;
-  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::recursive_directory_iterator();
-       it.increment(ec))
-    if (it->is_regular_file(ec)) bytes += it->file_size(ec);
-  fs::remove_all(dir, ec);
-  if (ec) throw std::runtime_error("cannot remove " + dir.string() + ": " + ec.message());
-  return bytes;
+  return remove_folder((fs::path(dir_) / job).string());
 }
 
 void DiskImageSink::remove_unknown(const std::function<bool(const std::string& job)>& known) {

@@ -198,15 +198,13 @@ uint64_t SceneStore::remove_if_unused(const std::string& hash) {
   if (hash.empty() || hash.find('/') != std::string::npos || hash.find("..") != std::string::npos) return 0;
   std::lock_guard<std::mutex> lock(mu_);  // a keep() of the same bytes waits, then checks afresh
   if (scenes_.count(hash)) return 0;
-  const fs::path dir = fs::path(dir_) / hash;
-  uint64_t bytes = 0;
   std::error_code ec;
-  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::recursive_directory_iterator();
-       it.increment(ec))
-    if (it->is_regular_file(ec)) bytes += it->file_size(ec);
-  fs::remove_all(dir, ec);
   fs::remove(fs::path(dir_) / (hash + ".bundle"), ec);  // kept whole before protocol 5
-  return bytes;
+  try {
+    return remove_folder((fs::path(dir_) / hash).string());
+  } catch (const std::runtime_error&) {  // its files stay; the next start tries again
+    return 0;
+  }
 }
 
 v1::SceneManifest served_manifest(const SceneStore& scenes, const std::string& hash) {

@@ -5,6 +5,7 @@
 
 #include <cerrno>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <stdexcept>
@@ -85,6 +86,18 @@ void write_file_atomic(const std::string& path, const std::string& bytes, const 
   AtomicFile f(path);
   f.append(bytes);
   f.commit(how);
+}
+
+uint64_t remove_folder(const std::string& path) {
+  namespace fs = std::filesystem;
+  uint64_t bytes = 0;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(path, ec); !ec && it != fs::recursive_directory_iterator();
+       it.increment(ec))
+    if (it->is_regular_file(ec)) bytes += it->file_size(ec);
+  fs::remove_all(path, ec);
+  if (ec) throw std::runtime_error("cannot remove " + path + ": " + ec.message());
+  return bytes;
 }
 
 }  // namespace tessera

@@ -14,6 +14,16 @@ inline std::string shared_scene(const std::string& name) {
   return std::filesystem::exists(p) ? p : std::string();
 }
 
+// Regular files under a folder (none if it is absent): what a test expects to be gone.
+inline size_t files_under(const std::filesystem::path& p) {
+  size_t n = 0;
+  std::error_code ec;
+  for (auto it = std::filesystem::recursive_directory_iterator(p, ec);
+       !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec))
+    n += it->is_regular_file(ec);
+  return n;
+}
+
 }  // namespace tessera::testing
 
 #define TESSERA_REQUIRE_SHARED_SCENE(var, name)                                           \

@@ -1,6 +1,7 @@
 // Issue 22, a job's life after submit through the real binaries: requeue (bit-identical to
 // tessera render) and delete (the data folder shrinks back), each with the coordinator
 // killed -9 just after its commit point; retention (--keep-ended); paging through jobs.
+#include "tests/core/test_paths.h"
 #include "tests/integration/farm_fixture.h"
 
 namespace tessera {
@@ -8,13 +9,7 @@ namespace {
 
 std::string first_line(const std::string& s) { return s.substr(0, s.find('\n')); }
 
-size_t files_under(const fs::path& p) {
-  size_t n = 0;
-  std::error_code ec;
-  for (auto it = fs::recursive_directory_iterator(p, ec); !ec && it != fs::recursive_directory_iterator(); ++it)
-    n += it->is_regular_file();
-  return n;
-}
+using testing::files_under;
 
 class Lifecycle : public Farm {
  protected:

@@ -6,13 +6,7 @@
 namespace tessera {
 namespace {
 
-size_t files_under(const fs::path& p) {
-  size_t n = 0;
-  std::error_code ec;
-  for (auto it = fs::recursive_directory_iterator(p, ec); !ec && it != fs::recursive_directory_iterator(); ++it)
-    n += it->is_regular_file();
-  return n;
-}
+using testing::files_under;
 
 template <typename F>
 RequestError::Code refused(F&& f) {
