@@ -82,8 +82,7 @@ void Coordinator::apply(Effects fx) {
 }
 
 void Coordinator::write(const std::shared_ptr<Job>& job) {
-  // This thread is the job's one writer until next() finds nothing more due.
-  for (;;) {
+  for (;;) {  // this thread is the job's one writer until next() finds nothing more due
     SnapshotPlan plan;
     {
       MutexLock lock(mu_);
@@ -96,12 +95,15 @@ void Coordinator::write(const std::shared_ptr<Job>& job) {
       job->plan.copy_band(band, copy);
       return true;
     });
+    bool left;
     {
       MutexLock lock(mu_);
       snapshotter_.written(*job, plan, out, counters_);
+      left = jobs_.let_go(*job);  // a DONE frame whole on disk leaves memory: nothing more is due
     }
     changed_.notify_all();  // an image fetch may wait for this write; an end may be durable now
     if (out.end_recorded && !job->sequence.empty()) record_sequence_end(job->sequence);
+    if (left) return;
   }
 }
 
@@ -230,13 +232,17 @@ uint64_t Coordinator::remove(const std::string& id, const std::string& requester
   return bytes;
 }
 
-std::shared_ptr<Job> Coordinator::current_image(const std::string& id, std::optional<int> frame,
-                                                ImageStreamHeader* header) {
+std::string Coordinator::current_image(const std::string& id, std::optional<int> frame, ImageStreamHeader* header) {
   std::shared_ptr<Job> job;
   bool live, writer = false;
-  uint64_t merges;
+  uint64_t merges;  // the film's version as asked
   {
     MutexLock lock(mu_);
+    if (const auto gone = jobs_.left_frame(id, frame)) {  // DONE, its image on disk holds its whole film
+      header->frame_passes_done = uint32_t(gone->sequence->settings.passes().size());
+      header->final = true;
+      return gone->id();
+    }
     job = jobs_.shared(jobs_.frame_job(id, frame).id());
     live = job->live();
     merges = job->plan.merges();
@@ -254,22 +260,20 @@ std::shared_ptr<Job> Coordinator::current_image(const std::string& id, std::opti
                            "); the samples are kept and the write is retried");
   header->frame_passes_done = job->snaps.image_frame_passes;
   header->final = !live && job->end_recorded;  // ended durably (and the image holds the whole film)
-  return job;
+  return job->id();
 }
 
 v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::optional<int> frame) {
   ImageStreamHeader h;
-  const std::shared_ptr<Job> job = current_image(id, frame, &h);
-  return whole_image(*sink_, job->id(), exr, png, h);
+  return whole_image(*sink_, current_image(id, frame, &h), exr, png, h);
 }
 
 void Coordinator::image_chunks(const v1::FetchImageRequest& req,
                                const std::function<bool(const v1::ImageChunk&)>& write) {
   ImageStreamHeader h;
-  const std::shared_ptr<Job> job =
-      current_image(req.id(), req.has_frame() ? std::optional(req.frame()) : std::nullopt, &h);
-  const std::unique_ptr<ImageSink::Reader> file = sink_->open(job->id());
-  if (!file) throw RequestError(RequestError::Code::kFailedPrecondition, "job " + job->id() + " has no image file");
+  const std::string job = current_image(req.id(), req.has_frame() ? std::optional(req.frame()) : std::nullopt, &h);
+  const std::unique_ptr<ImageSink::Reader> file = sink_->open(job);
+  if (!file) throw RequestError(RequestError::Code::kFailedPrecondition, "job " + job + " has no image file");
   stream_image(*file, req, h, options_.image_chunk_bytes, write);
 }
 

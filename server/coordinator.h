@@ -221,8 +221,9 @@ class Coordinator {
   void record_sequence_end(const std::string& id) TESSERA_EXCLUDES(mu_);
   void refused() TESSERA_EXCLUDES(mu_);  // a submit refused: counted
   // The job's (or frame's) image as a client is to get it: written first (or waited for)
-  // when the one on disk is not current. Throws RequestError when it cannot be.
-  std::shared_ptr<Job> current_image(const std::string& id, std::optional<int> frame, ImageStreamHeader* header)
+  // when the one on disk is not current; returns whose image it is (a frame's own id).
+  // Throws RequestError when it cannot be.
+  std::string current_image(const std::string& id, std::optional<int> frame, ImageStreamHeader* header)
       TESSERA_EXCLUDES(mu_);
   v1::ResultAck check_result(const v1::TaskResult& result, const Lease& lease) TESSERA_EXCLUDES(mu_);
 

@@ -60,6 +60,7 @@ uint64_t Sequence::samples_merged() const {
   uint64_t n = 0;
   for (const auto& j : jobs)
     if (j) n += j->plan.samples_merged();
+  for (const auto& l : left) n += l.value_or(0);
   return n;
 }
 
@@ -78,10 +79,15 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
   std::string e = error;
   for (size_t i = 0; i < frames.size(); ++i) {
     const Job* j = jobs[i].get();
-    const uint64_t fd = j ? j->plan.samples_merged() : 0, ft = j ? j->plan.samples_total() : frame_samples();
+    const bool gone = frame_left(i);  // DONE, its end recorded, out of memory
+    const uint64_t fd = j ? j->plan.samples_merged() : gone ? *left[i] : 0;
+    const uint64_t ft = j ? j->plan.samples_total() : gone ? fd : frame_samples();
     done += fd;
     total += ft;
-    if (j) {
+    if (gone) {
+      tiles_done += frame_tiles();
+      ++frames_done;
+    } else if (j) {
       tiles_done += j->plan.tiles_done();
       frames_done += j->reported_state() == v1::JobStatus::DONE;
       if (auto w = workers.find(j->id()); w != workers.end()) active += w->second;
@@ -91,10 +97,13 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
     if (!with_frames) continue;
     v1::FrameStatus* f = s.add_frames();
     f->set_frame(frames[i]);
-    f->set_state(j ? j->reported_state() : live() ? v1::JobStatus::QUEUED : v1::JobStatus::CANCELLED);
+    f->set_state(j ? j->reported_state()
+                   : gone ? v1::JobStatus::DONE
+                   : live() ? v1::JobStatus::QUEUED
+                            : v1::JobStatus::CANCELLED);
     f->set_samples_done(fd);
     f->set_samples_total(ft);
-    if (j) f->set_job_id(j->id());
+    if (j || gone) f->set_job_id(frame_job_id(i));
   }
   s.set_error(e);
   s.set_samples_done(done);

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <memory>
 #include <set>
 #include <string>
@@ -97,6 +98,12 @@ struct Sequence {
   RenderSettings settings;  // every frame's, but for its number
   std::vector<int> frames;
   std::vector<std::shared_ptr<Job>> jobs;  // per frame: its job once started (also in JobTable)
+  // Frames that ended DONE and left memory (JobTable::let_go: their image and final
+  // checkpoint on disk, their end recorded): the samples each merged, by frame index (sized
+  // at the first to leave), and the workers whose results they hold, with how many tiles
+  // (a liar found later flags the sequence). A long sequence holds only its live frames.
+  std::vector<std::optional<uint64_t>> left;
+  std::map<uint64_t, uint32_t> left_merged_by;
   size_t next = 0;              // frames before this one have started (later ones may have, after a restart)
   uint32_t frames_started = 0;  // jobs that are not null
   uint32_t live_frames = 0;     // started and not ended
@@ -112,6 +119,8 @@ struct Sequence {
   uint64_t frame_samples() const { return uint64_t(settings.effective_window().area()) * uint64_t(settings.spp); }
   uint32_t frame_tiles() const { return uint32_t(settings.tile_count()); }
   std::string frame_job_id(size_t i) const { return meta.id + "-f" + std::to_string(frames[i]); }
+  bool frame_left(size_t i) const { return i < left.size() && left[i].has_value(); }
+  bool frame_started(size_t i) const { return jobs[i] || frame_left(i); }
   uint64_t samples_merged() const;
 
   State state() const { return state_; }

@@ -100,8 +100,9 @@ std::optional<RowEnd> JobLifecycle::sequence_end_due(const std::string& id) {
   Sequence* s = jobs_.find_sequence(id);
   if (!s || s->live() || s->end_recorded || s->end_recording || s->removed) return std::nullopt;
   if (s->state() == v1::JobStatus::DONE)
-    for (const auto& j : s->jobs)
-      if (!j || !j->end_recorded) return std::nullopt;  // a frame's final checkpoint is not on disk yet
+    for (size_t i = 0; i < s->frames.size(); ++i)
+      if (!s->frame_left(i) && (!s->jobs[i] || !s->jobs[i]->end_recorded))
+        return std::nullopt;  // a frame's final checkpoint is not on disk yet
   s->end_recording = true;
   return RowEnd{s->id(), s->state(), s->error, s->started > 0 ? s->finished_at - s->started : 0};
 }

@@ -14,12 +14,36 @@ v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const s
       if (j && j->live()) workers[j->id()] = leases.workers_on(j->id());
     return s->status(now, workers, true);
   }
+  if (!jobs.find_job(id))
+    if (const auto gone = jobs.left_frame(id)) return left_frame_status(*gone->sequence, gone->index);
   const Job& job = jobs.job(id);
   return job.status(now, leases.workers_on(id), with_tiles);
 }
 
+v1::JobStatus left_frame_status(const Sequence& s, size_t i) {
+  v1::JobStatus st;
+  st.set_id(s.frame_job_id(i));
+  st.set_name(s.meta.name + " frame " + std::to_string(s.frames[i]));
+  st.set_state(v1::JobStatus::DONE);
+  st.set_samples_done(*s.left[i]);
+  st.set_samples_total(*s.left[i]);
+  st.set_tiles_done(s.frame_tiles());
+  st.set_tiles_total(s.frame_tiles());
+  st.set_passes_total(uint32_t(s.settings.passes().size()));
+  st.set_frame_passes_done(st.passes_total());
+  st.set_priority(s.meta.priority);
+  st.set_owner(s.meta.owner);
+  RenderSettings frame = s.settings;
+  frame.frame = s.frames[i];
+  *st.mutable_settings() = to_proto(frame);
+  st.set_sequence(s.id());
+  return st;
+}
+
 JobProgress job_progress(const JobTable& jobs, const std::string& id) {
   if (const Sequence* s = jobs.find_sequence(id)) return {s->samples_merged(), s->changes, s->ended_durably()};
+  if (!jobs.find_job(id))
+    if (const auto gone = jobs.left_frame(id)) return {*gone->sequence->left[gone->index], 0, true};
   const Job& j = jobs.job(id);
   return {j.plan.samples_merged(), j.plan.samples_merged(), j.ended_durably()};
 }

@@ -20,6 +20,8 @@ struct JobProgress {
   bool operator==(const JobProgress&) const = default;
 };
 JobProgress job_progress(const JobTable& jobs, const std::string& id);
+// What clients see of a frame that left memory (JobTable::let_go): DONE, its counts.
+v1::JobStatus left_frame_status(const Sequence& s, size_t i);
 
 // What is left to render, for autoscalers (Kubernetes HPA, Slurm scripts): tasks ready
 // and leased, samples not yet merged (an upper bound with adaptive sampling), and those

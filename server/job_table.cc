@@ -55,6 +55,41 @@ void JobTable::replace(std::shared_ptr<Job> job) {
   it->second = std::move(job);
 }
 
+bool JobTable::let_go(const Job& frame) {
+  if (frame.sequence.empty() || frame.state() != v1::JobStatus::DONE || !frame.end_recorded || frame.plan.has_film())
+    return false;
+  Sequence* s = find_sequence(frame.sequence);
+  const size_t i = frame.frame_index;
+  if (!s || i >= s->jobs.size() || s->jobs[i].get() != &frame) return false;
+  if (s->left.empty()) s->left.resize(s->frames.size());
+  s->left[i] = frame.plan.samples_merged();
+  for (const auto& [worker, tiles] : frame.merged_by) s->left_merged_by[worker] += uint32_t(tiles.size());
+  const std::string id = frame.id();
+  s->jobs[i].reset();  // (frame is gone after these two)
+  jobs_.erase(id);
+  return true;
+}
+
+std::optional<JobTable::LeftFrame> JobTable::left_frame(const std::string& id, std::optional<int> frame) const {
+  const Sequence* s = find_sequence(id);
+  if (!s && !frame) {  // a frame's own id: <sequence>-f<frame>
+    const size_t f = id.rfind("-f");
+    if (f == std::string::npos || !(s = find_sequence(id.substr(0, f)))) return std::nullopt;
+    try {
+      size_t used = 0;
+      frame = std::stoi(id.substr(f + 2), &used);
+      if (used != id.size() - f - 2) return std::nullopt;
+    } catch (const std::exception&) {
+      return std::nullopt;
+    }
+  }
+  if (!s || !frame) return std::nullopt;
+  const auto at = std::find(s->frames.begin(), s->frames.end(), *frame);
+  const size_t i = size_t(at - s->frames.begin());
+  if (at == s->frames.end() || !s->frame_left(i)) return std::nullopt;
+  return LeftFrame{s, i};
+}
+
 std::vector<std::string> JobTable::page(uint64_t after_seq, size_t n) const {
   std::vector<std::string> out;
   for (auto it = listed_.upper_bound(after_seq); it != listed_.end() && out.size() < n; ++it) out.push_back(it->second);

@@ -41,6 +41,18 @@ class JobTable {
   std::shared_ptr<Sequence> remove_sequence(const std::string& id);
   // A job made anew (a requeue's, its plan read back) in place of the one with its id.
   void replace(std::shared_ptr<Job> job);
+  // A frame that ended DONE, whose image and final checkpoint are on disk and whose end is
+  // recorded, leaves memory: its sequence keeps its samples and who merged into it
+  // (Sequence::left). Nothing happens to any other job. True if it left.
+  bool let_go(const Job& frame);
+  // A frame that left memory, named by its own id or by its sequence's and its number:
+  // its sequence and index.
+  struct LeftFrame {
+    const Sequence* sequence = nullptr;
+    size_t index = 0;
+    std::string id() const { return sequence->frame_job_id(index); }
+  };
+  std::optional<LeftFrame> left_frame(const std::string& id, std::optional<int> frame = std::nullopt) const;
 
   Job* find_job(const std::string& id) const;  // null if none
   Sequence* find_sequence(const std::string& id) const;

@@ -140,6 +140,7 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
     } else {
       p_.lifecycle.restore(j, j.plan.done() ? v1::JobStatus::DONE : v1::JobStatus::CANCELLED);
       as_ended(j, now, *cp);
+      p_.jobs.let_go(j);  // a DONE frame leaves memory; a cancelled one stays for a requeue
     }
   }
   if (!s.live()) {
@@ -154,7 +155,7 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
   } else {
     s.started = now - elapsed;
     p_.lifecycle.restore(s, elapsed > 0 ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED);
-    while (s.next < s.jobs.size() && s.jobs[s.next]) ++s.next;
+    while (s.next < s.jobs.size() && s.frame_started(s.next)) ++s.next;
   }
 }
 

@@ -17,7 +17,7 @@ std::shared_ptr<Job> SequenceScheduler::make_frame(const Sequence& s, size_t ind
 
 size_t SequenceScheduler::next_unstarted(const Sequence& s) {
   size_t i = s.next;
-  while (i < s.frames.size() && s.jobs[i]) ++i;
+  while (i < s.frames.size() && s.frame_started(i)) ++i;
   return i;
 }
 

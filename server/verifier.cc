@@ -123,10 +123,13 @@ void Verifier::flag_ended(Job& job, const std::string& flag, Effects& fx) {
   }
   // A frame has no row: its sequence carries the flag (recorded with its end, or now if it
   // has ended).
-  Sequence* s = jobs_.find_sequence(job.sequence);
-  if (!s) return;
-  add(s->error, "frame " + std::to_string(s->frames[job.frame_index]) + ": " + flag);
-  if (!s->live()) fx.rows.push_back({s->id(), s->state(), s->error, s->finished_at - s->started});
+  if (Sequence* s = jobs_.find_sequence(job.sequence))
+    flag_sequence(*s, "frame " + std::to_string(s->frames[job.frame_index]) + ": " + flag, fx);
+}
+
+void Verifier::flag_sequence(Sequence& s, const std::string& flag, Effects& fx) {
+  s.error += (s.error.empty() ? "" : "; ") + flag;
+  if (!s.live()) fx.rows.push_back({s.id(), s.state(), s.error, s.finished_at - s.started});
 }
 
 void Verifier::quarantine(uint64_t worker, const std::string& why, double now, Effects& fx) {
@@ -164,6 +167,17 @@ void Verifier::quarantine(uint64_t worker, const std::string& why, double now, E
                      "elsewhere): submit the job again for an image without them",
                  fx);
     }
+  }
+  // Frames that left memory (JobTable::let_go) flag their sequence.
+  for (const auto& [id, s] : jobs_.sequences()) {
+    auto mine = s->left_merged_by.find(worker);
+    if (mine == s->left_merged_by.end()) continue;
+    flag_sequence(*s,
+                  std::to_string(mine->second) + " tiles of finished frames hold results of worker " + name +
+                      ", quarantined after those frames ended (its results differed from the same tasks rendered "
+                      "elsewhere): submit the job again for images without them",
+                  fx);
+    s->left_merged_by.erase(mine);
   }
   workers_.remove(worker);
   fx.changed = true;

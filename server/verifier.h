@@ -58,13 +58,16 @@ class Verifier {
   void skip_stale(double now, Effects& fx);
   bool quarantined(uint64_t worker) const { return checks_.quarantined(worker); }
   bool quarantined(const std::string& principal) const { return checks_.quarantined(principal); }
+  // A worker found lying (decide() calls it): its leases end, what it merged into live jobs
+  // is rendered again, ended jobs (and sequences whose frames left memory) are flagged.
+  void quarantine(uint64_t worker, const std::string& why, double now, Effects& fx);
 
  private:
   void drop(uint64_t check, bool skipped, double now);
-  void quarantine(uint64_t worker, const std::string& why, double now, Effects& fx);
   // An ended job holds a liar's tiles: said in its error and its database row (a frame's
   // in its sequence's).
   void flag_ended(Job& job, const std::string& flag, Effects& fx);
+  void flag_sequence(Sequence& s, const std::string& flag, Effects& fx);
 
   double fraction_, lease_seconds_;
   CheckBook& checks_;

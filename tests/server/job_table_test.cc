@@ -6,6 +6,7 @@
 
 #include <set>
 
+#include "server/job_status.h"
 #include "tests/server/parts_fixture.h"
 
 namespace tessera {
@@ -154,6 +155,49 @@ TEST_F(JobTableTest, ASequenceWithAGapInItsStartedFramesCountsItsUnstartedSample
   EXPECT_EQ(l.live_pixels, 2 * int64_t(kPixels));
   EXPECT_EQ(l.tasks_ready, 3 * kTiles);  // two frames' first passes, and the next one's
   EXPECT_EQ(l.client_jobs, 1u);
+}
+
+// Issue 22: a long sequence holds only its live frames. A DONE frame whose image and final
+// checkpoint are on disk leaves memory; its sequence still answers for it.
+TEST_F(JobTableTest, ADoneFrameWholeOnDiskLeavesMemoryAndItsSequenceAnswersForIt) {
+  Sequence& s = add_sequence({4, 5, 6});
+  Job& first = start_frame(s);
+  testing::merge_passes(first.plan, uint32_t(first.plan.passes().size()));
+  first.merged_by[77] = {0, 1, 0};
+  EXPECT_FALSE(jobs.let_go(first));  // live
+  lifecycle.finish_if_done(first, now, fx);
+  EXPECT_FALSE(jobs.let_go(first));  // its end not recorded, its film still in memory
+  first.end_recorded = true;
+  first.compact();
+  const std::string id = first.id();
+  const uint64_t samples = first.plan.samples_merged();
+  ASSERT_TRUE(jobs.let_go(first));
+  EXPECT_EQ(jobs.find_job(id), nullptr);
+  EXPECT_EQ(s.jobs[0], nullptr);
+  EXPECT_TRUE(s.frame_left(0));
+  EXPECT_TRUE(s.frame_started(0));
+  EXPECT_EQ(s.left_merged_by.at(77), 2u);  // tiles, once each
+  EXPECT_EQ(s.samples_merged(), samples);
+  EXPECT_EQ(SequenceScheduler::next_unstarted(s), 1u);
+  // Named by its own id or by its sequence's and number; other frames are not.
+  ASSERT_TRUE(jobs.left_frame(id));
+  EXPECT_EQ(jobs.left_frame(id)->index, 0u);
+  EXPECT_EQ(jobs.left_frame(s.id(), 4)->id(), id);
+  EXPECT_FALSE(jobs.left_frame(s.id(), 5));
+  EXPECT_FALSE(jobs.left_frame(s.id() + "-f5"));
+  EXPECT_FALSE(jobs.left_frame(s.id() + "-fx"));
+  EXPECT_TRUE(jobs.names(id));  // its folder is still its sequence's
+  const v1::JobStatus st = job_status(jobs, leases, s.id(), false, now);
+  EXPECT_EQ(st.frames(0).state(), v1::JobStatus::DONE);
+  EXPECT_EQ(st.frames(0).job_id(), id);
+  EXPECT_EQ(st.frames(0).samples_done(), samples);
+  EXPECT_EQ(st.frames_done(), 1u);
+  const v1::JobStatus frame = job_status(jobs, leases, id, true, now);
+  EXPECT_EQ(frame.state(), v1::JobStatus::DONE);
+  EXPECT_EQ(frame.samples_done(), samples);
+  EXPECT_EQ(frame.sequence(), s.id());
+  EXPECT_EQ(frame.settings().frame(), 4);
+  EXPECT_TRUE(job_progress(jobs, id).ended);
 }
 
 }  // namespace

@@ -204,6 +204,25 @@ TEST_F(VerifierTest, AnEndedFrameWithALiarsTilesFlagsItsSequence) {
   EXPECT_TRUE(has(error, "quarantined")) << error;
 }
 
+// ... and so does a frame that had left memory (JobTable::let_go) when the liar was found.
+TEST_F(VerifierTest, AFrameThatLeftMemoryWithALiarsTilesFlagsItsSequence) {
+  Sequence& s = add_sequence({1, 2});
+  Job& frame = start_frame(s);
+  frame.merged_by[a] = {0, 1};
+  frame.merged_by[b] = {2};
+  testing::merge_passes(frame.plan, uint32_t(frame.plan.passes().size()));
+  lifecycle.finish_if_done(frame, now, fx);
+  frame.end_recorded = true;
+  frame.compact();
+  ASSERT_TRUE(jobs.let_go(frame));
+  fx = {};
+  verifier.quarantine(a, "a test", now, fx);
+  const std::string error = job_status(jobs, leases, s.id(), false, now).error();
+  EXPECT_TRUE(has(error, "2 tiles of finished frames hold results of worker")) << error;
+  EXPECT_EQ(s.left_merged_by.count(a), 0u);
+  EXPECT_EQ(s.left_merged_by.at(b), 1u);
+}
+
 TEST_F(VerifierTest, ACheckerTheRefereeDisagreesWithIsTheOneQuarantined) {
   const uint64_t check = merged_and_picked(*job, a);
   const uint64_t lease = lease_check(b);
