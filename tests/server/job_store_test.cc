@@ -2,6 +2,7 @@
 #include "server/job_store.h"
 
 #include <gtest/gtest.h>
+#include <sqlite3.h>
 #include <unistd.h>
 
 #include <cstddef>
@@ -243,6 +244,70 @@ TEST(JobStore, JobsAndGenerationsSurviveReopening) {
   EXPECT_EQ(*elapsed, 2);
   expect_same_film(plan.film(), merged_plan().film());
   EXPECT_FALSE(fs::exists(store.checkpoint_path(jobs[1].meta.id) + ".tmp"));
+  fs::remove_all(dir);
+}
+
+// Issue 22: what delete, requeue, priority and retention write survives reopening; an end
+// keeps its first time when written again; a database from before ended_at gives its ended
+// jobs a full retention period from the upgrade.
+TEST(JobStore, RequeueDeletePriorityAndEndTimesSurviveReopening) {
+  const fs::path dir = fs::temp_directory_path() / ("tessera_store_life_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  double wall = 1000;
+  auto row = [](const std::string& id, uint64_t seq) {
+    StoredJob j;
+    j.meta.id = id;
+    j.meta.seq = seq;
+    j.meta.scene_hash = "shared";
+    j.meta.settings.set_spp(4);
+    return j;
+  };
+  {
+    SqliteJobStore store(dir.string());
+    store.wall = [&wall] { return wall; };
+    store.add(row("a", 1));
+    store.add(row("b", 2));
+    store.add(row("c", 3));
+    store.end("a", v1::JobStatus::DONE, "", 1);
+    wall = 1010;
+    store.end("b", v1::JobStatus::CANCELLED, "", 1);
+    store.end("a", v1::JobStatus::DONE, "a liar's tiles", 1);  // written again: keeps 1000
+    store.set_priority("c", 9);
+    EXPECT_EQ(store.scene_users("shared"), 3u);
+    write_checkpoint(store, "b", merged_plan(), 2);
+  }
+  SqliteJobStore store(dir.string());
+  store.wall = [&wall] { return wall; };
+  wall = 1020;
+  EXPECT_EQ(store.ended_before(15, 10), std::vector<std::string>{"a"});
+  EXPECT_EQ(store.ended_before(5, 10), (std::vector<std::string>{"a", "b"}));
+  EXPECT_EQ(store.ended_before(5, 1), std::vector<std::string>{"a"});
+  store.requeue("b");
+  EXPECT_EQ(store.ended_before(0, 10), std::vector<std::string>{"a"});
+  store.remove("a", {"a"});
+  store.remove("b", {"b"});
+  EXPECT_FALSE(fs::exists(store.checkpoint_path("b")));
+  const std::vector<StoredJob> jobs = store.jobs();
+  ASSERT_EQ(jobs.size(), 1u);
+  EXPECT_EQ(jobs[0].meta.id, "c");
+  EXPECT_EQ(jobs[0].meta.priority, 9);
+  EXPECT_EQ(store.scene_users("shared"), 1u);
+  fs::remove_all(dir);
+
+  // A database without the ended_at column (before this change): added, its ended rows
+  // stamped with the time of the upgrade.
+  {
+    SqliteJobStore old(dir.string());
+    old.add(row("x", 1));
+    old.end("x", v1::JobStatus::DONE, "", 1);
+  }
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open((dir / "coordinator.db").string().c_str(), &db), SQLITE_OK);
+  ASSERT_EQ(sqlite3_exec(db, "ALTER TABLE jobs DROP COLUMN ended_at", nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_close(db);
+  SqliteJobStore upgraded(dir.string());  // its wall clock: now
+  EXPECT_TRUE(upgraded.ended_before(3600, 10).empty());
+  EXPECT_EQ(upgraded.ended_before(-3600, 10), std::vector<std::string>{"x"});
   fs::remove_all(dir);
 }
 
