@@ -40,7 +40,7 @@ class Lifecycle : public Farm {
 TEST_F(Lifecycle, ARequeueSurvivesAKillAfterItsRecordAndTheImageIsTheLocalOne) {
   const std::string flags = "-r 96 72 -s 32 --pass-spp 4 -m 6 --seed 5 --tile 16";
   const std::string local = local_render(flags);
-  start_coordinator("127.0.0.1:0", "2", {"--test-commit-delay-ms", "4000", "--checkpoint-seconds", "0"});
+  start_coordinator("127.0.0.1:0", "2", {"--test-commit-delay-ms", "8000", "--checkpoint-seconds", "0"});
   start_worker();
   const CommandResult sub = tessera("submit " + kScene + " " + flags);
   ASSERT_EQ(sub.code, 0) << sub.err;
@@ -52,8 +52,8 @@ TEST_F(Lifecycle, ARequeueSurvivesAKillAfterItsRecordAndTheImageIsTheLocalOne) {
   }
   ASSERT_EQ(tessera("cancel " + id).code, 0);
   ASSERT_TRUE(wait_for(id, "CANCELLED"));
-  std::thread requeue([&] { tessera("requeue " + id); });  // its record, then 4 s of delay
-  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  std::thread requeue([&] { tessera("requeue " + id); });  // its record, then 8 s of delay
+  std::this_thread::sleep_for(std::chrono::milliseconds(4000));  // past the record, in the delay
   kill_and_restart();
   requeue.join();
   ASSERT_TRUE(wait_for(id, "DONE", 120)) << state_of(id);
@@ -65,7 +65,7 @@ TEST_F(Lifecycle, ARequeueSurvivesAKillAfterItsRecordAndTheImageIsTheLocalOne) {
 // A delete killed just after its record: the restart finds no job and removes its files,
 // so the data folder holds nothing of it. A delete that runs through frees the same.
 TEST_F(Lifecycle, ADeleteSurvivesAKillAfterItsRecordAndTheDataFolderShrinksBack) {
-  start_coordinator("127.0.0.1:0", "2", {"--test-commit-delay-ms", "4000"});
+  start_coordinator("127.0.0.1:0", "2", {"--test-commit-delay-ms", "8000"});
   start_worker(2);
   const std::string a = (dir / "a.exr").string(), b = (dir / "b.exr").string();
   ASSERT_EQ(submit_wait(kScene, kFlags, a).code, 0);
@@ -80,7 +80,7 @@ TEST_F(Lifecycle, ADeleteSurvivesAKillAfterItsRecordAndTheDataFolderShrinksBack)
   EXPECT_GT(files_under(data / "jobs"), 0u);
   EXPECT_GT(files_under(data / "scenes"), 0u);  // kept while a job names it
   std::thread remove([&] { tessera("delete " + ids[0]); });
-  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  std::this_thread::sleep_for(std::chrono::milliseconds(4000));  // past the record, in the delay
   kill_and_restart();
   remove.join();
   EXPECT_NE(tessera("status " + ids[0]).code, 0);
