@@ -88,7 +88,7 @@ void Coordinator::write(const std::shared_ptr<Job>& job) {
       MutexLock lock(mu_);
       plan = snapshotter_.next(*job, clock_->now());
     }
-    if (!plan.image && !plan.checkpoint) return;
+    if (!plan.image && !plan.checkpoint) return changed_.notify_all();  // no writer now: a delete may wait
     const SnapshotOutcome out = writer_.write(*job, plan, [&](uint32_t band, BandCopy* copy) {
       MutexLock lock(mu_);  // one band at a time: merges go on between them
       if (!job->plan.has_film() || job->removed) return false;  // (a job being deleted: stop)

@@ -65,6 +65,31 @@ TEST_F(ControlTest, DeletingALiveJobCancelsItAndItsLeasesEnd) {
   EXPECT_TRUE(c->list().empty());
 }
 
+// A delete waits for the job's writer to stop (its next band sees the job removed), then
+// removes everything; the writer says when it stops (Coordinator::write notifies then: a
+// delete racing it on an idle farm could otherwise wait out kImageWaitSeconds).
+TEST_F(ControlTest, ADeleteWaitsForAWriteUnderWayAndNoLonger) {
+  CoordinatorOptions o = options();
+  o.checkpoint_seconds = 0;  // every merge asks for a checkpoint, written on the merging thread
+  std::atomic<bool> writing{false};
+  o.before_checkpoint_rename = [&] {
+    writing = true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  };
+  restart(c, o, &t);
+  const std::string id = c->submit(request(job_settings()));
+  const uint64_t w = worker();
+  const v1::TaskResult result = render_task(c->get_task(w).tasks(0), w);
+  std::thread merger([&] { c->submit_result(result); });  // its checkpoint is written on this thread
+  for (int i = 0; i < 10000 && !writing; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  EXPECT_TRUE(writing) << "no write began";
+  const auto start = std::chrono::steady_clock::now();
+  c->remove(id);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 30);
+  merger.join();
+  EXPECT_EQ(files_under(dir + "/jobs") + files_under(dir + "/scenes"), 0u);
+}
+
 TEST_F(ControlTest, ADeletedSequenceTakesEveryFramesFiles) {
   v1::SubmitJobRequest r = request(job_settings());
   for (int f : {1, 2, 3}) r.add_frames(f);
