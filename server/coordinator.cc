@@ -195,7 +195,7 @@ v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requ
 
 v1::JobStatus Coordinator::set_priority(const std::string& id, int32_t priority, const std::string& requester,
                                         bool any) {
-  locked([&](Effects&) TESSERA_REQUIRES(mu_) { control_.check(id, requester, any, "change the priority of"); });
+  locked([&](Effects&) TESSERA_REQUIRES(mu_) { jobs_.check_change(id, requester, any, "change the priority of"); });
   try {
     store_->set_priority(id, priority);  // the row first: a restart keeps it
   } catch (const std::exception& e) {
@@ -363,7 +363,7 @@ void Coordinator::checkpoint_all() {
   }
   for (const std::shared_ptr<Job>& job : mine) write(job);
   MutexLock lock(mu_);  // the writers of the others take the checkpoint too
-  await([&] { return std::none_of(others.begin(), others.end(), [](const auto& j) { return j->snaps.writing; }); });
+  await([&] { return none_writing(others); });
 }
 
 // ---- waiting ----

@@ -82,6 +82,14 @@ struct Job {
   State state_;
 };
 
+// Whether none of these jobs has a snapshot writer at work (a delete, a requeue, a
+// stopping coordinator wait for that).
+inline bool none_writing(const std::vector<std::shared_ptr<Job>>& jobs) {
+  for (const std::shared_ptr<Job>& j : jobs)
+    if (j->snaps.writing) return false;
+  return true;
+}
+
 // A sequence: one job per frame, each made when the scheduler first needs its tiles (so a
 // long sequence holds the films of only the frames being rendered), in frame order. Its
 // frames are ordinary jobs to the scheduler, leases, checkpoints and images; the sequence

@@ -18,26 +18,6 @@ const char* state_name(v1::JobStatus::State s) { return v1::JobStatus::State_Nam
 
 }  // namespace
 
-void refuse_unless_owner(const std::string& id, const std::string& owner, const std::string& requester, bool any,
-                         const char* verb) {
-  if (!any && owner != requester)
-    throw RequestError(RequestError::Code::kPermissionDenied, "job " + id + " belongs to '" + owner +
-                                                                  "': a client may " + verb + " only its own jobs");
-}
-
-std::string JobControl::check(const std::string& id, const std::string& requester, bool any, const char* verb) const {
-  if (const Sequence* s = jobs_.find_sequence(id)) {
-    refuse_unless_owner(id, s->meta.owner, requester, any, verb);
-    return s->meta.owner;
-  }
-  const Job& job = jobs_.job(id);
-  if (!job.sequence.empty())
-    throw RequestError(RequestError::Code::kFailedPrecondition, "job " + id + " is a frame of sequence " +
-                                                                    job.sequence + ": " + verb + " the sequence");
-  refuse_unless_owner(id, job.meta.owner, requester, any, verb);
-  return job.meta.owner;
-}
-
 void JobControl::set_priority(const std::string& id, int32_t priority, Effects& fx) {
   if (Sequence* s = jobs_.find_sequence(id)) {
     s->meta.priority = priority;
@@ -54,7 +34,7 @@ void JobControl::set_priority(const std::string& id, int32_t priority, Effects& 
 
 JobControl::Removal JobControl::begin_delete(const std::string& id, const std::string& requester, bool any,
                                              double now, Effects& fx) {
-  check(id, requester, any, "delete");
+  jobs_.check_change(id, requester, any, "delete");
   Removal r;
   r.id = id;
   if (std::shared_ptr<Sequence> s = jobs_.shared_sequence(id)) {
@@ -83,9 +63,7 @@ JobControl::Removal JobControl::begin_delete(const std::string& id, const std::s
 }
 
 bool JobControl::quiet(const Removal& r) {
-  for (const std::shared_ptr<Job>& j : r.jobs)
-    if (j->snaps.writing) return false;
-  return !r.sequence || !r.sequence->end_recording;
+  return none_writing(r.jobs) && (!r.sequence || !r.sequence->end_recording);
 }
 
 bool JobControl::holds_scene(const Removal& r) {
@@ -116,7 +94,7 @@ void JobControl::delete_failed(const Removal& r, double now, Effects& fx) {
 // ---- requeue ----
 
 JobControl::Requeue JobControl::begin_requeue(const std::string& id, const std::string& requester, bool any) {
-  check(id, requester, any, "requeue");
+  jobs_.check_change(id, requester, any, "requeue");
   Requeue q;
   q.id = id;
   const auto refuse_state = [&](v1::JobStatus::State state, bool durable) {
@@ -136,9 +114,8 @@ JobControl::Requeue JobControl::begin_requeue(const std::string& id, const std::
     s->changing = true;
     q.sequence = s;
     q.scene_hash = s->meta.scene_hash;
-    for (const std::shared_ptr<Job>& j : s->jobs)
+    for (const std::shared_ptr<Job>& j : s->jobs)  // (its frames change only with it)
       if (j && j->state() != v1::JobStatus::DONE) q.ended.push_back(j);
-    for (const std::shared_ptr<Job>& j : q.ended) j->changing = true;
     return q;
   }
   std::shared_ptr<Job> job = jobs_.shared(id);
@@ -150,15 +127,11 @@ JobControl::Requeue JobControl::begin_requeue(const std::string& id, const std::
   return q;
 }
 
-bool JobControl::quiet(const Requeue& q) {
-  for (const std::shared_ptr<Job>& j : q.ended)
-    if (j->snaps.writing) return false;
-  return true;
-}
-
 void JobControl::requeue_failed(const Requeue& q) {
-  for (const std::shared_ptr<Job>& j : q.ended) j->changing = false;
-  if (q.sequence) q.sequence->changing = false;
+  if (q.sequence)
+    q.sequence->changing = false;
+  else
+    q.ended.front()->changing = false;
 }
 
 void JobControl::finish_requeue(Requeue& q, double now, Effects& fx) {

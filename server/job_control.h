@@ -22,18 +22,10 @@
 
 namespace tessera {
 
-// Throws RequestError (kPermissionDenied) unless `requester` owns the job or `any`.
-void refuse_unless_owner(const std::string& id, const std::string& owner, const std::string& requester, bool any,
-                         const char* verb);
-
 class JobControl {
  public:
   JobControl(JobTable& jobs, JobLifecycle& lifecycle, const Snapshotter& snapshots, CoordinatorCounters& counters)
       : jobs_(jobs), lifecycle_(lifecycle), snapshots_(snapshots), counters_(counters) {}
-
-  // Checks that `id` names a job or sequence (not a frame) that the requester may change;
-  // returns its owner. Throws RequestError.
-  std::string check(const std::string& id, const std::string& requester, bool any, const char* verb) const;
 
   // The job's (or sequence's and its frames') priority, once its row has it.
   void set_priority(const std::string& id, int32_t priority, Effects& fx);
@@ -71,7 +63,7 @@ class JobControl {
   // changed) and marks it being changed. Throws RequestError.
   Requeue begin_requeue(const std::string& id, const std::string& requester, bool any);
   // Whether the jobs' writers have stopped.
-  static bool quiet(const Requeue& q);
+  static bool quiet(const Requeue& q) { return none_writing(q.ended); }
   void requeue_failed(const Requeue& q);
   // The fresh jobs take the ended ones' places, live again.
   void finish_requeue(Requeue& q, double now, Effects& fx);

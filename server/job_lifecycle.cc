@@ -1,7 +1,6 @@
 #include "server/job_lifecycle.h"
 
 #include "core/util/invariant.h"
-#include "server/job_control.h"
 #include "server/request_error.h"
 
 namespace tessera {
@@ -70,17 +69,12 @@ bool JobLifecycle::finish_if_done(Job& job, double now, Effects& fx) {
 }
 
 void JobLifecycle::cancel(const std::string& id, const std::string& requester, bool any, double now, Effects& fx) {
-  auto refuse_other = [&](const std::string& owner) { refuse_unless_owner(id, owner, requester, any, "cancel"); };
+  jobs_.check_change(id, requester, any, "cancel");
   if (Sequence* s = jobs_.find_sequence(id)) {
-    refuse_other(s->meta.owner);
     if (s->live()) end(*s, v1::JobStatus::CANCELLED, now, fx);
     return;
   }
   Job& job = jobs_.job(id);
-  refuse_other(job.meta.owner);
-  if (!job.sequence.empty())
-    throw RequestError(RequestError::Code::kFailedPrecondition,
-                       "job " + id + " is a frame of sequence " + job.sequence + ": cancel the sequence");
   if (!job.live()) return;
   end(job, v1::JobStatus::CANCELLED, now, fx);
   if (snapshots_.final_snapshot(job, now)) fx.writes.push_back(jobs_.shared(id));  // keep what was rendered

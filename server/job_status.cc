@@ -81,10 +81,12 @@ v1::JobList job_page(const JobTable& jobs, const LeaseTable& leases, uint32_t pa
   const size_t n = page_size == 0 ? jobs.listed() : std::min(page_size, kMaxPage);
   v1::JobList out;
   out.set_total(jobs.listed());
-  const std::vector<std::string> ids = jobs.page(after, n);
-  for (const std::string& id : ids) *out.add_jobs() = job_status(jobs, leases, id, false, now);
-  if (!ids.empty() && !jobs.page(jobs.seq_of(ids.back()), 1).empty())
+  std::vector<std::string> ids = jobs.page(after, n + 1);  // one more: is there a next page?
+  if (ids.size() > n) {
+    ids.pop_back();
     out.set_next_page_token(std::to_string(jobs.seq_of(ids.back())));
+  }
+  for (const std::string& id : ids) *out.add_jobs() = job_status(jobs, leases, id, false, now);
   return out;
 }
 

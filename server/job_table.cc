@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <tuple>
 
 #include "core/util/invariant.h"
 #include "server/request_error.h"
@@ -72,13 +73,14 @@ bool JobTable::let_go(const Job& frame) {
 
 std::optional<JobTable::LeftFrame> JobTable::left_frame(const std::string& id, std::optional<int> frame) const {
   const Sequence* s = find_sequence(id);
-  if (!s && !frame) {  // a frame's own id: <sequence>-f<frame>
-    const size_t f = id.rfind("-f");
-    if (f == std::string::npos || !(s = find_sequence(id.substr(0, f)))) return std::nullopt;
+  if (!s && !frame) {  // a frame's own id
+    std::string number;
+    std::tie(s, number) = frame_id_parts(id);
+    if (!s) return std::nullopt;
     try {
       size_t used = 0;
-      frame = std::stoi(id.substr(f + 2), &used);
-      if (used != id.size() - f - 2) return std::nullopt;
+      frame = std::stoi(number, &used);
+      if (used != number.size()) return std::nullopt;
     } catch (const std::exception&) {
       return std::nullopt;
     }
@@ -128,6 +130,25 @@ Job& JobTable::job(const std::string& id) const {
   return *j;
 }
 
+const std::string& JobTable::check_change(const std::string& id, const std::string& requester, bool any,
+                                          const char* verb) const {
+  const auto refuse_other = [&](const std::string& owner) {
+    if (!any && owner != requester)
+      throw RequestError(RequestError::Code::kPermissionDenied, "job " + id + " belongs to '" + owner +
+                                                                    "': a client may " + verb + " only its own jobs");
+  };
+  if (const Sequence* s = find_sequence(id)) {
+    refuse_other(s->meta.owner);
+    return s->meta.owner;
+  }
+  const Job& j = job(id);
+  refuse_other(j.meta.owner);
+  if (!j.sequence.empty())
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "job " + id + " is a frame of sequence " + j.sequence + ": " + verb + " the sequence");
+  return j.meta.owner;
+}
+
 Job& JobTable::frame_job(const std::string& id, std::optional<int> frame) const {
   const Sequence* s = find_sequence(id);
   if (!s) {
@@ -159,9 +180,13 @@ std::set<std::string> JobTable::scene_hashes() const {
 }
 
 bool JobTable::names(const std::string& folder) const {
-  if (jobs_.count(folder) || sequences_.count(folder)) return true;
-  const size_t f = folder.rfind("-f");
-  return f != std::string::npos && sequences_.count(folder.substr(0, f));
+  return jobs_.count(folder) || sequences_.count(folder) || frame_id_parts(folder).first;
+}
+
+std::pair<const Sequence*, std::string> JobTable::frame_id_parts(const std::string& id) const {
+  const size_t f = id.rfind("-f");
+  if (f == std::string::npos) return {nullptr, ""};
+  return {find_sequence(id.substr(0, f)), id.substr(f + 2)};
 }
 
 Load JobTable::load(const std::string& owner) const {

@@ -8,6 +8,7 @@
 #include <random>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "server/job.h"
@@ -60,6 +61,12 @@ class JobTable {
   std::shared_ptr<Job> shared(const std::string& id) const;
   // Throws RequestError (kNotFound) naming the id.
   Job& job(const std::string& id) const;
+  // The owner of the job or sequence `id` that `requester` would `verb` (cancel, requeue,
+  // ...): allowed to its owner, or to anyone with `any` (an admin, or no access tokens); a
+  // frame changes only with its sequence. Throws RequestError (kNotFound,
+  // kPermissionDenied, kFailedPrecondition for a frame) saying which.
+  const std::string& check_change(const std::string& id, const std::string& requester, bool any,
+                                  const char* verb) const;
   // The job of `id`, or of its frame `frame` when `id` is a sequence; throws RequestError
   // saying what is missing (a frame not named, not one of its frames, not started).
   Job& frame_job(const std::string& id, std::optional<int> frame) const;
@@ -82,6 +89,10 @@ class JobTable {
   Load load(const std::string& owner = "") const;
 
  private:
+  // A frame's own id, <sequence>-f<frame> (Sequence::frame_job_id): its sequence here (null
+  // if none) and what follows "-f".
+  std::pair<const Sequence*, std::string> frame_id_parts(const std::string& id) const;
+
   std::map<std::string, std::shared_ptr<Job>> jobs_;  // stills and frames
   std::map<std::string, std::shared_ptr<Sequence>> sequences_;
   std::map<uint64_t, std::string> listed_;  // stills and sequences by submission number

@@ -26,14 +26,20 @@ bool plausible(const PixelSums& p) {
   return s * s <= double(p.n) * p.lum2 * (1 + 1e-5) + 1e-300;
 }
 
+namespace {
+// The tile whose lower-left pixel is (x, y): `tile` square, cut short at the window's edge.
+Rect tile_from(const Rect& w, int tile, int x, int y) {
+  return {x, y, std::min(tile, w.x + w.w - x), std::min(tile, w.y + w.h - y)};
+}
+}  // namespace
+
 FramePlan::FramePlan(const RenderSettings& settings)
     : settings_(settings), film_(settings.effective_window()), passes_(settings.passes()) {
   const Rect w = film_.window();
   const int ts = std::max(1, settings.tile_size);
   for (int y = w.y; y < w.y + w.h; y += ts) {
     ++bands_;
-    for (int x = w.x; x < w.x + w.w; x += ts)
-      tiles_.push_back({x, y, std::min(ts, w.x + w.w - x), std::min(ts, w.y + w.h - y)});
+    for (int x = w.x; x < w.x + w.w; x += ts) tiles_.push_back(tile_from(w, ts, x, y));
   }
   tiles_per_band_ = bands_ ? uint32_t(tiles_.size() / bands_) : 0;
   tile_count_ = uint32_t(tiles_.size());
@@ -315,8 +321,7 @@ Rect FramePlan::tile_rect(uint32_t t) const {
   if (t < tiles_.size()) return tiles_[t];
   const Rect w = settings_.effective_window();
   const int ts = std::max(1, settings_.tile_size);
-  const int x = w.x + int(t % tiles_per_band_) * ts, y = w.y + int(t / tiles_per_band_) * ts;
-  return {x, y, std::min(ts, w.x + w.w - x), std::min(ts, w.y + w.h - y)};
+  return tile_from(w, ts, w.x + int(t % tiles_per_band_) * ts, w.y + int(t / tiles_per_band_) * ts);
 }
 
 TileProgress FramePlan::tile_progress(uint32_t t) const {

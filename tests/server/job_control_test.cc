@@ -53,22 +53,6 @@ TEST_F(JobControlTest, APriorityReachesASequencesFramesAndTheDispatchOrder) {
   EXPECT_EQ(still->meta.priority, -3);
 }
 
-TEST_F(JobControlTest, ChecksRefuseOthersJobsFramesAndUnknownIds) {
-  std::shared_ptr<Job> job = add_still(small_settings(), "ann");
-  Sequence& s = add_sequence({1, 2}, small_settings(), "ann");
-  Job& frame = start_frame(s);
-  EXPECT_EQ(control.check(job->id(), "ann", false, "delete"), "ann");
-  EXPECT_NE(refusal([&] { control.check(job->id(), "bob", false, "delete"); }, RequestError::Code::kPermissionDenied)
-                .find("a client may delete only its own jobs"),
-            std::string::npos);
-  EXPECT_EQ(control.check(s.id(), "bob", true, "delete"), "ann");  // an admin
-  EXPECT_NE(refusal([&] { control.check(frame.id(), "ann", false, "requeue"); },
-                    RequestError::Code::kFailedPrecondition)
-                .find("requeue the sequence"),
-            std::string::npos);
-  refusal([&] { control.check("nope", "", true, "delete"); }, RequestError::Code::kNotFound);
-}
-
 TEST_F(JobControlTest, ADeleteEndsALiveJobWithoutALastImageAndWaitsForItsWriter) {
   std::shared_ptr<Job> job = add_still();
   const uint64_t w = add_worker();

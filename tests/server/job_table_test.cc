@@ -157,6 +157,22 @@ TEST_F(JobTableTest, ASequenceWithAGapInItsStartedFramesCountsItsUnstartedSample
   EXPECT_EQ(l.client_jobs, 1u);
 }
 
+TEST_F(JobTableTest, AChangeIsTheOwnersOrAnAdminsAndAFrameChangesWithItsSequence) {
+  std::shared_ptr<Job> job = add_still(testing::small_settings(), "ann");
+  Sequence& s = add_sequence({1, 2}, testing::small_settings(), "ann");
+  Job& frame = start_frame(s);
+  EXPECT_EQ(jobs.check_change(job->id(), "ann", false, "delete"), "ann");
+  EXPECT_NE(refusal([&] { jobs.check_change(job->id(), "bob", false, "delete"); }, Code::kPermissionDenied)
+                .find("a client may delete only its own jobs"),
+            std::string::npos);
+  EXPECT_EQ(jobs.check_change(s.id(), "bob", true, "delete"), "ann");  // an admin
+  EXPECT_NE(refusal([&] { jobs.check_change(frame.id(), "ann", false, "requeue"); },
+                    Code::kFailedPrecondition)
+                .find("requeue the sequence"),
+            std::string::npos);
+  refusal([&] { jobs.check_change("nope", "", true, "delete"); }, Code::kNotFound);
+}
+
 // Issue 22: a long sequence holds only its live frames. A DONE frame whose image and final
 // checkpoint are on disk leaves memory; its sequence still answers for it.
 TEST_F(JobTableTest, ADoneFrameWholeOnDiskLeavesMemoryAndItsSequenceAnswersForIt) {
