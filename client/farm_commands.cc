@@ -93,7 +93,8 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
       [job, priority](v1::Tessera::StubInterface& stub, const FarmContext& c) {
         return set_job_priority(stub, *job, *priority, c);
       });
-  add("delete", "Delete a job: its record, images, checkpoints, and scene if no other job uses it (a live job is "
+  add("delete",
+      "Delete a job: its record, images, checkpoints, and scene if no other job uses it (a live job is "
       "cancelled first)",
       job_arg(true),
       [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return delete_job(stub, *job, c); });

@@ -53,9 +53,9 @@ std::string over_limit(const Admission& a, const Load& load, const CoordinatorOp
   if (load.client_jobs >= o.max_jobs_per_client)
     return who + " has " + std::to_string(load.client_jobs) + " live jobs, the most allowed (--max-jobs-per-client)";
   if (a.pixels > o.max_live_pixels)  // never, however empty the farm: say what it would take
-    return "a frame of " + std::to_string(a.pixels) + " pixels needs " + std::to_string(a.pixels * kFilmBytesPerPixel >> 20) +
-           " MiB of film (" + std::to_string(kFilmBytesPerPixel) + " bytes a pixel); this coordinator holds at most " +
-           std::to_string(o.max_live_pixels) + " live pixels (" +
+    return "a frame of " + std::to_string(a.pixels) + " pixels needs " +
+           std::to_string(a.pixels * kFilmBytesPerPixel >> 20) + " MiB of film (" + std::to_string(kFilmBytesPerPixel) +
+           " bytes a pixel); this coordinator holds at most " + std::to_string(o.max_live_pixels) + " live pixels (" +
            std::to_string(o.max_live_pixels * kFilmBytesPerPixel >> 20) +
            " MiB, --max-live-pixels): render it in parts (-p) or raise the limit on a machine with the memory";
   if (load.live_pixels + a.pixels > o.max_live_pixels)

@@ -316,9 +316,8 @@ std::vector<v1::ResultAck> Coordinator::submit_results(const std::vector<const v
 
 v1::ResultAck Coordinator::check_result(const v1::TaskResult& result, const Lease& lease) {
   v1::ResultAck ack;
-  const std::optional<Check> check = locked([&](Effects&) TESSERA_REQUIRES(mu_) {
-    return verifier_.pending(lease.check, result.task_id());
-  });
+  const std::optional<Check> check =
+      locked([&](Effects&) TESSERA_REQUIRES(mu_) { return verifier_.pending(lease.check, result.task_id()); });
   if (!check) return ack;  // decided, or moot
   const std::optional<uint64_t> digest = result_digest(result, *check);
   if (!digest) {

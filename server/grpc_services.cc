@@ -89,8 +89,7 @@ grpc::Status ClientService::GetJob(grpc::ServerContext* ctx, const v1::JobId* re
   return as(auth_, ctx, Action::kRead, [&](const Principal&) { *out = c_.status(req->id(), true); });
 }
 grpc::Status ClientService::ListJobs(grpc::ServerContext* ctx, const v1::ListJobsRequest* req, v1::JobList* out) {
-  return as(auth_, ctx, Action::kRead,
-            [&](const Principal&) { *out = c_.list(req->page_size(), req->page_token()); });
+  return as(auth_, ctx, Action::kRead, [&](const Principal&) { *out = c_.list(req->page_size(), req->page_token()); });
 }
 grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* req,
                                      grpc::ServerWriter<v1::JobStatus>* w) {

@@ -97,10 +97,10 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
     if (!with_frames) continue;
     v1::FrameStatus* f = s.add_frames();
     f->set_frame(frames[i]);
-    f->set_state(j ? j->reported_state()
-                   : gone ? v1::JobStatus::DONE
-                   : live() ? v1::JobStatus::QUEUED
-                            : v1::JobStatus::CANCELLED);
+    f->set_state(j        ? j->reported_state()
+                 : gone   ? v1::JobStatus::DONE
+                 : live() ? v1::JobStatus::QUEUED
+                          : v1::JobStatus::CANCELLED);
     f->set_samples_done(fd);
     f->set_samples_total(ft);
     if (j || gone) f->set_job_id(frame_job_id(i));

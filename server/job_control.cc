@@ -32,8 +32,8 @@ void JobControl::set_priority(const std::string& id, int32_t priority, Effects& 
 
 // ---- delete ----
 
-JobControl::Removal JobControl::begin_delete(const std::string& id, const std::string& requester, bool any,
-                                             double now, Effects& fx) {
+JobControl::Removal JobControl::begin_delete(const std::string& id, const std::string& requester, bool any, double now,
+                                             Effects& fx) {
   jobs_.check_change(id, requester, any, "delete");
   Removal r;
   r.id = id;
@@ -62,9 +62,7 @@ JobControl::Removal JobControl::begin_delete(const std::string& id, const std::s
   return r;
 }
 
-bool JobControl::quiet(const Removal& r) {
-  return none_writing(r.jobs) && (!r.sequence || !r.sequence->end_recording);
-}
+bool JobControl::quiet(const Removal& r) { return none_writing(r.jobs) && (!r.sequence || !r.sequence->end_recording); }
 
 bool JobControl::holds_scene(const Removal& r) {
   // A still holds its scene until its end is recorded; a sequence, for its frames, until its own is.

@@ -61,7 +61,8 @@ QueueDepth queue_depth(const JobTable& jobs, const LeaseTable& leases, double th
 
 std::vector<v1::JobStatus> job_list(const JobTable& jobs, const LeaseTable& leases, double now) {
   std::vector<v1::JobStatus> statuses;  // stills and sequences; frames are in their sequences
-  for (const std::string& id : jobs.page(0, jobs.listed())) statuses.push_back(job_status(jobs, leases, id, false, now));
+  for (const std::string& id : jobs.page(0, jobs.listed()))
+    statuses.push_back(job_status(jobs, leases, id, false, now));
   return statuses;
 }
 

@@ -205,7 +205,8 @@ size_t SqliteJobStore::scene_users(const std::string& hash) const {
 
 std::vector<std::string> SqliteJobStore::ended_before(double age, size_t limit) const {
   MutexLock lock(mu_);
-  Statement q(db_, "SELECT id FROM jobs WHERE state >= 2 AND ended_at > 0 AND ended_at < ?1 ORDER BY ended_at LIMIT ?2");
+  Statement q(db_,
+              "SELECT id FROM jobs WHERE state >= 2 AND ended_at > 0 AND ended_at < ?1 ORDER BY ended_at LIMIT ?2");
   q.real(1, wall() - age).integer(2, int64_t(limit));
   std::vector<std::string> out;
   while (q.step()) out.push_back(q.column_text(0));

@@ -134,8 +134,8 @@ const std::string& JobTable::check_change(const std::string& id, const std::stri
                                           const char* verb) const {
   const auto refuse_other = [&](const std::string& owner) {
     if (!any && owner != requester)
-      throw RequestError(RequestError::Code::kPermissionDenied, "job " + id + " belongs to '" + owner +
-                                                                    "': a client may " + verb + " only its own jobs");
+      throw RequestError(RequestError::Code::kPermissionDenied,
+                         "job " + id + " belongs to '" + owner + "': a client may " + verb + " only its own jobs");
   };
   if (const Sequence* s = find_sequence(id)) {
     refuse_other(s->meta.owner);

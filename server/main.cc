@@ -46,9 +46,14 @@ double parse_keep(const std::string& s) {
     end = 0;
   }
   const std::string unit = s.substr(end);
-  const double scale = unit == "d" ? 86400 : unit == "h" ? 3600 : unit == "m" ? 60 : unit == "s" || unit.empty() ? 1 : -1;
+  const double scale = unit == "d"                   ? 86400
+                       : unit == "h"                 ? 3600
+                       : unit == "m"                 ? 60
+                       : unit == "s" || unit.empty() ? 1
+                                                     : -1;
   if (end == 0 || scale < 0 || !(v >= 0) || v * scale > 1e10)
-    throw CLI::ValidationError("--keep-ended", "expected a duration such as 7d, 12h, 30m, 45s or forever, got '" + s + "'");
+    throw CLI::ValidationError("--keep-ended",
+                               "expected a duration such as 7d, 12h, 30m, 45s or forever, got '" + s + "'");
   return v * scale;
 }
 
@@ -91,7 +96,8 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
   app.add_option("--max-live-pixels", opt.max_live_pixels,
-                 "pixels of all live frames together (each costs 40 bytes of memory; default: 2^27, or half the machine's memory if less)")
+                 "pixels of all live frames together (each costs 40 bytes of memory; default: 2^27, or half the "
+                 "machine's memory if less)")
       ->capture_default_str()
       ->check(CLI::Range(int64_t(1), int64_t(1) << 40));
   app.add_option("--max-scene-bytes-per-client", opt.max_scene_bytes_per_client,
@@ -117,7 +123,8 @@ int main(int argc, char** argv) {
                "allow listening beyond loopback without access tokens (anyone who can connect may do anything)");
   CLI11_PARSE(app, argc, argv);
   if (app.count("--max-live-pixels") == 0)  // a frame the machine cannot hold is refused at submit
-    opt.max_live_pixels = tessera::live_pixel_default(uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGESIZE)));
+    opt.max_live_pixels =
+        tessera::live_pixel_default(uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGESIZE)));
   tessera::init_logging("tessera-coordinator");
   if (tls_cert.empty() != tls_key.empty()) {
     spdlog::error("--tls-cert and --tls-key go together");
@@ -210,8 +217,8 @@ int main(int argc, char** argv) {
             } catch (const std::exception& e) {
               spdlog::warn("job {}: kept past --keep-ended: {}", id, e.what());
             }
-          next = std::chrono::steady_clock::now() + std::chrono::duration_cast<std::chrono::steady_clock::duration>(
-                                                        std::chrono::duration<double>(period));
+          next = std::chrono::steady_clock::now() +
+                 std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(period));
         }
         std::this_thread::sleep_for(std::chrono::milliseconds(200));
       }

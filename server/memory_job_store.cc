@@ -1,6 +1,6 @@
-#include "server/job_store.h"
-
 #include <algorithm>
+
+#include "server/job_store.h"
 
 namespace tessera {
 
@@ -67,15 +67,18 @@ void MemoryJobStore::set_priority(const std::string& id, int32_t priority) {
 
 size_t MemoryJobStore::scene_users(const std::string& hash) const {
   MutexLock lock(mu_);
-  return size_t(std::count_if(rows_.begin(), rows_.end(), [&](const StoredJob& j) { return j.meta.scene_hash == hash; }));
+  return size_t(
+      std::count_if(rows_.begin(), rows_.end(), [&](const StoredJob& j) { return j.meta.scene_hash == hash; }));
 }
 
 std::vector<std::string> MemoryJobStore::ended_before(double age, size_t limit) const {
   std::vector<StoredJob> rows = jobs();
-  std::stable_sort(rows.begin(), rows.end(), [](const StoredJob& a, const StoredJob& b) { return a.ended_at < b.ended_at; });
+  std::stable_sort(rows.begin(), rows.end(),
+                   [](const StoredJob& a, const StoredJob& b) { return a.ended_at < b.ended_at; });
   std::vector<std::string> out;
   for (const StoredJob& j : rows)
-    if (!job_live(j.state) && j.ended_at > 0 && j.ended_at < wall() - age && out.size() < limit) out.push_back(j.meta.id);
+    if (!job_live(j.state) && j.ended_at > 0 && j.ended_at < wall() - age && out.size() < limit)
+      out.push_back(j.meta.id);
   return out;
 }
 
@@ -85,7 +88,8 @@ std::vector<StoredJob> MemoryJobStore::jobs() const {
     MutexLock lock(mu_);
     rows = rows_;
   }
-  std::stable_sort(rows.begin(), rows.end(), [](const StoredJob& a, const StoredJob& b) { return a.meta.seq < b.meta.seq; });
+  std::stable_sort(rows.begin(), rows.end(),
+                   [](const StoredJob& a, const StoredJob& b) { return a.meta.seq < b.meta.seq; });
   return rows;
 }
 

@@ -48,7 +48,8 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
   } catch (const std::exception& e) {
     spdlog::error("submit: {}", e.what());
     scenes.release(row.meta.scene_hash);
-    try {  // off the disk too, unless a job the database knows names it (asked; if it cannot say, the next start prunes it)
+    try {  // off the disk too, unless a job the database knows names it (asked; if it cannot say, the next start prunes
+           // it)
       if (store.scene_users(row.meta.scene_hash) == 0) scenes.remove_if_unused(row.meta.scene_hash);
     } catch (const std::exception&) {
     }

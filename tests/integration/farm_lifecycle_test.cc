@@ -52,7 +52,7 @@ TEST_F(Lifecycle, ARequeueSurvivesAKillAfterItsRecordAndTheImageIsTheLocalOne) {
   }
   ASSERT_EQ(tessera("cancel " + id).code, 0);
   ASSERT_TRUE(wait_for(id, "CANCELLED"));
-  std::thread requeue([&] { tessera("requeue " + id); });  // its record, then 8 s of delay
+  std::thread requeue([&] { tessera("requeue " + id); });        // its record, then 8 s of delay
   std::this_thread::sleep_for(std::chrono::milliseconds(4000));  // past the record, in the delay
   kill_and_restart();
   requeue.join();
@@ -86,7 +86,7 @@ TEST_F(Lifecycle, ADeleteSurvivesAKillAfterItsRecordAndTheDataFolderShrinksBack)
   EXPECT_NE(tessera("status " + ids[0]).code, 0);
   EXPECT_FALSE(fs::exists(data / "jobs" / ids[0]));
   EXPECT_GT(files_under(data / "scenes"), 0u);  // the sequence names the scene still
-  kill_and_restart();  // no delay now
+  kill_and_restart();                           // no delay now
   const CommandResult del = tessera("delete " + ids[1]);
   ASSERT_EQ(del.code, 0) << del.err;
   EXPECT_NE(del.out.find("deleted"), std::string::npos) << del.out;

@@ -175,8 +175,7 @@ TEST_F(ControlTest, ARequeuedSequenceRendersItsUnfinishedFramesOnly) {
   for (int f : {1, 2, 3}) {
     RenderSettings frame = s;
     frame.frame = f;
-    EXPECT_TRUE(same_film_as_exr(local(frame), read_exr(image_path(id + "-f" + std::to_string(f), "image.exr"))))
-        << f;
+    EXPECT_TRUE(same_film_as_exr(local(frame), read_exr(image_path(id + "-f" + std::to_string(f), "image.exr")))) << f;
   }
 }
 

@@ -166,8 +166,7 @@ TEST_F(JobTableTest, AChangeIsTheOwnersOrAnAdminsAndAFrameChangesWithItsSequence
                 .find("a client may delete only its own jobs"),
             std::string::npos);
   EXPECT_EQ(jobs.check_change(s.id(), "bob", true, "delete"), "ann");  // an admin
-  EXPECT_NE(refusal([&] { jobs.check_change(frame.id(), "ann", false, "requeue"); },
-                    Code::kFailedPrecondition)
+  EXPECT_NE(refusal([&] { jobs.check_change(frame.id(), "ann", false, "requeue"); }, Code::kFailedPrecondition)
                 .find("requeue the sequence"),
             std::string::npos);
   refusal([&] { jobs.check_change("nope", "", true, "delete"); }, Code::kNotFound);
