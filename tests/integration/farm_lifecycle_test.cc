@@ -110,6 +110,21 @@ TEST_F(Lifecycle, EndedJobsGoAfterKeepEnded) {
   EXPECT_TRUE(fs::exists(out));  // what the client downloaded is its own
 }
 
+// A --keep-ended the coordinator cannot read stops it at once, saying what it takes.
+TEST_F(Lifecycle, ABadKeepEndedIsRefusedSayingWhatItTakes) {
+  for (const std::string bad : {"7x", "-1d", "d", "1e20s", "''", "7d5"}) {
+    const std::string err = (dir / "keep.err").string();
+    const int status = std::system((kBin + "/tessera-coordinator --listen 127.0.0.1:0 --http 127.0.0.1:0 --data " +
+                                    (dir / "data").string() + " --keep-ended " + bad + " >/dev/null 2>" + err)
+                                       .c_str());
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 2) << bad;
+    const std::string said = slurp(err);
+    EXPECT_NE(said.find("--keep-ended"), std::string::npos) << bad << ": " << said;
+    EXPECT_NE(said.find("expected a duration such as 7d, 12h, 30m, 45s or forever"), std::string::npos)
+        << bad << ": " << said;
+  }
+}
+
 // A priority set after submit orders the queue; `jobs` pages through every job.
 TEST_F(Lifecycle, PriorityAfterSubmitAndJobsInPages) {
   start_coordinator();
