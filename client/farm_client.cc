@@ -5,6 +5,7 @@
 #include <chrono>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <set>
 
 #include "client/image_download.h"
@@ -118,7 +119,7 @@ void print_status(const v1::JobStatus& s, const FarmContext& c) {
 v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, const FarmContext& c,
                     const std::function<void(const v1::JobStatus&)>& on_status = nullptr) {
   ProgressBar bar(c.quiet || c.json);
-  v1::JobStatus s, last;
+  v1::JobStatus got, last;  // last: every frame, whatever a message left out
   bool any = false;
   Backoff backoff(Backoff::kClientFirstSeconds);
   auto lost_since = std::chrono::steady_clock::now();
@@ -128,9 +129,10 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
     v1::JobId req;
     req.set_id(id);
     auto reader = stub.WatchJob(&ctx, req);
-    while (reader->Read(&s)) {
+    while (reader->Read(&got)) {
       any = true;
-      last = s;
+      apply_watch_update(last, std::move(got));
+      const v1::JobStatus& s = last;
       backoff.reset();
       if (on_status) on_status(s);
       char what[128];
@@ -205,6 +207,22 @@ int show_status(v1::Tessera::StubInterface& stub, const std::string& job, const 
   if (!c.json && s.frames_total() > 0) std::fprintf(c.out, "  frames: %s\n", describe_frames(s).c_str());
   if (!c.json && !s.error().empty()) std::fprintf(c.out, "  error: %s\n", s.error().c_str());
   return 0;
+}
+
+void apply_watch_update(v1::JobStatus& held, v1::JobStatus update) {
+  if (!update.frames_changed_only()) {
+    held = std::move(update);
+    return;
+  }
+  google::protobuf::RepeatedPtrField<v1::FrameStatus> frames;
+  frames.Swap(held.mutable_frames());
+  std::map<int, int> at;  // frame number -> place
+  for (int i = 0; i < frames.size(); ++i) at[frames[i].frame()] = i;
+  for (v1::FrameStatus& f : *update.mutable_frames())
+    if (const auto it = at.find(f.frame()); it != at.end()) frames[it->second].Swap(&f);
+  update.mutable_frames()->Swap(&frames);
+  update.set_frames_changed_only(false);
+  held = std::move(update);
 }
 
 int watch_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c) {

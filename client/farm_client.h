@@ -52,6 +52,9 @@ int show_status(v1::Tessera::StubInterface& stub, const std::string& job, const 
 int list_jobs(v1::Tessera::StubInterface& stub, const FarmContext& c);
 // Shows progress until the job ends; exit code 0 when it is DONE.
 int watch_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c);
+// A WatchJob message onto the status a watcher holds: a whole one replaces it; one with
+// frames_changed_only replaces the frames it names (by number) and keeps the others.
+void apply_watch_update(v1::JobStatus& held, v1::JobStatus update);
 // Which image of a job to fetch: its only one, one frame of a sequence, or every finished
 // frame (to -f paths with ####, as frame_path fills them in).
 struct FetchWhat {

@@ -100,7 +100,9 @@ grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* 
     // Progress only: a watcher that wants every tile asks GetJob.
     v1::JobStatus s = c_.status(req->id(), false);
     const auto ended = [](const v1::JobStatus& st) { return !job_live(st.state()); };
+    std::vector<std::string> sent;  // a sequence's frames as last sent: later messages carry what changed
     while (!ctx->IsCancelled()) {
+      keep_changed_frames(s, sent);
       if (!w->Write(s) || ended(s)) return;
       const auto next = std::chrono::steady_clock::now() + std::chrono::duration<double>(1 / kUpdatesPerSecond);
       s = c_.wait_for_change(req->id(), s.samples_done(), 0.5);

@@ -40,6 +40,19 @@ v1::JobStatus left_frame_status(const Sequence& s, size_t i) {
   return st;
 }
 
+void keep_changed_frames(v1::JobStatus& s, std::vector<std::string>& sent) {
+  std::vector<std::string> now(size_t(s.frames_size()));
+  for (int i = 0; i < s.frames_size(); ++i) now[size_t(i)] = s.frames(i).SerializeAsString();
+  if (!sent.empty() && sent.size() == now.size()) {
+    google::protobuf::RepeatedPtrField<v1::FrameStatus> changed;
+    for (size_t i = 0; i < now.size(); ++i)
+      if (now[i] != sent[i]) changed.Add()->Swap(s.mutable_frames(int(i)));
+    s.mutable_frames()->Swap(&changed);
+    s.set_frames_changed_only(true);
+  }
+  sent = std::move(now);
+}
+
 JobProgress job_progress(const JobTable& jobs, const std::string& id) {
   if (const Sequence* s = jobs.find_sequence(id)) return {s->samples_merged(), s->changes, s->ended_durably()};
   if (!jobs.find_job(id))

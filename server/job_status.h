@@ -34,6 +34,12 @@ struct QueueDepth {
 };
 QueueDepth queue_depth(const JobTable& jobs, const LeaseTable& leases, double thread_speed);
 
+// A watcher's next message (JobStatus.frames_changed_only): keeps in `s` only the frames
+// that differ from `sent` (the frames the stream sent last, serialized), and makes `sent`
+// the new list. The first message of a stream (`sent` empty) keeps every frame, as does one
+// whose frame count changed.
+void keep_changed_frames(v1::JobStatus& s, std::vector<std::string>& sent);
+
 // Throws RequestError (kNotFound) for an unknown id.
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
                          double now);

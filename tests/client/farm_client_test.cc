@@ -276,6 +276,66 @@ TEST_F(FarmClient, SubmitWaitWritesNoFrameThatIsNotFinal) {
   }
 }
 
+TEST(WatchUpdates, AChangedOnlyMessageReplacesItsFramesByNumberAndKeepsTheOthers) {
+  v1::JobStatus held, whole;
+  for (int f : {5, 6, 7}) whole.add_frames()->set_frame(f);
+  whole.set_frames_done(0);
+  apply_watch_update(held, whole);
+  EXPECT_EQ(held.frames_size(), 3);
+  v1::JobStatus update;
+  update.set_frames_changed_only(true);
+  update.set_frames_done(1);
+  v1::FrameStatus* six = update.add_frames();
+  six->set_frame(6);
+  six->set_state(v1::JobStatus::DONE);
+  apply_watch_update(held, update);
+  ASSERT_EQ(held.frames_size(), 3);
+  EXPECT_FALSE(held.frames_changed_only());
+  EXPECT_EQ(held.frames_done(), 1u);  // the rest of the message is the new status
+  EXPECT_EQ(held.frames(0).frame(), 5);
+  EXPECT_EQ(held.frames(1).state(), v1::JobStatus::DONE);
+  EXPECT_EQ(held.frames(2).frame(), 7);
+  apply_watch_update(held, whole);  // a whole message (a new stream's first): replaces all
+  EXPECT_EQ(held.frames(1).state(), v1::JobStatus::QUEUED);
+}
+
+TEST_F(FarmClient, AWatchedSequenceSendsEveryFrameOnceThenOnlyFramesThatChanged) {
+  SubmitRequest r = request({});
+  r.flags.resolution = {16, 16};
+  v1::SubmitJobRequest req;
+  req.set_version(kProtocolVersion);
+  std::string main;
+  pack_scene(r.flags.scene, &main, req.mutable_files());
+  req.set_main_file(main);
+  *req.mutable_settings() = to_proto(to_settings(r.flags));
+  for (int f = 1; f <= 6; ++f) req.add_frames(f);
+  grpc::ClientContext submit_ctx;
+  v1::JobId id;
+  ASSERT_TRUE(stub->SubmitJob(&submit_ctx, req, &id).ok());
+  grpc::ClientContext watch_ctx;
+  auto reader = stub->WatchJob(&watch_ctx, id);
+  v1::JobStatus got, held;
+  ASSERT_TRUE(reader->Read(&got));
+  EXPECT_FALSE(got.frames_changed_only()) << "a stream's first message holds every frame";
+  EXPECT_EQ(got.frames_size(), 6);
+  apply_watch_update(held, got);
+  // No worker yet: nothing moves, and the next update (after the watch's wait) says so
+  // without a frame.
+  ASSERT_TRUE(reader->Read(&got));
+  EXPECT_TRUE(got.frames_changed_only());
+  EXPECT_EQ(got.frames_size(), 0);
+  apply_watch_update(held, got);
+  start_worker();
+  while (reader->Read(&got)) {
+    EXPECT_TRUE(got.frames_changed_only());
+    apply_watch_update(held, got);
+  }
+  EXPECT_TRUE(reader->Finish().ok());
+  EXPECT_EQ(held.state(), v1::JobStatus::DONE);
+  ASSERT_EQ(held.frames_size(), 6);
+  for (const v1::FrameStatus& f : held.frames()) EXPECT_EQ(f.state(), v1::JobStatus::DONE) << f.frame();
+}
+
 TEST_F(FarmClient, SubmitWaitsAndWritesTheLocalImageThenListsStatusAndFetch) {
   start_worker();
   const std::string exr = (dir / "farm.exr").string(), png = (dir / "farm.png").string();

@@ -120,6 +120,34 @@ TEST_F(JobStatusTest, TheListIsInSubmissionOrderWithFramesInsideTheirSequence) {
   EXPECT_EQ(list[2].id(), last);
 }
 
+TEST(KeepChangedFrames, AWatcherGetsEveryFrameFirstThenOnlyThoseThatChanged) {
+  v1::JobStatus s;
+  for (int f = 1; f <= 4; ++f) s.add_frames()->set_frame(f);
+  std::vector<std::string> sent;
+  v1::JobStatus first = s;
+  keep_changed_frames(first, sent);
+  EXPECT_EQ(first.frames_size(), 4);
+  EXPECT_FALSE(first.frames_changed_only());
+  v1::JobStatus same = s;  // nothing moved: no frame
+  keep_changed_frames(same, sent);
+  EXPECT_EQ(same.frames_size(), 0);
+  EXPECT_TRUE(same.frames_changed_only());
+  s.mutable_frames(2)->set_samples_done(7);
+  s.mutable_frames(0)->set_state(v1::JobStatus::DONE);
+  v1::JobStatus moved = s;
+  keep_changed_frames(moved, sent);
+  ASSERT_EQ(moved.frames_size(), 2);
+  EXPECT_EQ(moved.frames(0).frame(), 1);
+  EXPECT_EQ(moved.frames(1).frame(), 3);
+  EXPECT_EQ(moved.frames(1).samples_done(), 7u);
+  v1::JobStatus still = s;  // a still has no frames: nothing changes
+  still.clear_frames();
+  std::vector<std::string> none;
+  keep_changed_frames(still, none);
+  keep_changed_frames(still, none);
+  EXPECT_FALSE(still.frames_changed_only());
+}
+
 TEST_F(JobStatusTest, AnUnknownJobIsNotFound) {
   refusal([&] { status("nope"); }, RequestError::Code::kNotFound);
 }
