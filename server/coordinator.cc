@@ -46,17 +46,24 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
                   options_.max_live_pixels),
       intake_({jobs_, leases_, leasing_, workers_, verifier_, lifecycle_, snapshotter_, counters_}),
       worker_lifecycle_({workers_, jobs_, leases_, leasing_, checks_, lifecycle_, counters_}, options_),
-      control_(jobs_, lifecycle_, snapshotter_, counters_) {
+      control_(jobs_, lifecycle_, snapshotter_, counters_),
+      archive_(jobs_) {
   started_ = clock_->now();
+  std::set<std::string> archived;  // ids; their scenes and files stay
+  std::set<std::string> scenes;
+  for (auto& [id, scene] : store_->archived_names()) archived.insert(std::move(id)), scenes.insert(std::move(scene));
   Effects fx;
   {
     MutexLock lock(mu_);
     const auto restore_scene = [this](const std::string& hash) { return scenes_.restore(hash); };
     Recovery({*store_, jobs_, lifecycle_, snapshotter_, counters_, restore_scene}).restore(clock_->now(), fx);
     for (const auto& [id, s] : jobs_.sequences()) fx.sequence_ends.push_back(id);  // ended, not yet recorded
-    scenes_.remove_unused(jobs_.scene_hashes());  // scenes of deleted jobs, or of a submit the crash cut short
+    scenes.merge(jobs_.scene_hashes());
+    scenes_.remove_unused(scenes);  // scenes of deleted jobs, or of a submit the crash cut short
     // Files of jobs deleted while their files were being removed: no row names them now.
-    sink_->remove_unknown([&](const std::string& id) TESSERA_REQUIRES(mu_) { return jobs_.names(id); });
+    sink_->remove_unknown([&](const std::string& id) TESSERA_REQUIRES(mu_) {
+      return jobs_.names(id) || archived.count(id) || archived.count(id.substr(0, id.rfind("-f")));
+    });
   }
   apply(std::move(fx));
 }
@@ -74,6 +81,14 @@ void Coordinator::apply(Effects fx) {
       spdlog::error("job {}: recording its end: {}", r.id, e.what());
     }
   for (const std::string& id : fx.sequence_ends) record_sequence_end(id);
+  for (const Effects::Flag& f : fx.flags) try {
+      store_->flag_merged(f.worker, f.flagged_in_memory, [&](uint32_t tiles, bool frames) {
+        return Verifier::ended_flag(tiles, f.name, frames);
+      });
+    } catch (const std::exception& e) {
+      spdlog::error("worker {}: flagging the archived jobs that hold its results: {}", f.name, e.what());
+    }
+  for (const Archival& a : fx.archive) archive(a);
   for (auto& [sequence, index] : fx.prepare) {
     std::shared_ptr<Job> job = SequenceScheduler::make_frame(*sequence, index);  // its films, outside the lock
     MutexLock lock(mu_);
@@ -120,6 +135,24 @@ void Coordinator::record_sequence_end(const std::string& id) {
     lifecycle_.sequence_end_recorded(id, ok);
     fx.changed = true;
   });
+}
+
+void Coordinator::archive(const Archival& a) {
+  bool archived = false;
+  try {
+    archived = store_->archive(a.id, a.summary, a.merged);
+  } catch (const std::exception& e) {  // it stays in memory; the next tick tries again
+    spdlog::warn("job {}: archiving: {}", a.id, e.what());
+  }
+  MutexLock lock(mu_);
+  archive_.done(a, archived);
+}
+
+bool Coordinator::begin_archived(const std::string& id) {
+  MutexLock lock(mu_);
+  if (jobs_.knows(id)) return false;  // a requeue brought it back meanwhile
+  control_.begin_archived(id);
+  return true;
 }
 
 // ---- clients ----
@@ -173,29 +206,31 @@ v1::SceneUpload Coordinator::upload_scene(const std::function<bool(v1::SceneChun
   return uploads_.receive(owner, next, in_jobs, options_.max_scene_bytes_per_client);  // the disk, without mu_
 }
 
-v1::JobStatus Coordinator::status(const std::string& id, bool with_tiles) const {
-  MutexLock lock(mu_);
-  return job_status(jobs_, leases_, id, with_tiles, clock_->now());
-}
-
-std::vector<v1::JobStatus> Coordinator::list() const {
-  MutexLock lock(mu_);
-  return job_list(jobs_, leases_, clock_->now());
-}
-
-v1::JobList Coordinator::list(uint32_t page_size, const std::string& page_token) const {
-  MutexLock lock(mu_);
-  return job_page(jobs_, leases_, page_size, page_token, clock_->now());
+std::optional<StoredJob> Coordinator::archived_change(const std::string& id, const std::string& requester, bool any,
+                                                      const char* verb) const {
+  {
+    MutexLock lock(mu_);
+    if (jobs_.knows(id)) return std::nullopt;
+  }
+  try {
+    return archived_for_change(*store_, id, requester, any, verb);
+  } catch (const RequestError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw RequestError(RequestError::Code::kResourceExhausted, without_dir(e.what(), options_.data_dir));
+  }
 }
 
 v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requester, bool any) {
-  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { lifecycle_.cancel(id, requester, any, clock_->now(), fx); });
+  if (!archived_change(id, requester, any, "cancel"))  // (an archived job has ended: nothing to cancel)
+    locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { lifecycle_.cancel(id, requester, any, clock_->now(), fx); });
   return status(id, false);
 }
 
 v1::JobStatus Coordinator::set_priority(const std::string& id, int32_t priority, const std::string& requester,
                                         bool any) {
-  locked([&](Effects&) TESSERA_REQUIRES(mu_) { jobs_.check_change(id, requester, any, "change the priority of"); });
+  if (!archived_change(id, requester, any, "change the priority of"))
+    locked([&](Effects&) TESSERA_REQUIRES(mu_) { jobs_.check_change(id, requester, any, "change the priority of"); });
   try {
     store_->set_priority(id, priority);  // the row first: a restart keeps it
   } catch (const std::exception& e) {
@@ -206,7 +241,19 @@ v1::JobStatus Coordinator::set_priority(const std::string& id, int32_t priority,
 }
 
 v1::JobStatus Coordinator::requeue(const std::string& id, const std::string& requester, bool any) {
+  std::optional<Recovery::Ended> back;  // an archived job, brought back into memory first
+  if (const std::optional<StoredJob> row = archived_change(id, requester, any, "requeue"); row && begin_archived(id))
+    back = undo_on_throw(
+        [&] {
+          if (!store_->job(id)) throw RequestError(RequestError::Code::kNotFound, "no job '" + id + "'");
+          return Recovery::load_ended(*row, *store_, clock_->now());
+        },
+        [&](Effects&) TESSERA_REQUIRES(mu_) { control_.end_archived(id); });
   JobControl::Requeue q = locked([&](Effects&) TESSERA_REQUIRES(mu_) {
+    if (back) {
+      control_.end_archived(id);
+      if (!jobs_.knows(id)) Recovery::adopt(jobs_, *back);
+    }
     JobControl::Requeue r = control_.begin_requeue(id, requester, any);
     await([&] { return JobControl::quiet(r); });  // (an ended job's writers are done, or nearly)
     return r;
@@ -218,6 +265,17 @@ v1::JobStatus Coordinator::requeue(const std::string& id, const std::string& req
 }
 
 uint64_t Coordinator::remove(const std::string& id, const std::string& requester, bool any) {
+  if (const std::optional<StoredJob> row = archived_change(id, requester, any, "delete"); row && begin_archived(id)) {
+    const JobControl::Removal r = JobControl::archived_removal(*row);  // only its row and files
+    const uint64_t bytes =
+        undo_on_throw([&] { return finish_removal(r, false, *store_, *sink_, scenes_, options_.data_dir); },
+                      [&](Effects&) TESSERA_REQUIRES(mu_) { control_.end_archived(id); });
+    locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+      control_.end_archived(id);
+      control_.removed(r, fx);
+    });
+    return bytes;
+  }
   bool holds_scene = false;
   const JobControl::Removal r = locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     JobControl::Removal r = control_.begin_delete(id, requester, any, clock_->now(), fx);
@@ -230,51 +288,6 @@ uint64_t Coordinator::remove(const std::string& id, const std::string& requester
                     [&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.delete_failed(r, clock_->now(), fx); });
   locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.removed(r, fx); });
   return bytes;
-}
-
-std::string Coordinator::current_image(const std::string& id, std::optional<int> frame, ImageStreamHeader* header) {
-  std::shared_ptr<Job> job;
-  bool live, writer = false;
-  uint64_t merges;  // the film's version as asked
-  {
-    MutexLock lock(mu_);
-    if (const auto gone = jobs_.left_frame(id, frame)) {  // DONE, its image on disk holds its whole film
-      header->frame_passes_done = uint32_t(gone->sequence->settings.passes().size());
-      header->final = true;
-      return gone->id();
-    }
-    job = jobs_.shared(jobs_.frame_job(id, frame).id());
-    live = job->live();
-    merges = job->plan.merges();
-    // A live job gets its latest image. An ended job's film no longer changes, and the image
-    // must hold all of it: the merge (or cancel) that ended the job asks for its last image,
-    // which may still be being written, so a client that saw the end can get here first.
-    if (!Snapshotter::image_current(*job, live, merges)) writer = snapshotter_.request(*job, true, !live);
-  }
-  if (writer) write(job);
-  MutexLock lock(mu_);
-  await([&] { return Snapshotter::image_current(*job, live, merges) || !job->snaps.writing; });
-  if (!Snapshotter::image_current(*job, live, merges))
-    throw RequestError(RequestError::Code::kFailedPrecondition,
-                       "job " + job->id() + ": its image could not be written (" + job->image_error +
-                           "); the samples are kept and the write is retried");
-  header->frame_passes_done = job->snaps.image_frame_passes;
-  header->final = !live && job->end_recorded;  // ended durably (and the image holds the whole film)
-  return job->id();
-}
-
-v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::optional<int> frame) {
-  ImageStreamHeader h;
-  return whole_image(*sink_, current_image(id, frame, &h), exr, png, h);
-}
-
-void Coordinator::image_chunks(const v1::FetchImageRequest& req,
-                               const std::function<bool(const v1::ImageChunk&)>& write) {
-  ImageStreamHeader h;
-  const std::string job = current_image(req.id(), req.has_frame() ? std::optional(req.frame()) : std::nullopt, &h);
-  const std::unique_ptr<ImageSink::Reader> file = sink_->open(job);
-  if (!file) throw RequestError(RequestError::Code::kFailedPrecondition, "job " + job + " has no image file");
-  stream_image(*file, req, h, options_.image_chunk_bytes, write);
 }
 
 // ---- workers ----
@@ -348,6 +361,7 @@ size_t Coordinator::expire_leases() {
     fx.changed = expired > 0;
     verifier_.skip_stale(now, fx);
     fx.prepare = sequences_.to_prepare();  // made off every worker's path
+    fx.archive = archive_.due(now);        // ended jobs whole on disk leave memory
     return expired;
   });
 }
@@ -370,19 +384,6 @@ void Coordinator::checkpoint_all() {
 void Coordinator::wait_for_work(double timeout) const {
   MutexLock lock(mu_);
   changed_.wait_until(mu_, deadline_in(timeout));  // the first change: GetTask looks again
-}
-
-v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_samples, double timeout) const {
-  MutexLock lock(mu_);
-  const JobProgress since = job_progress(jobs_, id);
-  if (since.samples == last_samples)  // (else the caller's status is behind already)
-    await([&]() TESSERA_REQUIRES(mu_) { return since.ended || !(job_progress(jobs_, id) == since); }, timeout);
-  return job_status(jobs_, leases_, id, false, clock_->now());
-}
-
-bool Coordinator::wait_for_end(const std::string& id, double timeout) const {
-  MutexLock lock(mu_);
-  return await([&]() TESSERA_REQUIRES(mu_) { return job_progress(jobs_, id).ended; }, timeout);
 }
 
 // ---- for operators ----

@@ -13,6 +13,7 @@
 //   load         job_table.h (Load: what live work weighs, counted once)
 //   status       job_status.h (what clients see of a job, and the list)
 //   after submit job_control.h (priority, requeue, delete; the disk work between the steps)
+//   ended jobs   archive.h (leave memory for their rows; read back from them: coordinator_reads.cc)
 // A new feature gets its own unit beside these, reached from here by one forwarding call;
 // docs/architecture.md says where each step of a task's life is.
 //
@@ -38,6 +39,7 @@
 #include <vector>
 
 #include "core/util/mutex.h"
+#include "server/archive.h"
 #include "server/clock.h"
 #include "server/counters.h"
 #include "server/dispatcher.h"
@@ -75,10 +77,18 @@ class Coordinator {
   // stream, false at its end; written to disk as it comes. SubmitJobRequest.upload_id then
   // names it.
   v1::SceneUpload upload_scene(const std::function<bool(v1::SceneChunk*)>& next, const std::string& owner = "");
+  // A job's status; an archived job's (archive.h) has no tiles.
   v1::JobStatus status(const std::string& id, bool with_tiles) const;
-  std::vector<v1::JobStatus> list() const;  // in submission order
-  // A page of that list (ListJobsRequest: page_size 0 is every job).
+  // The jobs in memory (live ones, and those ended lately that are not archived yet), in
+  // submission order.
+  std::vector<v1::JobStatus> list() const;
+  // A page of every job the database has, in submission order (ListJobsRequest: page_size 0
+  // is every job).
   v1::JobList list(uint32_t page_size, const std::string& page_token) const;
+  // The `n` jobs submitted last and every live job before them, in submission order (the
+  // status page), and how many jobs there are in each state (metrics).
+  std::vector<v1::JobStatus> recent(size_t n) const;
+  std::array<uint64_t, 5> job_counts() const;
   // `requester` may cancel (requeue, delete, re-prioritise) only its own jobs unless `any`
   // (an admin, or no access tokens).
   v1::JobStatus cancel(const std::string& id, const std::string& requester = "", bool any = true);
@@ -219,6 +229,33 @@ class Coordinator {
     return done();
   }
   void record_sequence_end(const std::string& id) TESSERA_EXCLUDES(mu_);
+  // An ended job leaves memory (archive.h): its row first, then the table.
+  void archive(const Archival& a) TESSERA_EXCLUDES(mu_);
+  // The status of each row's job, from memory or its row (a row of neither is left out).
+  std::vector<v1::JobStatus> statuses(const std::vector<StoredJob>& rows) const TESSERA_EXCLUDES(mu_);
+  // An archived job's status from its row; nothing if none. Throws RequestError.
+  std::optional<v1::JobStatus> archived(const std::string& id) const TESSERA_EXCLUDES(mu_);
+  // The row of the archived job `id` a request would `verb`, nothing if it is not archived
+  // (archived_for_change). Throws RequestError.
+  std::optional<StoredJob> archived_change(const std::string& id, const std::string& requester, bool any,
+                                           const char* verb) const TESSERA_EXCLUDES(mu_);
+  // An archived job is being deleted or brought back (JobControl::begin_archived); false if
+  // it is in memory again. Throws RequestError (busy).
+  bool begin_archived(const std::string& id) TESSERA_EXCLUDES(mu_);
+  // Runs in_memory() under mu_ if the job `id` is in memory, else archived() without it (an
+  // optional of the same); a job a requeue brought back meanwhile is looked for again.
+  // Throws RequestError (kNotFound) if neither has it.
+  template <typename InMemory, typename Archived>
+  auto find(const std::string& id, InMemory&& in_memory, Archived&& archived) const TESSERA_EXCLUDES(mu_) {
+    for (int tries = 0; tries < 2; ++tries) {
+      {
+        MutexLock lock(mu_);
+        if (jobs_.knows(id)) return in_memory();
+      }
+      if (auto got = archived()) return std::move(*got);
+    }
+    throw RequestError(RequestError::Code::kNotFound, "no job '" + id + "'");
+  }
   void refused() TESSERA_EXCLUDES(mu_);  // a submit refused: counted
   // The job's (or frame's) image as a client is to get it: written first (or waited for)
   // when the one on disk is not current; returns whose image it is (a frame's own id).
@@ -255,6 +292,7 @@ class Coordinator {
   ResultIntake intake_ TESSERA_GUARDED_BY(mu_);
   WorkerLifecycle worker_lifecycle_ TESSERA_GUARDED_BY(mu_);
   JobControl control_ TESSERA_GUARDED_BY(mu_);
+  Archive archive_ TESSERA_GUARDED_BY(mu_);
 };
 
 }  // namespace tessera

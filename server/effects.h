@@ -2,14 +2,16 @@
 // lock writes to disk, encodes an image or waits: each operation appends what it needs
 // done to one Effects, and the coordinator carries it out once the lock is released
 // (Coordinator::apply): waking the waiters, then images and checkpoints, database rows,
-// sequence ends, frames to prepare.
+// sequence ends, frames to prepare, jobs to archive and flags for archived jobs.
 #pragma once
 
 #include <memory>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "server/archive.h"
 #include "server/snapshotter.h"
 
 namespace tessera {
@@ -19,10 +21,20 @@ struct Effects {
   std::vector<RowEnd> rows;                  // database rows to rewrite
   std::vector<std::string> sequence_ends;          // sequences whose end to record (once it can be)
   std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> prepare;  // sequences whose next frame's job to make
-  bool changed = false;                            // something waiters wait for happened
+  std::vector<Archival> archive;  // ended jobs to leave memory (archive.h)
+  // A worker quarantined: archived jobs holding its results are flagged in their rows (but
+  // those flagged in memory).
+  struct Flag {
+    uint64_t worker = 0;
+    std::string name;
+    std::set<std::string> flagged_in_memory;
+  };
+  std::vector<Flag> flags;
+  bool changed = false;  // something waiters wait for happened
 
   bool empty() const {
-    return writes.empty() && rows.empty() && sequence_ends.empty() && prepare.empty() && !changed;
+    return writes.empty() && rows.empty() && sequence_ends.empty() && prepare.empty() && archive.empty() &&
+           flags.empty() && !changed;
   }
 };
 

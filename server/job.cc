@@ -103,6 +103,8 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
                           : v1::JobStatus::CANCELLED);
     f->set_samples_done(fd);
     f->set_samples_total(ft);
+    f->set_frame_passes_done(j ? j->plan.frame_passes_done() : gone ? s.passes_total() : 0);
+    f->set_tiles_done(j ? j->plan.tiles_done() : gone ? frame_tiles() : 0);
     if (j || gone) f->set_job_id(frame_job_id(i));
   }
   s.set_error(e);

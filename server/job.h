@@ -60,8 +60,8 @@ struct Job {
   } written;
   std::atomic<bool> end_recorded{false};  // the job database has its end
   // JobControl: a requeue or delete of it is under way; it is being deleted (no image or
-  // checkpoint of it is begun again).
-  bool changing = false, removed = false;
+  // checkpoint of it is begun again). Archive: its row is taking its last status.
+  bool changing = false, removed = false, archiving = false;
 
   State state() const { return state_; }
   bool live() const { return job_live(state_); }
@@ -121,12 +121,15 @@ struct Sequence {
   std::string error;
   double submitted = 0, started = 0, finished_at = 0;
   bool end_recording = false, end_recorded = false;
-  bool changing = false, removed = false;  // as Job's
+  bool changing = false, removed = false, archiving = false;  // as Job's
 
   // One frame's counts, as its plan will have them, before any frame has started.
   uint64_t frame_samples() const { return uint64_t(settings.effective_window().area()) * uint64_t(settings.spp); }
   uint32_t frame_tiles() const { return uint32_t(settings.tile_count()); }
-  std::string frame_job_id(size_t i) const { return meta.id + "-f" + std::to_string(frames[i]); }
+  std::string frame_job_id(size_t i) const { return frame_id(meta.id, frames[i]); }
+  static std::string frame_id(const std::string& sequence, int frame) {
+    return sequence + "-f" + std::to_string(frame);
+  }
   bool frame_left(size_t i) const { return i < left.size() && left[i].has_value(); }
   bool frame_started(size_t i) const { return jobs[i] || frame_left(i); }
   uint64_t samples_merged() const;

@@ -35,6 +35,7 @@ void JobControl::set_priority(const std::string& id, int32_t priority, Effects& 
 JobControl::Removal JobControl::begin_delete(const std::string& id, const std::string& requester, bool any, double now,
                                              Effects& fx) {
   jobs_.check_change(id, requester, any, "delete");
+  if (archived_changing_.count(id)) throw busy(id);
   Removal r;
   r.id = id;
   if (std::shared_ptr<Sequence> s = jobs_.shared_sequence(id)) {
@@ -60,6 +61,19 @@ JobControl::Removal JobControl::begin_delete(const std::string& id, const std::s
   r.job_ids.push_back(id);
   if (job->live()) lifecycle_.end(*job, v1::JobStatus::CANCELLED, now, fx);
   return r;
+}
+
+JobControl::Removal JobControl::archived_removal(const StoredJob& row) {
+  Removal r;
+  r.id = row.meta.id;
+  r.scene_hash = row.meta.scene_hash;
+  if (row.frames.empty()) r.job_ids.push_back(r.id);
+  for (const int f : row.frames) r.job_ids.push_back(Sequence::frame_id(r.id, f));
+  return r;
+}
+
+void JobControl::begin_archived(const std::string& id) {
+  if (!archived_changing_.insert(id).second) throw busy(id);
 }
 
 bool JobControl::quiet(const Removal& r) { return none_writing(r.jobs) && (!r.sequence || !r.sequence->end_recording); }
@@ -93,6 +107,7 @@ void JobControl::delete_failed(const Removal& r, double now, Effects& fx) {
 
 JobControl::Requeue JobControl::begin_requeue(const std::string& id, const std::string& requester, bool any) {
   jobs_.check_change(id, requester, any, "requeue");
+  if (archived_changing_.count(id)) throw busy(id);
   Requeue q;
   q.id = id;
   const auto refuse_state = [&](v1::JobStatus::State state, bool durable) {

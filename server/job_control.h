@@ -12,6 +12,7 @@
 #pragma once
 
 #include <memory>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -48,6 +49,12 @@ class JobControl {
   void removed(const Removal& r, Effects& fx);
   // Its row could not be removed: it stays, ended, and its end is recorded as usual.
   void delete_failed(const Removal& r, double now, Effects& fx);
+  // An archived job's delete (archive.h): only its files, from its row.
+  static Removal archived_removal(const StoredJob& row);
+  // An archived job being deleted or brought back for a requeue: one request at a time (a
+  // second, and a delete or requeue of it in memory meanwhile, are refused as busy).
+  void begin_archived(const std::string& id);
+  void end_archived(const std::string& id) { archived_changing_.erase(id); }
 
   // A requeue in progress.
   struct Requeue {
@@ -73,6 +80,7 @@ class JobControl {
   JobLifecycle& lifecycle_;
   const Snapshotter& snapshots_;
   CoordinatorCounters& counters_;
+  std::set<std::string> archived_changing_;
 };
 
 // ---- the disk work, without the coordinator's lock ----

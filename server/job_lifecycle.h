@@ -22,8 +22,8 @@ class JobLifecycle {
       : jobs_(jobs), leasing_(leasing), snapshots_(snapshots), counters_(counters) {}
 
   // A job or sequence read back after a restart comes back in the state it was in.
-  void restore(Job& job, Job::State state) { job.state_ = state; }
-  void restore(Sequence& s, Sequence::State state) { s.state_ = state; }
+  static void restore(Job& job, Job::State state) { job.state_ = state; }
+  static void restore(Sequence& s, Sequence::State state) { s.state_ = state; }
   // A requeued job or sequence (JobControl) is live again: RUNNING once it has rendered.
   void requeue(Job& job, bool rendered) { job.state_ = rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED; }
   void requeue(Sequence& s, bool rendered) { s.state_ = rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED; }

@@ -79,29 +79,18 @@ std::vector<v1::JobStatus> job_list(const JobTable& jobs, const LeaseTable& leas
   return statuses;
 }
 
-v1::JobList job_page(const JobTable& jobs, const LeaseTable& leases, uint32_t page_size, const std::string& page_token,
-                     double now) {
-  uint64_t after = 0;  // the token: the submission number of the page's last job
-  if (!page_token.empty()) {
-    size_t used = 0;
-    try {
-      after = std::stoull(page_token, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used == 0 || used != page_token.size())
-      throw RequestError(RequestError::Code::kInvalidArgument, "bad page_token '" + page_token.substr(0, 64) + "'");
+uint64_t page_after(const std::string& page_token) {
+  if (page_token.empty()) return 0;  // from the first job
+  size_t used = 0;
+  uint64_t after = 0;
+  try {
+    after = std::stoull(page_token, &used);
+  } catch (const std::exception&) {
+    used = 0;
   }
-  const size_t n = page_size == 0 ? jobs.listed() : std::min(page_size, kMaxPage);
-  v1::JobList out;
-  out.set_total(jobs.listed());
-  std::vector<std::string> ids = jobs.page(after, n + 1);  // one more: is there a next page?
-  if (ids.size() > n) {
-    ids.pop_back();
-    out.set_next_page_token(std::to_string(jobs.seq_of(ids.back())));
-  }
-  for (const std::string& id : ids) *out.add_jobs() = job_status(jobs, leases, id, false, now);
-  return out;
+  if (used == 0 || used != page_token.size())
+    throw RequestError(RequestError::Code::kInvalidArgument, "bad page_token '" + page_token.substr(0, 64) + "'");
+  return after;
 }
 
 }  // namespace tessera

@@ -44,10 +44,9 @@ void keep_changed_frames(v1::JobStatus& s, std::vector<std::string>& sent);
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
                          double now);
 std::vector<v1::JobStatus> job_list(const JobTable& jobs, const LeaseTable& leases, double now);
-// A page of the list (ListJobsRequest): `page_size` jobs (0: all; at most kMaxPage) after the
-// one `page_token` names. Throws RequestError (kInvalidArgument) for a token it never gave.
+// A page of the list (ListJobsRequest): at most kMaxPage jobs, after the submission number
+// its page_token gives. Throws RequestError (kInvalidArgument) for a token never given.
 constexpr uint32_t kMaxPage = 1000;
-v1::JobList job_page(const JobTable& jobs, const LeaseTable& leases, uint32_t page_size, const std::string& page_token,
-                     double now);
+uint64_t page_after(const std::string& page_token);
 
 }  // namespace tessera

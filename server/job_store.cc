@@ -95,7 +95,14 @@ SqliteJobStore::SqliteJobStore(const std::string& data_dir) : dir_(data_dir) {
     exec("ALTER TABLE jobs ADD COLUMN ended_at REAL NOT NULL DEFAULT 0");
     Statement(db_, "UPDATE jobs SET ended_at = ?1 WHERE state >= 2").real(1, wall()).step();
   }
+  // ... and archived jobs' last status (archive.h), with whose results their tiles hold.
+  bool has_summary = false;
+  for (Statement q(db_, "PRAGMA table_info(jobs)"); q.step();) has_summary |= q.column_text(1) == "summary";
+  if (!has_summary) exec("ALTER TABLE jobs ADD COLUMN summary BLOB");
+  exec("CREATE TABLE IF NOT EXISTS merged_into(worker INTEGER NOT NULL, job TEXT NOT NULL, tiles INTEGER NOT NULL)");
   exec("CREATE INDEX IF NOT EXISTS jobs_scene ON jobs(scene_hash)");
+  exec("CREATE INDEX IF NOT EXISTS jobs_seq ON jobs(seq)");
+  exec("CREATE INDEX IF NOT EXISTS merged_worker ON merged_into(worker)");
 }
 
 SqliteJobStore::~SqliteJobStore() { sqlite3_close(db_); }
@@ -169,6 +176,7 @@ void SqliteJobStore::remove(const std::string& id, const std::vector<std::string
   {
     MutexLock lock(mu_);
     Statement(db_, "DELETE FROM jobs WHERE id = ?1").text(1, id).step();
+    Statement(db_, "DELETE FROM merged_into WHERE job = ?1").text(1, id).step();
   }
   if (after_row_commit) after_row_commit();
   // The row is gone: a checkpoint left behind (a disk error) is removed with its folder,
@@ -183,7 +191,9 @@ void SqliteJobStore::remove(const std::string& id, const std::vector<std::string
 void SqliteJobStore::requeue(const std::string& id) {
   {
     MutexLock lock(mu_);
-    Statement(db_, "UPDATE jobs SET state = ?2, error = '', elapsed = 0, ended_at = 0 WHERE id = ?1")
+    Statement(db_, "DELETE FROM merged_into WHERE job = ?1").text(1, id).step();  // (in memory again: its own)
+    Statement(db_,
+              "UPDATE jobs SET state = ?2, error = '', elapsed = 0, ended_at = 0, summary = NULL WHERE id = ?1")
         .text(1, id)
         .integer(2, v1::JobStatus::QUEUED)
         .step();
@@ -213,38 +223,157 @@ std::vector<std::string> SqliteJobStore::ended_before(double age, size_t limit) 
   return out;
 }
 
+namespace {
+
+// The columns a StoredJob is read from, and the reading (`summary`: the archived status too).
+constexpr const char* kRowColumns =
+    "id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, frames, ended_at, "
+    "summary IS NOT NULL";
+
+StoredJob read_row(const Statement& q, bool with_summary) {
+  StoredJob j;
+  j.meta.id = q.column_text(0);
+  j.meta.seq = uint64_t(q.column_int(1));
+  j.meta.name = q.column_text(2);
+  j.meta.owner = q.column_text(3);
+  j.meta.priority = int32_t(q.column_int(4));
+  j.meta.scene_hash = q.column_text(5);
+  j.meta.main_file = q.column_text(6);
+  if (!j.meta.settings.ParseFromString(q.column_text(7)))
+    throw std::runtime_error("job database: job " + j.meta.id + ": unreadable settings");
+  const int64_t state = q.column_int(8);
+  j.state = v1::JobStatus::State_IsValid(int(state)) ? v1::JobStatus::State(state) : v1::JobStatus::FAILED;
+  j.error = q.column_text(9);
+  j.elapsed = q.column_real(10);
+  try {
+    const std::string frames = q.column_text(11);
+    if (!frames.empty()) j.frames = parse_frames(frames);
+  } catch (const std::exception& e) {
+    throw std::runtime_error("job database: job " + j.meta.id + ": unreadable frames: " + e.what());
+  }
+  j.ended_at = q.column_real(12);
+  if (with_summary) j.summary = q.column_text(14);
+  return j;
+}
+
+std::string select_rows(const char* where_and_order, bool with_summary) {
+  return std::string("SELECT ") + kRowColumns + (with_summary ? ", summary" : "") + " FROM jobs " + where_and_order;
+}
+
+}  // namespace
+
 std::vector<StoredJob> SqliteJobStore::jobs() const {
   MutexLock lock(mu_);
-  Statement q(db_,
-              "SELECT id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, frames, "
-              "ended_at "
-              "FROM jobs ORDER BY seq");
+  Statement q(db_, select_rows("WHERE summary IS NULL ORDER BY seq", false).c_str());
   std::vector<StoredJob> out;
-  while (q.step()) {
-    StoredJob j;
-    j.meta.id = q.column_text(0);
-    j.meta.seq = uint64_t(q.column_int(1));
-    j.meta.name = q.column_text(2);
-    j.meta.owner = q.column_text(3);
-    j.meta.priority = int32_t(q.column_int(4));
-    j.meta.scene_hash = q.column_text(5);
-    j.meta.main_file = q.column_text(6);
-    if (!j.meta.settings.ParseFromString(q.column_text(7)))
-      throw std::runtime_error("job database: job " + j.meta.id + ": unreadable settings");
-    const int64_t state = q.column_int(8);
-    j.state = v1::JobStatus::State_IsValid(int(state)) ? v1::JobStatus::State(state) : v1::JobStatus::FAILED;
-    j.error = q.column_text(9);
-    j.elapsed = q.column_real(10);
-    try {
-      const std::string frames = q.column_text(11);
-      if (!frames.empty()) j.frames = parse_frames(frames);
-    } catch (const std::exception& e) {
-      throw std::runtime_error("job database: job " + j.meta.id + ": unreadable frames: " + e.what());
-    }
-    j.ended_at = q.column_real(12);
-    out.push_back(std::move(j));
-  }
+  while (q.step()) out.push_back(read_row(q, false));
   return out;
+}
+
+bool SqliteJobStore::archive(const std::string& id, const std::string& summary, const std::vector<MergedInto>& merged) {
+  MutexLock lock(mu_);
+  exec("BEGIN IMMEDIATE");
+  try {
+    Statement(db_, "DELETE FROM merged_into WHERE job = ?1").text(1, id).step();
+    Statement(db_, "UPDATE jobs SET summary = ?2 WHERE id = ?1 AND state >= 2").text(1, id).blob(2, summary).step();
+    const bool took = sqlite3_changes(db_) > 0;
+    if (took)
+      for (const MergedInto& m : merged)
+        Statement(db_, "INSERT INTO merged_into(worker, job, tiles) VALUES(?1, ?2, ?3)")
+            .integer(1, int64_t(m.worker))
+            .text(2, id)
+            .integer(3, m.tiles)
+            .step();
+    exec("COMMIT");
+    return took;
+  } catch (...) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    throw;
+  }
+}
+
+std::optional<StoredJob> SqliteJobStore::job(const std::string& id) const {
+  MutexLock lock(mu_);
+  Statement q(db_, select_rows("WHERE id = ?1", true).c_str());
+  q.text(1, id);
+  if (!q.step()) return std::nullopt;
+  return read_row(q, true);
+}
+
+std::vector<StoredJob> SqliteJobStore::page(uint64_t after_seq, size_t n) const {
+  MutexLock lock(mu_);
+  Statement q(db_, select_rows("WHERE seq > ?1 ORDER BY seq LIMIT ?2", true).c_str());
+  q.integer(1, int64_t(after_seq)).integer(2, int64_t(std::min<size_t>(n, INT64_MAX)));
+  std::vector<StoredJob> out;
+  while (q.step()) out.push_back(read_row(q, true));
+  return out;
+}
+
+uint64_t SqliteJobStore::count() const {
+  MutexLock lock(mu_);
+  Statement q(db_, "SELECT count(*) FROM jobs");
+  q.step();
+  return uint64_t(q.column_int(0));
+}
+
+std::vector<StoredJob> SqliteJobStore::newest(size_t n) const {
+  MutexLock lock(mu_);
+  Statement q(db_, select_rows("ORDER BY seq DESC LIMIT ?1", true).c_str());
+  q.integer(1, int64_t(std::min<size_t>(n, INT64_MAX)));
+  std::vector<StoredJob> out;
+  while (q.step()) out.push_back(read_row(q, true));
+  std::reverse(out.begin(), out.end());
+  return out;
+}
+
+std::vector<std::pair<std::string, std::string>> SqliteJobStore::archived_names() const {
+  MutexLock lock(mu_);
+  Statement q(db_, "SELECT id, scene_hash FROM jobs WHERE summary IS NOT NULL");
+  std::vector<std::pair<std::string, std::string>> out;
+  while (q.step()) out.emplace_back(q.column_text(0), q.column_text(1));
+  return out;
+}
+
+std::array<uint64_t, 5> SqliteJobStore::archived_states() const {
+  MutexLock lock(mu_);
+  Statement q(db_, "SELECT state, count(*) FROM jobs WHERE summary IS NOT NULL GROUP BY state");
+  std::array<uint64_t, 5> out{};
+  while (q.step()) out[size_t(std::clamp<int64_t>(q.column_int(0), 0, 4))] += uint64_t(q.column_int(1));
+  return out;
+}
+
+void SqliteJobStore::flag_merged(uint64_t worker, const std::set<std::string>& skip,
+                                 const std::function<std::string(uint32_t, bool)>& message) {
+  MutexLock lock(mu_);
+  std::vector<std::pair<std::string, uint32_t>> hits;  // job, tiles
+  {
+    Statement q(db_, "SELECT job, sum(tiles) FROM merged_into WHERE worker = ?1 GROUP BY job");
+    q.integer(1, int64_t(worker));
+    while (q.step())
+      if (!skip.count(q.column_text(0))) hits.emplace_back(q.column_text(0), uint32_t(q.column_int(1)));
+  }
+  exec("BEGIN IMMEDIATE");
+  try {
+    for (const auto& [job, tiles] : hits) {
+      Statement f(db_, "SELECT frames != '' FROM jobs WHERE id = ?1");
+      if (!f.text(1, job).step()) continue;
+      const std::string m = message(tiles, f.column_int(0) != 0);
+      Statement(db_, "UPDATE jobs SET error = CASE WHEN error = '' THEN ?2 ELSE error || '; ' || ?2 END WHERE id = ?1")
+          .text(1, job)
+          .text(2, m)
+          .step();
+    }
+    Statement(db_, "DELETE FROM merged_into WHERE worker = ?1").integer(1, int64_t(worker)).step();
+    exec("COMMIT");
+  } catch (...) {
+    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
+    throw;
+  }
+}
+
+void SqliteJobStore::forget_merges() {
+  MutexLock lock(mu_);
+  exec("DELETE FROM merged_into");
 }
 
 void SqliteJobStore::ping() const {

@@ -9,12 +9,15 @@
 // keeping them would cost a synchronous write per task. docs/architecture.md has the why.
 #pragma once
 
+#include <array>
 #include <chrono>
 #include <functional>
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/util/mutex.h"
@@ -33,6 +36,17 @@ struct StoredJob {
   double ended_at = 0;  // when its end was recorded (JobStore::wall), 0 while live
   // A sequence's frames (its frames' jobs have no rows: each is found by its checkpoint).
   std::vector<int> frames;
+  // Archived (archive.h: an ended job kept only here): its last status, a JobStatus without
+  // tiles whose state, error and priority the columns above override. Read by job() and
+  // page(); empty for a job still in memory.
+  std::string summary;
+};
+
+// How many tiles of an archived job hold one worker's results: a worker found lying later
+// flags the job (JobStore::flag_merged).
+struct MergedInto {
+  uint64_t worker = 0;
+  uint32_t tiles = 0;
 };
 
 // A job row's end, to write (again: an ended job's error changed when a liar's tiles are in it).
@@ -60,7 +74,34 @@ class JobStore {
   // Durable when it returns (the submit is acknowledged after it). Throws std::runtime_error.
   virtual void add(const StoredJob& job) = 0;
   virtual void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) = 0;
-  virtual std::vector<StoredJob> jobs() const = 0;  // in submission order
+  // The jobs to take up at start, in submission order: every row but the archived ones.
+  virtual std::vector<StoredJob> jobs() const = 0;
+
+  // ---- archived jobs (archive.h) ----
+  // The ended job `id` leaves memory: its last status (StoredJob::summary) and whose results
+  // its tiles hold. Only an ended row takes it; false when none did (the job was requeued or
+  // deleted meanwhile). Throws std::runtime_error.
+  virtual bool archive(const std::string& id, const std::string& summary, const std::vector<MergedInto>& merged) = 0;
+  // One row, with its summary if archived; nothing if there is no such row.
+  virtual std::optional<StoredJob> job(const std::string& id) const = 0;
+  // Up to `n` rows after submission number `after_seq`, in submission order (summaries of
+  // archived ones included), and how many rows there are.
+  virtual std::vector<StoredJob> page(uint64_t after_seq, size_t n) const = 0;
+  virtual uint64_t count() const = 0;
+  // The `n` rows submitted last, in submission order (summaries included).
+  virtual std::vector<StoredJob> newest(size_t n) const = 0;
+  // Archived jobs' ids and scenes (what a start must keep on disk), and their number by state.
+  virtual std::vector<std::pair<std::string, std::string>> archived_names() const = 0;
+  virtual std::array<uint64_t, 5> archived_states() const = 0;
+  // Worker `worker` was found lying: every archived job whose tiles hold its results (but
+  // those in `skip`, flagged in memory) gets message(tiles, is a sequence) added to its error,
+  // and the worker's records go. Throws std::runtime_error.
+  virtual void flag_merged(uint64_t worker, const std::set<std::string>& skip,
+                           const std::function<std::string(uint32_t tiles, bool sequence)>& message) = 0;
+  // At start: the records of which worker merged into what (worker ids of an earlier run
+  // mean nothing now).
+  virtual void forget_merges() = 0;
+
   // The job's row is gone (durably) when it returns, then the checkpoints of the jobs named
   // in `with_checkpoints` (the job's own, a sequence's frames'). Throws std::runtime_error.
   virtual void remove(const std::string& id, const std::vector<std::string>& with_checkpoints) = 0;
@@ -102,6 +143,16 @@ class SqliteJobStore : public JobStore {
   void add(const StoredJob& job) override;
   void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) override;
   std::vector<StoredJob> jobs() const override;
+  bool archive(const std::string& id, const std::string& summary, const std::vector<MergedInto>& merged) override;
+  std::optional<StoredJob> job(const std::string& id) const override;
+  std::vector<StoredJob> page(uint64_t after_seq, size_t n) const override;
+  uint64_t count() const override;
+  std::vector<StoredJob> newest(size_t n) const override;
+  std::vector<std::pair<std::string, std::string>> archived_names() const override;
+  std::array<uint64_t, 5> archived_states() const override;
+  void flag_merged(uint64_t worker, const std::set<std::string>& skip,
+                   const std::function<std::string(uint32_t, bool)>& message) override;
+  void forget_merges() override;
   void remove(const std::string& id, const std::vector<std::string>& with_checkpoints) override;
   void requeue(const std::string& id) override;
   void set_priority(const std::string& id, int32_t priority) override;
@@ -133,6 +184,16 @@ class MemoryJobStore : public JobStore {
   void add(const StoredJob& job) override;
   void end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) override;
   std::vector<StoredJob> jobs() const override;
+  bool archive(const std::string& id, const std::string& summary, const std::vector<MergedInto>& merged) override;
+  std::optional<StoredJob> job(const std::string& id) const override;
+  std::vector<StoredJob> page(uint64_t after_seq, size_t n) const override;
+  uint64_t count() const override;
+  std::vector<StoredJob> newest(size_t n) const override;
+  std::vector<std::pair<std::string, std::string>> archived_names() const override;
+  std::array<uint64_t, 5> archived_states() const override;
+  void flag_merged(uint64_t worker, const std::set<std::string>& skip,
+                   const std::function<std::string(uint32_t, bool)>& message) override;
+  void forget_merges() override;
   void remove(const std::string& id, const std::vector<std::string>& with_checkpoints) override;
   void requeue(const std::string& id) override;
   void set_priority(const std::string& id, int32_t priority) override;
@@ -146,9 +207,16 @@ class MemoryJobStore : public JobStore {
   bool fail_writes = false;  // every write throws, as a full disk would
 
  private:
+  void check_writes() const;
   mutable Mutex mu_;
   uint64_t generation_ = 0;
   std::vector<StoredJob> rows_ TESSERA_GUARDED_BY(mu_);
+  struct Merge {
+    uint64_t worker;
+    std::string job;
+    uint32_t tiles;
+  };
+  std::vector<Merge> merges_ TESSERA_GUARDED_BY(mu_);
   mutable std::map<std::string, std::string> checkpoints_ TESSERA_GUARDED_BY(mu_);
 };
 

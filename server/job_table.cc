@@ -98,12 +98,6 @@ std::vector<std::string> JobTable::page(uint64_t after_seq, size_t n) const {
   return out;
 }
 
-uint64_t JobTable::seq_of(const std::string& id) const {
-  if (const Sequence* s = find_sequence(id)) return s->meta.seq;
-  const Job* j = find_job(id);
-  return j && j->sequence.empty() ? j->meta.seq : 0;
-}
-
 Job* JobTable::find_job(const std::string& id) const {
   auto it = jobs_.find(id);
   return it == jobs_.end() ? nullptr : it->second.get();
@@ -130,22 +124,27 @@ Job& JobTable::job(const std::string& id) const {
   return *j;
 }
 
+void JobTable::check_owner(const std::string& id, const std::string& owner, const std::string& requester, bool any,
+                           const char* verb) {
+  if (!any && owner != requester)
+    throw RequestError(RequestError::Code::kPermissionDenied,
+                       "job " + id + " belongs to '" + owner + "': a client may " + verb + " only its own jobs");
+}
+
+RequestError JobTable::frame_refusal(const std::string& id, const std::string& sequence, const char* verb) {
+  return RequestError(RequestError::Code::kFailedPrecondition,
+                      "job " + id + " is a frame of sequence " + sequence + ": " + verb + " the sequence");
+}
+
 const std::string& JobTable::check_change(const std::string& id, const std::string& requester, bool any,
                                           const char* verb) const {
-  const auto refuse_other = [&](const std::string& owner) {
-    if (!any && owner != requester)
-      throw RequestError(RequestError::Code::kPermissionDenied,
-                         "job " + id + " belongs to '" + owner + "': a client may " + verb + " only its own jobs");
-  };
   if (const Sequence* s = find_sequence(id)) {
-    refuse_other(s->meta.owner);
+    check_owner(id, s->meta.owner, requester, any, verb);
     return s->meta.owner;
   }
   const Job& j = job(id);
-  refuse_other(j.meta.owner);
-  if (!j.sequence.empty())
-    throw RequestError(RequestError::Code::kFailedPrecondition,
-                       "job " + id + " is a frame of sequence " + j.sequence + ": " + verb + " the sequence");
+  check_owner(id, j.meta.owner, requester, any, verb);
+  if (!j.sequence.empty()) throw frame_refusal(id, j.sequence, verb);
   return j.meta.owner;
 }
 

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "server/job.h"
+#include "server/request_error.h"
 
 namespace tessera {
 
@@ -55,6 +56,9 @@ class JobTable {
   };
   std::optional<LeftFrame> left_frame(const std::string& id, std::optional<int> frame = std::nullopt) const;
 
+  // Whether `id` names a job, a sequence or a frame that left memory here (else it is
+  // archived, archive.h, or unknown).
+  bool knows(const std::string& id) const { return find_job(id) || find_sequence(id) || left_frame(id); }
   Job* find_job(const std::string& id) const;  // null if none
   Sequence* find_sequence(const std::string& id) const;
   std::shared_ptr<Sequence> shared_sequence(const std::string& id) const;
@@ -67,6 +71,10 @@ class JobTable {
   // kPermissionDenied, kFailedPrecondition for a frame) saying which.
   const std::string& check_change(const std::string& id, const std::string& requester, bool any,
                                   const char* verb) const;
+  // Its parts: `owner`'s job refused to another `requester` unless `any`; a frame refused.
+  static void check_owner(const std::string& id, const std::string& owner, const std::string& requester, bool any,
+                          const char* verb);
+  static RequestError frame_refusal(const std::string& id, const std::string& sequence, const char* verb);
   // The job of `id`, or of its frame `frame` when `id` is a sequence; throws RequestError
   // saying what is missing (a frame not named, not one of its frames, not started).
   Job& frame_job(const std::string& id, std::optional<int> frame) const;
@@ -77,8 +85,6 @@ class JobTable {
   // number `after_seq`, and their count.
   std::vector<std::string> page(uint64_t after_seq, size_t n) const;
   size_t listed() const { return listed_.size(); }
-  // The submission number of a listed job or sequence (0 if none).
-  uint64_t seq_of(const std::string& id) const;
 
   // The scenes every job and sequence names (ended ones' too: kept until deleted).
   std::set<std::string> scene_hashes() const;

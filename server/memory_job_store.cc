@@ -1,4 +1,6 @@
 #include <algorithm>
+#include <cstdint>
+#include <map>
 
 #include "server/job_store.h"
 
@@ -18,6 +20,10 @@ class MemoryCheckpoint : public CheckpointFile {
 }  // namespace
 
 uint64_t MemoryJobStore::next_generation() { return ++generation_; }
+
+void MemoryJobStore::check_writes() const {
+  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+}
 
 void MemoryJobStore::add(const StoredJob& job) {
   MutexLock lock(mu_);
@@ -44,6 +50,7 @@ void MemoryJobStore::remove(const std::string& id, const std::vector<std::string
   MutexLock lock(mu_);
   if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
   std::erase_if(rows_, [&](const StoredJob& j) { return j.meta.id == id; });
+  std::erase_if(merges_, [&](const Merge& m) { return m.job == id; });
   for (const std::string& j : with_checkpoints) checkpoints_.erase(j);
 }
 
@@ -55,7 +62,9 @@ void MemoryJobStore::requeue(const std::string& id) {
       j.state = v1::JobStatus::QUEUED;
       j.error.clear();
       j.elapsed = j.ended_at = 0;
+      j.summary.clear();
     }
+  std::erase_if(merges_, [&](const Merge& m) { return m.job == id; });
 }
 
 void MemoryJobStore::set_priority(const std::string& id, int32_t priority) {
@@ -83,14 +92,90 @@ std::vector<std::string> MemoryJobStore::ended_before(double age, size_t limit) 
 }
 
 std::vector<StoredJob> MemoryJobStore::jobs() const {
+  std::vector<StoredJob> rows = page(0, SIZE_MAX);
+  std::erase_if(rows, [](const StoredJob& j) { return !j.summary.empty(); });
+  for (StoredJob& j : rows) j.summary.clear();
+  return rows;
+}
+
+bool MemoryJobStore::archive(const std::string& id, const std::string& summary, const std::vector<MergedInto>& merged) {
+  MutexLock lock(mu_);
+  check_writes();
+  std::erase_if(merges_, [&](const Merge& m) { return m.job == id; });
+  for (StoredJob& j : rows_)
+    if (j.meta.id == id && !job_live(j.state)) {
+      j.summary = summary;
+      for (const MergedInto& m : merged) merges_.push_back({m.worker, id, m.tiles});
+      return true;
+    }
+  return false;
+}
+
+std::optional<StoredJob> MemoryJobStore::job(const std::string& id) const {
+  MutexLock lock(mu_);
+  for (const StoredJob& j : rows_)
+    if (j.meta.id == id) return j;
+  return std::nullopt;
+}
+
+std::vector<StoredJob> MemoryJobStore::page(uint64_t after_seq, size_t n) const {
   std::vector<StoredJob> rows;
   {
     MutexLock lock(mu_);
-    rows = rows_;
+    for (const StoredJob& j : rows_)
+      if (j.meta.seq > after_seq) rows.push_back(j);
   }
   std::stable_sort(rows.begin(), rows.end(),
                    [](const StoredJob& a, const StoredJob& b) { return a.meta.seq < b.meta.seq; });
+  if (rows.size() > n) rows.resize(n);
   return rows;
+}
+
+uint64_t MemoryJobStore::count() const {
+  MutexLock lock(mu_);
+  return rows_.size();
+}
+
+std::vector<StoredJob> MemoryJobStore::newest(size_t n) const {
+  std::vector<StoredJob> rows = page(0, SIZE_MAX);
+  if (rows.size() > n) rows.erase(rows.begin(), rows.end() - ptrdiff_t(n));
+  return rows;
+}
+
+std::vector<std::pair<std::string, std::string>> MemoryJobStore::archived_names() const {
+  MutexLock lock(mu_);
+  std::vector<std::pair<std::string, std::string>> out;
+  for (const StoredJob& j : rows_)
+    if (!j.summary.empty()) out.emplace_back(j.meta.id, j.meta.scene_hash);
+  return out;
+}
+
+std::array<uint64_t, 5> MemoryJobStore::archived_states() const {
+  MutexLock lock(mu_);
+  std::array<uint64_t, 5> out{};
+  for (const StoredJob& j : rows_)
+    if (!j.summary.empty()) ++out[std::min<size_t>(4, size_t(j.state))];
+  return out;
+}
+
+void MemoryJobStore::flag_merged(uint64_t worker, const std::set<std::string>& skip,
+                                 const std::function<std::string(uint32_t, bool)>& message) {
+  MutexLock lock(mu_);
+  check_writes();
+  std::map<std::string, uint32_t> hits;
+  for (const Merge& m : merges_)
+    if (m.worker == worker && !skip.count(m.job)) hits[m.job] += m.tiles;
+  for (StoredJob& j : rows_)
+    if (auto it = hits.find(j.meta.id); it != hits.end()) {
+      const std::string m = message(it->second, !j.frames.empty());
+      j.error += (j.error.empty() ? "" : "; ") + m;
+    }
+  std::erase_if(merges_, [&](const Merge& m) { return m.worker == worker; });
+}
+
+void MemoryJobStore::forget_merges() {
+  MutexLock lock(mu_);
+  merges_.clear();
 }
 
 void MemoryJobStore::ping() const {

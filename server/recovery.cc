@@ -6,8 +6,17 @@
 namespace tessera {
 
 void Recovery::restore(double now, Effects& fx) {
+  p_.store.forget_merges();  // worker ids of the earlier run
   for (const StoredJob& row : p_.store.jobs()) {
-    if (row.frames.empty())
+    if (!job_live(row.state)) {  // (ended, not yet archived when the earlier run stopped)
+      p_.store.discard_partial_writes(row.meta.id);
+      try {
+        adopt(p_.jobs, load_ended(row, p_.store, now));
+        ++p_.counters.jobs_restored;
+      } catch (const WireError& e) {  // checked at submit: only a damaged database gets here
+        spdlog::error("job {}: stored settings: {}; skipped", row.meta.id, e.what());
+      }
+    } else if (row.frames.empty())
       restore_job(row, now, fx);
     else
       restore_sequence(row, now, fx);
@@ -21,6 +30,68 @@ void Recovery::as_ended(Job& job, double now, double elapsed) {
   job.compact();  // (restored without a film; a plan without a checkpoint has its own)
   job.written = {1, job.plan.merges(), 1, job.plan.merges()};
   job.end_recorded = true;
+}
+
+Recovery::Ended Recovery::load_ended(const StoredJob& row, const JobStore& store, double now) {
+  const RenderSettings settings = from_proto(row.meta.settings);
+  Ended e;
+  if (row.frames.empty()) {
+    e.job = std::make_shared<Job>(row.meta, settings, row.state);
+    try {
+      store.read_checkpoint(row.meta.id, e.job->plan, false);  // (its counts: the film stays on disk)
+    } catch (const std::exception& ex) {
+      spdlog::warn("job {}: {}; its counts are lost, its image is kept", row.meta.id, ex.what());
+      e.job = std::make_shared<Job>(row.meta, settings, row.state);  // the damaged read left its plan unusable
+    }
+    e.job->error = row.error;
+    e.job->submitted = now;
+    as_ended(*e.job, now, row.elapsed);
+    return e;
+  }
+  Sequence& s = *(e.sequence = std::make_shared<Sequence>(row.meta, settings, row.frames, row.state));
+  s.error = row.error;
+  s.submitted = now;
+  double elapsed = 0;
+  for (size_t i = 0; i < s.frames.size(); ++i) {  // a frame that started has a checkpoint
+    std::shared_ptr<Job> job = SequenceScheduler::make_frame(s, i);
+    std::optional<double> cp;
+    try {
+      if (!(cp = store.read_checkpoint(job->id(), job->plan, false))) continue;
+    } catch (const std::exception& ex) {
+      spdlog::warn("job {}: {}; taken as never rendered", job->id(), ex.what());
+      continue;
+    }
+    store.discard_partial_writes(job->id());
+    const bool done = job->plan.done();
+    JobLifecycle::restore(*job, done ? v1::JobStatus::DONE : v1::JobStatus::CANCELLED);
+    job->submitted = now;
+    as_ended(*job, now, *cp);
+    elapsed = std::max(elapsed, *cp);
+    ++s.frames_started;
+    if (done) {  // left memory, as JobTable::let_go leaves it
+      ++s.frames_done;
+      if (s.left.empty()) s.left.resize(s.frames.size());
+      s.left[i] = job->plan.samples_merged();
+    } else {
+      s.jobs[i] = std::move(job);  // kept for a requeue
+    }
+  }
+  s.end_recorded = true;
+  s.started = now - elapsed;
+  s.finished_at = now;
+  return e;
+}
+
+void Recovery::adopt(JobTable& jobs, const Ended& e) {
+  if (e.job) {
+    jobs.saw_seq(e.job->meta.seq);
+    jobs.add(e.job);
+    return;
+  }
+  jobs.saw_seq(e.sequence->meta.seq);
+  jobs.add(e.sequence);
+  for (const std::shared_ptr<Job>& j : e.sequence->jobs)
+    if (j) jobs.add(j);
 }
 
 void Recovery::resume(JobLifecycle& lifecycle, Job& j, double elapsed, bool checkpointed, double now) {
@@ -46,10 +117,9 @@ void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
   double elapsed = row.elapsed;
   bool checkpointed = false;
   try {
-    // An ended job's film stays on disk: start-up decodes only what live jobs go on with.
-    if (const std::optional<double> e = p_.store.read_checkpoint(id, shared->plan, shared->live())) {
+    if (const std::optional<double> e = p_.store.read_checkpoint(id, shared->plan)) {
       checkpointed = true;
-      if (shared->live()) elapsed = *e;
+      elapsed = *e;
     }
   } catch (const std::exception& e) {
     spdlog::warn("job {}: {}; its samples are rendered again", id, e.what());
@@ -60,10 +130,6 @@ void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
   j.submitted = now;
   ++p_.counters.jobs_restored;
   p_.store.discard_partial_writes(id);
-  if (!j.live()) {  // its image is on disk and its film is not needed; status comes from the plan
-    as_ended(j, now, elapsed);
-    return;
-  }
   std::string lost;  // why it cannot go on
   try {
     j.meta.scene_bytes = p_.restore_scene(j.meta.scene_hash);
@@ -94,11 +160,11 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
   s.submitted = now;
   ++p_.counters.jobs_restored;
   std::string lost;
-  if (s.live()) try {
-      s.meta.scene_bytes = p_.restore_scene(s.meta.scene_hash);
-    } catch (const std::exception& e) {
-      lost = e.what();
-    }
+  try {
+    s.meta.scene_bytes = p_.restore_scene(s.meta.scene_hash);
+  } catch (const std::exception& e) {
+    lost = e.what();
+  }
   double elapsed = 0;
   bool all_done = true;
   for (size_t i = 0; i < s.frames.size(); ++i) {
@@ -143,11 +209,7 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
       p_.jobs.let_go(j);  // a DONE frame leaves memory; a cancelled one stays for a requeue
     }
   }
-  if (!s.live()) {
-    s.end_recorded = true;
-    s.started = now - elapsed;
-    s.finished_at = now;
-  } else if (!lost.empty()) {
+  if (!lost.empty()) {
     s.error = "cannot go on after the coordinator restarted: " + lost;
     p_.lifecycle.end(s, v1::JobStatus::FAILED, now, fx);
   } else if (all_done) {

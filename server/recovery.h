@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <string>
 
 #include "server/job_lifecycle.h"
@@ -30,7 +31,19 @@ class Recovery {
     std::function<uint64_t(const std::string& hash)> restore_scene;
   };
   explicit Recovery(Parts parts) : p_(std::move(parts)) {}
+  // Every row but the archived ones (archive.h: they stay on disk until asked for).
   void restore(double now, Effects& fx);
+  // An ended job's row as it is on disk, not yet in any table: counts from its checkpoints,
+  // no film; a sequence with its frames that did not end DONE (those that did have left
+  // memory: Sequence::left). A start's ended rows, and an archived job a requeue brings
+  // back. Reads from disk: call it without the coordinator's lock. Throws WireError for
+  // settings that cannot be read (only a damaged database has them).
+  struct Ended {
+    std::shared_ptr<Job> job;            // a still,
+    std::shared_ptr<Sequence> sequence;  // or a sequence
+  };
+  static Ended load_ended(const StoredJob& row, const JobStore& store, double now);
+  static void adopt(JobTable& jobs, const Ended& e);  // into the table
   // A job whose plan was read back from its checkpoint goes on (a restart's, a requeue's):
   // live again, RUNNING if it rendered before, its checkpoint counted as on disk.
   static void resume(JobLifecycle& lifecycle, Job& job, double elapsed, bool checkpointed, double now);

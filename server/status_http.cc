@@ -182,7 +182,7 @@ std::string StatusHttp::status_json() const {
   std::snprintf(buf, sizeof buf, "{\"uptime_seconds\":%.17g,\"utilization\":%.17g,\"jobs\":[", num(c_.uptime()),
                 num(c_.utilization()));
   out += buf;
-  const std::vector<v1::JobStatus> jobs = c_.list();
+  const std::vector<v1::JobStatus> jobs = c_.recent(kStatusJobs);
   for (size_t i = 0; i < jobs.size(); ++i) {
     if (i) out += ',';
     out += proto_json(jobs[i]);
@@ -256,8 +256,7 @@ std::string StatusHttp::metrics_text() const {
         "Work left in core-seconds at the measured speed: the autoscaling signal (workers = this / seconds wanted).",
         q.core_seconds_remaining);
   counter("tessera_merge_seconds_total", "Time spent adding tile sums into films.", k.merge_seconds);
-  size_t counts[5] = {};
-  for (const v1::JobStatus& s : c_.list()) ++counts[std::min<size_t>(4, size_t(s.state()))];
+  const std::array<uint64_t, 5> counts = c_.job_counts();
   m << "# HELP tessera_jobs Jobs by state.\n# TYPE tessera_jobs gauge\n";
   const char* names[5] = {"queued", "running", "done", "cancelled", "failed"};
   for (int i = 0; i < 5; ++i) m << "tessera_jobs{state=\"" << names[i] << "\"} " << counts[i] << '\n';

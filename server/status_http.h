@@ -24,6 +24,9 @@ namespace tessera {
 
 class StatusHttp {
  public:
+  // The status page's jobs: the ones submitted last and every live one before them (a farm
+  // keeps thousands; `tessera jobs` and ListJobs page through them all).
+  static constexpr size_t kStatusJobs = 200;
   // With `tls_cert` and `tls_key` (PEM files) it serves HTTPS. Throws if they do not load.
   explicit StatusHttp(Coordinator& coordinator, const Authenticator* auth = nullptr, const std::string& tls_cert = "",
                       const std::string& tls_key = "");

@@ -114,6 +114,15 @@ void Verifier::skip_stale(double now, Effects& fx) {
     if (Job* job = jobs_.find_job(id)) lifecycle_.finish_if_done(*job, now, fx);
 }
 
+std::string Verifier::ended_flag(uint32_t tiles, const std::string& worker, bool frames) {
+  return frames ? std::to_string(tiles) + " tiles of finished frames hold results of worker " + worker +
+                      ", quarantined after those frames ended (its results differed from the same tasks rendered "
+                      "elsewhere): submit the job again for images without them"
+                : std::to_string(tiles) + " tiles hold results of worker " + worker +
+                      ", quarantined after the job ended (its results differed from the same tasks rendered "
+                      "elsewhere): submit the job again for an image without them";
+}
+
 void Verifier::flag_ended(Job& job, const std::string& flag, Effects& fx) {
   auto add = [&](std::string& error, const std::string& what) { error += (error.empty() ? "" : "; ") + what; };
   add(job.error, flag);
@@ -145,6 +154,7 @@ void Verifier::quarantine(uint64_t worker, const std::string& why, double now, E
   leasing_.end_worker(worker, now);
   // What it merged is rendered again: every tile of a live job it added sums to starts
   // over (a tile's passes build on each other). An ended job is flagged.
+  std::set<std::string> flagged;  // stills and sequences
   for (const auto& [id, job] : jobs_.jobs()) {
     auto mine = job->merged_by.find(worker);
     if (mine == job->merged_by.end()) continue;
@@ -161,24 +171,20 @@ void Verifier::quarantine(uint64_t worker, const std::string& why, double now, E
         if (c.job == id && tiles.count(c.tile)) moot.push_back(check);
       for (uint64_t check : moot) drop(check, false, now);
     } else if (job->state() == v1::JobStatus::DONE) {
-      flag_ended(*job,
-                 std::to_string(tiles.size()) + " tiles hold results of worker " + name +
-                     ", quarantined after the job ended (its results differed from the same tasks rendered "
-                     "elsewhere): submit the job again for an image without them",
-                 fx);
+      flag_ended(*job, ended_flag(uint32_t(tiles.size()), name, false), fx);
+      flagged.insert(job->sequence.empty() ? id : job->sequence);
     }
   }
   // Frames that left memory (JobTable::let_go) flag their sequence.
   for (const auto& [id, s] : jobs_.sequences()) {
     auto mine = s->left_merged_by.find(worker);
     if (mine == s->left_merged_by.end()) continue;
-    flag_sequence(*s,
-                  std::to_string(mine->second) + " tiles of finished frames hold results of worker " + name +
-                      ", quarantined after those frames ended (its results differed from the same tasks rendered "
-                      "elsewhere): submit the job again for images without them",
-                  fx);
+    flag_sequence(*s, ended_flag(mine->second, name, true), fx);
     s->left_merged_by.erase(mine);
+    flagged.insert(id);
   }
+  // Archived jobs (archive.h) are flagged in their rows; those flagged here are not again.
+  fx.flags.push_back({worker, name, std::move(flagged)});
   workers_.remove(worker);
   fx.changed = true;
 }

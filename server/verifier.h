@@ -60,7 +60,11 @@ class Verifier {
   bool quarantined(const std::string& principal) const { return checks_.quarantined(principal); }
   // A worker found lying (decide() calls it): its leases end, what it merged into live jobs
   // is rendered again, ended jobs (and sequences whose frames left memory) are flagged.
+  // Archived jobs (archive.h) are flagged in their rows, through fx.flags.
   void quarantine(uint64_t worker, const std::string& why, double now, Effects& fx);
+  // What an ended job is flagged with when `tiles` of its tiles (a sequence's finished
+  // frames': `frames`) hold results of `worker`, quarantined after it ended.
+  static std::string ended_flag(uint32_t tiles, const std::string& worker, bool frames);
 
  private:
   void drop(uint64_t check, bool skipped, double now);

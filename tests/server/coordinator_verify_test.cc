@@ -110,6 +110,35 @@ TEST_F(VerifyTest, ALyingWorkerIsQuarantinedAndWhatItMergedIsRenderedAgain) {
   EXPECT_EQ(c->status(id, false).error(), "");
 }
 
+// Jobs that left memory (archive.h) before the liar was caught are flagged in their rows:
+// a still, and a sequence with frames the liar rendered.
+TEST_F(VerifyTest, ArchivedJobsHoldingALiarsResultsAreFlaggedInTheirRows) {
+  start(0.5);
+  const RenderSettings s = job_settings();
+  const uint64_t honest = worker_as("honest"), liar = worker_as("liar");
+  const std::string still = c->submit(request(s));
+  v1::SubmitJobRequest r = request(s);
+  for (int f : {1, 2}) r.add_frames(f);
+  const std::string sequence = c->submit(r);
+  run(honest, liar, false);  // honest at first: both end DONE with its results in them
+  for (int i = 0; i < 200 && !c->list().empty(); ++i) {
+    c->expire_leases();  // the reaper's tick archives them
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(c->list().empty()) << "not archived";
+  const std::string id = c->submit(request(s));
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(step(liar, true));
+  run(honest, liar, true);
+  ASSERT_EQ(c->counters().workers_quarantined, 1u);
+  EXPECT_EQ(c->status(id, false).error(), "");
+  const std::string flag = c->status(still, false).error();
+  EXPECT_NE(flag.find("tiles hold results of worker 'liar'"), std::string::npos) << flag;
+  const std::string frames = c->status(sequence, false).error();
+  EXPECT_NE(frames.find("tiles of finished frames hold results of worker 'liar'"), std::string::npos) << frames;
+  restart(c, options(), &t);  // the flag is in the row
+  EXPECT_EQ(c->status(still, false).error(), flag);
+}
+
 TEST_F(VerifyTest, AWorkerLyingOnlyAsTheCheckerIsTheOneQuarantined) {
   start(1.0);
   const RenderSettings s = job_settings();

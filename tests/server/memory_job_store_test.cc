@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <type_traits>
+#include <utility>
 
 #include "server/checkpoint.h"
 #include "server/job_store.h"
@@ -64,6 +65,60 @@ TYPED_TEST_SUITE(JobStoreContract, Stores);
 TYPED_TEST(JobStoreContract, GenerationsCountFromOne) {
   EXPECT_EQ(this->store->next_generation(), 1u);
   EXPECT_EQ(this->store->next_generation(), 2u);
+}
+
+// Archive (archive.h): an ended row takes a job's last status and leaves the start's rows;
+// a live one does not; pages, counts and a liar's flags read and change them.
+TYPED_TEST(JobStoreContract, AnArchivedRowKeepsItsSummaryAndLeavesTheRowsAStartTakesUp) {
+  auto& store = *this->store;
+  StoredJob a = this->row("000000000000000a", 1), b = this->row("000000000000000b", 2);
+  b.frames.clear();
+  store.add(a);
+  store.add(b);
+  EXPECT_FALSE(store.archive(a.meta.id, "summary of a", {{7, 3}}));  // live: not taken
+  store.end(a.meta.id, v1::JobStatus::DONE, "", 1.5);
+  store.end(b.meta.id, v1::JobStatus::CANCELLED, "stopped", 0.5);
+  EXPECT_TRUE(store.archive(a.meta.id, "summary of a", {{7, 3}, {8, 1}}));
+  EXPECT_TRUE(store.archive(b.meta.id, "summary of b", {{7, 2}}));
+  EXPECT_TRUE(store.jobs().empty());  // nothing for a start to take up
+  EXPECT_EQ(store.job(a.meta.id)->summary, "summary of a");
+  EXPECT_FALSE(store.job("nope"));
+  EXPECT_EQ(store.count(), 2u);
+  const std::vector<StoredJob> page = store.page(1, 10);
+  ASSERT_EQ(page.size(), 1u);
+  EXPECT_EQ(page[0].meta.id, b.meta.id);
+  EXPECT_EQ(page[0].summary, "summary of b");
+  EXPECT_EQ(store.page(0, 1).at(0).meta.id, a.meta.id);
+  ASSERT_EQ(store.newest(1).size(), 1u);
+  EXPECT_EQ(store.newest(1)[0].meta.id, b.meta.id);
+  EXPECT_EQ(store.newest(5).size(), 2u);
+  EXPECT_EQ(store.newest(5)[0].meta.id, a.meta.id);  // in submission order
+  EXPECT_EQ(store.archived_names().size(), 2u);
+  const std::array<uint64_t, 5> states = store.archived_states();
+  EXPECT_EQ(states[v1::JobStatus::DONE], 1u);
+  EXPECT_EQ(states[v1::JobStatus::CANCELLED], 1u);
+  // Worker 7 was lying: both are flagged but b, flagged in memory; its records go.
+  std::vector<std::pair<uint32_t, bool>> asked;
+  store.flag_merged(7, {b.meta.id}, [&](uint32_t tiles, bool sequence) {
+    asked.emplace_back(tiles, sequence);
+    return "liar";
+  });
+  ASSERT_EQ(asked.size(), 1u);
+  EXPECT_EQ(asked[0], std::make_pair(3u, true));  // a is a sequence
+  EXPECT_EQ(store.job(a.meta.id)->error, "liar");
+  EXPECT_EQ(store.job(b.meta.id)->error, "stopped");
+  store.flag_merged(7, {}, [](uint32_t, bool) { return "again"; });  // its records are gone
+  EXPECT_EQ(store.job(a.meta.id)->error, "liar");
+  store.flag_merged(8, {}, [](uint32_t, bool) { return "second"; });
+  EXPECT_EQ(store.job(a.meta.id)->error, "liar; second");
+  // A requeued row is in memory again: no summary, taken up at a start.
+  store.requeue(b.meta.id);
+  EXPECT_TRUE(store.job(b.meta.id)->summary.empty());
+  ASSERT_EQ(store.jobs().size(), 1u);
+  EXPECT_EQ(store.archived_names().size(), 1u);
+  store.forget_merges();
+  store.remove(a.meta.id, {});
+  EXPECT_EQ(store.count(), 1u);
 }
 
 TYPED_TEST(JobStoreContract, ARowComesBackFieldForField) {
