@@ -83,7 +83,10 @@ std::vector<Archival> Archive::due(double now, size_t limit) {
     for (const std::shared_ptr<Job>& j : s->jobs)
       if (j) count_merged(*j, merged);
     s->archiving = true;
-    out.push_back({id, s->status(now, {}, true).SerializeAsString(), merged_list(merged), nullptr, s});
+    std::vector<std::string> done;
+    if (s->state() == v1::JobStatus::DONE)
+      for (size_t i = 0; i < s->frames.size(); ++i) done.push_back(s->frame_job_id(i));
+    out.push_back({id, s->status(now, {}, true).SerializeAsString(), merged_list(merged), done, nullptr, s});
   }
   for (const auto& [id, j] : jobs_.jobs()) {
     if (out.size() >= limit) return out;
@@ -91,7 +94,9 @@ std::vector<Archival> Archive::due(double now, size_t limit) {
     std::map<uint64_t, uint32_t> merged;
     count_merged(*j, merged);
     j->archiving = true;
-    out.push_back({id, j->status(now, 0, false).SerializeAsString(), merged_list(merged), j, nullptr});
+    std::vector<std::string> done;
+    if (j->state() == v1::JobStatus::DONE) done.push_back(id);
+    out.push_back({id, j->status(now, 0, false).SerializeAsString(), merged_list(merged), done, j, nullptr});
   }
   return out;
 }

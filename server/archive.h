@@ -27,6 +27,9 @@ namespace tessera {
 struct Archival {
   std::string id, summary;
   std::vector<MergedInto> merged;
+  // A DONE job's checkpoints (its own, or every frame's), removed once its row took it: its
+  // images hold its films, and a DONE job is never requeued.
+  std::vector<std::string> done_checkpoints;
   std::shared_ptr<Job> job;            // a still,
   std::shared_ptr<Sequence> sequence;  // or a sequence
 };

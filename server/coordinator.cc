@@ -141,6 +141,8 @@ void Coordinator::archive(const Archival& a) {
   bool archived = false;
   try {
     archived = store_->archive(a.id, a.summary, a.merged);
+    if (archived)
+      for (const std::string& id : a.done_checkpoints) store_->discard_checkpoint(id);
   } catch (const std::exception& e) {  // it stays in memory; the next tick tries again
     spdlog::warn("job {}: archiving: {}", a.id, e.what());
   }
@@ -206,21 +208,6 @@ v1::SceneUpload Coordinator::upload_scene(const std::function<bool(v1::SceneChun
   return uploads_.receive(owner, next, in_jobs, options_.max_scene_bytes_per_client);  // the disk, without mu_
 }
 
-std::optional<StoredJob> Coordinator::archived_change(const std::string& id, const std::string& requester, bool any,
-                                                      const char* verb) const {
-  {
-    MutexLock lock(mu_);
-    if (jobs_.knows(id)) return std::nullopt;
-  }
-  try {
-    return archived_for_change(*store_, id, requester, any, verb);
-  } catch (const RequestError&) {
-    throw;
-  } catch (const std::exception& e) {
-    throw RequestError(RequestError::Code::kResourceExhausted, without_dir(e.what(), options_.data_dir));
-  }
-}
-
 v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requester, bool any) {
   if (!archived_change(id, requester, any, "cancel"))  // (an archived job has ended: nothing to cancel)
     locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { lifecycle_.cancel(id, requester, any, clock_->now(), fx); });
@@ -242,7 +229,9 @@ v1::JobStatus Coordinator::set_priority(const std::string& id, int32_t priority,
 
 v1::JobStatus Coordinator::requeue(const std::string& id, const std::string& requester, bool any) {
   std::optional<Recovery::Ended> back;  // an archived job, brought back into memory first
-  if (const std::optional<StoredJob> row = archived_change(id, requester, any, "requeue"); row && begin_archived(id))
+  const std::optional<StoredJob> row = archived_change(id, requester, any, "requeue");
+  if (row) JobControl::refuse_requeue(id, row->state, true);  // (a DONE job's checkpoint is gone)
+  if (row && begin_archived(id))
     back = undo_on_throw(
         [&] {
           if (!store_->job(id)) throw RequestError(RequestError::Code::kNotFound, "no job '" + id + "'");

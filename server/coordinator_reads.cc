@@ -20,6 +20,21 @@ std::optional<v1::JobStatus> Coordinator::archived(const std::string& id) const 
   }
 }
 
+std::optional<StoredJob> Coordinator::archived_change(const std::string& id, const std::string& requester, bool any,
+                                                      const char* verb) const {
+  {
+    MutexLock lock(mu_);
+    if (jobs_.knows(id)) return std::nullopt;
+  }
+  try {
+    return archived_for_change(*store_, id, requester, any, verb);
+  } catch (const RequestError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw RequestError(RequestError::Code::kResourceExhausted, without_dir(e.what(), options_.data_dir));
+  }
+}
+
 v1::JobStatus Coordinator::status(const std::string& id, bool with_tiles) const {
   return find(
       id, [&]() TESSERA_REQUIRES(mu_) { return job_status(jobs_, leases_, id, with_tiles, clock_->now()); },

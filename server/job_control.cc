@@ -110,17 +110,7 @@ JobControl::Requeue JobControl::begin_requeue(const std::string& id, const std::
   if (archived_changing_.count(id)) throw busy(id);
   Requeue q;
   q.id = id;
-  const auto refuse_state = [&](v1::JobStatus::State state, bool durable) {
-    if (job_live(state))
-      throw RequestError(RequestError::Code::kFailedPrecondition,
-                         "job " + id + " is " + state_name(state) + ": only a FAILED or CANCELLED job can be requeued");
-    if (state == v1::JobStatus::DONE)
-      throw RequestError(RequestError::Code::kFailedPrecondition,
-                         "job " + id + " is DONE: its image is whole; only a FAILED or CANCELLED job can be requeued");
-    if (!durable)
-      throw RequestError(RequestError::Code::kFailedPrecondition,
-                         "job " + id + " is still recording its end; try again in a moment");
-  };
+  const auto refuse_state = [&](v1::JobStatus::State state, bool durable) { refuse_requeue(id, state, durable); };
   if (std::shared_ptr<Sequence> s = jobs_.shared_sequence(id)) {
     refuse_state(s->state(), s->end_recorded);
     if (s->changing || s->removed) throw busy(id);
@@ -138,6 +128,18 @@ JobControl::Requeue JobControl::begin_requeue(const std::string& id, const std::
   q.scene_hash = job->meta.scene_hash;
   q.ended.push_back(job);
   return q;
+}
+
+void JobControl::refuse_requeue(const std::string& id, v1::JobStatus::State state, bool durable) {
+  if (job_live(state))
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "job " + id + " is " + state_name(state) + ": only a FAILED or CANCELLED job can be requeued");
+  if (state == v1::JobStatus::DONE)
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "job " + id + " is DONE: its image is whole; only a FAILED or CANCELLED job can be requeued");
+  if (!durable)
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "job " + id + " is still recording its end; try again in a moment");
 }
 
 void JobControl::requeue_failed(const Requeue& q) {

@@ -69,6 +69,9 @@ class JobControl {
   // Refuses what cannot be requeued (live, DONE, its end not yet on disk, a frame, being
   // changed) and marks it being changed. Throws RequestError.
   Requeue begin_requeue(const std::string& id, const std::string& requester, bool any);
+  // Throws RequestError (kFailedPrecondition) for a job in `state` that cannot be requeued
+  // (`durable`: its end is on disk).
+  static void refuse_requeue(const std::string& id, v1::JobStatus::State state, bool durable);
   // Whether the jobs' writers have stopped.
   static bool quiet(const Requeue& q) { return none_writing(q.ended); }
   void requeue_failed(const Requeue& q);

@@ -438,6 +438,11 @@ void SqliteJobStore::discard_partial_writes(const std::string& id) const {
   }
 }
 
+void SqliteJobStore::discard_checkpoint(const std::string& id) {
+  std::error_code ec;
+  fs::remove(checkpoint_path(id), ec);
+}
+
 void write_checkpoint(const JobStore& store, const std::string& id, const FramePlan& plan, double elapsed) {
   std::unique_ptr<CheckpointFile> file = store.begin_checkpoint(id);
   CheckpointEncoder enc(plan, elapsed, [&](const std::string& bytes) { file->append(bytes); });

@@ -124,6 +124,9 @@ class JobStore {
                                                 bool with_film = true) const = 0;
   // Removes what a crash cut short (temporary files of the job's checkpoint and image).
   virtual void discard_partial_writes(const std::string&) const {}
+  // Removes the job's checkpoint (an archived DONE job's: its image holds the film, and it
+  // is never requeued). Errors are ignored: a delete removes it later.
+  virtual void discard_checkpoint(const std::string& id) = 0;
 
   // The wall clock an end is stamped with (seconds since 1970): a seam for retention tests.
   std::function<double()> wall = [] {
@@ -163,6 +166,7 @@ class SqliteJobStore : public JobStore {
   std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
   std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;
   void discard_partial_writes(const std::string& id) const override;
+  void discard_checkpoint(const std::string& id) override;
   std::string checkpoint_path(const std::string& id) const;
 
   // Test seams: runs between a checkpoint's temporary file being written and its rename;
@@ -202,6 +206,7 @@ class MemoryJobStore : public JobStore {
   void ping() const override;
   std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
   std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;
+  void discard_checkpoint(const std::string& id) override { set_checkpoint_bytes(id, std::nullopt); }
   std::optional<std::string> checkpoint_bytes(const std::string& id) const;
   void set_checkpoint_bytes(const std::string& id, std::optional<std::string> bytes);  // nullopt: remove
   bool fail_writes = false;  // every write throws, as a full disk would

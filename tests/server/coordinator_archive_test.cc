@@ -59,8 +59,12 @@ TEST_F(ArchiveTest, AnEndedStillLeavesMemoryAndAnswersAsBefore) {
   ASSERT_TRUE(c->wait_for_end(id, 10));
   const v1::JobStatus before = c->status(id, false);
   const std::string exr = image_bytes(id);
+  EXPECT_TRUE(fs::exists(image_path(id, "checkpoint")));
   ASSERT_TRUE(settle());
   EXPECT_TRUE(c->list().empty()) << "an archived job is not in memory";
+  // A DONE job is never requeued, and its image holds its film: its checkpoint goes.
+  EXPECT_FALSE(fs::exists(image_path(id, "checkpoint")));
+  EXPECT_TRUE(fs::exists(image_path(id, "image.exr")));
   const v1::JobStatus after = c->status(id, true);
   EXPECT_EQ(after.tiles_size(), 0);
   EXPECT_EQ(comparable(after).SerializeAsString(), comparable(before).SerializeAsString())
@@ -88,7 +92,7 @@ TEST_F(ArchiveTest, AnEndedStillLeavesMemoryAndAnswersAsBefore) {
   EXPECT_EQ(c->set_priority(id, 3, "ann", false).priority(), 3);
   EXPECT_EQ(c->list(0, "").jobs(0).priority(), 3);
   EXPECT_EQ(refused([&] { c->requeue(id); }), RequestError::Code::kFailedPrecondition);  // DONE
-  ASSERT_TRUE(settle());  // (the refused requeue brought it back into memory)
+  EXPECT_TRUE(c->list().empty());  // refused from its row
   EXPECT_GT(c->remove(id, "ann", false), 0u);
   EXPECT_EQ(files_under(dir + "/jobs") + files_under(dir + "/scenes"), 0u);
   EXPECT_EQ(refused([&] { c->status(id, false); }), RequestError::Code::kNotFound);
@@ -156,6 +160,7 @@ TEST_F(ArchiveTest, AnArchivedCancelledJobIsRequeuedBitIdentically) {
   c->cancel(id);
   ASSERT_TRUE(c->wait_for_end(id, 10));
   ASSERT_TRUE(settle());
+  EXPECT_TRUE(fs::exists(image_path(id, "checkpoint")));  // kept for this
   const uint64_t merged = c->counters().results_merged;
   EXPECT_EQ(c->requeue(id).state(), v1::JobStatus::RUNNING);
   EXPECT_FALSE(c->list().empty());  // back in memory, live
