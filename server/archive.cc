@@ -147,8 +147,8 @@ std::optional<v1::JobStatus> archived_status(const JobStore& store, const std::s
   return std::nullopt;
 }
 
-std::optional<StoredJob> archived_for_change(const JobStore& store, const std::string& id,
-                                             const std::string& requester, bool any, const char* verb) {
+std::optional<StoredJob> archived_for_change(const JobStore& store, const std::string& id, const std::string& requester,
+                                             bool any, const char* verb) {
   std::optional<StoredJob> row = store.job(id);
   if (row && !row->summary.empty()) {
     JobTable::check_owner(id, row->meta.owner, requester, any, verb);
@@ -168,14 +168,13 @@ std::optional<std::string> archived_image(const JobStore& store, const std::stri
   if (!s) return std::nullopt;
   if (s->frames_total() > 0) {  // a sequence: one of its frames
     if (!frame)
-      throw RequestError(RequestError::Code::kInvalidArgument,
-                         "job " + id + " is a sequence of " + std::to_string(s->frames_total()) +
-                             " frames: name one (fetch --frame N, or --all)");
+      throw RequestError(RequestError::Code::kInvalidArgument, "job " + id + " is a sequence of " +
+                                                                   std::to_string(s->frames_total()) +
+                                                                   " frames: name one (fetch --frame N, or --all)");
     const int i = frame_place(*s, *frame);
     if (s->frames(i).job_id().empty())
-      throw RequestError(RequestError::Code::kFailedPrecondition,
-                         "job " + id + ": frame " + std::to_string(*frame) +
-                             " was never rendered (the job ended first)");
+      throw RequestError(RequestError::Code::kFailedPrecondition, "job " + id + ": frame " + std::to_string(*frame) +
+                                                                      " was never rendered (the job ended first)");
     s = frame_status(*s, i);
   } else if (frame && s->settings().frame() != *frame) {
     throw RequestError(RequestError::Code::kInvalidArgument, "job " + id + " has no frame " + std::to_string(*frame));

@@ -58,8 +58,8 @@ std::optional<v1::JobStatus> archived_status(const JobStore& store, const std::s
 // The row of the archived job a request would change (`verb`: "delete", ...): nothing when
 // no archived still or sequence is named `id`. Throws RequestError: another owner's job
 // (kPermissionDenied, unless `any`), a frame of an archived sequence (kFailedPrecondition).
-std::optional<StoredJob> archived_for_change(const JobStore& store, const std::string& id,
-                                             const std::string& requester, bool any, const char* verb);
+std::optional<StoredJob> archived_for_change(const JobStore& store, const std::string& id, const std::string& requester,
+                                             bool any, const char* verb);
 // An archived job's image (FetchImage): whose it is (a frame's own id) and its header;
 // nothing when no archived row names it. Throws RequestError as JobTable::frame_job does
 // (a sequence without a frame, a frame it lacks or never rendered).

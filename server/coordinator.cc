@@ -82,9 +82,8 @@ void Coordinator::apply(Effects fx) {
     }
   for (const std::string& id : fx.sequence_ends) record_sequence_end(id);
   for (const Effects::Flag& f : fx.flags) try {
-      store_->flag_merged(f.worker, f.flagged_in_memory, [&](uint32_t tiles, bool frames) {
-        return Verifier::ended_flag(tiles, f.name, frames);
-      });
+      store_->flag_merged(f.worker, f.flagged_in_memory,
+                          [&](uint32_t tiles, bool frames) { return Verifier::ended_flag(tiles, f.name, frames); });
     } catch (const std::exception& e) {
       spdlog::error("worker {}: flagging the archived jobs that hold its results: {}", f.name, e.what());
     }

@@ -1,13 +1,12 @@
 // The coordinator's answers to clients that read: a job's status, the list, its image, and
 // the waits a watcher makes. A job in memory answers under the lock; an archived one
 // (archive.h) from its row, without it.
-#include "server/archive.h"
-#include "server/coordinator.h"
-#include "server/image_stream.h"
-
 #include <set>
 
 #include "core/util/log.h"
+#include "server/archive.h"
+#include "server/coordinator.h"
+#include "server/image_stream.h"
 
 namespace tessera {
 
@@ -178,11 +177,9 @@ v1::JobStatus Coordinator::wait_for_change(const std::string& id, uint64_t last_
     if (jobs_.knows(id)) {
       const JobProgress since = job_progress(jobs_, id);
       if (since.samples == last_samples)  // (else the caller's status is behind already)
-        await(
-            [&]() TESSERA_REQUIRES(mu_) {
-              return since.ended || !jobs_.knows(id) || !(job_progress(jobs_, id) == since);
-            },
-            timeout);
+        await([&]() TESSERA_REQUIRES(
+                  mu_) { return since.ended || !jobs_.knows(id) || !(job_progress(jobs_, id) == since); },
+              timeout);
       if (jobs_.knows(id)) return job_status(jobs_, leases_, id, false, clock_->now());
     }
   }
@@ -193,8 +190,7 @@ bool Coordinator::wait_for_end(const std::string& id, double timeout) const {
   {
     MutexLock lock(mu_);
     if (jobs_.knows(id))  // (one that leaves memory has ended: it is archived, or deleted)
-      return await([&]() TESSERA_REQUIRES(mu_) { return !jobs_.knows(id) || job_progress(jobs_, id).ended; },
-                   timeout);
+      return await([&]() TESSERA_REQUIRES(mu_) { return !jobs_.knows(id) || job_progress(jobs_, id).ended; }, timeout);
   }
   return !job_live(status(id, false).state());
 }

@@ -21,7 +21,7 @@ struct Effects {
   std::vector<RowEnd> rows;                  // database rows to rewrite
   std::vector<std::string> sequence_ends;          // sequences whose end to record (once it can be)
   std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> prepare;  // sequences whose next frame's job to make
-  std::vector<Archival> archive;  // ended jobs to leave memory (archive.h)
+  std::vector<Archival> archive;                                      // ended jobs to leave memory (archive.h)
   // A worker quarantined: archived jobs holding its results are flagged in their rows (but
   // those flagged in memory).
   struct Flag {

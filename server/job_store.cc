@@ -192,8 +192,7 @@ void SqliteJobStore::requeue(const std::string& id) {
   {
     MutexLock lock(mu_);
     Statement(db_, "DELETE FROM merged_into WHERE job = ?1").text(1, id).step();  // (in memory again: its own)
-    Statement(db_,
-              "UPDATE jobs SET state = ?2, error = '', elapsed = 0, ended_at = 0, summary = NULL WHERE id = ?1")
+    Statement(db_, "UPDATE jobs SET state = ?2, error = '', elapsed = 0, ended_at = 0, summary = NULL WHERE id = ?1")
         .text(1, id)
         .integer(2, v1::JobStatus::QUEUED)
         .step();

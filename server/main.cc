@@ -1,5 +1,6 @@
 // tessera-coordinator: splits frames into tiles, leases them to workers, merges results.
 #include <grpcpp/grpcpp.h>
+#include <malloc.h>
 #include <signal.h>
 #include <unistd.h>
 
@@ -57,9 +58,16 @@ double parse_keep(const std::string& s) {
   return v * scale;
 }
 
+// glibc gives each of up to 8 x cores threads that allocate at once a heap of its own and
+// keeps what they free: the coordinator's gRPC threads (a watcher's status, an image's
+// pieces) grew it by tens of MB that stayed. Its work is under one lock anyway, so a few
+// heaps cost nothing measurable (docs/performance.md); MALLOC_ARENA_MAX still decides.
+constexpr int kMallocArenas = 4;
+
 }  // namespace
 
 int main(int argc, char** argv) {
+  if (!std::getenv("MALLOC_ARENA_MAX")) mallopt(M_ARENA_MAX, kMallocArenas);
   CLI::App app{"tessera-coordinator: the render farm's coordinator"};
   std::string listen = "127.0.0.1:7878", http = "127.0.0.1:7879";
   tessera::CoordinatorOptions opt;

@@ -10,17 +10,6 @@ namespace {
 
 using testing::files_under;
 
-template <typename F>
-RequestError::Code refused(F&& f) {
-  try {
-    f();
-  } catch (const RequestError& e) {
-    return e.code();
-  }
-  ADD_FAILURE() << "not refused";
-  return RequestError::Code::kInvalidArgument;
-}
-
 class ArchiveTest : public CoordinatorTest {
  protected:
   // Reaper ticks until no ended job is left in memory (a writer may be finishing).
@@ -92,7 +81,7 @@ TEST_F(ArchiveTest, AnEndedStillLeavesMemoryAndAnswersAsBefore) {
   EXPECT_EQ(c->set_priority(id, 3, "ann", false).priority(), 3);
   EXPECT_EQ(c->list(0, "").jobs(0).priority(), 3);
   EXPECT_EQ(refused([&] { c->requeue(id); }), RequestError::Code::kFailedPrecondition);  // DONE
-  EXPECT_TRUE(c->list().empty());  // refused from its row
+  EXPECT_TRUE(c->list().empty());                                                        // refused from its row
   EXPECT_GT(c->remove(id, "ann", false), 0u);
   EXPECT_EQ(files_under(dir + "/jobs") + files_under(dir + "/scenes"), 0u);
   EXPECT_EQ(refused([&] { c->status(id, false); }), RequestError::Code::kNotFound);
@@ -144,8 +133,7 @@ TEST_F(ArchiveTest, AnArchivedSequenceAnswersForEveryFrame) {
   for (int f : {4, 5, 6}) {
     RenderSettings frame = s;
     frame.frame = f;
-    EXPECT_TRUE(same_film_as_exr(local(frame), read_exr(image_path(id + "-f" + std::to_string(f), "image.exr"))))
-        << f;
+    EXPECT_TRUE(same_film_as_exr(local(frame), read_exr(image_path(id + "-f" + std::to_string(f), "image.exr")))) << f;
   }
   ASSERT_TRUE(settle());
   c->remove(id);

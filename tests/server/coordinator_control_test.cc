@@ -8,17 +8,6 @@ namespace {
 
 using testing::files_under;
 
-template <typename F>
-RequestError::Code refused(F&& f) {
-  try {
-    f();
-  } catch (const RequestError& e) {
-    return e.code();
-  }
-  ADD_FAILURE() << "not refused";
-  return RequestError::Code::kInvalidArgument;
-}
-
 // Renders tasks until `n` results are merged (or none is left).
 void merge_some(Coordinator& c, uint64_t w, int n, const std::function<v1::TaskResult(const v1::Task&)>& render) {
   for (int i = 0; i < n; ++i) {

@@ -159,6 +159,18 @@ inline uint64_t exr_hash(const ExrImage& img) {
 
 // Takes the coordinator down without a word (as kill -9 would: nothing is written on the
 // way out) and starts a new one on the same data folder.
+// The code of the RequestError f() throws (a failure if it throws none).
+template <typename F>
+inline RequestError::Code refused(F&& f) {
+  try {
+    f();
+  } catch (const RequestError& e) {
+    return e.code();
+  }
+  ADD_FAILURE() << "not refused";
+  return RequestError::Code::kInvalidArgument;
+}
+
 inline void restart(std::unique_ptr<Coordinator>& c, const CoordinatorOptions& o, double* t) {
   c.reset();
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(t));
