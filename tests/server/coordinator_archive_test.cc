@@ -135,7 +135,12 @@ TEST_F(ArchiveTest, AnArchivedSequenceAnswersForEveryFrame) {
     frame.frame = f;
     EXPECT_TRUE(same_film_as_exr(local(frame), read_exr(image_path(id + "-f" + std::to_string(f), "image.exr")))) << f;
   }
+  EXPECT_TRUE(fs::exists(image_path(id + "-f4", "checkpoint")));  // kept while a requeue may need it
   ASSERT_TRUE(settle());
+  for (int f : {4, 5, 6}) {  // DONE: each frame's image holds its film
+    EXPECT_FALSE(fs::exists(image_path(id + "-f" + std::to_string(f), "checkpoint"))) << f;
+    EXPECT_TRUE(fs::exists(image_path(id + "-f" + std::to_string(f), "image.exr"))) << f;
+  }
   c->remove(id);
   EXPECT_EQ(files_under(dir + "/jobs") + files_under(dir + "/scenes"), 0u);
 }
