@@ -132,6 +132,29 @@ v1::JobStatus archived_status(const StoredJob& row) {
   return s;
 }
 
+void add_archived_tiles(v1::JobStatus& s) {
+  if (s.frames_total() > 0) return;  // a sequence: its frames have the tiles
+  RenderSettings settings;
+  try {
+    settings = from_proto(s.settings());
+  } catch (const std::exception&) {  // (a damaged row: no map)
+    return;
+  }
+  const auto passes = settings.passes();
+  const bool done = s.tiles_done() == s.tiles_total();
+  const uint32_t passes_done = done ? uint32_t(passes.size()) : std::min<uint32_t>(s.frame_passes_done(), passes.size());
+  const Rect w = settings.effective_window();
+  const int ts = std::max(1, settings.tile_size);
+  for (int y = w.y; y < w.y + w.h; y += ts)
+    for (int x = w.x; x < w.x + w.w; x += ts) {
+      v1::TileProgress* t = s.add_tiles();
+      *t->mutable_rect() = to_proto(Rect{x, y, std::min(ts, w.x + w.w - x), std::min(ts, w.y + w.h - y)});
+      t->set_passes_done(passes_done);
+      t->set_samples(passes_done ? passes[passes_done - 1].second : 0);
+      t->set_finished(done);
+    }
+}
+
 std::optional<v1::JobStatus> archived_status(const JobStore& store, const std::string& id) {
   if (const std::optional<StoredJob> row = store.job(id)) {
     if (row->summary.empty()) return std::nullopt;

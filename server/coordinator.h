@@ -77,7 +77,7 @@ class Coordinator {
   // stream, false at its end; written to disk as it comes. SubmitJobRequest.upload_id then
   // names it.
   v1::SceneUpload upload_scene(const std::function<bool(v1::SceneChunk*)>& next, const std::string& owner = "");
-  // A job's status; an archived job's (archive.h) has no tiles.
+  // A job's status; an archived job's (archive.h) tile map is as a compacted job's.
   v1::JobStatus status(const std::string& id, bool with_tiles) const;
   // The jobs in memory (live ones, and those ended lately that are not archived yet), in
   // submission order.

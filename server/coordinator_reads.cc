@@ -37,7 +37,11 @@ std::optional<StoredJob> Coordinator::archived_change(const std::string& id, con
 v1::JobStatus Coordinator::status(const std::string& id, bool with_tiles) const {
   return find(
       id, [&]() TESSERA_REQUIRES(mu_) { return job_status(jobs_, leases_, id, with_tiles, clock_->now()); },
-      [&] { return archived(id); });
+      [&] {
+        std::optional<v1::JobStatus> s = archived(id);
+        if (s && with_tiles) add_archived_tiles(*s);
+        return s;
+      });
 }
 
 std::vector<v1::JobStatus> Coordinator::list() const {

@@ -46,7 +46,7 @@ TEST_F(ArchiveTest, AnEndedStillLeavesMemoryAndAnswersAsBefore) {
   const std::string id = c->submit(request(s), "ann");
   drain(worker());
   ASSERT_TRUE(c->wait_for_end(id, 10));
-  const v1::JobStatus before = c->status(id, false);
+  const v1::JobStatus before = c->status(id, false), before_tiles = c->status(id, true);
   const std::string exr = image_bytes(id);
   EXPECT_TRUE(fs::exists(image_path(id, "checkpoint")));
   ASSERT_TRUE(settle());
@@ -54,10 +54,16 @@ TEST_F(ArchiveTest, AnEndedStillLeavesMemoryAndAnswersAsBefore) {
   // A DONE job is never requeued, and its image holds its film: its checkpoint goes.
   EXPECT_FALSE(fs::exists(image_path(id, "checkpoint")));
   EXPECT_TRUE(fs::exists(image_path(id, "image.exr")));
-  const v1::JobStatus after = c->status(id, true);
-  EXPECT_EQ(after.tiles_size(), 0);
+  const v1::JobStatus after = c->status(id, false);
   EXPECT_EQ(comparable(after).SerializeAsString(), comparable(before).SerializeAsString())
       << after.DebugString() << before.DebugString();
+  // GetJob's tile map, as the job in memory (compacted) had it.
+  v1::JobStatus tiles = c->status(id, true);
+  tiles.clear_elapsed_seconds();
+  v1::JobStatus tiles_before = before_tiles;
+  tiles_before.clear_elapsed_seconds();
+  EXPECT_EQ(tiles.tiles_size(), int(s.tile_count()));
+  EXPECT_EQ(tiles.SerializeAsString(), tiles_before.SerializeAsString());
   EXPECT_EQ(image_bytes(id), exr);
   const v1::JobList page = c->list(10, "");
   ASSERT_EQ(page.jobs_size(), 1);
@@ -152,7 +158,12 @@ TEST_F(ArchiveTest, AnArchivedCancelledJobIsRequeuedBitIdentically) {
   merge_some(w, 5);
   c->cancel(id);
   ASSERT_TRUE(c->wait_for_end(id, 10));
+  const v1::JobStatus tiles_before = c->status(id, true);
   ASSERT_TRUE(settle());
+  const v1::JobStatus tiles = c->status(id, true);  // a map of a job that did not finish
+  ASSERT_EQ(tiles.tiles_size(), tiles_before.tiles_size());
+  for (int i = 0; i < tiles.tiles_size(); ++i)
+    EXPECT_EQ(tiles.tiles(i).SerializeAsString(), tiles_before.tiles(i).SerializeAsString()) << i;
   EXPECT_TRUE(fs::exists(image_path(id, "checkpoint")));  // kept for this
   const uint64_t merged = c->counters().results_merged;
   EXPECT_EQ(c->requeue(id).state(), v1::JobStatus::RUNNING);
