@@ -14,10 +14,45 @@ TEST_F(Gltf, RequiredUnsupportedExtensionIsRefusedByName) {
   expect_error(d, "required extension 'KHR_draco_mesh_compression' is not supported");
 }
 
-TEST_F(Gltf, NonTriangleModeIsRefused) {
+TEST_F(Gltf, AModeThatIsNoGltfModeIsRefused) {
   Doc d;
-  d.j["meshes"][0]["primitives"][0]["mode"] = 1;
-  expect_error(d, "mode LINES is not supported (only TRIANGLES)");
+  d.j["meshes"][0]["primitives"][0]["mode"] = 9;
+  expect_error(d, "mode 9 is not a glTF mode (0-6)");
+}
+
+// Issue 29: points and lines are skipped with a warning (the file still renders); strips
+// and fans are triangles in the specification's order.
+TEST_F(Gltf, PointsAndLinesAreSkippedWithAWarningNotRefused) {
+  Doc d;
+  json line = d.j["meshes"][0]["primitives"][0];
+  line["mode"] = 1;
+  d.j["meshes"][0]["primitives"].push_back(line);
+  const Scene s = load(d);
+  size_t triangles = 0;
+  for (const Mesh& m : s.meshes) triangles += m.indices.size() / 3;
+  EXPECT_EQ(triangles, 1u);
+  bool warned = false;
+  for (const std::string& w : s.warnings)
+    warned |= w.find("meshes[0].primitives[1]: mode LINES has no surface to render: skipped") != std::string::npos;
+  EXPECT_TRUE(warned);
+}
+
+TEST_F(Gltf, StripsAndFansBecomeTrianglesInTheSpecificationsOrder) {
+  for (const int mode : {5, 6}) {  // TRIANGLE_STRIP, TRIANGLE_FAN
+    Doc d;  // four vertices: (0,0) (1,0) (0,1) (1,1), no index accessor
+    d.blob.clear();
+    put<float>(d.blob, {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0});
+    json& prim = d.j["meshes"][0]["primitives"][0];
+    prim = {{"attributes", {{"POSITION", 0}}}, {"mode", mode}};
+    d.j["accessors"] = {{{"bufferView", 0}, {"componentType", 5126}, {"count", 4}, {"type", "VEC3"}}};
+    d.j["bufferViews"] = {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 48}}};
+    d.j["buffers"][0]["byteLength"] = 48;
+    const Scene s = load(d);
+    ASSERT_EQ(s.meshes.size(), 1u);
+    const std::vector<uint32_t> want = mode == 5 ? std::vector<uint32_t>{0, 1, 2, 1, 3, 2}   // strip: both CCW
+                                                 : std::vector<uint32_t>{1, 2, 0, 2, 3, 0};  // fan
+    EXPECT_EQ(s.meshes[0].indices, want) << "mode " << mode;
+  }
 }
 
 TEST_F(Gltf, OrthographicCameraIsRefused) {

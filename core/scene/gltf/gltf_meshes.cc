@@ -6,7 +6,26 @@
 
 namespace tessera {
 
-std::vector<GltfPrimitive> read_gltf_mesh(const GltfContext& ctx, GltfMaterials& materials, int index, const Mat4& w,
+namespace {
+
+// A primitive's vertices as a list of triangles (glTF 2.0, 3.7.2.1: strip triangle i is
+// {v[i], v[i + 1 + i % 2], v[i + 2 - i % 2]}, fan triangle i is {v[i + 1], v[i + 2], v[0]}).
+std::vector<uint32_t> triangle_list(int mode, std::vector<uint32_t> v) {
+  if (mode == TINYGLTF_MODE_TRIANGLES) return v;
+  std::vector<uint32_t> out;
+  if (v.size() < 3) return out;
+  out.reserve((v.size() - 2) * 3);
+  for (size_t i = 0; i + 2 < v.size(); ++i)
+    if (mode == TINYGLTF_MODE_TRIANGLE_STRIP)
+      out.insert(out.end(), {v[i], v[i + 1 + i % 2], v[i + 2 - i % 2]});
+    else
+      out.insert(out.end(), {v[i + 1], v[i + 2], v[0]});
+  return out;
+}
+
+}  // namespace
+
+std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& materials, int index, const Mat4& w,
                                           const std::string& node_el, bool keep_object_space) {
   if (size_t(index) >= ctx.model.meshes.size()) ctx.fail(node_el, "mesh " + std::to_string(index) + " does not exist");
   const tinygltf::Mesh& mesh = ctx.model.meshes[size_t(index)];
@@ -19,9 +38,11 @@ std::vector<GltfPrimitive> read_gltf_mesh(const GltfContext& ctx, GltfMaterials&
     static const char* kModes[] = {"POINTS",    "LINES",          "LINE_LOOP",   "LINE_STRIP",
                                    "TRIANGLES", "TRIANGLE_STRIP", "TRIANGLE_FAN"};
     const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
-    if (mode != TINYGLTF_MODE_TRIANGLES)
-      ctx.fail(el, std::string("mode ") + (mode >= 0 && mode < 7 ? kModes[mode] : std::to_string(mode).c_str()) +
-                       " is not supported (only TRIANGLES)");
+    if (mode > TINYGLTF_MODE_TRIANGLE_FAN) ctx.fail(el, "mode " + std::to_string(mode) + " is not a glTF mode (0-6)");
+    if (mode < TINYGLTF_MODE_TRIANGLES) {
+      ctx.warn_once(el + ": mode " + kModes[mode] + " has no surface to render: skipped");
+      continue;
+    }
     auto pos = prim.attributes.find("POSITION");
     if (pos == prim.attributes.end()) ctx.fail(el, "has no POSITION attribute");
     std::vector<float> p3 = read_accessor_floats(ctx, pos->second, 3, el + " POSITION");
@@ -40,6 +61,7 @@ std::vector<GltfPrimitive> read_gltf_mesh(const GltfContext& ctx, GltfMaterials&
       m.indices.resize(nv);
       for (size_t i = 0; i < nv; ++i) m.indices[i] = uint32_t(i);
     }
+    m.indices = triangle_list(mode, std::move(m.indices));
     if (m.indices.size() % 3) ctx.fail(el, std::to_string(m.indices.size()) + " indices is not a multiple of 3");
     g.mirrored = det < 0;
     if (g.mirrored)

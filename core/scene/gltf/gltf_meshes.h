@@ -25,7 +25,10 @@ struct GltfPrimitive {
 // The primitives of meshes[index] placed by `world`, in the file's order, those without
 // triangles left out; their materials made through `materials`. `node_el` names the node
 // that refers to the mesh. `keep_object_space`: fill GltfPrimitive::positions and normals.
-std::vector<GltfPrimitive> read_gltf_mesh(const GltfContext& ctx, GltfMaterials& materials, int index,
+// Triangle strips and fans become triangles (in the specification's vertex order, so
+// windings stay as authored); points and lines have no surface to render: skipped with a
+// warning (the rest of the file renders).
+std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& materials, int index,
                                           const Mat4& world, const std::string& node_el, bool keep_object_space);
 
 }  // namespace tessera
