@@ -39,7 +39,7 @@ TEST_F(Gltf, PointsAndLinesAreSkippedWithAWarningNotRefused) {
 
 TEST_F(Gltf, StripsAndFansBecomeTrianglesInTheSpecificationsOrder) {
   for (const int mode : {5, 6}) {  // TRIANGLE_STRIP, TRIANGLE_FAN
-    Doc d;  // four vertices: (0,0) (1,0) (0,1) (1,1), no index accessor
+    Doc d;                         // four vertices: (0,0) (1,0) (0,1) (1,1), no index accessor
     d.blob.clear();
     put<float>(d.blob, {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0});
     json& prim = d.j["meshes"][0]["primitives"][0];

@@ -28,7 +28,7 @@ struct GltfPrimitive {
 // Triangle strips and fans become triangles (in the specification's vertex order, so
 // windings stay as authored); points and lines have no surface to render: skipped with a
 // warning (the rest of the file renders).
-std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& materials, int index,
-                                          const Mat4& world, const std::string& node_el, bool keep_object_space);
+std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& materials, int index, const Mat4& world,
+                                          const std::string& node_el, bool keep_object_space);
 
 }  // namespace tessera
