@@ -89,6 +89,47 @@ TEST_F(Gltf, NonIndexedSparseAndOtherComponentTypes) {
   EXPECT_FLOAT_EQ(s.meshes[0].positions[2].y, 5);
 }
 
+// Issue 29: KHR_mesh_quantization, what gltfpack writes by default: integer positions
+// (normalized or not, dequantized by the node's transform), normalized byte normals and
+// short texture coordinates, each element padded to 4 bytes.
+TEST_F(Gltf, QuantizedAttributesAreReadAsTheExtensionSays) {
+  for (const bool normalized : {true, false}) {
+    Doc d;
+    d.blob.clear();
+    if (normalized)
+      put<int16_t>(d.blob, {0, 0, 0, 0, 32767, 0, 0, 0, 0, 32767, 0, 0});  // positions, stride 8, at 0
+    else
+      put<uint16_t>(d.blob, {0, 0, 0, 0, 4, 0, 0, 0, 0, 4, 0, 0});
+    put<int8_t>(d.blob, {0, 0, 127, 0, 0, 0, 127, 0, 0, 0, -127, 0});  // normals, stride 4, at 24
+    put<uint16_t>(d.blob, {0, 0, 65535, 0, 0, 65535});                 // uvs, at 36
+    put<uint16_t>(d.blob, {0, 1, 2, 0});                               // indices, at 48
+    d.j["extensionsUsed"] = {"KHR_mesh_quantization"};
+    d.j["extensionsRequired"] = {"KHR_mesh_quantization"};
+    d.j["nodes"][0]["scale"] = normalized ? json::array({2, 2, 2}) : json::array({0.5, 0.5, 0.5});
+    d.j["accessors"] = {
+        {{"bufferView", 0}, {"componentType", normalized ? 5122 : 5123}, {"normalized", normalized}, {"count", 3},
+         {"type", "VEC3"}},
+        {{"bufferView", 1}, {"componentType", 5120}, {"normalized", true}, {"count", 3}, {"type", "VEC3"}},
+        {{"bufferView", 2}, {"componentType", 5123}, {"normalized", true}, {"count", 3}, {"type", "VEC2"}},
+        {{"bufferView", 3}, {"componentType", 5123}, {"count", 3}, {"type", "SCALAR"}}};
+    d.j["bufferViews"] = {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 24}, {"byteStride", 8}},
+                          {{"buffer", 0}, {"byteOffset", 24}, {"byteLength", 12}, {"byteStride", 4}},
+                          {{"buffer", 0}, {"byteOffset", 36}, {"byteLength", 12}},
+                          {{"buffer", 0}, {"byteOffset", 48}, {"byteLength", 6}}};
+    d.j["buffers"][0]["byteLength"] = 56;
+    const Scene s = load(d);
+    for (const std::string& w : s.warnings) EXPECT_EQ(w.find("KHR_mesh_quantization"), std::string::npos) << w;
+    ASSERT_EQ(s.meshes.size(), 1u);
+    const Mesh& m = s.meshes[0];
+    EXPECT_FLOAT_EQ(m.positions[1].x, 2) << normalized;
+    EXPECT_FLOAT_EQ(m.positions[2].y, 2) << normalized;
+    EXPECT_FLOAT_EQ(m.normals[0].z, 1);  // 127 -> 1
+    EXPECT_FLOAT_EQ(m.normals[2].z, -1);
+    EXPECT_FLOAT_EQ(m.uvs[1].x, 1);  // 65535 -> 1
+    EXPECT_FLOAT_EQ(m.uvs[2].y, 1);
+  }
+}
+
 TEST_F(Gltf, MaterialMapping) {
   Doc d;
   auto mat = [&](json m) {
