@@ -53,6 +53,11 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
     tan_h_ = float(ty * s.width / s.height);
     tmin_ = c.znear;
     tmax_ = c.zfar;
+    if (c.ortho_half_height) {
+      ortho_h_ = float(*c.ortho_half_height);
+      ortho_w_ = ortho_h_ * float(s.width) / float(s.height);
+      lens_radius_ = 0;  // (parallel rays: no depth of field)
+    }
   }
   const CameraPath::At& p = s.pose;
   if (p.eye || p.target || p.up || p.orbit) {
@@ -87,9 +92,15 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
 }
 
 Ray Camera::generate(float fx, float fy, Vec2 u_lens) const {
-  const Vec3 dc{(2 * fx * inv_w_ - 1) * tan_h_, (2 * fy * inv_h_ - 1) * tan_v_, -1};
   Ray r;
   r.tmin = tmin_;
+  if (ortho_h_ > 0) {  // from a point on the view rectangle, along the view
+    r.o = eye_ + x_ * ((2 * fx * inv_w_ - 1) * ortho_w_) + y_ * ((2 * fy * inv_h_ - 1) * ortho_h_);
+    r.d = -z_;
+    r.tmax = tmax_;
+    return r;
+  }
+  const Vec3 dc{(2 * fx * inv_w_ - 1) * tan_h_, (2 * fy * inv_h_ - 1) * tan_v_, -1};
   if (lens_radius_ <= 0) {
     const Vec3 d = x_ * dc.x + y_ * dc.y + z_ * dc.z;
     const float len = length(d);

@@ -1,4 +1,5 @@
-// Pinhole and thin-lens cameras with CS184 framing (format doc 2.2-2.5).
+// Pinhole and thin-lens cameras with CS184 framing (format doc 2.2-2.5); a file's
+// orthographic camera (glTF) with the file's framing: parallel rays, no depth of field.
 //
 // Parameters:
 //   width, height   output size in pixels; with CS184 framing the field of view follows it
@@ -50,6 +51,7 @@ class Camera {
  private:
   Vec3 eye_, x_, y_, z_;  // camera-to-world basis; the camera looks along -z_
   float tan_h_ = 0, tan_v_ = 0;
+  float ortho_w_ = 0, ortho_h_ = 0;  // an orthographic camera's half width and height (0: perspective)
   float inv_w_ = 0, inv_h_ = 0;
   float lens_radius_ = 0, focal_distance_ = 1;
   float tmin_ = 0, tmax_ = 1e30f;

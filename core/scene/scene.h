@@ -145,6 +145,9 @@ struct CameraDesc {
   std::optional<double> yfov_deg;  // full vertical, when the file gives it
   std::optional<double> aspect_ratio;
   float znear = 0.001f, zfar = 1000.0f;
+  // An orthographic camera (glTF): half the view's height in scene units (ymag); its width
+  // follows the image's aspect. Unset: perspective.
+  std::optional<double> ortho_half_height;
   Vec3 cs184_dir{0, 0, 1};  // CS184 framing direction c (format doc section 2.2)
   bool present = false;
   // Why the pose or clip planes are unusable (a file's sloppy camera that CS184 framing

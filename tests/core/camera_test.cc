@@ -65,6 +65,34 @@ TEST(Camera, PinholeIsTheZeroApertureLimit) {
 namespace tessera {
 namespace {
 
+// A file's orthographic camera (glTF): rays along the view from a rectangle ymag high
+// and as wide as the image's aspect, starting at znear.
+TEST(Camera, AnOrthographicCameraSendsParallelRaysFromItsViewRectangle) {
+  Scene s;
+  s.camera.present = true;
+  s.camera.eye = {1, 2, 10};
+  s.camera.ortho_half_height = 3;
+  s.camera.znear = 0.5f;
+  s.camera.zfar = 100;
+  CameraSettings c;
+  c.framing = Framing::kFile;
+  c.width = 200;
+  c.height = 100;
+  c.lens_radius = 0.5f;  // ignored: parallel rays have no depth of field
+  const Camera cam(s, c);
+  const Ray corner = cam.generate(0, 0, {0.3f, 0.7f}), centre = cam.generate(100, 50, {0.3f, 0.7f});
+  EXPECT_FLOAT_EQ(corner.o.x, 1 - 6);  // half width: 3 x 200/100
+  EXPECT_FLOAT_EQ(corner.o.y, 2 - 3);
+  EXPECT_FLOAT_EQ(corner.o.z, 10);
+  EXPECT_FLOAT_EQ(centre.o.x, 1);
+  EXPECT_FLOAT_EQ(centre.o.y, 2);
+  for (const Ray& r : {corner, centre}) {
+    EXPECT_FLOAT_EQ(r.d.z, -1);
+    EXPECT_FLOAT_EQ(r.tmin, 0.5f);
+    EXPECT_FLOAT_EQ(r.tmax, 100);
+  }
+}
+
 // A .dae whose camera pose is unusable loads (collada_test.cc); CS184 framing renders it,
 // and asking for the file's camera is refused naming the problem.
 TEST(Camera, AnUnusableFilePoseServesCs184FramingAndIsRefusedForFileFraming) {

@@ -55,11 +55,21 @@ TEST_F(Gltf, StripsAndFansBecomeTrianglesInTheSpecificationsOrder) {
   }
 }
 
-TEST_F(Gltf, OrthographicCameraIsRefused) {
+TEST_F(Gltf, AnOrthographicCameraIsReadAndAnUnusableOneRefused) {
   Doc d;
   d.j["cameras"][0] = {{"type", "orthographic"},
-                       {"orthographic", {{"xmag", 1}, {"ymag", 1}, {"znear", 0.1}, {"zfar", 10}}}};
-  expect_error(d, "orthographic cameras are not supported");
+                       {"orthographic", {{"xmag", 2}, {"ymag", -1}, {"znear", 0.1}, {"zfar", 10}}}};
+  const Scene s = load(d);
+  ASSERT_TRUE(s.camera.ortho_half_height);
+  EXPECT_EQ(*s.camera.ortho_half_height, 1);
+  EXPECT_EQ(*s.camera.aspect_ratio, 2);
+  EXPECT_FLOAT_EQ(s.camera.znear, 0.1f);
+  EXPECT_FLOAT_EQ(s.camera.eye.z, 3);
+  d.j["cameras"][0]["orthographic"]["ymag"] = 0;
+  expect_error(d, "orthographic xmag and ymag must be finite and not zero");
+  d.j["cameras"][0]["orthographic"]["ymag"] = 1;
+  d.j["cameras"][0]["orthographic"]["zfar"] = 0.05;
+  expect_error(d, "orthographic needs 0 <= znear < zfar");
 }
 
 TEST_F(Gltf, AccessorOffsetPastTheBufferView) {

@@ -62,7 +62,22 @@ void add_gltf_camera(GltfContext& ctx, int index, const Mat4& w, const std::stri
   if (ctx.scene.camera.present) return;  // the first camera in the scene's node order wins
   const tinygltf::Camera& c = ctx.model.cameras[size_t(index)];
   const std::string el = "cameras[" + std::to_string(index) + "]";
-  if (c.type == "orthographic") ctx.fail(el, "orthographic cameras are not supported (use a perspective camera)");
+  if (c.type == "orthographic") {
+    const tinygltf::OrthographicCamera& o = c.orthographic;
+    if (!(std::isfinite(o.xmag) && std::isfinite(o.ymag) && o.xmag != 0 && o.ymag != 0))
+      ctx.fail(el, "orthographic xmag and ymag must be finite and not zero");
+    if (!(o.znear >= 0 && o.zfar > o.znear && std::isfinite(o.zfar)))
+      ctx.fail(el, "orthographic needs 0 <= znear < zfar");
+    CameraDesc& d = ctx.scene.camera;
+    d.present = true;
+    d.ortho_half_height = std::fabs(o.ymag);
+    d.aspect_ratio = std::fabs(o.xmag / o.ymag);
+    d.znear = float(o.znear);
+    d.zfar = float(o.zfar);
+    place_camera(d, w);
+    if (!is_finite(d.forward) || !is_finite(d.up)) ctx.fail(node_el, "camera transform is degenerate");
+    return;
+  }
   if (c.type != "perspective") ctx.fail(el, "unknown camera type '" + c.type + "'");
   const double yfov = c.perspective.yfov * 180 / M_PI;
   if (!(yfov > 0 && yfov < 180)) ctx.fail(el, "yfov must be in (0, pi)");
