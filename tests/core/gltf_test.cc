@@ -213,6 +213,31 @@ std::string red_blue_png_uri() {
   return "data:image/png;base64," + base64(std::string(reinterpret_cast<const char*>(kRedBluePng), sizeof kRedBluePng));
 }
 
+// Issue 29: an image's errors name its file as the scene does and say what is wrong in
+// words (stb's "outofdata" was the whole message), never the folder's absolute path.
+TEST_F(Gltf, ImageErrorsNameTheFileInWordsWithoutTheFolder) {
+  const auto error_of = [&](const std::string& uri) {
+    Doc d;
+    d.j["images"] = {{{"uri", uri}}};
+    d.j["textures"] = {{{"source", 0}}};
+    d.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+    try {
+      load(d);
+    } catch (const SceneError& e) {
+      return std::string(e.what());
+    }
+    return std::string("loaded");
+  };
+  write("cut.png", std::string(reinterpret_cast<const char*>(kRedBluePng), 50));  // cut inside its data
+  const std::string cut = error_of("cut.png");
+  EXPECT_NE(cut.find("images[0] ('cut.png')"), std::string::npos) << cut;
+  EXPECT_NE(cut.find("the image is"), std::string::npos) << cut;
+  EXPECT_EQ(cut.find(dir.string(), 1), std::string::npos) << cut;  // (only as the scene file it names)
+  const std::string missing = error_of("missing.png");
+  EXPECT_NE(missing.find("missing.png"), std::string::npos) << missing;
+  EXPECT_EQ(missing.find(dir.string(), 1), std::string::npos) << missing;
+}
+
 TEST_F(Gltf, BaseColourTextureWithSamplerWrapModes) {
   Doc d;
   d.j["images"] = {{{"uri", red_blue_png_uri()}}};

@@ -167,6 +167,19 @@ std::vector<std::string> gltf_document_external_files(const nlohmann::json& j) {
   return out;
 }
 
+namespace {
+
+// tinygltf names files by absolute path: the scene's folder goes, so that an error names
+// files as the scene does (and a farm's never shows a server's path).
+std::string relative_to(std::string s, const std::string& folder) {
+  for (const std::string& f : {folder + "/", folder})
+    for (size_t at; !f.empty() && (at = s.find(f)) != std::string::npos;)
+      s.replace(at, f.size(), f == folder ? "." : "");
+  return s;
+}
+
+}  // namespace
+
 void parse_gltf_model(GltfDocument doc, GltfContext& ctx) {
   // The JSON is parsed twice, the fewest the libraries allow: by nlohmann in
   // read_gltf_document, for the pre-checks, which must see it before tinygltf allocates
@@ -192,8 +205,8 @@ void parse_gltf_model(GltfDocument doc, GltfContext& ctx) {
                                                            unsigned(doc.bytes.size()), base)
                              : loader.LoadASCIIFromString(&ctx.model, &err, &warn, doc.bytes.data(),
                                                           unsigned(doc.bytes.size()), base);
-  if (!ok) throw SceneError(ctx.path, "", first_line(err.empty() ? "glTF parse error" : err));
-  if (!warn.empty()) ctx.scene.warnings.push_back(ctx.path + ": " + first_line(warn));
+  if (!ok) throw SceneError(ctx.path, "", first_line(relative_to(err.empty() ? "glTF parse error" : err, base)));
+  if (!warn.empty()) ctx.scene.warnings.push_back(ctx.path + ": " + first_line(relative_to(warn, base)));
   for (const std::string& ext : ctx.model.extensionsUsed)
     if (!gltf_extension_supported(ext))
       ctx.scene.warnings.push_back(ctx.path + ": optional extension '" + ext + "' is not supported; ignored");

@@ -105,20 +105,26 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
 // allocating; once, whatever number of textures use it.
 const tinygltf::Image& GltfTextures::decode_image(int index) {
   tinygltf::Image& img = ctx_.model.images[size_t(index)];
-  const std::string el = "images[" + std::to_string(index) + "]";
+  // Named by its file where it has one: the user looks for the file.
+  const bool file = !img.uri.empty() && img.uri.rfind("data:", 0) != 0;
+  const std::string el = "images[" + std::to_string(index) + "]" + (file ? " ('" + img.uri + "')" : "");
   if (img.component != kEncoded) {
     if (img.width <= 0 || img.height <= 0 || img.image.size() < size_t(img.width) * size_t(img.height) * 4)
       ctx_.fail(el, "has no pixel data");
     return img;
   }
-  if (img.image.empty()) ctx_.fail(el, "has no data (a missing file?)");
+  if (img.image.empty()) ctx_.fail(el, file ? "the file is missing or empty" : "has no data");
   int w = 0, h = 0, comp = 0;
   const int size = int(std::min<size_t>(img.image.size(), size_t(INT32_MAX)));
   if (!stbi_info_from_memory(img.image.data(), size, &w, &h, &comp)) ctx_.fail(el, "not a readable PNG or JPEG");
   if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels)
     ctx_.fail(el, std::to_string(w) + "x" + std::to_string(h) + " is over the 64 M texel limit");
   unsigned char* data = stbi_load_from_memory(img.image.data(), size, &w, &h, &comp, 4);
-  if (!data) ctx_.fail(el, stbi_failure_reason());
+  if (!data) {  // stb's reasons are short codes ("outofdata", "bad zlib header", ...)
+    const std::string why = stbi_failure_reason() ? stbi_failure_reason() : "unknown";
+    ctx_.fail(el, why == "outofdata" ? "the image is cut short (a truncated PNG or JPEG)"
+                                     : "the image is damaged and cannot be decoded (" + why + ")");
+  }
   img.width = w;
   img.height = h;
   img.component = 4;
