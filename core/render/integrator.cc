@@ -95,6 +95,10 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
   sp.ns = ns_len > 0 ? ns / ns_len : sp.ng;
   sp.ns = face_forward(sp.ns, sp.ng);
   if (!m.uvs.empty()) sp.uv = m.uv_at(hit.prim, b1, b2);
+  if (!m.colors.empty()) {
+    sp.color = m.colors[i0] * b0 + m.colors[i1] * b1 + m.colors[i2] * b2;
+    sp.colored = true;
+  }
   sp.material = m.material;
   sp.light = m.light;
   return sp;
@@ -231,6 +235,11 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
       textured = scene_.textured(*mp, sp.uv);
       mp = &textured;
       if (mp->normal_texture.active()) apply_normal_map(scene_, *mp, hit, &sp);
+    }
+    if (sp.colored && mp->kind == Material::Kind::kPbr) {  // glTF COLOR_0 multiplies the base colour
+      if (mp != &textured) textured = *mp;
+      textured.reflectance = textured.reflectance * sp.color;
+      mp = &textured;
     }
     const Material& m = *mp;
     const Vec3 wo_world = -ray.d;

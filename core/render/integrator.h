@@ -29,6 +29,8 @@ struct SurfacePoint {
   Vec3 ng;     // unit geometric normal (winding / outward)
   Vec3 ns;     // unit shading normal, same hemisphere as ng
   Vec2 uv;     // texture coordinates (meshes with TEXCOORD_0)
+  Rgb color{1.0f};  // vertex colour (meshes with COLOR_0), when `colored`
+  bool colored = false;
   uint32_t material = 0;
   int32_t light = -1;
 };

@@ -130,6 +130,33 @@ TEST_F(Gltf, QuantizedAttributesAreReadAsTheExtensionSays) {
   }
 }
 
+// Issue 29: COLOR_0 (VEC4 normalized ubyte here; VEC3 float too) is read per vertex.
+TEST_F(Gltf, VertexColoursAreReadPerVertex) {
+  for (const bool vec4 : {true, false}) {
+    Doc d;
+    const size_t at = d.blob.size();  // 88
+    if (vec4)
+      put<uint8_t>(d.blob, {255, 0, 0, 255, 0, 255, 0, 255, 0, 0, 255, 128});
+    else
+      put<float>(d.blob, {1, 0, 0, 0, 1, 0, 0, 0, 1});
+    d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at}, {"byteLength", d.blob.size() - at}});
+    d.j["buffers"][0]["byteLength"] = d.blob.size();
+    d.j["accessors"].push_back({{"bufferView", 4},
+                                {"componentType", vec4 ? 5121 : 5126},
+                                {"normalized", vec4},
+                                {"count", 3},
+                                {"type", vec4 ? "VEC4" : "VEC3"}});
+    d.j["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"] = 4;
+    const Scene s = load(d);
+    const Mesh& m = s.meshes[0];
+    ASSERT_EQ(m.colors.size(), 3u);
+    EXPECT_FLOAT_EQ(m.colors[0].r, 1);
+    EXPECT_FLOAT_EQ(m.colors[0].g, 0);
+    EXPECT_FLOAT_EQ(m.colors[1].g, 1);
+    EXPECT_FLOAT_EQ(m.colors[2].b, 1);
+  }
+}
+
 TEST_F(Gltf, MaterialMapping) {
   Doc d;
   auto mat = [&](json m) {

@@ -102,6 +102,20 @@ TEST(PbrRender, WhiteFurnaces) {
   EXPECT_GT(e.mean, 0.97);
 }
 
+// glTF COLOR_0 multiplies the base colour: a smooth metal reflects its base colour times
+// the vertex colour (here the same at every vertex) of a uniform environment.
+TEST(PbrRender, VertexColoursMultiplyTheBaseColour) {
+  Mesh b = box(1, 0);
+  b.colors.assign(b.positions.size(), Rgb(0.5f, 0.25f, 1.0f));
+  Material metal = pbr(1, 0);
+  metal.reflectance = Rgb(1.0f, 1.0f, 0.5f);
+  const Film film = render(scene_with(b, metal), env_settings()).film;
+  const PixelSums& p = film.pixels()[size_t(12 * 24 + 12)];
+  EXPECT_NEAR(p.r / p.n, 0.5, 1e-4);
+  EXPECT_NEAR(p.g / p.n, 0.25, 1e-4);
+  EXPECT_NEAR(p.b / p.n, 0.5, 1e-4);
+}
+
 TEST(PbrRender, NormalMapTurnsTheShadingNormalInTangentSpace) {
   Scene s;
   Texture t;

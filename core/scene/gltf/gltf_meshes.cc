@@ -1,5 +1,6 @@
 #include "core/scene/gltf/gltf_meshes.h"
 
+#include <algorithm>
 #include <utility>
 
 #include "core/scene/gltf/gltf_accessors.h"
@@ -74,6 +75,20 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
       m.normals.resize(nv);
       for (size_t i = 0; i < nv; ++i) m.normals[i] = nt.unit_vector(n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]);
       m.file_normals = true;
+    }
+    if (auto c = prim.attributes.find("COLOR_0"); c != prim.attributes.end()) {
+      // VEC3 or VEC4 (its alpha is the material's alpha: rendered opaque, as alphaMode is).
+      const int comps = c->second >= 0 && size_t(c->second) < ctx.model.accessors.size() &&
+                                ctx.model.accessors[size_t(c->second)].type == TINYGLTF_TYPE_VEC4
+                            ? 4
+                            : 3;
+      const std::vector<float> rgba = read_accessor_floats(ctx, c->second, comps, el + " COLOR_0");
+      if (rgba.size() / size_t(comps) != nv) ctx.fail(el, "COLOR_0 count differs from POSITION count");
+      m.colors.resize(nv);
+      for (size_t i = 0; i < nv; ++i) {
+        const float* v = &rgba[i * size_t(comps)];
+        m.colors[i] = Rgb(std::clamp(v[0], 0.0f, 1.0f), std::clamp(v[1], 0.0f, 1.0f), std::clamp(v[2], 0.0f, 1.0f));
+      }
     }
     if (auto uv = prim.attributes.find("TEXCOORD_0"); uv != prim.attributes.end()) {
       const std::vector<float> t2 = read_accessor_floats(ctx, uv->second, 2, el + " TEXCOORD_0");
