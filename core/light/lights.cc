@@ -87,8 +87,8 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
       if (!(len > 0)) return false;
       Rgb radiance = l.color;
       const Material& mat = scene_.materials[m.material];
-      if (mat.emissive_texture.active() && !m.uvs.empty())  // glTF emissiveTexture
-        radiance = scene_.textured(mat, m.uv_at(t, bc.x, bc.y)).radiance;
+      if (mat.emissive_texture.active() && !m.uv_set(mat.emissive_texture.set).empty())  // glTF emissiveTexture
+        radiance = scene_.textured(mat, m.uv_at(t, bc.x, bc.y, mat.emissive_texture.set)).radiance;
       return finish_area_sample(p, q, err, n / len, 1 / d.area, radiance, l.two_sided, out);
     }
     case Light::Kind::kSphere: {

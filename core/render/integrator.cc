@@ -94,7 +94,8 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
   const float ns_len = length(ns);
   sp.ns = ns_len > 0 ? ns / ns_len : sp.ng;
   sp.ns = face_forward(sp.ns, sp.ng);
-  if (!m.uvs.empty()) sp.uv = m.uv_at(hit.prim, b1, b2);
+  if (!m.uvs.empty()) sp.uv = sp.uv1 = m.uv_at(hit.prim, b1, b2);
+  if (!m.uvs1.empty()) sp.uv1 = m.uv_at(hit.prim, b1, b2, 1);
   if (!m.colors.empty()) {
     sp.color = m.colors[i0] * b0 + m.colors[i1] * b1 + m.colors[i2] * b2;
     sp.colored = true;
@@ -107,11 +108,13 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
 void apply_normal_map(const Scene& scene, const Material& m, const Hit& hit, SurfacePoint* sp) {
   if (hit.is_sphere) return;
   const Mesh& mesh = scene.meshes[hit.shape];
-  if (mesh.uvs.empty()) return;
+  const TextureRef& ref = m.normal_texture;
+  const std::vector<Vec2>& uvs = mesh.uv_set(ref.set);  // (the map's own set: its tangent frame)
+  if (uvs.empty()) return;
   const uint32_t i0 = mesh.indices[3 * hit.prim], i1 = mesh.indices[3 * hit.prim + 1],
                  i2 = mesh.indices[3 * hit.prim + 2];
   // The triangle's dp/du and dp/dv (pbrt's Triangle::InteractionFromIntersection).
-  const Vec2 uv0 = mesh.uvs[i0], uv1 = mesh.uvs[i1], uv2 = mesh.uvs[i2];
+  const Vec2 uv0 = uvs[i0], uv1 = uvs[i1], uv2 = uvs[i2];
   const Vec2 d02{uv0.x - uv2.x, uv0.y - uv2.y}, d12{uv1.x - uv2.x, uv1.y - uv2.y};
   const Vec3 p02 = mesh.positions[i0] - mesh.positions[i2], p12 = mesh.positions[i1] - mesh.positions[i2];
   const float det = d02.x * d12.y - d02.y * d12.x;
@@ -125,8 +128,7 @@ void apply_normal_map(const Scene& scene, const Material& m, const Hit& hit, Sur
   // glTF's bitangent is cross(N, T), image "up" (v decreasing) for an unmirrored mapping.
   Vec3 b = cross(n, t);
   if (dot(b, dpdv) > 0) b = -b;
-  const TextureRef& ref = m.normal_texture;
-  const Rgb c = scene.textures[size_t(ref.index)].sample(ref.map(sp->uv));
+  const Rgb c = scene.textures[size_t(ref.index)].sample(ref.map(ref.set ? sp->uv1 : sp->uv));
   const float x = (2 * c.r - 1) * m.normal_scale, y = (2 * c.g - 1) * m.normal_scale, z = 2 * c.b - 1;
   Vec3 mapped = t * x + b * y + n * z;
   const float len = length(mapped);
@@ -232,7 +234,7 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
     const Material* mp = &scene_.materials[sp.material];
     Material textured;  // only textured materials pay for a copy
     if (mp->has_textures()) {
-      textured = scene_.textured(*mp, sp.uv);
+      textured = scene_.textured(*mp, sp.uv, sp.uv1);
       mp = &textured;
       if (mp->normal_texture.active()) apply_normal_map(scene_, *mp, hit, &sp);
     }

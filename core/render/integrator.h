@@ -29,6 +29,7 @@ struct SurfacePoint {
   Vec3 ng;     // unit geometric normal (winding / outward)
   Vec3 ns;     // unit shading normal, same hemisphere as ng
   Vec2 uv;     // texture coordinates (meshes with TEXCOORD_0)
+  Vec2 uv1;    // the second set (meshes with TEXCOORD_1; else uv)
   Rgb color{1.0f};  // vertex colour (meshes with COLOR_0), when `colored`
   bool colored = false;
   uint32_t material = 0;

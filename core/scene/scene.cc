@@ -177,9 +177,9 @@ Rgb Texture::sample(Vec2 uv) const {
 
 namespace tessera {
 
-Material Scene::textured(const Material& m, Vec2 uv) const {
+Material Scene::textured(const Material& m, Vec2 uv, Vec2 uv1) const {
   Material out = m;
-  auto at = [&](const TextureRef& t) { return textures[size_t(t.index)].sample(t.map(uv)); };
+  auto at = [&](const TextureRef& t) { return textures[size_t(t.index)].sample(t.map(t.set ? uv1 : uv)); };
   if (m.texture.active()) out.reflectance *= at(m.texture);
   if (m.metal_rough_texture.active()) {
     const Rgb mr = at(m.metal_rough_texture);

@@ -16,6 +16,7 @@ namespace tessera {
 // affine map of the coordinates, uv' = [m0 m1 m2; m3 m4 m5] (u, v, 1).
 struct TextureRef {
   int32_t index = -1;
+  uint8_t set = 0;  // the texture coordinates it reads: Mesh::uvs (0) or Mesh::uvs1 (1)
   float xform[6] = {1, 0, 0, 0, 1, 0};
   bool active() const { return index >= 0; }
   Vec2 map(Vec2 uv) const {
@@ -79,16 +80,20 @@ struct Mesh {
   std::vector<uint32_t> indices;  // 3 per triangle
   std::vector<Vec3> normals;      // per vertex: from the file, or area weighted (compute_normals)
   std::vector<Vec2> uvs;          // per vertex texture coordinates, or empty
+  std::vector<Vec2> uvs1;         // a second set (glTF TEXCOORD_1), or empty
   std::vector<Rgb> colors;        // per vertex colour (glTF COLOR_0, linear), multiplying the base colour; or empty
   bool file_normals = false;      // `normals` came from the file: keep them
   uint32_t material = 0;
   int32_t light = -1;  // index into Scene::lights when the mesh emits
 
   size_t triangle_count() const { return indices.size() / 3; }
+  // The coordinates of set `set` (`uvs` where the mesh has no second set).
+  const std::vector<Vec2>& uv_set(int set) const { return set == 1 && !uvs1.empty() ? uvs1 : uvs; }
   // Texture coordinates at barycentrics (b1, b2) of triangle `tri`; uvs must not be empty.
-  Vec2 uv_at(size_t tri, float b1, float b2) const {
+  Vec2 uv_at(size_t tri, float b1, float b2, int set = 0) const {
     const float b0 = 1 - b1 - b2;
-    const Vec2 a = uvs[indices[3 * tri]], b = uvs[indices[3 * tri + 1]], c = uvs[indices[3 * tri + 2]];
+    const std::vector<Vec2>& uv = uv_set(set);
+    const Vec2 a = uv[indices[3 * tri]], b = uv[indices[3 * tri + 1]], c = uv[indices[3 * tri + 2]];
     return {a.x * b0 + b.x * b1 + c.x * b2, a.y * b0 + b.y * b1 + c.y * b2};
   }
   void compute_normals();
@@ -202,10 +207,12 @@ struct Scene {
   // last.
   void finalize();
   uint32_t add_material(Material m);
-  // The material at a surface point with texture coordinates uv: its textures applied
-  // (base colour, metallic-roughness, emission; not the normal map, which the integrator
-  // applies to the shading frame).
-  Material textured(const Material& m, Vec2 uv) const;
+  // The material at a surface point with texture coordinates uv (and uv1, of the second
+  // set, for textures that read it): its textures applied (base colour,
+  // metallic-roughness, emission; not the normal map, which the integrator applies to the
+  // shading frame).
+  Material textured(const Material& m, Vec2 uv, Vec2 uv1) const;
+  Material textured(const Material& m, Vec2 uv) const { return textured(m, uv, uv); }
 };
 
 }  // namespace tessera

@@ -265,6 +265,38 @@ TEST_F(Gltf, ImageErrorsNameTheFileInWordsWithoutTheFolder) {
   EXPECT_EQ(missing.find(dir.string(), 1), std::string::npos) << missing;
 }
 
+// Issue 29: each texture reads the coordinate set it names (TEXCOORD_1 was read as
+// TEXCOORD_0); a set the mesh lacks is a warning.
+TEST_F(Gltf, ATextureReadsTheCoordinateSetItNames) {
+  Doc d;
+  const size_t at = d.blob.size();  // TEXCOORD_1: u = 0.75 at every vertex (blue)
+  put<float>(d.blob, {0.75f, 0.5f, 0.75f, 0.5f, 0.75f, 0.5f});
+  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at}, {"byteLength", 24}});
+  d.j["buffers"][0]["byteLength"] = d.blob.size();
+  d.j["accessors"].push_back({{"bufferView", 4}, {"componentType", 5126}, {"count", 3}, {"type", "VEC2"}});
+  d.j["images"] = {{{"uri", red_blue_png_uri()}}};
+  d.j["samplers"] = {{{"magFilter", 9728}}};  // nearest
+  d.j["textures"] = {{{"source", 0}, {"sampler", 0}}};
+  d.j["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1, 1, 1, 1};
+  d.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}, {"texCoord", 1}};
+  Doc lacking = d;
+  d.j["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_1"] = 4;
+  const Scene s = load(d);
+  const Mesh& m = s.meshes[0];
+  ASSERT_EQ(m.uvs1.size(), 3u);
+  EXPECT_FLOAT_EQ(m.uv_at(0, 0.3f, 0.3f, 1).x, 0.75f);
+  const Material& mat = s.materials[m.material];
+  EXPECT_EQ(mat.texture.set, 1);
+  // uv (set 0) at the red texel, uv1 at the blue one: the texture reads uv1.
+  const Rgb c = s.textured(mat, {0.25f, 0.5f}, {0.75f, 0.5f}).reflectance;
+  EXPECT_LT(c.r, 0.01f);
+  EXPECT_GT(c.b, 0.99f);
+  const Scene l = load(lacking);
+  bool warned = false;
+  for (const std::string& w : l.warnings) warned |= w.find("reads TEXCOORD_1, which it lacks") != std::string::npos;
+  EXPECT_TRUE(warned);
+}
+
 TEST_F(Gltf, BaseColourTextureWithSamplerWrapModes) {
   Doc d;
   d.j["images"] = {{{"uri", red_blue_png_uri()}}};

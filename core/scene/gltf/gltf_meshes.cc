@@ -96,7 +96,17 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
       m.uvs.resize(nv);
       for (size_t i = 0; i < nv; ++i) m.uvs[i] = {t2[2 * i], t2[2 * i + 1]};
     }
+    if (auto uv = prim.attributes.find("TEXCOORD_1"); uv != prim.attributes.end()) {
+      const std::vector<float> t2 = read_accessor_floats(ctx, uv->second, 2, el + " TEXCOORD_1");
+      if (t2.size() / 2 != nv) ctx.fail(el, "TEXCOORD_1 count differs from POSITION count");
+      m.uvs1.resize(nv);
+      for (size_t i = 0; i < nv; ++i) m.uvs1[i] = {t2[2 * i], t2[2 * i + 1]};
+    }
     m.material = materials.material(prim.material);
+    const Material& mat = ctx.scene.materials[m.material];
+    for (const TextureRef* t : {&mat.texture, &mat.metal_rough_texture, &mat.normal_texture, &mat.emissive_texture})
+      if (t->active() && t->set == 1 && m.uvs1.empty())
+        ctx.warn_once(el + ": its material reads TEXCOORD_1, which it lacks; TEXCOORD_0 is used");
     if (m.indices.empty()) continue;
     if (keep_object_space) {
       g.positions = std::move(p3);

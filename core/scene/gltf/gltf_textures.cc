@@ -56,8 +56,11 @@ TextureRef GltfTextures::texture_ref(int index, int tex_coord, const tinygltf::E
     for (int i = 0; i < 6; ++i) r.xform[i] = float(m[i]);
     if (t.Has("texCoord") && t.Get("texCoord").IsInt()) tex_coord = t.Get("texCoord").GetNumberAsInt();
   }
-  if (tex_coord > 0)
-    ctx_.warn_once(el + ": " + what + " uses TEXCOORD_" + std::to_string(tex_coord) + "; TEXCOORD_0 is used");
+  if (tex_coord == 1)
+    r.set = 1;
+  else if (tex_coord > 1)
+    ctx_.warn_once(el + ": " + what + " uses TEXCOORD_" + std::to_string(tex_coord) +
+                   " (only TEXCOORD_0 and TEXCOORD_1 are read); TEXCOORD_0 is used");
   return r;
 }
 
