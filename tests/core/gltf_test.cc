@@ -403,7 +403,12 @@ TEST_F(Gltf, NoCameraFramesTheBounds) {
   d.j["scenes"][0]["nodes"] = {0};
   const Scene s = load(d);
   ASSERT_TRUE(s.camera.present);
-  EXPECT_GT(s.camera.eye.z, 1);
+  // A three-quarter view: front (+Z), right (+X), above (+Y) the bounds' centre, looking at it.
+  const Vec3 centre = s.object_bounds().center(), to_eye = s.camera.eye - centre;
+  EXPECT_GT(to_eye.z, 1);
+  EXPECT_NEAR(to_eye.x, to_eye.z, 1e-4f);
+  EXPECT_NEAR(to_eye.y / length(to_eye), 0.5f, 1e-5f);  // 30 degrees up
+  EXPECT_NEAR(dot(normalize(to_eye), s.camera.forward), -1, 1e-5f);
   bool warned = false;
   for (const std::string& w : s.warnings) warned |= w.find("no camera") != std::string::npos;
   EXPECT_TRUE(warned);

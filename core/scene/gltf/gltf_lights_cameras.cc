@@ -99,11 +99,18 @@ void frame_gltf_scene(GltfContext& ctx) {
   CameraDesc& d = ctx.scene.camera;
   d.present = true;
   d.yfov_deg = 40;
-  d.eye = c + Vec3{0, 0, r / std::sin(20 * kPi / 180) * 1.05f};
-  d.forward = {0, 0, -1};
+  // A three-quarter view, as glTF viewers frame a file without a camera: from the front
+  // (+Z) right (+X), 45 degrees round and 30 degrees up, so that a model lying on the
+  // ground plane is seen from above rather than edge-on.
+  const float el = 30 * kPi / 180, az = 45 * kPi / 180;
+  const Vec3 dir{std::cos(el) * std::sin(az), std::sin(el), std::cos(el) * std::cos(az)};
+  d.eye = c + dir * (r / std::sin(20 * kPi / 180) * 1.05f);
+  d.forward = -dir;
   d.up = {0, 1, 0};
-  d.cs184_dir = {0, 0, 1};
-  ctx.scene.warnings.push_back(ctx.path + ": no camera; framing the scene's bounds from +Z");
+  d.cs184_dir = dir;
+  ctx.scene.warnings.push_back(ctx.path +
+                               ": no camera; framing the scene's bounds from a three-quarter view (from the front "
+                               "right, 30 degrees above)");
 }
 
 }  // namespace tessera
