@@ -87,7 +87,7 @@ done
 [ -n "$up" ] || skip "the Slurm daemons did not bring the node up" "$T/slurmctld.log" "$T/slurmd.log" "$T/slurmd.out"
 
 # The coordinator, outside the cluster, on loopback.
-flags=(-r 160 120 -s 128 --pass-spp 8 -m 6 --seed 4)
+flags=(-r 160 120 -s 384 --pass-spp 8 -m 6 --seed 4)  # long enough (~15 s on 2 cores) that scancel lands mid-job
 "$build/bin/tessera" render "$root/scenes/cornell-spheres.dae" "${flags[@]}" -q -f "$T/local.exr"
 "$build/bin/tessera-coordinator" --listen 127.0.0.1:0 --http 127.0.0.1:0 --data "$T/data" \
   --lease-seconds 2 >"$T/coord.out" 2>"$T/coord.err" &
