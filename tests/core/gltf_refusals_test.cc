@@ -99,6 +99,8 @@ TEST_F(Gltf, BufferShorterThanDeclared) {
     load_scene(write(d, false));
   } catch (const SceneError& e) {
     EXPECT_EQ(std::string(e.what()).find(dir.string(), 1), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("a buffer's file is not the size its byteLength says"), std::string::npos)
+        << e.what();
   }
 }
 
@@ -151,6 +153,20 @@ TEST_F(Gltf, MalformedDataNothingUsesIsToleratedAndInUseRefused) {
                            std::string(1, '\0') + bin;
   const Scene g = load_gltf_file(write("scene.glb", file));
   EXPECT_EQ(g.meshes.size(), 1u);
+}
+
+// A .glb whose BIN chunk is not padded to 4 bytes: refused in a user's words.
+TEST_F(Gltf, AnUnpaddedGlbBinChunkIsRefusedInPlainWords) {
+  Doc d;
+  d.j["buffers"][0].erase("uri");
+  std::string json = d.j.dump();
+  while (json.size() % 4) json += ' ';
+  const std::string bin = d.blob + "xy";  // 90 bytes
+  auto u32 = [](uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
+  const std::string file = "glTF" + u32(2) + u32(uint32_t(12 + 8 + json.size() + 8 + bin.size())) +
+                           u32(uint32_t(json.size())) + "JSON" + json + u32(uint32_t(bin.size())) + "BIN" +
+                           std::string(1, '\0') + bin;
+  expect_error(write("scene.glb", file), "the .glb's BIN chunk length is not a multiple of 4 bytes");
 }
 
 TEST_F(Gltf, BrokenBase64) {

@@ -178,6 +178,23 @@ std::string relative_to(std::string s, const std::string& folder) {
   return s;
 }
 
+// tinygltf's wording for a damaged file, in a user's terms (the original kept after it).
+std::string plain_words(const std::string& s) {
+  static const std::pair<const char*, const char*> kPlain[] = {
+      {"BIN Chunk end does not aligned to a 4-byte boundary",
+       "the .glb's BIN chunk length is not a multiple of 4 bytes (a damaged or hand-edited .glb)"},
+      {"BIN Chunk data length exceeds the GLB size", "the .glb's BIN chunk runs past the end of the file (cut short?)"},
+      {"Insufficient Chunk1(BIN) data size", "the .glb's BIN chunk is shorter than 4 bytes"},
+      {"Invalid type for chunk1 data", "the .glb's second chunk is not a BIN chunk"},
+      {"File size mismatch", "a buffer's file is not the size its byteLength says"},
+      {"File is empty", "a buffer's file is empty"},
+      {"File not found", "a file the scene names is missing"},
+  };
+  for (const auto& [raw, plain] : kPlain)
+    if (s.find(raw) != std::string::npos) return std::string(plain) + " (" + s + ")";
+  return s;
+}
+
 }  // namespace
 
 void parse_gltf_model(GltfDocument doc, GltfContext& ctx) {
@@ -205,7 +222,8 @@ void parse_gltf_model(GltfDocument doc, GltfContext& ctx) {
                                                            unsigned(doc.bytes.size()), base)
                              : loader.LoadASCIIFromString(&ctx.model, &err, &warn, doc.bytes.data(),
                                                           unsigned(doc.bytes.size()), base);
-  if (!ok) throw SceneError(ctx.path, "", first_line(relative_to(err.empty() ? "glTF parse error" : err, base)));
+  if (!ok)
+    throw SceneError(ctx.path, "", plain_words(first_line(relative_to(err.empty() ? "glTF parse error" : err, base))));
   if (!warn.empty()) ctx.scene.warnings.push_back(ctx.path + ": " + first_line(relative_to(warn, base)));
   for (const std::string& ext : ctx.model.extensionsUsed)
     if (!gltf_extension_supported(ext))
