@@ -107,7 +107,7 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
     }
     if (!img) img = read_exr(at);
     write_file_atomic(p, encode_png(img->width, img->height, img->channels.at("R").data(), img->channels.at("G").data(),
-                                    img->channels.at("B").data()));
+                                    img->channels.at("B").data(), false, exposure_scale(img->metadata)));
   }
   if (at == download) fs::remove(download);
   return got;

@@ -54,6 +54,7 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
     meta["frame"] = std::to_string(*s.frame);
     meta["time"] = std::to_string(s.time());  // seconds: frame / fps
   }
+  if (s.exposure != 0) meta[kExposureAttribute] = exposure_text(s.exposure);
   for (const std::string& out : outputs) write_image(out, r.film, meta);
 
   const uint64_t rays = r.stats.rays.rays + r.stats.rays.shadow_rays;

@@ -43,6 +43,9 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
       ->capture_default_str();
   cmd->add_option("--env-rotate", s.environment_rotation, "Turns the environment map by DEGREES about +Y")
       ->capture_default_str();
+  cmd->add_option("--exposure", s.exposure,
+                  "EV of the PNGs and previews (linear x 2^EV; for scenes in physical units); EXRs keep linear values")
+      ->capture_default_str();
   cmd->add_flag("--no-default-env", f.no_default_env,
                 "No neutral environment for a glTF scene without lights (it renders black)");
   cmd->add_option("--animation", s.animation,

@@ -41,6 +41,7 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   p.set_environment_map(s.environment_map);
   if (s.environment_strength != 1) p.set_environment_strength(s.environment_strength);
   p.set_environment_rotation(s.environment_rotation);
+  p.set_exposure(s.exposure);
   p.set_pass_spp(uint32_t(s.pass_spp));
   p.set_width(uint32_t(s.camera.width));
   p.set_height(uint32_t(s.camera.height));
@@ -79,6 +80,7 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
                     "' must name a file inside the scene bundle (a relative path without ..)");
   if (p.has_environment_strength()) s.environment_strength = p.environment_strength();
   s.environment_rotation = p.environment_rotation();
+  s.exposure = p.exposure();
   s.pass_spp = i(p.pass_spp());
   s.camera.width = i(p.width());
   s.camera.height = i(p.height());

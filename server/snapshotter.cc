@@ -74,6 +74,7 @@ SnapshotPlan Snapshotter::next(Job& j, double now) const {
     p.meta["frame"] = std::to_string(*st.frame);
     p.meta["time"] = std::to_string(st.time());  // seconds: frame / fps
   }
+  if (st.exposure != 0) p.meta[kExposureAttribute] = exposure_text(st.exposure);  // (PNGs made of it take it)
   return p;
 }
 

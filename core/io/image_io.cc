@@ -35,12 +35,12 @@ void write_exr(const std::string& path, const Film& film, const ImageMetadata& m
   out.commit();
 }
 
-std::string encode_png(int w, int h, const float* r, const float* g, const float* b, bool fast) {
+std::string encode_png(int w, int h, const float* r, const float* g, const float* b, bool fast, float scale) {
   std::vector<uint8_t> rgb(size_t(w) * h * 3);
   for (size_t i = 0; i < size_t(w) * h; ++i) {
-    rgb[3 * i] = srgb_byte(r[i]);
-    rgb[3 * i + 1] = srgb_byte(g[i]);
-    rgb[3 * i + 2] = srgb_byte(b[i]);
+    rgb[3 * i] = srgb_byte(r[i] * scale);
+    rgb[3 * i + 1] = srgb_byte(g[i] * scale);
+    rgb[3 * i + 2] = srgb_byte(b[i] * scale);
   }
   std::string out;
   auto append = [](void* context, void* data, int size) {
@@ -54,7 +54,27 @@ std::string encode_png(int w, int h, const float* r, const float* g, const float
   return out;
 }
 
-void write_png(const std::string& path, const Film& film, bool fast) {
+float exposure_scale(const ImageMetadata& metadata) {
+  auto it = metadata.find(kExposureAttribute);
+  if (it == metadata.end()) it = metadata.find(kExposureFileAttribute);
+  if (it == metadata.end()) return 1;
+  try {
+    size_t used = 0;
+    const float ev = std::stof(it->second, &used);
+    if (used != it->second.size() || !std::isfinite(ev) || std::fabs(ev) > 64) return 1;
+    return std::exp2(ev);
+  } catch (const std::exception&) {
+    return 1;
+  }
+}
+
+std::string exposure_text(float ev) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.9g", double(ev));
+  return buf;
+}
+
+void write_png(const std::string& path, const Film& film, bool fast, float scale) {
   const size_t n = size_t(film.width()) * film.height();
   std::vector<float> r(n), g(n), b(n);
   for (size_t i = 0; i < n; ++i) {
@@ -65,7 +85,7 @@ void write_png(const std::string& path, const Film& film, bool fast) {
   }
   std::string bytes;
   try {
-    bytes = encode_png(film.width(), film.height(), r.data(), g.data(), b.data(), fast);
+    bytes = encode_png(film.width(), film.height(), r.data(), g.data(), b.data(), fast, scale);
   } catch (const std::runtime_error& e) {
     throw std::runtime_error(path + ": " + e.what());
   }
@@ -74,7 +94,7 @@ void write_png(const std::string& path, const Film& film, bool fast) {
 
 void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata) {
   if (ends_with(path, ".exr")) return write_exr(path, film, metadata);
-  if (ends_with(path, ".png")) return write_png(path, film);
+  if (ends_with(path, ".png")) return write_png(path, film, false, exposure_scale(metadata));
   throw std::runtime_error(path + ": unknown image format (use .exr or .png)");
 }
 

@@ -4,6 +4,7 @@
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfStringAttribute.h>
 
 #include <algorithm>
 #include <stdexcept>
@@ -48,7 +49,10 @@ std::string preview_png(const std::string& exr_path, int max_width) {
         pb[o] = float(sb / n);
       }
     }
-    return encode_png(pw, ph, pr.data(), pg.data(), pb.data(), true);
+    ImageMetadata meta;  // (the exposure the render asked for, if any)
+    if (const auto* a = in.header().findTypedAttribute<Imf::StringAttribute>(kExposureFileAttribute))
+      meta[kExposureAttribute] = a->value();
+    return encode_png(pw, ph, pr.data(), pg.data(), pb.data(), true, exposure_scale(meta));
   } catch (const std::exception& e) {
     throw std::runtime_error(exr_path + ": cannot make a preview: " + e.what());
   }

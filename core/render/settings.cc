@@ -43,6 +43,8 @@ void RenderSettings::validate() const {
           "--env-strength", "must be in 0..1e20");
   require(std::isfinite(environment_rotation) && std::fabs(environment_rotation) <= 1e6f, "--env-rotate",
           "must be a finite angle in degrees (at most 1e6)");
+  require(std::isfinite(exposure) && std::fabs(exposure) <= kMaxExposure, "--exposure",
+          "must be a finite EV in -64..64");
   require(animation.size() <= kMaxAnimationName, "--animation", "a name of at most 256 bytes");
   require(std::isfinite(fps) && fps > 0 && fps <= kMaxFps, "--fps", "must be > 0 and at most 1e6");
   require(std::isfinite(noise_target) && noise_target >= 0 && noise_target <= kMaxNoiseTarget, "--noise-target",

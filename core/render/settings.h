@@ -82,6 +82,12 @@ struct RenderSettings {
   // --env-rotate turns an image environment by degrees about +Y.
   float environment_strength = 1;
   float environment_rotation = 0;
+  // --exposure EV: PNGs and previews show the linear values x 2^EV (for scenes in physical
+  // units: a 3 lux sun renders at 1e-6); EXRs keep the scene-linear values and carry the
+  // EV as their `exposure` attribute, from which every PNG made of them takes it. It
+  // changes no sample: the same render at any exposure has the same EXR pixels.
+  static constexpr float kMaxExposure = 64;
+  float exposure = 0;
   int pass_spp = 16;  // --pass-spp: samples per progressive pass (the unit merged in order)
   // --tile: side of the square tiles the frame is cut into. It never changes the image,
   // except with a noise target, which is judged per tile.

@@ -11,6 +11,7 @@
 
 #include "core/io/files.h"
 #include "core/io/image_io.h"
+#include "core/io/preview.h"
 #define XXH_INLINE_ALL
 #include <xxhash.h>
 
@@ -148,6 +149,40 @@ TEST_F(ImageDownloadTest, APngIsMadeFromTheExrAndEveryOutputWritten) {
   const ExrImage img = read_exr(e1);
   EXPECT_EQ(read_file_bytes(png), encode_png(img.width, img.height, img.channels.at("R").data(),
                                              img.channels.at("G").data(), img.channels.at("B").data()));
+}
+
+// Issue 29's --exposure: the EXR keeps linear values and carries the EV; every PNG made of
+// it (the client's, the coordinator's preview) and a local render's PNG show 2^EV times
+// the values.
+TEST_F(ImageDownloadTest, EveryPngOfAnExrTakesTheExposureItCarries) {
+  Film film(Rect{0, 0, 4, 2});
+  for (int y = 0; y < 2; ++y)
+    for (int x = 0; x < 4; ++x) film.at(x, y) = PixelSums{0.01 * (x + 1), 0.02, 0.03, 0, 1};
+  const ImageMetadata meta{{kExposureAttribute, exposure_text(2)}};
+  const std::string e = (dir / "bright.exr").string(), p = (dir / "bright.png").string();
+  write_image(e, film, meta);
+  write_image(p, film, meta);
+  exr = read_file_bytes(e);
+  const ExrImage img = read_exr(e);
+  EXPECT_FLOAT_EQ(img.channels.at("R")[0], 0.01f);  // linear, as rendered
+  EXPECT_FLOAT_EQ(exposure_scale(img.metadata), 4);
+  const std::string bright =
+      encode_png(4, 2, img.channels.at("R").data(), img.channels.at("G").data(), img.channels.at("B").data(), false, 4);
+  EXPECT_NE(bright,
+            encode_png(4, 2, img.channels.at("R").data(), img.channels.at("G").data(), img.channels.at("B").data()));
+  EXPECT_EQ(read_file_bytes(p), bright);  // tessera render's PNG
+  answers = {{0, exr.size()}};
+  int retries = 0;
+  const std::string got = (dir / "got.png").string();
+  download({got}, false, &retries);
+  EXPECT_EQ(read_file_bytes(got), bright);  // the farm client's PNG
+  const std::string preview = preview_png(e);
+  EXPECT_EQ(preview, encode_png(4, 2, img.channels.at("R").data(), img.channels.at("G").data(),
+                                img.channels.at("B").data(), true, 4));  // the coordinator's preview
+  // A value that is no EV is ignored, not trusted.
+  EXPECT_EQ(exposure_scale({{kExposureAttribute, "bright"}}), 1);
+  EXPECT_EQ(exposure_scale({{kExposureFileAttribute, "1e9"}}), 1);
+  EXPECT_EQ(exposure_scale({}), 1);
 }
 
 TEST_F(ImageDownloadTest, AnImageThatIsNotFinalIsWrittenNowhereWhenOneIsNeeded) {

@@ -109,6 +109,11 @@ TEST(Environment, RangeIsChecked) {
     r.environment_rotation = rotation;
     EXPECT_EQ(flag_of(r), "--env-rotate") << rotation;
   }
+  for (float ev : {std::nanf(""), INFINITY, 65.0f, -65.0f}) {  // --exposure, with them (a display setting)
+    RenderSettings r;
+    r.exposure = ev;
+    EXPECT_EQ(flag_of(r), "--exposure") << ev;
+  }
   RenderSettings r;
   r.environment_map.assign(RenderSettings::kMaxEnvironmentPath + 1, 'x');
   EXPECT_EQ(flag_of(r), "--env");

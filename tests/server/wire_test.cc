@@ -184,7 +184,9 @@ TEST(WireSettings, SequenceAndEnvironmentSettingsRoundTrip) {
   s.environment_map = ".tessera-env/sky.hdr";
   s.environment_strength = 0.5f;
   s.environment_rotation = 30;
+  s.exposure = -3.5f;
   const RenderSettings m = from_proto(to_proto(s));
+  EXPECT_EQ(m.exposure, -3.5f);
   EXPECT_EQ(m.environment_map, ".tessera-env/sky.hdr");
   EXPECT_EQ(m.environment_strength, 0.5f);
   EXPECT_EQ(m.environment_rotation, 30);
