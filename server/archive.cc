@@ -142,7 +142,8 @@ void add_archived_tiles(v1::JobStatus& s) {
   }
   const auto passes = settings.passes();
   const bool done = s.tiles_done() == s.tiles_total();
-  const uint32_t passes_done = done ? uint32_t(passes.size()) : std::min<uint32_t>(s.frame_passes_done(), passes.size());
+  const uint32_t passes_done =
+      done ? uint32_t(passes.size()) : std::min<uint32_t>(s.frame_passes_done(), passes.size());
   const Rect w = settings.effective_window();
   const int ts = std::max(1, settings.tile_size);
   for (int y = w.y; y < w.y + w.h; y += ts)

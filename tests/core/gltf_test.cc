@@ -107,7 +107,10 @@ TEST_F(Gltf, QuantizedAttributesAreReadAsTheExtensionSays) {
     d.j["extensionsRequired"] = {"KHR_mesh_quantization"};
     d.j["nodes"][0]["scale"] = normalized ? json::array({2, 2, 2}) : json::array({0.5, 0.5, 0.5});
     d.j["accessors"] = {
-        {{"bufferView", 0}, {"componentType", normalized ? 5122 : 5123}, {"normalized", normalized}, {"count", 3},
+        {{"bufferView", 0},
+         {"componentType", normalized ? 5122 : 5123},
+         {"normalized", normalized},
+         {"count", 3},
          {"type", "VEC3"}},
         {{"bufferView", 1}, {"componentType", 5120}, {"normalized", true}, {"count", 3}, {"type", "VEC3"}},
         {{"bufferView", 2}, {"componentType", 5123}, {"normalized", true}, {"count", 3}, {"type", "VEC2"}},
