@@ -18,20 +18,6 @@ std::vector<MergedInto> merged_list(const std::map<uint64_t, uint32_t>& by_worke
   return out;
 }
 
-// A frame's own id, <sequence>-f<frame>: the two parts (nothing if it is not one).
-std::optional<std::pair<std::string, int>> frame_id_parts(const std::string& id) {
-  const size_t f = id.rfind("-f");
-  if (f == std::string::npos || f == 0) return std::nullopt;
-  try {
-    size_t used = 0;
-    const int frame = std::stoi(id.substr(f + 2), &used);
-    if (used != id.size() - f - 2) return std::nullopt;
-    return std::make_pair(id.substr(0, f), frame);
-  } catch (const std::exception&) {
-    return std::nullopt;
-  }
-}
-
 // The frame `frame` of an archived sequence's status: its place (throws as frame_job does).
 int frame_place(const v1::JobStatus& s, int frame) {
   for (int i = 0; i < s.frames_size(); ++i)
@@ -144,16 +130,13 @@ void add_archived_tiles(v1::JobStatus& s) {
   const bool done = s.tiles_done() == s.tiles_total();
   const uint32_t passes_done =
       done ? uint32_t(passes.size()) : std::min<uint32_t>(s.frame_passes_done(), passes.size());
-  const Rect w = settings.effective_window();
-  const int ts = std::max(1, settings.tile_size);
-  for (int y = w.y; y < w.y + w.h; y += ts)
-    for (int x = w.x; x < w.x + w.w; x += ts) {
-      v1::TileProgress* t = s.add_tiles();
-      *t->mutable_rect() = to_proto(Rect{x, y, std::min(ts, w.x + w.w - x), std::min(ts, w.y + w.h - y)});
-      t->set_passes_done(passes_done);
-      t->set_samples(passes_done ? passes[passes_done - 1].second : 0);
-      t->set_finished(done);
-    }
+  for (const Rect& r : frame_tiles(settings)) {  // as FramePlan cuts them
+    v1::TileProgress* t = s.add_tiles();
+    *t->mutable_rect() = to_proto(r);
+    t->set_passes_done(passes_done);
+    t->set_samples(passes_done ? passes[passes_done - 1].second : 0);
+    t->set_finished(done);
+  }
 }
 
 std::optional<v1::JobStatus> archived_status(const JobStore& store, const std::string& id) {
@@ -161,7 +144,7 @@ std::optional<v1::JobStatus> archived_status(const JobStore& store, const std::s
     if (row->summary.empty()) return std::nullopt;
     return archived_status(*row);
   }
-  const auto parts = frame_id_parts(id);
+  const auto parts = Sequence::split_frame_id(id);
   if (!parts) return std::nullopt;
   const std::optional<StoredJob> row = store.job(parts->first);
   if (!row || row->summary.empty() || row->frames.empty()) return std::nullopt;

@@ -62,7 +62,8 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
     scenes_.remove_unused(scenes);  // scenes of deleted jobs, or of a submit the crash cut short
     // Files of jobs deleted while their files were being removed: no row names them now.
     sink_->remove_unknown([&](const std::string& id) TESSERA_REQUIRES(mu_) {
-      return jobs_.names(id) || archived.count(id) || archived.count(id.substr(0, id.rfind("-f")));
+      const auto frame = Sequence::split_frame_id(id);
+      return jobs_.names(id) || archived.count(id) || (frame && archived.count(frame->first));
     });
   }
   apply(std::move(fx));
@@ -217,11 +218,7 @@ v1::JobStatus Coordinator::set_priority(const std::string& id, int32_t priority,
                                         bool any) {
   if (!archived_change(id, requester, any, "change the priority of"))
     locked([&](Effects&) TESSERA_REQUIRES(mu_) { jobs_.check_change(id, requester, any, "change the priority of"); });
-  try {
-    store_->set_priority(id, priority);  // the row first: a restart keeps it
-  } catch (const std::exception& e) {
-    throw RequestError(RequestError::Code::kResourceExhausted, without_dir(e.what(), options_.data_dir));
-  }
+  with_store([&] { store_->set_priority(id, priority); });  // the row first: a restart keeps it
   locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.set_priority(id, priority, fx); });
   return status(id, false);
 }

@@ -231,6 +231,19 @@ class Coordinator {
   void record_sequence_end(const std::string& id) TESSERA_EXCLUDES(mu_);
   // An ended job leaves memory (archive.h): its row first, then the table.
   void archive(const Archival& a) TESSERA_EXCLUDES(mu_);
+  // Runs op() (on the job database, without mu_) and returns what it does; a failure other
+  // than a RequestError becomes one (kResourceExhausted) saying why after `context`, the
+  // data folder shown as <data>.
+  template <typename Op>
+  auto with_store(Op&& op, const std::string& context = "") const TESSERA_EXCLUDES(mu_) {
+    try {
+      return op();
+    } catch (const RequestError&) {
+      throw;
+    } catch (const std::exception& e) {
+      throw RequestError(RequestError::Code::kResourceExhausted, context + without_dir(e.what(), options_.data_dir));
+    }
+  }
   // The status of each row's job, from memory or its row (a row of neither is left out).
   std::vector<v1::JobStatus> statuses(const std::vector<StoredJob>& rows) const TESSERA_EXCLUDES(mu_);
   // An archived job's status from its row; nothing if none. Throws RequestError.

@@ -11,12 +11,7 @@
 namespace tessera {
 
 std::optional<v1::JobStatus> Coordinator::archived(const std::string& id) const {
-  try {
-    return archived_status(*store_, id);
-  } catch (const std::exception& e) {  // the database cannot be read
-    throw RequestError(RequestError::Code::kResourceExhausted,
-                       "job " + id + ": " + without_dir(e.what(), options_.data_dir));
-  }
+  return with_store([&] { return archived_status(*store_, id); }, "job " + id + ": ");
 }
 
 std::optional<StoredJob> Coordinator::archived_change(const std::string& id, const std::string& requester, bool any,
@@ -25,13 +20,7 @@ std::optional<StoredJob> Coordinator::archived_change(const std::string& id, con
     MutexLock lock(mu_);
     if (jobs_.knows(id)) return std::nullopt;
   }
-  try {
-    return archived_for_change(*store_, id, requester, any, verb);
-  } catch (const RequestError&) {
-    throw;
-  } catch (const std::exception& e) {
-    throw RequestError(RequestError::Code::kResourceExhausted, without_dir(e.what(), options_.data_dir));
-  }
+  return with_store([&] { return archived_for_change(*store_, id, requester, any, verb); });
 }
 
 v1::JobStatus Coordinator::status(const std::string& id, bool with_tiles) const {
@@ -71,14 +60,11 @@ std::vector<v1::JobStatus> Coordinator::statuses(const std::vector<StoredJob>& r
 v1::JobList Coordinator::list(uint32_t page_size, const std::string& page_token) const {
   const uint64_t after = page_after(page_token);
   const size_t n = page_size == 0 ? SIZE_MAX - 1 : std::min(page_size, kMaxPage);
-  std::vector<StoredJob> rows;
   v1::JobList out;
-  try {
-    rows = store_->page(after, n + 1);  // one more: is there a next page?
+  std::vector<StoredJob> rows = with_store([&] {
     out.set_total(store_->count());
-  } catch (const std::exception& e) {
-    throw RequestError(RequestError::Code::kResourceExhausted, without_dir(e.what(), options_.data_dir));
-  }
+    return store_->page(after, n + 1);  // one more: is there a next page?
+  });
   if (rows.size() > n) {
     rows.pop_back();
     out.set_next_page_token(std::to_string(rows.back().meta.seq));
@@ -88,13 +74,7 @@ v1::JobList Coordinator::list(uint32_t page_size, const std::string& page_token)
 }
 
 std::vector<v1::JobStatus> Coordinator::recent(size_t n) const {
-  std::vector<StoredJob> rows;
-  try {
-    rows = store_->newest(n);
-  } catch (const std::exception& e) {
-    throw RequestError(RequestError::Code::kResourceExhausted, without_dir(e.what(), options_.data_dir));
-  }
-  std::vector<v1::JobStatus> newest = statuses(rows), out;
+  std::vector<v1::JobStatus> newest = statuses(with_store([&] { return store_->newest(n); })), out;
   std::set<std::string> have;
   for (const v1::JobStatus& s : newest) have.insert(s.id());
   for (v1::JobStatus& s : list())  // live ones submitted before those (in memory, in submission order)
@@ -137,13 +117,8 @@ std::string Coordinator::current_image(const std::string& id, std::optional<int>
         return std::nullopt;
       },
       [&]() -> std::optional<std::optional<std::string>> {
-        try {
-          if (std::optional<std::string> who = archived_image(*store_, id, frame, header)) return who;
-        } catch (const RequestError&) {
-          throw;
-        } catch (const std::exception& e) {
-          throw RequestError(RequestError::Code::kResourceExhausted, without_dir(e.what(), options_.data_dir));
-        }
+        std::optional<std::string> who = with_store([&] { return archived_image(*store_, id, frame, header); });
+        if (who) return who;
         return std::nullopt;
       });
   if (whose) return *whose;

@@ -56,6 +56,19 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   return s;
 }
 
+std::optional<std::pair<std::string, int>> Sequence::split_frame_id(const std::string& id) {
+  const size_t f = id.rfind("-f");
+  if (f == std::string::npos || f == 0) return std::nullopt;
+  try {
+    size_t used = 0;
+    const int frame = std::stoi(id.substr(f + 2), &used);
+    if (used != id.size() - f - 2) return std::nullopt;
+    return std::make_pair(id.substr(0, f), frame);
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
 uint64_t Sequence::samples_merged() const {
   uint64_t n = 0;
   for (const auto& j : jobs)

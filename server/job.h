@@ -10,6 +10,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/render/frame_plan.h"
@@ -130,6 +131,9 @@ struct Sequence {
   static std::string frame_id(const std::string& sequence, int frame) {
     return sequence + "-f" + std::to_string(frame);
   }
+  // The parts of a frame's own id (frame_id): its sequence's id and the frame; nothing if
+  // `id` is not one.
+  static std::optional<std::pair<std::string, int>> split_frame_id(const std::string& id);
   bool frame_left(size_t i) const { return i < left.size() && left[i].has_value(); }
   bool frame_started(size_t i) const { return jobs[i] || frame_left(i); }
   uint64_t samples_merged() const;

@@ -74,16 +74,10 @@ bool JobTable::let_go(const Job& frame) {
 std::optional<JobTable::LeftFrame> JobTable::left_frame(const std::string& id, std::optional<int> frame) const {
   const Sequence* s = find_sequence(id);
   if (!s && !frame) {  // a frame's own id
-    std::string number;
-    std::tie(s, number) = frame_id_parts(id);
-    if (!s) return std::nullopt;
-    try {
-      size_t used = 0;
-      frame = std::stoi(number, &used);
-      if (used != number.size()) return std::nullopt;
-    } catch (const std::exception&) {
-      return std::nullopt;
-    }
+    const auto parts = Sequence::split_frame_id(id);
+    if (!parts) return std::nullopt;
+    s = find_sequence(parts->first);
+    frame = parts->second;
   }
   if (!s || !frame) return std::nullopt;
   const auto at = std::find(s->frames.begin(), s->frames.end(), *frame);
@@ -179,13 +173,9 @@ std::set<std::string> JobTable::scene_hashes() const {
 }
 
 bool JobTable::names(const std::string& folder) const {
-  return jobs_.count(folder) || sequences_.count(folder) || frame_id_parts(folder).first;
-}
-
-std::pair<const Sequence*, std::string> JobTable::frame_id_parts(const std::string& id) const {
-  const size_t f = id.rfind("-f");
-  if (f == std::string::npos) return {nullptr, ""};
-  return {find_sequence(id.substr(0, f)), id.substr(f + 2)};
+  if (jobs_.count(folder) || sequences_.count(folder)) return true;
+  const auto parts = Sequence::split_frame_id(folder);
+  return parts && sequences_.count(parts->first);
 }
 
 Load JobTable::load(const std::string& owner) const {

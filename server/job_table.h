@@ -95,10 +95,6 @@ class JobTable {
   Load load(const std::string& owner = "") const;
 
  private:
-  // A frame's own id, <sequence>-f<frame> (Sequence::frame_job_id): its sequence here (null
-  // if none) and what follows "-f".
-  std::pair<const Sequence*, std::string> frame_id_parts(const std::string& id) const;
-
   std::map<std::string, std::shared_ptr<Job>> jobs_;  // stills and frames
   std::map<std::string, std::shared_ptr<Sequence>> sequences_;
   std::map<uint64_t, std::string> listed_;  // stills and sequences by submission number

@@ -27,7 +27,7 @@ void MemoryJobStore::check_writes() const {
 
 void MemoryJobStore::add(const StoredJob& job) {
   MutexLock lock(mu_);
-  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  check_writes();
   for (const StoredJob& j : rows_)  // as SQLite's primary key
     if (j.meta.id == job.meta.id) throw std::runtime_error("job database: UNIQUE constraint failed: jobs.id");
   StoredJob& row = rows_.emplace_back(job);
@@ -36,7 +36,7 @@ void MemoryJobStore::add(const StoredJob& job) {
 
 void MemoryJobStore::end(const std::string& id, v1::JobStatus::State state, const std::string& error, double elapsed) {
   MutexLock lock(mu_);
-  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  check_writes();
   for (StoredJob& j : rows_)
     if (j.meta.id == id) {
       j.state = state;
@@ -48,7 +48,7 @@ void MemoryJobStore::end(const std::string& id, v1::JobStatus::State state, cons
 
 void MemoryJobStore::remove(const std::string& id, const std::vector<std::string>& with_checkpoints) {
   MutexLock lock(mu_);
-  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  check_writes();
   std::erase_if(rows_, [&](const StoredJob& j) { return j.meta.id == id; });
   std::erase_if(merges_, [&](const Merge& m) { return m.job == id; });
   for (const std::string& j : with_checkpoints) checkpoints_.erase(j);
@@ -56,7 +56,7 @@ void MemoryJobStore::remove(const std::string& id, const std::vector<std::string
 
 void MemoryJobStore::requeue(const std::string& id) {
   MutexLock lock(mu_);
-  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  check_writes();
   for (StoredJob& j : rows_)
     if (j.meta.id == id) {
       j.state = v1::JobStatus::QUEUED;
@@ -69,7 +69,7 @@ void MemoryJobStore::requeue(const std::string& id) {
 
 void MemoryJobStore::set_priority(const std::string& id, int32_t priority) {
   MutexLock lock(mu_);
-  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
+  check_writes();
   for (StoredJob& j : rows_)
     if (j.meta.id == id) j.meta.priority = priority;
 }
@@ -178,9 +178,7 @@ void MemoryJobStore::forget_merges() {
   merges_.clear();
 }
 
-void MemoryJobStore::ping() const {
-  if (fail_writes) throw std::runtime_error("job database: disk I/O error (a test's)");
-}
+void MemoryJobStore::ping() const { check_writes(); }
 
 std::unique_ptr<CheckpointFile> MemoryJobStore::begin_checkpoint(const std::string& id) const {
   {

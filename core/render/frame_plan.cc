@@ -33,14 +33,21 @@ Rect tile_from(const Rect& w, int tile, int x, int y) {
 }
 }  // namespace
 
+std::vector<Rect> frame_tiles(const RenderSettings& settings) {
+  const Rect w = settings.effective_window();
+  const int ts = std::max(1, settings.tile_size);
+  std::vector<Rect> tiles;
+  for (int y = w.y; y < w.y + w.h; y += ts)
+    for (int x = w.x; x < w.x + w.w; x += ts) tiles.push_back(tile_from(w, ts, x, y));
+  return tiles;
+}
+
 FramePlan::FramePlan(const RenderSettings& settings)
     : settings_(settings), film_(settings.effective_window()), passes_(settings.passes()) {
   const Rect w = film_.window();
   const int ts = std::max(1, settings.tile_size);
-  for (int y = w.y; y < w.y + w.h; y += ts) {
-    ++bands_;
-    for (int x = w.x; x < w.x + w.w; x += ts) tiles_.push_back(tile_from(w, ts, x, y));
-  }
+  tiles_ = frame_tiles(settings);
+  bands_ = w.h > 0 ? uint32_t((int64_t(w.h) + ts - 1) / ts) : 0;
   tiles_per_band_ = bands_ ? uint32_t(tiles_.size() / bands_) : 0;
   tile_count_ = uint32_t(tiles_.size());
   progress_.resize(tiles_.size());

@@ -77,6 +77,10 @@ class CheckedSums {
   uint64_t samples_;
 };
 
+// The tiles a frame with these settings is cut into, band by band (rows of tiles, from the
+// window's first row): squares of --tile pixels, cut short at the window's edge.
+std::vector<Rect> frame_tiles(const RenderSettings& settings);
+
 class FramePlan {
  public:
   enum class Merge { kMerged, kDuplicate, kInvalid };
