@@ -14,6 +14,19 @@ TEST_F(Gltf, RequiredUnsupportedExtensionIsRefusedByName) {
   expect_error(d, "required extension 'KHR_draco_mesh_compression' is not supported");
 }
 
+// COLOR_0 and TEXCOORD_1 (issue 29) are checked as every attribute is: a count that is not
+// the vertices' or a wrong shape is refused naming the attribute.
+TEST_F(Gltf, ColoursAndASecondCoordinateSetOfTheWrongSizeAreRefused) {
+  Doc d;  // accessor 3 is the 3 indices: a SCALAR, 3 of them
+  d.j["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"] = 3;
+  expect_error(d, "COLOR_0");
+  Doc e;  // two coordinates for three vertices
+  e.j["accessors"].push_back(
+      {{"bufferView", 2}, {"componentType", 5121}, {"normalized", true}, {"count", 2}, {"type", "VEC2"}});
+  e.j["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_1"] = 4;
+  expect_error(e, "TEXCOORD_1 count differs from POSITION count");
+}
+
 TEST_F(Gltf, AModeThatIsNoGltfModeIsRefused) {
   Doc d;
   d.j["meshes"][0]["primitives"][0]["mode"] = 9;
