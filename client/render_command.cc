@@ -12,6 +12,7 @@
 #include "client/render_flags.h"
 #include "core/io/image_io.h"
 #include "core/render/frames.h"
+#include "core/render/lighting.h"
 #include "core/render/local_renderer.h"
 #include "core/scene/load.h"
 #include "core/scene/scene_error.h"
@@ -99,6 +100,7 @@ int run_render(const RenderArgs& a) {
   const bool lit_by_flags = s.environment || !s.environment_map.empty();
   for (size_t i = scene.unlit && lit_by_flags ? 1 : 0; i < scene.warnings.size(); ++i)
     std::fprintf(stderr, "tessera: warning: %s\n", scene.warnings[i].c_str());
+  std::fprintf(stderr, "tessera: lighting: %s\n", describe_lighting(scene, s).c_str());
   TileRenderer renderer(scene, s);
   if (frames.empty()) return render_frame(a, renderer, s, outputs);
   for (const int frame : frames) {  // one scene and one acceleration structure for them all

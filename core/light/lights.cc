@@ -86,9 +86,9 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
       const float len = length(n);
       if (!(len > 0)) return false;
       Rgb radiance = l.color;
-      const Material& mat = scene_.materials[m.material];
-      if (mat.emissive_texture.active() && !m.uv_set(mat.emissive_texture.set).empty())  // glTF emissiveTexture
-        radiance = scene_.textured(mat, m.uv_at(t, bc.x, bc.y, mat.emissive_texture.set)).radiance;
+      const TextureRef& tex = scene_.materials[m.material].emissive_texture;
+      if (tex.active() && !m.uv_set(tex.set).empty())  // glTF emissiveTexture
+        radiance *= scene_.textures[size_t(tex.index)].sample(tex.map(m.uv_at(t, bc.x, bc.y, tex.set)));
       return finish_area_sample(p, q, err, n / len, 1 / d.area, radiance, l.two_sided, out);
     }
     case Light::Kind::kSphere: {

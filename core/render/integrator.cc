@@ -251,7 +251,9 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
       const float t = hit.t;
       beta *= Rgb(std::exp(-m.absorption.r * t), std::exp(-m.absorption.g * t), std::exp(-m.absorption.b * t));
     }
-    if (m.kind == Material::Kind::kEmission) {  // emitters do not reflect: the path ends
+    // Emission: an emitter's (the path ends there: it does not reflect) or a glTF surface's
+    // own, which adds to its reflection. Only lamps are lights (sp.light), weighted by MIS.
+    if (m.emits() || m.kind == Material::Kind::kEmission) {
       if (m.two_sided_emission || dot(sp.ng, wo_world) > 0) {
         float w = 1;
         if (!specular && sp.light >= 0 && nee_)
@@ -260,7 +262,7 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
                    : 0;  // light sampling alone accounts for it
         L += beta * m.radiance * w;
       }
-      break;
+      if (m.kind == Material::Kind::kEmission) break;
     }
     if (depth >= max_depth_) break;
 

@@ -90,8 +90,7 @@ void Scene::finalize() {
                          "emission " + std::to_string(v) + " must be finite, non-negative and at most 1e20");
   };
   for (const Light& l : lights) check_emission(l.color, "light '" + l.name + "'");
-  for (const Material& m : materials)
-    if (m.kind == Material::Kind::kEmission) check_emission(m.radiance, "material '" + m.name + "'");
+  for (const Material& m : materials) check_emission(m.radiance, "material '" + m.name + "'");
   // Rect lights are also geometry: a one-sided emitter that camera rays see and that
   // blocks other rays (format doc 3.3, with the physical radiance `color`).
   for (size_t i = 0; i < lights.size(); ++i) {
@@ -116,12 +115,20 @@ void Scene::finalize() {
     l.shape = uint32_t(meshes.size());
     meshes.push_back(std::move(mesh));
   }
-  // Emission materials glow and are sampled as area lights.
-  auto add_emitter = [this](auto& shapes, Light::Kind kind) {
+  // Emitters (CS184's) and glTF surfaces bright enough to be lamps (kLampRadiance) are
+  // sampled as area lights; dimmer glTF emission is glow, reached by paths only.
+  auto is_light = [this](const Material& m) {
+    if (!m.emits()) return false;
+    if (m.kind == Material::Kind::kEmission) return true;
+    const Rgb mean =
+        m.radiance * (m.emissive_texture.active() ? textures[size_t(m.emissive_texture.index)].mean() : Rgb(1.0f));
+    return mean.max() >= kLampRadiance;
+  };
+  auto add_emitter = [&](auto& shapes, Light::Kind kind) {
     for (size_t i = 0; i < shapes.size(); ++i) {
       auto& shape = shapes[i];
       const Material& m = materials[shape.material];
-      if (shape.light >= 0 || m.kind != Material::Kind::kEmission || m.radiance.is_black()) continue;
+      if (shape.light >= 0 || !is_light(m)) continue;
       Light l;
       l.kind = kind;
       l.name = shape.name;
@@ -156,6 +163,17 @@ int wrap(int i, int n, Texture::Wrap mode) {
 }
 
 }  // namespace
+
+Rgb Texture::mean() const {
+  double r = 0, g = 0, b = 0;
+  for (const Rgb& t : texels) {
+    r += t.r;
+    g += t.g;
+    b += t.b;
+  }
+  const double n = texels.empty() ? 1 : double(texels.size());
+  return Rgb(float(r / n), float(g / n), float(b / n));
+}
 
 Rgb Texture::sample(Vec2 uv) const {
   if (width <= 0 || height <= 0) return Rgb(1);

@@ -39,7 +39,10 @@ struct Material {
   float ior = 1.5f;         // glass, refraction, kPbr: interior / exterior
   float alpha = 0.25f;      // microfacet Beckmann roughness; kPbr GGX alpha (roughness^2)
   Rgb eta{0.2f}, k{3.0f};   // microfacet conductor complex index, per channel
-  Rgb radiance{0.0f};       // emission
+  // Emitted radiance: kEmission's (an emitter that does not reflect), or a kPbr surface's
+  // own (glTF's emissive), which adds to its reflection. One-sided emission leaves the
+  // side the geometric normal faces.
+  Rgb radiance{0.0f};
   bool two_sided_emission = true;
   TextureRef texture;  // multiplies `reflectance` (sRGB-decoded); kPbr: the base colour texture
 
@@ -54,7 +57,7 @@ struct Material {
   TextureRef metal_rough_texture;  // linear: G scales roughness, B metallic
   TextureRef normal_texture;       // tangent-space normal map (linear)
   float normal_scale = 1;
-  TextureRef emissive_texture;  // kEmission: multiplies `radiance` (sRGB-decoded)
+  TextureRef emissive_texture;  // multiplies `radiance` (sRGB-decoded)
 
   // Below this alpha a kPbr surface's specular lobes are perfectly smooth (delta).
   static constexpr float kSmoothAlpha = 1e-3f;
@@ -62,6 +65,8 @@ struct Material {
     if (kind == Kind::kPbr) return alpha < kSmoothAlpha && metallic + (1 - metallic) * transmission >= 1;
     return kind == Kind::kMirror || kind == Kind::kGlass || kind == Kind::kRefraction;
   }
+  // True if the surface glows (camera and BSDF paths that reach it add `radiance`).
+  bool emits() const { return !radiance.is_black(); }
   // True if no BSDF lobe exists: paths end here.
   bool is_black() const { return kind == Kind::kEmission; }
   // Keeps the outward normal (a path can be inside it) rather than shading the side the
@@ -140,6 +145,7 @@ struct Texture {
   std::vector<Rgb> texels;  // row-major, row 0 at v = 0
   Wrap wrap_s = Wrap::kRepeat, wrap_t = Wrap::kRepeat;
   Rgb sample(Vec2 uv) const;
+  Rgb mean() const;  // over all texels
 };
 
 struct SceneAnimation;  // core/scene/animation.h
@@ -182,6 +188,13 @@ struct Scene {
   // far below kMaxSampleValue (core/render/frame_plan.h), so that a sample beyond it is
   // a worker's lie, not a bright scene.
   static constexpr double kMaxEmission = 1e20;
+  // A glTF emissive surface is sampled as a light (and lights the scene: no default
+  // environment) when its mean emitted radiance reaches this in some channel: the default
+  // environment's radiance, so it is at least as bright as the sky it would replace. Dimmer
+  // emission (a helmet's glowing details, a lit label) is glow: reached by paths, not
+  // sampled, where a light sample would cost more than the light it finds. CS184
+  // emitters are always lights.
+  static constexpr float kLampRadiance = 1.0f;
 
   std::string source;  // file it came from
   std::vector<Material> materials;
@@ -191,7 +204,8 @@ struct Scene {
   std::vector<Texture> textures;
   CameraDesc camera;
   std::vector<std::string> warnings;
-  // A glTF scene with no light at all: rendered under a neutral default environment
+  // A glTF scene with no light at all (glow does not count, see kLampRadiance): rendered
+  // under a neutral default environment
   // unless --no-default-env (RenderSettings::default_environment), with a warning that
   // is warnings[0].
   bool unlit = false;

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include "core/light/lights.h"
+#include "core/render/lighting.h"
 #include "core/scene/load.h"
 #include "core/scene/scene_error.h"
 #include "tests/core/render_helpers.h"
@@ -78,6 +79,31 @@ TEST(Environment, AnUnlitGltfSceneGetsTheDefaultEnvironmentWithAWarningAndTheFla
   const double quarter = film_estimate(render(unlit, s).film).mean;
   s.environment = Rgb(1);
   EXPECT_NEAR(film_estimate(render(unlit, s).film).mean, 4 * quarter, 1e-6 * quarter);  // linear in it
+}
+
+// The lighting line the CLI prints names what lights the render, as TileRenderer chooses.
+TEST(Environment, TheLightingChosenIsDescribed) {
+  RenderSettings s;
+  const Scene cornell = load_scene(testing::source_path("scenes/cornell-spheres.gltf"));
+  EXPECT_EQ(describe_lighting(cornell, s), "1 emissive surface sampled as a light");
+  const Scene unlit = load_scene(testing::source_path("tests/fuzz/seeds/gltf/animated.gltf"));
+  EXPECT_NE(describe_lighting(unlit, s).find("the default environment (uniform radiance 1)"), std::string::npos);
+  s.default_environment = false;
+  EXPECT_NE(describe_lighting(unlit, s).find("none"), std::string::npos);
+  s.environment = Rgb(0.5f);
+  s.environment_strength = 2;
+  EXPECT_EQ(describe_lighting(unlit, s), "a uniform environment of radiance (0.5, 0.5, 0.5) x strength 2");
+  // Dim emission glows: counted, not a light, and the default environment stays.
+  Scene glow = unlit;
+  glow.materials[glow.meshes[0].material].radiance = Rgb(0.2f);
+  const std::string d = describe_lighting(glow, RenderSettings());
+  EXPECT_NE(d.find(std::to_string(glow.meshes.size()) + " glowing surface"), std::string::npos) << d;
+  EXPECT_NE(d.find("(emission below a mean radiance of 1: seen and reflected, not sampled as a light)"),
+            std::string::npos)
+      << d;
+  EXPECT_NE(d.find("default environment"), std::string::npos) << d;
+  const Scene dae = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  EXPECT_NE(describe_lighting(dae, RenderSettings()).find("area light"), std::string::npos);
 }
 
 TEST(Environment, RangeIsChecked) {

@@ -199,11 +199,21 @@ TEST_F(Gltf, MaterialMapping) {
   s = mat({{"emissiveFactor", {1, 0.5, 0.25}},
            {"doubleSided", true},
            {"extensions", {{"KHR_materials_emissive_strength", {{"emissiveStrength", 8}}}}}});
-  ASSERT_EQ(of(s).kind, Material::Kind::kEmission);
+  // Emission adds to the material's reflection: it stays kPbr.
+  ASSERT_EQ(of(s).kind, Material::Kind::kPbr);
   EXPECT_FLOAT_EQ(of(s).radiance.g, 4);
-  ASSERT_EQ(s.lights.size(), 1u);  // emitters are sampled as area lights
+  EXPECT_FLOAT_EQ(of(s).reflectance.g, 1);
+  ASSERT_EQ(s.lights.size(), 1u);  // mean radiance 8 >= kLampRadiance: a lamp, sampled as a light
   EXPECT_EQ(s.lights[0].kind, Light::Kind::kMesh);
   EXPECT_TRUE(s.lights[0].two_sided);
+  EXPECT_FALSE(s.unlit);
+  // A dim glow is not a light: the scene is unlit (the default environment lights it).
+  s = mat({{"emissiveFactor", {0.9, 0.5, 0.25}}});
+  EXPECT_EQ(of(s).kind, Material::Kind::kPbr);
+  EXPECT_TRUE(of(s).emits());
+  EXPECT_FALSE(of(s).two_sided_emission);
+  EXPECT_TRUE(s.lights.empty());
+  EXPECT_TRUE(s.unlit);
   // No material: the spec's default, metallic 1 and roughness 1.
   d.j["meshes"][0]["primitives"][0].erase("material");
   s = load(d);
@@ -355,8 +365,16 @@ TEST_F(Gltf, MetallicRoughnessNormalAndEmissiveTexturesWithTextureTransform) {
   e.j["materials"][0] = {{"emissiveFactor", {1, 1, 1}}, {"emissiveTexture", {{"index", 0}}}};
   const Scene se = load(e);
   const Material& em = se.materials[se.meshes[0].material];
-  ASSERT_EQ(em.kind, Material::Kind::kEmission);
+  ASSERT_EQ(em.kind, Material::Kind::kPbr);
   EXPECT_NEAR(se.textured(em, {0.75f, 0.5f}).radiance.b, 1, 1e-6);
+  // Half red, half blue: a mean radiance of 0.5 per lit channel, below kLampRadiance: glow.
+  EXPECT_TRUE(se.lights.empty());
+  // x 4 it is a lamp.
+  e.j["materials"][0]["emissiveFactor"] = {4, 4, 4};
+  expect_error(e, "emissiveFactor component 4");  // (the factor is [0, 1]: strength scales)
+  e.j["materials"][0]["emissiveFactor"] = {1, 1, 1};
+  e.j["materials"][0]["extensions"]["KHR_materials_emissive_strength"] = {{"emissiveStrength", 4}};
+  EXPECT_EQ(load(e).lights.size(), 1u);
   EXPECT_NEAR(se.textured(em, {0.75f, 0.5f}).radiance.r, 0, 1e-6);
   // A malformed transform that is used is refused by name.
   m["pbrMetallicRoughness"]["metallicRoughnessTexture"]["extensions"]["KHR_texture_transform"]["offset"] = {1};

@@ -210,3 +210,67 @@ TEST(PbrRender, EmissiveTextureScalesCameraHitsAndLightSamplesAlike) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// glTF emission adds to reflection (the specification's model): a textured emissive quad
+// (left half red, right half blue) that is also a Lambertian reflector (ior 1, albedo 0.5)
+// under a uniform environment of radiance 1 shows emission + 0.5 x 1, whether its emission
+// is bright enough to be a sampled light (a lamp) or only glows.
+TEST(PbrRender, EmissionAddsToReflection) {
+  for (const float strength : {0.5f, 3.0f}) {
+    Scene s;
+    Texture t;
+    t.width = 2;
+    t.height = 1;
+    t.texels = {Rgb(1.0f, 0.0f, 0.0f), Rgb(0.0f, 0.0f, 1.0f)};
+    t.wrap_s = t.wrap_t = Texture::Wrap::kClamp;
+    s.textures.push_back(t);
+    Material m = pbr(0, 1);
+    m.ior = 1;  // exactly Lambertian (docs/gltf.md)
+    m.reflectance = Rgb(0.5f);
+    m.radiance = Rgb(strength);
+    m.emissive_texture.index = 0;
+    m.two_sided_emission = false;
+    s.materials.push_back(m);
+    Mesh quad;  // faces +z
+    quad.positions = {{-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}};
+    quad.uvs = {{0, 1}, {1, 1}, {1, 0}, {0, 0}};
+    quad.indices = {0, 1, 2, 0, 2, 3};
+    s.meshes.push_back(quad);
+    s.finalize();
+    // Mean texture radiance strength / 2 per lit channel: a lamp from kLampRadiance on.
+    EXPECT_EQ(s.lights.size(), strength / 2 >= Scene::kLampRadiance ? 1u : 0u) << strength;
+    s.camera.present = true;
+    s.camera.eye = {-0.6f, 0, 3};
+    s.camera.xfov_deg = 2;
+    s.camera.aspect_ratio = 1;
+    RenderSettings rs = testing::furnace_settings();
+    rs.environment = Rgb(1.0f);
+    const Film film = render(s, rs).film;
+    double r = 0, g = 0, b = 0, n = 0;
+    for (const PixelSums& p : film.pixels()) {
+      r += p.r;
+      g += p.g;
+      b += p.b;
+      n += p.n;
+    }
+    EXPECT_NEAR(r / n, strength + 0.5, 0.01 * (strength + 0.5)) << strength;
+    EXPECT_NEAR(g / n, 0.5, 0.01) << strength;
+    EXPECT_NEAR(b / n, 0.5, 0.01) << strength;
+    // Seen from behind, one-sided emission is dark: only the reflection is left.
+    s.camera.eye = {-0.6f, 0, -3};
+    s.camera.forward = {0, 0, 1};
+    const Film back = render(s, rs).film;
+    r = n = 0;
+    for (const PixelSums& p : back.pixels()) {
+      r += p.r;
+      n += p.n;
+    }
+    EXPECT_NEAR(r / n, 0.5, 0.01) << strength;
+  }
+}
+
+}  // namespace
+}  // namespace tessera

@@ -24,13 +24,15 @@ Scene load_gltf_file(const std::string& path) {
   if (scene.meshes.empty() && scene.spheres.empty()) ctx.fail("scene", "no triangles to render");
   if (!scene.camera.present) frame_gltf_scene(ctx);
   scene.finalize();
-  if (scene.lights.empty()) {  // (emissive materials are lights by now)
+  if (scene.lights.empty()) {  // (emissive surfaces bright enough to be lamps are lights by now)
     scene.unlit = true;
-    scene.warnings.insert(scene.warnings.begin(),  // first: it explains the whole image
-                          path +
-                              ": no lights (no KHR_lights_punctual light, no emissive material): rendered under a "
-                              "neutral default environment of radiance 1 from every direction (--env-color sets "
-                              "another, --no-default-env none)");
+    scene.warnings.insert(
+        scene.warnings.begin(),  // first: it explains the whole image
+        path +
+            ": no lights (no KHR_lights_punctual light, no emissive surface bright enough to light it): "
+            "rendered under a "
+            "neutral default environment of radiance 1 from every direction (--env-color sets "
+            "another, --no-default-env none)");
   }
   return std::move(scene);
 }

@@ -114,15 +114,11 @@ uint32_t GltfMaterials::material(int index) {
       ctx_.warn_once(el + ": alphaMode " + g.alphaMode + " is rendered opaque");
   }
   m.alpha = m.roughness * m.roughness;  // glTF's alpha = roughness^2
-  const Rgb radiance = emissive * float(strength);
-  if (!radiance.is_black()) {
-    const Rgb base = m.reflectance;
-    const std::string name = m.name;
-    m = Material();
-    m.kind = Material::Kind::kEmission;  // emitters do not reflect (docs/gltf.md)
-    m.name = name;
-    m.reflectance = base;
-    m.radiance = radiance;
+  // Emission adds to the reflected light (the specification's material model): the surface
+  // keeps its BSDF. Scene::finalize decides whether it is bright enough to be sampled as a
+  // light as well (Scene::kLampRadiance).
+  m.radiance = emissive * float(strength);
+  if (!m.radiance.is_black()) {
     m.two_sided_emission = double_sided;
     m.emissive_texture = emissive_texture;
   }

@@ -1,6 +1,6 @@
 // glTF materials as ours (docs/gltf.md, Materials): metallic-roughness as Material::kPbr
-// with KHR_materials_transmission, _ior, _volume and _emissive_strength; a material that
-// emits as a kEmission emitter. Factors outside the specification's ranges are refused
+// with KHR_materials_transmission, _ior, _volume and _emissive_strength; emission adds to
+// the material's reflection. Factors outside the specification's ranges are refused
 // naming the material; what is not rendered (alphaMode, transmissionTexture) is warned.
 #pragma once
 
