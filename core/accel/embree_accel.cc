@@ -1,6 +1,8 @@
 #include <embree3/rtcore.h>
 
 #include <cmath>
+#include <cstring>
+#include <deque>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -83,6 +85,49 @@ void sphere_occluded(const RTCOccludedFunctionNArguments* args) {
   if (intersect_sphere(s.center, s.radius, ray) >= 0) r->tfar = -std::numeric_limits<float>::infinity();
 }
 
+// A mesh whose material has an alphaMode (Material::AlphaMode): its hits pass through the
+// intersection filter, which drops those where the surface is not there.
+struct AlphaData {
+  const Scene* scene;
+  uint32_t mesh;
+};
+
+// SplitMix64's finaliser: every input bit flips about half the output bits.
+uint64_t mix64(uint64_t h) {
+  h = (h ^ (h >> 30)) * 0xbf58476d1ce4e5b9ull;
+  h = (h ^ (h >> 27)) * 0x94d049bb133111ebull;
+  return h ^ (h >> 31);
+}
+
+// A uniform number in [0, 1) from the ray and the triangle: the same for a ray's intersect
+// and occluded queries and on every machine (its bits only), and independent between
+// layers (the triangle is hashed too), so stacked BLEND surfaces are each met with their
+// own probability.
+float ray_number(const float (&ray_words)[6], uint32_t mesh, uint32_t prim) {
+  uint64_t h = mix64((uint64_t(mesh) << 32) | prim);
+  for (const float f : ray_words) {
+    uint32_t w;
+    std::memcpy(&w, &f, sizeof w);
+    h = mix64(h ^ (w + 0x9e3779b97f4a7c15ull));
+  }
+  return float(h >> 40) * 0x1p-24f;
+}
+
+void alpha_filter(const RTCFilterFunctionNArguments* args) {
+  for (unsigned i = 0; i < args->N; ++i) {
+    if (!args->valid[i]) continue;
+    const auto* d = static_cast<const AlphaData*>(args->geometryUserPtr);
+    const float words[6] = {RTCRayN_org_x(args->ray, args->N, i), RTCRayN_org_y(args->ray, args->N, i),
+                            RTCRayN_org_z(args->ray, args->N, i), RTCRayN_dir_x(args->ray, args->N, i),
+                            RTCRayN_dir_y(args->ray, args->N, i), RTCRayN_dir_z(args->ray, args->N, i)};
+    const uint32_t prim = RTCHitN_primID(args->hit, args->N, i);
+    const float u = ray_number(words, d->mesh, prim);
+    if (!d->scene->covered(d->scene->meshes[d->mesh], prim, RTCHitN_u(args->hit, args->N, i),
+                           RTCHitN_v(args->hit, args->N, i), u))
+      args->valid[i] = 0;
+  }
+}
+
 RTCRay to_rtc(const Ray& ray) {
   RTCRay r;
   r.org_x = ray.o.x;
@@ -108,6 +153,7 @@ struct Accel::Impl {
   unsigned sphere_geom = RTC_INVALID_GEOMETRY_ID;
   SphereData sphere_data{};
   std::string error;
+  std::deque<AlphaData> alpha_data;    // (stable addresses: Embree keeps pointers)
   std::shared_ptr<const Accel> fixed;  // a pose's static part (its device is this one's)
   unsigned fixed_sphere_geom = RTC_INVALID_GEOMETRY_ID;
   ~Impl() {
@@ -123,7 +169,8 @@ struct Accel::Impl {
     rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
     rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
   }
-  void add_mesh(const Mesh& m, unsigned id) {
+  void add_mesh(const Scene& s, unsigned id) {
+    const Mesh& m = s.meshes[id];
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     // Embree may read 16 bytes from the last vertex: pad by one.
     float* v = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
@@ -137,6 +184,12 @@ struct Accel::Impl {
     uint32_t* idx = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                                                    3 * sizeof(uint32_t), m.triangle_count()));
     std::copy(m.indices.begin(), m.indices.end(), idx);
+    if (s.materials[m.material].alpha_mode != Material::AlphaMode::kOpaque) {  // only these pay for a filter
+      alpha_data.push_back({&s, id});
+      rtcSetGeometryUserData(g, &alpha_data.back());
+      rtcSetGeometryIntersectFilterFunction(g, alpha_filter);
+      rtcSetGeometryOccludedFilterFunction(g, alpha_filter);
+    }
     rtcCommitGeometry(g);
     rtcAttachGeometryByID(scene, g, id);  // geomID == mesh index
     rtcReleaseGeometry(g);
@@ -178,7 +231,7 @@ Accel::Accel(const Scene& scene, const std::vector<bool>& skip) : impl_(std::mak
   impl_->new_scene(d);
   rtcReleaseDevice(d);  // the Impl holds it
   for (size_t i = 0; i < scene.meshes.size(); ++i)
-    if (i >= skip.size() || !skip[i]) impl_->add_mesh(scene.meshes[i], unsigned(i));
+    if (i >= skip.size() || !skip[i]) impl_->add_mesh(scene, unsigned(i));
   impl_->add_spheres(scene);
   impl_->commit();
 }
@@ -189,7 +242,7 @@ Accel::Accel(const Scene& scene, std::shared_ptr<const Accel> fixed, const std::
   impl_->fixed = fixed;
   impl_->fixed_sphere_geom = fixed->impl_->sphere_geom;
   for (size_t i = 0; i < scene.meshes.size() && i < moving.size(); ++i)
-    if (moving[i]) impl_->add_mesh(scene.meshes[i], unsigned(i));
+    if (moving[i]) impl_->add_mesh(scene, unsigned(i));
   RTCGeometry g = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
   rtcSetGeometryInstancedScene(g, fixed->impl_->scene);
   rtcSetGeometryTimeStepCount(g, 1);

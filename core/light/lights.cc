@@ -86,7 +86,18 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
       const float len = length(n);
       if (!(len > 0)) return false;
       Rgb radiance = l.color;
-      const TextureRef& tex = scene_.materials[m.material].emissive_texture;
+      const Material& mat = scene_.materials[m.material];
+      switch (mat.alpha_mode) {  // where the surface is not there, neither is its light
+        case Material::AlphaMode::kOpaque:
+          break;
+        case Material::AlphaMode::kMask:
+          if (!scene_.covered(m, t, bc.x, bc.y, 0)) return false;
+          break;
+        case Material::AlphaMode::kBlend:
+          radiance *= scene_.opacity_at(m, t, bc.x, bc.y);
+          break;
+      }
+      const TextureRef& tex = mat.emissive_texture;
       if (tex.active() && !m.uv_set(tex.set).empty())  // glTF emissiveTexture
         radiance *= scene_.textures[size_t(tex.index)].sample(tex.map(m.uv_at(t, bc.x, bc.y, tex.set)));
       return finish_area_sample(p, q, err, n / len, 1 / d.area, radiance, l.two_sided, out);

@@ -175,20 +175,35 @@ Rgb Texture::mean() const {
   return Rgb(float(r / n), float(g / n), float(b / n));
 }
 
-Rgb Texture::sample(Vec2 uv) const {
-  if (width <= 0 || height <= 0) return Rgb(1);
+namespace {
+
+// Bilinear lookup in a row-major grid of texels, with the texture's wrap modes.
+template <typename T>
+T bilinear(const Texture& tex, const std::vector<T>& texels, Vec2 uv) {
   // Texel centres at (i + 0.5) / n, as OpenGL samples.
-  const float x = uv.x * float(width) - 0.5f, y = uv.y * float(height) - 0.5f;
+  const float x = uv.x * float(tex.width) - 0.5f, y = uv.y * float(tex.height) - 0.5f;
   if (!std::isfinite(x) || !std::isfinite(y)) return texels[0];
   const float fx = std::floor(x), fy = std::floor(y);
   const float tx = x - fx, ty = y - fy;
   // Guard huge coordinates before converting to int.
   const int ix = int(std::fmod(double(fx), 1 << 24)), iy = int(std::fmod(double(fy), 1 << 24));
   auto at = [&](int i, int j) {
-    return texels[size_t(wrap(j, height, wrap_t)) * width + size_t(wrap(i, width, wrap_s))];
+    return texels[size_t(wrap(j, tex.height, tex.wrap_t)) * size_t(tex.width) + size_t(wrap(i, tex.width, tex.wrap_s))];
   };
   return at(ix, iy) * ((1 - tx) * (1 - ty)) + at(ix + 1, iy) * (tx * (1 - ty)) + at(ix, iy + 1) * ((1 - tx) * ty) +
          at(ix + 1, iy + 1) * (tx * ty);
+}
+
+}  // namespace
+
+Rgb Texture::sample(Vec2 uv) const {
+  if (width <= 0 || height <= 0) return Rgb(1);
+  return bilinear(*this, texels, uv);
+}
+
+float Texture::sample_alpha(Vec2 uv) const {
+  if (width <= 0 || height <= 0 || alpha.size() != texels.size()) return 1;
+  return bilinear(*this, alpha, uv);
 }
 
 }  // namespace tessera
@@ -207,6 +222,31 @@ Material Scene::textured(const Material& m, Vec2 uv, Vec2 uv1) const {
   }
   if (m.emissive_texture.active()) out.radiance *= at(m.emissive_texture);
   return out;
+}
+
+float Scene::opacity_at(const Mesh& mesh, size_t tri, float b1, float b2) const {
+  const Material& m = materials[mesh.material];
+  float a = m.opacity;
+  const TextureRef& t = m.texture;
+  if (t.active() && !textures[size_t(t.index)].alpha.empty() && !mesh.uv_set(t.set).empty())
+    a *= textures[size_t(t.index)].sample_alpha(t.map(mesh.uv_at(tri, b1, b2, t.set)));
+  if (!mesh.color_alpha.empty()) {
+    const uint32_t* i = &mesh.indices[3 * tri];
+    a *= mesh.color_alpha[i[0]] * (1 - b1 - b2) + mesh.color_alpha[i[1]] * b1 + mesh.color_alpha[i[2]] * b2;
+  }
+  return a;
+}
+
+bool Scene::covered(const Mesh& mesh, size_t tri, float b1, float b2, float u) const {
+  switch (materials[mesh.material].alpha_mode) {
+    case Material::AlphaMode::kOpaque:
+      return true;
+    case Material::AlphaMode::kMask:
+      return opacity_at(mesh, tri, b1, b2) >= materials[mesh.material].alpha_cutoff;
+    case Material::AlphaMode::kBlend:
+      return u < opacity_at(mesh, tri, b1, b2);
+  }
+  return true;
 }
 
 }  // namespace tessera

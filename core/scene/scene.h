@@ -58,6 +58,15 @@ struct Material {
   TextureRef normal_texture;       // tangent-space normal map (linear)
   float normal_scale = 1;
   TextureRef emissive_texture;  // multiplies `radiance` (sRGB-decoded)
+  // glTF alphaMode: how much of the surface is there, from the coverage `opacity` x the base
+  // colour texture's alpha x COLOR_0's alpha (Scene::opacity_at). OPAQUE ignores it; MASK
+  // keeps the surface where it reaches `alpha_cutoff`, BLEND where a uniform number per ray
+  // and triangle is below it (stochastic transparency: unbiased, no sorting). Decided in the
+  // intersection filter (core/accel), installed only on meshes with such a material.
+  enum class AlphaMode : uint8_t { kOpaque, kMask, kBlend };
+  AlphaMode alpha_mode = AlphaMode::kOpaque;
+  float opacity = 1;  // baseColorFactor's alpha
+  float alpha_cutoff = 0.5f;
 
   // Below this alpha a kPbr surface's specular lobes are perfectly smooth (delta).
   static constexpr float kSmoothAlpha = 1e-3f;
@@ -87,6 +96,7 @@ struct Mesh {
   std::vector<Vec2> uvs;          // per vertex texture coordinates, or empty
   std::vector<Vec2> uvs1;         // a second set (glTF TEXCOORD_1), or empty
   std::vector<Rgb> colors;        // per vertex colour (glTF COLOR_0, linear), multiplying the base colour; or empty
+  std::vector<float> color_alpha;  // COLOR_0's alpha where the file gives one below 1, or empty
   bool file_normals = false;      // `normals` came from the file: keep them
   uint32_t material = 0;
   int32_t light = -1;  // index into Scene::lights when the mesh emits
@@ -142,9 +152,11 @@ struct Light {
 struct Texture {
   enum class Wrap : uint8_t { kRepeat, kClamp, kMirror };
   int width = 0, height = 0;
-  std::vector<Rgb> texels;  // row-major, row 0 at v = 0
+  std::vector<Rgb> texels;   // row-major, row 0 at v = 0
+  std::vector<float> alpha;  // the image's alpha, as texels, where some texel is not opaque; else empty
   Wrap wrap_s = Wrap::kRepeat, wrap_t = Wrap::kRepeat;
   Rgb sample(Vec2 uv) const;
+  float sample_alpha(Vec2 uv) const;  // 1 without an alpha channel
   Rgb mean() const;  // over all texels
 };
 
@@ -227,6 +239,10 @@ struct Scene {
   // shading frame).
   Material textured(const Material& m, Vec2 uv, Vec2 uv1) const;
   Material textured(const Material& m, Vec2 uv) const { return textured(m, uv, uv); }
+  // The coverage of mesh `mesh`'s triangle `tri` at barycentrics (b1, b2) (Material's
+  // alphaMode), and whether a ray whose uniform number is `u` meets the surface there.
+  float opacity_at(const Mesh& mesh, size_t tri, float b1, float b2) const;
+  bool covered(const Mesh& mesh, size_t tri, float b1, float b2, float u) const;
 };
 
 }  // namespace tessera

@@ -157,6 +157,9 @@ TEST_F(Gltf, VertexColoursAreReadPerVertex) {
     EXPECT_FLOAT_EQ(m.colors[0].g, 0);
     EXPECT_FLOAT_EQ(m.colors[1].g, 1);
     EXPECT_FLOAT_EQ(m.colors[2].b, 1);
+    // A VEC4's alpha is kept where some vertex is translucent (the third, 128/255).
+    ASSERT_EQ(m.color_alpha.size(), vec4 ? 3u : 0u);
+    if (vec4) EXPECT_NEAR(m.color_alpha[2], 128 / 255.0, 1e-6);
   }
 }
 
@@ -251,6 +254,47 @@ const unsigned char kRedBluePng[] = {
 
 std::string red_blue_png_uri() {
   return "data:image/png;base64," + base64(std::string(reinterpret_cast<const char*>(kRedBluePng), sizeof kRedBluePng));
+}
+
+// Issue 29: alphaMode MASK and BLEND with their cutoff and the base colour's alpha (factor,
+// texture alpha kept only where the image has translucent texels); bad values refused.
+TEST_F(Gltf, AlphaModesAndCoverageAreRead) {
+  Doc d;
+  // A 2x1 RGBA PNG: white, alpha 0 then 255.
+  d.j["images"] = {{{"uri",
+                     "data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAIAAAABCAYAAAD0In+"
+                     "KAAAAEElEQVR4nGP4//8/AxD/BwAe6gb6OStlagAAAABJRU5ErkJggg=="}}};
+  d.j["textures"] = {{{"source", 0}}};
+  d.j["materials"][0] = {
+      {"alphaMode", "MASK"},
+      {"alphaCutoff", 0.25},
+      {"pbrMetallicRoughness", {{"baseColorFactor", {1, 1, 1, 0.75}}, {"baseColorTexture", {{"index", 0}}}}}};
+  Scene s = load(d);
+  const Material& m = s.materials[s.meshes[0].material];
+  EXPECT_EQ(m.alpha_mode, Material::AlphaMode::kMask);
+  EXPECT_FLOAT_EQ(m.alpha_cutoff, 0.25f);
+  EXPECT_FLOAT_EQ(m.opacity, 0.75f);
+  const Texture& t = s.textures[size_t(m.texture.index)];
+  ASSERT_EQ(t.alpha.size(), 2u);
+  EXPECT_FLOAT_EQ(t.alpha[0], 0);
+  EXPECT_FLOAT_EQ(t.alpha[1], 1);
+  d.j["materials"][0]["alphaMode"] = "BLEND";
+  EXPECT_EQ(load(d).materials[0].alpha_mode, Material::AlphaMode::kBlend);
+  d.j["materials"][0].erase("alphaMode");  // OPAQUE by default
+  EXPECT_EQ(load(d).materials[0].alpha_mode, Material::AlphaMode::kOpaque);
+  // An opaque image keeps no alpha.
+  d.j["images"][0]["uri"] = red_blue_png_uri();
+  s = load(d);
+  EXPECT_TRUE(s.textures[0].alpha.empty());
+  // Refused, naming the material.
+  d.j["materials"][0]["alphaMode"] = "CUTOUT";
+  expect_error(d, "materials[0]: alphaMode 'CUTOUT' is not OPAQUE, MASK or BLEND");
+  d.j["materials"][0]["alphaMode"] = "MASK";
+  d.j["materials"][0]["alphaCutoff"] = -1;
+  expect_error(d, "alphaCutoff");
+  d.j["materials"][0]["alphaCutoff"] = 0.5;
+  d.j["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = {1, 1, 1, 1.5};
+  expect_error(d, "baseColorFactor alpha 1.5");
 }
 
 // Issue 29: an image's errors name its file as the scene does and say what is wrong in

@@ -60,6 +60,24 @@ void read_volume(const GltfContext& ctx, const tinygltf::ExtensionMap& ex, const
   }
 }
 
+// alphaMode, alphaCutoff and the base colour's alpha (Material::AlphaMode).
+void read_alpha(const GltfContext& ctx, const tinygltf::Material& g, const std::string& el, Material& m) {
+  const std::vector<double>& f = g.pbrMetallicRoughness.baseColorFactor;
+  if (f.size() >= 4) m.opacity = float(unit_factor(ctx, f[3], el, "baseColorFactor alpha"));
+  if (g.alphaMode == "OPAQUE" || g.alphaMode.empty()) {
+    m.alpha_mode = Material::AlphaMode::kOpaque;
+  } else if (g.alphaMode == "MASK") {
+    m.alpha_mode = Material::AlphaMode::kMask;
+    if (!(g.alphaCutoff >= 0 && std::isfinite(g.alphaCutoff)))
+      ctx.fail(el, "alphaCutoff " + std::to_string(g.alphaCutoff) + " must be a finite number >= 0");
+    m.alpha_cutoff = float(g.alphaCutoff);
+  } else if (g.alphaMode == "BLEND") {
+    m.alpha_mode = Material::AlphaMode::kBlend;
+  } else {
+    ctx.fail(el, "alphaMode '" + g.alphaMode + "' is not OPAQUE, MASK or BLEND");
+  }
+}
+
 }  // namespace
 
 uint32_t GltfMaterials::material(int index) {
@@ -110,8 +128,7 @@ uint32_t GltfMaterials::material(int index) {
     if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_transmission", "transmissionTexture"))
       if (v->IsObject() && v->Has("index"))
         ctx_.warn_once(el + ": transmissionTexture is not supported; transmissionFactor is used");
-    if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty())
-      ctx_.warn_once(el + ": alphaMode " + g.alphaMode + " is rendered opaque");
+    read_alpha(ctx_, g, el, m);
   }
   m.alpha = m.roughness * m.roughness;  // glTF's alpha = roughness^2
   // Emission adds to the reflected light (the specification's material model): the surface

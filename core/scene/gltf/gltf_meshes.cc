@@ -77,7 +77,7 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
       m.file_normals = true;
     }
     if (auto c = prim.attributes.find("COLOR_0"); c != prim.attributes.end()) {
-      // VEC3 or VEC4 (its alpha is the material's alpha: rendered opaque, as alphaMode is).
+      // VEC3 or VEC4 (its alpha multiplies the material's: Scene::opacity_at).
       const int comps = c->second >= 0 && size_t(c->second) < ctx.model.accessors.size() &&
                                 ctx.model.accessors[size_t(c->second)].type == TINYGLTF_TYPE_VEC4
                             ? 4
@@ -88,6 +88,12 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
       for (size_t i = 0; i < nv; ++i) {
         const float* v = &rgba[i * size_t(comps)];
         m.colors[i] = Rgb(std::clamp(v[0], 0.0f, 1.0f), std::clamp(v[1], 0.0f, 1.0f), std::clamp(v[2], 0.0f, 1.0f));
+      }
+      bool translucent = false;
+      for (size_t i = 0; comps == 4 && i < nv; ++i) translucent |= !(rgba[i * 4 + 3] >= 1);
+      if (translucent) {
+        m.color_alpha.resize(nv);
+        for (size_t i = 0; i < nv; ++i) m.color_alpha[i] = std::clamp(rgba[i * 4 + 3], 0.0f, 1.0f);
       }
     }
     if (auto uv = prim.attributes.find("TEXCOORD_0"); uv != prim.attributes.end()) {

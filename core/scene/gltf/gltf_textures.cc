@@ -84,6 +84,14 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
   auto decode = [srgb](unsigned char c) { return srgb ? srgb_to_linear(c / 255.0f) : c / 255.0f; };
   for (size_t i = 0; i < tex.texels.size(); ++i)
     tex.texels[i] = Rgb(decode(img.image[4 * i]), decode(img.image[4 * i + 1]), decode(img.image[4 * i + 2]));
+  // Alpha (always linear) is kept where some texel is not opaque: the base colour's
+  // coverage for alphaMode MASK and BLEND (Scene::opacity_at).
+  bool translucent = false;
+  for (size_t i = 0; i < tex.texels.size() && !translucent; ++i) translucent = img.image[4 * i + 3] != 255;
+  if (translucent && srgb) {
+    tex.alpha.resize(tex.texels.size());
+    for (size_t i = 0; i < tex.alpha.size(); ++i) tex.alpha[i] = img.image[4 * i + 3] / 255.0f;
+  }
   if (t.sampler >= 0) {
     if (size_t(t.sampler) >= model.samplers.size())
       ctx_.fail(tel, "sampler " + std::to_string(t.sampler) + " does not exist");
