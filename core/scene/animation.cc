@@ -53,7 +53,42 @@ Q slerp(Q a, Q b, double t) {
   return normalized(out);
 }
 
+// glTF's cubic spline between keys k and k + 1 at t in [0, 1] (spec, appendix C):
+// p(t) = (2t^3 - 3t^2 + 1) v_k + td (t^3 - 2t^2 + t) b_k + (-2t^3 + 3t^2) v_k+1 + td (t^3 - t^2) a_k+1,
+// b_k the out-tangent of key k and a_k+1 the in-tangent of key k+1, td the keys' interval.
+double hermite(double vk, double bk, double vk1, double ak1, double t, double td) {
+  const double t2 = t * t, t3 = t2 * t;
+  return (2 * t3 - 3 * t2 + 1) * vk + td * (t3 - 2 * t2 + t) * bk + (-2 * t3 + 3 * t2) * vk1 + td * (t3 - t2) * ak1;
+}
+
 }  // namespace
+
+std::vector<double> sample_weights(const SceneAnimation::Channel& c, double time) {
+  using I = SceneAnimation::Interpolation;
+  const size_t n = c.width, keys = c.times.size();
+  const bool cubic = c.interpolation == I::kCubicSpline;
+  auto at = [&](size_t k, size_t i, size_t part = 1) { return c.values[(cubic ? 3 * k + part : k) * n + i]; };
+  std::vector<double> v(n);
+  if (time <= c.times.front() || keys == 1 || time >= c.times.back()) {
+    const size_t k = time >= c.times.back() ? keys - 1 : 0;
+    for (size_t i = 0; i < n; ++i) v[i] = at(k, i);
+    return v;
+  }
+  const size_t k = size_t(std::upper_bound(c.times.begin(), c.times.end(), time) - c.times.begin()) - 1;
+  const double td = c.times[k + 1] - c.times[k], t = (time - c.times[k]) / td;
+  for (size_t i = 0; i < n; ++i) switch (c.interpolation) {
+      case I::kStep:
+        v[i] = at(k, i);
+        break;
+      case I::kLinear:
+        v[i] = at(k, i) + t * (at(k + 1, i) - at(k, i));
+        break;
+      case I::kCubicSpline:
+        v[i] = hermite(at(k, i), at(k, i, 2), at(k + 1, i), at(k + 1, i, 0), t, td);
+        break;
+    }
+  return v;
+}
 
 std::array<double, 4> sample_channel(const SceneAnimation::Channel& c, double time) {
   using I = SceneAnimation::Interpolation;
@@ -83,14 +118,9 @@ std::array<double, 4> sample_channel(const SceneAnimation::Channel& c, double ti
       return v;
     }
     case I::kCubicSpline: {
-      // p(t) = (2t^3 - 3t^2 + 1) v_k + td (t^3 - 2t^2 + t) b_k + (-2t^3 + 3t^2) v_k+1 + td (t^3 - t^2) a_k+1,
-      // b_k the out-tangent of key k and a_k+1 the in-tangent of key k+1 (glTF spec).
       const auto vk = value(k), bk = value(k, 2), vk1 = value(k + 1), ak1 = value(k + 1, 0);
-      const double t2 = t * t, t3 = t2 * t;
       std::array<double, 4> v{};
-      for (size_t i = 0; i < n; ++i)
-        v[i] = (2 * t3 - 3 * t2 + 1) * vk[i] + td * (t3 - 2 * t2 + t) * bk[i] + (-2 * t3 + 3 * t2) * vk1[i] +
-               td * (t3 - t2) * ak1[i];
+      for (size_t i = 0; i < n; ++i) v[i] = hermite(vk[i], bk[i], vk1[i], ak1[i], t, td);
       return finish(v);
     }
   }
@@ -137,7 +167,7 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
       std::array<double, 3> t = node.translation, s = node.scale;
       std::array<double, 4> r = node.rotation;
       for (const SceneAnimation::Channel& c : clip.channels) {
-        if (c.gltf_node != node.gltf_node) continue;
+        if (c.gltf_node != node.gltf_node || c.path == SceneAnimation::Path::kWeights) continue;
         animated = true;
         const std::array<double, 4> v = sample_channel(c, time);
         if (c.path == SceneAnimation::Path::kTranslation) t = {v[0], v[1], v[2]};
@@ -160,23 +190,37 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
                            " is not finite or outside +-1e12, the range the ray tracer handles");
   };
   for (const SceneAnimation::MeshBinding& b : a.meshes) {
-    if (!moved[b.node]) continue;
-    const Mat4& w = world[b.node];
+    const SceneAnimation::Channel* weights = nullptr;
+    if (b.morph)
+      for (const SceneAnimation::Channel& c : clip.channels)
+        if (c.path == SceneAnimation::Path::kWeights && c.gltf_node == a.nodes[b.node].gltf_node) weights = &c;
+    bool joints_moved = false;
+    for (const int32_t e : b.joint_entries) joints_moved |= e >= 0 && moved[size_t(e)];
+    if (!(b.skin ? joints_moved : moved[b.node]) && !weights) continue;
     Mesh& m = s.meshes[b.mesh];
-    for (size_t i = 0; i < b.positions.size(); ++i) {
-      m.positions[i] = w.point(b.positions[i].x, b.positions[i].y, b.positions[i].z).to_float();
-      check(m.positions[i], "a vertex of mesh '" + m.name + "'");
-    }
+    std::vector<Vec3> p = b.positions, n = b.normals;
+    if (b.morph) apply_morph(*b.morph, weights ? sample_weights(*weights, time) : b.morph->weights, p, n);
     m.indices = b.indices;
-    if (w.det3() < 0)  // a mirroring pose: keep geometric normals outward
-      for (size_t t = 0; t + 2 < m.indices.size(); t += 3) std::swap(m.indices[t + 1], m.indices[t + 2]);
-    if (!b.normals.empty()) {
-      const Mat4 nt = w.normal_matrix();
-      for (size_t i = 0; i < b.normals.size(); ++i)
-        m.normals[i] = nt.unit_vector(b.normals[i].x, b.normals[i].y, b.normals[i].z);
+    if (b.skin) {  // the joints carry the vertices; the node's own transform is ignored
+      std::vector<Mat4> joints(b.joint_entries.size());
+      for (size_t j = 0; j < joints.size(); ++j)
+        joints[j] = b.joint_entries[j] >= 0 ? world[size_t(b.joint_entries[j])] : b.joint_rest[j];
+      std::vector<Vec3> wn;
+      apply_skin(*b.skin, joints, p, n, m.positions, wn);
+      for (const Vec3& v : m.positions) check(v, "a vertex of mesh '" + m.name + "'");
+      if (!wn.empty()) m.normals = std::move(wn);
     } else {
-      m.compute_normals();
+      const Mat4& w = world[b.node];
+      for (size_t i = 0; i < p.size(); ++i) {
+        m.positions[i] = w.point(p[i].x, p[i].y, p[i].z).to_float();
+        check(m.positions[i], "a vertex of mesh '" + m.name + "'");
+      }
+      if (w.det3() < 0)  // a mirroring pose: keep geometric normals outward
+        for (size_t t = 0; t + 2 < m.indices.size(); t += 3) std::swap(m.indices[t + 1], m.indices[t + 2]);
+      const Mat4 nt = w.normal_matrix();
+      for (size_t i = 0; i < n.size(); ++i) m.normals[i] = nt.unit_vector(n[i].x, n[i].y, n[i].z);
     }
+    if (n.empty()) m.compute_normals();
   }
   for (const SceneAnimation::LightBinding& b : a.lights) {
     if (!moved[b.node]) continue;

@@ -1,5 +1,5 @@
-// glTF animation (docs/gltf.md, docs/sequences.md): node translation, rotation and scale
-// channels with LINEAR (rotations by slerp), STEP and CUBICSPLINE interpolation, as the
+// glTF animation (docs/gltf.md, docs/sequences.md): node translation, rotation, scale and
+// morph weight channels with LINEAR (rotations by slerp), STEP and CUBICSPLINE interpolation, as the
 // glTF 2.0 specification defines them, and the posing of a scene at a time. The loader
 // fills a SceneAnimation only for files with animations: a still scene carries none and
 // pays nothing.
@@ -7,11 +7,13 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "core/math/transform.h"
 #include "core/math/vec.h"
+#include "core/scene/deform.h"
 
 namespace tessera {
 
@@ -30,14 +32,15 @@ struct SceneAnimation {
     std::array<double, 3> translation{0, 0, 0}, scale{1, 1, 1};
     std::array<double, 4> rotation{0, 0, 0, 1};  // x, y, z, w
   };
-  enum class Path { kTranslation, kRotation, kScale };
+  enum class Path { kTranslation, kRotation, kScale, kWeights };
   enum class Interpolation { kLinear, kStep, kCubicSpline };
   struct Channel {
     uint32_t gltf_node = 0;
     Path path = Path::kTranslation;
     Interpolation interpolation = Interpolation::kLinear;
     std::vector<double> times;   // seconds, strictly increasing
-    std::vector<double> values;  // 3 or 4 per key; CUBICSPLINE: in-tangent, value, out-tangent
+    std::vector<double> values;  // width per key; CUBICSPLINE: in-tangent, value, out-tangent
+    uint32_t width = 3;          // 3, 4 (rotation), or the morph target count (weights)
   };
   struct Clip {
     std::string name;
@@ -49,6 +52,15 @@ struct SceneAnimation {
     uint32_t mesh = 0, node = 0;
     std::vector<Vec3> positions, normals;  // object space; normals empty unless the file gave them
     std::vector<uint32_t> indices;         // as in the file (winding fixed per pose)
+    // Morph targets (positions and normals above are before them), null without; a
+    // weights channel on the node's glTF node animates their weights.
+    std::shared_ptr<const MorphTargets> morph;
+    // A skin (null without): the node's transform is then ignored and the vertices follow
+    // the joints, whose node entries are `joint_entries` (-1: a joint outside the walked
+    // hierarchy, held at its rest transform `joint_rest`).
+    std::shared_ptr<const Skin> skin;
+    std::vector<int32_t> joint_entries;
+    std::vector<Mat4> joint_rest;
   };
   struct LightBinding {
     uint32_t light = 0, node = 0;
@@ -68,6 +80,8 @@ struct SceneAnimation {
 // The value of one channel at `time` (clamped to its keys): 3 or 4 numbers; rotations are
 // unit quaternions (x, y, z, w).
 std::array<double, 4> sample_channel(const SceneAnimation::Channel& c, double time);
+// A weights channel's `width` numbers at `time` (clamped to its keys).
+std::vector<double> sample_weights(const SceneAnimation::Channel& c, double time);
 // Where a node's world transform puts the file's camera (eye, forward, up; CS184's
 // direction) and a punctual light (position, and direction for spot and directional):
 // the loader places them, and so does every pose.

@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "core/scene/gltf/gltf_accessors.h"
+#include "core/scene/gltf/gltf_skins.h"
 
 namespace tessera {
 
@@ -26,8 +27,9 @@ std::vector<uint32_t> triangle_list(int mode, std::vector<uint32_t> v) {
 
 }  // namespace
 
-std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& materials, int index, const Mat4& w,
-                                          const std::string& node_el, bool keep_object_space) {
+std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& materials, const tinygltf::Node& node,
+                                          const Mat4& w, const std::string& node_el, bool keep_object_space) {
+  const int index = node.mesh;
   if (size_t(index) >= ctx.model.meshes.size()) ctx.fail(node_el, "mesh " + std::to_string(index) + " does not exist");
   const tinygltf::Mesh& mesh = ctx.model.meshes[size_t(index)];
   // det < 0 mirrors the mesh: swap winding so geometric normals stay outward.
@@ -51,6 +53,11 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
     Mesh& m = g.mesh;
     m.name = mesh.name.empty() ? "mesh" + std::to_string(index) : mesh.name;
     const size_t nv = p3.size() / 3;
+    g.morph = read_gltf_morph(ctx, prim, mesh, node, nv, el);
+    if (node.skin >= 0) g.skin = read_gltf_skin(ctx, node.skin, prim, nv, el);
+    // The shown shape in object space: the file's, moved by the morph targets' weights.
+    std::vector<Vec3> shown(nv), shown_n;
+    for (size_t i = 0; i < nv; ++i) shown[i] = {p3[3 * i], p3[3 * i + 1], p3[3 * i + 2]};
     m.positions.resize(nv);
     for (size_t i = 0; i < nv; ++i) {
       m.positions[i] = w.point(p3[3 * i], p3[3 * i + 1], p3[3 * i + 2]).to_float();
@@ -75,6 +82,18 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
       m.normals.resize(nv);
       for (size_t i = 0; i < nv; ++i) m.normals[i] = nt.unit_vector(n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]);
       m.file_normals = true;
+      shown_n.resize(nv);
+      for (size_t i = 0; i < nv; ++i) shown_n[i] = {n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]};
+    }
+    if (g.morph && !g.skin) {  // (a skinned mesh is placed once its joints are known)
+      apply_morph(*g.morph, g.morph->weights, shown, shown_n);
+      for (size_t i = 0; i < nv; ++i) {
+        m.positions[i] = w.point(shown[i].x, shown[i].y, shown[i].z).to_float();
+        if (!is_finite(m.positions[i])) ctx.fail(el, "vertex " + std::to_string(i) + " is not finite after morphing");
+      }
+      const Mat4 nt = w.normal_matrix();
+      for (size_t i = 0; i < shown_n.size(); ++i)
+        m.normals[i] = nt.unit_vector(shown_n[i].x, shown_n[i].y, shown_n[i].z);
     }
     if (auto c = prim.attributes.find("COLOR_0"); c != prim.attributes.end()) {
       // VEC3 or VEC4 (its alpha multiplies the material's: Scene::opacity_at).
@@ -114,7 +133,7 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
       if (t->active() && t->set == 1 && m.uvs1.empty())
         ctx.warn_once(el + ": its material reads TEXCOORD_1, which it lacks; TEXCOORD_0 is used");
     if (m.indices.empty()) continue;
-    if (keep_object_space) {
+    if (keep_object_space || g.skin) {
       g.positions = std::move(p3);
       g.normals = std::move(n3);
     }

@@ -8,47 +8,12 @@
 
 #include "core/scene/gltf/gltf_lights_cameras.h"
 #include "core/scene/gltf/gltf_meshes.h"
+#include "core/scene/gltf/gltf_skins.h"
 
 namespace tessera {
 namespace {
 
 constexpr size_t kMaxNodeDepth = 256;
-
-// A node's translation, rotation and scale (glTF's defaults where absent), checked.
-struct Trs {
-  std::array<double, 3> t{0, 0, 0}, s{1, 1, 1};
-  std::array<double, 4> r{0, 0, 0, 1};
-};
-Trs trs_of(const GltfContext& ctx, const tinygltf::Node& n, const std::string& el) {
-  Trs x;
-  if (!n.translation.empty()) {
-    if (n.translation.size() != 3) ctx.fail(el, "translation needs 3 numbers");
-    x.t = {n.translation[0], n.translation[1], n.translation[2]};
-  }
-  if (!n.rotation.empty()) {
-    if (n.rotation.size() != 4) ctx.fail(el, "rotation needs 4 numbers");
-    x.r = {n.rotation[0], n.rotation[1], n.rotation[2], n.rotation[3]};
-    const double len = std::sqrt(x.r[0] * x.r[0] + x.r[1] * x.r[1] + x.r[2] * x.r[2] + x.r[3] * x.r[3]);
-    if (!(len > 0)) ctx.fail(el, "rotation quaternion is zero");
-  }
-  if (!n.scale.empty()) {
-    if (n.scale.size() != 3) ctx.fail(el, "scale needs 3 numbers");
-    x.s = {n.scale[0], n.scale[1], n.scale[2]};
-  }
-  return x;
-}
-
-Mat4 local_matrix(const GltfContext& ctx, const tinygltf::Node& n, const std::string& el) {
-  if (!n.matrix.empty()) {
-    if (n.matrix.size() != 16) ctx.fail(el, "matrix needs 16 numbers");
-    std::array<double, 16> m{};
-    for (int r = 0; r < 4; ++r)
-      for (int c = 0; c < 4; ++c) m[size_t(r * 4 + c)] = n.matrix[size_t(c * 4 + r)];  // glTF is column-major
-    return Mat4::from_row_major(m);
-  }
-  const Trs x = trs_of(ctx, n, el);
-  return trs_matrix(x.t, x.r, x.s);
-}
 
 // The nodes the walk starts from.
 std::vector<int> scene_roots(const GltfContext& ctx) {
@@ -81,7 +46,7 @@ class NodeWalk {
       ctx_.fail(el, "the node graph has a cycle through this node");
     if (path_.size() >= kMaxNodeDepth) ctx_.fail(el, "node hierarchy deeper than 256 levels");
     const tinygltf::Node& n = ctx_.model.nodes[size_t(index)];
-    const Mat4 local = local_matrix(ctx_, n, el);
+    const Mat4 local = gltf_local_matrix(ctx_, n, el);
     const Mat4 world = parent * local;
     int32_t entry = -1;
     if (animation_.recording()) {  // the hierarchy, for posing frames of an animation
@@ -91,7 +56,7 @@ class NodeWalk {
       e.trs = n.matrix.empty();
       e.matrix = local;
       if (e.trs) {
-        const Trs x = trs_of(ctx_, n, el);
+        const GltfTrs x = gltf_trs(ctx_, n, el);
         e.translation = x.t;
         e.rotation = x.r;
         e.scale = x.s;
@@ -100,8 +65,15 @@ class NodeWalk {
     }
     path_.push_back(index);
     if (n.mesh >= 0)
-      for (GltfPrimitive& p : read_gltf_mesh(ctx_, materials_, n.mesh, world, el, animation_.recording())) {
-        if (animation_.recording()) animation_.add_mesh(uint32_t(ctx_.scene.meshes.size()), entry, p);
+      for (GltfPrimitive& p : read_gltf_mesh(ctx_, materials_, n, world, el, animation_.recording())) {
+        const uint32_t id = uint32_t(ctx_.scene.meshes.size());
+        if (animation_.recording()) animation_.add_mesh(id, entry, p);
+        if (p.skin) {
+          if (p.mirrored)  // the node's transform does not apply to a skinned mesh: the file's winding
+            for (size_t t = 0; t + 2 < p.mesh.indices.size(); t += 3)
+              std::swap(p.mesh.indices[t + 1], p.mesh.indices[t + 2]);
+          skinned_.push_back({id, p.skin, p.morph, std::move(p.positions), std::move(p.normals)});
+        }
         ctx_.scene.meshes.push_back(std::move(p.mesh));
       }
     if (n.camera >= 0) {
@@ -122,6 +94,16 @@ class NodeWalk {
   GltfMaterials& materials_;
   GltfAnimationBuilder& animation_;
   std::vector<int> path_;  // the nodes from the root to the one visited: a cycle returns to one of them
+
+ public:
+  // Skinned primitives, placed once the walk is over (their joints can come anywhere).
+  struct Skinned {
+    uint32_t mesh;
+    std::shared_ptr<const Skin> skin;
+    std::shared_ptr<const MorphTargets> morph;
+    std::vector<float> positions, normals;  // object space
+  };
+  std::vector<Skinned> skinned_;
 };
 
 }  // namespace
@@ -129,6 +111,12 @@ class NodeWalk {
 void add_gltf_nodes(GltfContext& ctx, GltfMaterials& materials, GltfAnimationBuilder& animation) {
   NodeWalk walk(ctx, materials, animation);
   for (int r : scene_roots(ctx)) walk.visit(r, Mat4(), -1);
+  if (walk.skinned_.empty()) return;
+  const std::vector<Mat4> rest = gltf_rest_worlds(ctx);
+  for (const NodeWalk::Skinned& k : walk.skinned_) {
+    Mesh& mesh = ctx.scene.meshes[k.mesh];
+    place_skinned_mesh(ctx, mesh, *k.skin, k.morph.get(), k.positions, k.normals, rest, "mesh '" + mesh.name + "'");
+  }
 }
 
 }  // namespace tessera
