@@ -15,6 +15,9 @@
   cornell-animated.gltf the Cornell box with its spheres moving (the glass one LINEAR, the
                         mirror one hopping along a CUBICSPLINE path) and the camera turning
                         (rotation slerp) and dollying in, over 2 s: 48 frames at 24 fps.
+  skinned-bar.gltf      a square bar on two joints that bends 90 degrees over 2 s (a skin,
+                        the weights blended across the middle), over a floor whose corner
+                        rises by an animated morph target; lit by the default environment.
 
 Run: python3 scenes/make_gltf_scenes.py   (rewrites the files beside this script)
 """
@@ -261,8 +264,64 @@ def material_spheres():
     b.write(os.path.join(HERE, "material-spheres.gltf"))
 
 
+def skinned_bar():
+    b = Builder()
+    grey = b.material({"name": "grey", "pbrMetallicRoughness": {"baseColorFactor": [0.6, 0.6, 0.6, 1], "metallicFactor": 0}})
+    orange = b.material({"name": "orange", "pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.4, 0.1, 1],
+                                                                     "metallicFactor": 0, "roughnessFactor": 0.5}})
+    # The bar: 9 rings of 4 vertices along x in [0, 2], a 0.2 x 0.2 section.
+    pos, joints, weights, idx = [], [], [], []
+    rings = 9
+    for r in range(rings):
+        x = 2 * r / (rings - 1)
+        t = min(max((x - 0.75) / 0.5, 0), 1)
+        w1 = t * t * (3 - 2 * t)  # smoothstep across the joint at x = 1
+        for y, z in ((-0.1, -0.1), (0.1, -0.1), (0.1, 0.1), (-0.1, 0.1)):
+            pos += [x, y, z]
+            joints += [0, 1, 0, 0]
+            weights += [1 - w1, w1, 0, 0]
+    for r in range(rings - 1):
+        for k in range(4):
+            a, bb = 4 * r + k, 4 * r + (k + 1) % 4
+            idx += [a, bb, bb + 4, a, bb + 4, a + 4]
+    attrs = {"POSITION": b._accessor(pos, 3, 5126, "f", 34962, True),
+             "JOINTS_0": b._accessor(joints, 4, 5121, "B", 34962),
+             "WEIGHTS_0": b._accessor(weights, 4, 5126, "f", 34962)}
+    ibm = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1,
+           1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, -1, 0, 0, 1]  # column-major: identity, translate(-1, 0, 0)
+    b.g["accessors"].append({"bufferView": b._view(struct.pack("<32f", *ibm), None), "componentType": 5126,
+                             "count": 2, "type": "MAT4"})
+    ibm_acc = len(b.g["accessors"]) - 1
+    b.g["meshes"].append({"name": "bar", "primitives": [{"attributes": attrs, "material": orange,
+                                                         "indices": b._accessor(idx, 1, 5123, "H", 34963)}]})
+    bar = b.node({"name": "bar", "mesh": len(b.g["meshes"]) - 1, "skin": 0})
+    root = b.node({"name": "root", "translation": [0, 0.3, 0], "children": [len(b.g["nodes"]) + 1]})
+    b.g["nodes"].append({"name": "elbow", "translation": [1, 0, 0]})
+    elbow = len(b.g["nodes"]) - 1
+    b.g["skins"] = [{"joints": [root, elbow], "inverseBindMatrices": ibm_acc}]
+    # The floor, with a morph target lifting its far right corner by 0.5.
+    fpos, fidx = quad([-1.5, 0, 1.5], [2.5, 0, 1.5], [2.5, 0, -1.5], [-1.5, 0, -1.5])
+    lift = b._accessor([0, 0, 0, 0, 0, 0, 0, 0.5, 0, 0, 0, 0], 3, 5126, "f", None, True)
+    b.g["meshes"].append({"name": "floor", "weights": [0],
+                          "primitives": [{"attributes": {"POSITION": b._accessor(fpos, 3, 5126, "f", 34962, True)},
+                                          "indices": b._accessor(fidx, 1, 5123, "H", 34963), "material": grey,
+                                          "targets": [{"POSITION": lift}]}]})
+    floor = b.node({"name": "floor", "mesh": len(b.g["meshes"]) - 1})
+    half = math.radians(90) / 2
+    b.animate(elbow, "rotation", [0, 2], [0, 0, 0, 1, 0, 0, math.sin(half), math.cos(half)], name="bend")
+    anim = b.g["animations"][0]
+    anim["samplers"].append({"input": b._accessor([0, 2], 1, 5126, "f", None, True),
+                             "output": b._accessor([0, 1], 1, 5126, "f", None), "interpolation": "LINEAR"})
+    anim["channels"].append({"sampler": len(anim["samplers"]) - 1, "target": {"node": floor, "path": "weights"}})
+    b.g["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.7, "aspectRatio": 4 / 3, "znear": 0.05, "zfar": 100}}]
+    b.node({"name": "camera", "camera": 0, "translation": [1, 0.8, 4.5]})
+    del bar
+    b.write(os.path.join(HERE, "skinned-bar.gltf"))
+
+
 if __name__ == "__main__":
     material_spheres()
     cornell()
     cornell(animated=True)
     dof_row()
+    skinned_bar()

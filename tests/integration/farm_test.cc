@@ -124,6 +124,22 @@ TEST_F(Farm, AnAnimatedGltfSequenceThroughTheFarmGivesTesseraRendersFrames) {
   EXPECT_NE((bad.err + bad.out).find("no animation 'walk'"), std::string::npos) << bad.err << bad.out;
 }
 
+// Issue 29: a skinned bar bending and a floor morphing (scenes/skinned-bar.gltf): the
+// farm's frames are tessera render's, bit for bit.
+TEST_F(Farm, ASkinnedAndMorphedSequenceThroughTheFarmGivesTesseraRendersFrames) {
+  const std::string scene = std::string(TESSERA_SOURCE_DIR) + "/scenes/skinned-bar.gltf";
+  const std::string flags = "-r 64 48 -s 8 --pass-spp 4 -m 6 --tile 16 --frames 12,40";
+  const CommandResult local = run("render " + scene + " " + flags + " -q -f " + (dir / "local.####.exr").string(), dir);
+  ASSERT_EQ(local.code, 0) << local.err;
+  start_coordinator();
+  start_worker();
+  const CommandResult r = submit_wait(scene, flags, (dir / "farm.####.exr").string());
+  ASSERT_EQ(r.code, 0) << r.err << r.out;
+  for (const char* n : {"0012", "0040"})
+    expect_same_pixels((dir / ("local." + std::string(n) + ".exr")).string(),
+                       (dir / ("farm." + std::string(n) + ".exr")).string());
+}
+
 // Issue 13's first piece: a uniform environment (--env-color) crosses the wire and the
 // farm's image is still tessera render's, on a CS184 scene.
 TEST_F(Farm, AnEnvironmentLightGivesTheLocalImageThroughTheFarm) {
