@@ -1,7 +1,8 @@
-// Issue 29: morph targets and skins, with known answers: a triangle morphed by weighted
+// Issue 29: morph targets, skins and EXT_mesh_gpu_instancing, with known answers: a triangle morphed by weighted
 // targets (mesh and node weights, animated weights), a bar bent by a joint through a
 // known angle (rest pose and animated, the mesh node's own transform ignored, more than
-// four influences), and hostile skins refused naming what is wrong.
+// four influences), hostile skins refused naming what is wrong, and instances placed by
+// their own transforms under the node's.
 #include <cmath>
 
 #include "tests/core/gltf_fixture.h"
@@ -154,6 +155,30 @@ TEST_F(Gltf, HostileSkinsAreRefusedByName) {
   d = skinned(0);
   d.j["accessors"][8]["count"] = 1;  // one inverse bind matrix for two joints
   expect_error(d, "inverseBindMatrices has 1 matrices for 2 joints");
+}
+
+TEST_F(Gltf, GpuInstancesAreEachPlacedUnderTheNode) {
+  Doc d;
+  const int t = add_accessor(d, bytes<float>({0, 0, 0, 10, 0, 0, 0, 10, 0}), kFloat, 3, "VEC3");
+  const float h = float(std::sqrt(0.5));
+  const int r = add_accessor(d, bytes<float>({0, 0, 0, 1, 0, 0, h, h, 0, 0, 0, 1}), kFloat, 3, "VEC4");
+  const int sc = add_accessor(d, bytes<float>({1, 1, 1, 1, 1, 1, 2, 2, 2}), kFloat, 3, "VEC3");
+  d.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"] = {
+      {"TRANSLATION", t}, {"ROTATION", r}, {"SCALE", sc}};
+  d.j["nodes"][0]["translation"] = {0, 0, -1};
+  d.j["extensionsUsed"] = {"EXT_mesh_gpu_instancing"};
+  const Scene s = load(d);
+  ASSERT_EQ(s.meshes.size(), 3u);  // one triangle per instance
+  expect_vec(s.meshes[0].positions[1], {1, 0, -1});
+  expect_vec(s.meshes[1].positions[1], {10, 1, -1});  // turned 90 degrees about z: (1,0,0) -> (0,1,0)
+  expect_vec(s.meshes[2].positions[1], {2, 10, -1});  // scaled by 2
+  EXPECT_TRUE(s.warnings.empty() || s.warnings[0].find("EXT_mesh_gpu_instancing") == std::string::npos);
+  // Counts that disagree, or none, are refused by name.
+  const int short_t = add_accessor(d, bytes<float>({0, 0, 0, 1, 1, 1}), kFloat, 2, "VEC3");
+  d.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]["TRANSLATION"] = short_t;
+  expect_error(d, "EXT_mesh_gpu_instancing: ROTATION has 3 instances, the others 2");
+  d.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"] = json::object();
+  expect_error(d, "has no instances");
 }
 
 }  // namespace

@@ -297,6 +297,27 @@ TEST_F(Gltf, AlphaModesAndCoverageAreRead) {
   expect_error(d, "baseColorFactor alpha 1.5");
 }
 
+// Issue 29: KTX2 textures (KHR_texture_basisu) have no decoder here: a texture's PNG or
+// JPEG fallback is used with a warning; one without a fallback, or a file that requires
+// the extension, is refused saying so.
+TEST_F(Gltf, Ktx2TexturesUseTheirFallbackOrAreRefusedClearly) {
+  Doc d;
+  d.j["images"] = {{{"uri", red_blue_png_uri()}}, {{"uri", "data:image/ktx2;base64,q0tUWCAyMLsNChoK"}}};
+  d.j["textures"] = {{{"source", 0}, {"extensions", {{"KHR_texture_basisu", {{"source", 1}}}}}}};
+  d.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+  d.j["extensionsUsed"] = {"KHR_texture_basisu"};
+  const Scene s = load(d);
+  ASSERT_EQ(s.textures.size(), 1u);
+  EXPECT_EQ(s.textures[0].width, 2);  // the PNG
+  bool warned = false;
+  for (const std::string& w : s.warnings) warned |= w.find("PNG or JPEG fallback is used") != std::string::npos;
+  EXPECT_TRUE(warned);
+  d.j["textures"][0].erase("source");
+  expect_error(d, "textures[0]: has only a KTX2 image (KHR_texture_basisu)");
+  d.j["extensionsRequired"] = {"KHR_texture_basisu"};
+  expect_error(d, "KTX2 / Basis Universal textures cannot be decoded here");
+}
+
 // Issue 29: an image's errors name its file as the scene does and say what is wrong in
 // words (stb's "outofdata" was the whole message), never the folder's absolute path.
 TEST_F(Gltf, ImageErrorsNameTheFileInWordsWithoutTheFolder) {

@@ -19,7 +19,9 @@ inline bool gltf_extension_supported(const std::string& name) {
       "KHR_materials_emissive_strength", "KHR_texture_transform",
       // Integer attributes: every accessor is read with the component types and
       // normalization the core allows for any attribute (gltf_accessors.cc).
-      "KHR_mesh_quantization"};
+      "KHR_mesh_quantization",
+      // Instances are copied into the scene (gltf_nodes.cc): memory grows with their count.
+      "EXT_mesh_gpu_instancing"};
   return kSupported.count(name) > 0;
 }
 

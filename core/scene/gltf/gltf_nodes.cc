@@ -6,6 +6,8 @@
 #include <utility>
 #include <vector>
 
+#include "core/scene/animation.h"
+#include "core/scene/gltf/gltf_accessors.h"
 #include "core/scene/gltf/gltf_lights_cameras.h"
 #include "core/scene/gltf/gltf_meshes.h"
 #include "core/scene/gltf/gltf_skins.h"
@@ -14,6 +16,46 @@ namespace tessera {
 namespace {
 
 constexpr size_t kMaxNodeDepth = 256;
+constexpr size_t kMaxInstancedTriangles = 50'000'000;
+constexpr size_t kMaxInstances = 1 << 20;
+
+// A node's EXT_mesh_gpu_instancing transforms (TRANSLATION, ROTATION, SCALE accessors of
+// one count), each applied before the node's world transform; one identity without it.
+std::vector<Mat4> gltf_instances(const GltfContext& ctx, const tinygltf::Node& n, const std::string& el) {
+  auto ext = n.extensions.find("EXT_mesh_gpu_instancing");
+  if (ext == n.extensions.end()) return {Mat4()};
+  const std::string xel = el + " EXT_mesh_gpu_instancing";
+  if (!ext->second.IsObject() || !ext->second.Has("attributes") || !ext->second.Get("attributes").IsObject())
+    ctx.fail(xel, "has no instances (no TRANSLATION, ROTATION or SCALE attributes)");
+  const tinygltf::Value& attrs = ext->second.Get("attributes");
+  std::vector<float> t, r, s;
+  size_t count = 0;
+  auto read = [&](const char* name, int comps, std::vector<float>& out) {
+    if (!attrs.Has(name)) return;
+    if (!attrs.Get(name).IsInt()) ctx.fail(xel, std::string(name) + " is not an accessor index");
+    out = read_accessor_floats(ctx, attrs.Get(name).GetNumberAsInt(), comps, xel + " " + name);
+    const size_t c = out.size() / size_t(comps);
+    if (count && c != count)
+      ctx.fail(xel,
+               std::string(name) + " has " + std::to_string(c) + " instances, the others " + std::to_string(count));
+    count = c;
+  };
+  read("TRANSLATION", 3, t);
+  read("ROTATION", 4, r);
+  read("SCALE", 3, s);
+  if (count == 0) ctx.fail(xel, "has no instances (no TRANSLATION, ROTATION or SCALE attributes)");
+  if (count > kMaxInstances) ctx.fail(xel, std::to_string(count) + " instances is over the 1 M limit");
+  std::vector<Mat4> out(count);
+  for (size_t i = 0; i < count; ++i) {
+    std::array<double, 3> ti{0, 0, 0}, si{1, 1, 1};
+    std::array<double, 4> ri{0, 0, 0, 1};
+    if (!t.empty()) ti = {t[3 * i], t[3 * i + 1], t[3 * i + 2]};
+    if (!r.empty()) ri = {r[4 * i], r[4 * i + 1], r[4 * i + 2], r[4 * i + 3]};
+    if (!s.empty()) si = {s[3 * i], s[3 * i + 1], s[3 * i + 2]};
+    out[i] = trs_matrix(ti, ri, si);
+  }
+  return out;
+}
 
 // The nodes the walk starts from.
 std::vector<int> scene_roots(const GltfContext& ctx) {
@@ -64,9 +106,26 @@ class NodeWalk {
       entry = animation_.add_node(e);
     }
     path_.push_back(index);
-    if (n.mesh >= 0)
-      for (GltfPrimitive& p : read_gltf_mesh(ctx_, materials_, n, world, el, animation_.recording())) {
+    const std::vector<Mat4> instances = n.mesh >= 0 ? gltf_instances(ctx_, n, el) : std::vector<Mat4>();
+    for (const Mat4& inst : instances)
+      for (GltfPrimitive& p : read_gltf_mesh(ctx_, materials_, n, world * inst, el, animation_.recording())) {
         const uint32_t id = uint32_t(ctx_.scene.meshes.size());
+        if (instances.size() > 1) {
+          instanced_triangles_ += p.mesh.triangle_count();
+          if (instanced_triangles_ > kMaxInstancedTriangles)
+            ctx_.fail(el, "EXT_mesh_gpu_instancing: " + std::to_string(instances.size()) +
+                              " instances make more than the 50 M triangle limit (instances are copied)");
+          // An animated node moves its instances as one: their object space includes the instance's own transform.
+          for (size_t i = 0; i + 2 < p.positions.size(); i += 3) {
+            const Dvec3 q = inst.point(p.positions[i], p.positions[i + 1], p.positions[i + 2]);
+            p.positions[i] = float(q.x), p.positions[i + 1] = float(q.y), p.positions[i + 2] = float(q.z);
+          }
+          const Mat4 nt = inst.normal_matrix();
+          for (size_t i = 0; i + 2 < p.normals.size(); i += 3) {
+            const Dvec3 q = nt.vector(p.normals[i], p.normals[i + 1], p.normals[i + 2]);
+            p.normals[i] = float(q.x), p.normals[i + 1] = float(q.y), p.normals[i + 2] = float(q.z);
+          }
+        }
         if (animation_.recording()) animation_.add_mesh(id, entry, p);
         if (p.skin) {
           if (p.mirrored)  // the node's transform does not apply to a skinned mesh: the file's winding
@@ -94,6 +153,7 @@ class NodeWalk {
   GltfMaterials& materials_;
   GltfAnimationBuilder& animation_;
   std::vector<int> path_;  // the nodes from the root to the one visited: a cycle returns to one of them
+  size_t instanced_triangles_ = 0;
 
  public:
   // Skinned primitives, placed once the walk is over (their joints can come anywhere).

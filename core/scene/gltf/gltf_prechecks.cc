@@ -70,8 +70,13 @@ bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<
   if (j.contains("extensionsRequired") && j["extensionsRequired"].is_array())
     for (const auto& e : j["extensionsRequired"])
       if (e.is_string() && !gltf_extension_supported(e.get<std::string>()))
-        throw SceneError(path, "extensionsRequired",
-                         "required extension '" + e.get<std::string>() + "' is not supported");
+        throw SceneError(
+            path, "extensionsRequired",
+            "required extension '" + e.get<std::string>() + "' is not supported" +
+                (e == "KHR_texture_basisu" ? " (KTX2 / Basis Universal textures cannot be decoded here, and a "
+                                             "file that requires them has no PNG or JPEG fallback; export "
+                                             "with PNG or JPEG textures)"
+                                           : ""));
   if (j.contains("buffers") && j["buffers"].is_array())
     for (size_t i = 0; i < j["buffers"].size(); ++i) {
       const auto& b = j["buffers"][i];
