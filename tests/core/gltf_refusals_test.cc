@@ -9,9 +9,9 @@ namespace {
 
 TEST_F(Gltf, RequiredUnsupportedExtensionIsRefusedByName) {
   Doc d;
-  d.j["extensionsUsed"] = {"KHR_draco_mesh_compression"};
-  d.j["extensionsRequired"] = {"KHR_draco_mesh_compression"};
-  expect_error(d, "required extension 'KHR_draco_mesh_compression' is not supported");
+  d.j["extensionsUsed"] = {"KHR_materials_pbrSpecularGlossiness"};
+  d.j["extensionsRequired"] = {"KHR_materials_pbrSpecularGlossiness"};
+  expect_error(d, "required extension 'KHR_materials_pbrSpecularGlossiness' is not supported");
 }
 
 // COLOR_0 and TEXCOORD_1 (issue 29) are checked as every attribute is: a count that is not

@@ -21,7 +21,9 @@ inline bool gltf_extension_supported(const std::string& name) {
       // normalization the core allows for any attribute (gltf_accessors.cc).
       "KHR_mesh_quantization",
       // Instances are copied into the scene (gltf_nodes.cc): memory grows with their count.
-      "EXT_mesh_gpu_instancing"};
+      "EXT_mesh_gpu_instancing",
+      // Decoded after parsing (gltf_compression.cc) with libmeshoptimizer and libdraco.
+      "EXT_meshopt_compression", "KHR_draco_mesh_compression"};
   return kSupported.count(name) > 0;
 }
 

@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "core/scene/gltf/gltf_animation.h"
+#include "core/scene/gltf/gltf_compression.h"
 #include "core/scene/gltf/gltf_context.h"
 #include "core/scene/gltf/gltf_document.h"
 #include "core/scene/gltf/gltf_lights_cameras.h"
@@ -16,6 +17,7 @@ namespace tessera {
 Scene load_gltf_file(const std::string& path) {
   GltfContext ctx(path);
   parse_gltf_model(read_gltf_document(path), ctx);
+  decode_gltf_compression(ctx);
   GltfMaterials materials(ctx);
   GltfAnimationBuilder animation(!ctx.model.animations.empty());
   add_gltf_nodes(ctx, materials, animation);

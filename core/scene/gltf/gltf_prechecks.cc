@@ -91,6 +91,40 @@ bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<
       }
     }
   bool changed = false;
+  // EXT_meshopt_compression's fallback buffers have no data (the views that point into them
+  // are decoded from compressed ones): one byte stands in, so the parser has nothing to load.
+  if (j.contains("buffers") && j["buffers"].is_array())
+    for (auto& b : j["buffers"]) {
+      const bool fallback = b.contains("extensions") && b["extensions"].is_object() &&
+                            b["extensions"].contains("EXT_meshopt_compression") &&
+                            b["extensions"]["EXT_meshopt_compression"].is_object() &&
+                            b["extensions"]["EXT_meshopt_compression"].value("fallback", false) == true;
+      if (fallback && !b.contains("uri")) {
+        b["uri"] = "data:application/octet-stream;base64,AA==";
+        b["byteLength"] = 1;
+        changed = true;
+      }
+    }
+  // A Draco primitive's accessors have no bufferView (their data is in the compressed
+  // stream), which Debian's tinygltf 2.7 refuses for indices: the stream's view stands in
+  // until gltf_compression.cc puts the decoded indices there.
+  if (j.contains("meshes") && j["meshes"].is_array() && j.contains("accessors") && j["accessors"].is_array())
+    for (auto& mesh : j["meshes"]) {
+      if (!mesh.is_object() || !mesh.contains("primitives") || !mesh["primitives"].is_array()) continue;
+      for (auto& p : mesh["primitives"]) {
+        if (!p.is_object() || !p.contains("extensions") || !p["extensions"].is_object()) continue;
+        const auto& ext = p["extensions"];
+        if (!ext.contains("KHR_draco_mesh_compression") || !ext["KHR_draco_mesh_compression"].is_object()) continue;
+        const auto& view = ext["KHR_draco_mesh_compression"].value("bufferView", nlohmann::json());
+        if (!view.is_number_unsigned() || !p.contains("indices") || !p["indices"].is_number_unsigned()) continue;
+        const size_t idx = p["indices"].get<size_t>();
+        if (idx < j["accessors"].size() && j["accessors"][idx].is_object() &&
+            !j["accessors"][idx].contains("bufferView")) {
+          j["accessors"][idx]["bufferView"] = view;
+          changed = true;
+        }
+      }
+    }
   if (j.contains("accessors") && j["accessors"].is_array()) {
     const std::set<int64_t> used = used_accessors(j);
     for (size_t i = 0; i < j["accessors"].size(); ++i) {
