@@ -12,6 +12,8 @@
 #include "client/progress.h"
 #include "core/io/files.h"
 #include "core/render/frames.h"
+#include "core/render/lighting.h"
+#include "core/scene/load.h"
 #include "rpc.h"
 #include "scene_bundle.h"
 #include "scene_chunks.h"
@@ -393,6 +395,9 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
   if (r.wait) check_outputs(outputs);
   SceneSource scene;
   try {
+    // Loaded here too, as tessera render loads it: a bad scene is refused before its upload,
+    // and the user sees its warnings and lighting as a local render shows them.
+    print_scene_notes(load_scene(r.flags.scene), settings, c.err);
     auto files = scene_bundle_files(r.flags.scene);
     if (!settings.environment_map.empty()) {
       // The environment map travels in the bundle, named apart from the scene's own files;

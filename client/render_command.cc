@@ -95,12 +95,7 @@ int run_render(const RenderArgs& a) {
   std::vector<std::string> outputs = output_paths(a.flags);
   const std::vector<int> frames = sequence_frames(a.flags);
   const Scene scene = load_scene(a.flags.scene);
-  // An unlit scene's warning (its first) says what the default environment does: moot
-  // when the user gave an environment.
-  const bool lit_by_flags = s.environment || !s.environment_map.empty();
-  for (size_t i = scene.unlit && lit_by_flags ? 1 : 0; i < scene.warnings.size(); ++i)
-    std::fprintf(stderr, "tessera: warning: %s\n", scene.warnings[i].c_str());
-  std::fprintf(stderr, "tessera: lighting: %s\n", describe_lighting(scene, s).c_str());
+  print_scene_notes(scene, s, stderr);
   TileRenderer renderer(scene, s);
   if (frames.empty()) return render_frame(a, renderer, s, outputs);
   for (const int frame : frames) {  // one scene and one acceleration structure for them all

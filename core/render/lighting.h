@@ -4,6 +4,7 @@
 // unlit glTF scene). Mirrors TileRenderer::set_up_frame's choice.
 #pragma once
 
+#include <cstdio>
 #include <string>
 
 #include "core/render/settings.h"
@@ -12,5 +13,10 @@
 namespace tessera {
 
 std::string describe_lighting(const Scene& scene, const RenderSettings& s);
+
+// What a user sees before a render starts, locally or through the farm: the scene's
+// warnings ("tessera: warning: ...", the unlit one left out when the settings give an
+// environment) and the lighting line ("tessera: lighting: ...").
+void print_scene_notes(const Scene& scene, const RenderSettings& s, std::FILE* to);
 
 }  // namespace tessera

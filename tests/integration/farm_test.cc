@@ -135,6 +135,9 @@ TEST_F(Farm, ASkinnedAndMorphedSequenceThroughTheFarmGivesTesseraRendersFrames) 
   start_worker();
   const CommandResult r = submit_wait(scene, flags, (dir / "farm.####.exr").string());
   ASSERT_EQ(r.code, 0) << r.err << r.out;
+  // The client says what a local render says before it starts: the scene's warnings and lighting.
+  EXPECT_NE(r.err.find("tessera: lighting: the default environment (uniform radiance 1)"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("tessera: warning: "), std::string::npos) << r.err;
   for (const char* n : {"0012", "0040"})
     expect_same_pixels((dir / ("local." + std::string(n) + ".exr")).string(),
                        (dir / ("farm." + std::string(n) + ".exr")).string());
