@@ -313,7 +313,11 @@ TEST_F(Gltf, Ktx2TexturesUseTheirFallbackOrAreRefusedClearly) {
   for (const std::string& w : s.warnings) warned |= w.find("PNG or JPEG fallback is used") != std::string::npos;
   EXPECT_TRUE(warned);
   d.j["textures"][0].erase("source");
-  expect_error(d, "textures[0]: has only a KTX2 image (KHR_texture_basisu)");
+  expect_error(d, "textures[0]: has only a KTX2 / Basis Universal image (KHR_texture_basisu)");
+  // WebP likewise.
+  d.j["textures"][0]["extensions"] = {{"EXT_texture_webp", {{"source", 1}}}};
+  expect_error(d, "textures[0]: has only a WebP image (EXT_texture_webp)");
+  d.j["textures"][0]["extensions"] = {{"KHR_texture_basisu", {{"source", 1}}}};
   d.j["extensionsRequired"] = {"KHR_texture_basisu"};
   expect_error(d, "KTX2 / Basis Universal textures cannot be decoded here");
 }

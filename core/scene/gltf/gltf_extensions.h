@@ -10,6 +10,7 @@
 
 #include <set>
 #include <string>
+#include <utility>
 
 namespace tessera {
 
@@ -26,5 +27,11 @@ inline bool gltf_extension_supported(const std::string& name) {
       "EXT_meshopt_compression", "KHR_draco_mesh_compression"};
   return kSupported.count(name) > 0;
 }
+
+// Texture extensions that name an image in a format we cannot decode (no Debian library
+// here): each texture's PNG or JPEG fallback `source` is used, with a warning; a texture
+// without one, or a file requiring the extension, is refused saying so.
+inline constexpr std::pair<const char*, const char*> kGltfImageFormatExtensions[] = {
+    {"KHR_texture_basisu", "KTX2 / Basis Universal"}, {"EXT_texture_webp", "WebP"}, {"EXT_texture_avif", "AVIF"}};
 
 }  // namespace tessera

@@ -63,6 +63,16 @@ std::set<int64_t> used_accessors(const nlohmann::json& j) {
   return used;
 }
 
+// Why a required image-format extension is refused, in words.
+std::string image_format_note(const std::string& ext) {
+  for (const auto& [name, format] : kGltfImageFormatExtensions)
+    if (ext == name)
+      return std::string(" (") + format +
+             " textures cannot be decoded here, and a file that requires them has no PNG or JPEG fallback; export "
+             "with PNG or JPEG textures)";
+  return "";
+}
+
 }  // namespace
 
 bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<std::string>& warnings) {
@@ -70,13 +80,9 @@ bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<
   if (j.contains("extensionsRequired") && j["extensionsRequired"].is_array())
     for (const auto& e : j["extensionsRequired"])
       if (e.is_string() && !gltf_extension_supported(e.get<std::string>()))
-        throw SceneError(
-            path, "extensionsRequired",
-            "required extension '" + e.get<std::string>() + "' is not supported" +
-                (e == "KHR_texture_basisu" ? " (KTX2 / Basis Universal textures cannot be decoded here, and a "
-                                             "file that requires them has no PNG or JPEG fallback; export "
-                                             "with PNG or JPEG textures)"
-                                           : ""));
+        throw SceneError(path, "extensionsRequired",
+                         "required extension '" + e.get<std::string>() + "' is not supported" +
+                             image_format_note(e.get<std::string>()));
   if (j.contains("buffers") && j["buffers"].is_array())
     for (size_t i = 0; i < j["buffers"].size(); ++i) {
       const auto& b = j["buffers"][i];

@@ -7,6 +7,8 @@
 #include <cstdint>
 #include <utility>
 
+#include "core/scene/gltf/gltf_extensions.h"
+
 namespace tessera {
 namespace {
 
@@ -74,10 +76,10 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
   if (auto it = loaded_.find(key); it != loaded_.end()) return it->second;
   const tinygltf::Texture& t = model.textures[size_t(index)];
   const std::string tel = "textures[" + std::to_string(index) + "]";
-  if (t.source < 0 && t.extensions.count("KHR_texture_basisu"))
-    ctx_.fail(tel,
-              "has only a KTX2 image (KHR_texture_basisu), which cannot be decoded here, and no PNG or JPEG "
-              "fallback `source`");
+  for (const auto& [ext, format] : kGltfImageFormatExtensions)
+    if (t.source < 0 && t.extensions.count(ext))
+      ctx_.fail(tel, std::string("has only a ") + format + " image (" + ext +
+                         "), which cannot be decoded here, and no PNG or JPEG fallback `source`");
   if (t.source < 0 || size_t(t.source) >= model.images.size())
     ctx_.fail(tel, "image " + std::to_string(t.source) + " does not exist");
   const tinygltf::Image& img = decode_image(t.source);
