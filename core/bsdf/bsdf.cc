@@ -79,6 +79,26 @@ bool pbr_smooth(const Material& m) { return m.alpha < Material::kSmoothAlpha; }
 // sees the inverse index (total internal reflection); a thin wall has air on both sides.
 float glass_fresnel(const Material& m, float c) { return fresnel_dielectric(m.thin ? std::fabs(c) : c, m.ior); }
 
+// The dielectric interface's reflectance `reflect` (per channel) and the weight `keep` of
+// what lies under it (diffuse, transmission), from the exact Fresnel reflectance `f` at
+// that angle; `lum` is the reflectance for lobe selection. Without KHR_materials_specular
+// exactly Rgb(f), 1 - f, f. With it, as the extension's fresnel_mix: F0 = min(F0(ior) x
+// specular_color, 1), the curve from it to 1 shaped as the exact one, the layer scaled by
+// `specular` and the base kept at 1 - specular x max(F).
+struct DielectricF {
+  Rgb reflect;
+  float keep, lum;
+};
+DielectricF dielectric_f(const Material& m, float f) {
+  if (!m.specular_ext) return {Rgb(f), 1 - f, f};
+  const float r = (m.ior - 1) / (m.ior + 1), f0 = r * r;
+  const float shape = f0 < 1 ? std::clamp((f - f0) / (1 - f0), 0.0f, 1.0f) : 1.0f;
+  const Rgb tinted = m.specular_color * f0;
+  const Rgb c0(std::min(tinted.r, 1.0f), std::min(tinted.g, 1.0f), std::min(tinted.b, 1.0f));
+  const Rgb fr = (c0 + (Rgb(1.0f) - c0) * shape) * m.specular;
+  return {fr, 1 - fr.max(), fr.luminance()};
+}
+
 // Lobe probabilities for wo: specular reflection, diffuse, transmission (sum 1).
 struct PbrLobes {
   float spec = 0, diffuse = 0, trans = 0;
@@ -86,18 +106,18 @@ struct PbrLobes {
 PbrLobes pbr_lobes(const Material& m, Vec3 wo) {
   const PbrWeights w = pbr_weights(m);
   const float c = std::fabs(wo.z);
-  const float fc = fresnel_dielectric(c, m.ior), fg = glass_fresnel(m, wo.z);
+  const DielectricF fc = dielectric_f(m, fresnel_dielectric(c, m.ior)), fg = dielectric_f(m, glass_fresnel(m, wo.z));
   const float base = m.reflectance.luminance();
   PbrLobes p;
-  p.spec = w.metal * schlick(m.reflectance, c).luminance() + w.coat * fc + w.glass * fg;
-  p.trans = w.glass > 0 ? w.glass * (1 - fg) * base : 0;
+  p.spec = w.metal * schlick(m.reflectance, c).luminance() + w.coat * fc.lum + w.glass * fg.lum;
+  p.trans = w.glass > 0 ? w.glass * fg.keep * base : 0;
   // Floors keep every rough lobe that can be non-zero samplable (an unbiased mixture needs
   // it). A smooth lobe's albedo is exact, so a delta lobe of albedo 0 is never chosen.
   if (!pbr_smooth(m)) {
     p.spec = std::max(p.spec, 0.05f);
     if (w.glass > 0 && base > 0) p.trans = std::max(p.trans, 0.02f);
   }
-  if (w.coat > 0 && base > 0) p.diffuse = std::max(w.coat * (1 - fc) * base, 0.02f);
+  if (w.coat > 0 && base > 0) p.diffuse = std::max(w.coat * fc.keep * base, 0.02f);
   const float sum = p.spec + p.diffuse + p.trans;
   if (!(sum > 0)) return PbrLobes{};
   p.spec /= sum;
@@ -117,14 +137,14 @@ Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
     Vec3 h;
     if (!reflection_half(wo, wi, &h)) return Rgb(0);
     const float oh = dot(wo, h);  // negative inside
-    const float fc = fresnel_dielectric(std::fabs(oh), m.ior);
+    const DielectricF fc = dielectric_f(m, fresnel_dielectric(std::fabs(oh), m.ior));
     Rgb f(0.0f);
-    if (w.coat > 0) f += m.reflectance * (w.coat * (1 - fc) * kInvPi);
+    if (w.coat > 0) f += m.reflectance * (w.coat * fc.keep * kInvPi);
     if (smooth) return f;
     const float spec = g.d(h) * g.g2(wo, wi) / (4 * std::fabs(co * ci));
     if (w.metal > 0) f += schlick(m.reflectance, std::fabs(oh)) * (w.metal * spec);
-    const float fd = w.coat * fc + w.glass * glass_fresnel(m, oh);
-    return f + Rgb(fd * spec);
+    if (!m.specular_ext) return f + Rgb((w.coat * fc.lum + w.glass * glass_fresnel(m, oh)) * spec);
+    return f + (fc.reflect * w.coat + dielectric_f(m, glass_fresnel(m, oh)).reflect * w.glass) * spec;
   }
   if (w.glass <= 0 || smooth) return Rgb(0);
   if (m.thin) {  // the reflection lobe mirrored through the surface
@@ -132,14 +152,14 @@ Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
     Vec3 h;
     if (!reflection_half(wo, wr, &h)) return Rgb(0);
     const float spec = g.d(h) * g.g2(wo, wr) / (4 * std::fabs(co * ci));
-    return m.reflectance * (w.glass * (1 - glass_fresnel(m, dot(wo, h))) * spec);
+    return m.reflectance * (w.glass * dielectric_f(m, glass_fresnel(m, dot(wo, h))).keep * spec);
   }
   Vec3 h;
   float etap;
   if (!refraction_half(m, wo, wi, &h, &etap)) return Rgb(0);
   const float oh = dot(wo, h), ih = dot(wi, h);
   const float denom = (ih + oh / etap) * (ih + oh / etap) * ci * co;
-  const float ft = g.d(h) * (1 - glass_fresnel(m, oh)) * g.g2(wo, wi) * std::fabs(ih * oh / denom);
+  const float ft = g.d(h) * dielectric_f(m, glass_fresnel(m, oh)).keep * g.g2(wo, wi) * std::fabs(ih * oh / denom);
   return m.reflectance * (w.glass * ft / (etap * etap));  // radiance scaled by 1/eta^2, as glass
 }
 
@@ -190,11 +210,13 @@ bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) 
     const float c = std::fabs(co);
     if (u1 < p.diffuse + p.spec) {
       out->wi = reflect_z(wo);
-      const float fd = w.coat * fresnel_dielectric(c, m.ior) + w.glass * glass_fresnel(m, co);
-      out->weight = (schlick(m.reflectance, c) * w.metal + Rgb(fd)) / p.spec;
+      const Rgb fd = m.specular_ext ? dielectric_f(m, fresnel_dielectric(c, m.ior)).reflect * w.coat +
+                                          dielectric_f(m, glass_fresnel(m, co)).reflect * w.glass
+                                    : Rgb(w.coat * fresnel_dielectric(c, m.ior) + w.glass * glass_fresnel(m, co));
+      out->weight = (schlick(m.reflectance, c) * w.metal + fd) / p.spec;
       return true;
     }
-    const float t = w.glass * (1 - glass_fresnel(m, co)) / p.trans;
+    const float t = w.glass * dielectric_f(m, glass_fresnel(m, co)).keep / p.trans;
     if (m.thin) {
       out->wi = -wo;
       out->weight = m.reflectance * t;

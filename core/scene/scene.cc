@@ -221,6 +221,11 @@ Material Scene::textured(const Material& m, Vec2 uv, Vec2 uv1) const {
     out.metallic = std::clamp(m.metallic * mr.b, 0.0f, 1.0f);
   }
   if (m.emissive_texture.active()) out.radiance *= at(m.emissive_texture);
+  if (m.specular_texture.active()) {
+    const TextureRef& t = m.specular_texture;
+    out.specular *= textures[size_t(t.index)].sample_alpha(t.map(t.set ? uv1 : uv));
+  }
+  if (m.specular_color_texture.active()) out.specular_color *= at(m.specular_color_texture);
   return out;
 }
 

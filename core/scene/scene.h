@@ -58,6 +58,14 @@ struct Material {
   TextureRef normal_texture;       // tangent-space normal map (linear)
   float normal_scale = 1;
   TextureRef emissive_texture;  // multiplies `radiance` (sRGB-decoded)
+  // KHR_materials_specular: the dielectric's Fresnel reflectance F0 tinted by
+  // `specular_color` (x its texture, sRGB), the whole layer scaled by `specular` (x its
+  // texture's alpha); the diffuse and transmission under it keep 1 - specular x max(F).
+  // Off (`specular_ext` false) the BSDF takes its exact-Fresnel path unchanged.
+  bool specular_ext = false;
+  float specular = 1;
+  Rgb specular_color{1.0f};
+  TextureRef specular_texture, specular_color_texture;
   // glTF alphaMode: how much of the surface is there, from the coverage `opacity` x the base
   // colour texture's alpha x COLOR_0's alpha (Scene::opacity_at). OPAQUE ignores it; MASK
   // keeps the surface where it reaches `alpha_cutoff`, BLEND where a uniform number per ray
@@ -84,7 +92,8 @@ struct Material {
     return kind == Kind::kGlass || kind == Kind::kRefraction || (kind == Kind::kPbr && transmission > 0);
   }
   bool has_textures() const {
-    return texture.active() || metal_rough_texture.active() || normal_texture.active() || emissive_texture.active();
+    return texture.active() || metal_rough_texture.active() || normal_texture.active() || emissive_texture.active() ||
+           specular_texture.active() || specular_color_texture.active();
   }
 };
 

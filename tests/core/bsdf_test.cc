@@ -242,6 +242,9 @@ struct PbrCase {
   float theta;  // of wo; > pi/2 is inside the object
   Rgb base{0.9f, 0.6f, 0.3f};
   float ior = 1.5f;
+  // KHR_materials_specular, when `specular` >= 0.
+  float specular = -1;
+  Rgb specular_color{1.0f};
 };
 void PrintTo(const PbrCase& c, std::ostream* os) { *os << c.name; }
 
@@ -255,6 +258,11 @@ Material pbr(const PbrCase& c) {
   m.transmission = c.transmission;
   m.thin = c.thin;
   m.ior = c.ior;
+  if (c.specular >= 0) {
+    m.specular_ext = true;
+    m.specular = c.specular;
+    m.specular_color = c.specular_color;
+  }
   return m;
 }
 
@@ -307,15 +315,28 @@ TEST_P(PbrTest, AlbedoBySamplingEqualsQuadratureAndNeverExceedsOne) {
 
 INSTANTIATE_TEST_SUITE_P(
     Materials, PbrTest,
-    ::testing::Values(PbrCase{"plastic", 0, 0.5f, 0, true, 0.6f},
-                      PbrCase{"rough_plastic_grazing", 0, 0.9f, 0, true, 1.4f},
-                      PbrCase{"metal", 1, 0.3f, 0, true, 1.2f}, PbrCase{"half_metal", 0.5f, 0.7f, 0, true, 0.3f},
-                      PbrCase{"rough_glass_outside", 0, 0.3f, 1, false, 0.5f},
-                      PbrCase{"rough_glass_inside", 0, 0.3f, 1, false, float(M_PI) - 0.3f},
-                      PbrCase{"rough_glass_inside_beyond_critical", 0, 0.4f, 1, false, float(M_PI) - 1.0f},
-                      PbrCase{"thin_rough_transmission", 0, 0.4f, 1, true, 0.7f},
-                      PbrCase{"thin_from_behind", 0, 0.5f, 0.6f, true, float(M_PI) - 0.4f},
-                      PbrCase{"everything_mixed", 0.2f, 0.6f, 0.5f, false, 1.3f}),
+    ::testing::Values(
+        PbrCase{"plastic", 0, 0.5f, 0, true, 0.6f}, PbrCase{"rough_plastic_grazing", 0, 0.9f, 0, true, 1.4f},
+        PbrCase{"metal", 1, 0.3f, 0, true, 1.2f}, PbrCase{"half_metal", 0.5f, 0.7f, 0, true, 0.3f},
+        PbrCase{"rough_glass_outside", 0, 0.3f, 1, false, 0.5f},
+        PbrCase{"rough_glass_inside", 0, 0.3f, 1, false, float(M_PI) - 0.3f},
+        PbrCase{"rough_glass_inside_beyond_critical", 0, 0.4f, 1, false, float(M_PI) - 1.0f},
+        PbrCase{"thin_rough_transmission", 0, 0.4f, 1, true, 0.7f},
+        PbrCase{"thin_from_behind", 0, 0.5f, 0.6f, true, float(M_PI) - 0.4f},
+        PbrCase{"everything_mixed", 0.2f, 0.6f, 0.5f, false, 1.3f},
+        PbrCase{"specular_tinted_plastic", 0, 0.5f, 0, true, 0.6f, {0.9f, 0.6f, 0.3f}, 1.5f, 0.6f, {1.0f, 0.5f, 0.2f}},
+        PbrCase{
+            "specular_bright_rough_glass", 0, 0.3f, 1, false, 0.5f, {0.9f, 0.6f, 0.3f}, 1.5f, 0.5f, {8.0f, 4.0f, 1.0f}},
+        PbrCase{"specular_thin_inside",
+                0,
+                0.4f,
+                0.6f,
+                true,
+                float(M_PI) - 0.4f,
+                {0.9f, 0.6f, 0.3f},
+                1.5f,
+                0.8f,
+                {1.0f, 1.0f, 3.0f}}),
     [](const ::testing::TestParamInfo<PbrCase>& info) { return std::string(info.param.name); });
 
 TEST(Pbr, IndexOneMakesTheDielectricExactlyLambertian) {
@@ -326,6 +347,27 @@ TEST(Pbr, IndexOneMakesTheDielectricExactlyLambertian) {
     const Rgb f = bsdf_eval(m, dir(0.7f), Vec3{std::sin(t) * 0.6f, std::sin(t) * 0.8f, std::cos(t)});
     EXPECT_NEAR(f.r, 0.9f / M_PI, 1e-6);
     EXPECT_NEAR(f.b, 0.3f / M_PI, 1e-6);
+  }
+}
+
+// KHR_materials_specular: factor 0 leaves a dielectric's diffuse alone (exactly Lambertian
+// at any ior); factor 1 with a white colour is the plain model (same f).
+TEST(Pbr, SpecularFactorScalesTheDielectricLayer) {
+  PbrCase c{"no_specular", 0, 0.5f, 0, true, 0.7f};
+  c.specular = 0;
+  const Material m = pbr(c);
+  c.specular = 1;
+  const Material full = pbr(c);
+  c.specular = -1;
+  const Material plain = pbr(c);
+  for (float t : {0.1f, 0.8f, 1.4f}) {
+    const Vec3 wi{std::sin(t) * 0.6f, std::sin(t) * 0.8f, std::cos(t)};
+    const Rgb f = bsdf_eval(m, dir(0.7f), wi);
+    EXPECT_NEAR(f.r, 0.9f / M_PI, 1e-6);
+    EXPECT_NEAR(f.b, 0.3f / M_PI, 1e-6);
+    const Rgb a = bsdf_eval(full, dir(0.7f), wi), b = bsdf_eval(plain, dir(0.7f), wi);
+    EXPECT_NEAR(a.r, b.r, 1e-6 * b.r + 1e-7);
+    EXPECT_NEAR(a.g, b.g, 1e-6 * b.g + 1e-7);
   }
 }
 

@@ -297,6 +297,31 @@ TEST_F(Gltf, AlphaModesAndCoverageAreRead) {
   expect_error(d, "baseColorFactor alpha 1.5");
 }
 
+// Issue 29: KHR_materials_specular's factor, colour (above 1 allowed) and textures (the
+// factor from specularTexture's alpha) are read; out of range refused by name.
+TEST_F(Gltf, SpecularExtensionIsRead) {
+  Doc d;
+  d.j["images"] = {{{"uri",
+                     "data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAIAAAABCAYAAAD0In+"
+                     "KAAAAEElEQVR4nGP4//8/AxD/BwAe6gb6OStlagAAAABJRU5ErkJggg=="}}};
+  d.j["textures"] = {{{"source", 0}}};
+  d.j["materials"][0]["extensions"]["KHR_materials_specular"] = {
+      {"specularFactor", 0.5}, {"specularColorFactor", {2, 1, 0.5}}, {"specularTexture", {{"index", 0}}}};
+  d.j["extensionsUsed"] = {"KHR_materials_specular"};
+  Scene s = load(d);
+  const Material& m = s.materials[s.meshes[0].material];
+  EXPECT_TRUE(m.specular_ext);
+  EXPECT_FLOAT_EQ(m.specular, 0.5f);
+  EXPECT_FLOAT_EQ(m.specular_color.r, 2);
+  ASSERT_TRUE(m.specular_texture.active());
+  // The texture's alpha (0 at u = 0.25, 1 at 0.75, clamped by the default repeat between)
+  // scales the factor.
+  EXPECT_NEAR(s.textured(m, {0.25f, 0.5f}).specular, 0, 1e-6);
+  EXPECT_NEAR(s.textured(m, {0.75f, 0.5f}).specular, 0.5f, 1e-6);
+  d.j["materials"][0]["extensions"]["KHR_materials_specular"]["specularFactor"] = 1.5;
+  expect_error(d, "KHR_materials_specular.specularFactor 1.500000 is outside [0, 1]");
+}
+
 // Issue 29: KTX2 textures (KHR_texture_basisu) have no decoder here: a texture's PNG or
 // JPEG fallback is used with a warning; one without a fallback, or a file that requires
 // the extension, is refused saying so.

@@ -80,6 +80,39 @@ void read_alpha(const GltfContext& ctx, const tinygltf::Material& g, const std::
 
 }  // namespace
 
+// A texture reference inside a material extension (its index, texCoord, transform).
+TextureRef GltfMaterials::ext_texture(const tinygltf::ExtensionMap& ex, const char* ext, const char* key, bool srgb,
+                                      const std::string& el) {
+  const tinygltf::Value* v = ext_value(ex, ext, key);
+  if (!v) return TextureRef();
+  if (!v->IsObject() || !v->Has("index") || !v->Get("index").IsInt())
+    ctx_.fail(el, std::string(ext) + "." + key + " has no texture index");
+  const int tex_coord = v->Has("texCoord") && v->Get("texCoord").IsInt() ? v->Get("texCoord").GetNumberAsInt() : 0;
+  tinygltf::ExtensionMap exts;
+  if (v->Has("extensions") && v->Get("extensions").IsObject())
+    for (const std::string& k : v->Get("extensions").Keys()) exts[k] = v->Get("extensions").Get(k);
+  return textures_.texture_ref(v->Get("index").GetNumberAsInt(), tex_coord, exts, srgb, el,
+                               std::string(ext) + "." + key);
+}
+
+// KHR_materials_specular (Material::specular_ext).
+void GltfMaterials::read_specular(const tinygltf::ExtensionMap& ex, const std::string& el, Material& m) {
+  if (!ex.count("KHR_materials_specular")) return;
+  m.specular_ext = true;
+  m.specular = float(unit_factor(ctx_, ext_number(ctx_, ex, "KHR_materials_specular", "specularFactor", 1, el), el,
+                                 "KHR_materials_specular.specularFactor"));
+  if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_specular", "specularColorFactor")) {
+    std::vector<double> f;
+    if (v->IsArray())
+      for (size_t i = 0; i < v->ArrayLen(); ++i)
+        f.push_back(v->Get(int(i)).IsNumber() ? v->Get(int(i)).GetNumberAsDouble() : NAN);
+    // Above 1 is allowed: it multiplies F0 (4% for ior 1.5), and F0 is clamped to 1.
+    m.specular_color = color_factor(ctx_, f, Rgb(1.0f), el, "KHR_materials_specular.specularColorFactor", 1e4);
+  }
+  m.specular_texture = ext_texture(ex, "KHR_materials_specular", "specularTexture", false, el);  // its alpha
+  m.specular_color_texture = ext_texture(ex, "KHR_materials_specular", "specularColorTexture", true, el);
+}
+
 uint32_t GltfMaterials::material(int index) {
   if (auto it = made_.find(index); it != made_.end()) return it->second;
   Material m;
@@ -114,6 +147,7 @@ uint32_t GltfMaterials::material(int index) {
       ctx_.fail(el, "KHR_materials_ior ior " + std::to_string(ior) + " out of range [1, 10)");
     m.ior = float(ior);
     read_volume(ctx_, ex, el, m);
+    read_specular(ex, el, m);
     m.texture = textures_.texture_ref(pbr.baseColorTexture.index, pbr.baseColorTexture.texCoord,
                                       pbr.baseColorTexture.extensions, true, el, "baseColorTexture");
     m.metal_rough_texture =

@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <map>
+#include <string>
 
 #include "core/scene/gltf/gltf_context.h"
 #include "core/scene/gltf/gltf_textures.h"
@@ -21,6 +22,10 @@ class GltfMaterials {
   uint32_t material(int index);
 
  private:
+  TextureRef ext_texture(const tinygltf::ExtensionMap& ex, const char* ext, const char* key, bool srgb,
+                         const std::string& el);
+  void read_specular(const tinygltf::ExtensionMap& ex, const std::string& el, Material& m);
+
   GltfContext& ctx_;
   GltfTextures textures_;
   std::map<int, uint32_t> made_;  // glTF material index -> scene material

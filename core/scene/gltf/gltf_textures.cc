@@ -91,10 +91,11 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
   for (size_t i = 0; i < tex.texels.size(); ++i)
     tex.texels[i] = Rgb(decode(img.image[4 * i]), decode(img.image[4 * i + 1]), decode(img.image[4 * i + 2]));
   // Alpha (always linear) is kept where some texel is not opaque: the base colour's
-  // coverage for alphaMode MASK and BLEND (Scene::opacity_at).
+  // coverage for alphaMode MASK and BLEND (Scene::opacity_at), KHR_materials_specular's
+  // specularTexture.
   bool translucent = false;
   for (size_t i = 0; i < tex.texels.size() && !translucent; ++i) translucent = img.image[4 * i + 3] != 255;
-  if (translucent && srgb) {
+  if (translucent) {
     tex.alpha.resize(tex.texels.size());
     for (size_t i = 0; i < tex.alpha.size(); ++i) tex.alpha[i] = img.image[4 * i + 3] / 255.0f;
   }
