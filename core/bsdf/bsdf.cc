@@ -243,6 +243,83 @@ bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) 
   return true;
 }
 
+// ---- KHR_materials_clearcoat over kPbr -------------------------------------------------
+// The extension's fresnel_coat: f = (1 - c Fc) f_base + c Fc f_coat, with Fc Schlick's
+// reflectance of an ior-1.5 coat (F0 = 0.04) at the viewing angle |wo.z| and f_coat a GGX
+// specular lobe of the coat's roughness without Fresnel; every lobe is two-sided as the
+// base's are. Sampling picks the coat with probability from c Fc (floored while the coat
+// is rough, so that every lobe that can be non-zero is samplable), else the base; the
+// density is the mixture's. A smooth coat is a delta lobe of albedo c Fc.
+
+constexpr float kCoatF0 = 0.04f;  // ((1.5 - 1) / (1.5 + 1))^2
+
+float coat_fresnel(const Material& m, Vec3 wo) {
+  const float x = 1 - std::min(std::fabs(wo.z), 1.0f), x5 = x * x * x * x * x;
+  return m.clearcoat * (kCoatF0 + (1 - kCoatF0) * x5);
+}
+bool coat_smooth(const Material& m) { return m.clearcoat_alpha < Material::kSmoothAlpha; }
+// Probability of sampling the coat.
+float coat_probability(const Material& m, Vec3 wo) {
+  const float p = coat_fresnel(m, wo);
+  return coat_smooth(m) ? p : std::clamp(p, 0.05f, 0.95f);
+}
+float coat_f(const Material& m, Vec3 wo, Vec3 wi) {
+  Vec3 h;
+  if (coat_smooth(m) || wo.z * wi.z <= 0 || !reflection_half(wo, wi, &h)) return 0;
+  const Ggx g(m.clearcoat_alpha);
+  return g.d(h) * g.g2(wo, wi) / (4 * std::fabs(wo.z * wi.z));
+}
+float coat_pdf(const Material& m, Vec3 wo, Vec3 wi) {
+  Vec3 h;
+  if (coat_smooth(m) || wo.z * wi.z <= 0 || !reflection_half(wo, wi, &h)) return 0;
+  const Vec3 wo_up = wo.z > 0 ? wo : -wo;
+  return Ggx(m.clearcoat_alpha).pdf_visible(wo_up, h) / (4 * std::fabs(dot(wo, h)));
+}
+
+Rgb coated_f(const Material& m, Vec3 wo, Vec3 wi) {
+  const Rgb base = pbr_f(m, wo, wi);
+  if (m.clearcoat <= 0) return base;
+  const float fc = coat_fresnel(m, wo);
+  return base * (1 - fc) + Rgb(fc * coat_f(m, wo, wi));
+}
+
+float coated_pdf(const Material& m, Vec3 wo, Vec3 wi) {
+  if (m.clearcoat <= 0) return pbr_pdf(m, wo, wi);
+  const float pc = coat_probability(m, wo);
+  return (1 - pc) * pbr_pdf(m, wo, wi) + pc * coat_pdf(m, wo, wi);
+}
+
+bool coated_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
+  if (m.clearcoat <= 0) return pbr_sample(m, wo, u1, u2, out);
+  if (wo.z == 0) return false;
+  const float pc = coat_probability(m, wo), fc = coat_fresnel(m, wo);
+  if (u1 < pc) {  // the coat
+    out->etap = 1;
+    if (coat_smooth(m)) {
+      out->wi = reflect_z(wo);
+      out->delta = true;
+      out->pdf = 1;
+      out->weight = Rgb(fc / pc);
+      return fc > 0;
+    }
+    const Vec3 wo_up = wo.z > 0 ? wo : -wo;
+    const Vec3 h = Ggx(m.clearcoat_alpha).sample_visible(wo_up, u2);
+    out->wi = h * (2 * dot(wo, h)) - wo;
+    if (out->wi.z * wo.z <= 0) return false;
+    out->delta = false;
+  } else {  // the base, its own choice of lobe from the rest of u1
+    if (!pbr_sample(m, wo, std::min((u1 - pc) / (1 - pc), 0x1.fffffep-1f), u2, out)) return false;
+    if (out->delta) {  // a delta lobe of the base: its weight, under the coat
+      out->weight = out->weight * ((1 - fc) / (1 - pc));
+      return true;
+    }
+  }
+  out->pdf = coated_pdf(m, wo, out->wi);
+  if (!(out->pdf > 0)) return false;
+  out->weight = coated_f(m, wo, out->wi) * (std::fabs(out->wi.z) / out->pdf);
+  return true;
+}
+
 }  // namespace
 
 Rgb bsdf_eval(const Material& m, Vec3 wo, Vec3 wi) {
@@ -252,7 +329,7 @@ Rgb bsdf_eval(const Material& m, Vec3 wo, Vec3 wi) {
     case Material::Kind::kMicrofacet:
       return microfacet_f(m, wo, wi);
     case Material::Kind::kPbr:
-      return pbr_f(m, wo, wi);
+      return coated_f(m, wo, wi);
     default:
       return Rgb(0);
   }
@@ -265,7 +342,7 @@ float bsdf_pdf(const Material& m, Vec3 wo, Vec3 wi) {
     case Material::Kind::kMicrofacet:
       return microfacet_pdf(m, wo, wi);
     case Material::Kind::kPbr:
-      return pbr_pdf(m, wo, wi);
+      return coated_pdf(m, wo, wi);
     default:
       return 0;
   }
@@ -330,7 +407,7 @@ bool bsdf_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out)
       return true;
     }
     case Material::Kind::kPbr:
-      return pbr_sample(m, wo, u1, u2, out);
+      return coated_sample(m, wo, u1, u2, out);
     case Material::Kind::kEmission:
       return false;
   }

@@ -226,6 +226,11 @@ Material Scene::textured(const Material& m, Vec2 uv, Vec2 uv1) const {
     out.specular *= textures[size_t(t.index)].sample_alpha(t.map(t.set ? uv1 : uv));
   }
   if (m.specular_color_texture.active()) out.specular_color *= at(m.specular_color_texture);
+  if (m.clearcoat_texture.active()) out.clearcoat = std::clamp(m.clearcoat * at(m.clearcoat_texture).r, 0.0f, 1.0f);
+  if (m.clearcoat_roughness_texture.active()) {
+    out.clearcoat_roughness = std::clamp(m.clearcoat_roughness * at(m.clearcoat_roughness_texture).g, 0.0f, 1.0f);
+    out.clearcoat_alpha = out.clearcoat_roughness * out.clearcoat_roughness;
+  }
   return out;
 }
 

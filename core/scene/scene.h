@@ -66,6 +66,11 @@ struct Material {
   float specular = 1;
   Rgb specular_color{1.0f};
   TextureRef specular_texture, specular_color_texture;
+  // KHR_materials_clearcoat: a smooth or rough (GGX, alpha = clearcoat_roughness^2)
+  // dielectric coat of ior 1.5 over the whole material, weighted by `clearcoat` (x its
+  // texture's R; roughness x its texture's G). 0: no coat, the plain path.
+  float clearcoat = 0, clearcoat_roughness = 0, clearcoat_alpha = 0;
+  TextureRef clearcoat_texture, clearcoat_roughness_texture;
   // glTF alphaMode: how much of the surface is there, from the coverage `opacity` x the base
   // colour texture's alpha x COLOR_0's alpha (Scene::opacity_at). OPAQUE ignores it; MASK
   // keeps the surface where it reaches `alpha_cutoff`, BLEND where a uniform number per ray
@@ -79,7 +84,9 @@ struct Material {
   // Below this alpha a kPbr surface's specular lobes are perfectly smooth (delta).
   static constexpr float kSmoothAlpha = 1e-3f;
   bool is_delta() const {
-    if (kind == Kind::kPbr) return alpha < kSmoothAlpha && metallic + (1 - metallic) * transmission >= 1;
+    if (kind == Kind::kPbr)
+      return alpha < kSmoothAlpha && metallic + (1 - metallic) * transmission >= 1 &&
+             (clearcoat <= 0 || clearcoat_alpha < kSmoothAlpha);
     return kind == Kind::kMirror || kind == Kind::kGlass || kind == Kind::kRefraction;
   }
   // True if the surface glows (camera and BSDF paths that reach it add `radiance`).
@@ -93,7 +100,8 @@ struct Material {
   }
   bool has_textures() const {
     return texture.active() || metal_rough_texture.active() || normal_texture.active() || emissive_texture.active() ||
-           specular_texture.active() || specular_color_texture.active();
+           specular_texture.active() || specular_color_texture.active() || clearcoat_texture.active() ||
+           clearcoat_roughness_texture.active();
   }
 };
 

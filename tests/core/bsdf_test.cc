@@ -245,6 +245,7 @@ struct PbrCase {
   // KHR_materials_specular, when `specular` >= 0.
   float specular = -1;
   Rgb specular_color{1.0f};
+  float clearcoat = 0, clearcoat_roughness = 0;  // KHR_materials_clearcoat
 };
 void PrintTo(const PbrCase& c, std::ostream* os) { *os << c.name; }
 
@@ -263,6 +264,9 @@ Material pbr(const PbrCase& c) {
     m.specular = c.specular;
     m.specular_color = c.specular_color;
   }
+  m.clearcoat = c.clearcoat;
+  m.clearcoat_roughness = c.clearcoat_roughness;
+  m.clearcoat_alpha = c.clearcoat_roughness * c.clearcoat_roughness;
   return m;
 }
 
@@ -313,6 +317,18 @@ TEST_P(PbrTest, AlbedoBySamplingEqualsQuadratureAndNeverExceedsOne) {
       << "sampled " << radiance_sum / n << " quadrature " << quad;
 }
 
+// The extensions' cases: a base case with KHR_materials_specular or _clearcoat added.
+PbrCase with_specular(PbrCase c, float specular, Rgb color) {
+  c.specular = specular;
+  c.specular_color = color;
+  return c;
+}
+PbrCase with_coat(PbrCase c, float clearcoat, float roughness) {
+  c.clearcoat = clearcoat;
+  c.clearcoat_roughness = roughness;
+  return c;
+}
+
 INSTANTIATE_TEST_SUITE_P(
     Materials, PbrTest,
     ::testing::Values(
@@ -324,19 +340,12 @@ INSTANTIATE_TEST_SUITE_P(
         PbrCase{"thin_rough_transmission", 0, 0.4f, 1, true, 0.7f},
         PbrCase{"thin_from_behind", 0, 0.5f, 0.6f, true, float(M_PI) - 0.4f},
         PbrCase{"everything_mixed", 0.2f, 0.6f, 0.5f, false, 1.3f},
-        PbrCase{"specular_tinted_plastic", 0, 0.5f, 0, true, 0.6f, {0.9f, 0.6f, 0.3f}, 1.5f, 0.6f, {1.0f, 0.5f, 0.2f}},
-        PbrCase{
-            "specular_bright_rough_glass", 0, 0.3f, 1, false, 0.5f, {0.9f, 0.6f, 0.3f}, 1.5f, 0.5f, {8.0f, 4.0f, 1.0f}},
-        PbrCase{"specular_thin_inside",
-                0,
-                0.4f,
-                0.6f,
-                true,
-                float(M_PI) - 0.4f,
-                {0.9f, 0.6f, 0.3f},
-                1.5f,
-                0.8f,
-                {1.0f, 1.0f, 3.0f}}),
+        with_specular({"specular_tinted_plastic", 0, 0.5f, 0, true, 0.6f}, 0.6f, {1.0f, 0.5f, 0.2f}),
+        with_specular({"specular_bright_rough_glass", 0, 0.3f, 1, false, 0.5f}, 0.5f, {8.0f, 4.0f, 1.0f}),
+        with_specular({"specular_thin_inside", 0, 0.4f, 0.6f, true, float(M_PI) - 0.4f}, 0.8f, {1.0f, 1.0f, 3.0f}),
+        with_coat({"rough_coat_on_plastic", 0, 0.6f, 0, true, 0.9f}, 1.0f, 0.3f),
+        with_coat({"rough_coat_on_rough_metal", 1, 0.5f, 0, true, 1.2f}, 0.7f, 0.2f),
+        with_coat({"rough_coat_on_rough_glass_inside", 0, 0.4f, 1, false, float(M_PI) - 0.5f}, 0.8f, 0.25f)),
     [](const ::testing::TestParamInfo<PbrCase>& info) { return std::string(info.param.name); });
 
 TEST(Pbr, IndexOneMakesTheDielectricExactlyLambertian) {
@@ -369,6 +378,30 @@ TEST(Pbr, SpecularFactorScalesTheDielectricLayer) {
     EXPECT_NEAR(a.r, b.r, 1e-6 * b.r + 1e-7);
     EXPECT_NEAR(a.g, b.g, 1e-6 * b.g + 1e-7);
   }
+}
+
+// A smooth clearcoat over a smooth metal: both lobes are deltas along the mirror
+// direction, and the mean weight is the coat's Fresnel plus what it lets through of the
+// metal's, c Fc + (1 - c Fc) Schlick(base).
+TEST(Pbr, ASmoothCoatOverAMirrorAddsItsFresnelToWhatItLetsThrough) {
+  const Material m = pbr(with_coat({"coat", 1, 0, 0, true, 1.1f}, 0.8f, 0));
+  EXPECT_TRUE(m.is_delta());
+  const Vec3 wo = dir(1.1f);
+  const float c = wo.z, x = 1 - c, fc = 0.8f * (0.04f + 0.96f * x * x * x * x * x);
+  const float schlick_g = 0.6f + 0.4f * x * x * x * x * x;
+  double sum = 0;
+  const int n = 20000;
+  for (int i = 0; i < n; ++i) {
+    Sampler sp(9, 0, uint32_t(i));
+    BsdfSample s;
+    ASSERT_TRUE(bsdf_sample(m, wo, sp.next_1d(), sp.next_2d(), &s));
+    EXPECT_TRUE(s.delta);
+    EXPECT_NEAR(s.wi.z, wo.z, 1e-6);
+    sum += s.weight.g;
+  }
+  EXPECT_NEAR(sum / n, fc + (1 - fc) * schlick_g, 0.01);
+  // A rough coat makes the same mirror a non-delta material.
+  EXPECT_FALSE(pbr(with_coat({"rough", 1, 0, 0, true, 1.1f}, 0.8f, 0.3f)).is_delta());
 }
 
 TEST(Pbr, SmoothSurfacesAreDeltaLobes) {

@@ -298,8 +298,9 @@ TEST_F(Gltf, AlphaModesAndCoverageAreRead) {
 }
 
 // Issue 29: KHR_materials_specular's factor, colour (above 1 allowed) and textures (the
-// factor from specularTexture's alpha) are read; out of range refused by name.
-TEST_F(Gltf, SpecularExtensionIsRead) {
+// factor from specularTexture's alpha), and KHR_materials_clearcoat's, are read; out of
+// range refused by name.
+TEST_F(Gltf, SpecularAndClearcoatExtensionsAreRead) {
   Doc d;
   d.j["images"] = {{{"uri",
                      "data:image/png;base64,iVBORw0KGgoAAAANSUhEUgAAAAIAAAABCAYAAAD0In+"
@@ -320,6 +321,21 @@ TEST_F(Gltf, SpecularExtensionIsRead) {
   EXPECT_NEAR(s.textured(m, {0.75f, 0.5f}).specular, 0.5f, 1e-6);
   d.j["materials"][0]["extensions"]["KHR_materials_specular"]["specularFactor"] = 1.5;
   expect_error(d, "KHR_materials_specular.specularFactor 1.500000 is outside [0, 1]");
+  // KHR_materials_clearcoat likewise; its normal texture is warned, not applied.
+  d.j["materials"][0]["extensions"].erase("KHR_materials_specular");
+  d.j["materials"][0]["extensions"]["KHR_materials_clearcoat"] = {
+      {"clearcoatFactor", 0.75}, {"clearcoatRoughnessFactor", 0.5}, {"clearcoatNormalTexture", {{"index", 0}}}};
+  d.j["extensionsUsed"] = {"KHR_materials_clearcoat"};
+  s = load(d);
+  const Material& c = s.materials[s.meshes[0].material];
+  EXPECT_FLOAT_EQ(c.clearcoat, 0.75f);
+  EXPECT_FLOAT_EQ(c.clearcoat_alpha, 0.25f);
+  bool warned = false;
+  for (const std::string& w : s.warnings)
+    warned |= w.find("clearcoatNormalTexture is not applied") != std::string::npos;
+  EXPECT_TRUE(warned);
+  d.j["materials"][0]["extensions"]["KHR_materials_clearcoat"]["clearcoatFactor"] = -1;
+  expect_error(d, "KHR_materials_clearcoat.clearcoatFactor");
 }
 
 // Issue 29: KTX2 textures (KHR_texture_basisu) have no decoder here: a texture's PNG or

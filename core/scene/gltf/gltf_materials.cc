@@ -113,6 +113,23 @@ void GltfMaterials::read_specular(const tinygltf::ExtensionMap& ex, const std::s
   m.specular_color_texture = ext_texture(ex, "KHR_materials_specular", "specularColorTexture", true, el);
 }
 
+// KHR_materials_clearcoat (Material::clearcoat).
+void GltfMaterials::read_clearcoat(const tinygltf::ExtensionMap& ex, const std::string& el, Material& m) {
+  if (!ex.count("KHR_materials_clearcoat")) return;
+  const char* k = "KHR_materials_clearcoat";
+  m.clearcoat = float(unit_factor(ctx_, ext_number(ctx_, ex, k, "clearcoatFactor", 0, el), el,
+                                  "KHR_materials_clearcoat.clearcoatFactor"));
+  m.clearcoat_roughness = float(unit_factor(ctx_, ext_number(ctx_, ex, k, "clearcoatRoughnessFactor", 0, el), el,
+                                            "KHR_materials_clearcoat.clearcoatRoughnessFactor"));
+  m.clearcoat_alpha = m.clearcoat_roughness * m.clearcoat_roughness;
+  m.clearcoat_texture = ext_texture(ex, k, "clearcoatTexture", false, el);
+  m.clearcoat_roughness_texture = ext_texture(ex, k, "clearcoatRoughnessTexture", false, el);
+  if (ext_value(ex, k, "clearcoatNormalTexture"))
+    ctx_.warn_once(el +
+                   ": KHR_materials_clearcoat.clearcoatNormalTexture is not applied: the coat follows the "
+                   "base's shading normal");
+}
+
 uint32_t GltfMaterials::material(int index) {
   if (auto it = made_.find(index); it != made_.end()) return it->second;
   Material m;
@@ -148,6 +165,7 @@ uint32_t GltfMaterials::material(int index) {
     m.ior = float(ior);
     read_volume(ctx_, ex, el, m);
     read_specular(ex, el, m);
+    read_clearcoat(ex, el, m);
     m.texture = textures_.texture_ref(pbr.baseColorTexture.index, pbr.baseColorTexture.texCoord,
                                       pbr.baseColorTexture.extensions, true, el, "baseColorTexture");
     m.metal_rough_texture =

@@ -25,6 +25,7 @@ class GltfMaterials {
   TextureRef ext_texture(const tinygltf::ExtensionMap& ex, const char* ext, const char* key, bool srgb,
                          const std::string& el);
   void read_specular(const tinygltf::ExtensionMap& ex, const std::string& el, Material& m);
+  void read_clearcoat(const tinygltf::ExtensionMap& ex, const std::string& el, Material& m);
 
   GltfContext& ctx_;
   GltfTextures textures_;
