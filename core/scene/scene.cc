@@ -183,6 +183,12 @@ T bilinear(const Texture& tex, const std::vector<T>& texels, Vec2 uv) {
   // Texel centres at (i + 0.5) / n, as OpenGL samples.
   const float x = uv.x * float(tex.width) - 0.5f, y = uv.y * float(tex.height) - 0.5f;
   if (!std::isfinite(x) || !std::isfinite(y)) return texels[0];
+  if (tex.nearest) {  // the texel containing uv: centres at (i + 0.5) / n, so round x and y
+    const int ix = int(std::fmod(double(std::floor(x + 0.5f)), 1 << 24)),
+              iy = int(std::fmod(double(std::floor(y + 0.5f)), 1 << 24));
+    return texels[size_t(wrap(iy, tex.height, tex.wrap_t)) * size_t(tex.width) +
+                  size_t(wrap(ix, tex.width, tex.wrap_s))];
+  }
   const float fx = std::floor(x), fy = std::floor(y);
   const float tx = x - fx, ty = y - fy;
   // Guard huge coordinates before converting to int.

@@ -172,6 +172,10 @@ struct Texture {
   std::vector<Rgb> texels;   // row-major, row 0 at v = 0
   std::vector<float> alpha;  // the image's alpha, as texels, where some texel is not opaque; else empty
   Wrap wrap_s = Wrap::kRepeat, wrap_t = Wrap::kRepeat;
+  // glTF magFilter NEAREST: the texel the point falls in, not a bilinear blend (pixel art
+  // stays sharp, as Blender's importer shows it with Closest). Minification needs no
+  // mipmaps here: pixels are supersampled.
+  bool nearest = false;
   Rgb sample(Vec2 uv) const;
   float sample_alpha(Vec2 uv) const;  // 1 without an alpha channel
   Rgb mean() const;  // over all texels

@@ -410,6 +410,7 @@ TEST_F(Gltf, ATextureReadsTheCoordinateSetItNames) {
   EXPECT_FLOAT_EQ(m.uv_at(0, 0.3f, 0.3f, 1).x, 0.75f);
   const Material& mat = s.materials[m.material];
   EXPECT_EQ(mat.texture.set, 1);
+  EXPECT_TRUE(s.textures[size_t(mat.texture.index)].nearest);  // the sampler's magFilter 9728
   // uv (set 0) at the red texel, uv1 at the blue one: the texture reads uv1.
   const Rgb c = s.textured(mat, {0.25f, 0.5f}, {0.75f, 0.5f}).reflectance;
   EXPECT_LT(c.r, 0.01f);
@@ -504,6 +505,14 @@ TEST(TextureWrap, RepeatMirrorAndClamp) {
   EXPECT_FLOAT_EQ(at(1.125f), 3);  // mirrored: the first texel past 1 is the last one
   t.wrap_s = Texture::Wrap::kClamp;
   EXPECT_FLOAT_EQ(at(5.0f), 3);
+  // Between texel centres bilinear blends; magFilter NEAREST takes the texel the point is in.
+  t.wrap_s = Texture::Wrap::kRepeat;
+  EXPECT_FLOAT_EQ(at(0.3f), 0.7f);  // 0.3 x 4 - 0.5 = 0.7 of the way from texel 0 to 1
+  t.nearest = true;
+  EXPECT_FLOAT_EQ(at(0.3f), 1);
+  EXPECT_FLOAT_EQ(at(0.2f), 0);
+  EXPECT_FLOAT_EQ(at(0.99f), 3);
+  EXPECT_FLOAT_EQ(at(1.01f), 0);  // repeat
 }
 
 TEST_F(Gltf, PunctualLightsInRadiometricUnits) {

@@ -114,6 +114,7 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
     };
     tex.wrap_s = wrap(model.samplers[size_t(t.sampler)].wrapS);
     tex.wrap_t = wrap(model.samplers[size_t(t.sampler)].wrapT);
+    tex.nearest = model.samplers[size_t(t.sampler)].magFilter == TINYGLTF_TEXTURE_FILTER_NEAREST;
   }
   ctx_.scene.textures.push_back(std::move(tex));
   return loaded_[key] = int(ctx_.scene.textures.size() - 1);
