@@ -2,10 +2,12 @@
 // warning; tinygltf's model of the file; the scene being built.
 //
 // The load, in order (gltf_loader.cc): gltf_document reads the file and parses its JSON,
-// gltf_prechecks checks it, tinygltf makes the model; gltf_nodes walks the scene's node
-// graph and places what each node carries: meshes (gltf_meshes, over gltf_accessors, with
-// gltf_materials and gltf_textures), lights and the camera (gltf_lights_cameras);
-// gltf_animation keeps what posing needs and reads the animations.
+// gltf_prechecks checks it, tinygltf makes the model; gltf_compression decodes meshopt
+// and Draco geometry into plain buffer views; gltf_nodes walks the scene's node graph
+// (EXT_mesh_gpu_instancing too) and places what each node carries: meshes (gltf_meshes,
+// over gltf_accessors, with gltf_materials and gltf_textures; morph targets and skins by
+// gltf_skins), lights and the camera (gltf_lights_cameras); gltf_animation keeps what
+// posing needs and reads the animations.
 #pragma once
 
 #include <tiny_gltf.h>
