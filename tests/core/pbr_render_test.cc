@@ -27,6 +27,16 @@ Material pbr(float metallic, float roughness, float transmission = 0, bool thin 
   return m;
 }
 
+// A 2x1 texture, red then blue, clamped: x < 0 red and x > 0 blue on a quad mapped u = x.
+Texture red_blue() {
+  Texture t;
+  t.width = 2;
+  t.height = 1;
+  t.texels = {Rgb(1.0f, 0.0f, 0.0f), Rgb(0.0f, 0.0f, 1.0f)};
+  t.wrap_s = t.wrap_t = Texture::Wrap::kClamp;
+  return t;
+}
+
 // An axis-aligned box [-h, h]^3 of outward-wound triangles.
 Mesh box(float h, uint32_t material) {
   Mesh m;
@@ -160,12 +170,7 @@ TEST(PbrRender, NormalMapTurnsTheShadingNormalInTangentSpace) {
 
 TEST(PbrRender, EmissiveTextureScalesCameraHitsAndLightSamplesAlike) {
   Scene s;
-  Texture t;
-  t.width = 2;
-  t.height = 1;
-  t.texels = {Rgb(1.0f, 0.0f, 0.0f), Rgb(0.0f, 0.0f, 1.0f)};
-  t.wrap_s = t.wrap_t = Texture::Wrap::kClamp;
-  s.textures.push_back(t);
+  s.textures.push_back(red_blue());
   Material e;
   e.kind = Material::Kind::kEmission;
   e.radiance = Rgb(2.0f);
@@ -221,12 +226,7 @@ namespace {
 TEST(PbrRender, EmissionAddsToReflection) {
   for (const float strength : {0.5f, 3.0f}) {
     Scene s;
-    Texture t;
-    t.width = 2;
-    t.height = 1;
-    t.texels = {Rgb(1.0f, 0.0f, 0.0f), Rgb(0.0f, 0.0f, 1.0f)};
-    t.wrap_s = t.wrap_t = Texture::Wrap::kClamp;
-    s.textures.push_back(t);
+    s.textures.push_back(red_blue());
     Material m = pbr(0, 1);
     m.ior = 1;  // exactly Lambertian (docs/gltf.md)
     m.reflectance = Rgb(0.5f);
