@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <optional>
 
 #include "core/bsdf/bsdf.h"
 #include "core/sampling/warp.h"
@@ -232,16 +233,18 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
     prev_hit = hit;
     SurfacePoint sp = make_surface_point(scene_, ray, hit);
     const Material* mp = &scene_.materials[sp.material];
-    Material textured;  // only textured materials pay for a copy
+    // Only textured or vertex-coloured materials pay for a copy (not even its construction:
+    // Material is a few hundred bytes).
+    std::optional<Material> textured;
     if (mp->has_textures()) {
-      textured = scene_.textured(*mp, sp.uv, sp.uv1);
-      mp = &textured;
+      textured.emplace(scene_.textured(*mp, sp.uv, sp.uv1));
+      mp = &*textured;
       if (mp->normal_texture.active()) apply_normal_map(scene_, *mp, hit, &sp);
     }
     if (sp.colored && mp->kind == Material::Kind::kPbr) {  // glTF COLOR_0 multiplies the base colour
-      if (mp != &textured) textured = *mp;
-      textured.reflectance = textured.reflectance * sp.color;
-      mp = &textured;
+      if (!textured) textured.emplace(*mp);
+      textured->reflectance = textured->reflectance * sp.color;
+      mp = &*textured;
     }
     const Material& m = *mp;
     const Vec3 wo_world = -ray.d;
