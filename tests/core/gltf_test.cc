@@ -1,5 +1,8 @@
 // The glTF loader: what it makes of valid files (tests/core/gltf_refusals_test.cc has the
 // hostile ones).
+#include <webp/decode.h>
+#include <webp/encode.h>
+
 #include "tests/core/gltf_fixture.h"
 
 namespace tessera {
@@ -355,12 +358,42 @@ TEST_F(Gltf, Ktx2TexturesUseTheirFallbackOrAreRefusedClearly) {
   EXPECT_TRUE(warned);
   d.j["textures"][0].erase("source");
   expect_error(d, "textures[0]: has only a KTX2 / Basis Universal image (KHR_texture_basisu)");
-  // WebP likewise.
-  d.j["textures"][0]["extensions"] = {{"EXT_texture_webp", {{"source", 1}}}};
-  expect_error(d, "textures[0]: has only a WebP image (EXT_texture_webp)");
+  // AVIF likewise.
+  d.j["textures"][0]["extensions"] = {{"EXT_texture_avif", {{"source", 1}}}};
+  expect_error(d, "textures[0]: has only a AVIF image (EXT_texture_avif)");
   d.j["textures"][0]["extensions"] = {{"KHR_texture_basisu", {{"source", 1}}}};
   d.j["extensionsRequired"] = {"KHR_texture_basisu"};
   expect_error(d, "KTX2 / Basis Universal textures cannot be decoded here");
+}
+
+// Issue 29: EXT_texture_webp's image is decoded (libwebp) and preferred to the fallback;
+// a damaged one is refused naming it.
+TEST_F(Gltf, WebPTexturesAreDecoded) {
+  const uint8_t rgba[8] = {255, 0, 0, 255, 0, 0, 255, 128};  // red, then half-transparent blue
+  uint8_t* out = nullptr;
+  const size_t n = WebPEncodeLosslessRGBA(rgba, 2, 1, 8, &out);
+  ASSERT_GT(n, 0u);
+  const std::string webp(reinterpret_cast<const char*>(out), n);
+  WebPFree(out);
+  Doc d;
+  d.j["images"] = {{{"uri", red_blue_png_uri()}}, {{"uri", "data:image/webp;base64," + base64(webp)}}};
+  d.j["textures"] = {{{"source", 0}, {"extensions", {{"EXT_texture_webp", {{"source", 1}}}}}}};
+  d.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
+  d.j["extensionsUsed"] = {"EXT_texture_webp"};
+  const Scene s = load(d);
+  ASSERT_EQ(s.textures.size(), 1u);
+  const Texture& t = s.textures[0];
+  ASSERT_EQ(t.texels.size(), 2u);
+  EXPECT_FLOAT_EQ(t.texels[0].r, 1);  // lossless: exact
+  EXPECT_FLOAT_EQ(t.texels[1].b, 1);
+  ASSERT_EQ(t.alpha.size(), 2u);
+  EXPECT_NEAR(t.alpha[1], 128 / 255.0, 1e-6);
+  for (const std::string& w : s.warnings) EXPECT_EQ(w.find("EXT_texture_webp"), std::string::npos) << w;
+  Doc x;  // KHR_xmp_json_ld is metadata: accepted without a warning
+  x.j["extensionsUsed"] = {"KHR_xmp_json_ld"};
+  for (const std::string& w : load(x).warnings) EXPECT_EQ(w.find("KHR_xmp_json_ld"), std::string::npos) << w;
+  d.j["images"][1]["uri"] = "data:image/webp;base64," + base64(webp.substr(0, webp.size() / 2));
+  expect_error(d, "images[1]: the WebP image is damaged or cut short and cannot be decoded");
 }
 
 // Issue 29: an image's errors name its file as the scene does and say what is wrong in

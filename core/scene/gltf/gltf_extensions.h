@@ -24,14 +24,18 @@ inline bool gltf_extension_supported(const std::string& name) {
       // Instances are copied into the scene (gltf_nodes.cc): memory grows with their count.
       "EXT_mesh_gpu_instancing",
       // Decoded after parsing (gltf_compression.cc) with libmeshoptimizer and libdraco.
-      "EXT_meshopt_compression", "KHR_draco_mesh_compression"};
+      "EXT_meshopt_compression", "KHR_draco_mesh_compression",
+      // WebP images through libwebp (gltf_textures.cc).
+      "EXT_texture_webp",
+      // Metadata (XMP): nothing to render, so nothing is lost by not reading it.
+      "KHR_xmp_json_ld"};
   return kSupported.count(name) > 0;
 }
 
 // Texture extensions that name an image in a format we cannot decode (no Debian library
-// here): each texture's PNG or JPEG fallback `source` is used, with a warning; a texture
+// for KTX2; stb reads no AVIF): each texture's PNG or JPEG fallback `source` is used, with a warning; a texture
 // without one, or a file requiring the extension, is refused saying so.
 inline constexpr std::pair<const char*, const char*> kGltfImageFormatExtensions[] = {
-    {"KHR_texture_basisu", "KTX2 / Basis Universal"}, {"EXT_texture_webp", "WebP"}, {"EXT_texture_avif", "AVIF"}};
+    {"KHR_texture_basisu", "KTX2 / Basis Universal"}, {"EXT_texture_avif", "AVIF"}};
 
 }  // namespace tessera

@@ -111,6 +111,18 @@ bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<
         changed = true;
       }
     }
+  // Debian's tinygltf 2.7 drops data URIs of image types it does not know (WebP): as
+  // octet-stream they keep their bytes, and the texture unit recognises WebP by content.
+  if (j.contains("images") && j["images"].is_array())
+    for (auto& img : j["images"]) {
+      static const std::string kWebp = "data:image/webp;base64,";
+      if (!img.is_object() || !img.contains("uri") || !img["uri"].is_string()) continue;
+      const std::string& uri = img["uri"].get_ref<const std::string&>();
+      if (uri.rfind(kWebp, 0) == 0) {
+        img["uri"] = "data:application/octet-stream;base64," + uri.substr(kWebp.size());
+        changed = true;
+      }
+    }
   // A Draco primitive's accessors have no bufferView (their data is in the compressed
   // stream), which Debian's tinygltf 2.7 refuses for indices: the stream's view stands in
   // until gltf_compression.cc puts the decoded indices there.

@@ -1,10 +1,12 @@
 #include "core/scene/gltf/gltf_textures.h"
 
 #include <stb/stb_image.h>
+#include <webp/decode.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <utility>
 
 #include "core/scene/gltf/gltf_extensions.h"
@@ -80,9 +82,14 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
     if (t.source < 0 && t.extensions.count(ext))
       ctx_.fail(tel, std::string("has only a ") + format + " image (" + ext +
                          "), which cannot be decoded here, and no PNG or JPEG fallback `source`");
-  if (t.source < 0 || size_t(t.source) >= model.images.size())
-    ctx_.fail(tel, "image " + std::to_string(t.source) + " does not exist");
-  const tinygltf::Image& img = decode_image(t.source);
+  int source = t.source;
+  // EXT_texture_webp: its image is preferred (libwebp decodes it); `source` is the fallback.
+  if (auto it = t.extensions.find("EXT_texture_webp");
+      it != t.extensions.end() && it->second.IsObject() && it->second.Has("source") && it->second.Get("source").IsInt())
+    source = it->second.Get("source").GetNumberAsInt();
+  if (source < 0 || size_t(source) >= model.images.size())
+    ctx_.fail(tel, "image " + std::to_string(source) + " does not exist");
+  const tinygltf::Image& img = decode_image(source);
   Texture tex;
   tex.width = img.width;
   tex.height = img.height;
@@ -120,6 +127,24 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
   return loaded_[key] = int(ctx_.scene.textures.size() - 1);
 }
 
+// A WebP image (EXT_texture_webp) through libwebp, to RGBA 8-bit, with the same limit.
+const tinygltf::Image& GltfTextures::decode_webp(tinygltf::Image& img, const std::string& el) {
+  int w = 0, h = 0;
+  if (!WebPGetInfo(img.image.data(), img.image.size(), &w, &h))
+    ctx_.fail(el, "the WebP image is damaged or cut short and cannot be decoded");
+  if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels)
+    ctx_.fail(el, std::to_string(w) + "x" + std::to_string(h) + " is over the 64 M texel limit");
+  uint8_t* data = WebPDecodeRGBA(img.image.data(), img.image.size(), &w, &h);
+  if (!data) ctx_.fail(el, "the WebP image is damaged or cut short and cannot be decoded");
+  img.width = w;
+  img.height = h;
+  img.component = 4;
+  img.bits = 8;
+  img.image.assign(data, data + size_t(w) * size_t(h) * 4);
+  WebPFree(data);
+  return img;
+}
+
 // Decodes images[index] (PNG or JPEG, RGBA 8-bit), refusing absurd sizes before
 // allocating; once, whatever number of textures use it.
 const tinygltf::Image& GltfTextures::decode_image(int index) {
@@ -133,6 +158,9 @@ const tinygltf::Image& GltfTextures::decode_image(int index) {
     return img;
   }
   if (img.image.empty()) ctx_.fail(el, file ? "the file is missing or empty" : "has no data");
+  if (img.image.size() >= 12 && std::memcmp(img.image.data(), "RIFF", 4) == 0 &&
+      std::memcmp(img.image.data() + 8, "WEBP", 4) == 0)
+    return decode_webp(img, el);
   int w = 0, h = 0, comp = 0;
   const int size = int(std::min<size_t>(img.image.size(), size_t(INT32_MAX)));
   if (!stbi_info_from_memory(img.image.data(), size, &w, &h, &comp)) ctx_.fail(el, "not a readable PNG or JPEG");

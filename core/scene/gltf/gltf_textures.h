@@ -26,6 +26,7 @@ class GltfTextures {
  private:
   int load_texture(int index, const std::string& el, bool srgb);
   const tinygltf::Image& decode_image(int index);
+  const tinygltf::Image& decode_webp(tinygltf::Image& img, const std::string& el);
 
   GltfContext& ctx_;
   std::map<int, int> loaded_;  // 2 x texture index + sRGB -> scene texture
