@@ -178,7 +178,7 @@ struct Texture {
   bool nearest = false;
   Rgb sample(Vec2 uv) const;
   float sample_alpha(Vec2 uv) const;  // 1 without an alpha channel
-  Rgb mean() const;  // over all texels
+  Rgb mean() const;                   // over all texels
 };
 
 struct SceneAnimation;  // core/scene/animation.h
