@@ -143,7 +143,6 @@ Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
     if (smooth) return f;
     const float spec = g.d(h) * g.g2(wo, wi) / (4 * std::fabs(co * ci));
     if (w.metal > 0) f += schlick(m.reflectance, std::fabs(oh)) * (w.metal * spec);
-    if (!m.specular_ext) return f + Rgb((w.coat * fc.lum + w.glass * glass_fresnel(m, oh)) * spec);
     return f + (fc.reflect * w.coat + dielectric_f(m, glass_fresnel(m, oh)).reflect * w.glass) * spec;
   }
   if (w.glass <= 0 || smooth) return Rgb(0);
@@ -210,9 +209,8 @@ bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) 
     const float c = std::fabs(co);
     if (u1 < p.diffuse + p.spec) {
       out->wi = reflect_z(wo);
-      const Rgb fd = m.specular_ext ? dielectric_f(m, fresnel_dielectric(c, m.ior)).reflect * w.coat +
-                                          dielectric_f(m, glass_fresnel(m, co)).reflect * w.glass
-                                    : Rgb(w.coat * fresnel_dielectric(c, m.ior) + w.glass * glass_fresnel(m, co));
+      const Rgb fd = dielectric_f(m, fresnel_dielectric(c, m.ior)).reflect * w.coat +
+                     dielectric_f(m, glass_fresnel(m, co)).reflect * w.glass;
       out->weight = (schlick(m.reflectance, c) * w.metal + fd) / p.spec;
       return true;
     }

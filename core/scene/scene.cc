@@ -183,19 +183,16 @@ T bilinear(const Texture& tex, const std::vector<T>& texels, Vec2 uv) {
   // Texel centres at (i + 0.5) / n, as OpenGL samples.
   const float x = uv.x * float(tex.width) - 0.5f, y = uv.y * float(tex.height) - 0.5f;
   if (!std::isfinite(x) || !std::isfinite(y)) return texels[0];
-  if (tex.nearest) {  // the texel containing uv: centres at (i + 0.5) / n, so round x and y
-    const int ix = int(std::fmod(double(std::floor(x + 0.5f)), 1 << 24)),
-              iy = int(std::fmod(double(std::floor(y + 0.5f)), 1 << 24));
-    return texels[size_t(wrap(iy, tex.height, tex.wrap_t)) * size_t(tex.width) +
-                  size_t(wrap(ix, tex.width, tex.wrap_s))];
-  }
-  const float fx = std::floor(x), fy = std::floor(y);
-  const float tx = x - fx, ty = y - fy;
   // Guard huge coordinates before converting to int.
-  const int ix = int(std::fmod(double(fx), 1 << 24)), iy = int(std::fmod(double(fy), 1 << 24));
+  auto to_int = [](float f) { return int(std::fmod(double(f), 1 << 24)); };
   auto at = [&](int i, int j) {
     return texels[size_t(wrap(j, tex.height, tex.wrap_t)) * size_t(tex.width) + size_t(wrap(i, tex.width, tex.wrap_s))];
   };
+  // magFilter NEAREST: the texel containing uv (centres at (i + 0.5) / n, so round x and y).
+  if (tex.nearest) return at(to_int(std::floor(x + 0.5f)), to_int(std::floor(y + 0.5f)));
+  const float fx = std::floor(x), fy = std::floor(y);
+  const float tx = x - fx, ty = y - fy;
+  const int ix = to_int(fx), iy = to_int(fy);
   return at(ix, iy) * ((1 - tx) * (1 - ty)) + at(ix + 1, iy) * (tx * (1 - ty)) + at(ix, iy + 1) * ((1 - tx) * ty) +
          at(ix + 1, iy + 1) * (tx * ty);
 }
@@ -218,7 +215,8 @@ namespace tessera {
 
 Material Scene::textured(const Material& m, Vec2 uv, Vec2 uv1) const {
   Material out = m;
-  auto at = [&](const TextureRef& t) { return textures[size_t(t.index)].sample(t.map(t.set ? uv1 : uv)); };
+  auto coords = [&](const TextureRef& t) { return t.map(t.set ? uv1 : uv); };
+  auto at = [&](const TextureRef& t) { return textures[size_t(t.index)].sample(coords(t)); };
   if (m.texture.active()) out.reflectance *= at(m.texture);
   if (m.metal_rough_texture.active()) {
     const Rgb mr = at(m.metal_rough_texture);
@@ -227,10 +225,8 @@ Material Scene::textured(const Material& m, Vec2 uv, Vec2 uv1) const {
     out.metallic = std::clamp(m.metallic * mr.b, 0.0f, 1.0f);
   }
   if (m.emissive_texture.active()) out.radiance *= at(m.emissive_texture);
-  if (m.specular_texture.active()) {
-    const TextureRef& t = m.specular_texture;
-    out.specular *= textures[size_t(t.index)].sample_alpha(t.map(t.set ? uv1 : uv));
-  }
+  if (m.specular_texture.active())
+    out.specular *= textures[size_t(m.specular_texture.index)].sample_alpha(coords(m.specular_texture));
   if (m.specular_color_texture.active()) out.specular_color *= at(m.specular_color_texture);
   if (m.clearcoat_texture.active()) out.clearcoat = std::clamp(m.clearcoat * at(m.clearcoat_texture).r, 0.0f, 1.0f);
   if (m.clearcoat_roughness_texture.active()) {

@@ -28,7 +28,7 @@ void GltfAnimationBuilder::add_mesh(uint32_t scene_mesh, int32_t node_entry, con
   b.morph = primitive.morph;
   b.skin = primitive.skin;
   b.indices = primitive.mesh.indices;
-  if (primitive.mirrored && !primitive.skin)  // back to the file's winding: each pose fixes it for its own transform
+  if (primitive.mirrored)  // back to the file's winding: each pose fixes it for its own transform
     for (size_t t = 0; t < b.indices.size(); t += 3) std::swap(b.indices[t + 1], b.indices[t + 2]);
   animation_.meshes.push_back(std::move(b));
 }

@@ -226,14 +226,10 @@ void parse_gltf_model(GltfDocument doc, GltfContext& ctx) {
     throw SceneError(ctx.path, "", plain_words(first_line(relative_to(err.empty() ? "glTF parse error" : err, base))));
   if (!warn.empty()) ctx.scene.warnings.push_back(ctx.path + ": " + first_line(relative_to(warn, base)));
   for (const std::string& ext : ctx.model.extensionsUsed) {
-    bool image_format = false;
-    for (const auto& [name, format] : kGltfImageFormatExtensions)
-      if (ext == name) {
-        image_format = true;
-        ctx.scene.warnings.push_back(ctx.path + ": " + name + ": " + format +
-                                     " textures cannot be decoded here; each texture's PNG or JPEG fallback is used");
-      }
-    if (!image_format && !gltf_extension_supported(ext))
+    if (const char* format = gltf_undecodable_format(ext))
+      ctx.scene.warnings.push_back(ctx.path + ": " + ext + ": " + format +
+                                   " textures cannot be decoded here; each texture's PNG or JPEG fallback is used");
+    else if (!gltf_extension_supported(ext))
       ctx.scene.warnings.push_back(ctx.path + ": optional extension '" + ext + "' is not supported; ignored");
   }
 }

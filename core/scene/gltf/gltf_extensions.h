@@ -37,5 +37,11 @@ inline bool gltf_extension_supported(const std::string& name) {
 // without one, or a file requiring the extension, is refused saying so.
 inline constexpr std::pair<const char*, const char*> kGltfImageFormatExtensions[] = {
     {"KHR_texture_basisu", "KTX2 / Basis Universal"}, {"EXT_texture_avif", "AVIF"}};
+// The image format `ext` names (one of the above), or null.
+inline const char* gltf_undecodable_format(const std::string& ext) {
+  for (const auto& [name, format] : kGltfImageFormatExtensions)
+    if (ext == name) return format;
+  return nullptr;
+}
 
 }  // namespace tessera

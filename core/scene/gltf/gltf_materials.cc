@@ -38,6 +38,16 @@ Rgb color_factor(const GltfContext& ctx, const std::vector<double>& f, Rgb fallb
   return Rgb(float(f[0]), float(f[1]), float(f[2]));
 }
 
+// An extension's array of numbers (an element that is not a number reads as NaN, which
+// color_factor refuses; not an array: none).
+std::vector<double> numbers_of(const tinygltf::Value& v) {
+  std::vector<double> f;
+  if (v.IsArray())
+    for (size_t i = 0; i < v.ArrayLen(); ++i)
+      f.push_back(v.Get(int(i)).IsNumber() ? v.Get(int(i)).GetNumberAsDouble() : NAN);
+  return f;
+}
+
 // KHR_materials_volume: thickness > 0 makes a solid; absorption from the attenuation colour
 // reached after the attenuation distance: sigma = -ln(colour) / distance.
 void read_volume(const GltfContext& ctx, const tinygltf::ExtensionMap& ex, const std::string& el, Material& m) {
@@ -47,13 +57,8 @@ void read_volume(const GltfContext& ctx, const tinygltf::ExtensionMap& ex, const
   const double distance = ext_number(ctx, ex, "KHR_materials_volume", "attenuationDistance", HUGE_VAL, el);
   if (!(distance > 0)) ctx.fail(el, "KHR_materials_volume.attenuationDistance must be positive");
   Rgb att(1.0f);
-  if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_volume", "attenuationColor")) {
-    std::vector<double> f;
-    if (v->IsArray())
-      for (size_t i = 0; i < v->ArrayLen(); ++i)
-        f.push_back(v->Get(int(i)).IsNumber() ? v->Get(int(i)).GetNumberAsDouble() : NAN);
-    att = color_factor(ctx, f, Rgb(1.0f), el, "KHR_materials_volume.attenuationColor");
-  }
+  if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_volume", "attenuationColor"))
+    att = color_factor(ctx, numbers_of(*v), Rgb(1.0f), el, "KHR_materials_volume.attenuationColor");
   if (!m.thin && std::isfinite(distance)) {
     auto sigma = [&](float c) { return float(-std::log(std::max(double(c), 1e-30)) / distance); };
     m.absorption = Rgb(sigma(att.r), sigma(att.g), sigma(att.b));
@@ -101,14 +106,10 @@ void GltfMaterials::read_specular(const tinygltf::ExtensionMap& ex, const std::s
   m.specular_ext = true;
   m.specular = float(unit_factor(ctx_, ext_number(ctx_, ex, "KHR_materials_specular", "specularFactor", 1, el), el,
                                  "KHR_materials_specular.specularFactor"));
-  if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_specular", "specularColorFactor")) {
-    std::vector<double> f;
-    if (v->IsArray())
-      for (size_t i = 0; i < v->ArrayLen(); ++i)
-        f.push_back(v->Get(int(i)).IsNumber() ? v->Get(int(i)).GetNumberAsDouble() : NAN);
-    // Above 1 is allowed: it multiplies F0 (4% for ior 1.5), and F0 is clamped to 1.
-    m.specular_color = color_factor(ctx_, f, Rgb(1.0f), el, "KHR_materials_specular.specularColorFactor", 1e4);
-  }
+  // Above 1 is allowed: it multiplies F0 (4% for ior 1.5), and F0 is clamped to 1.
+  if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_specular", "specularColorFactor"))
+    m.specular_color =
+        color_factor(ctx_, numbers_of(*v), Rgb(1.0f), el, "KHR_materials_specular.specularColorFactor", 1e4);
   m.specular_texture = ext_texture(ex, "KHR_materials_specular", "specularTexture", false, el);  // its alpha
   m.specular_color_texture = ext_texture(ex, "KHR_materials_specular", "specularColorTexture", true, el);
 }

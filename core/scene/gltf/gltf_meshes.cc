@@ -55,13 +55,36 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
     const size_t nv = p3.size() / 3;
     g.morph = read_gltf_morph(ctx, prim, mesh, node, nv, el);
     if (node.skin >= 0) g.skin = read_gltf_skin(ctx, node.skin, prim, nv, el);
-    // The shown shape in object space: the file's, moved by the morph targets' weights.
-    std::vector<Vec3> shown(nv), shown_n;
-    for (size_t i = 0; i < nv; ++i) shown[i] = {p3[3 * i], p3[3 * i + 1], p3[3 * i + 2]};
+    std::vector<float> n3;  // the file's normals, object space
+    if (auto nrm = prim.attributes.find("NORMAL"); nrm != prim.attributes.end()) {
+      n3 = read_accessor_floats(ctx, nrm->second, 3, el + " NORMAL");
+      if (n3.size() != p3.size()) ctx.fail(el, "NORMAL count differs from POSITION count");
+    }
+    // The shape shown, in object space: the file's, or moved by the morph targets' weights
+    // (a skinned mesh is placed once its joints are known: add_gltf_nodes).
+    std::vector<Vec3> morphed_p, morphed_n;
+    if (g.morph && !g.skin) {
+      morphed_p = as_vec3s(p3);
+      morphed_n = as_vec3s(n3);
+      apply_morph(*g.morph, g.morph->weights, morphed_p, morphed_n);
+    }
+    auto shown = [](const std::vector<Vec3>& morphed, const std::vector<float>& file, size_t i) {
+      return morphed.empty() ? Vec3{file[3 * i], file[3 * i + 1], file[3 * i + 2]} : morphed[i];
+    };
     m.positions.resize(nv);
     for (size_t i = 0; i < nv; ++i) {
-      m.positions[i] = w.point(p3[3 * i], p3[3 * i + 1], p3[3 * i + 2]).to_float();
+      const Vec3 q = shown(morphed_p, p3, i);
+      m.positions[i] = w.point(q.x, q.y, q.z).to_float();
       if (!is_finite(m.positions[i])) ctx.fail(el, "vertex " + std::to_string(i) + " is not finite after transform");
+    }
+    if (!n3.empty()) {
+      const Mat4 nt = w.normal_matrix();
+      m.normals.resize(nv);
+      for (size_t i = 0; i < nv; ++i) {
+        const Vec3 q = shown(morphed_n, n3, i);
+        m.normals[i] = nt.unit_vector(q.x, q.y, q.z);
+      }
+      m.file_normals = true;
     }
     if (prim.indices >= 0) {
       m.indices = read_accessor_indices(ctx, prim.indices, nv, el + " indices");
@@ -71,30 +94,10 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
     }
     m.indices = triangle_list(mode, std::move(m.indices));
     if (m.indices.size() % 3) ctx.fail(el, std::to_string(m.indices.size()) + " indices is not a multiple of 3");
-    g.mirrored = det < 0;
+    // A skinned mesh follows its joints, not the node: it keeps the file's winding.
+    g.mirrored = det < 0 && !g.skin;
     if (g.mirrored)
       for (size_t t = 0; t < m.indices.size(); t += 3) std::swap(m.indices[t + 1], m.indices[t + 2]);
-    std::vector<float> n3;  // the file's normals, object space
-    if (auto nrm = prim.attributes.find("NORMAL"); nrm != prim.attributes.end()) {
-      n3 = read_accessor_floats(ctx, nrm->second, 3, el + " NORMAL");
-      if (n3.size() != p3.size()) ctx.fail(el, "NORMAL count differs from POSITION count");
-      const Mat4 nt = w.normal_matrix();
-      m.normals.resize(nv);
-      for (size_t i = 0; i < nv; ++i) m.normals[i] = nt.unit_vector(n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]);
-      m.file_normals = true;
-      shown_n.resize(nv);
-      for (size_t i = 0; i < nv; ++i) shown_n[i] = {n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]};
-    }
-    if (g.morph && !g.skin) {  // (a skinned mesh is placed once its joints are known)
-      apply_morph(*g.morph, g.morph->weights, shown, shown_n);
-      for (size_t i = 0; i < nv; ++i) {
-        m.positions[i] = w.point(shown[i].x, shown[i].y, shown[i].z).to_float();
-        if (!is_finite(m.positions[i])) ctx.fail(el, "vertex " + std::to_string(i) + " is not finite after morphing");
-      }
-      const Mat4 nt = w.normal_matrix();
-      for (size_t i = 0; i < shown_n.size(); ++i)
-        m.normals[i] = nt.unit_vector(shown_n[i].x, shown_n[i].y, shown_n[i].z);
-    }
     if (auto c = prim.attributes.find("COLOR_0"); c != prim.attributes.end()) {
       // VEC3 or VEC4 (its alpha multiplies the material's: Scene::opacity_at).
       const int comps = c->second >= 0 && size_t(c->second) < ctx.model.accessors.size() &&

@@ -21,7 +21,9 @@ struct GltfPrimitive {
   // the file has none), before any morph target, when asked for or skinned: an animated
   // file poses them again, a skin places them.
   std::vector<float> positions, normals;
-  bool mirrored = false;  // the transform's determinant is negative: mesh.indices' winding is swapped
+  // The transform's determinant is negative: mesh.indices' winding is swapped (never for a
+  // skinned mesh, which follows its joints and keeps the file's winding).
+  bool mirrored = false;
   std::shared_ptr<const MorphTargets> morph;  // null without targets
   std::shared_ptr<const Skin> skin;           // null unless the node has a skin
 };

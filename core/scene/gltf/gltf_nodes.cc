@@ -127,12 +127,7 @@ class NodeWalk {
           }
         }
         if (animation_.recording()) animation_.add_mesh(id, entry, p);
-        if (p.skin) {
-          if (p.mirrored)  // the node's transform does not apply to a skinned mesh: the file's winding
-            for (size_t t = 0; t + 2 < p.mesh.indices.size(); t += 3)
-              std::swap(p.mesh.indices[t + 1], p.mesh.indices[t + 2]);
-          skinned_.push_back({id, p.skin, p.morph, std::move(p.positions), std::move(p.normals)});
-        }
+        if (p.skin) skinned_.push_back({id, p.skin, p.morph, std::move(p.positions), std::move(p.normals)});
         ctx_.scene.meshes.push_back(std::move(p.mesh));
       }
     if (n.camera >= 0) {

@@ -65,12 +65,11 @@ std::set<int64_t> used_accessors(const nlohmann::json& j) {
 
 // Why a required image-format extension is refused, in words.
 std::string image_format_note(const std::string& ext) {
-  for (const auto& [name, format] : kGltfImageFormatExtensions)
-    if (ext == name)
-      return std::string(" (") + format +
-             " textures cannot be decoded here, and a file that requires them has no PNG or JPEG fallback; export "
-             "with PNG or JPEG textures)";
-  return "";
+  const char* format = gltf_undecodable_format(ext);
+  if (!format) return "";
+  return std::string(" (") + format +
+         " textures cannot be decoded here, and a file that requires them has no PNG or JPEG fallback; export "
+         "with PNG or JPEG textures)";
 }
 
 }  // namespace

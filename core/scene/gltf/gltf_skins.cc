@@ -15,13 +15,13 @@ namespace {
 constexpr double kWeightSumTolerance = 0.02;
 constexpr size_t kMaxJoints = 1 << 16;
 
-std::vector<Vec3> vec3s(const std::vector<float>& f) {
+}  // namespace
+
+std::vector<Vec3> as_vec3s(const std::vector<float>& f) {
   std::vector<Vec3> v(f.size() / 3);
   for (size_t i = 0; i < v.size(); ++i) v[i] = {f[3 * i], f[3 * i + 1], f[3 * i + 2]};
   return v;
 }
-
-}  // namespace
 
 std::shared_ptr<const MorphTargets> read_gltf_morph(const GltfContext& ctx, const tinygltf::Primitive& prim,
                                                     const tinygltf::Mesh& mesh, const tinygltf::Node& node, size_t nv,
@@ -33,7 +33,7 @@ std::shared_ptr<const MorphTargets> read_gltf_morph(const GltfContext& ctx, cons
     std::vector<Vec3> dp(nv), dn;
     for (const auto& [name, accessor] : prim.targets[t]) {
       if (name != "POSITION" && name != "NORMAL") continue;  // TANGENT: tangents are not read (docs/gltf.md)
-      std::vector<Vec3> d = vec3s(read_accessor_floats(ctx, accessor, 3, tel + " " + name));
+      std::vector<Vec3> d = as_vec3s(read_accessor_floats(ctx, accessor, 3, tel + " " + name));
       if (d.size() != nv)
         ctx.fail(tel, name + " has " + std::to_string(d.size()) + " elements for " + std::to_string(nv) + " vertices");
       (name == "POSITION" ? dp : dn) = std::move(d);
@@ -120,7 +120,7 @@ std::shared_ptr<const Skin> read_gltf_skin(const GltfContext& ctx, int index, co
 void place_skinned_mesh(const GltfContext& ctx, Mesh& mesh, const Skin& skin, const MorphTargets* morph,
                         const std::vector<float>& p3, const std::vector<float>& n3, const std::vector<Mat4>& node_world,
                         const std::string& el) {
-  std::vector<Vec3> p = vec3s(p3), n = vec3s(n3);
+  std::vector<Vec3> p = as_vec3s(p3), n = as_vec3s(n3);
   if (morph) apply_morph(*morph, morph->weights, p, n);
   std::vector<Mat4> joints(skin.joints.size());
   for (size_t j = 0; j < joints.size(); ++j) joints[j] = node_world[skin.joints[j]];

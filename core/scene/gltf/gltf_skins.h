@@ -14,6 +14,9 @@
 
 namespace tessera {
 
+// 3 floats a vertex (as accessors are read) as vectors.
+std::vector<Vec3> as_vec3s(const std::vector<float>& f);
+
 // The primitive's morph targets with the weights shown without animation (the node's,
 // else the mesh's); null when it has none. `nv`: its vertex count.
 std::shared_ptr<const MorphTargets> read_gltf_morph(const GltfContext& ctx, const tinygltf::Primitive& prim,

@@ -19,6 +19,21 @@ constexpr int kEncoded = -1;                             // tinygltf::Image::com
 
 float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f); }
 
+// An image's size from its header, refused over kMaxImagePixels before anything is allocated.
+void check_size(const GltfContext& ctx, int w, int h, const std::string& el) {
+  if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels)
+    ctx.fail(el, std::to_string(w) + "x" + std::to_string(h) + " is over the 64 M texel limit");
+}
+
+// A decoder's RGBA 8-bit pixels kept as the image's, decoded.
+void keep_rgba(tinygltf::Image& img, const unsigned char* rgba, int w, int h) {
+  img.width = w;
+  img.height = h;
+  img.component = 4;
+  img.bits = 8;
+  img.image.assign(rgba, rgba + size_t(w) * size_t(h) * 4);
+}
+
 }  // namespace
 
 bool keep_image_encoded(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
@@ -132,15 +147,10 @@ const tinygltf::Image& GltfTextures::decode_webp(tinygltf::Image& img, const std
   int w = 0, h = 0;
   if (!WebPGetInfo(img.image.data(), img.image.size(), &w, &h))
     ctx_.fail(el, "the WebP image is damaged or cut short and cannot be decoded");
-  if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels)
-    ctx_.fail(el, std::to_string(w) + "x" + std::to_string(h) + " is over the 64 M texel limit");
+  check_size(ctx_, w, h, el);
   uint8_t* data = WebPDecodeRGBA(img.image.data(), img.image.size(), &w, &h);
   if (!data) ctx_.fail(el, "the WebP image is damaged or cut short and cannot be decoded");
-  img.width = w;
-  img.height = h;
-  img.component = 4;
-  img.bits = 8;
-  img.image.assign(data, data + size_t(w) * size_t(h) * 4);
+  keep_rgba(img, data, w, h);
   WebPFree(data);
   return img;
 }
@@ -164,19 +174,14 @@ const tinygltf::Image& GltfTextures::decode_image(int index) {
   int w = 0, h = 0, comp = 0;
   const int size = int(std::min<size_t>(img.image.size(), size_t(INT32_MAX)));
   if (!stbi_info_from_memory(img.image.data(), size, &w, &h, &comp)) ctx_.fail(el, "not a readable PNG or JPEG");
-  if (w <= 0 || h <= 0 || uint64_t(w) * uint64_t(h) > kMaxImagePixels)
-    ctx_.fail(el, std::to_string(w) + "x" + std::to_string(h) + " is over the 64 M texel limit");
+  check_size(ctx_, w, h, el);
   unsigned char* data = stbi_load_from_memory(img.image.data(), size, &w, &h, &comp, 4);
   if (!data) {  // stb's reasons are short codes ("outofdata", "bad zlib header", ...)
     const std::string why = stbi_failure_reason() ? stbi_failure_reason() : "unknown";
     ctx_.fail(el, why == "outofdata" ? "the image is cut short (a truncated PNG or JPEG)"
                                      : "the image is damaged and cannot be decoded (" + why + ")");
   }
-  img.width = w;
-  img.height = h;
-  img.component = 4;
-  img.bits = 8;
-  img.image.assign(data, data + size_t(w) * size_t(h) * 4);
+  keep_rgba(img, data, w, h);
   stbi_image_free(data);
   return img;
 }
