@@ -26,24 +26,19 @@ Mesh square(float z, uint32_t material) {
 }
 
 Material black(Material::AlphaMode mode, float opacity) {
-  Material m;
-  m.kind = Material::Kind::kPbr;
+  Material m = testing::pbr_material(0, 1);
   m.reflectance = Rgb(0.0f);
-  m.metallic = 0;
   m.ior = 1;  // Lambertian, and black: nothing reflected
   m.alpha_mode = mode;
   m.opacity = opacity;
   return m;
 }
 
-// Left half transparent (alpha 0), right half opaque (alpha 1), clamped.
+// Left half transparent (alpha 0), right half opaque (alpha 1), clamped (its colour is
+// never seen: the materials here are black).
 Texture half_alpha() {
-  Texture t;
-  t.width = 2;
-  t.height = 1;
-  t.texels = {Rgb(1.0f), Rgb(1.0f)};
+  Texture t = testing::red_blue_texture();
   t.alpha = {0.0f, 1.0f};
-  t.wrap_s = t.wrap_t = Texture::Wrap::kClamp;
   return t;
 }
 

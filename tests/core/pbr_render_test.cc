@@ -13,29 +13,8 @@ namespace tessera {
 namespace {
 
 using testing::film_estimate;
+using testing::pbr_material;
 using testing::render;
-
-Material pbr(float metallic, float roughness, float transmission = 0, bool thin = true) {
-  Material m;
-  m.kind = Material::Kind::kPbr;
-  m.reflectance = Rgb(1.0f);
-  m.metallic = metallic;
-  m.roughness = roughness;
-  m.alpha = roughness * roughness;
-  m.transmission = transmission;
-  m.thin = thin;
-  return m;
-}
-
-// A 2x1 texture, red then blue, clamped: x < 0 red and x > 0 blue on a quad mapped u = x.
-Texture red_blue() {
-  Texture t;
-  t.width = 2;
-  t.height = 1;
-  t.texels = {Rgb(1.0f, 0.0f, 0.0f), Rgb(0.0f, 0.0f, 1.0f)};
-  t.wrap_s = t.wrap_t = Texture::Wrap::kClamp;
-  return t;
-}
 
 // An axis-aligned box [-h, h]^3 of outward-wound triangles.
 Mesh box(float h, uint32_t material) {
@@ -69,7 +48,7 @@ RenderSettings env_settings() {
 TEST(PbrRender, AbsorbingSolidTransmitsExpOfMinusSigmaTimesItsThickness) {
   // Index 1 and smooth: no reflection, no bending; the path crosses 2 units of a medium of
   // sigma (0.5, 1, 2) and sees the environment of radiance 1 behind.
-  Material glass = pbr(0, 0, 1, false);
+  Material glass = pbr_material(0, 0, 1, false);
   glass.ior = 1;
   glass.absorption = Rgb(0.5f, 1.0f, 2.0f);
   const Scene scene = scene_with(box(1, 0), glass);
@@ -91,23 +70,23 @@ TEST(PbrRender, AbsorbingSolidTransmitsExpOfMinusSigmaTimesItsThickness) {
 // than it receives.
 TEST(PbrRender, WhiteFurnaces) {
   auto mean_of = [](Material m) { return film_estimate(render(testing::lone_sphere(m), env_settings()).film); };
-  testing::Estimate e = mean_of(pbr(1, 0));
+  testing::Estimate e = mean_of(pbr_material(1, 0));
   EXPECT_NEAR(e.mean, 1.0, 1e-4);
-  Material lambert = pbr(0, 0.5f);
+  Material lambert = pbr_material(0, 0.5f);
   lambert.ior = 1;
   e = mean_of(lambert);
   EXPECT_NEAR(e.mean, 1.0, 4 * e.stderr_ + 2e-3);
-  e = mean_of(pbr(0, 0, 1, false));  // smooth glass: energy is only redirected
+  e = mean_of(pbr_material(0, 0, 1, false));  // smooth glass: energy is only redirected
   EXPECT_NEAR(e.mean, 1.0, 4 * e.stderr_ + 2e-3);
-  for (const Material& m : {pbr(1, 0.2f), pbr(0, 0.2f, 1, false), pbr(0, 0.2f, 1, true)}) {
+  for (const Material& m : {pbr_material(1, 0.2f), pbr_material(0, 0.2f, 1, false), pbr_material(0, 0.2f, 1, true)}) {
     e = mean_of(m);
     EXPECT_LE(e.mean, 1.0 + 4 * e.stderr_);
     EXPECT_GT(e.mean, 0.95) << m.thin << " " << m.transmission;
   }
-  e = mean_of(pbr(1, 0.5f));  // rougher: more of the single-scattering loss
+  e = mean_of(pbr_material(1, 0.5f));  // rougher: more of the single-scattering loss
   EXPECT_LE(e.mean, 1.0 + 4 * e.stderr_);
   EXPECT_GT(e.mean, 0.8);
-  e = mean_of(pbr(0, 0.5f));  // white plastic
+  e = mean_of(pbr_material(0, 0.5f));  // white plastic
   EXPECT_LE(e.mean, 1.01 + 4 * e.stderr_);
   EXPECT_GT(e.mean, 0.97);
 }
@@ -117,7 +96,7 @@ TEST(PbrRender, WhiteFurnaces) {
 TEST(PbrRender, VertexColoursMultiplyTheBaseColour) {
   Mesh b = box(1, 0);
   b.colors.assign(b.positions.size(), Rgb(0.5f, 0.25f, 1.0f));
-  Material metal = pbr(1, 0);
+  Material metal = pbr_material(1, 0);
   metal.reflectance = Rgb(1.0f, 1.0f, 0.5f);
   const Film film = render(scene_with(b, metal), env_settings()).film;
   const PixelSums& p = film.pixels()[size_t(12 * 24 + 12)];
@@ -133,7 +112,7 @@ TEST(PbrRender, NormalMapTurnsTheShadingNormalInTangentSpace) {
   // Tangent-space normal (0.6, 0, 0.8): tilted toward +T (dp/du).
   t.texels = {Rgb(0.5f * 0.6f + 0.5f, 0.5f, 0.5f * 0.8f + 0.5f)};
   s.textures.push_back(t);
-  Material m = pbr(0, 0.5f);
+  Material m = pbr_material(0, 0.5f);
   m.normal_texture.index = 0;
   s.materials.push_back(m);
   Mesh quad;  // z = 0, facing +z, u along +x and v along -y (an upright glTF texture)
@@ -170,7 +149,7 @@ TEST(PbrRender, NormalMapTurnsTheShadingNormalInTangentSpace) {
 
 TEST(PbrRender, EmissiveTextureScalesCameraHitsAndLightSamplesAlike) {
   Scene s;
-  s.textures.push_back(red_blue());
+  s.textures.push_back(testing::red_blue_texture());
   Material e;
   e.kind = Material::Kind::kEmission;
   e.radiance = Rgb(2.0f);
@@ -226,8 +205,8 @@ namespace {
 TEST(PbrRender, EmissionAddsToReflection) {
   for (const float strength : {0.5f, 3.0f}) {
     Scene s;
-    s.textures.push_back(red_blue());
-    Material m = pbr(0, 1);
+    s.textures.push_back(testing::red_blue_texture());
+    Material m = pbr_material(0, 1);
     m.ior = 1;  // exactly Lambertian (docs/gltf.md)
     m.reflectance = Rgb(0.5f);
     m.radiance = Rgb(strength);

@@ -72,6 +72,30 @@ inline Scene lone_sphere(Material m) {
   return s;
 }
 
+// glTF's metallic-roughness material (white base colour).
+inline Material pbr_material(float metallic, float roughness, float transmission = 0, bool thin = true) {
+  Material m;
+  m.kind = Material::Kind::kPbr;
+  m.reflectance = Rgb(1.0f);
+  m.metallic = metallic;
+  m.roughness = roughness;
+  m.alpha = roughness * roughness;
+  m.transmission = transmission;
+  m.thin = thin;
+  return m;
+}
+
+// A 2x1 texture, red then blue, clamped: on a quad [-1, 1]^2 mapped u = (x + 1) / 2, x < 0
+// is red and x > 0 blue.
+inline Texture red_blue_texture() {
+  Texture t;
+  t.width = 2;
+  t.height = 1;
+  t.texels = {Rgb(1.0f, 0.0f, 0.0f), Rgb(0.0f, 0.0f, 1.0f)};
+  t.wrap_s = t.wrap_t = Texture::Wrap::kClamp;
+  return t;
+}
+
 inline RenderSettings furnace_settings() {
   RenderSettings s;
   s.camera.framing = Framing::kFile;
