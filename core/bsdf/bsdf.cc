@@ -4,6 +4,7 @@
 
 #include "core/bsdf/fresnel.h"
 #include "core/bsdf/microfacet.h"
+#include "core/bsdf/sheen.h"
 #include "core/sampling/warp.h"
 
 namespace tessera {
@@ -241,6 +242,65 @@ bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) 
   return true;
 }
 
+// ---- KHR_materials_sheen over kPbr ----------------------------------------------------
+// The extension's albedo scaling: f = sheenColor f_sheen + f_base s, s = min(1 - c E(wo),
+// 1 - c E(wi)) with c = max(sheenColor) and E the white lobe's directional albedo
+// (core/bsdf/sheen.h). The lobe is two-sided as the base's are. Sampling picks the sheen
+// with probability from c E(wo) (in [0.1, 0.9]; 1 over a black base), drawing a cosine
+// direction on wo's side, else the base; the density is the mixture's.
+
+bool has_sheen(const Material& m) { return m.sheen_color.max() > 0; }
+float sheen_scale(const Material& m, float alpha, Vec3 wo, Vec3 wi) {
+  const float c = m.sheen_color.max();
+  return std::min(1 - c * sheen_albedo(wo.z, alpha), 1 - c * sheen_albedo(wi.z, alpha));
+}
+float sheen_probability(const Material& m, float alpha, Vec3 wo) {
+  const PbrLobes base = pbr_lobes(m, wo);
+  if (base.spec + base.diffuse + base.trans <= 0) return 1;
+  return std::clamp(m.sheen_color.max() * sheen_albedo(wo.z, alpha), 0.1f, 0.9f);
+}
+// The lobe with the caller's frame flipped so that wo is up.
+float sheen_lobe_f(float alpha, Vec3 wo, Vec3 wi) {
+  if (wo.z * wi.z <= 0) return 0;
+  return wo.z > 0 ? sheen_f(alpha, wo, wi) : sheen_f(alpha, -wo, -wi);
+}
+
+Rgb sheened_f(const Material& m, Vec3 wo, Vec3 wi) {
+  const Rgb base = pbr_f(m, wo, wi);
+  if (!has_sheen(m)) return base;
+  const float alpha = sheen_alpha(m.sheen_roughness);
+  return m.sheen_color * sheen_lobe_f(alpha, wo, wi) + base * sheen_scale(m, alpha, wo, wi);
+}
+
+float sheened_pdf(const Material& m, Vec3 wo, Vec3 wi) {
+  if (!has_sheen(m)) return pbr_pdf(m, wo, wi);
+  const float ps = sheen_probability(m, sheen_alpha(m.sheen_roughness), wo);
+  const float cosine = wo.z * wi.z > 0 ? std::fabs(wi.z) * kInvPi : 0;
+  return ps * cosine + (ps < 1 ? (1 - ps) * pbr_pdf(m, wo, wi) : 0);
+}
+
+bool sheened_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
+  if (!has_sheen(m)) return pbr_sample(m, wo, u1, u2, out);
+  if (wo.z == 0) return false;
+  const float alpha = sheen_alpha(m.sheen_roughness), ps = sheen_probability(m, alpha, wo);
+  if (u1 < ps) {  // the sheen: a cosine direction on wo's side
+    const Vec3 d = square_to_cosine_hemisphere(u2);
+    out->wi = wo.z > 0 ? d : Vec3{d.x, d.y, -d.z};
+    out->delta = false;
+    out->etap = 1;
+  } else {  // the base, its own choice of lobe from the rest of u1
+    if (!pbr_sample(m, wo, std::min((u1 - ps) / (1 - ps), 0x1.fffffep-1f), u2, out)) return false;
+    if (out->delta) {  // a delta lobe of the base, scaled under the sheen
+      out->weight = out->weight * (sheen_scale(m, alpha, wo, out->wi) / (1 - ps));
+      return true;
+    }
+  }
+  out->pdf = sheened_pdf(m, wo, out->wi);
+  if (!(out->pdf > 0)) return false;
+  out->weight = sheened_f(m, wo, out->wi) * (std::fabs(out->wi.z) / out->pdf);
+  return true;
+}
+
 // ---- KHR_materials_clearcoat over kPbr -------------------------------------------------
 // The extension's fresnel_coat: f = (1 - c Fc) f_base + c Fc f_coat, with Fc Schlick's
 // reflectance of an ior-1.5 coat (F0 = 0.04) at the viewing angle |wo.z| and f_coat a GGX
@@ -275,20 +335,20 @@ float coat_pdf(const Material& m, Vec3 wo, Vec3 wi) {
 }
 
 Rgb coated_f(const Material& m, Vec3 wo, Vec3 wi) {
-  const Rgb base = pbr_f(m, wo, wi);
+  const Rgb base = sheened_f(m, wo, wi);
   if (m.clearcoat <= 0) return base;
   const float fc = coat_fresnel(m, wo);
   return base * (1 - fc) + Rgb(fc * coat_f(m, wo, wi));
 }
 
 float coated_pdf(const Material& m, Vec3 wo, Vec3 wi) {
-  if (m.clearcoat <= 0) return pbr_pdf(m, wo, wi);
+  if (m.clearcoat <= 0) return sheened_pdf(m, wo, wi);
   const float pc = coat_probability(m, wo);
-  return (1 - pc) * pbr_pdf(m, wo, wi) + pc * coat_pdf(m, wo, wi);
+  return (1 - pc) * sheened_pdf(m, wo, wi) + pc * coat_pdf(m, wo, wi);
 }
 
 bool coated_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
-  if (m.clearcoat <= 0) return pbr_sample(m, wo, u1, u2, out);
+  if (m.clearcoat <= 0) return sheened_sample(m, wo, u1, u2, out);
   if (wo.z == 0) return false;
   const float pc = coat_probability(m, wo), fc = coat_fresnel(m, wo);
   if (u1 < pc) {  // the coat
@@ -306,7 +366,7 @@ bool coated_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* ou
     if (out->wi.z * wo.z <= 0) return false;
     out->delta = false;
   } else {  // the base, its own choice of lobe from the rest of u1
-    if (!pbr_sample(m, wo, std::min((u1 - pc) / (1 - pc), 0x1.fffffep-1f), u2, out)) return false;
+    if (!sheened_sample(m, wo, std::min((u1 - pc) / (1 - pc), 0x1.fffffep-1f), u2, out)) return false;
     if (out->delta) {  // a delta lobe of the base: its weight, under the coat
       out->weight = out->weight * ((1 - fc) / (1 - pc));
       return true;

@@ -233,6 +233,10 @@ Material Scene::textured(const Material& m, Vec2 uv, Vec2 uv1) const {
     out.clearcoat_roughness = std::clamp(m.clearcoat_roughness * at(m.clearcoat_roughness_texture).g, 0.0f, 1.0f);
     out.clearcoat_alpha = out.clearcoat_roughness * out.clearcoat_roughness;
   }
+  if (m.sheen_color_texture.active()) out.sheen_color *= at(m.sheen_color_texture);
+  if (m.sheen_roughness_texture.active())
+    out.sheen_roughness *=
+        textures[size_t(m.sheen_roughness_texture.index)].sample_alpha(coords(m.sheen_roughness_texture));
   return out;
 }
 

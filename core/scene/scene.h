@@ -71,6 +71,12 @@ struct Material {
   // texture's R; roughness x its texture's G). 0: no coat, the plain path.
   float clearcoat = 0, clearcoat_roughness = 0, clearcoat_alpha = 0;
   TextureRef clearcoat_texture, clearcoat_roughness_texture;
+  // KHR_materials_sheen: a microfibre layer of colour `sheen_color` (x its texture, sRGB)
+  // and roughness `sheen_roughness` (x its texture's alpha) over the base, under the coat
+  // (core/bsdf/sheen.h). Black: no sheen, the plain path.
+  Rgb sheen_color{0.0f};
+  float sheen_roughness = 0;
+  TextureRef sheen_color_texture, sheen_roughness_texture;
   // glTF alphaMode: how much of the surface is there, from the coverage `opacity` x the base
   // colour texture's alpha x COLOR_0's alpha (Scene::opacity_at). OPAQUE ignores it; MASK
   // keeps the surface where it reaches `alpha_cutoff`, BLEND where a uniform number per ray
@@ -86,7 +92,7 @@ struct Material {
   bool is_delta() const {
     if (kind == Kind::kPbr)
       return alpha < kSmoothAlpha && metallic + (1 - metallic) * transmission >= 1 &&
-             (clearcoat <= 0 || clearcoat_alpha < kSmoothAlpha);
+             (clearcoat <= 0 || clearcoat_alpha < kSmoothAlpha) && sheen_color.is_black();
     return kind == Kind::kMirror || kind == Kind::kGlass || kind == Kind::kRefraction;
   }
   // True if the surface glows (camera and BSDF paths that reach it add `radiance`).
@@ -101,7 +107,7 @@ struct Material {
   bool has_textures() const {
     return texture.active() || metal_rough_texture.active() || normal_texture.active() || emissive_texture.active() ||
            specular_texture.active() || specular_color_texture.active() || clearcoat_texture.active() ||
-           clearcoat_roughness_texture.active();
+           clearcoat_roughness_texture.active() || sheen_color_texture.active() || sheen_roughness_texture.active();
   }
 };
 

@@ -246,6 +246,8 @@ struct PbrCase {
   float specular = -1;
   Rgb specular_color{1.0f};
   float clearcoat = 0, clearcoat_roughness = 0;  // KHR_materials_clearcoat
+  Rgb sheen{0.0f};                               // KHR_materials_sheen
+  float sheen_roughness = 0;
 };
 void PrintTo(const PbrCase& c, std::ostream* os) { *os << c.name; }
 
@@ -267,6 +269,8 @@ Material pbr(const PbrCase& c) {
   m.clearcoat = c.clearcoat;
   m.clearcoat_roughness = c.clearcoat_roughness;
   m.clearcoat_alpha = c.clearcoat_roughness * c.clearcoat_roughness;
+  m.sheen_color = c.sheen;
+  m.sheen_roughness = c.sheen_roughness;
   return m;
 }
 
@@ -317,7 +321,7 @@ TEST_P(PbrTest, AlbedoBySamplingEqualsQuadratureAndNeverExceedsOne) {
       << "sampled " << radiance_sum / n << " quadrature " << quad;
 }
 
-// The extensions' cases: a base case with KHR_materials_specular or _clearcoat added.
+// The extensions' cases: a base case with KHR_materials_specular, _clearcoat or _sheen added.
 PbrCase with_specular(PbrCase c, float specular, Rgb color) {
   c.specular = specular;
   c.specular_color = color;
@@ -326,6 +330,11 @@ PbrCase with_specular(PbrCase c, float specular, Rgb color) {
 PbrCase with_coat(PbrCase c, float clearcoat, float roughness) {
   c.clearcoat = clearcoat;
   c.clearcoat_roughness = roughness;
+  return c;
+}
+PbrCase with_sheen(PbrCase c, Rgb color, float roughness) {
+  c.sheen = color;
+  c.sheen_roughness = roughness;
   return c;
 }
 
@@ -345,7 +354,11 @@ INSTANTIATE_TEST_SUITE_P(
         with_specular({"specular_thin_inside", 0, 0.4f, 0.6f, true, float(M_PI) - 0.4f}, 0.8f, {1.0f, 1.0f, 3.0f}),
         with_coat({"rough_coat_on_plastic", 0, 0.6f, 0, true, 0.9f}, 1.0f, 0.3f),
         with_coat({"rough_coat_on_rough_metal", 1, 0.5f, 0, true, 1.2f}, 0.7f, 0.2f),
-        with_coat({"rough_coat_on_rough_glass_inside", 0, 0.4f, 1, false, float(M_PI) - 0.5f}, 0.8f, 0.25f)),
+        with_coat({"rough_coat_on_rough_glass_inside", 0, 0.4f, 1, false, float(M_PI) - 0.5f}, 0.8f, 0.25f),
+        with_sheen({"white_sheen_on_plastic", 0, 0.7f, 0, true, 0.8f}, Rgb(1.0f), 0.5f),
+        with_sheen({"smooth_sheen_grazing_on_metal", 1, 0.4f, 0, true, 1.45f}, {1.0f, 0.8f, 0.6f}, 0.07f),
+        with_sheen({"rough_sheen_on_rough_glass_inside", 0, 0.4f, 1, false, float(M_PI) - 0.5f}, Rgb(0.8f), 1.0f),
+        with_sheen(with_coat({"sheen_under_a_coat", 0, 0.6f, 0, true, 1.0f}, 0.7f, 0.3f), Rgb(1.0f), 0.3f)),
     [](const ::testing::TestParamInfo<PbrCase>& info) { return std::string(info.param.name); });
 
 TEST(Pbr, IndexOneMakesTheDielectricExactlyLambertian) {

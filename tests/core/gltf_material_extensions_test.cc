@@ -1,5 +1,5 @@
 // The glTF loader's material and texture extensions (issue 29): alphaMode and coverage,
-// KHR_materials_specular and _clearcoat, image formats (KTX2 and AVIF fallbacks, WebP
+// KHR_materials_specular, _clearcoat and _sheen, image formats (KTX2 and AVIF fallbacks, WebP
 // decoded).
 #include <webp/decode.h>
 #include <webp/encode.h>
@@ -91,6 +91,30 @@ TEST_F(Gltf, SpecularAndClearcoatExtensionsAreRead) {
   EXPECT_TRUE(warned);
   d.j["materials"][0]["extensions"]["KHR_materials_clearcoat"]["clearcoatFactor"] = -1;
   expect_error(d, "KHR_materials_clearcoat.clearcoatFactor");
+}
+
+// Issue 29: KHR_materials_sheen's colour (x its sRGB texture) and roughness (x its
+// texture's alpha) are read without a warning; out of range refused by name.
+TEST_F(Gltf, SheenExtensionIsRead) {
+  Doc d;
+  d.j["images"] = {{{"uri", white_alpha_png_uri()}}};
+  d.j["textures"] = {{{"source", 0}}};
+  d.j["materials"][0]["extensions"]["KHR_materials_sheen"] = {{"sheenColorFactor", {1, 0.5, 0.25}},
+                                                              {"sheenRoughnessFactor", 0.6},
+                                                              {"sheenColorTexture", {{"index", 0}}},
+                                                              {"sheenRoughnessTexture", {{"index", 0}}}};
+  d.j["extensionsUsed"] = {"KHR_materials_sheen"};
+  const Scene s = load(d);
+  const Material& m = s.materials[s.meshes[0].material];
+  EXPECT_FLOAT_EQ(m.sheen_color.g, 0.5f);
+  EXPECT_FLOAT_EQ(m.sheen_roughness, 0.6f);
+  EXPECT_FALSE(m.is_delta());
+  EXPECT_NEAR(s.textured(m, {0.75f, 0.5f}).sheen_color.b, 0.25f, 1e-6);  // white texel
+  EXPECT_NEAR(s.textured(m, {0.25f, 0.5f}).sheen_roughness, 0, 1e-6);    // alpha 0
+  EXPECT_NEAR(s.textured(m, {0.75f, 0.5f}).sheen_roughness, 0.6f, 1e-6);
+  for (const std::string& w : s.warnings) EXPECT_EQ(w.find("sheen"), std::string::npos) << w;
+  d.j["materials"][0]["extensions"]["KHR_materials_sheen"]["sheenColorFactor"] = {1, 2, 0};
+  expect_error(d, "KHR_materials_sheen.sheenColorFactor component 2");
 }
 
 // Issue 29: KTX2 textures (KHR_texture_basisu) have no decoder here: a texture's PNG or

@@ -18,6 +18,7 @@ inline bool gltf_extension_supported(const std::string& name) {
   static const std::set<std::string> kSupported = {
       "KHR_lights_punctual", "KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume",
       "KHR_materials_emissive_strength", "KHR_texture_transform", "KHR_materials_specular", "KHR_materials_clearcoat",
+      "KHR_materials_sheen",
       // Integer attributes: every accessor is read with the component types and
       // normalization the core allows for any attribute (gltf_accessors.cc).
       "KHR_mesh_quantization",

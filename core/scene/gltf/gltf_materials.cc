@@ -131,6 +131,18 @@ void GltfMaterials::read_clearcoat(const tinygltf::ExtensionMap& ex, const std::
                    "base's shading normal");
 }
 
+// KHR_materials_sheen (Material::sheen_color).
+void GltfMaterials::read_sheen(const tinygltf::ExtensionMap& ex, const std::string& el, Material& m) {
+  const char* k = "KHR_materials_sheen";
+  if (!ex.count(k)) return;
+  if (const tinygltf::Value* v = ext_value(ex, k, "sheenColorFactor"))
+    m.sheen_color = color_factor(ctx_, numbers_of(*v), Rgb(0.0f), el, "KHR_materials_sheen.sheenColorFactor");
+  m.sheen_roughness = float(unit_factor(ctx_, ext_number(ctx_, ex, k, "sheenRoughnessFactor", 0, el), el,
+                                        "KHR_materials_sheen.sheenRoughnessFactor"));
+  m.sheen_color_texture = ext_texture(ex, k, "sheenColorTexture", true, el);
+  m.sheen_roughness_texture = ext_texture(ex, k, "sheenRoughnessTexture", false, el);  // its alpha
+}
+
 uint32_t GltfMaterials::material(int index) {
   if (auto it = made_.find(index); it != made_.end()) return it->second;
   Material m;
@@ -167,6 +179,7 @@ uint32_t GltfMaterials::material(int index) {
     read_volume(ctx_, ex, el, m);
     read_specular(ex, el, m);
     read_clearcoat(ex, el, m);
+    read_sheen(ex, el, m);
     m.texture = textures_.texture_ref(pbr.baseColorTexture.index, pbr.baseColorTexture.texCoord,
                                       pbr.baseColorTexture.extensions, true, el, "baseColorTexture");
     m.metal_rough_texture =

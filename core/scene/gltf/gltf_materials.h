@@ -26,6 +26,7 @@ class GltfMaterials {
                          const std::string& el);
   void read_specular(const tinygltf::ExtensionMap& ex, const std::string& el, Material& m);
   void read_clearcoat(const tinygltf::ExtensionMap& ex, const std::string& el, Material& m);
+  void read_sheen(const tinygltf::ExtensionMap& ex, const std::string& el, Material& m);
 
   GltfContext& ctx_;
   GltfTextures textures_;

@@ -1,0 +1,76 @@
+#include "core/bsdf/sheen.h"
+
+#include <array>
+#include <cmath>
+
+namespace tessera {
+namespace {
+
+// The fit L(x) of the log of Lambda, interpolated between its alpha = 1 and alpha = 0
+// coefficients by (1 - alpha)^2 (the extension's implementation notes).
+float charlie_l(float x, float alpha) {
+  const float t = (1 - alpha) * (1 - alpha);
+  auto mix = [t](float at1, float at0) { return at1 + (at0 - at1) * t; };
+  const float a = mix(21.5473f, 25.3245f), b = mix(3.82987f, 3.32435f), c = mix(0.19823f, 0.16801f),
+              d = mix(-1.97760f, -1.27393f), e = mix(-4.32054f, -4.85967f);
+  return a / (1 + b * std::pow(x, c)) + d * x + e;
+}
+
+float charlie_lambda(float cos_theta, float alpha) {
+  const float c = std::fabs(cos_theta);
+  return c < 0.5f ? std::exp(charlie_l(c, alpha)) : std::exp(2 * charlie_l(0.5f, alpha) - charlie_l(1 - c, alpha));
+}
+
+// E(mu, alpha) on a grid: mu_i = i / (kN - 1), alpha_j = kSheenMinAlpha .. 1.
+constexpr int kN = 32;
+struct AlbedoTable {
+  std::array<float, kN * kN> e{};
+  AlbedoTable() {
+    // Midpoint rule over (cos theta_i, phi) on a half circle (f is symmetric in phi).
+    constexpr int kCos = 64, kPhi = 32;
+    for (int j = 0; j < kN; ++j) {
+      const float alpha = kSheenMinAlpha + (1 - kSheenMinAlpha) * float(j) / (kN - 1);
+      for (int i = 0; i < kN; ++i) {
+        const float mu = std::max(float(i) / (kN - 1), 1e-3f);
+        const Vec3 wo{std::sqrt(1 - mu * mu), 0, mu};
+        double sum = 0;
+        for (int a = 0; a < kCos; ++a) {
+          const float ci = (a + 0.5f) / kCos, si = std::sqrt(1 - ci * ci);
+          for (int b = 0; b < kPhi; ++b) {
+            const float phi = (b + 0.5f) * kPi / kPhi;
+            sum += double(sheen_f(alpha, wo, Vec3{si * std::cos(phi), si * std::sin(phi), ci})) * ci;
+          }
+        }
+        e[size_t(j * kN + i)] = float(sum * (1.0 / kCos) * (2 * kPi / kPhi));
+      }
+    }
+  }
+};
+
+}  // namespace
+
+float sheen_d(float alpha, float cos_h) {
+  const float sin2 = std::max(0.0f, 1 - cos_h * cos_h), inv = 1 / alpha;
+  return (2 + inv) * std::pow(sin2, 0.5f * inv) * (0.5f * kInvPi);
+}
+
+float sheen_f(float alpha, Vec3 wo, Vec3 wi) {
+  if (wo.z <= 0 || wi.z <= 0) return 0;
+  const Vec3 sum = wo + wi;
+  const float len = length(sum);
+  if (!(len > 0)) return 0;
+  const float g = 1 / (1 + charlie_lambda(wo.z, alpha) + charlie_lambda(wi.z, alpha));
+  return sheen_d(alpha, sum.z / len) * g / (4 * wo.z * wi.z);
+}
+
+float sheen_albedo(float cos_theta, float alpha) {
+  static const AlbedoTable table;  // thread-safe, first use only
+  const float x = std::clamp(std::fabs(cos_theta), 0.0f, 1.0f) * (kN - 1);
+  const float y = std::clamp((alpha - kSheenMinAlpha) / (1 - kSheenMinAlpha), 0.0f, 1.0f) * (kN - 1);
+  const int i = std::min(int(x), kN - 2), j = std::min(int(y), kN - 2);
+  const float fx = x - float(i), fy = y - float(j);
+  auto at = [&](int a, int b) { return table.e[size_t(b * kN + a)]; };
+  return (at(i, j) * (1 - fx) + at(i + 1, j) * fx) * (1 - fy) + (at(i, j + 1) * (1 - fx) + at(i + 1, j + 1) * fx) * fy;
+}
+
+}  // namespace tessera
