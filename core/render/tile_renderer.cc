@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "core/light/environment.h"
+#include "core/render/frame_plan.h"
 #include "core/sampling/sampler.h"
 #include "core/scene/animation.h"
 
@@ -141,7 +142,9 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
         const Ray ray = camera_->generate(float(px) + jitter.x, float(height - 1 - py) + jitter.y, u_lens);
         const Rgb L = integrator_->radiance(ray, sampler, local.rays);
         ++local.samples;
-        if (!L.is_finite()) {
+        // Beyond kMaxSampleValue is as useless as NaN (only a delta light nearer than 1e-5
+        // gets there), and dropping it keeps our own sums always plausible (frame_plan.h).
+        if (!L.is_finite() || L.max() > kMaxSampleValue) {
           ++local.nan_samples;
           continue;
         }

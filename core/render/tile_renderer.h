@@ -19,7 +19,7 @@ namespace tessera {
 
 struct TileStats {
   uint64_t samples = 0;
-  uint64_t nan_samples = 0;  // NaN or Inf samples: dropped, counted, reported
+  uint64_t nan_samples = 0;  // NaN, Inf or over kMaxSampleValue: dropped, counted, reported
   RayCounters rays;
   void add(const TileStats& o) {
     samples += o.samples;

@@ -181,6 +181,27 @@ TEST_F(BadCollada, EmitterBrighterThanTheBound) {
                "must be finite, non-negative and at most 1e20");
 }
 
+// Issue 23: material values out of their physical range aborted `tessera render` (a
+// reflectance of 3e38 overflowed a pixel's sums) or made energy; each is refused by name.
+TEST_F(BadCollada, MaterialValuesOutOfRange) {
+  expect_error(replaced("<color>0.73 0.73 0.73 1</color>", "<color>-0.8 0.73 0.73 1</color>"), "<color",
+               "<color> component -0.8 is outside [0, 1]");
+  expect_error(replaced("<color>0.73 0.73 0.73 1</color>", "<color>3e38 3e38 3e38 1</color>"), "<color",
+               "is outside [0, 1]");
+  expect_error(replaced("<reflectance>0.95 0.95 0.95</reflectance>", "<reflectance>1.5 0.95 0.95</reflectance>"),
+               "<reflectance", "<reflectance> component 1.5 is outside [0, 1]");
+  expect_error(replaced("<transmittance>1 1 1</transmittance>", "<transmittance>1 2 1</transmittance>"),
+               "<transmittance", "is outside [0, 1]");
+  expect_error(replaced("<ior>1.5</ior>", "<ior>0</ior>"), "<ior", "<ior> 0 is outside (0, 10]");
+  expect_error(replaced("<ior>1.5</ior>", "<ior>1e30</ior>"), "<ior", "<ior> 1e+30 is outside (0, 10]");
+  expect_error(replaced("<mirror><reflectance>0.95 0.95 0.95</reflectance></mirror>",
+                        "<microfacet><alpha>0</alpha><eta>1 1 1</eta><k>1 1 1</k></microfacet>"),
+               "<alpha", "<alpha> 0 is outside (0, 10]");
+  expect_error(replaced("<mirror><reflectance>0.95 0.95 0.95</reflectance></mirror>",
+                        "<microfacet><alpha>0.2</alpha><eta>1 1 1</eta><k>1 -1 1</k></microfacet>"),
+               "<k", "<k> component -1 is outside [0, 100]");
+}
+
 TEST_F(BadCollada, TruncatedFile) { expect_error(base.substr(0, base.size() / 2), "line ", "XML parse error"); }
 
 TEST_F(BadCollada, GarbageBytes) {

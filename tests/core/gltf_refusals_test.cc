@@ -215,6 +215,45 @@ TEST_F(Gltf, SelfParentNode) {
   expect_error(d, "nodes[0]: the node graph has a cycle");
 }
 
+// Issue 23: a node graph that lists a child twice, nested 30 deep, expanded to 2^30 meshes
+// (a 1 KB file, 1 GB and counting); without meshes it pinned a core for days. The budget
+// counts the expansion before the walk and refuses it naming the limit.
+TEST_F(Gltf, DagBombsAreRefusedBeforeExpansion) {
+  auto bomb = [](bool with_mesh, int levels) {
+    Doc d;
+    if (!with_mesh) d.j["nodes"][0].erase("mesh");
+    for (int i = 1; i <= levels; ++i) {
+      const int child = i == 1 ? 0 : int(d.j["nodes"].size()) - 1;
+      d.j["nodes"].push_back({{"children", {child, child}}});
+    }
+    d.j["scenes"][0]["nodes"] = {int(d.j["nodes"].size()) - 1, 1};
+    return d;
+  };
+  expect_error(bomb(true, 30), "the scene's node graph expands to 2147483648 node visits");
+  expect_error(bomb(false, 60), "node visits (a child listed more than once is expanded each time), over the limit");
+  // A child listed twice a few times over is an instance, rendered twice each time.
+  const Scene s = load(bomb(true, 4));
+  EXPECT_EQ(s.meshes.size(), 16u);
+}
+
+// Triangles are counted before expansion too, instances of EXT_mesh_gpu_instancing included.
+TEST_F(Gltf, TrianglesOverTheBudgetAreRefusedBeforeExpansion) {
+  Doc d;
+  d.j["accessors"][3]["count"] = 3 * 40'000'000;  // declared; never read
+  for (int i = 0; i < 2; ++i) d.j["nodes"].push_back({{"children", {0, 0}}});
+  d.j["nodes"][3]["children"] = {2, 2};
+  d.j["scenes"][0]["nodes"] = {3};
+  expect_error(d, "nodes: the scene expands to 160000000 triangles");
+}
+
+TEST_F(Gltf, HierarchyDeeperThanTheLimitIsRefused) {
+  Doc d;
+  for (int i = 0; i < 300; ++i) d.j["nodes"].push_back({{"children", {int(d.j["nodes"].size()) - 1}}});
+  d.j["nodes"][2]["children"] = {0};
+  d.j["scenes"][0]["nodes"] = {int(d.j["nodes"].size()) - 1};
+  expect_error(d, "node hierarchy deeper than 256 levels");
+}
+
 TEST_F(Gltf, UriOutsideTheScenesFolderIsRefused) {
   Doc d;
   write("secret.bin", d.blob);

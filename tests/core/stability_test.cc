@@ -7,6 +7,7 @@
 #include "core/accel/accel.h"
 #include "core/bsdf/bsdf.h"
 #include "core/bsdf/fresnel.h"
+#include "core/render/frame_plan.h"
 #include "core/scene/load.h"
 #include "tests/core/render_helpers.h"
 #include "tests/core/test_paths.h"
@@ -169,6 +170,33 @@ TEST(HardCases, DegenerateTrianglesDuplicateVerticesAndCoplanarFaces) {
   const RenderResult r = render(s, st);
   EXPECT_EQ(r.stats.nan_samples, 0u);
   for (const PixelSums& p : r.film.pixels()) ASSERT_TRUE(std::isfinite(p.r) && p.r >= 0);
+}
+
+// Issue 23: a sample beyond kMaxSampleValue (here a 1e19 point light with a constant
+// attenuation of 1e-15, which the format allows) made `tessera render` abort, its own sums
+// refused by the frame plan. Such samples are dropped and counted as NaN ones are, and
+// every pixel stays plausible.
+TEST(HardCases, SamplesBeyondTheBoundAreDroppedNotFatal) {
+  Scene s;
+  s.materials.push_back(Material{});  // grey diffuse
+  s.spheres.push_back(Sphere{"ball", {0, 0, 0}, 1, 0, -1});
+  s.camera.present = true;
+  s.camera.eye = {0, 0, 4};
+  s.camera.xfov_deg = 30;
+  s.camera.aspect_ratio = 1;
+  Light l;
+  l.kind = Light::Kind::kPoint;
+  l.position = {0, 0, 3};
+  l.color = Rgb(1e19f);
+  l.att_constant = 1e-15f;  // samples near 1e33: finite floats, past the bound
+  s.lights.push_back(l);
+  s.finalize();
+  RenderSettings settings;
+  settings.camera.width = settings.camera.height = 8;
+  settings.spp = 2;
+  const RenderResult r = render(s, settings);
+  EXPECT_GT(r.stats.nan_samples, 0u);
+  for (const PixelSums& p : r.film.pixels()) EXPECT_TRUE(plausible(p)) << p.r;
 }
 
 TEST(HardCases, ZeroNaNSamplesAcrossTheSharedScenes) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -102,11 +103,31 @@ class ColladaLoader {
     }
     return out;
   }
-  Rgb color(pugi::xml_node parent, const char* child) const {
+  static std::string short_number(double v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", v);
+    return buf;
+  }
+  // A colour in [0, hi] per channel: reflectances in [0, 1] (above 1 a surface creates
+  // energy, and a hostile 3e38 overflowed a pixel's sums). Emitted colours are checked by
+  // Scene::finalize (kMaxEmission) for both loaders.
+  Rgb color(pugi::xml_node parent, const char* child, double hi = HUGE_VAL) const {
     pugi::xml_node c = parent.child(child);
     if (!c) fail(parent, std::string("missing <") + child + ">");
     const std::vector<double> v = numbers_exact(c, 3);
+    for (double x : v)
+      if (hi < HUGE_VAL && !(x >= 0 && x <= hi))
+        fail(c,
+             "<" + std::string(child) + "> component " + short_number(x) + " is outside [0, " + short_number(hi) + "]");
     return Rgb(float(v[0]), float(v[1]), float(v[2]));
+  }
+  // A scalar in (lo, hi].
+  double scalar_in(pugi::xml_node parent, const char* child, double lo, double hi) const {
+    const double v = scalar(parent, child);
+    if (!(v > lo && v <= hi))
+      fail(parent.child(child), "<" + std::string(child) + "> " + short_number(v) + " is outside (" + short_number(lo) +
+                                    ", " + short_number(hi) + "]");
+    return v;
   }
   double scalar(pugi::xml_node parent, const char* child, std::optional<double> fallback = {}) const {
     pugi::xml_node c = parent.child(child);
@@ -305,30 +326,27 @@ class ColladaLoader {
         m = Material{};
         if (kind == "mirror") {
           m.kind = Material::Kind::kMirror;
-          m.reflectance = color(k, "reflectance");
+          m.reflectance = color(k, "reflectance", 1);
         } else if (kind == "glass") {
           m.kind = Material::Kind::kGlass;
-          m.reflectance = color(k, "reflectance");
-          m.transmittance = color(k, "transmittance");
-          m.ior = float(scalar(k, "ior"));
+          m.reflectance = color(k, "reflectance", 1);
+          m.transmittance = color(k, "transmittance", 1);
+          m.ior = float(scalar_in(k, "ior", 0, 10));
         } else if (kind == "refraction") {
           m.kind = Material::Kind::kRefraction;
-          m.transmittance = color(k, "transmittance");
-          m.ior = float(scalar(k, "ior"));
+          m.transmittance = color(k, "transmittance", 1);
+          m.ior = float(scalar_in(k, "ior", 0, 10));
         } else if (kind == "microfacet") {
           m.kind = Material::Kind::kMicrofacet;
-          m.alpha = float(scalar(k, "alpha"));
-          m.eta = color(k, "eta");
-          m.k = color(k, "k");
-          if (!(m.alpha > 0)) fail(k, "microfacet alpha must be positive");
+          m.alpha = float(scalar_in(k, "alpha", 0, 10));
+          m.eta = color(k, "eta", 100);
+          m.k = color(k, "k", 100);
         } else if (kind == "emission") {
           m.kind = Material::Kind::kEmission;
           m.radiance = color(k, "radiance");
         } else {
           fail(k, "unknown CGL material kind <" + kind + ">");
         }
-        if ((m.kind == Material::Kind::kGlass || m.kind == Material::Kind::kRefraction) && !(m.ior > 0))
-          fail(k, "ior must be positive");
         found = true;  // the last recognised kind wins (format doc 4.2)
       }
       if (!found) fail(cgl, "CGL technique names no material kind");
@@ -339,7 +357,7 @@ class ColladaLoader {
       pugi::xml_node s = tech.child(shading);
       if (s && s.child("diffuse").child("color")) {
         m.kind = Material::Kind::kDiffuse;
-        m.reflectance = color(s.child("diffuse"), "color");
+        m.reflectance = color(s.child("diffuse"), "color", 1);
         return m;
       }
     }

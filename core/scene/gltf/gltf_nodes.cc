@@ -8,6 +8,7 @@
 
 #include "core/scene/animation.h"
 #include "core/scene/gltf/gltf_accessors.h"
+#include "core/scene/gltf/gltf_budget.h"
 #include "core/scene/gltf/gltf_lights_cameras.h"
 #include "core/scene/gltf/gltf_meshes.h"
 #include "core/scene/gltf/gltf_skins.h"
@@ -15,7 +16,6 @@
 namespace tessera {
 namespace {
 
-constexpr size_t kMaxNodeDepth = 256;
 constexpr size_t kMaxInstancedTriangles = 50'000'000;
 constexpr size_t kMaxInstances = 1 << 20;
 
@@ -86,7 +86,7 @@ class NodeWalk {
     if (index < 0 || size_t(index) >= ctx_.model.nodes.size()) ctx_.fail(el, "does not exist");
     if (std::find(path_.begin(), path_.end(), index) != path_.end())
       ctx_.fail(el, "the node graph has a cycle through this node");
-    if (path_.size() >= kMaxNodeDepth) ctx_.fail(el, "node hierarchy deeper than 256 levels");
+    if (path_.size() >= kMaxGltfNodeDepth) ctx_.fail(el, "node hierarchy deeper than 256 levels");
     const tinygltf::Node& n = ctx_.model.nodes[size_t(index)];
     const Mat4 local = gltf_local_matrix(ctx_, n, el);
     const Mat4 world = parent * local;
@@ -164,8 +164,10 @@ class NodeWalk {
 }  // namespace
 
 void add_gltf_nodes(GltfContext& ctx, GltfMaterials& materials, GltfAnimationBuilder& animation) {
+  const std::vector<int> roots = scene_roots(ctx);
+  check_gltf_budget(ctx, roots);  // before anything is expanded
   NodeWalk walk(ctx, materials, animation);
-  for (int r : scene_roots(ctx)) walk.visit(r, Mat4(), -1);
+  for (int r : roots) walk.visit(r, Mat4(), -1);
   if (walk.skinned_.empty()) return;
   const std::vector<Mat4> rest = gltf_rest_worlds(ctx);
   for (const NodeWalk::Skinned& k : walk.skinned_) {

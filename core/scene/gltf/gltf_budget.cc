@@ -1,0 +1,110 @@
+#include "core/scene/gltf/gltf_budget.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <string>
+
+namespace tessera {
+namespace {
+
+std::string count_text(double n) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, n < 1e15 ? "%.0f" : "%.3g", n);
+  return buf;
+}
+
+class Budget {
+ public:
+  explicit Budget(const GltfContext& ctx) : ctx_(ctx), memo_(ctx.model.nodes.size()) {}
+
+  struct Count {
+    double visits = 0, triangles = 0;
+    size_t height = 0;  // the longest chain of nodes from this one down, itself included
+  };
+
+  Count node(int index, size_t depth) {
+    const std::string el = "nodes[" + std::to_string(index) + "]";
+    if (index < 0 || size_t(index) >= memo_.size()) ctx_.fail(el, "does not exist");
+    Entry& e = memo_[size_t(index)];
+    if (e.state == State::kOpen) ctx_.fail(el, "the node graph has a cycle through this node");
+    if (e.state == State::kNew) {
+      if (depth >= kMaxGltfNodeDepth) ctx_.fail(el, "node hierarchy deeper than 256 levels");
+      e.state = State::kOpen;
+      const tinygltf::Node& n = ctx_.model.nodes[size_t(index)];
+      Count c;
+      c.visits = 1;
+      if (n.mesh >= 0) c.triangles = mesh_triangles(n.mesh) * instances(n);
+      for (int child : n.children) {
+        const Count k = node(child, depth + 1);
+        c.visits += k.visits;
+        c.triangles += k.triangles;
+        c.height = std::max(c.height, k.height);
+      }
+      ++c.height;
+      e = {State::kDone, c};  // (memo_ never reallocates)
+    }
+    const Count& c = e.count;
+    if (depth + c.height > kMaxGltfNodeDepth) ctx_.fail(el, "node hierarchy deeper than 256 levels");
+    return c;
+  }
+
+ private:
+  enum class State { kNew, kOpen, kDone };
+  struct Entry {
+    State state = State::kNew;
+    Count count;
+  };
+
+  double accessor_count(int a) const {
+    return a >= 0 && size_t(a) < ctx_.model.accessors.size() ? double(ctx_.model.accessors[size_t(a)].count) : 0;
+  }
+  // Triangles of a mesh from its primitives' declared counts (the walk checks them later).
+  double mesh_triangles(int mesh) const {
+    if (size_t(mesh) >= ctx_.model.meshes.size()) return 0;
+    double t = 0;
+    for (const tinygltf::Primitive& p : ctx_.model.meshes[size_t(mesh)].primitives) {
+      auto pos = p.attributes.find("POSITION");
+      const double n = p.indices >= 0              ? accessor_count(p.indices)
+                       : pos != p.attributes.end() ? accessor_count(pos->second)
+                                                   : 0;
+      if (p.mode == TINYGLTF_MODE_TRIANGLES || p.mode == -1) t += std::floor(n / 3);
+      if (p.mode == TINYGLTF_MODE_TRIANGLE_STRIP || p.mode == TINYGLTF_MODE_TRIANGLE_FAN) t += std::max(0.0, n - 2);
+    }
+    return t;
+  }
+  // EXT_mesh_gpu_instancing's instance count (its first attribute's), else 1.
+  double instances(const tinygltf::Node& n) const {
+    auto ext = n.extensions.find("EXT_mesh_gpu_instancing");
+    if (ext == n.extensions.end() || !ext->second.IsObject() || !ext->second.Has("attributes")) return 1;
+    const tinygltf::Value& attrs = ext->second.Get("attributes");
+    for (const char* name : {"TRANSLATION", "ROTATION", "SCALE"})
+      if (attrs.IsObject() && attrs.Has(name) && attrs.Get(name).IsInt())
+        return std::max(1.0, accessor_count(attrs.Get(name).GetNumberAsInt()));
+    return 1;
+  }
+
+  const GltfContext& ctx_;
+  std::vector<Entry> memo_;
+};
+
+}  // namespace
+
+void check_gltf_budget(const GltfContext& ctx, const std::vector<int>& roots) {
+  Budget budget(ctx);
+  double visits = 0, triangles = 0;
+  for (int r : roots) {
+    const Budget::Count c = budget.node(r, 0);
+    visits += c.visits;
+    triangles += c.triangles;
+  }
+  if (visits > kMaxGltfNodeVisits)
+    ctx.fail("nodes", "the scene's node graph expands to " + count_text(visits) +
+                          " node visits (a child listed more than once is expanded each time), over the limit of " +
+                          count_text(kMaxGltfNodeVisits));
+  if (triangles > kMaxGltfTriangles)
+    ctx.fail("nodes", "the scene expands to " + count_text(triangles) +
+                          " triangles (every node visit and instance counted), over the limit of " +
+                          count_text(kMaxGltfTriangles));
+}
+
+}  // namespace tessera
