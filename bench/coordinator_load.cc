@@ -19,6 +19,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 #include <thread>
+#include <utility>
 
 #include "server/grpc_services.h"
 #include "server/status_http.h"
@@ -154,7 +155,7 @@ int main(int argc, char** argv) {
   for (int t = 0; t < threads; ++t) {
     pool.emplace_back([&, t] {
       auto stub = v1::TesseraWorker::NewStub(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()));
-      std::vector<uint64_t> ids;               // this thread's share of the simulated workers
+      std::vector<std::pair<uint64_t, std::string>> ids;  // this thread's share of the simulated workers
       std::map<size_t, std::string> payloads;  // by tile area
       for (int w = t; w < workers; w += threads) {
         grpc::ClientContext ctx;
@@ -162,22 +163,25 @@ int main(int argc, char** argv) {
         r.set_version(kProtocolVersion);
         r.set_name("sim" + std::to_string(w));
         v1::RegisterResponse resp;
-        if (stub->Register(&ctx, r, &resp).ok()) ids.push_back(resp.worker_id());
+        if (stub->Register(&ctx, r, &resp).ok()) ids.emplace_back(resp.worker_id(), resp.worker_secret());
       }
       if (ids.empty()) return;  // more client threads than workers
       for (size_t k = 0; !stop; k = (k + 1) % ids.size()) {
         load_cpu[size_t(t)] = cpu_seconds(RUSAGE_THREAD);
         grpc::ClientContext c1;
         v1::GetTaskRequest g;
-        g.set_worker_id(ids[k]);
+        g.set_worker_id(ids[k].first);
+        g.set_worker_secret(ids[k].second);
         g.set_max_tasks(uint32_t(batch));
         v1::GetTaskResponse tasks;
         if (!stub->GetTask(&c1, g, &tasks).ok() || tasks.tasks_size() == 0) continue;
         grpc::ClientContext c2;
         v1::ResultBatch results;
+        results.set_worker_id(ids[k].first);
+        results.set_worker_secret(ids[k].second);
         for (const v1::Task& task : tasks.tasks()) {
           v1::TaskResult* res = results.add_results();
-          res->set_worker_id(ids[k]);
+          res->set_worker_id(ids[k].first);
           res->set_task_id(task.task_id());
           const Rect tile = from_proto(task.tile());
           std::string& payload = payloads[size_t(tile.area())];

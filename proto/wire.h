@@ -18,7 +18,8 @@ namespace tessera {
 // Version 5: scenes stream in pieces (UploadScene, FetchSceneChunks instead of FetchScene).
 // Version 6: images stream in pieces (FetchImageChunks); farm EXRs ZIP-compressed; an end
 // is reported only once durable.
-constexpr uint32_t kProtocolVersion = 6;
+// Version 7: a worker's requests carry the secret its registration gave (worker_secret).
+constexpr uint32_t kProtocolVersion = 7;
 constexpr size_t kBytesPerPixel = 36;  // r, g, b, lum2 (float64) + n (uint32)
 // gRPC message limit, for images and inline scene bundles (scenes of any size stream in
 // pieces: scene_chunks.h).

@@ -282,6 +282,11 @@ v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& req
   return worker_lifecycle_.register_worker(request, principal, clock_->now());
 }
 
+void Coordinator::check_worker(uint64_t worker_id, const std::string& secret) const {
+  MutexLock lock(mu_);
+  worker_lifecycle_.check_worker(worker_id, secret);
+}
+
 v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples) {
   return locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     return dispatcher_.get_task(worker_id, max_tasks, max_samples, clock_->now(), fx);

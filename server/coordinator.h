@@ -114,6 +114,9 @@ class Coordinator {
   // Worker side.
   // `principal`: the worker's access token name (a quarantined one may not register).
   v1::RegisterResponse register_worker(const v1::RegisterRequest& request, const std::string& principal = "");
+  // The gRPC layer's check before every worker request but Register and scene fetches:
+  // throws RequestError unless `secret` is what worker `worker_id`'s registration was given.
+  void check_worker(uint64_t worker_id, const std::string& secret) const;
   // Up to max_tasks tasks, stopping once they hold max_samples samples (0: no such limit);
   // always one if any is ready.
   v1::GetTaskResponse get_task(uint64_t worker_id, uint32_t max_tasks = 1, uint64_t max_samples = 0);

@@ -164,6 +164,7 @@ grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskR
   // Long poll: an idle worker waits here (up to a second) and gets a new job's first task
   // the moment it is submitted, instead of sleeping through a retry interval.
   return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+    c_.check_worker(req->worker_id(), req->worker_secret());
     const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
     while (true) {
       *out = c_.get_task(req->worker_id(), req->max_tasks(), req->max_samples());
@@ -181,24 +182,36 @@ grpc::Status WorkerService::FetchSceneChunks(grpc::ServerContext* ctx, const v1:
 grpc::Status WorkerService::Heartbeat(grpc::ServerContext* ctx, const v1::HeartbeatRequest* req,
                                       v1::HeartbeatResponse* out) {
   return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+    c_.check_worker(req->worker_id(), req->worker_secret());
     for (uint64_t id : c_.heartbeat(req->worker_id(), {req->task_ids().begin(), req->task_ids().end()}))
       out->add_refused(id);
   });
 }
 grpc::Status WorkerService::SubmitResults(grpc::ServerContext* ctx, const v1::ResultBatch* req, v1::ResultAcks* out) {
   return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+    c_.check_worker(req->worker_id(), req->worker_secret());
+    for (const v1::TaskResult& r : req->results())
+      if (r.worker_id() != req->worker_id())
+        throw RequestError(RequestError::Code::kPermissionDenied, "a result under worker " +
+                                                                      std::to_string(r.worker_id()) + " in worker " +
+                                                                      std::to_string(req->worker_id()) + "'s batch");
     const std::vector<const v1::TaskResult*> results(req->results().pointer_begin(), req->results().pointer_end());
     for (v1::ResultAck& ack : c_.submit_results(results)) *out->add_acks() = std::move(ack);
   });
 }
 grpc::Status WorkerService::ReleaseTask(grpc::ServerContext* ctx, const v1::ReleaseRequest* req, v1::ReleaseResponse*) {
-  return as(auth_, ctx, Action::kWork,
-            [&](const Principal&) { c_.release(req->worker_id(), req->task_id(), req->error()); });
+  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+    c_.check_worker(req->worker_id(), req->worker_secret());
+    c_.release(req->worker_id(), req->task_id(), req->error());
+  });
 }
 
 grpc::Status WorkerService::Unregister(grpc::ServerContext* ctx, const v1::UnregisterRequest* req,
                                        v1::UnregisterResponse*) {
-  return as(auth_, ctx, Action::kWork, [&](const Principal&) { c_.unregister(req->worker_id()); });
+  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+    c_.check_worker(req->worker_id(), req->worker_secret());
+    c_.unregister(req->worker_id());
+  });
 }
 
 }  // namespace tessera

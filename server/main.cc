@@ -100,6 +100,10 @@ int main(int argc, char** argv) {
   app.add_option("--max-workers", opt.max_workers, "registered workers at most (silent ones are forgotten after 60 s)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
+  app.add_option("--max-workers-per-token", opt.max_workers_per_token,
+                 "registered workers of one worker token at most (with --tokens)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000000));
   app.add_option("--max-jobs-per-client", opt.max_jobs_per_client, "live jobs one client token may have at once")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));

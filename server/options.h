@@ -20,6 +20,9 @@ struct CoordinatorOptions {
   double worker_timeout_seconds = 60;
   // Registered workers at most: a Register loop cannot grow the coordinator without bound.
   size_t max_workers = 10000;
+  // Registered workers of one access token at most: a flood under one credential cannot
+  // lock the others out (each worker's own credential makes this 1 per worker).
+  size_t max_workers_per_token = 1000;
   // Live (queued or running) jobs one client (token name) may have at once.
   size_t max_jobs_per_client = 100;
   // Pixels of all live frames together: each costs its film's sums, 40 bytes (a snapshot

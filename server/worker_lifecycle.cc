@@ -16,14 +16,35 @@ v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest&
   if (p_.workers.size() >= options_.max_workers) forget_silent(now);
   if (p_.workers.size() >= options_.max_workers)
     throw RequestError(RequestError::Code::kResourceExhausted,
-                       "the coordinator has its " + std::to_string(options_.max_workers) + " workers");
-  WorkerInfo& w = p_.workers.add(req.name(), req.threads(), now);
+                       "the coordinator has its " + std::to_string(options_.max_workers) + " workers (--max-workers)");
+  if (!principal.empty() && p_.workers.count_principal(principal) >= options_.max_workers_per_token) {
+    forget_silent(now);
+    if (p_.workers.count_principal(principal) >= options_.max_workers_per_token)
+      throw RequestError(RequestError::Code::kResourceExhausted, "worker token '" + principal + "' has its " +
+                                                                     std::to_string(options_.max_workers_per_token) +
+                                                                     " registered workers (--max-workers-per-token)");
+  }
+  std::string secret;
+  WorkerInfo& w = p_.workers.add(req.name(), req.threads(), now, &secret);
   w.principal = principal;
   v1::RegisterResponse r;
   r.set_worker_id(w.id);
+  r.set_worker_secret(secret);
   r.set_heartbeat_interval_ms(uint32_t(options_.heartbeat_seconds * 1000));
   r.set_lease_ms(uint32_t(options_.lease_seconds * 1000));
   return r;
+}
+
+void WorkerLifecycle::check_worker(uint64_t worker, const std::string& secret) const {
+  const WorkerInfo* w = p_.workers.find(worker);
+  if (!w)
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "unknown worker " + std::to_string(worker) + "; register again");
+  if (!p_.workers.secret_matches(*w, secret))
+    throw RequestError(RequestError::Code::kPermissionDenied,
+                       "worker " + std::to_string(worker) +
+                           ": the request does not carry that worker's secret (only the process that registered it may "
+                           "act for it)");
 }
 
 std::vector<uint64_t> WorkerLifecycle::heartbeat(uint64_t worker, const std::vector<uint64_t>& tasks, double now) {

@@ -27,6 +27,10 @@ class WorkerLifecycle {
 
   // `principal`: the worker's access token name. Throws RequestError.
   v1::RegisterResponse register_worker(const v1::RegisterRequest& request, const std::string& principal, double now);
+  // Throws RequestError unless `secret` is the one worker `worker`'s registration was
+  // given: kFailedPrecondition for an unknown worker (it registers again),
+  // kPermissionDenied for a request under another worker's id.
+  void check_worker(uint64_t worker, const std::string& secret) const;
   // Renews the worker's leases; returns the tasks it must not go on with.
   std::vector<uint64_t> heartbeat(uint64_t worker, const std::vector<uint64_t>& tasks, double now);
   // The worker gives a lease back; with an error, it could not render the task.

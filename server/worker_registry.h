@@ -3,7 +3,6 @@
 
 #include <cstdint>
 #include <map>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -13,6 +12,7 @@ struct WorkerInfo {
   uint64_t id = 0;
   std::string name;
   std::string principal;  // the access token's name ("" without tokens)
+  std::string secret_digest;  // SHA-256 of the secret its registration was given
   uint32_t threads = 0;
   double last_seen = 0;
   double samples_per_second = 0;  // smoothed over results
@@ -30,8 +30,14 @@ class WorkerRegistry {
  public:
   static constexpr uint32_t kMaxThreads = 4096;  // a worker's claimed threads, at most
   // `threads` is clamped to [1, kMaxThreads]: it weighs the worker's share of the work.
-  WorkerInfo& add(const std::string& name, uint32_t threads, double now);
+  // The id (53 bits) and, into `secret` when given, 128 bits (hex) come from OpenSSL's
+  // CSPRNG: neither says anything about another worker's.
+  WorkerInfo& add(const std::string& name, uint32_t threads, double now, std::string* secret = nullptr);
   WorkerInfo* find(uint64_t id);
+  // Whether `secret` is the one worker `id` was given (constant time in the secret).
+  bool secret_matches(const WorkerInfo& w, const std::string& secret) const;
+  // Workers registered under this access token name.
+  size_t count_principal(const std::string& principal) const;
   // Forgets workers not heard from for `timeout` seconds; returns their ids. (A forgotten
   // worker that comes back is told to register again.)
   std::vector<uint64_t> forget_silent(double now, double timeout);
@@ -51,7 +57,6 @@ class WorkerRegistry {
 
  private:
   std::map<uint64_t, WorkerInfo> workers_;
-  std::mt19937_64 ids_{std::random_device{}()};  // ids are unguessable: results are checked by id
   uint64_t threads_ = 0;
   mutable double last_thread_speed_ = 0;
 };

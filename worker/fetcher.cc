@@ -36,7 +36,9 @@ Fetcher::Leased Fetcher::lease(const std::atomic<bool>& stop) {
   const std::optional<LeaseRequest> size = queue_.wait_for_room(kStopPoll);
   if (!size) return {};
   v1::GetTaskRequest req;
-  req.set_worker_id(link_.worker_id);
+  const Link::Identity me = link_.identity();
+  req.set_worker_id(me.id);
+  req.set_worker_secret(me.secret);
   req.set_max_tasks(size->max_tasks);
   if (size->max_samples > 0) req.set_max_samples(size->max_samples);
   v1::GetTaskResponse resp;

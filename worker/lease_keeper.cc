@@ -17,7 +17,9 @@ LeaseKeeper::~LeaseKeeper() { thread_.join(); }
 
 void LeaseKeeper::heartbeat() {
   v1::HeartbeatRequest hb;
-  hb.set_worker_id(link_.worker_id);
+  const Link::Identity me = link_.identity();
+  hb.set_worker_id(me.id);
+  hb.set_worker_secret(me.secret);
   for (uint64_t id : queue_.held_ids()) hb.add_task_ids(id);
   if (hb.task_ids_size() == 0) return;
   v1::HeartbeatResponse hr;

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <string>
 
 #include "access.h"
@@ -18,20 +19,40 @@ struct Link {
   Link(std::shared_ptr<v1::TesseraWorker::StubInterface> s, Access a) : stub(std::move(s)), access(std::move(a)) {}
   std::shared_ptr<v1::TesseraWorker::StubInterface> stub;
   Access access;
-  std::atomic<uint64_t> worker_id{0};
   std::atomic<uint32_t> heartbeat_ms{2000};
+
+  // Who this worker is since its last registration: the id and the secret that every
+  // request carries with it (read together, so a request never mixes two registrations).
+  struct Identity {
+    uint64_t id = 0;
+    std::string secret;
+  };
+  Identity identity() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return identity_;
+  }
+  void set_identity(Identity i) {
+    std::lock_guard<std::mutex> lock(mu_);
+    identity_ = std::move(i);
+  }
 
   std::unique_ptr<grpc::ClientContext> context(double seconds) const { return call_context(access, seconds); }
   // Gives a lease back early; `error` says why this worker could not render the task.
   // Best effort: an unanswered release expires like any lease.
   void release(uint64_t task_id, const std::string& error = "") const {
     v1::ReleaseRequest rel;
-    rel.set_worker_id(worker_id);
+    const Identity me = identity();
+    rel.set_worker_id(me.id);
+    rel.set_worker_secret(me.secret);
     rel.set_task_id(task_id);
     rel.set_error(error);
     v1::ReleaseResponse rr;
     stub->ReleaseTask(context(2).get(), rel, &rr);
   }
+
+ private:
+  mutable std::mutex mu_;
+  Identity identity_;
 };
 
 }  // namespace tessera::worker

@@ -18,10 +18,13 @@ Sender::~Sender() { thread_.join(); }
 
 v1::ResultBatch Sender::encode(const TaskQueue::Batch& batch, double now) const {
   v1::ResultBatch results;
+  const Link::Identity me = link_.identity();
+  results.set_worker_id(me.id);
+  results.set_worker_secret(me.secret);
   const double threads = options_.threads * (now - options_.since);
   for (const std::shared_ptr<Held>& h : batch.tasks) {
     v1::TaskResult* r = results.add_results();
-    r->set_worker_id(link_.worker_id);
+    r->set_worker_id(me.id);
     r->set_task_id(h->task.task_id());
     r->set_raw_size(uint32_t(h->sums.size() * kBytesPerPixel));
     if (options_.lie) {

@@ -71,7 +71,7 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
     v1::RegisterResponse resp;
     const grpc::Status st = link_->stub->Register(link_->context(5).get(), req, &resp);
     if (st.ok()) {
-      link_->worker_id = resp.worker_id();
+      link_->set_identity({resp.worker_id(), resp.worker_secret()});
       link_->heartbeat_ms = std::max(50u, resp.heartbeat_interval_ms());
       backoff_.reset();
       spdlog::debug("registered as {}", resp.worker_id());
@@ -125,7 +125,9 @@ bool Worker::run(const std::atomic<bool>& stop) {
   // worker stops counting as one.
   const std::vector<uint64_t> unfinished = queue_->take_held();
   v1::UnregisterRequest bye;
-  bye.set_worker_id(link_->worker_id);
+  const Link::Identity me = link_->identity();
+  bye.set_worker_id(me.id);
+  bye.set_worker_secret(me.secret);
   v1::UnregisterResponse ok;
   if (!link_->stub->Unregister(link_->context(2).get(), bye, &ok).ok())
     for (uint64_t id : unfinished) link_->release(id);  // at least the leases, one by one

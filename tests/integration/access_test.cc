@@ -1,5 +1,6 @@
 // Access control through the real binaries: tokens with roles on gRPC and HTTP, a client
 // cancelling only its own jobs, loopback-only without tokens unless --insecure, and TLS.
+#include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 #include <httplib.h>
 #include <unistd.h>
@@ -10,8 +11,10 @@
 #include <thread>
 
 #include "core/io/files.h"
+#include "tessera.grpc.pb.h"
 #include "tests/integration/farm_helpers.h"
 #include "tests/integration/process.h"
+#include "wire.h"
 
 namespace tessera {
 namespace {
@@ -165,6 +168,85 @@ TEST_F(Access, EveryCallNeedsATokenWhoseRoleAllowsIt) {
   auto page = browser.Get("/");
   ASSERT_TRUE(page);
   EXPECT_EQ(page->status, 200);
+}
+
+// Issue 23: a worker's id is not enough to act for it. Mallory (holding another worker
+// token) knows the honest worker's id (the status page shows it) and tries every worker
+// call under it, with its own secret or none: each is refused, and the honest worker, with
+// the secret only its registration was given, goes on.
+TEST_F(Access, NoWorkerCanActUnderAnothersId) {
+  start_coordinator({"--max-workers-per-token", "3"});
+  auto stub = v1::TesseraWorker::NewStub(grpc::CreateChannel(grpc_addr, grpc::InsecureChannelCredentials()));
+  auto call = [](const char* token) {
+    auto c = std::make_unique<grpc::ClientContext>();
+    c->AddMetadata("authorization", std::string("Bearer ") + token);
+    return c;
+  };
+  v1::RegisterRequest reg;
+  reg.set_version(kProtocolVersion);
+  reg.set_name("w");
+  reg.set_threads(1);
+  v1::RegisterResponse honest, mallory;
+  ASSERT_TRUE(stub->Register(call(kWorker).get(), reg, &honest).ok());
+  ASSERT_TRUE(stub->Register(call(kMallory).get(), reg, &mallory).ok());
+  EXPECT_EQ(honest.worker_secret().size(), 32u);  // 128 bits, hex
+  EXPECT_NE(honest.worker_secret(), mallory.worker_secret());
+  const auto denied = [](const grpc::Status& st, const std::string& why) {
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::PERMISSION_DENIED) << st.error_message();
+    EXPECT_NE(st.error_message().find(why), std::string::npos) << st.error_message();
+  };
+  const std::string not_its = "does not carry that worker's secret";
+  for (const std::string& secret : {mallory.worker_secret(), std::string()}) {
+    v1::HeartbeatRequest hb;
+    hb.set_worker_id(honest.worker_id());
+    hb.set_worker_secret(secret);
+    hb.add_task_ids(1);
+    v1::HeartbeatResponse hr;
+    denied(stub->Heartbeat(call(kMallory).get(), hb, &hr), not_its);
+    v1::GetTaskRequest gt;
+    gt.set_worker_id(honest.worker_id());
+    gt.set_worker_secret(secret);
+    v1::GetTaskResponse tasks;
+    denied(stub->GetTask(call(kMallory).get(), gt, &tasks), not_its);
+    v1::ReleaseRequest rel;
+    rel.set_worker_id(honest.worker_id());
+    rel.set_worker_secret(secret);
+    v1::ReleaseResponse rr;
+    denied(stub->ReleaseTask(call(kMallory).get(), rel, &rr), not_its);
+    v1::UnregisterRequest bye;
+    bye.set_worker_id(honest.worker_id());
+    bye.set_worker_secret(secret);
+    v1::UnregisterResponse ur;
+    denied(stub->Unregister(call(kMallory).get(), bye, &ur), not_its);
+    v1::ResultBatch forged;
+    forged.set_worker_id(honest.worker_id());
+    forged.set_worker_secret(secret);
+    forged.add_results()->set_worker_id(honest.worker_id());
+    v1::ResultAcks acks;
+    denied(stub->SubmitResults(call(kMallory).get(), forged, &acks), not_its);
+  }
+  // Its own batch with a result under the honest id inside.
+  v1::ResultBatch smuggled;
+  smuggled.set_worker_id(mallory.worker_id());
+  smuggled.set_worker_secret(mallory.worker_secret());
+  smuggled.add_results()->set_worker_id(honest.worker_id());
+  v1::ResultAcks acks;
+  denied(stub->SubmitResults(call(kMallory).get(), smuggled, &acks), "a result under worker");
+  // The honest worker is still registered, and acts with its secret.
+  v1::GetTaskRequest mine;
+  mine.set_worker_id(honest.worker_id());
+  mine.set_worker_secret(honest.worker_secret());
+  v1::GetTaskResponse none;
+  EXPECT_TRUE(stub->GetTask(call(kWorker).get(), mine, &none).ok());
+  // A registration flood under one token stops at --max-workers-per-token, naming it, and
+  // locks no other token's workers out.
+  v1::RegisterResponse r;
+  EXPECT_TRUE(stub->Register(call(kMallory).get(), reg, &r).ok());
+  EXPECT_TRUE(stub->Register(call(kMallory).get(), reg, &r).ok());
+  const grpc::Status full = stub->Register(call(kMallory).get(), reg, &r);
+  EXPECT_EQ(full.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(full.error_message().find("--max-workers-per-token"), std::string::npos) << full.error_message();
+  EXPECT_TRUE(stub->Register(call(kWorker).get(), reg, &r).ok());
 }
 
 // Issue 22: requeue, priority and delete follow the cancel rule: a client changes only its

@@ -19,6 +19,7 @@ using Code = RequestError::Code;
 CoordinatorOptions two_workers_at_most() {
   CoordinatorOptions o = testing::parts_options();
   o.max_workers = 2;
+  o.max_workers_per_token = 1;
   o.worker_timeout_seconds = 60;
   o.heartbeat_seconds = 2;
   return o;
@@ -65,12 +66,36 @@ TEST_F(WorkerLifecycleTest, AQuarantinedTokenMayNotRegister) {
   EXPECT_NO_THROW(join("honest", "honest"));
 }
 
+// Issue 23: a worker is who holds the secret its registration was given, not whoever
+// names its id; registrations are bounded per token as well as in total.
+TEST_F(WorkerLifecycleTest, ARequestMustCarryItsWorkersSecret) {
+  const v1::RegisterResponse a = worker_lifecycle.register_worker(request("a"), "farm-a", now);
+  const v1::RegisterResponse b = worker_lifecycle.register_worker(request("b"), "farm-b", now);
+  EXPECT_EQ(a.worker_secret().size(), 32u);
+  EXPECT_NE(a.worker_secret(), b.worker_secret());
+  EXPECT_NE(a.worker_id(), b.worker_id());
+  EXPECT_NO_THROW(worker_lifecycle.check_worker(a.worker_id(), a.worker_secret()));
+  std::string why =
+      refusal([&] { worker_lifecycle.check_worker(a.worker_id(), b.worker_secret()); }, Code::kPermissionDenied);
+  EXPECT_TRUE(has(why, "does not carry that worker's secret")) << why;
+  refusal([&] { worker_lifecycle.check_worker(a.worker_id(), ""); }, Code::kPermissionDenied);
+  why = refusal([&] { worker_lifecycle.check_worker(12345, a.worker_secret()); }, Code::kFailedPrecondition);
+  EXPECT_TRUE(has(why, "register again")) << why;
+}
+
+TEST_F(WorkerLifecycleTest, RegistrationsAreBoundedPerToken) {
+  join("first", "farm");
+  const std::string why = refusal([&] { join("second", "farm"); }, Code::kResourceExhausted);
+  EXPECT_EQ(why, "worker token 'farm' has its 1 registered workers (--max-workers-per-token)");
+  EXPECT_NO_THROW(join("other", "lab"));  // another token's workers are not locked out
+}
+
 TEST_F(WorkerLifecycleTest, WorkersAreBoundedSilentOnesForgottenFirst) {
   const uint64_t quiet = join("quiet");
   now += options.worker_timeout_seconds / 2;
   const uint64_t busy = join("busy");
   const std::string why = refusal([&] { join("third"); }, Code::kResourceExhausted);
-  EXPECT_EQ(why, "the coordinator has its 2 workers");
+  EXPECT_EQ(why, "the coordinator has its 2 workers (--max-workers)");
   now += options.worker_timeout_seconds / 2 + 1;  // quiet has been silent past the timeout; busy not
   const uint64_t third = join("third");
   EXPECT_EQ(workers.find(quiet), nullptr);

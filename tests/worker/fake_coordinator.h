@@ -9,6 +9,8 @@
 #include <map>
 #include <mutex>
 #include <set>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "scene_bundle.h"
@@ -46,6 +48,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   std::vector<v1::HeartbeatRequest> heartbeats;
   std::vector<v1::TaskResult> results;
   int submissions = 0;  // SubmitResults calls begun
+  std::vector<std::pair<uint64_t, std::string>> batch_identities;  // each result batch's worker id and secret
   std::vector<v1::ReleaseRequest> releases;
   int unregisters = 0;
 
@@ -78,7 +81,8 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
       return st;
     }
     registrations.push_back(req);
-    resp->set_worker_id(registrations.size());  // a new id each time
+    resp->set_worker_id(registrations.size());  // a new id each time, with its secret
+    resp->set_worker_secret("secret-" + std::to_string(registrations.size()));
     resp->set_heartbeat_interval_ms(heartbeat_interval_ms);
     resp->set_lease_ms(10 * heartbeat_interval_ms);
     return grpc::Status::OK;
@@ -180,6 +184,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
     ++submissions;
     changed_.notify_all();
     changed_.wait(lock, [this] { return !hold_submissions; });
+    batch_identities.emplace_back(req.worker_id(), req.worker_secret());
     for (const v1::TaskResult& r : req.results()) {
       results.push_back(r);
       resp->add_acks()->set_accepted(true);

@@ -143,6 +143,10 @@ TEST_F(WorkerTest, RegistersAndRendersTasksBitForBitAsTileRendererDoes) {
     for (size_t i = 0; i < local.size(); ++i) differ += !same_bits(local[i], farm[i]);
     EXPECT_EQ(differ, 0) << "task " << t.task_id();
   }
+  for (const auto& [id, secret] : fake->batch_identities) {  // each batch says whose it is (issue 23)
+    EXPECT_EQ(id, 1u);
+    EXPECT_EQ(secret, "secret-1");
+  }
 }
 
 TEST_F(WorkerTest, AHeartbeatRefusalDropsTheTaskWhichIsNeverSubmitted) {
@@ -225,6 +229,9 @@ TEST_F(WorkerTest, AnUnreachableCoordinatorIsRetriedWithBackOffAndAForgottenWork
   EXPECT_GE(gap(2), 0.1);  // reset by the registration, then waited after "unknown worker"
   ASSERT_EQ(fake->registrations.size(), 2u);
   EXPECT_EQ(fake->task_requests[0].worker_id(), 1u);
+  // Every request carries the secret of the registration its id came from (issue 23).
+  for (const v1::GetTaskRequest& r : fake->task_requests)
+    EXPECT_EQ(r.worker_secret(), "secret-" + std::to_string(r.worker_id()));
 }
 
 TEST_F(WorkerTest, ARefusedWorkerStopsAtOnce) {
@@ -277,6 +284,7 @@ TEST_F(WorkerTest, ATaskWhoseSceneCannotLoadIsReleasedWithTheError) {
   EXPECT_NE(fake->releases[1].error().find("fetch scene " + std::string(32, 'f')), std::string::npos)
       << fake->releases[1].error();
   EXPECT_EQ(fake->releases[0].worker_id(), 1u);
+  EXPECT_EQ(fake->releases[0].worker_secret(), "secret-1");
   EXPECT_TRUE(fake->results.empty());
 }
 
