@@ -9,6 +9,7 @@
 
 #include "core/io/files.h"
 #include "core/render/frames.h"
+#include "server/data_marker.h"
 
 namespace tessera {
 
@@ -65,6 +66,7 @@ class Statement {
 
 SqliteJobStore::SqliteJobStore(const std::string& data_dir) : dir_(data_dir) {
   fs::create_directories(dir_);
+  check_data_marker(dir_);  // a lost database is refused, not replaced by an empty one
   const std::string path = (fs::path(dir_) / "coordinator.db").string();
   if (sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX,
                       nullptr) != SQLITE_OK) {
@@ -103,9 +105,18 @@ SqliteJobStore::SqliteJobStore(const std::string& data_dir) : dir_(data_dir) {
   exec("CREATE INDEX IF NOT EXISTS jobs_scene ON jobs(scene_hash)");
   exec("CREATE INDEX IF NOT EXISTS jobs_seq ON jobs(seq)");
   exec("CREATE INDEX IF NOT EXISTS merged_worker ON merged_into(worker)");
+  set_data_marker(dir_, true);
 }
 
-SqliteJobStore::~SqliteJobStore() { sqlite3_close(db_); }
+SqliteJobStore::~SqliteJobStore() {
+  // A clean close folds the write-ahead log into coordinator.db and deletes it.
+  if (sqlite3_close(db_) == SQLITE_OK && !fs::exists(fs::path(dir_) / "coordinator.db-wal")) {
+    try {
+      set_data_marker(dir_, false);
+    } catch (const std::exception&) {  // the next start then asks for a WAL it does not need: it says how to go on
+    }
+  }
+}
 
 void SqliteJobStore::exec(const char* sql) const {
   char* err = nullptr;

@@ -250,18 +250,19 @@ TEST(JobStore, JobsAndGenerationsSurviveReopening) {
 // Issue 22: what delete, requeue, priority and retention write survives reopening; an end
 // keeps its first time when written again; a database from before ended_at gives its ended
 // jobs a full retention period from the upgrade.
+StoredJob row(const std::string& id, uint64_t seq) {
+  StoredJob j;
+  j.meta.id = id;
+  j.meta.seq = seq;
+  j.meta.scene_hash = "shared";
+  j.meta.settings.set_spp(4);
+  return j;
+}
+
 TEST(JobStore, RequeueDeletePriorityAndEndTimesSurviveReopening) {
   const fs::path dir = fs::temp_directory_path() / ("tessera_store_life_" + std::to_string(::getpid()));
   fs::remove_all(dir);
   double wall = 1000;
-  auto row = [](const std::string& id, uint64_t seq) {
-    StoredJob j;
-    j.meta.id = id;
-    j.meta.seq = seq;
-    j.meta.scene_hash = "shared";
-    j.meta.settings.set_spp(4);
-    return j;
-  };
   {
     SqliteJobStore store(dir.string());
     store.wall = [&wall] { return wall; };
@@ -308,6 +309,50 @@ TEST(JobStore, RequeueDeletePriorityAndEndTimesSurviveReopening) {
   SqliteJobStore upgraded(dir.string());  // its wall clock: now
   EXPECT_TRUE(upgraded.ended_before(3600, 10).empty());
   EXPECT_EQ(upgraded.ended_before(-3600, 10), std::vector<std::string>{"x"});
+  fs::remove_all(dir);
+}
+
+// Issue 23: deleting coordinator.db, or only its write-ahead log after an unclean stop,
+// started an empty farm without a word (and, with no job using them, deleted the folder's
+// live scene bundles). The data folder's marker makes both a refusal that says what to do.
+TEST(JobStore, ALostDatabaseIsRefusedNotReplacedByAnEmptyOne) {
+  const fs::path dir = fs::temp_directory_path() / ("tessera_store_lost_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  { SqliteJobStore(dir.string()).add(row("a", 1)); }  // a clean close
+  EXPECT_FALSE(fs::exists(dir / "coordinator.db-wal"));
+  { EXPECT_EQ(SqliteJobStore(dir.string()).jobs().size(), 1u); }  // reopens without complaint
+  fs::remove(dir / "coordinator.db");
+  try {
+    SqliteJobStore store(dir.string());
+    ADD_FAILURE() << "an empty database was made over a lost one";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("coordinator.db is missing, but this data folder held"), std::string::npos)
+        << e.what();
+  }
+  fs::remove_all(dir);
+  // Left open (a crash), then its write-ahead log deleted: the latest commits are gone.
+  {
+    SqliteJobStore running(dir.string());
+    running.add(row("b", 1));
+    ASSERT_TRUE(fs::exists(dir / "coordinator.db-wal"));
+    std::error_code ec;
+    fs::copy_file(dir / "coordinator.db", dir / "crashed.db", ec);
+    fs::copy_file(dir / "DATA-FOLDER", dir / "crashed.marker", ec);
+  }
+  fs::rename(dir / "crashed.db", dir / "coordinator.db");  // as a kill -9 leaves it, without its WAL
+  fs::rename(dir / "crashed.marker", dir / "DATA-FOLDER");
+  try {
+    SqliteJobStore store(dir.string());
+    ADD_FAILURE() << "opened without its write-ahead log";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("coordinator.db-wal is missing"), std::string::npos) << e.what();
+  }
+  fs::remove_all(dir);
+  // A folder from before markers (none): opened, and marked from then on.
+  { SqliteJobStore(dir.string()).add(row("c", 1)); }
+  fs::remove(dir / "DATA-FOLDER");
+  { EXPECT_EQ(SqliteJobStore(dir.string()).jobs().size(), 1u); }
+  EXPECT_TRUE(fs::exists(dir / "DATA-FOLDER"));
   fs::remove_all(dir);
 }
 
