@@ -142,7 +142,10 @@ TEST_F(Gltf, MalformedDataNothingUsesIsToleratedAndInUseRefused) {
   // The same image used by a material: refused, naming it.
   Doc used = d;
   used.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
-  expect_error(used, "images[0]: not a readable PNG or JPEG");
+  expect_error(used, "images[0]: not a readable PNG, JPEG or WebP image");
+  // A KTX2 file named as a plain image source (no KHR_texture_basisu): said so, with the way out.
+  used.j["images"][0]["uri"] = "data:image/png;base64,q0tUWCAyMLsNChoKAAAAAAAAAAAAAAAAAAAAAAAAAAA=";
+  expect_error(used, "images[0]: is a KTX2 image, which Tessera cannot decode");
   // The same accessor used as indices: refused (by tinygltf's parser).
   Doc idx = d;
   idx.j["meshes"][0]["primitives"][0]["indices"] = bad;

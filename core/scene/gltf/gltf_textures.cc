@@ -173,7 +173,16 @@ const tinygltf::Image& GltfTextures::decode_image(int index) {
     return decode_webp(img, el);
   int w = 0, h = 0, comp = 0;
   const int size = int(std::min<size_t>(img.image.size(), size_t(INT32_MAX)));
-  if (!stbi_info_from_memory(img.image.data(), size, &w, &h, &comp)) ctx_.fail(el, "not a readable PNG or JPEG");
+  if (!stbi_info_from_memory(img.image.data(), size, &w, &h, &comp)) {
+    // A KTX2 file named directly (no KHR_texture_basisu, so no fallback) is common enough
+    // to name: the user needs a PNG or JPEG version of it.
+    static const unsigned char kKtx2[12] = {0xAB, 'K', 'T', 'X', ' ', '2', '0', 0xBB, '\r', '\n', 0x1A, '\n'};
+    if (img.image.size() >= 12 && std::memcmp(img.image.data(), kKtx2, 12) == 0)
+      ctx_.fail(el,
+                "is a KTX2 image, which Tessera cannot decode (no KTX2 library here): give the texture a PNG or "
+                "JPEG source (KHR_texture_basisu's fallback)");
+    ctx_.fail(el, "not a readable PNG, JPEG or WebP image");
+  }
   check_size(ctx_, w, h, el);
   unsigned char* data = stbi_load_from_memory(img.image.data(), size, &w, &h, &comp, 4);
   if (!data) {  // stb's reasons are short codes ("outofdata", "bad zlib header", ...)
