@@ -134,9 +134,22 @@ std::string Coordinator::current_image(const std::string& id, std::optional<int>
   return job->id();
 }
 
+namespace {
+// A final image is checked before it is served: a damaged one is an error, not a download.
+void require_intact(const ImageSink& sink, const std::string& job, const ImageStreamHeader& h) {
+  if (h.final && !sink.intact(job))
+    throw RequestError(RequestError::Code::kFailedPrecondition,
+                       "job " + job +
+                           ": its final image on the coordinator is damaged or cut short (its log says how); "
+                           "nothing was sent");
+}
+}  // namespace
+
 v1::Image Coordinator::image(const std::string& id, bool exr, bool png, std::optional<int> frame) {
   ImageStreamHeader h;
-  return whole_image(*sink_, current_image(id, frame, &h), exr, png, h);
+  const std::string job = current_image(id, frame, &h);
+  require_intact(*sink_, job, h);
+  return whole_image(*sink_, job, exr, png, h);
 }
 
 void Coordinator::image_chunks(const v1::FetchImageRequest& req,
@@ -145,6 +158,7 @@ void Coordinator::image_chunks(const v1::FetchImageRequest& req,
   const std::string job = current_image(req.id(), req.has_frame() ? std::optional(req.frame()) : std::nullopt, &h);
   const std::unique_ptr<ImageSink::Reader> file = sink_->open(job);
   if (!file) throw RequestError(RequestError::Code::kFailedPrecondition, "job " + job + " has no image file");
+  require_intact(*sink_, job, h);
   stream_image(*file, req, h, options_.image_chunk_bytes, write);
 }
 

@@ -1,6 +1,7 @@
 #include "server/grpc_services.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <thread>
 
@@ -9,6 +10,16 @@
 
 namespace tessera {
 namespace {
+
+// An unexpected failure: its details (which can name files on the coordinator's disk) go
+// to the log only; the caller gets a number to find them by.
+grpc::Status internal_error(const char* what) {
+  static std::atomic<uint64_t> incidents{0};
+  const uint64_t n = ++incidents;
+  spdlog::error("internal error #{}: {}", n, what);
+  return grpc::Status(grpc::StatusCode::INTERNAL,
+                      "internal error #" + std::to_string(n) + " (the coordinator's log has its details)");
+}
 
 // Runs f, mapping the coordinator's errors to gRPC status codes.
 template <typename F>
@@ -36,10 +47,9 @@ grpc::Status guarded(F&& f) {
     }
     return grpc::Status(code, e.what());
   } catch (const InvariantError& e) {  // a bug, logged where it was found
-    return grpc::Status(grpc::StatusCode::INTERNAL, e.what());
+    return internal_error(e.what());
   } catch (const std::exception& e) {
-    spdlog::error("a call failed unexpectedly: {}", e.what());
-    return grpc::Status(grpc::StatusCode::INTERNAL, std::string("internal error: ") + e.what());
+    return internal_error(e.what());
   }
 }
 

@@ -4,14 +4,16 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 
 #include "core/io/exr_writer.h"
-#include "core/io/preview.h"
 #include "core/io/files.h"
+#include "core/io/preview.h"
+#include "core/util/log.h"
 
 namespace tessera {
 
@@ -138,6 +140,24 @@ std::unique_ptr<ImageSink::Reader> DiskImageSink::open(const std::string& job) c
                 (unsigned long long)st.st_ino, (unsigned long long)st.st_size, (long long)st.st_mtim.tv_sec,
                 st.st_mtim.tv_nsec);
   return std::make_unique<FileReader>(fd, uint64_t(st.st_size), version);
+}
+
+bool DiskImageSink::intact(const std::string& job) const {
+  const std::unique_ptr<Reader> file = open(job);
+  if (!file) return false;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    if (std::find(intact_.begin(), intact_.end(), file->version()) != intact_.end()) return true;
+  }
+  std::string why;
+  if (!exr_intact(path(job, "image.exr"), &why)) {
+    spdlog::error("job {}: its image file does not decode: {}", job, why);
+    return false;
+  }
+  std::lock_guard<std::mutex> lock(mu_);
+  intact_.push_back(file->version());
+  if (intact_.size() > 64) intact_.pop_front();
+  return true;
 }
 
 uint64_t DiskImageSink::remove(const std::string& job) {

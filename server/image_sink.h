@@ -42,6 +42,9 @@ class ImageSink {
   };
   // Null when none was written (or the sink keeps no files).
   virtual std::unique_ptr<Reader> open(const std::string& job) const = 0;
+  // Whether the job's image file decodes whole (checked before a final image is served:
+  // a truncated or damaged file is an error, never a download that exits 0).
+  virtual bool intact(const std::string& job) const { return true; }
   // The last image written, as EXR bytes and a PNG preview; empty if none was written.
   virtual std::string exr(const std::string& job) const = 0;
   virtual std::string png(const std::string& job) const = 0;
@@ -64,6 +67,8 @@ class DiskImageSink : public ImageSink {
   std::string exr(const std::string& job) const override;
   std::string png(const std::string& job) const override;
   std::unique_ptr<Reader> open(const std::string& job) const override;
+  // Decodes the file once per version (inode, size, time) and remembers the answer.
+  bool intact(const std::string& job) const override;
   // The job's whole folder (<dir>/<job>/: its image, preview and checkpoint).
   uint64_t remove(const std::string& job) override;
   void remove_unknown(const std::function<bool(const std::string& job)>& known) override;
@@ -76,6 +81,7 @@ class DiskImageSink : public ImageSink {
   mutable std::mutex mu_;  // guards previews_
   // (job, its preview PNG) for the last jobs asked; most recent last. A write drops the job's.
   mutable std::list<std::pair<std::string, std::string>> previews_;
+  mutable std::list<std::string> intact_;  // versions found whole, most recent last (guarded by mu_)
 };
 
 // Keeps the films in memory, unencoded: for tests, which compare them bit for bit.

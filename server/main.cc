@@ -9,6 +9,7 @@
 #include <atomic>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <thread>
 
 #include "core/io/files.h"
@@ -176,6 +177,18 @@ int main(int argc, char** argv) {
       }
       spdlog::warn("no access tokens: every caller may do anything ({})",
                    open_network ? "--insecure, reachable beyond loopback" : "loopback only");
+    } else {
+      if (open_network && tls_cert.empty())
+        spdlog::warn(
+            "access tokens travel in clear beyond loopback ({}, {}): anyone on the path can read and reuse them; "
+            "give --tls-cert and --tls-key (docs/security.md, TLS)",
+            listen, http);
+      const auto perms = std::filesystem::status(tokens_file).permissions();
+      if ((perms & std::filesystem::perms::others_read) != std::filesystem::perms::none)
+        spdlog::warn(
+            "tokens file {} is readable by every user of this machine: chmod o-r it (Kubernetes: the "
+            "Secret volume's defaultMode, 0440 in deploy/k8s)",
+            tokens_file);
     }
     std::shared_ptr<grpc::ServerCredentials> credentials = grpc::InsecureServerCredentials();
     if (!tls_cert.empty()) {

@@ -58,4 +58,26 @@ std::string preview_png(const std::string& exr_path, int max_width) {
   }
 }
 
+bool exr_intact(const std::string& exr_path, std::string* why) {
+  try {
+    Imf::InputFile in(exr_path.c_str());
+    const Imath::Box2i dw = in.header().dataWindow();
+    const int w = dw.max.x - dw.min.x + 1;
+    constexpr int kBand = 64;
+    std::vector<float> r(size_t(w) * kBand);
+    for (int y0 = dw.min.y; y0 <= dw.max.y; y0 += kBand) {
+      const int rows = std::min(kBand, dw.max.y + 1 - y0);
+      Imf::FrameBuffer fb;  // one channel is enough: a block decodes whole or not at all
+      fb.insert("R", Imf::Slice::Make(Imf::FLOAT, r.data(), Imath::V2i(dw.min.x, y0), w, rows, sizeof(float),
+                                      sizeof(float) * size_t(w)));
+      in.setFrameBuffer(fb);
+      in.readPixels(y0, y0 + rows - 1);
+    }
+    return true;
+  } catch (const std::exception& e) {
+    if (why) *why = e.what();
+    return false;
+  }
+}
+
 }  // namespace tessera

@@ -11,4 +11,9 @@ namespace tessera {
 // Throws std::runtime_error naming the path.
 std::string preview_png(const std::string& exr_path, int max_width = 1280);
 
+// Whether the EXR at `exr_path` decodes whole: every block read (a truncated file, a
+// damaged block or a checksum that fails stops it), a band of rows at a time. `why` gets
+// OpenEXR's reason otherwise.
+bool exr_intact(const std::string& exr_path, std::string* why = nullptr);
+
 }  // namespace tessera

@@ -249,6 +249,21 @@ TEST_F(Access, NoWorkerCanActUnderAnothersId) {
   EXPECT_TRUE(stub->Register(call(kWorker).get(), reg, &r).ok());
 }
 
+// Issue 23: a tokens file every user of the machine can read is warned of at start (the
+// Kubernetes base mounts it 0440 for that reason); one only its owner reads is not.
+TEST_F(Access, AWorldReadableTokensFileIsWarnedOf) {
+  const fs::path tokens = dir / "tokens";
+  fs::permissions(tokens, fs::perms::owner_read | fs::perms::owner_write | fs::perms::others_read);
+  start_coordinator();
+  coordinator.reset();
+  EXPECT_NE(slurp((dir / "coordinator.err").string()).find("is readable by every user of this machine"),
+            std::string::npos);
+  fs::permissions(tokens, fs::perms::owner_read | fs::perms::owner_write);
+  start_coordinator();
+  coordinator.reset();
+  EXPECT_EQ(slurp((dir / "coordinator.err").string()).find("readable by every user"), std::string::npos);
+}
+
 // Issue 22: requeue, priority and delete follow the cancel rule: a client changes only its
 // own jobs, a viewer none, an admin any.
 TEST_F(Access, ChangingAJobAfterSubmitIsTheOwnersOrAnAdminsRight) {

@@ -62,6 +62,29 @@ TEST_F(Lifecycle, ARequeueSurvivesAKillAfterItsRecordAndTheImageIsTheLocalOne) {
   expect_same_pixels(local, out);
 }
 
+// Issue 23: a DONE job's image file truncated on the coordinator's disk was fetched with
+// exit 0 as a 300-byte file. A final image is decoded before it is served (once per
+// version): damaged, the fetch fails saying so and writes nothing; whole, it is served.
+TEST_F(Lifecycle, ADamagedFinalImageIsAnErrorNeverADownload) {
+  start_coordinator("127.0.0.1:0", "2");
+  start_worker();
+  const std::string out = (dir / "whole.exr").string();
+  const CommandResult sub = tessera("submit " + kScene + " -r 32 24 -s 4 --pass-spp 4 --wait -q -f " + out);
+  ASSERT_EQ(sub.code, 0) << sub.err;
+  const std::string id = first_line(sub.out).substr(0, 16);
+  const fs::path image = dir / "data" / "jobs" / id / "image.exr";
+  ASSERT_TRUE(fs::exists(image)) << image;
+  ASSERT_EQ(tessera("fetch " + id + " -f " + (dir / "again.exr").string()).code, 0);
+  fs::resize_file(image, 300);
+  for (const char* name : {"cut.exr", "cut.png"}) {
+    const CommandResult r = tessera("fetch " + id + " -f " + (dir / name).string());
+    EXPECT_EQ(r.code, 1) << r.out;
+    EXPECT_NE(r.err.find("its final image on the coordinator is damaged or cut short"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find(dir.string()), std::string::npos) << "no server path: " << r.err;
+    EXPECT_FALSE(fs::exists(dir / name));
+  }
+}
+
 // A delete killed just after its record: the restart finds no job and removes its files,
 // so the data folder holds nothing of it. A delete that runs through frees the same.
 TEST_F(Lifecycle, ADeleteSurvivesAKillAfterItsRecordAndTheDataFolderShrinksBack) {
