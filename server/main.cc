@@ -16,6 +16,7 @@
 #include "core/util/log.h"
 #include "server/admission.h"
 #include "server/grpc_services.h"
+#include "server/health_http.h"
 #include "server/status_http.h"
 
 namespace {
@@ -74,6 +75,10 @@ int main(int argc, char** argv) {
   tessera::CoordinatorOptions opt;
   app.add_option("--listen", listen, "gRPC address HOST:PORT (port 0 picks a free port)")->capture_default_str();
   app.add_option("--http", http, "status endpoint HOST:PORT (port 0 picks a free port)")->capture_default_str();
+  std::string health;
+  app.add_option("--health", health,
+                 "probes' own listener HOST:PORT (/healthz, /readyz on their own threads: answered whatever holds the "
+                 "status port)");
   app.add_option("--data", opt.data_dir,
                  "data directory (job database, scenes, images, checkpoints); a coordinator started again on it "
                  "takes up its jobs")
@@ -223,6 +228,14 @@ int main(int argc, char** argv) {
     status.start();
     std::printf("grpc listening on %s:%d%s\n", grpc_host.c_str(), bound, tls_cert.empty() ? "" : " (TLS)");
     std::printf("http listening on %s:%d%s\n", http_host.c_str(), http_bound, tls_cert.empty() ? "" : " (TLS)");
+    std::unique_ptr<tessera::HealthHttp> probes;
+    if (!health.empty()) {
+      const auto [health_host, health_port] = split_host_port(health, "--health");
+      probes = std::make_unique<tessera::HealthHttp>(coordinator);
+      const int health_bound = probes->bind(health_host, health_port);
+      probes->start();
+      std::printf("health listening on %s:%d\n", health_host.c_str(), health_bound);
+    }
     std::fflush(stdout);
 
     std::atomic<bool> stopping{false};

@@ -1,8 +1,11 @@
 // Access control through the real binaries: tokens with roles on gRPC and HTTP, a client
 // cancelling only its own jobs, loopback-only without tokens unless --insecure, and TLS.
+#include <arpa/inet.h>
 #include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 #include <httplib.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <filesystem>
@@ -262,6 +265,41 @@ TEST_F(Access, AWorldReadableTokensFileIsWarnedOf) {
   start_coordinator();
   coordinator.reset();
   EXPECT_EQ(slurp((dir / "coordinator.err").string()).find("readable by every user"), std::string::npos);
+}
+
+// Issue 23: slow connections that never finish their request held every thread of the
+// status port, /healthz included, so the shipped liveness probe restarted the coordinator
+// in a loop. The probes' own listener (--health) answers whatever holds the status port.
+TEST_F(Access, ProbesAnswerWhileSlowClientsHoldTheStatusPort) {
+  start_coordinator({"--health", "127.0.0.1:0"});
+  std::smatch m;
+  const std::string line = coordinator->read_line();
+  ASSERT_TRUE(std::regex_search(line, m, std::regex("health listening on 127\\.0\\.0\\.1:(\\d+)"))) << line;
+  const int health_port = std::stoi(m[1]);
+  std::vector<int> slow;  // each sends half a request line, then nothing
+  for (int i = 0; i < 64; ++i) {
+    const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(uint16_t(http_port));
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    ASSERT_GT(::send(fd, "GET /api/status HT", 18, 0), 0);
+    slow.push_back(fd);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  for (int i = 0; i < 5; ++i) {
+    httplib::Client probe("127.0.0.1", health_port);
+    probe.set_connection_timeout(1);
+    probe.set_read_timeout(1);
+    const auto t0 = std::chrono::steady_clock::now();
+    auto live = probe.Get("/healthz"), ready = probe.Get("/readyz");
+    ASSERT_TRUE(live && ready);
+    EXPECT_EQ(live->status, 200);
+    EXPECT_EQ(ready->status, 200);
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 1.0);
+  }
+  for (int fd : slow) ::close(fd);
 }
 
 // Issue 22: requeue, priority and delete follow the cancel rule: a client changes only its
