@@ -21,6 +21,15 @@ grpc::Status internal_error(const char* what) {
                       "internal error #" + std::to_string(n) + " (the coordinator's log has its details)");
 }
 
+// Whom a stream counts against: the token's name, or without tokens the caller's address
+// ("ipv4:127.0.0.1:5000" -> "ipv4:127.0.0.1").
+std::string stream_peer(const Principal& who, const grpc::ServerContext& ctx) {
+  if (!who.name.empty()) return "token " + who.name;
+  const std::string peer = ctx.peer();
+  const size_t colon = peer.rfind(':');
+  return colon == std::string::npos || colon < 5 ? peer : peer.substr(0, colon);
+}
+
 // Runs f, mapping the coordinator's errors to gRPC status codes.
 template <typename F>
 grpc::Status guarded(F&& f) {
@@ -106,7 +115,8 @@ grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* 
   // At most kUpdatesPerSecond updates (and always the last): a status with every tile on
   // every merge cost the render farm's cores more than the watcher gains.
   constexpr double kUpdatesPerSecond = 4;
-  return as(auth_, ctx, Action::kRead, [&](const Principal&) {
+  return as(auth_, ctx, Action::kRead, [&](const Principal& who) {
+    const StreamSlots::Slot slot = streams_.take(stream_peer(who, *ctx));
     // Progress only: a watcher that wants every tile asks GetJob.
     v1::JobStatus s = c_.status(req->id(), false);
     const auto ended = [](const v1::JobStatus& st) { return !job_live(st.state()); };
@@ -161,7 +171,8 @@ grpc::Status ClientService::UploadScene(grpc::ServerContext* ctx, grpc::ServerRe
 
 grpc::Status ClientService::FetchImageChunks(grpc::ServerContext* ctx, const v1::FetchImageRequest* req,
                                              grpc::ServerWriter<v1::ImageChunk>* w) {
-  return as(auth_, ctx, Action::kRead, [&](const Principal&) {
+  return as(auth_, ctx, Action::kRead, [&](const Principal& who) {
+    const StreamSlots::Slot slot = streams_.take(stream_peer(who, *ctx));
     c_.image_chunks(*req, [&](const v1::ImageChunk& c) { return !ctx->IsCancelled() && w->Write(c); });
   });
 }

@@ -5,6 +5,7 @@
 
 #include "server/auth.h"
 #include "server/coordinator.h"
+#include "server/stream_slots.h"
 
 namespace tessera {
 
@@ -18,7 +19,8 @@ void configure_server(grpc::ServerBuilder& builder, int max_message_bytes = kMax
 // Without an Authenticator (or with an open one) every caller may do everything.
 class ClientService final : public v1::Tessera::Service {
  public:
-  explicit ClientService(Coordinator& c, const Authenticator* auth = nullptr) : c_(c), auth_(auth) {}
+  explicit ClientService(Coordinator& c, const Authenticator* auth = nullptr)
+      : c_(c), auth_(auth), streams_(c.options().max_streams_per_peer) {}
   grpc::Status SubmitJob(grpc::ServerContext*, const v1::SubmitJobRequest* req, v1::JobId* out) override;
   grpc::Status GetJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) override;
   grpc::Status ListJobs(grpc::ServerContext*, const v1::ListJobsRequest*, v1::JobList* out) override;
@@ -36,6 +38,7 @@ class ClientService final : public v1::Tessera::Service {
  private:
   Coordinator& c_;
   const Authenticator* auth_;
+  StreamSlots streams_;  // WatchJob and FetchImageChunks, per caller
 };
 
 class WorkerService final : public v1::TesseraWorker::Service {

@@ -110,6 +110,10 @@ int main(int argc, char** argv) {
                  "registered workers of one worker token at most (with --tokens)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
+  app.add_option("--max-streams-per-peer", opt.max_streams_per_peer,
+                 "job watches and image downloads one token (or, without tokens, one address) may hold open at once")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100000));
   app.add_option("--max-jobs-per-client", opt.max_jobs_per_client, "live jobs one client token may have at once")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));

@@ -23,6 +23,9 @@ struct CoordinatorOptions {
   // Registered workers of one access token at most: a flood under one credential cannot
   // lock the others out (each worker's own credential makes this 1 per worker).
   size_t max_workers_per_token = 1000;
+  // Streams (WatchJob, FetchImageChunks) one caller may hold open at once: each holds a
+  // server thread while it lasts.
+  size_t max_streams_per_peer = 64;
   // Live (queued or running) jobs one client (token name) may have at once.
   size_t max_jobs_per_client = 100;
   // Pixels of all live frames together: each costs its film's sums, 40 bytes (a snapshot

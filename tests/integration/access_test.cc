@@ -294,6 +294,55 @@ TEST_F(Access, ProbesAnswerWhileSlowClientsHoldTheStatusPort) {
   for (int fd : slow) ::close(fd);
 }
 
+// Issue 23: 1,000 WatchJob streams made 1,021 server threads. A caller holds at most
+// --max-streams-per-peer streams at once; the next is refused naming the flag, and
+// another caller's watch is not.
+TEST_F(Access, StreamsAreBoundedPerCaller) {
+  start_coordinator({"--max-streams-per-peer", "2"});
+  const std::string id = submit(kAlice);  // no worker: it stays queued, so watches last
+  auto stub = v1::Tessera::NewStub(grpc::CreateChannel(grpc_addr, grpc::InsecureChannelCredentials()));
+  struct Watch {
+    grpc::ClientContext ctx;
+    std::unique_ptr<grpc::ClientReader<v1::JobStatus>> reader;
+    v1::JobStatus first;
+  };
+  auto watch = [&](const char* token) {
+    auto w = std::make_unique<Watch>();
+    w->ctx.AddMetadata("authorization", std::string("Bearer ") + token);
+    v1::JobId req;
+    req.set_id(id);
+    w->reader = stub->WatchJob(&w->ctx, req);
+    return w;
+  };
+  std::vector<std::unique_ptr<Watch>> open;
+  for (int i = 0; i < 2; ++i) {
+    open.push_back(watch(kAlice));
+    ASSERT_TRUE(open.back()->reader->Read(&open.back()->first));  // held open by the server
+  }
+  auto third = watch(kAlice);
+  v1::JobStatus s;
+  EXPECT_FALSE(third->reader->Read(&s));
+  const grpc::Status refused = third->reader->Finish();
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(refused.error_message().find("--max-streams-per-peer"), std::string::npos) << refused.error_message();
+  auto bobs = watch(kBob);
+  EXPECT_TRUE(bobs->reader->Read(&s));
+  for (auto& w : open) w->ctx.TryCancel();
+  bobs->ctx.TryCancel();
+  for (auto& w : open) w->reader->Finish();
+  bobs->reader->Finish();
+  // A stream closed gives its place back (once the server notices, within a second).
+  bool watched = false;
+  for (int i = 0; i < 30 && !watched; ++i) {
+    auto again = watch(kAlice);
+    watched = again->reader->Read(&s);
+    again->ctx.TryCancel();
+    again->reader->Finish();
+    if (!watched) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_TRUE(watched);
+}
+
 // Issue 22: requeue, priority and delete follow the cancel rule: a client changes only its
 // own jobs, a viewer none, an admin any.
 TEST_F(Access, ChangingAJobAfterSubmitIsTheOwnersOrAnAdminsRight) {

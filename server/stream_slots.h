@@ -1,0 +1,57 @@
+// Long-lived calls counted per caller. A WatchJob or FetchImageChunks stream holds one of
+// the gRPC server's threads while it lasts, so a caller opening a thousand of them made a
+// thousand threads. Each caller (its token's name, or without tokens its address) may hold
+// `per_peer` at once; the next is refused with RESOURCE_EXHAUSTED naming the flag.
+#pragma once
+
+#include <cstddef>
+#include <map>
+#include <mutex>
+#include <string>
+
+#include "server/request_error.h"
+
+namespace tessera {
+
+class StreamSlots {
+ public:
+  explicit StreamSlots(size_t per_peer) : per_peer_(per_peer) {}
+
+  // A stream's place, given back when it is destroyed.
+  class Slot {
+   public:
+    Slot(StreamSlots* owner, std::string peer) : owner_(owner), peer_(std::move(peer)) {}
+    Slot(const Slot&) = delete;
+    Slot& operator=(const Slot&) = delete;
+    ~Slot() { owner_->give_back(peer_); }
+
+   private:
+    StreamSlots* owner_;
+    std::string peer_;
+  };
+
+  // Throws RequestError (kResourceExhausted) when `peer` holds per_peer streams already.
+  [[nodiscard]] Slot take(const std::string& peer) {
+    std::lock_guard<std::mutex> lock(mu_);
+    size_t& n = held_[peer];
+    if (n >= per_peer_)
+      throw RequestError(RequestError::Code::kResourceExhausted,
+                         std::to_string(per_peer_) +
+                             " open streams (job watches, image downloads) per caller at most "
+                             "(--max-streams-per-peer)");
+    ++n;
+    return Slot(this, peer);
+  }
+
+ private:
+  void give_back(const std::string& peer) {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = held_.find(peer);
+    if (it != held_.end() && --it->second == 0) held_.erase(it);
+  }
+  const size_t per_peer_;
+  std::mutex mu_;
+  std::map<std::string, size_t> held_;
+};
+
+}  // namespace tessera
