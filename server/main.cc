@@ -2,6 +2,7 @@
 #include <grpcpp/grpcpp.h>
 #include <malloc.h>
 #include <signal.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <CLI/CLI.hpp>
@@ -20,6 +21,24 @@
 #include "server/status_http.h"
 
 namespace {
+
+// Every connection and every file being written is a descriptor: the soft limit goes up
+// to the hard one (systemd's default soft limit, 1024, ran out at about a thousand idle
+// connections, and then checkpoints failed), with a warning if that is still low.
+void raise_fd_limit() {
+  rlimit r{};
+  if (getrlimit(RLIMIT_NOFILE, &r) != 0) return;
+  if (r.rlim_cur < r.rlim_max) {
+    r.rlim_cur = r.rlim_max;
+    setrlimit(RLIMIT_NOFILE, &r);
+    getrlimit(RLIMIT_NOFILE, &r);
+  }
+  if (r.rlim_cur < 4096)
+    spdlog::warn(
+        "only {} file descriptors (every connection takes one): raise the limit (LimitNOFILE= in the "
+        "systemd unit, ulimit -n)",
+        (unsigned long long)r.rlim_cur);
+}
 
 std::pair<std::string, int> split_host_port(const std::string& s, const char* flag) {
   const size_t colon = s.rfind(':');
@@ -170,6 +189,7 @@ int main(int argc, char** argv) {
   sigaddset(&sigs, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
 
+  raise_fd_limit();
   try {
     const auto [grpc_host, grpc_port] = split_host_port(listen, "--listen");
     const auto [http_host, http_port] = split_host_port(http, "--http");

@@ -5,11 +5,14 @@
 #include <gtest/gtest.h>
 #include <httplib.h>
 #include <netinet/in.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
 #include <regex>
+#include <sstream>
 #include <string>
 #include <thread>
 
@@ -341,6 +344,25 @@ TEST_F(Access, StreamsAreBoundedPerCaller) {
     if (!watched) std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   EXPECT_TRUE(watched);
+}
+
+// Issue 23: systemd's default soft limit of 1024 descriptors ran out at about a thousand
+// idle connections. The coordinator raises its soft limit to the hard one at start.
+TEST_F(Access, TheCoordinatorRaisesItsDescriptorLimit) {
+  rlimit r{};
+  ASSERT_EQ(getrlimit(RLIMIT_NOFILE, &r), 0);
+  if (r.rlim_max != RLIM_INFINITY && r.rlim_max <= 300) GTEST_SKIP() << "hard descriptor limit " << r.rlim_max;
+  Process c("/bin/sh",
+            {"-c", "ulimit -Sn 256 && exec " + kBin + "/tessera-coordinator --listen 127.0.0.1:0 --http 127.0.0.1:0 " +
+                       "--data " + (dir / "data").string()},
+            (dir / "limited.err").string());
+  ASSERT_NE(c.read_line().find("grpc listening"), std::string::npos);
+  std::ifstream limits("/proc/" + std::to_string(c.pid()) + "/limits");
+  std::string line, soft, hard;
+  while (std::getline(limits, line))
+    if (line.rfind("Max open files", 0) == 0) std::istringstream(line.substr(14)) >> soft >> hard;
+  ASSERT_FALSE(soft.empty());
+  EXPECT_EQ(soft, hard) << "the soft limit is raised to the hard one";
 }
 
 // Issue 22: requeue, priority and delete follow the cancel rule: a client changes only its
