@@ -3,7 +3,8 @@
 //
 // The load, in order (gltf_loader.cc): gltf_document reads the file and parses its JSON,
 // gltf_prechecks checks it, tinygltf makes the model; gltf_compression decodes meshopt
-// and Draco geometry into plain buffer views; gltf_nodes walks the scene's node graph
+// and Draco geometry into plain buffer views; gltf_budget counts what the node graph
+// expands to (refusing a bomb before anything is expanded); gltf_nodes walks the graph
 // (EXT_mesh_gpu_instancing too) and places what each node carries: meshes (gltf_meshes,
 // over gltf_accessors, with gltf_materials and gltf_textures; morph targets and skins by
 // gltf_skins), lights and the camera (gltf_lights_cameras); gltf_animation keeps what
