@@ -21,6 +21,7 @@ import argparse
 import json
 import math
 import os
+import struct
 import subprocess
 import sys
 
@@ -37,6 +38,16 @@ def blender_env():
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYENV")}
     env["PATH"] = os.pathsep.join(p for p in env.get("PATH", "").split(os.pathsep) if ".pyenv" not in p)
     return env
+
+
+def gltf_json(path):
+    """The JSON of a .gltf, or of a .glb's first chunk."""
+    with open(path, "rb") as f:
+        data = f.read()
+    if data[:4] == b"glTF":
+        length, = struct.unpack_from("<I", data, 12)
+        data = data[20:20 + length]
+    return json.loads(data)
 
 
 def run(cmd):
@@ -76,7 +87,7 @@ def model_of(g, mesh):
 
 def regions_of(scene, width, height):
     """name -> ([x, y, w, h], same model, why)."""
-    g = json.load(open(scene))
+    g = gltf_json(scene)
     table = json.load(open(os.path.join(HERE, "regions.json"))).get("gltf:" + os.path.basename(scene))
     if table:  # a scene that is not a grid of spheres: its regions by hand
         return {k: (v["box"], v["same"], v.get("why", "")) for k, v in table.items()}

@@ -438,6 +438,12 @@ TEST_F(Gltf, NoCameraFramesTheBounds) {
   EXPECT_TRUE(warned);
   EXPECT_TRUE(s.unlit);
   EXPECT_NE(s.warnings.front().find("no lights"), std::string::npos) << s.warnings.front();
+  // Nothing the framing shows is clipped, however large the model: a 480-unit Cornell box
+  // put the eye 1475 away and the default far plane (1000) cut all but a dot.
+  d.j["nodes"][0]["scale"] = {5000, 5000, 5000};
+  const Scene big = load(d);
+  const Bounds b = big.object_bounds();
+  EXPECT_GT(big.camera.zfar, length(big.camera.eye - b.center()) + length(b.diagonal()));
 }
 
 TEST_F(Gltf, OptionalUnsupportedExtensionIsAWarningOnce) {

@@ -99,6 +99,10 @@ void frame_gltf_scene(GltfContext& ctx) {
   CameraDesc& d = ctx.scene.camera;
   d.present = true;
   d.yfov_deg = 40;
+  // No clipping: the default far plane (1000) cut a model whose framing puts the eye
+  // further away (a 480-unit Cornell box showed as a dot).
+  d.znear = 0.001f;
+  d.zfar = 1e30f;
   // A three-quarter view, as glTF viewers frame a file without a camera: from the front
   // (+Z) right (+X), 45 degrees round and 30 degrees up, so that a model lying on the
   // ground plane is seen from above rather than edge-on.
