@@ -44,7 +44,7 @@ class ImageSink {
   virtual std::unique_ptr<Reader> open(const std::string& job) const = 0;
   // Whether the job's image file decodes whole (checked before a final image is served:
   // a truncated or damaged file is an error, never a download that exits 0).
-  virtual bool intact(const std::string& job) const { return true; }
+  virtual bool intact(const std::string& /*job*/) const { return true; }
   // The last image written, as EXR bytes and a PNG preview; empty if none was written.
   virtual std::string exr(const std::string& job) const = 0;
   virtual std::string png(const std::string& job) const = 0;
