@@ -82,6 +82,31 @@ const char* kContentSecurityPolicy =
 
 }  // namespace
 
+std::string job_status_json(v1::JobStatus status) {
+  google::protobuf::RepeatedPtrField<v1::TileProgress> tiles;
+  tiles.Swap(status.mutable_tiles());
+  std::string out = proto_json(status);  // "{...}": every field printed, so never "{}"
+  out.pop_back();
+  out += ",\"tiles\":[";
+  char buf[192], err[32];
+  for (int i = 0; i < tiles.size(); ++i) {
+    const v1::TileProgress& t = tiles[i];
+    const float e = t.relative_error();
+    if (std::isfinite(e))  // as protobuf prints them: shortest form that reads back, else a string
+      std::snprintf(err, sizeof err, "%.9g", double(e));
+    else
+      std::snprintf(err, sizeof err, "\"%s\"", std::isnan(e) ? "NaN" : e > 0 ? "Infinity" : "-Infinity");
+    const int n = std::snprintf(buf, sizeof buf,
+                                "%s{\"finished\":%s,\"passes_done\":%u,\"rect\":{\"h\":%u,\"w\":%u,\"x\":%u,\"y\":%u},"
+                                "\"relative_error\":%s,\"samples\":%u}",
+                                i ? "," : "", t.finished() ? "true" : "false", t.passes_done(), t.rect().h(),
+                                t.rect().w(), t.rect().x(), t.rect().y(), err, t.samples());
+    out.append(buf, size_t(n));
+  }
+  out += "]}";
+  return out;
+}
+
 namespace {
 std::unique_ptr<httplib::Server> make_server(const std::string& cert, const std::string& key) {
   if (cert.empty() && key.empty()) return std::make_unique<httplib::Server>();
@@ -118,7 +143,7 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
   });
   server_->Get(R"(/api/jobs/([A-Za-z0-9-]+))", [this](const httplib::Request& req, httplib::Response& res) {
     try {
-      res.set_content(to_json(c_.status(req.matches[1], true)).dump(), "application/json");
+      res.set_content(job_status_json(c_.status(req.matches[1], true)), "application/json");
     } catch (const RequestError& e) {
       res.status = 404;
       res.set_content(nlohmann::json{{"error", e.what()}}.dump(), "application/json");

@@ -1,0 +1,53 @@
+// /api/jobs/<id>'s JSON: the tiles written by hand read back as protobuf's own printer
+// writes them (which cost 6.5 s and 0.9 GB for an 8K frame's 262,144 tiles).
+#include "server/status_http.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <nlohmann/json.hpp>
+
+#include "wire.h"
+
+namespace tessera {
+namespace {
+
+TEST(StatusHttp, AJobsTilesReadBackAsProtobufPrintsThem) {
+  v1::JobStatus s;
+  s.set_id("abc");
+  s.set_state(v1::JobStatus::RUNNING);
+  s.set_tiles_total(4);
+  const float errors[] = {0.1f, 1.0f / 3, std::numeric_limits<float>::infinity(), 0};
+  for (int i = 0; i < 4; ++i) {
+    v1::TileProgress* t = s.add_tiles();
+    t->mutable_rect()->set_x(uint32_t(16 * i));
+    t->mutable_rect()->set_w(16);
+    t->mutable_rect()->set_h(i == 3 ? 5 : 16);
+    t->set_passes_done(uint32_t(i));
+    t->set_samples(uint32_t(64 * i));
+    t->set_relative_error(errors[i]);
+    t->set_finished(i == 3);
+  }
+  const nlohmann::json ours = nlohmann::json::parse(job_status_json(s));
+  const nlohmann::json theirs = nlohmann::json::parse(proto_json(s));
+  ASSERT_EQ(ours["tiles"].size(), 4u);
+  for (int i = 0; i < 4; ++i) {
+    nlohmann::json a = ours["tiles"][size_t(i)], b = theirs["tiles"][size_t(i)];
+    if (a["relative_error"].is_number()) {  // the same float, however it is spelled
+      EXPECT_EQ(float(a["relative_error"].get<double>()), float(b["relative_error"].get<double>())) << i;
+      a.erase("relative_error");
+      b.erase("relative_error");
+    }
+    EXPECT_EQ(a, b) << i;
+  }
+  nlohmann::json rest = ours, their_rest = theirs;
+  rest.erase("tiles");
+  their_rest.erase("tiles");
+  EXPECT_EQ(rest, their_rest);
+  // No tiles: an empty list, as protobuf prints it.
+  EXPECT_EQ(nlohmann::json::parse(job_status_json(v1::JobStatus()))["tiles"], nlohmann::json::array());
+}
+
+}  // namespace
+}  // namespace tessera
