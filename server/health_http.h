@@ -6,29 +6,12 @@
 #pragma once
 
 #include <memory>
-#include <string>
-#include <thread>
 
-#include "server/coordinator.h"
-
-namespace httplib {
-class Server;
-}
+#include "server/http_listener.h"
 
 namespace tessera {
 
-class HealthHttp {
- public:
-  explicit HealthHttp(const Coordinator& coordinator);
-  ~HealthHttp();
-  // Binds host:port (port 0 picks one) and returns the port; throws on failure.
-  int bind(const std::string& host, int port);
-  void start();  // serves on a thread until stop()
-  void stop();
-
- private:
-  std::unique_ptr<httplib::Server> server_;
-  std::thread thread_;
-};
+// Four threads, short timeouts, no keep-alive: probes answer at once or not at all.
+std::unique_ptr<HttpListener> health_listener(const Coordinator& coordinator);
 
 }  // namespace tessera

@@ -252,10 +252,10 @@ int main(int argc, char** argv) {
     status.start();
     std::printf("grpc listening on %s:%d%s\n", grpc_host.c_str(), bound, tls_cert.empty() ? "" : " (TLS)");
     std::printf("http listening on %s:%d%s\n", http_host.c_str(), http_bound, tls_cert.empty() ? "" : " (TLS)");
-    std::unique_ptr<tessera::HealthHttp> probes;
+    std::unique_ptr<tessera::HttpListener> probes;
     if (!health.empty()) {
       const auto [health_host, health_port] = split_host_port(health, "--health");
-      probes = std::make_unique<tessera::HealthHttp>(coordinator);
+      probes = tessera::health_listener(coordinator);
       const int health_bound = probes->bind(health_host, health_port);
       probes->start();
       std::printf("health listening on %s:%d\n", health_host.c_str(), health_bound);

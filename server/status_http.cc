@@ -118,9 +118,10 @@ std::unique_ptr<httplib::Server> make_server(const std::string& cert, const std:
 
 StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::string& tls_cert,
                        const std::string& tls_key)
-    : c_(c), server_(make_server(tls_cert, tls_key)) {
+    : c_(c), http_(make_server(tls_cert, tls_key), "http") {
+  httplib::Server& server = http_.server();
   if (auth && auth->enabled())
-    server_->set_pre_routing_handler([auth](const httplib::Request& req, httplib::Response& res) {
+    server.set_pre_routing_handler([auth](const httplib::Request& req, httplib::Response& res) {
       // Probes (kubelet, load balancers) carry no token, and the answers say nothing.
       if (req.path == "/healthz" || req.path == "/readyz") return httplib::Server::HandlerResponse::Unhandled;
       const Authenticator::Check c = auth->check(req.get_header_value("Authorization"), Action::kRead);
@@ -131,17 +132,11 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
       res.set_content(c.why + (unauthenticated ? " (Authorization: Bearer TOKEN)\n" : "\n"), "text/plain");
       return httplib::Server::HandlerResponse::Handled;
     });
-  server_->Get("/healthz",
-               [](const httplib::Request&, httplib::Response& res) { res.set_content("ok\n", "text/plain"); });
-  server_->Get("/readyz", [this](const httplib::Request&, httplib::Response& res) {
-    const std::string why = c_.unready_reason();
-    res.status = why.empty() ? 200 : 503;
-    res.set_content(why.empty() ? "ready\n" : why + "\n", "text/plain");
-  });
-  server_->Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {
+  add_probes(server, c_);
+  server.Get("/api/status", [this](const httplib::Request&, httplib::Response& res) {
     res.set_content(status_json(), "application/json");
   });
-  server_->Get(R"(/api/jobs/([A-Za-z0-9-]+))", [this](const httplib::Request& req, httplib::Response& res) {
+  server.Get(R"(/api/jobs/([A-Za-z0-9-]+))", [this](const httplib::Request& req, httplib::Response& res) {
     try {
       res.set_content(job_status_json(c_.status(req.matches[1], true)), "application/json");
     } catch (const RequestError& e) {
@@ -149,10 +144,10 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
       res.set_content(nlohmann::json{{"error", e.what()}}.dump(), "application/json");
     }
   });
-  server_->Get("/metrics", [this](const httplib::Request&, httplib::Response& res) {
+  server.Get("/metrics", [this](const httplib::Request&, httplib::Response& res) {
     res.set_content(metrics_text(), "text/plain; version=0.0.4");
   });
-  server_->Get(R"(/jobs/([A-Za-z0-9-]+)/preview.png)", [this](const httplib::Request& req, httplib::Response& res) {
+  server.Get(R"(/jobs/([A-Za-z0-9-]+)/preview.png)", [this](const httplib::Request& req, httplib::Response& res) {
     std::string png;
     try {
       png = c_.image(req.matches[1], false, true).png();
@@ -169,34 +164,19 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
     res.set_header("Cache-Control", "no-store");
     res.set_content(png, "image/png");
   });
-  server_->Get("/", [](const httplib::Request&, httplib::Response& res) { res.set_content(kLivePage, "text/html"); });
-  server_->Get("/app.js",
-               [](const httplib::Request&, httplib::Response& res) { res.set_content(kLiveJs, "text/javascript"); });
-  server_->Get("/app.css",
-               [](const httplib::Request&, httplib::Response& res) { res.set_content(kLiveCss, "text/css"); });
+  server.Get("/", [](const httplib::Request&, httplib::Response& res) { res.set_content(kLivePage, "text/html"); });
+  server.Get("/app.js",
+             [](const httplib::Request&, httplib::Response& res) { res.set_content(kLiveJs, "text/javascript"); });
+  server.Get("/app.css",
+             [](const httplib::Request&, httplib::Response& res) { res.set_content(kLiveCss, "text/css"); });
   // Every response: the policy, and no content-type guessing by browsers.
-  server_->set_post_routing_handler([](const httplib::Request&, httplib::Response& res) {
+  server.set_post_routing_handler([](const httplib::Request&, httplib::Response& res) {
     res.set_header("Content-Security-Policy", kContentSecurityPolicy);
     res.set_header("X-Content-Type-Options", "nosniff");
   });
 }
 
-StatusHttp::~StatusHttp() { stop(); }
-
-int StatusHttp::bind(const std::string& host, int port) {
-  const int bound = port == 0 ? server_->bind_to_any_port(host) : (server_->bind_to_port(host, port) ? port : -1);
-  if (bound <= 0) throw std::runtime_error("http: cannot bind " + host + ":" + std::to_string(port));
-  return bound;
-}
-
-void StatusHttp::start() {
-  thread_ = std::thread([this] { server_->listen_after_bind(); });
-}
-
-void StatusHttp::stop() {
-  if (server_) server_->stop();
-  if (thread_.joinable()) thread_.join();
-}
+StatusHttp::~StatusHttp() { stop(); }  // before anything its handlers reach goes
 
 std::string StatusHttp::status_json() const {
   // Written out directly: with thousands of workers, building a JSON object per worker

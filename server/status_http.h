@@ -9,16 +9,11 @@
 // browser asks for it).
 #pragma once
 
-#include <memory>
 #include <string>
-#include <thread>
 
 #include "server/auth.h"
 #include "server/coordinator.h"
-
-namespace httplib {
-class Server;
-}
+#include "server/http_listener.h"
 
 namespace tessera {
 
@@ -37,9 +32,9 @@ class StatusHttp {
                       const std::string& tls_key = "");
   ~StatusHttp();
   // Binds host:port (port 0 picks one) and returns the port; throws on failure.
-  int bind(const std::string& host, int port);
-  void start();  // serves on a thread until stop()
-  void stop();
+  int bind(const std::string& host, int port) { return http_.bind(host, port); }
+  void start() { http_.start(); }  // serves on a thread until stop()
+  void stop() { http_.stop(); }
 
   // Exposed for tests.
   std::string status_json() const;
@@ -47,8 +42,7 @@ class StatusHttp {
 
  private:
   Coordinator& c_;
-  std::unique_ptr<httplib::Server> server_;
-  std::thread thread_;
+  HttpListener http_;
 };
 
 }  // namespace tessera
