@@ -83,10 +83,8 @@ class NodeWalk {
   // `parent_entry`: the parent's entry in the animation's hierarchy (-1: none).
   void visit(int index, const Mat4& parent, int32_t parent_entry) {
     const std::string el = "nodes[" + std::to_string(index) + "]";
-    if (index < 0 || size_t(index) >= ctx_.model.nodes.size()) ctx_.fail(el, "does not exist");
-    if (std::find(path_.begin(), path_.end(), index) != path_.end())
-      ctx_.fail(el, "the node graph has a cycle through this node");
-    if (path_.size() >= kMaxGltfNodeDepth) ctx_.fail(el, "node hierarchy deeper than 256 levels");
+    // check_gltf_budget went over this graph first: every node exists, no cycle, no deeper
+    // than kMaxGltfNodeDepth.
     const tinygltf::Node& n = ctx_.model.nodes[size_t(index)];
     const Mat4 local = gltf_local_matrix(ctx_, n, el);
     const Mat4 world = parent * local;
@@ -105,7 +103,6 @@ class NodeWalk {
       }
       entry = animation_.add_node(e);
     }
-    path_.push_back(index);
     const std::vector<Mat4> instances = n.mesh >= 0 ? gltf_instances(ctx_, n, el) : std::vector<Mat4>();
     for (const Mat4& inst : instances)
       for (GltfPrimitive& p : read_gltf_mesh(ctx_, materials_, n, world * inst, el, animation_.recording())) {
@@ -140,14 +137,12 @@ class NodeWalk {
       if (animation_.recording()) animation_.add_light(uint32_t(ctx_.scene.lights.size() - 1), entry);
     }
     for (int c : n.children) visit(c, world, entry);
-    path_.pop_back();
   }
 
  private:
   GltfContext& ctx_;
   GltfMaterials& materials_;
   GltfAnimationBuilder& animation_;
-  std::vector<int> path_;  // the nodes from the root to the one visited: a cycle returns to one of them
   size_t instanced_triangles_ = 0;
 
  public:
