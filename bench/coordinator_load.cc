@@ -156,7 +156,7 @@ int main(int argc, char** argv) {
     pool.emplace_back([&, t] {
       auto stub = v1::TesseraWorker::NewStub(grpc::CreateChannel(target, grpc::InsecureChannelCredentials()));
       std::vector<std::pair<uint64_t, std::string>> ids;  // this thread's share of the simulated workers
-      std::map<size_t, std::string> payloads;  // by tile area
+      std::map<size_t, std::string> payloads;             // by tile area
       for (int w = t; w < workers; w += threads) {
         grpc::ClientContext ctx;
         v1::RegisterRequest r;

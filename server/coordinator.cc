@@ -105,7 +105,7 @@ void Coordinator::write(const std::shared_ptr<Job>& job) {
     }
     if (!plan.image && !plan.checkpoint) return changed_.notify_all();  // no writer now: a delete may wait
     const SnapshotOutcome out = writer_.write(*job, plan, [&](uint32_t band, BandCopy* copy) {
-      MutexLock lock(mu_);  // one band at a time: merges go on between them
+      MutexLock lock(mu_);                                      // one band at a time: merges go on between them
       if (!job->plan.has_film() || job->removed) return false;  // (a job being deleted: stop)
       job->plan.copy_band(band, copy);
       return true;

@@ -3,8 +3,8 @@
 
 #include <functional>
 #include <list>
-#include <memory>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <string>
 

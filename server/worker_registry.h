@@ -11,7 +11,7 @@ namespace tessera {
 struct WorkerInfo {
   uint64_t id = 0;
   std::string name;
-  std::string principal;  // the access token's name ("" without tokens)
+  std::string principal;      // the access token's name ("" without tokens)
   std::string secret_digest;  // SHA-256 of the secret its registration was given
   uint32_t threads = 0;
   double last_seen = 0;

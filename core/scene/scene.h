@@ -114,13 +114,13 @@ struct Material {
 struct Mesh {
   std::string name;
   std::vector<Vec3> positions;
-  std::vector<uint32_t> indices;  // 3 per triangle
-  std::vector<Vec3> normals;      // per vertex: from the file, or area weighted (compute_normals)
-  std::vector<Vec2> uvs;          // per vertex texture coordinates, or empty
-  std::vector<Vec2> uvs1;         // a second set (glTF TEXCOORD_1), or empty
-  std::vector<Rgb> colors;        // per vertex colour (glTF COLOR_0, linear), multiplying the base colour; or empty
+  std::vector<uint32_t> indices;   // 3 per triangle
+  std::vector<Vec3> normals;       // per vertex: from the file, or area weighted (compute_normals)
+  std::vector<Vec2> uvs;           // per vertex texture coordinates, or empty
+  std::vector<Vec2> uvs1;          // a second set (glTF TEXCOORD_1), or empty
+  std::vector<Rgb> colors;         // per vertex colour (glTF COLOR_0, linear), multiplying the base colour; or empty
   std::vector<float> color_alpha;  // COLOR_0's alpha where the file gives one below 1, or empty
-  bool file_normals = false;      // `normals` came from the file: keep them
+  bool file_normals = false;       // `normals` came from the file: keep them
   uint32_t material = 0;
   int32_t light = -1;  // index into Scene::lights when the mesh emits
 

@@ -34,7 +34,7 @@ Saved sample() {
   s.state.work_done = 0.1;  // not exact in binary: must come back bit for bit anyway
   s.state.work_total = 3e9;
   for (size_t i = 0; i < 20; ++i) {
-    PixelSums &p = s.film.at(int(i % 5), int(i / 5));
+    PixelSums& p = s.film.at(int(i % 5), int(i / 5));
     p = PixelSums{0.1 * double(i), 1.0 / 3, 1e-300, 2.5, uint32_t(i)};
   }
   return s;
@@ -94,7 +94,7 @@ TEST(JobStore, ACheckpointOfTheFirstVersionIsStillRead) {
   const uint32_t version = 1;
   std::memcpy(v1.data() + 4, &version, 4);
   const uint64_t sum = XXH64(v1.data(), v1.size(), 0);
-  v1.append(reinterpret_cast<const char *>(&sum), 8);
+  v1.append(reinterpret_cast<const char*>(&sum), 8);
   const Checkpoint c = decode_checkpoint(v1);
   EXPECT_EQ(c.elapsed, 7);
   ASSERT_EQ(c.film.window(), s.film.window());

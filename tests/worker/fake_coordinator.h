@@ -34,7 +34,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   int scene_streams_to_cut = 0;
   int cut_after_pieces = 2;
   bool damage_scenes = false;  // a byte of every piece flipped: bytes that do not hash to the scene's hash
-  std::set<uint64_t> refuse;                       // Heartbeat refuses these tasks
+  std::set<uint64_t> refuse;   // Heartbeat refuses these tasks
   grpc::Status unregister_status;
   bool hold_submissions = false;  // SubmitResults waits until this is false again
 
@@ -47,7 +47,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   std::vector<v1::FetchSceneRequest> scene_requests;
   std::vector<v1::HeartbeatRequest> heartbeats;
   std::vector<v1::TaskResult> results;
-  int submissions = 0;  // SubmitResults calls begun
+  int submissions = 0;                                             // SubmitResults calls begun
   std::vector<std::pair<uint64_t, std::string>> batch_identities;  // each result batch's worker id and secret
   std::vector<v1::ReleaseRequest> releases;
   int unregisters = 0;
