@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <thread>
 
 #include "core/io/files.h"
@@ -193,6 +194,9 @@ int main(int argc, char** argv) {
   try {
     const auto [grpc_host, grpc_port] = split_host_port(listen, "--listen");
     const auto [http_host, http_port] = split_host_port(http, "--http");
+    // Checked with the others, before any port or the data folder is opened.
+    const std::optional<std::pair<std::string, int>> health_at =
+        health.empty() ? std::nullopt : std::optional(split_host_port(health, "--health"));
     const tessera::Authenticator auth =
         tokens_file.empty() ? tessera::Authenticator() : tessera::Authenticator::from_file(tokens_file);
     const bool open_network = !is_loopback(grpc_host) || !is_loopback(http_host);
@@ -253,8 +257,8 @@ int main(int argc, char** argv) {
     std::printf("grpc listening on %s:%d%s\n", grpc_host.c_str(), bound, tls_cert.empty() ? "" : " (TLS)");
     std::printf("http listening on %s:%d%s\n", http_host.c_str(), http_bound, tls_cert.empty() ? "" : " (TLS)");
     std::unique_ptr<tessera::HttpListener> probes;
-    if (!health.empty()) {
-      const auto [health_host, health_port] = split_host_port(health, "--health");
+    if (health_at) {
+      const auto& [health_host, health_port] = *health_at;
       probes = tessera::health_listener(coordinator);
       const int health_bound = probes->bind(health_host, health_port);
       probes->start();

@@ -295,6 +295,15 @@ TEST_F(Access, ProbesAnswerWhileSlowClientsHoldTheStatusPort) {
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 1.0);
   }
   for (int fd : slow) ::close(fd);
+  coordinator.reset();
+  // A malformed --health is refused before any port or the data folder is opened.
+  Process bad(kBin + "/tessera-coordinator",
+              {"--listen", "127.0.0.1:0", "--http", "127.0.0.1:0", "--data", (dir / "bad").string(), "--health",
+               "127.0.0.1:99999"},
+              (dir / "bad.err").string());
+  EXPECT_NE(bad.wait(20), 0);
+  EXPECT_NE(slurp((dir / "bad.err").string()).find("--health: bad port in '127.0.0.1:99999'"), std::string::npos);
+  EXPECT_FALSE(fs::exists(dir / "bad"));
 }
 
 // Issue 23: 1,000 WatchJob streams made 1,021 server threads. A caller holds at most
