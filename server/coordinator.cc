@@ -43,7 +43,7 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
       verifier_(options_.verify_fraction, options_.lease_seconds, checks_, jobs_, leasing_, workers_, lifecycle_,
                 counters_),
       dispatcher_({jobs_, leases_, leasing_, workers_, checks_, verifier_, sequences_, lifecycle_},
-                  options_.max_live_pixels),
+                  options_.max_live_pixels, options_.max_leases_per_worker),
       intake_({jobs_, leases_, leasing_, workers_, verifier_, lifecycle_, snapshotter_, counters_}),
       worker_lifecycle_({workers_, jobs_, leases_, leasing_, checks_, lifecycle_, counters_}, options_),
       control_(jobs_, lifecycle_, snapshotter_, counters_),

@@ -48,7 +48,8 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
   });
   const uint64_t threads = std::max<uint64_t>(1, p_.workers.threads());
   const uint64_t share = (outstanding * w->threads + threads - 1) / threads;
-  const uint64_t unshared = share > w->leases ? share - w->leases : 0;
+  const uint64_t bound = std::min<uint64_t>(share, max_leases_);
+  const uint64_t unshared = bound > w->leases ? bound - w->leases : 0;
   max_tasks = uint32_t(std::min<uint64_t>(std::clamp<uint32_t>(max_tasks, 1, kMaxTasksPerRequest), unshared));
   p_.verifier.lease_checks(*w, max_tasks, now, resp);
 

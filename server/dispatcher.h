@@ -4,7 +4,9 @@
 // frames finish first and workers go from one frame to the next without waiting. Checks
 // come first (they are few, and a job waits for them). A worker gets at most its share,
 // by threads, of the work outstanding, less what it holds: on a small frame the first to
-// ask cannot take every ready task while the others idle. Runs under the coordinator's lock.
+// ask cannot take every ready task while the others idle; and never more than the bound on
+// one worker's leases (which the worker learns when it registers). Runs under the
+// coordinator's lock.
 #pragma once
 
 #include <cstdint>
@@ -28,7 +30,8 @@ class Dispatcher {
     SequenceScheduler& sequences;
     JobLifecycle& lifecycle;
   };
-  Dispatcher(Parts parts, int64_t max_live_pixels) : p_(parts), max_live_pixels_(max_live_pixels) {}
+  Dispatcher(Parts parts, int64_t max_live_pixels, uint32_t max_leases_per_worker)
+      : p_(parts), max_live_pixels_(max_live_pixels), max_leases_(max_leases_per_worker) {}
 
   // Up to max_tasks tasks, stopping once they hold max_samples samples (0: no such limit);
   // always one if any is ready and the worker's share allows. Expires overdue leases
@@ -38,6 +41,7 @@ class Dispatcher {
  private:
   Parts p_;
   int64_t max_live_pixels_;
+  uint32_t max_leases_;  // per worker (CoordinatorOptions::max_leases_per_worker)
 };
 
 }  // namespace tessera

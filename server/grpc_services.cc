@@ -186,10 +186,14 @@ grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskR
   // the moment it is submitted, instead of sleeping through a retry interval.
   return as(auth_, ctx, Action::kWork, [&](const Principal&) {
     c_.check_worker(req->worker_id(), req->worker_secret());
-    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+    const auto since = std::chrono::steady_clock::now(), until = since + std::chrono::seconds(1);
     while (true) {
       *out = c_.get_task(req->worker_id(), req->max_tasks(), req->max_samples());
-      if (out->tasks_size() > 0 || ctx->IsCancelled() || std::chrono::steady_clock::now() >= until) return;
+      const auto now = std::chrono::steady_clock::now();
+      if (out->tasks_size() > 0 || ctx->IsCancelled() || now >= until) {
+        out->set_held_ms(uint32_t(std::chrono::duration_cast<std::chrono::milliseconds>(now - since).count()));
+        return;
+      }
       c_.wait_for_work(0.25);
     }
   });

@@ -130,6 +130,11 @@ int main(int argc, char** argv) {
                  "registered workers of one worker token at most (with --tokens)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
+  app.add_option("--max-leases-per-worker", opt.max_leases_per_worker,
+                 "leases one worker may hold at once (its window of work in flight grows with its round trip, up "
+                 "to this)")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 1000000));
   app.add_option("--max-streams-per-peer", opt.max_streams_per_peer,
                  "job watches and image downloads one token (or, without tokens, one address) may hold open at once")
       ->capture_default_str()

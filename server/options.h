@@ -23,6 +23,10 @@ struct CoordinatorOptions {
   // Registered workers of one access token at most: a flood under one credential cannot
   // lock the others out (each worker's own credential makes this 1 per worker).
   size_t max_workers_per_token = 1000;
+  // Leases one worker may hold at once. A worker keeps as much work leased as its speed
+  // times its round trip asks for (a far worker needs more in flight), up to this; the
+  // dispatcher's share by threads still keeps one worker from taking all of a small job.
+  uint32_t max_leases_per_worker = 4096;
   // Streams (WatchJob, FetchImageChunks) one caller may hold open at once: each holds a
   // server thread while it lasts.
   size_t max_streams_per_peer = 64;

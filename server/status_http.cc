@@ -10,8 +10,6 @@
 namespace tessera {
 namespace {
 
-nlohmann::json to_json(const google::protobuf::Message& m) { return nlohmann::json::parse(proto_json(m)); }
-
 // The live page: markup only; its style and script are served separately so that the
 // Content-Security-Policy can forbid inline script (and with it any markup a job or
 // worker name might smuggle in). Every value the script writes into the page goes

@@ -32,6 +32,7 @@ v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest&
   r.set_worker_secret(secret);
   r.set_heartbeat_interval_ms(uint32_t(options_.heartbeat_seconds * 1000));
   r.set_lease_ms(uint32_t(options_.lease_seconds * 1000));
+  r.set_max_leases(options_.max_leases_per_worker);
   return r;
 }
 

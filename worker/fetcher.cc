@@ -42,8 +42,10 @@ Fetcher::Leased Fetcher::lease(const std::atomic<bool>& stop) {
   req.set_max_tasks(size->max_tasks);
   if (size->max_samples > 0) req.set_max_samples(size->max_samples);
   v1::GetTaskResponse resp;
+  const double t0 = now_seconds();
   const grpc::Status st = link_.stub->GetTask(link_.context(10).get(), req, &resp);
   if (!st.ok()) return {st, 0};
+  if (resp.tasks_size() > 0) queue_.note_round_trip(now_seconds() - t0 - resp.held_ms() / 1000.0);
   backoff_.reset();
   for (const v1::Task& task : resp.tasks()) enqueue(task, stop);
   return {st, resp.tasks_size()};

@@ -1,6 +1,9 @@
-// How much work a worker keeps leased: enough that its threads never run dry, about
-// `seconds` of it at the measured speed beyond that, and at most `max_tasks` leases. A
-// pure rule over the queue's load, so that tests can state it with numbers.
+// How much work a worker keeps leased: its window of work in flight, sized like a TCP
+// window from the bandwidth-delay product. Enough that its threads never run dry, plus what
+// they get through in `seconds` and in two of the link's round trips at the measured speed
+// (one for the request on its way, one of margin for a slow answer), and never more leases
+// than the coordinator allows this worker. A pure rule over the queue's load, so that tests
+// can state it with numbers; nothing to tune for a far or near coordinator.
 #pragma once
 
 #include <algorithm>
@@ -9,12 +12,15 @@
 
 namespace tessera::worker {
 
-// What the worker holds and has queued, and how fast it renders.
+// What the worker holds and has queued, how fast it renders and how far away the
+// coordinator is.
 struct QueueLoad {
   size_t held = 0;                       // leased and not yet submitted
   uint64_t queued_rows = 0;              // rows not yet handed to a render thread
   double queued_samples = 0;             // camera samples in those rows
   double samples_per_thread_second = 0;  // measured (smoothed); 0 until a task finished
+  double round_trip = 0;                 // seconds from asking for work to having it (smoothed); 0: unknown
+  size_t max_leases = 64;                // the coordinator's bound (RegisterResponse), or --max-tasks if lower
 };
 
 // A GetTask request's size: up to max_tasks tasks, stopping at max_samples (0: no limit).
@@ -26,24 +32,28 @@ struct LeaseRequest {
 struct Lookahead {
   int threads = 1;
   double seconds = 0.3;  // --lookahead
-  int max_tasks = 64;    // --max-tasks
 
-  // Whether to ask for more now: the threads are about to run dry (fewer than two rows per
-  // thread queued), or, once the speed is known, less than half the lookahead is queued
-  // (refilling at half, up to all of it, makes fewer and larger requests).
-  bool wants_more(const QueueLoad& load) const {
-    if (load.held >= size_t(max_tasks)) return false;
-    if (load.queued_rows < 2 * uint64_t(threads)) return true;
-    const double rate = load.samples_per_thread_second * threads;
-    return rate > 0 && load.queued_samples < 0.5 * rate * seconds;
+  // Samples the window holds once the speed is known.
+  double window_samples(const QueueLoad& load) const {
+    return load.samples_per_thread_second * threads * (seconds + 2 * load.round_trip);
   }
-  // As much work as the threads get through in the lookahead at the measured speed, less
-  // what is queued; two tasks until there is a measurement. Only when wants_more().
+  // Whether to ask for more now: the threads are about to run dry (fewer than two rows per
+  // thread queued), or, once the speed is known, less than half the window is queued
+  // (refilling at half, up to all of it, makes fewer and larger requests; half the window
+  // still covers a round trip, so the answer arrives before the queue runs out).
+  bool wants_more(const QueueLoad& load) const {
+    if (load.held >= load.max_leases) return false;
+    if (load.queued_rows < 2 * uint64_t(threads)) return true;
+    const double window = window_samples(load);
+    return window > 0 && load.queued_samples < 0.5 * window;
+  }
+  // The window less what is queued; two tasks until there is a measurement. Only when
+  // wants_more().
   LeaseRequest request(const QueueLoad& load) const {
-    const double rate = load.samples_per_thread_second * threads;
-    const uint32_t room = uint32_t(max_tasks - int(load.held));
-    if (rate <= 0) return {std::min(room, 2u), 0};
-    return {room, uint64_t(std::max(1.0, rate * seconds - load.queued_samples))};
+    const double window = window_samples(load);
+    const uint32_t room = uint32_t(std::min<size_t>(load.max_leases - load.held, UINT32_MAX));
+    if (window <= 0) return {std::min(room, 2u), 0};
+    return {room, uint64_t(std::max(1.0, window - load.queued_samples))};
   }
 };
 

@@ -26,9 +26,11 @@ int main(int argc, char** argv) {
                  "seconds of work to keep leased beyond what the threads are rendering, at the measured speed")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 60.0));
-  app.add_option("--max-tasks", opt.max_tasks, "leases held at once, at most")
+  app.add_option("--max-tasks", opt.max_tasks,
+                 "leases held at once, at most (0: as the window of work in flight asks, up to the coordinator's "
+                 "bound)")
       ->capture_default_str()
-      ->check(CLI::Range(1, 4096));
+      ->check(CLI::Range(0, 1000000));
   app.add_flag("-v,--verbose", opt.verbose, "log connection events");
   app.add_option("--exit-when-idle", opt.exit_when_idle_seconds,
                  "leave after this many seconds without a task (0: never); for batch allocations")

@@ -13,7 +13,23 @@ double Held::row_samples(int row) const {
 }
 
 QueueLoad TaskQueue::load_locked() const {
-  return {held_.size(), queued_rows_, queued_samples_, samples_per_thread_second_};
+  return {held_.size(), queued_rows_, queued_samples_, samples_per_thread_second_, round_trip_, max_leases_};
+}
+
+void TaskQueue::set_max_leases(size_t coordinator_bound, size_t own_cap) {
+  std::lock_guard<std::mutex> lock(mu_);
+  max_leases_ = std::max<size_t>(1, own_cap > 0 ? std::min(coordinator_bound, own_cap) : coordinator_bound);
+  more_.notify_one();
+}
+
+void TaskQueue::note_round_trip(double seconds) {
+  std::lock_guard<std::mutex> lock(mu_);
+  seconds = std::clamp(seconds, 0.0, 60.0);
+  // As TCP smooths its round trip (RFC 6298, gain 1/8), but quicker to follow a longer one,
+  // so that a slower link does not starve the threads while the average catches up.
+  round_trip_ = round_trip_ <= 0 ? seconds : seconds > round_trip_ ? 0.5 * (round_trip_ + seconds)
+                                                                   : 0.875 * round_trip_ + 0.125 * seconds;
+  if (lookahead_.wants_more(load_locked())) more_.notify_one();
 }
 
 QueueLoad TaskQueue::load() const {

@@ -93,6 +93,12 @@ class TaskQueue {
   std::vector<uint64_t> take_held();
 
   QueueLoad load() const;
+  // The coordinator's bound on this worker's leases (at registration), and its own
+  // --max-tasks if lower (0: none).
+  void set_max_leases(size_t coordinator_bound, size_t own_cap);
+  // One GetTask's time on the link (its call time less the coordinator's long poll); the
+  // window follows its smoothed value.
+  void note_round_trip(double seconds);
 
  private:
   QueueLoad load_locked() const;
@@ -108,6 +114,8 @@ class TaskQueue {
   double queued_samples_ = 0;
   double busy_thread_seconds_ = 0;
   double samples_per_thread_second_ = 0;  // measured, smoothed
+  double round_trip_ = 0;                 // measured, smoothed; 0 until measured
+  size_t max_leases_ = 64;
   bool stopping_ = false;
   std::atomic<uint64_t> tasks_done_{0};
 };

@@ -49,7 +49,7 @@ Worker::Worker(WorkerOptions options)
 Worker::Worker(WorkerOptions options, std::shared_ptr<v1::TesseraWorker::StubInterface> stub)
     : options_(resolved(std::move(options))),
       link_(std::make_unique<Link>(std::move(stub), options_.access)),
-      queue_(std::make_unique<TaskQueue>(Lookahead{options_.threads, options_.lookahead_seconds, options_.max_tasks})),
+      queue_(std::make_unique<TaskQueue>(Lookahead{options_.threads, options_.lookahead_seconds})),
       fetcher_(std::make_unique<Fetcher>(*link_, *queue_, options_.cache_dir, backoff_)) {}
 
 Worker::~Worker() = default;
@@ -73,6 +73,7 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
     if (st.ok()) {
       link_->set_identity({resp.worker_id(), resp.worker_secret()});
       link_->heartbeat_ms = std::max(50u, resp.heartbeat_interval_ms());
+      queue_->set_max_leases(resp.max_leases() > 0 ? resp.max_leases() : 64, size_t(options_.max_tasks));
       backoff_.reset();
       spdlog::debug("registered as {}", resp.worker_id());
       return true;

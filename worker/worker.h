@@ -5,7 +5,8 @@
 // The pipeline, so that no render thread ever waits for the network; its parts meet in one
 // TaskQueue (worker/task_queue.h) and reach the coordinator through one Link (link.h):
 //   fetcher (the thread that calls run(); fetcher.h)  leases tasks while the queued work is
-//       below about `lookahead_seconds` of this worker's measured speed (lookahead.h);
+//       below about `lookahead_seconds` plus two round trips of this worker's measured
+//       speed (its window of work in flight, lookahead.h);
 //       loads each task's scene and builds its renderer (scene_cache.h) before queuing it.
 //   render pool (`threads` persistent threads; render_pool.h)  take rows of the queued
 //       tasks, front task first, one row at a time.
@@ -38,7 +39,9 @@ struct WorkerOptions {
   std::string name;
   bool verbose = false;            // log connection events (main.cc: the log level)
   double lookahead_seconds = 0.3;  // queued work to keep, at the measured speed
-  int max_tasks = 64;              // leases held at once, at most
+  // Leases held at once, at most; 0: as many as the window asks for, up to the
+  // coordinator's bound on one worker (RegisterResponse.max_leases).
+  int max_tasks = 0;
   Access access;                   // token and TLS
   // For the verification tests only (a hidden flag): every result's sums scaled by 0.8
   // (plausible, and wrong), as a broken or dishonest machine would send them.

@@ -68,6 +68,28 @@ TEST_F(DispatcherTest, AWorkersShareGoesByItsThreads) {
   EXPECT_EQ(get(three).tasks_size(), 6);
 }
 
+// A worker that asks for a huge window gets no more than the bound on one worker's leases
+// (CoordinatorOptions::max_leases_per_worker), however much is outstanding.
+class DispatcherBoundTest : public DispatcherTest {
+ protected:
+  static CoordinatorOptions bounded() {
+    CoordinatorOptions o = testing::parts_options();
+    o.max_leases_per_worker = 5;
+    return o;
+  }
+  DispatcherBoundTest() : DispatcherTest(bounded()) {}
+};
+
+TEST_F(DispatcherBoundTest, AWorkerHoldsNoMoreThanTheBoundOnOneWorkersLeases) {
+  add_still();
+  add_still();
+  const uint64_t w = add_worker(64);
+  EXPECT_EQ(get(w).tasks_size(), 5);
+  EXPECT_EQ(get(w).tasks_size(), 0);  // it holds its bound
+  const uint64_t other = add_worker(64);
+  EXPECT_EQ(get(other).tasks_size(), 5);  // the bound is per worker (its share is 9)
+}
+
 TEST_F(DispatcherTest, TheRequestsCountAndSampleLimitsHold) {
   add_still();
   const uint64_t w = add_worker();

@@ -121,7 +121,8 @@ class PartsTest : public ::testing::Test {
         lifecycle(jobs, leasing, snapshotter, counters),
         sequences(jobs, lifecycle),
         verifier(options.verify_fraction, options.lease_seconds, checks, jobs, leasing, workers, lifecycle, counters),
-        dispatcher({jobs, leases, leasing, workers, checks, verifier, sequences, lifecycle}, options.max_live_pixels),
+        dispatcher({jobs, leases, leasing, workers, checks, verifier, sequences, lifecycle}, options.max_live_pixels,
+                   options.max_leases_per_worker),
         intake({jobs, leases, leasing, workers, verifier, lifecycle, snapshotter, counters}),
         worker_lifecycle({workers, jobs, leases, leasing, checks, lifecycle, counters}, options) {}
 

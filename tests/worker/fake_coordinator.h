@@ -25,6 +25,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   // What the test sets (under mu, or before the worker starts) ...
   std::deque<grpc::Status> register_failures;  // answers before Register succeeds
   uint32_t heartbeat_interval_ms = 50;
+  uint32_t max_leases = 0;  // RegisterResponse.max_leases (0: as coordinators before it)
   std::deque<std::vector<v1::Task>> task_batches;  // GetTask: the front batch, up to max_tasks
   std::deque<grpc::Status> get_task_failures;      // answers before GetTask works again
   std::map<std::string, v1::SceneBundle> scenes;   // FetchSceneChunks, by hash
@@ -85,6 +86,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
     resp->set_worker_secret("secret-" + std::to_string(registrations.size()));
     resp->set_heartbeat_interval_ms(heartbeat_interval_ms);
     resp->set_lease_ms(10 * heartbeat_interval_ms);
+    resp->set_max_leases(max_leases);
     return grpc::Status::OK;
   }
 

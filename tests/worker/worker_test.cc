@@ -262,6 +262,15 @@ TEST_F(WorkerTest, ItAsksForTwoTasksThenForItsLookaheadOnceItsSpeedIsMeasured) {
   EXPECT_GT(later.max_samples(), 0u);  // the lookahead at its speed
 }
 
+TEST_F(WorkerTest, ItAsksForNoMoreThanTheCoordinatorsBound) {
+  fake->max_leases = 3;
+  fake->task_batches.push_back({task(71, {0, 0, 16, 16}, 0, 4)});
+  start(options());
+  ASSERT_TRUE(fake->wait_until([&] { return fake->result_for(71) != nullptr && fake->task_requests.size() >= 2; }));
+  EXPECT_TRUE(finish());
+  for (const v1::GetTaskRequest& r : fake->task_requests) EXPECT_LE(r.max_tasks(), 3u);
+}
+
 TEST_F(WorkerTest, ATaskWhoseSceneCannotLoadIsReleasedWithTheError) {
   v1::SceneBundle broken;
   broken.set_main_file("broken.dae");
@@ -291,23 +300,70 @@ TEST_F(WorkerTest, ATaskWhoseSceneCannotLoadIsReleasedWithTheError) {
 // The lookahead rule with numbers: 2 threads at 1000 samples per thread-second keep 0.5 s
 // of work, 1000 samples, refilled below half of it.
 TEST(Lookahead, RefillsBelowHalfTheLookaheadUpToAllOfIt) {
-  const Lookahead l{2, 0.5, 8};
-  EXPECT_TRUE(l.wants_more({0, 0, 0, 0}));
-  EXPECT_EQ(l.request({0, 0, 0, 0}).max_tasks, 2u);  // unmeasured: two tasks
-  EXPECT_EQ(l.request({0, 0, 0, 0}).max_samples, 0u);
-  EXPECT_FALSE(l.wants_more({2, 4, 5000, 0}));    // two rows a thread queued, speed unknown
-  EXPECT_TRUE(l.wants_more({2, 3, 5000, 1000}));  // threads about to run dry
-  EXPECT_TRUE(l.wants_more({2, 4, 499, 1000}));
-  EXPECT_FALSE(l.wants_more({2, 4, 500, 1000}));
-  const LeaseRequest r = l.request({3, 4, 400, 1000});
+  const Lookahead l{2, 0.5};
+  const size_t bound = 8;  // leases it may hold
+  EXPECT_TRUE(l.wants_more({0, 0, 0, 0, 0, bound}));
+  EXPECT_EQ(l.request({0, 0, 0, 0, 0, bound}).max_tasks, 2u);  // unmeasured: two tasks
+  EXPECT_EQ(l.request({0, 0, 0, 0, 0, bound}).max_samples, 0u);
+  EXPECT_FALSE(l.wants_more({2, 4, 5000, 0, 0, bound}));    // two rows a thread queued, speed unknown
+  EXPECT_TRUE(l.wants_more({2, 3, 5000, 1000, 0, bound}));  // threads about to run dry
+  EXPECT_TRUE(l.wants_more({2, 4, 499, 1000, 0, bound}));
+  EXPECT_FALSE(l.wants_more({2, 4, 500, 1000, 0, bound}));
+  const LeaseRequest r = l.request({3, 4, 400, 1000, 0, bound});
   EXPECT_EQ(r.max_tasks, 5u);
   EXPECT_EQ(r.max_samples, 600u);
-  EXPECT_FALSE(l.wants_more({8, 0, 0, 1000}));  // every lease it may hold
+  EXPECT_FALSE(l.wants_more({8, 0, 0, 1000, 0, bound}));  // every lease it may hold
+}
+
+// The window follows the link: 2 threads at 1000 samples per thread-second with a 0.3 s
+// lookahead keep 600 samples next door and 2 x 1000 x (0.3 + 2 x 0.15) = 1200 behind a
+// 150 ms round trip, refilled below half of it, which still covers the round trip.
+TEST(Lookahead, AFarCoordinatorGetsTheBandwidthDelayProductInFlight) {
+  const Lookahead l{2, 0.3};
+  const QueueLoad near{2, 4, 299, 1000, 0, 4096}, far{2, 4, 599, 1000, 0.15, 4096};
+  EXPECT_DOUBLE_EQ(l.window_samples(near), 600);
+  EXPECT_DOUBLE_EQ(l.window_samples(far), 1200);
+  EXPECT_TRUE(l.wants_more(near));
+  EXPECT_TRUE(l.wants_more(far));
+  EXPECT_FALSE(l.wants_more({2, 4, 300, 1000, 0, 4096}));
+  EXPECT_FALSE(l.wants_more({2, 4, 600, 1000, 0.15, 4096}));
+  EXPECT_GE(0.5 * l.window_samples(far), 2 * 1000 * 0.15);  // the refill point covers a round trip
+  EXPECT_EQ(l.request(near).max_samples, 301u);
+  EXPECT_EQ(l.request(far).max_samples, 601u);
+  EXPECT_EQ(l.request(far).max_tasks, 4094u);  // room up to the coordinator's bound
+  EXPECT_FALSE(l.wants_more({4096, 0, 0, 1000, 0.15, 4096}));
+}
+
+// The round trip is smoothed as TCP smooths it (gain 1/8), but a longer one is followed at
+// once by half the difference, so the threads do not run dry while the average catches up.
+TEST(TaskQueue, SmoothsTheRoundTripAndFollowsALongerOneQuickly) {
+  TaskQueue q(Lookahead{2, 0.3});
+  EXPECT_EQ(q.load().round_trip, 0);  // unknown until measured
+  q.note_round_trip(0.1);
+  EXPECT_DOUBLE_EQ(q.load().round_trip, 0.1);
+  q.note_round_trip(0.3);
+  EXPECT_DOUBLE_EQ(q.load().round_trip, 0.2);
+  q.note_round_trip(0.04);
+  EXPECT_DOUBLE_EQ(q.load().round_trip, 0.18);
+  q.note_round_trip(-1);  // a clock step: no negative round trip
+  EXPECT_DOUBLE_EQ(q.load().round_trip, 0.1575);
+}
+
+TEST(TaskQueue, TheCoordinatorsBoundOrAnOwnLowerCapLimitsTheLeases) {
+  TaskQueue q(Lookahead{2, 0.3});
+  EXPECT_EQ(q.load().max_leases, 64u);  // until registered
+  q.set_max_leases(4096, 0);
+  EXPECT_EQ(q.load().max_leases, 4096u);
+  q.set_max_leases(4096, 100);
+  EXPECT_EQ(q.load().max_leases, 100u);
+  q.set_max_leases(50, 100);
+  EXPECT_EQ(q.load().max_leases, 50u);
 }
 
 // The queue measures the speed from the rows' render times, which sizes the next request.
 TEST(TaskQueue, MeasuresTheSpeedThatSizesTheNextRequest) {
-  TaskQueue q(Lookahead{2, 0.5, 8});
+  TaskQueue q(Lookahead{2, 0.5});
+  q.set_max_leases(8, 0);
   auto h = std::make_shared<Held>();
   h->task.set_task_id(1);
   h->task.set_sample_begin(0);
