@@ -71,19 +71,28 @@ run_row() {  # ROW: prints seconds, or fails
   "$BIN/tessera_compare" "$RUN/farm.exr" "$RUN/local.exr" | grep -q '"identical": *true' ||
     { echo "row $row: the farm's image differs from tessera render's" >&2; return 1; }
   stop_all
-  awk "BEGIN {print $t1 - $t0}"
+  # What crossed the links (both proxies, warm-up job included), in MB.
+  local up=0 down=0
+  for f in "$RUN"/p*.err; do
+    [ -f "$f" ] || continue
+    read -r u d < <(sed -n 's/^relayed \([0-9]*\) bytes up, \([0-9]*\) down.*/\1 \2/p' "$f")
+    up=$((up + ${u:-0})); down=$((down + ${d:-0}))
+  done
+  rm -f "$RUN"/p*.err
+  awk "BEGIN {printf \"%.3f %.1f %.1f\\n\", $t1 - $t0, $up / 1e6, $down / 1e6}"
 }
 
 median() { printf '%s\n' "$@" | sort -g | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}'; }
 echo "scene $SCENE, $FLAGS, $THREADS threads in all; local render $(printf %.2f "$local_s") s"
-echo "| link (round trip / Mbit/s) | farm wall time | against loopback |"
-echo "|---|---|---|"
-base=""
+echo "| link (round trip / Mbit/s) | farm wall time | against local | MB to / from the coordinator |"
+echo "|---|---|---|---|"
 for row in $ROWS; do
   times=()
-  for _ in $(seq "$REPEAT"); do times+=("$(run_row "$row")"); done
+  for _ in $(seq "$REPEAT"); do
+    read -r t up down < <(run_row "$row")
+    times+=("$t")
+  done
   t=$(median "${times[@]}")
-  [ -z "$base" ] && base=$t
   label=$(echo "$row" | sed -e 's#0/0#loopback#g' -e 's#/\([0-9]*\)# ms / \1#g' -e 's#+# + #')
-  echo "| $label | $(printf %.2f "$t") s | $(awk "BEGIN {printf \"%.2fx\", $t / $base}") |"
+  echo "| $label | $(printf %.2f "$t") s | $(awk "BEGIN {printf \"%.2fx\", $t / $local_s}") | $up / $down |"
 done

@@ -300,9 +300,10 @@ void Coordinator::scene_chunks(const v1::FetchSceneRequest& req,
   serve_scene(scenes_, req, options_.scene_chunk_bytes, write);
 }
 
-std::vector<uint64_t> Coordinator::heartbeat(uint64_t worker_id, const std::vector<uint64_t>& task_ids) {
+std::vector<uint64_t> Coordinator::heartbeat(uint64_t worker_id, const std::vector<uint64_t>& task_ids,
+                                             double round_trip) {
   MutexLock lock(mu_);
-  return worker_lifecycle_.heartbeat(worker_id, task_ids, clock_->now());
+  return worker_lifecycle_.heartbeat(worker_id, task_ids, round_trip, clock_->now());
 }
 
 std::vector<v1::ResultAck> Coordinator::submit_results(const std::vector<const v1::TaskResult*>& results) {

@@ -128,7 +128,8 @@ class Coordinator {
   void scene_chunks(const v1::FetchSceneRequest& request,
                     const std::function<bool(const v1::SceneChunk&)>& write) const;
   // Renews the worker's leases; returns the tasks it must not go on with.
-  std::vector<uint64_t> heartbeat(uint64_t worker_id, const std::vector<uint64_t>& task_ids);
+  // `round_trip`: the worker's measured round trip in seconds (0: not measured).
+  std::vector<uint64_t> heartbeat(uint64_t worker_id, const std::vector<uint64_t>& task_ids, double round_trip = 0);
   bool heartbeat(uint64_t worker_id, uint64_t task_id) {
     return heartbeat(worker_id, std::vector<uint64_t>{task_id}).empty();
   }

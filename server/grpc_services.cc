@@ -208,7 +208,8 @@ grpc::Status WorkerService::Heartbeat(grpc::ServerContext* ctx, const v1::Heartb
                                       v1::HeartbeatResponse* out) {
   return as(auth_, ctx, Action::kWork, [&](const Principal&) {
     c_.check_worker(req->worker_id(), req->worker_secret());
-    for (uint64_t id : c_.heartbeat(req->worker_id(), {req->task_ids().begin(), req->task_ids().end()}))
+    for (uint64_t id :
+         c_.heartbeat(req->worker_id(), {req->task_ids().begin(), req->task_ids().end()}, req->round_trip_us() / 1e6))
       out->add_refused(id);
   });
 }

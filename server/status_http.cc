@@ -42,8 +42,8 @@ async function tick(){
     `${(100*s.utilization).toFixed(0)}% busy, up ${s.uptime_seconds.toFixed(0)} s`;
   document.getElementById('jobs').innerHTML = '<tr><th>id</th><th>name</th><th>state</th><th>samples</th><th>passes / frames</th><th>ETA</th></tr>' +
     jobs.map(j=>`<tr><td>${esc(j.id)}</td><td>${esc(j.name)}</td><td>${esc(j.state)}</td><td>${esc((100*j.samples_done/Math.max(1,j.samples_total)).toFixed(1))}%</td><td>${esc(j.frames_total ? 'frames ' + j.frames_done + '/' + j.frames_total : j.frame_passes_done + '/' + j.passes_total)}</td><td>${esc(j.eta_seconds.toFixed(0))} s</td></tr>`).join('');
-  document.getElementById('workers').innerHTML = '<tr><th>id</th><th>name</th><th>threads</th><th>samples/s</th><th>busy</th><th>tasks</th></tr>' +
-    workers.map(w=>`<tr><td>${esc(w.id)}</td><td>${esc(w.name)}</td><td>${esc(w.threads)}</td><td>${esc((w.samples_per_second/1e6).toFixed(2))} M</td><td>${esc((100*w.utilization).toFixed(0))}%</td><td>${esc(w.tasks_done)}</td></tr>`).join('');
+  document.getElementById('workers').innerHTML = '<tr><th>id</th><th>name</th><th>threads</th><th>samples/s</th><th>busy</th><th>tasks</th><th>leases</th><th>round trip</th><th>bytes/sample</th></tr>' +
+    workers.map(w=>`<tr><td>${esc(w.id)}</td><td>${esc(w.name)}</td><td>${esc(w.threads)}</td><td>${esc((w.samples_per_second/1e6).toFixed(2))} M</td><td>${esc((100*w.utilization).toFixed(0))}%</td><td>${esc(w.tasks_done)}</td><td>${esc(w.leases)}</td><td>${esc(w.round_trip_ms.toFixed(1))} ms</td><td>${esc(w.bytes_per_sample.toFixed(3))}</td></tr>`).join('');
   const job = jobs.find(j=>j.state==='RUNNING') || jobs[jobs.length-1];
   if (!job) return;
   let id = job.id, d = await (await fetch(`/api/jobs/${encodeURIComponent(id)}`)).json();
@@ -198,10 +198,12 @@ std::string StatusHttp::status_json() const {
     std::snprintf(buf, sizeof buf,
                   "%s{\"id\":%llu,\"name\":%s,\"threads\":%u,\"samples_per_second\":%.17g,\"tasks_done\":%llu,"
                   "\"leases\":%u,\"active\":%s,\"busy_thread_seconds\":%.17g,\"thread_seconds\":%.17g,"
-                  "\"utilization\":%.17g}",
+                  "\"utilization\":%.17g,\"round_trip_ms\":%.17g,\"result_bytes\":%llu,\"bytes_per_sample\":%.17g}",
                   i ? "," : "", (unsigned long long)w.id, nlohmann::json(w.name).dump().c_str(), w.threads,
                   num(w.samples_per_second), (unsigned long long)w.tasks_done, w.leases, w.leases ? "true" : "false",
-                  num(w.busy_thread_seconds), num(w.thread_seconds), num(w.utilization));
+                  num(w.busy_thread_seconds), num(w.thread_seconds), num(w.utilization), num(w.round_trip * 1e3),
+                  (unsigned long long)w.result_bytes,
+                  w.result_samples ? double(w.result_bytes) / double(w.result_samples) : 0.0);
     out += buf;
   }
   out += "]}";
@@ -226,6 +228,10 @@ std::string StatusHttp::metrics_text() const {
   counter("tessera_leases_released_total", "Leases given back early by workers.", double(k.leases_released));
   counter("tessera_tasks_failed_total", "Tasks a worker could not render.", double(k.tasks_failed));
   counter("tessera_samples_merged_total", "Camera samples merged.", double(k.samples_merged));
+  counter("tessera_result_bytes_total",
+          "Compressed sums of merged results, in bytes (over tessera_samples_merged_total: the link's bytes per "
+          "sample).",
+          double(k.result_bytes));
   counter("tessera_jobs_submitted_total", "Jobs accepted.", double(k.jobs_submitted));
   counter("tessera_jobs_refused_total", "Jobs refused at submit.", double(k.jobs_refused));
   counter("tessera_jobs_deleted_total", "Jobs deleted (tessera delete, or --keep-ended).", double(k.jobs_deleted));

@@ -48,8 +48,12 @@ void WorkerLifecycle::check_worker(uint64_t worker, const std::string& secret) c
                            "act for it)");
 }
 
-std::vector<uint64_t> WorkerLifecycle::heartbeat(uint64_t worker, const std::vector<uint64_t>& tasks, double now) {
-  if (WorkerInfo* w = p_.workers.find(worker)) w->last_seen = now;
+std::vector<uint64_t> WorkerLifecycle::heartbeat(uint64_t worker, const std::vector<uint64_t>& tasks,
+                                                 double round_trip, double now) {
+  if (WorkerInfo* w = p_.workers.find(worker)) {
+    w->last_seen = now;
+    if (round_trip > 0) w->round_trip = round_trip;
+  }
   std::vector<uint64_t> refused;
   for (uint64_t id : tasks)
     if (!p_.leasing.renew(id, worker, now)) refused.push_back(id);

@@ -32,7 +32,7 @@ class WorkerLifecycle {
   // kPermissionDenied for a request under another worker's id.
   void check_worker(uint64_t worker, const std::string& secret) const;
   // Renews the worker's leases; returns the tasks it must not go on with.
-  std::vector<uint64_t> heartbeat(uint64_t worker, const std::vector<uint64_t>& tasks, double now);
+  std::vector<uint64_t> heartbeat(uint64_t worker, const std::vector<uint64_t>& tasks, double round_trip, double now);
   // The worker gives a lease back; with an error, it could not render the task.
   void release(uint64_t worker, uint64_t task, const std::string& error, double now, Effects& fx);
   // The worker stops: its leases go back to their jobs and it is forgotten.

@@ -89,12 +89,14 @@ std::vector<WorkerInfo> WorkerRegistry::list() const {
   return out;
 }
 
-void WorkerRegistry::record_result(uint64_t id, uint64_t samples, double seconds, double busy_thread_seconds,
-                                   double thread_seconds, double now) {
+void WorkerRegistry::record_result(uint64_t id, uint64_t samples, uint64_t bytes, double seconds,
+                                   double busy_thread_seconds, double thread_seconds, double now) {
   WorkerInfo* w = find(id);
   if (!w) return;
   w->last_seen = now;
   ++w->tasks_done;
+  w->result_bytes += bytes;
+  w->result_samples += samples;
   if (seconds > 0) {
     const double rate = double(samples) / seconds;
     w->samples_per_second = w->samples_per_second > 0 ? 0.8 * w->samples_per_second + 0.2 * rate : rate;

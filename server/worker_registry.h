@@ -18,6 +18,9 @@ struct WorkerInfo {
   double samples_per_second = 0;  // smoothed over results
   uint64_t tasks_done = 0;
   uint32_t leases = 0;  // live leases held
+  double round_trip = 0;  // seconds, as the worker measures it (heartbeats); 0: not reported
+  // The link's load: compressed sums of this worker's merged results, and their samples.
+  uint64_t result_bytes = 0, result_samples = 0;
   // Render-thread time as the worker reports it with each result, since it registered:
   // busy (rendering) and threads x wall. Utilization is their ratio over the last few
   // seconds of reports, so a worker idle between jobs does not dilute a busy one.
@@ -47,7 +50,7 @@ class WorkerRegistry {
   std::vector<WorkerInfo> list() const;
   // A finished task: its render rate feeds the worker's smoothed speed; its thread-time
   // counters the utilization.
-  void record_result(uint64_t id, uint64_t samples, double seconds, double busy_thread_seconds, double thread_seconds,
+  void record_result(uint64_t id, uint64_t samples, uint64_t bytes, double seconds, double busy_thread_seconds, double thread_seconds,
                      double now);
   // Busy over available render-thread time of every worker, over their windows.
   double utilization() const;

@@ -22,6 +22,7 @@ void LeaseKeeper::heartbeat() {
   hb.set_worker_secret(me.secret);
   for (uint64_t id : queue_.held_ids()) hb.add_task_ids(id);
   if (hb.task_ids_size() == 0) return;
+  hb.set_round_trip_us(uint32_t(std::min(queue_.load().round_trip * 1e6, 4e9)));
   v1::HeartbeatResponse hr;
   if (!link_.stub->Heartbeat(link_.context(5).get(), hb, &hr).ok()) return;
   queue_.drop_unfinished(std::vector<uint64_t>(hr.refused().begin(), hr.refused().end()));

@@ -109,11 +109,14 @@ TEST_F(WorkerLifecycleTest, AHeartbeatRenewsOnlyTheWorkersOwnLiveLeases) {
   const uint64_t mine = lease_next(job, a), theirs = lease_next(job, b), ended = lease_next(job, a);
   leasing.end(ended, true, now);
   now += 3;
-  const std::vector<uint64_t> refused = worker_lifecycle.heartbeat(a, {mine, theirs, ended, 999}, now);
+  const std::vector<uint64_t> refused = worker_lifecycle.heartbeat(a, {mine, theirs, ended, 999}, 0.15, now);
   EXPECT_EQ(refused, (std::vector<uint64_t>{theirs, ended, 999}));  // it must not go on with these
   EXPECT_EQ(leases.live(mine)->deadline, now + options.lease_seconds);
   EXPECT_EQ(leases.live(theirs)->deadline, now - 3 + options.lease_seconds);
   EXPECT_EQ(worker(a).last_seen, now);
+  EXPECT_EQ(worker(a).round_trip, 0.15);  // as the worker measured it, for the status page
+  worker_lifecycle.heartbeat(a, {mine}, 0, now);
+  EXPECT_EQ(worker(a).round_trip, 0.15);  // 0: not measured, the last report stands
 }
 
 TEST_F(WorkerLifecycleTest, ATaskGivenBackIsReadyAgain) {
