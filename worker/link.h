@@ -20,6 +20,7 @@ struct Link {
   std::shared_ptr<v1::TesseraWorker::StubInterface> stub;
   Access access;
   std::atomic<uint32_t> heartbeat_ms{2000};
+  std::atomic<uint32_t> lease_ms{10000};  // how long the coordinator keeps a silent worker's leases
 
   // Who this worker is since its last registration: the id and the secret that every
   // request carries with it (read together, so a request never mixes two registrations).

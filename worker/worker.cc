@@ -73,6 +73,8 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
     if (st.ok()) {
       link_->set_identity({resp.worker_id(), resp.worker_secret()});
       link_->heartbeat_ms = std::max(50u, resp.heartbeat_interval_ms());
+      if (resp.lease_ms() > 0) link_->lease_ms = resp.lease_ms();
+      last_contact_ = now_seconds();
       queue_->set_max_leases(resp.max_leases() > 0 ? resp.max_leases() : 64, size_t(options_.max_tasks));
       backoff_.reset();
       spdlog::debug("registered as {}", resp.worker_id());
@@ -101,10 +103,18 @@ void Worker::fetch(const std::atomic<bool>& stop) {
     }
     const Fetcher::Leased got = fetcher_->lease(stop);
     if (got.status.ok()) {
+      last_contact_ = now_seconds();
       if (got.tasks > 0) last_work_ = now_seconds();
       continue;
     }
     spdlog::debug("get task: {}", got.status.error_message());
+    if (unreachable(got.status) && now_seconds() - last_contact_ < 0.5 * link_->lease_ms / 1000.0) {
+      // A blip (a dropped connection, a stalled link): the coordinator holds this worker's
+      // leases until they expire, and the lease keeper goes on renewing them, so keep the
+      // work and ask again; only a longer silence (or "unknown worker") starts over.
+      backoff_.wait(&stop);
+      continue;
+    }
     // Unknown worker (the coordinator restarted) or unreachable: its leases are gone.
     queue_->drop_all();
     backoff_.wait(&stop);

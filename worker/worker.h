@@ -78,6 +78,7 @@ class Worker {
   Backoff backoff_{Backoff::kWorkerFirstSeconds};
   std::unique_ptr<worker::TaskQueue> queue_;
   std::unique_ptr<worker::Fetcher> fetcher_;  // its scenes and renderers are kept across reconnections
+  double last_contact_ = 0;                   // its last registration or GetTask that got through
   double last_work_ = 0;                      // when it last held or was given a task (--exit-when-idle)
   bool refused_ = false;                      // registration refused: retrying cannot help
 };

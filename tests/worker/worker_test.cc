@@ -262,6 +262,30 @@ TEST_F(WorkerTest, ItAsksForTwoTasksThenForItsLookaheadOnceItsSpeedIsMeasured) {
   EXPECT_GT(later.max_samples(), 0u);  // the lookahead at its speed
 }
 
+// A dropped connection or a stalled link (UNAVAILABLE) well within the lease time keeps the
+// registration and the work held: the coordinator still holds those leases.
+TEST_F(WorkerTest, ALinkBlipKeepsTheRegistrationAndTheWorkHeld) {
+  fake->task_batches.push_back({task(81, {0, 0, 16, 16}, 0, 4), task(82, {0, 16, 16, 16}, 0, 4)});
+  fake->hold_submissions = true;  // 81 and 82 stay held while the link blips
+  start(options());
+  ASSERT_TRUE(fake->wait_until([&] { return fake->handed_out.size() == 2; }));
+  ASSERT_TRUE(fake->wait_until([&] { return fake->submissions > 0; }));  // both rendered, none sent
+  size_t failed = 0;  // the request that fails
+  fake->set([&] {
+    failed = fake->task_requests.size();
+    fake->get_task_failures = {grpc::Status(grpc::StatusCode::UNAVAILABLE, "Socket closed")};
+  });
+  ASSERT_TRUE(fake->wait_until([&] { return fake->task_requests.size() >= failed + 3; }));  // and asked again
+  fake->set([&] { fake->hold_submissions = false; });
+  ASSERT_TRUE(fake->wait_until([&] { return fake->result_for(81) && fake->result_for(82); }));
+  EXPECT_TRUE(finish());
+  EXPECT_EQ(fake->registrations.size(), 1u);
+  for (size_t i = failed; i < fake->task_requests.size(); ++i) EXPECT_EQ(fake->task_requests[i].worker_id(), 1u) << i;
+  EXPECT_EQ(fake->result_for(81)->worker_id(), 1u);
+  EXPECT_EQ(fake->result_for(82)->worker_id(), 1u);
+  EXPECT_TRUE(fake->releases.empty());
+}
+
 TEST_F(WorkerTest, ItAsksForNoMoreThanTheCoordinatorsBound) {
   fake->max_leases = 3;
   fake->task_batches.push_back({task(71, {0, 0, 16, 16}, 0, 4)});
