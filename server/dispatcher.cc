@@ -32,6 +32,7 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
     if (job->live()) {
       order.push_back({job->meta.priority, job->meta.seq, job->frame_index, job.get(), nullptr});
       outstanding += job->plan.ready();
+      outstanding -= std::min<uint64_t>(outstanding, job->tile_backup.size());  // a tile's second lease is no more work
     }
   for (const auto& [id, sq] : p_.jobs.sequences())
     if (sq->live() && sq->next < sq->frames.size()) {
@@ -62,22 +63,9 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
       if (!t) break;
       const uint64_t task_id = p_.leasing.grant(job, *t, *w, now);
       p_.lifecycle.start(job, now);
-      v1::Task* task = resp.add_tasks();
-      task->set_task_id(task_id);
-      task->set_job_id(job.id());
-      task->set_scene_hash(job.meta.scene_hash);
-      *task->mutable_settings() = job.meta.settings;
-      *task->mutable_tile() = to_proto(t->rect);
-      task->set_pass(t->pass);
-      task->set_sample_begin(t->sample_begin);
-      task->set_sample_end(t->sample_end);
-      uint64_t pixels = uint64_t(t->rect.area());
-      if (!t->active.empty()) {
-        task->set_active(t->active.data(), t->active.size());
-        pixels = uint64_t(std::count(t->active.begin(), t->active.end(), 1));
-      }
-      samples += pixels * (t->sample_end - t->sample_begin);
-      if (verify && p_.verifier.pick()) p_.leases.live(task_id)->task = std::make_shared<const v1::Task>(*task);
+      samples += add_task(job, *t, task_id, resp);
+      if (verify && p_.verifier.pick())
+        p_.leases.live(task_id)->task = std::make_shared<const v1::Task>(resp.tasks(resp.tasks_size() - 1));
     }
   };
   int64_t live_pixels = -1;  // counted when first needed
@@ -99,8 +87,47 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
       take_from(*job);
     }
   }
+  if (resp.tasks_size() == 0 && max_tasks > 0) back_up(*w, max_tasks, now, resp);
   if (resp.tasks_size() == 0) resp.set_retry_after_ms(200);
   return resp;
+}
+
+uint64_t Dispatcher::add_task(Job& job, const TileTask& t, uint64_t task_id, v1::GetTaskResponse& resp) const {
+  v1::Task* task = resp.add_tasks();
+  task->set_task_id(task_id);
+  task->set_job_id(job.id());
+  task->set_scene_hash(job.meta.scene_hash);
+  *task->mutable_settings() = job.meta.settings;
+  *task->mutable_tile() = to_proto(t.rect);
+  task->set_pass(t.pass);
+  task->set_sample_begin(t.sample_begin);
+  task->set_sample_end(t.sample_end);
+  task->set_priority(job.meta.priority);
+  uint64_t pixels = uint64_t(t.rect.area());
+  if (!t.active.empty()) {
+    task->set_active(t.active.data(), t.active.size());
+    pixels = uint64_t(std::count(t.active.begin(), t.active.end(), 1));
+  }
+  return pixels * (t.sample_end - t.sample_begin);
+}
+
+void Dispatcher::back_up(WorkerInfo& w, uint32_t max_tasks, double now, v1::GetTaskResponse& resp) {
+  struct Old {
+    Job* job;
+    uint32_t tile;
+  };
+  std::vector<Old> old;
+  size_t looked = 0;
+  for (const auto& [id, l] : p_.leases.live_leases()) {
+    if (old.size() >= max_tasks || ++looked > kBackupScan) break;
+    if (l.check || l.worker == w.id || now - l.granted < kBackupAfterSeconds) continue;
+    Job* job = p_.jobs.find_job(l.job);
+    if (!job || !job->live() || job->tile_lease[l.tile] != id || job->tile_backup.count(l.tile)) continue;
+    old.push_back({job, l.tile});
+  }
+  for (const Old& o : old)
+    if (const std::optional<TileTask> t = o.job->plan.retake(o.tile))
+      add_task(*o.job, *t, p_.leasing.grant_backup(*o.job, *t, w, now), resp);
 }
 
 }  // namespace tessera

@@ -7,6 +7,11 @@
 // ask cannot take every ready task while the others idle; and never more than the bound on
 // one worker's leases (which the worker learns when it registers). Runs under the
 // coordinator's lock.
+//
+// At a frame's end, when nothing is ready anywhere, a worker that would idle is given the
+// oldest tiles others hold (for at least kBackupAfterSeconds) a second time: whichever
+// result comes first is merged, with the same bits, and both leases end; so a far or slow
+// worker never holds a frame's last tiles hostage.
 #pragma once
 
 #include <cstdint>
@@ -19,6 +24,10 @@ namespace tessera {
 class Dispatcher {
  public:
   static constexpr uint32_t kMaxTasksPerRequest = 256;
+  // A frame's end: a worker that would get nothing renders again tiles that others have
+  // held for at least this long (a far worker's window, a slow machine), the oldest first.
+  static constexpr double kBackupAfterSeconds = 0.25;
+  static constexpr size_t kBackupScan = 4096;  // live leases looked at per request, at most
 
   struct Parts {
     JobTable& jobs;
@@ -39,6 +48,11 @@ class Dispatcher {
   v1::GetTaskResponse get_task(uint64_t worker, uint32_t max_tasks, uint64_t max_samples, double now, Effects& fx);
 
  private:
+  // The task of `t` for the worker, leased as `task_id`, into `resp`; its samples.
+  uint64_t add_task(Job& job, const TileTask& t, uint64_t task_id, v1::GetTaskResponse& resp) const;
+  // Backups (kBackupAfterSeconds), up to max_tasks, into `resp`.
+  void back_up(WorkerInfo& w, uint32_t max_tasks, double now, v1::GetTaskResponse& resp);
+
   Parts p_;
   int64_t max_live_pixels_;
   uint32_t max_leases_;  // per worker (CoordinatorOptions::max_leases_per_worker)

@@ -7,6 +7,7 @@ namespace tessera {
 void Job::compact() {
   plan.compact();
   std::vector<uint64_t>().swap(tile_lease);
+  tile_backup.clear();
   for (auto& [worker, tiles] : merged_by) {
     std::sort(tiles.begin(), tiles.end());
     tiles.erase(std::unique(tiles.begin(), tiles.end()), tiles.end());

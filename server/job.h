@@ -31,6 +31,9 @@ struct Job {
   uint32_t frame_index = 0;
   FramePlan plan;
   std::vector<uint64_t> tile_lease;  // the live task id of each tile, 0 = none
+  // Tiles leased a second time at the frame's end (Dispatcher): tile -> that lease's task
+  // id. Whichever result comes first is merged and both leases end.
+  std::map<uint32_t, uint64_t> tile_backup;
   std::string error;
   std::string image_error;       // the last image write's failure; empty once one succeeds
   std::string checkpoint_error;  // the same for checkpoints

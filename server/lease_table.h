@@ -23,6 +23,7 @@ struct Lease {
   // worker; `check` names the check a lease renders (0: an ordinary task).
   std::shared_ptr<const v1::Task> task;
   uint64_t check = 0;
+  double granted = 0;  // when (a backup goes to a tile leased long ago)
 };
 
 class LeaseTable {
@@ -48,6 +49,7 @@ class LeaseTable {
   // Live leases of a job: how many distinct workers hold them.
   uint32_t workers_on(const std::string& job) const;
   size_t live_count() const { return live_.size(); }
+  const std::map<uint64_t, Lease>& live_leases() const { return live_; }  // oldest (lowest id) first
 
  private:
   std::map<uint64_t, Lease> live_, ended_;

@@ -5,11 +5,27 @@
 namespace tessera {
 
 uint64_t Leasing::grant(Job& job, const TileTask& task, WorkerInfo& worker, double now) {
-  const uint64_t id = leases_.grant({job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr});
+  const uint64_t id = leases_.grant({job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now});
   job.tile_lease[task.tile] = id;
   ++worker.leases;
   ++counters_.tasks_dispatched;
   return id;
+}
+
+uint64_t Leasing::grant_backup(Job& job, const TileTask& task, WorkerInfo& worker, double now) {
+  TESSERA_INVARIANT(job.tile_lease[task.tile] != 0 && !job.tile_backup.count(task.tile),
+                    "a backup of tile " + std::to_string(task.tile) + " that is not leased once");
+  const uint64_t id = leases_.grant({job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now});
+  job.tile_backup[task.tile] = id;
+  ++worker.leases;
+  ++counters_.tasks_dispatched;
+  ++counters_.backup_leases;
+  return id;
+}
+
+void Leasing::end_tile(Job& job, uint32_t tile, double now) {
+  if (auto b = job.tile_backup.find(tile); b != job.tile_backup.end()) end(b->second, false, now);
+  if (job.tile_lease[tile]) end(job.tile_lease[tile], false, now);
 }
 
 uint64_t Leasing::grant_check(uint64_t check, WorkerInfo& worker, double now) {
@@ -29,10 +45,19 @@ void Leasing::ended(uint64_t id, const Lease& l, bool requeue, double now) {
       c->lease = 0;
       c->since = now;
     }
-  } else if (Job* job = jobs_.find_job(l.job);
-             job && l.tile < job->tile_lease.size() && job->tile_lease[l.tile] == id) {  // (an ended job has none)
-    job->tile_lease[l.tile] = 0;
-    if (requeue) job->plan.put_back(l.tile);
+  } else if (Job* job = jobs_.find_job(l.job); job && l.tile < job->tile_lease.size()) {  // (an ended job has none)
+    const auto backup = job->tile_backup.find(l.tile);
+    if (backup != job->tile_backup.end() && backup->second == id) {
+      job->tile_backup.erase(backup);  // the first lease goes on
+    } else if (job->tile_lease[l.tile] == id) {
+      if (backup != job->tile_backup.end()) {  // the backup goes on alone
+        job->tile_lease[l.tile] = backup->second;
+        job->tile_backup.erase(backup);
+      } else {
+        job->tile_lease[l.tile] = 0;
+        if (requeue) job->plan.put_back(l.tile);
+      }
+    }
   }
   if (WorkerInfo* w = workers_.find(l.worker); w && w->leases > 0) --w->leases;
 }
@@ -56,8 +81,7 @@ size_t Leasing::end_worker(uint64_t worker, double now) {
 
 void Leasing::end_job(Job& job, double now) {
   for (uint64_t lease : checks_.erase_job(job.id())) end(lease, false, now);  // undecided checks: moot now
-  for (uint64_t lease : job.tile_lease)
-    if (lease) end(lease, false, now);
+  for (uint32_t tile = 0; tile < job.tile_lease.size(); ++tile) end_tile(job, tile, now);
   leases_.forget_job(job.id());
 }
 

@@ -22,6 +22,11 @@ class Leasing {
 
   // A task of the job's tile for the worker, until now + the lease period.
   uint64_t grant(Job& job, const TileTask& task, WorkerInfo& worker, double now);
+  // A second lease of a tile already leased (its task from FramePlan::retake), for
+  // another worker at the frame's end.
+  uint64_t grant_backup(Job& job, const TileTask& task, WorkerInfo& worker, double now);
+  // Ends every live lease of the tile (its result was merged, or the tile starts over).
+  void end_tile(Job& job, uint32_t tile, double now);
   // The check's task for the worker (not the one whose result it checks).
   uint64_t grant_check(uint64_t check, WorkerInfo& worker, double now);
   // Extends a live lease of this worker; false if it is not live or not the worker's.

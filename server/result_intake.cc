@@ -73,9 +73,8 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
     ++p_.counters.results_merged;
     // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends
     // (kept known, so a repeat of this result is recognised as a duplicate).
-    const uint64_t other = job.tile_lease[lease->tile];
     p_.leasing.end(result.task_id(), false, now);
-    if (other) p_.leasing.end(other, false, now);
+    p_.leasing.end_tile(job, lease->tile, now);
     job.merged_by[result.worker_id()].push_back(lease->tile);
     if (!job.sequence.empty()) ++p_.jobs.find_sequence(job.sequence)->changes;
     if (lease->task)  // picked for verification: another worker renders it again

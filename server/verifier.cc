@@ -162,7 +162,7 @@ void Verifier::quarantine(uint64_t worker, const std::string& why, double now, E
     job->merged_by.erase(mine);
     if (job->live()) {
       for (uint32_t t : tiles) {
-        if (job->tile_lease[t]) leasing_.end(job->tile_lease[t], false, now);
+        leasing_.end_tile(*job, t, now);
         job->plan.reset_tile(t);
         ++counters_.tiles_rendered_again;
       }

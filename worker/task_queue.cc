@@ -49,7 +49,13 @@ void TaskQueue::add(std::shared_ptr<Held> h) {
   held_[h->task.task_id()] = h;
   queued_rows_ += uint64_t(h->rect.h);
   for (int row = 0; row < h->rect.h; ++row) queued_samples_ += h->row_samples(row);
-  queue_.push_back(std::move(h));
+  // Higher priority first, else in the order leased; a task whose rows have begun stays
+  // in front, so that it finishes.
+  auto at = queue_.begin();
+  if (at != queue_.end() && (*at)->next_row > 0) ++at;
+  at = std::find_if(at, queue_.end(),
+                    [&](const std::shared_ptr<Held>& q) { return q->task.priority() < h->task.priority(); });
+  queue_.insert(at, std::move(h));
   work_.notify_all();
 }
 

@@ -48,7 +48,9 @@ class TaskQueue {
   // Waits up to `timeout` until more work is wanted (lookahead.h); what to ask for then,
   // or nothing (stopping, or enough still queued).
   std::optional<LeaseRequest> wait_for_room(std::chrono::milliseconds timeout);
-  // Queues a task's rows; the task must have its renderer and rect-sized sums.
+  // Queues a task's rows, behind those of the same or higher priority (Task.priority: the
+  // window may hold several jobs' tasks); the task must have its renderer and rect-sized
+  // sums.
   void add(std::shared_ptr<Held> task);
   bool holds_tasks() const;
   // Cancels and forgets every held task (the coordinator no longer knows its leases).

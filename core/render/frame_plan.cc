@@ -65,6 +65,16 @@ std::optional<TileTask> FramePlan::take() {
   if (ready_.empty()) return std::nullopt;
   const uint32_t t = ready_.begin()->second;
   ready_.erase(ready_.begin());
+  return task_of(t);
+}
+
+std::optional<TileTask> FramePlan::retake(uint32_t tile) const {
+  if (tile >= tiles_.size() || progress_[tile].finished || ready_.count({progress_[tile].passes_done, tile}))
+    return std::nullopt;
+  return task_of(tile);
+}
+
+TileTask FramePlan::task_of(uint32_t t) const {
   TileTask task;
   task.tile = t;
   task.pass = progress_[t].passes_done;

@@ -91,6 +91,10 @@ class FramePlan {
   // The ready tile with the fewest passes merged (the frame refines evenly), taken out of
   // the ready set; nothing when every unfinished tile is taken.
   std::optional<TileTask> take();
+  // A taken tile's task once more, the same as take() gave (for a second worker at the
+  // frame's end: whichever result comes first is merged, with the same bits); nothing if
+  // the tile is finished or not taken.
+  std::optional<TileTask> retake(uint32_t tile) const;
   // A taken tile's task was abandoned (its lease ended without a result): ready again.
   void put_back(uint32_t tile);
   // Whether a result for (tile, pass) would be merged now (tile and pass in range).
@@ -167,6 +171,7 @@ class FramePlan {
   bool has_film() const { return film_.window() == settings_.effective_window(); }
 
  private:
+  TileTask task_of(uint32_t tile) const;  // the tile's task for its next pass
   void finish_pass(uint32_t tile);
   // Moves frame_passes_ up to the lowest pass that still has unfinished tiles.
   void advance_frame_passes();

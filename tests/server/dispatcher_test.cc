@@ -90,6 +90,37 @@ TEST_F(DispatcherBoundTest, AWorkerHoldsNoMoreThanTheBoundOnOneWorkersLeases) {
   EXPECT_EQ(get(other).tasks_size(), 5);  // the bound is per worker (its share is 9)
 }
 
+// The frame's end: a worker that would idle gets the tiles another has held longest (over
+// kBackupAfterSeconds) once more, the same tasks; the first result merged ends both leases.
+TEST_F(DispatcherTest, AtTheFramesEndAnIdleWorkerBacksUpTheOldestLeases) {
+  const std::shared_ptr<Job> job = add_still();
+  const uint64_t far = add_worker(1);
+  const v1::GetTaskResponse held = get(far);  // every tile, as the only worker
+  ASSERT_EQ(held.tasks_size(), int(kTiles));
+  const uint64_t near = add_worker(1);
+  now += 0.1;
+  EXPECT_EQ(get(near).tasks_size(), 0);  // not yet: the far worker may still be on time
+  now += Dispatcher::kBackupAfterSeconds;
+  const v1::GetTaskResponse backups = get(near);
+  ASSERT_EQ(backups.tasks_size(), int((kTiles + 1) / 2));  // its share of what is outstanding
+  for (int i = 0; i < backups.tasks_size(); ++i) {  // the oldest first, the same tasks
+    const v1::Task &b = backups.tasks(i), &f = held.tasks(i);
+    EXPECT_EQ(b.tile().x(), f.tile().x());
+    EXPECT_EQ(b.tile().y(), f.tile().y());
+    EXPECT_EQ(b.pass(), f.pass());
+    EXPECT_EQ(b.sample_begin(), f.sample_begin());
+    EXPECT_EQ(b.sample_end(), f.sample_end());
+    EXPECT_NE(b.task_id(), f.task_id());
+  }
+  EXPECT_EQ(get(near).tasks_size(), 0);  // one backup a tile, within its share
+  // The backup's result comes first: merged, and the far worker's lease ends with it.
+  const uint64_t tile0 = held.tasks(0).task_id();
+  EXPECT_TRUE(submit(result(backups.tasks(0).task_id())).accepted());
+  EXPECT_EQ(leases.live(tile0), nullptr);
+  EXPECT_TRUE(submit(result(tile0)).duplicate());  // the far worker's, later
+  EXPECT_EQ(job->tile_backup.size(), size_t(backups.tasks_size() - 1));
+}
+
 TEST_F(DispatcherTest, TheRequestsCountAndSampleLimitsHold) {
   add_still();
   const uint64_t w = add_worker();

@@ -66,6 +66,41 @@ TEST_F(LeasingTest, EndedWithoutRequeueTheTileWaitsForItsResult) {
   EXPECT_EQ(job->plan.ready(), kTiles - 1);
 }
 
+// A backup (a tile leased a second time at the frame's end): either lease ending leaves the
+// other in charge of the tile; the tile is ready again only when neither is left.
+TEST_F(LeasingTest, ABackupLeaseAndTheFirstStandInForEachOther) {
+  const uint64_t first = lease_next(*job, a);
+  const std::optional<TileTask> again = job->plan.retake(0);
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->pass, 0u);
+  const uint64_t backup = leasing.grant_backup(*job, *again, worker(b), now);
+  EXPECT_EQ(job->tile_lease[0], first);
+  EXPECT_EQ(job->tile_backup.at(0), backup);
+  EXPECT_EQ(worker(b).leases, 1u);
+  EXPECT_EQ(counters.backup_leases, 1u);
+  EXPECT_THROW(leasing.grant_backup(*job, *again, worker(b), now), InvariantError);  // one backup a tile
+  leasing.end(first, true, now);  // the first expires: the backup goes on alone
+  EXPECT_EQ(job->tile_lease[0], backup);
+  EXPECT_TRUE(job->tile_backup.empty());
+  EXPECT_EQ(job->plan.ready(), kTiles - 1);
+  leasing.end(backup, true, now);  // now nobody has it
+  EXPECT_EQ(job->tile_lease[0], 0u);
+  EXPECT_EQ(job->plan.ready(), kTiles);
+
+  const uint64_t again_first = lease_next(*job, a);
+  const uint64_t again_backup = leasing.grant_backup(*job, *job->plan.retake(0), worker(b), now);
+  leasing.end(again_backup, true, now);  // the backup ends: the first lease goes on
+  EXPECT_EQ(job->tile_lease[0], again_first);
+  EXPECT_EQ(job->plan.ready(), kTiles - 1);
+  leasing.grant_backup(*job, *job->plan.retake(0), worker(b), now);
+  leasing.end_tile(*job, 0, now);  // merged: both end, nothing requeued
+  EXPECT_EQ(job->tile_lease[0], 0u);
+  EXPECT_TRUE(job->tile_backup.empty());
+  EXPECT_EQ(worker(a).leases + worker(b).leases, 0u);
+  EXPECT_EQ(job->plan.ready(), kTiles - 1);
+  EXPECT_FALSE(job->plan.retake(1));  // ready, not taken: nothing to back up
+}
+
 TEST_F(LeasingTest, LeasesExpireOnlyPastTheirDeadlineRequeuedAndCounted) {
   const uint64_t id = lease_next(*job, a);
   const double deadline = now + options.lease_seconds;

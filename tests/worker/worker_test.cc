@@ -384,6 +384,35 @@ TEST(TaskQueue, TheCoordinatorsBoundOrAnOwnLowerCapLimitsTheLeases) {
   EXPECT_EQ(q.load().max_leases, 50u);
 }
 
+// A window may hold several jobs' tasks: the higher priority's are rendered first, but a
+// task already begun is finished first.
+TEST(TaskQueue, HigherPriorityTasksAreRenderedFirst) {
+  TaskQueue q(Lookahead{1, 0.3});
+  auto task = [](uint64_t id, int32_t priority) {
+    auto h = std::make_shared<Held>();
+    h->task.set_task_id(id);
+    h->task.set_priority(priority);
+    h->task.set_sample_end(1);
+    h->rect = {0, 0, 2, 2};
+    h->sums.resize(4);
+    return h;
+  };
+  q.add(task(1, 0));
+  ASSERT_EQ(q.next_row()->task->task.task_id(), 1u);  // task 1 begun
+  q.add(task(2, 0));
+  q.add(task(3, 5));
+  q.add(task(4, -1));
+  q.add(task(5, 5));
+  std::vector<uint64_t> order;
+  for (int rows = 0; rows < 9; ++rows) {
+    const auto r = q.next_row();
+    ASSERT_TRUE(r);
+    if (order.empty() || order.back() != r->task->task.task_id()) order.push_back(r->task->task.task_id());
+  }
+  EXPECT_EQ(order, (std::vector<uint64_t>{1, 3, 5, 2, 4}));
+  q.stop();
+}
+
 // The queue measures the speed from the rows' render times, which sizes the next request.
 TEST(TaskQueue, MeasuresTheSpeedThatSizesTheNextRequest) {
   TaskQueue q(Lookahead{2, 0.5});
