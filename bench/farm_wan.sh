@@ -4,6 +4,8 @@
 # bottleneck rate each way; this kernel has no netem). Each row renders the same frame
 # through the farm and checks the image bit for bit against `tessera render`.
 #
+# Each row's runs are paired with runs of the same workers on loopback just before them,
+# and the ratio of each pair is reported (median over REPEAT pairs).
 # Rows (ROWS, space-separated; default the table in docs/performance.md):
 #   RTT_MS/MBIT          one worker of THREADS threads behind such a link (0/0: no proxy)
 #   RTT_MS/MBIT+RTT_MS/MBIT   two workers of THREADS/2 threads each (a near and a far one)
@@ -30,9 +32,8 @@ wait_line() {  # FILE PATTERN: waits up to 10 s for a line of FILE to match
   echo "timed out waiting for '$2' in $1" >&2; return 1
 }
 
-"$BIN/tessera" render "$SCENE" $FLAGS -t "$THREADS" -q -f "$RUN/local.exr" >/dev/null 2>&1
 t0=$(date +%s.%N)
-"$BIN/tessera" render "$SCENE" $FLAGS -t "$THREADS" -q -f "$RUN/local2.exr" >/dev/null 2>&1
+"$BIN/tessera" render "$SCENE" $FLAGS -t "$THREADS" -q -f "$RUN/local.exr" >/dev/null 2>&1
 local_s=$(awk "BEGIN {print $(date +%s.%N) - $t0}")
 
 # Starts a worker of $2 threads behind a link of spec $1 (RTT_MS/MBIT) to $GRPC.
@@ -84,15 +85,19 @@ run_row() {  # ROW: prints seconds, or fails
 
 median() { printf '%s\n' "$@" | sort -g | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}'; }
 echo "scene $SCENE, $FLAGS, $THREADS threads in all; local render $(printf %.2f "$local_s") s"
-echo "| link (round trip / Mbit/s) | farm wall time | against local | MB to / from the coordinator |"
-echo "|---|---|---|---|"
+echo "| link (round trip / Mbit/s) | farm wall time | loopback, same workers | ratio (median of pairs) | MB to / from the coordinator |"
+echo "|---|---|---|---|---|"
 for row in $ROWS; do
-  times=()
+  # Each run is paired with a run of the same workers on loopback just before it: this
+  # machine's speed drifts more between minutes than the links cost.
+  base_row=0/0; [[ $row == *+* ]] && base_row=0/0+0/0
+  times=(); bases=(); ratios=()
   for _ in $(seq "$REPEAT"); do
+    read -r b _ _ < <(run_row "$base_row")
     read -r t up down < <(run_row "$row")
-    times+=("$t")
+    times+=("$t"); bases+=("$b"); ratios+=("$(awk "BEGIN {print $t / $b}")")
   done
-  t=$(median "${times[@]}")
   label=$(echo "$row" | sed -e 's#0/0#loopback#g' -e 's#/\([0-9]*\)# ms / \1#g' -e 's#+# + #')
-  echo "| $label | $(printf %.2f "$t") s | $(awk "BEGIN {printf \"%.2fx\", $t / $local_s}") | $up / $down |"
+  echo "| $label | $(printf %.2f "$(median "${times[@]}")") s | $(printf %.2f "$(median "${bases[@]}")") s |" \
+    "$(printf %.2fx "$(median "${ratios[@]}")") | $up / $down |"
 done

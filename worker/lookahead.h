@@ -1,7 +1,7 @@
 // How much work a worker keeps leased: its window of work in flight, sized like a TCP
 // window from the bandwidth-delay product. Enough that its threads never run dry, plus what
 // they get through in `seconds` and in two of the link's round trips at the measured speed
-// (one for the request on its way, one of margin for a slow answer), and never more leases
+// (one for the request on its way, one of margin for faster tiles), and never more leases
 // than the coordinator allows this worker. A pure rule over the queue's load, so that tests
 // can state it with numbers; nothing to tune for a far or near coordinator.
 #pragma once
@@ -37,15 +37,20 @@ struct Lookahead {
   double window_samples(const QueueLoad& load) const {
     return load.samples_per_thread_second * threads * (seconds + 2 * load.round_trip);
   }
+  // The queue below which to ask for more: half the lookahead (refilling at half, up to
+  // all of it, makes fewer and larger requests) and two whole round trips, so the answer
+  // arrives before the queue runs out even when the queued tiles render three times
+  // faster than the measured speed (tiles of one frame differ that much).
+  double refill_samples(const QueueLoad& load) const {
+    return load.samples_per_thread_second * threads * (0.5 * seconds + 2 * load.round_trip);
+  }
   // Whether to ask for more now: the threads are about to run dry (fewer than two rows per
-  // thread queued), or, once the speed is known, less than half the window is queued
-  // (refilling at half, up to all of it, makes fewer and larger requests; half the window
-  // still covers a round trip, so the answer arrives before the queue runs out).
+  // thread queued), or, once the speed is known, the queue is below the refill point.
   bool wants_more(const QueueLoad& load) const {
     if (load.held >= load.max_leases) return false;
     if (load.queued_rows < 2 * uint64_t(threads)) return true;
-    const double window = window_samples(load);
-    return window > 0 && load.queued_samples < 0.5 * window;
+    const double refill = refill_samples(load);
+    return refill > 0 && load.queued_samples < refill;
   }
   // The window less what is queued; two tasks until there is a measurement. Only when
   // wants_more().

@@ -341,19 +341,19 @@ TEST(Lookahead, RefillsBelowHalfTheLookaheadUpToAllOfIt) {
 
 // The window follows the link: 2 threads at 1000 samples per thread-second with a 0.3 s
 // lookahead keep 600 samples next door and 2 x 1000 x (0.3 + 2 x 0.15) = 1200 behind a
-// 150 ms round trip, refilled below half of it, which still covers the round trip.
+// 150 ms round trip, refilled below half the lookahead plus two round trips (900).
 TEST(Lookahead, AFarCoordinatorGetsTheBandwidthDelayProductInFlight) {
   const Lookahead l{2, 0.3};
-  const QueueLoad near{2, 4, 299, 1000, 0, 4096}, far{2, 4, 599, 1000, 0.15, 4096};
+  const QueueLoad near{2, 4, 299, 1000, 0, 4096}, far{2, 4, 899, 1000, 0.15, 4096};
   EXPECT_DOUBLE_EQ(l.window_samples(near), 600);
   EXPECT_DOUBLE_EQ(l.window_samples(far), 1200);
   EXPECT_TRUE(l.wants_more(near));
   EXPECT_TRUE(l.wants_more(far));
   EXPECT_FALSE(l.wants_more({2, 4, 300, 1000, 0, 4096}));
-  EXPECT_FALSE(l.wants_more({2, 4, 600, 1000, 0.15, 4096}));
-  EXPECT_GE(0.5 * l.window_samples(far), 2 * 1000 * 0.15);  // the refill point covers a round trip
+  EXPECT_FALSE(l.wants_more({2, 4, 900, 1000, 0.15, 4096}));
+  EXPECT_DOUBLE_EQ(l.refill_samples(far), 3 * 2 * 1000 * 0.15);  // a round trip of tiles 3x faster
   EXPECT_EQ(l.request(near).max_samples, 301u);
-  EXPECT_EQ(l.request(far).max_samples, 601u);
+  EXPECT_EQ(l.request(far).max_samples, 301u);
   EXPECT_EQ(l.request(far).max_tasks, 4094u);  // room up to the coordinator's bound
   EXPECT_FALSE(l.wants_more({4096, 0, 0, 1000, 0.15, 4096}));
 }
