@@ -9,12 +9,17 @@
 namespace tessera::worker {
 
 Sender::Sender(const Link& link, TaskQueue& queue, Options options)
-    : link_(link), queue_(queue), options_(options), thread_([this] {
-        set_thread_name("send");
-        send_loop();
-      }) {}
+    : link_(link), queue_(queue), options_(options) {
+  for (int i = 0; i < kInFlight; ++i)
+    threads_.emplace_back([this] {
+      set_thread_name("send");
+      send_loop();
+    });
+}
 
-Sender::~Sender() { thread_.join(); }
+Sender::~Sender() {
+  for (std::thread& t : threads_) t.join();
+}
 
 v1::ResultBatch Sender::encode(const TaskQueue::Batch& batch, double now) const {
   v1::ResultBatch results;
