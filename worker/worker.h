@@ -10,7 +10,8 @@
 //       loads each task's scene and builds its renderer (scene_cache.h) before queuing it.
 //   render pool (`threads` persistent threads; render_pool.h)  take rows of the queued
 //       tasks, front task first, one row at a time.
-//   sender (sender.h)  encodes finished tasks (zstd) and submits them, with retries.
+//   sender (sender.h)  encodes finished tasks (zstd) and submits them, with retries, up
+//       to four calls at once (a far link's round trip does not hold results back).
 //   lease keeper (lease_keeper.h)  renews every held lease each heartbeat interval; a
 //       lease the coordinator refuses (job cancelled, task reassigned) is dropped at once.
 #pragma once

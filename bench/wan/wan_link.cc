@@ -95,7 +95,7 @@ class Pipe {
            std::string(buf.data(), size_t(n))});
       queued_ += size_t(n);
       cv_.notify_all();
-      cv_.wait(lock, [&] { return stopped_ || queued_ < WanLink::kMaxQueuedBytes; });
+      cv_.wait(lock, [&] { return stopped_ || queued_ < WanLink::queue_limit(shape_); });
       if (stopped_) return;
       lock.unlock();
       counter_ += uint64_t(n);
@@ -144,6 +144,11 @@ class Pipe {
 };
 
 }  // namespace
+
+size_t WanLink::queue_limit(const LinkShape& shape) {
+  if (shape.rate_bytes_per_s <= 0) return kMaxQueuedBytes;
+  return size_t(65536 + shape.rate_bytes_per_s * (shape.delay_s + std::max(0.1, 2 * shape.delay_s)));
+}
 
 struct WanLink::Conn {
   int client = -1, server = -1;

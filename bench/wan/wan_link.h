@@ -1,9 +1,12 @@
 // A TCP relay that behaves like a long, narrow network link, for measuring and testing the
 // farm across real distances on one machine (this kernel has no netem): every byte arrives
 // `delay` after it was sent, and each direction carries at most `rate` bytes a second, sent
-// one after another as through a bottleneck router. Each direction buffers at most
-// kMaxQueuedBytes; beyond that the relay stops reading, so the sender's TCP window closes as
-// it would behind a real link. A link can be cut, as a dropped connection is.
+// one after another as through a bottleneck router. Each direction holds at most what is
+// on the wire (rate x delay) plus a router's buffer of one round trip at the rate (the
+// classic sizing; a few megabytes when the rate is unlimited); beyond that the relay stops
+// reading, so the sender's TCP window closes as it would behind a real link, rather than
+// seconds of results piling up in an endless buffer. A link can be cut, as a dropped
+// connection is.
 #pragma once
 
 #include <atomic>
@@ -23,7 +26,9 @@ struct LinkShape {
 
 class WanLink {
  public:
-  static constexpr size_t kMaxQueuedBytes = size_t(4) << 20;
+  static constexpr size_t kMaxQueuedBytes = size_t(4) << 20;  // with no rate limit
+  // What one direction holds at most (see above).
+  static size_t queue_limit(const LinkShape& shape);
 
   // Listens on 127.0.0.1 (`listen_port` 0: any free port) and relays each connection to
   // target_host:target_port. Throws std::runtime_error if it cannot listen.
