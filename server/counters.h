@@ -13,8 +13,8 @@ struct CoordinatorCounters {
   uint64_t jobs_restored = 0, jobs_deleted = 0, jobs_requeued = 0;
   uint64_t checks_issued = 0, checks_passed = 0, check_mismatches = 0, checks_skipped = 0, workers_quarantined = 0,
            tiles_rendered_again = 0;
-  uint64_t result_bytes = 0;
-  uint64_t backup_leases = 0;  // tiles leased a second time at a frame's end  // compressed sums of merged results (the bulk of the workers' traffic)
+  uint64_t result_bytes = 0;   // compressed sums of merged results (the bulk of the workers' traffic)
+  uint64_t backup_leases = 0;  // tiles leased a second time at a frame's end
   double merge_seconds = 0;
 };
 

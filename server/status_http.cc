@@ -228,6 +228,9 @@ std::string StatusHttp::metrics_text() const {
   counter("tessera_leases_released_total", "Leases given back early by workers.", double(k.leases_released));
   counter("tessera_tasks_failed_total", "Tasks a worker could not render.", double(k.tasks_failed));
   counter("tessera_samples_merged_total", "Camera samples merged.", double(k.samples_merged));
+  counter("tessera_backup_leases_total",
+          "Tiles leased a second time at a frame's end, to a worker that would idle (first result merged).",
+          double(k.backup_leases));
   counter("tessera_result_bytes_total",
           "Compressed sums of merged results, in bytes (over tessera_samples_merged_total: the link's bytes per "
           "sample).",

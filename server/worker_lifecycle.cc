@@ -48,8 +48,8 @@ void WorkerLifecycle::check_worker(uint64_t worker, const std::string& secret) c
                            "act for it)");
 }
 
-std::vector<uint64_t> WorkerLifecycle::heartbeat(uint64_t worker, const std::vector<uint64_t>& tasks,
-                                                 double round_trip, double now) {
+std::vector<uint64_t> WorkerLifecycle::heartbeat(uint64_t worker, const std::vector<uint64_t>& tasks, double round_trip,
+                                                 double now) {
   if (WorkerInfo* w = p_.workers.find(worker)) {
     w->last_seen = now;
     if (round_trip > 0) w->round_trip = round_trip;

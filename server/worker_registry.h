@@ -50,8 +50,8 @@ class WorkerRegistry {
   std::vector<WorkerInfo> list() const;
   // A finished task: its render rate feeds the worker's smoothed speed; its thread-time
   // counters the utilization.
-  void record_result(uint64_t id, uint64_t samples, uint64_t bytes, double seconds, double busy_thread_seconds, double thread_seconds,
-                     double now);
+  void record_result(uint64_t id, uint64_t samples, uint64_t bytes, double seconds, double busy_thread_seconds,
+                     double thread_seconds, double now);
   // Busy over available render-thread time of every worker, over their windows.
   double utilization() const;
   // Samples a second per render thread, over the workers that have measured theirs; the

@@ -8,8 +8,7 @@
 
 namespace tessera::worker {
 
-Sender::Sender(const Link& link, TaskQueue& queue, Options options)
-    : link_(link), queue_(queue), options_(options) {
+Sender::Sender(const Link& link, TaskQueue& queue, Options options) : link_(link), queue_(queue), options_(options) {
   for (int i = 0; i < kInFlight; ++i)
     threads_.emplace_back([this] {
       set_thread_name("send");

@@ -27,8 +27,9 @@ void TaskQueue::note_round_trip(double seconds) {
   seconds = std::clamp(seconds, 0.0, 60.0);
   // As TCP smooths its round trip (RFC 6298, gain 1/8), but quicker to follow a longer one,
   // so that a slower link does not starve the threads while the average catches up.
-  round_trip_ = round_trip_ <= 0 ? seconds : seconds > round_trip_ ? 0.5 * (round_trip_ + seconds)
-                                                                   : 0.875 * round_trip_ + 0.125 * seconds;
+  round_trip_ = round_trip_ <= 0        ? seconds
+                : seconds > round_trip_ ? 0.5 * (round_trip_ + seconds)
+                                        : 0.875 * round_trip_ + 0.125 * seconds;
   if (lookahead_.wants_more(load_locked())) more_.notify_one();
 }
 

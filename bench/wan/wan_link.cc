@@ -77,9 +77,9 @@ class Pipe {
       const ssize_t n = ::read(from_, buf.data(), buf.size());
       std::unique_lock<std::mutex> lock(mu_);
       if (n <= 0) {
-        queue_.push_back({Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                             std::chrono::duration<double>(shape_.delay_s)),
-                          ""});
+        queue_.push_back(
+            {Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(shape_.delay_s)),
+             ""});
         cv_.notify_all();
         return;
       }

@@ -103,7 +103,7 @@ TEST_F(DispatcherTest, AtTheFramesEndAnIdleWorkerBacksUpTheOldestLeases) {
   now += Dispatcher::kBackupAfterSeconds;
   const v1::GetTaskResponse backups = get(near);
   ASSERT_EQ(backups.tasks_size(), int((kTiles + 1) / 2));  // its share of what is outstanding
-  for (int i = 0; i < backups.tasks_size(); ++i) {  // the oldest first, the same tasks
+  for (int i = 0; i < backups.tasks_size(); ++i) {         // the oldest first, the same tasks
     const v1::Task &b = backups.tasks(i), &f = held.tasks(i);
     EXPECT_EQ(b.tile().x(), f.tile().x());
     EXPECT_EQ(b.tile().y(), f.tile().y());

@@ -25,7 +25,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   // What the test sets (under mu, or before the worker starts) ...
   std::deque<grpc::Status> register_failures;  // answers before Register succeeds
   uint32_t heartbeat_interval_ms = 50;
-  uint32_t max_leases = 0;  // RegisterResponse.max_leases (0: as coordinators before it)
+  uint32_t max_leases = 0;                         // RegisterResponse.max_leases (0: as coordinators before it)
   std::deque<std::vector<v1::Task>> task_batches;  // GetTask: the front batch, up to max_tasks
   std::deque<grpc::Status> get_task_failures;      // answers before GetTask works again
   std::map<std::string, v1::SceneBundle> scenes;   // FetchSceneChunks, by hash

@@ -263,7 +263,7 @@ TEST_F(WorkerTest, ALinkBlipKeepsTheRegistrationAndTheWorkHeld) {
   start(options());
   ASSERT_TRUE(fake->wait_until([&] { return fake->handed_out.size() == 2; }));
   ASSERT_TRUE(fake->wait_until([&] { return fake->submissions > 0; }));  // both rendered, none sent
-  size_t failed = 0;  // the request that fails
+  size_t failed = 0;                                                     // the request that fails
   fake->set([&] {
     failed = fake->task_requests.size();
     fake->get_task_failures = {grpc::Status(grpc::StatusCode::UNAVAILABLE, "Socket closed")};
