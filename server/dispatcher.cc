@@ -39,8 +39,8 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
       order.push_back({sq->meta.priority, sq->meta.seq, sq->frames.size(), nullptr, sq.get()});
       // As if the frames it may start were ready: a worker's share counts them.
       const uint64_t unstarted = sq->frames.size() - sq->frames_started;
-      const uint32_t startable = SequenceScheduler::kMaxLiveFrames -
-                                 std::min(SequenceScheduler::kMaxLiveFrames, sq->live_frames);
+      const uint32_t startable =
+          SequenceScheduler::kMaxLiveFrames - std::min(SequenceScheduler::kMaxLiveFrames, sq->live_frames);
       outstanding += uint64_t(sq->frame_tiles()) * std::min<uint64_t>(unstarted, startable);
     }
   std::sort(order.begin(), order.end(), [](const Source& a, const Source& b) {

@@ -50,10 +50,10 @@ struct Job {
   struct Snapshots {
     uint32_t image_frame_passes = 0;  // frame passes in the last image begun
     double last_image = -1e9;
-    double last_checkpoint = 0;       // when the last checkpoint was begun
-    uint64_t checkpoint_merges = 0;   // the film version it began at
-    double write_seconds = 0;         // how long the last write took
-    bool writing = false;             // a writer is at work on this job
+    double last_checkpoint = 0;      // when the last checkpoint was begun
+    uint64_t checkpoint_merges = 0;  // the film version it began at
+    double write_seconds = 0;        // how long the last write took
+    bool writing = false;            // a writer is at work on this job
     bool image_due = false, checkpoint_due = false;
   } snaps;
   // What is on disk (an image's or checkpoint's film version: the film's at the write's
@@ -100,9 +100,11 @@ inline bool none_writing(const std::vector<std::shared_ptr<Job>>& jobs) {
 // keeps the order, the scene, the database row and the end.
 struct Sequence {
   using State = v1::JobStatus::State;
-  Sequence(JobMeta meta, const RenderSettings& settings, std::vector<int> frames,
-           State state = v1::JobStatus::QUEUED)
-      : meta(std::move(meta)), settings(settings), frames(std::move(frames)), jobs(this->frames.size()),
+  Sequence(JobMeta meta, const RenderSettings& settings, std::vector<int> frames, State state = v1::JobStatus::QUEUED)
+      : meta(std::move(meta)),
+        settings(settings),
+        frames(std::move(frames)),
+        jobs(this->frames.size()),
         state_(state) {}
 
   JobMeta meta;
@@ -116,11 +118,11 @@ struct Sequence {
   // (a liar found later flags the sequence). A long sequence holds only its live frames.
   std::vector<std::optional<uint64_t>> left;
   std::map<uint64_t, uint32_t> left_merged_by;
-  size_t next = 0;              // frames before this one have started (later ones may have, after a restart)
-  uint32_t frames_started = 0;  // jobs that are not null
-  uint32_t live_frames = 0;     // started and not ended
-  uint32_t frames_done = 0;     // DONE
-  uint64_t changes = 0;         // merges into its frames and frame ends: watchers wait on it
+  size_t next = 0;                // frames before this one have started (later ones may have, after a restart)
+  uint32_t frames_started = 0;    // jobs that are not null
+  uint32_t live_frames = 0;       // started and not ended
+  uint32_t frames_done = 0;       // DONE
+  uint64_t changes = 0;           // merges into its frames and frame ends: watchers wait on it
   std::shared_ptr<Job> prepared;  // frames[next]'s job, made outside the coordinator's lock
   std::string error;
   double submitted = 0, started = 0, finished_at = 0;

@@ -17,7 +17,11 @@ class Leasing {
  public:
   Leasing(LeaseTable& leases, JobTable& jobs, WorkerRegistry& workers, CheckBook& checks, CoordinatorCounters& counters,
           double lease_seconds)
-      : leases_(leases), jobs_(jobs), workers_(workers), checks_(checks), counters_(counters),
+      : leases_(leases),
+        jobs_(jobs),
+        workers_(workers),
+        checks_(checks),
+        counters_(counters),
         lease_seconds_(lease_seconds) {}
 
   // A task of the job's tile for the worker, until now + the lease period.

@@ -17,7 +17,7 @@ struct WorkerInfo {
   double last_seen = 0;
   double samples_per_second = 0;  // smoothed over results
   uint64_t tasks_done = 0;
-  uint32_t leases = 0;  // live leases held
+  uint32_t leases = 0;    // live leases held
   double round_trip = 0;  // seconds, as the worker measures it (heartbeats); 0: not reported
   // The link's load: compressed sums of this worker's merged results, and their samples.
   uint64_t result_bytes = 0, result_samples = 0;

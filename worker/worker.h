@@ -43,7 +43,7 @@ struct WorkerOptions {
   // Leases held at once, at most; 0: as many as the window asks for, up to the
   // coordinator's bound on one worker (RegisterResponse.max_leases).
   int max_tasks = 0;
-  Access access;                   // token and TLS
+  Access access;  // token and TLS
   // For the verification tests only (a hidden flag): every result's sums scaled by 0.8
   // (plausible, and wrong), as a broken or dishonest machine would send them.
   bool lie = false;
