@@ -15,7 +15,7 @@ before SIGTERM, else the most VmRSS seen every 0.2 s) and its I/O (/proc/PID/io)
             against the bundle's size, image equality.
 Exits 1 if an image differs, 2 if something failed (the processes' stderr is shown).
 
-Usage: bench/big_frame.py [--bin DIR] [--parts still,sequence,scene] [--scene FILE]
+Usage: bench/big_frame.py [--bin DIR] [--parts still,sequence,scene] [--scene FILE] [--rtt-ms MS] [--mbit M]
                           [--still-flags "-r 7680 4320 -s 2"] [--seq-flags "-r 64 48 -s 1 --pass-spp 1"]
                           [--seq-frames 1-1000] [--scene-mb 1024] [--json FILE] [--markdown] [--keep]
 Small try: bench/big_frame.py --still-flags "-r 640 360 -s 1" --seq-frames 1-40 --scene-mb 20
@@ -58,7 +58,7 @@ def disk_usage(path):
 class Farm:
     """A coordinator (default settings) and W workers of T threads on loopback; stderr to files."""
 
-    def __init__(self, bin_dir, workers, threads, tmp):
+    def __init__(self, bin_dir, workers, threads, tmp, rtt_ms=0, mbit=0):
         self.rss_max, self.final, self.polling, self.data = 0, None, True, os.path.join(tmp, "data")
         os.makedirs(tmp, exist_ok=True)
         out = open(os.path.join(tmp, "coordinator.out"), "w+")
@@ -78,8 +78,15 @@ class Farm:
                 raise RuntimeError("the coordinator did not start")
             self.grpc, self.http = m[1], m[2]
             for i in range(workers):
+                addr = self.grpc
+                if rtt_ms or mbit:  # each worker behind its own long link (bench/wan/wan_link.h)
+                    proxy = subprocess.Popen(
+                        [os.path.join(bin_dir, "tessera-wan-proxy"), "--to", self.grpc, "--rtt-ms", str(rtt_ms),
+                         "--mbit", str(mbit)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+                    self.procs.append(proxy)
+                    addr = proxy.stdout.readline().split()[-1]
                 self.procs.append(subprocess.Popen(
-                    [os.path.join(bin_dir, "tessera-worker"), "--coordinator", self.grpc, "--threads",
+                    [os.path.join(bin_dir, "tessera-worker"), "--coordinator", addr, "--threads",
                      str(threads), "--cache", os.path.join(tmp, f"cache{i}"), "--name", f"w{i}"],
                     stdout=subprocess.DEVNULL, stderr=open(os.path.join(tmp, f"worker{i}.err"), "w")))
             for _ in range(200):  # every worker registered before the clock starts
@@ -176,7 +183,7 @@ class Bench:
             self.results.setdefault(part, {})[key] = raw
 
     def farm(self, d):
-        f = Farm(self.a.bin, self.workers, self.threads, os.path.join(d, "farm"))
+        f = Farm(self.a.bin, self.workers, self.threads, os.path.join(d, "farm"), self.a.rtt_ms, self.a.mbit)
         self.farms.append(f)
         return f
 
@@ -329,6 +336,9 @@ def main():
     ap.add_argument("--seq-flags", default="-r 64 48 -s 1 --pass-spp 1")
     ap.add_argument("--seq-frames", default="1-1000")
     ap.add_argument("--scene-mb", type=int, default=1024, help="the scene part's .bin in MiB (at most 1024)")
+    ap.add_argument("--rtt-ms", type=float, default=0,
+                    help="workers reach the coordinator through tessera-wan-proxy with this round trip")
+    ap.add_argument("--mbit", type=float, default=0, help="... and this rate each way (0: unlimited)")
     ap.add_argument("--json", help="write the results here")
     ap.add_argument("--markdown", action="store_true", help="print the table as Markdown")
     ap.add_argument("--keep", action="store_true", help="keep the temporary folder (printed)")
