@@ -73,7 +73,7 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
     ++p_.counters.results_merged;
     // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends
     // (kept known, so a repeat of this result is recognised as a duplicate).
-    p_.leasing.end(result.task_id(), false, now);
+    // (A live lease of this (tile, pass) is the tile's first lease or its backup.)
     p_.leasing.end_tile(job, lease->tile, now);
     job.merged_by[result.worker_id()].push_back(lease->tile);
     if (!job.sequence.empty()) ++p_.jobs.find_sequence(job.sequence)->changes;

@@ -12,6 +12,10 @@
 
 namespace tessera::worker {
 
+// The lease cap until the coordinator names its bound (RegisterResponse.max_leases), and
+// with coordinators from before that field.
+constexpr size_t kDefaultMaxLeases = 64;
+
 // What the worker holds and has queued, how fast it renders and how far away the
 // coordinator is.
 struct QueueLoad {
@@ -20,7 +24,7 @@ struct QueueLoad {
   double queued_samples = 0;             // camera samples in those rows
   double samples_per_thread_second = 0;  // measured (smoothed); 0 until a task finished
   double round_trip = 0;                 // seconds from asking for work to having it (smoothed); 0: unknown
-  size_t max_leases = 64;                // the coordinator's bound (RegisterResponse), or --max-tasks if lower
+  size_t max_leases = kDefaultMaxLeases;  // the coordinator's bound (RegisterResponse), or --max-tasks if lower
 };
 
 // A GetTask request's size: up to max_tasks tasks, stopping at max_samples (0: no limit).

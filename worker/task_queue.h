@@ -117,7 +117,7 @@ class TaskQueue {
   double busy_thread_seconds_ = 0;
   double samples_per_thread_second_ = 0;  // measured, smoothed
   double round_trip_ = 0;                 // measured, smoothed; 0 until measured
-  size_t max_leases_ = 64;
+  size_t max_leases_ = kDefaultMaxLeases;
   bool stopping_ = false;
   std::atomic<uint64_t> tasks_done_{0};
 };

@@ -75,7 +75,8 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
       link_->heartbeat_ms = std::max(50u, resp.heartbeat_interval_ms());
       if (resp.lease_ms() > 0) link_->lease_ms = resp.lease_ms();
       last_contact_ = now_seconds();
-      queue_->set_max_leases(resp.max_leases() > 0 ? resp.max_leases() : 64, size_t(options_.max_tasks));
+      queue_->set_max_leases(resp.max_leases() > 0 ? resp.max_leases() : worker::kDefaultMaxLeases,
+                             size_t(options_.max_tasks));
       backoff_.reset();
       spdlog::debug("registered as {}", resp.worker_id());
       return true;

@@ -49,8 +49,8 @@ int connect_to(const std::string& host, int port) {
 // far end (after the bottleneck and the delay), a writer delivers it then.
 class Pipe {
  public:
-  Pipe(int from, int to, LinkShape shape, std::atomic<uint64_t>& counter, std::function<void(uint64_t)> on_bytes)
-      : from_(from), to_(to), shape_(shape), counter_(counter), on_bytes_(std::move(on_bytes)) {}
+  Pipe(int from, int to, LinkShape shape, std::atomic<uint64_t>& counter, std::function<void()> after_read)
+      : from_(from), to_(to), shape_(shape), counter_(counter), after_read_(std::move(after_read)) {}
   ~Pipe() {
     if (reader_.joinable()) reader_.join();
     if (writer_.joinable()) writer_.join();
@@ -99,7 +99,7 @@ class Pipe {
       if (stopped_) return;
       lock.unlock();
       counter_ += uint64_t(n);
-      if (on_bytes_) on_bytes_(uint64_t(n));
+      if (after_read_) after_read_();  // (the counter includes these bytes)
     }
   }
   void write_loop() {
@@ -134,7 +134,7 @@ class Pipe {
   int from_, to_;
   LinkShape shape_;
   std::atomic<uint64_t>& counter_;
-  std::function<void(uint64_t)> on_bytes_;
+  std::function<void()> after_read_;
   std::mutex mu_;
   std::condition_variable cv_;
   std::deque<Chunk> queue_;
@@ -228,7 +228,7 @@ void WanLink::relay(int client) {
   c->client = client;
   c->server = server;
   Conn* raw = c.get();
-  c->up = std::make_unique<Pipe>(client, server, shape_, up_, [this, raw](uint64_t) {
+  c->up = std::make_unique<Pipe>(client, server, shape_, up_, [this, raw] {
     int64_t at = cut_at_;
     if (at >= 0 && up_ >= uint64_t(at) && cut_at_.compare_exchange_strong(at, -1)) raw->cut();
   });
