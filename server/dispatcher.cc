@@ -87,7 +87,7 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
       take_from(*job);
     }
   }
-  if (resp.tasks_size() == 0 && max_tasks > 0) back_up(*w, max_tasks, now, resp);
+  if (resp.tasks_size() == 0 && max_tasks > 0) back_up(*w, max_tasks, max_samples, now, resp);
   if (resp.tasks_size() == 0) resp.set_retry_after_ms(200);
   return resp;
 }
@@ -111,7 +111,8 @@ uint64_t Dispatcher::add_task(Job& job, const TileTask& t, uint64_t task_id, v1:
   return pixels * (t.sample_end - t.sample_begin);
 }
 
-void Dispatcher::back_up(WorkerInfo& w, uint32_t max_tasks, double now, v1::GetTaskResponse& resp) {
+void Dispatcher::back_up(WorkerInfo& w, uint32_t max_tasks, uint64_t max_samples, double now,
+                         v1::GetTaskResponse& resp) {
   struct Old {
     Job* job;
     uint32_t tile;
@@ -125,9 +126,12 @@ void Dispatcher::back_up(WorkerInfo& w, uint32_t max_tasks, double now, v1::GetT
     if (!job || !job->live() || job->tile_lease[l.tile] != id || job->tile_backup.count(l.tile)) continue;
     old.push_back({job, l.tile});
   }
-  for (const Old& o : old)
+  uint64_t samples = 0;
+  for (const Old& o : old) {
+    if (max_samples > 0 && samples >= max_samples) break;
     if (const std::optional<TileTask> t = o.job->plan.retake(o.tile))
-      add_task(*o.job, *t, p_.leasing.grant_backup(*o.job, *t, w, now), resp);
+      samples += add_task(*o.job, *t, p_.leasing.grant_backup(*o.job, *t, w, now), resp);
+  }
 }
 
 }  // namespace tessera

@@ -50,8 +50,9 @@ class Dispatcher {
  private:
   // The task of `t` for the worker, leased as `task_id`, into `resp`; its samples.
   uint64_t add_task(Job& job, const TileTask& t, uint64_t task_id, v1::GetTaskResponse& resp) const;
-  // Backups (kBackupAfterSeconds), up to max_tasks, into `resp`.
-  void back_up(WorkerInfo& w, uint32_t max_tasks, double now, v1::GetTaskResponse& resp);
+  // Backups (kBackupAfterSeconds) into `resp`, within the request's count and sample
+  // limits as get_task's own tasks.
+  void back_up(WorkerInfo& w, uint32_t max_tasks, uint64_t max_samples, double now, v1::GetTaskResponse& resp);
 
   Parts p_;
   int64_t max_live_pixels_;

@@ -101,6 +101,13 @@ TEST_F(DispatcherTest, AtTheFramesEndAnIdleWorkerBacksUpTheOldestLeases) {
   now += 0.1;
   EXPECT_EQ(get(near).tasks_size(), 0);  // not yet: the far worker may still be on time
   now += Dispatcher::kBackupAfterSeconds;
+  // Within the request's sample limit, as any task: the first backup reaches it.
+  const v1::GetTaskResponse one = get(near, Dispatcher::kMaxTasksPerRequest, 1);
+  ASSERT_EQ(one.tasks_size(), 1);
+  EXPECT_EQ(one.tasks(0).tile().x(), held.tasks(0).tile().x());
+  EXPECT_EQ(one.tasks(0).tile().y(), held.tasks(0).tile().y());
+  leasing.end(one.tasks(0).task_id(), true, now);  // given back: the far worker's lease goes on
+  ASSERT_EQ(job->tile_backup.size(), 0u);
   const v1::GetTaskResponse backups = get(near);
   ASSERT_EQ(backups.tasks_size(), int((kTiles + 1) / 2));  // its share of what is outstanding
   for (int i = 0; i < backups.tasks_size(); ++i) {         // the oldest first, the same tasks
