@@ -9,6 +9,7 @@
 
 #include <CLI/CLI.hpp>
 #include <atomic>
+#include <charconv>
 #include <cstdio>
 
 #include "bench/wan/wan_link.h"
@@ -39,12 +40,15 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? 0 : 2;
   }
   const size_t colon = to.rfind(':');
-  if (colon == std::string::npos) {
-    std::fprintf(stderr, "--to: expected HOST:PORT, got '%s'\n", to.c_str());
+  int to_port = 0;
+  const char* port_end = to.data() + to.size();
+  if (colon == std::string::npos ||
+      std::from_chars(to.data() + colon + 1, port_end, to_port).ptr != port_end || to_port < 1 || to_port > 65535) {
+    std::fprintf(stderr, "--to: expected HOST:PORT with a port from 1 to 65535, got '%s'\n", to.c_str());
     return 2;
   }
   try {
-    tessera::wan::WanLink link(to.substr(0, colon), std::stoi(to.substr(colon + 1)), {rtt_ms / 2000.0, mbit * 1e6 / 8});
+    tessera::wan::WanLink link(to.substr(0, colon), to_port, {rtt_ms / 2000.0, mbit * 1e6 / 8});
     signal(SIGUSR1, on_signal);
     signal(SIGTERM, on_signal);
     signal(SIGINT, on_signal);

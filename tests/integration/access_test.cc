@@ -306,6 +306,24 @@ TEST_F(Access, ProbesAnswerWhileSlowClientsHoldTheStatusPort) {
   EXPECT_FALSE(fs::exists(dir / "bad"));
 }
 
+// The bound on one worker's leases and a worker's own cap take only values that make sense,
+// and a wrong one is refused naming the flag before anything starts.
+TEST_F(Access, LeaseBoundsOutOfRangeAreRefusedNamingTheFlag) {
+  Process coordinator(kBin + "/tessera-coordinator",
+                      {"--listen", "127.0.0.1:0", "--http", "127.0.0.1:0", "--data", (dir / "bad").string(),
+                       "--max-leases-per-worker", "0"},
+                      (dir / "c.err").string());
+  EXPECT_NE(coordinator.wait(20), 0);
+  EXPECT_NE(slurp((dir / "c.err").string()).find("--max-leases-per-worker: Value 0 not in range"), std::string::npos)
+      << slurp((dir / "c.err").string());
+  EXPECT_FALSE(fs::exists(dir / "bad"));
+  Process worker(kBin + "/tessera-worker", {"--coordinator", "127.0.0.1:1", "--max-tasks", "-1"},
+                 (dir / "w.err").string());
+  EXPECT_NE(worker.wait(20), 0);
+  EXPECT_NE(slurp((dir / "w.err").string()).find("--max-tasks: Value -1 not in range"), std::string::npos)
+      << slurp((dir / "w.err").string());
+}
+
 // Issue 23: 1,000 WatchJob streams made 1,021 server threads. A caller holds at most
 // --max-streams-per-peer streams at once; the next is refused naming the flag, and
 // another caller's watch is not.
