@@ -12,6 +12,8 @@
 #include <cstring>
 #include <filesystem>
 
+#include "core/render/frame_plan.h"
+
 namespace tessera {
 
 bool bundle_relative(const std::string& path) {
@@ -100,6 +102,23 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
     throw WireError(std::string("render settings: ") + e.what());
   }
   return s;
+}
+
+std::vector<std::pair<uint32_t, uint32_t>> task_passes(const v1::Task& task, const RenderSettings& settings) {
+  if (task.sample_begin() >= task.sample_end()) throw WireError("task: no samples");
+  if (task.pass_count() <= 1) return {{task.sample_begin(), task.sample_end()}};
+  auto run = pass_run(settings, task.pass(), task.pass_count());
+  if (run.empty() || run.front().first != task.sample_begin() || run.back().second != task.sample_end())
+    throw WireError("task: passes " + std::to_string(task.pass()) + "+" + std::to_string(task.pass_count()) +
+                    " do not span samples " + std::to_string(task.sample_begin()) + " to " +
+                    std::to_string(task.sample_end()));
+  return run;
+}
+
+std::vector<PixelSums> task_base(const v1::Task& task, const Rect& rect) {
+  if (task.base_sums().empty()) return {};
+  if (task.pass_count() <= 1) throw WireError("task: base sums without a run of passes");
+  return decode_sums(task.base_sums(), size_t(std::max<int64_t>(0, rect.area())));
 }
 
 v1::Rect to_proto(const Rect& r) {

@@ -34,6 +34,14 @@ class WireError : public std::runtime_error {
 // QUEUED or RUNNING: the one definition of a job that has not ended.
 inline bool job_live(v1::JobStatus::State s) { return s == v1::JobStatus::QUEUED || s == v1::JobStatus::RUNNING; }
 
+// A task's passes as sample ranges: [sample_begin, sample_end) for one pass; for a run
+// (pass_count > 1), each pass of the run, which must span exactly the task's samples.
+// Throws WireError otherwise.
+std::vector<std::pair<uint32_t, uint32_t>> task_passes(const v1::Task& task, const RenderSettings& settings);
+// A run's base sums (empty without), decoded for a tile of `rect`; throws WireError when
+// they do not fit it or come with a single pass.
+std::vector<PixelSums> task_base(const v1::Task& task, const Rect& rect);
+
 // A path that stays inside a folder when joined to it: relative, no "..", no NUL.
 bool bundle_relative(const std::string& path);
 v1::RenderSettings to_proto(const RenderSettings& s);

@@ -287,9 +287,10 @@ void Coordinator::check_worker(uint64_t worker_id, const std::string& secret) co
   worker_lifecycle_.check_worker(worker_id, secret);
 }
 
-v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples) {
+v1::GetTaskResponse Coordinator::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples,
+                                          uint32_t max_passes) {
   return locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
-    return dispatcher_.get_task(worker_id, max_tasks, max_samples, clock_->now(), fx);
+    return dispatcher_.get_task(worker_id, max_tasks, max_samples, clock_->now(), fx, max_passes);
   });
 }
 

@@ -119,7 +119,8 @@ class Coordinator {
   void check_worker(uint64_t worker_id, const std::string& secret) const;
   // Up to max_tasks tasks, stopping once they hold max_samples samples (0: no such limit);
   // always one if any is ready.
-  v1::GetTaskResponse get_task(uint64_t worker_id, uint32_t max_tasks = 1, uint64_t max_samples = 0);
+  v1::GetTaskResponse get_task(uint64_t worker_id, uint32_t max_tasks = 1, uint64_t max_samples = 0,
+                               uint32_t max_passes = 1);
   // A kept scene's manifest; throws RequestError (kNotFound).
   v1::SceneManifest scene(const std::string& hash) const;
   // FetchSceneChunks: `write` gets the scene's manifest, then its pieces from the request's

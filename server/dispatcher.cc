@@ -7,7 +7,7 @@
 namespace tessera {
 
 v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks, uint64_t max_samples, double now,
-                                         Effects& fx) {
+                                         Effects& fx, uint32_t max_passes) {
   v1::GetTaskResponse resp;
   if (p_.leasing.expire(now) > 0) fx.changed = true;
   if (p_.verifier.quarantined(worker_id))
@@ -19,6 +19,7 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
     throw RequestError(RequestError::Code::kFailedPrecondition,
                        "unknown worker " + std::to_string(worker_id) + "; register again");
   w->last_seen = now;
+  w->passes_per_task = std::clamp<uint32_t>(max_passes, 1, kMaxPassesPerTask);
   struct Source {
     int32_t priority;
     uint64_t seq;
@@ -59,7 +60,7 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
   auto room = [&] { return uint32_t(resp.tasks_size()) < max_tasks && (max_samples == 0 || samples < max_samples); };
   auto take_from = [&](Job& job) {
     while (room()) {
-      std::optional<TileTask> t = job.plan.take();
+      std::optional<TileTask> t = job.plan.take(w->passes_per_task);
       if (!t) break;
       const uint64_t task_id = p_.leasing.grant(job, *t, *w, now);
       p_.lifecycle.start(job, now);
@@ -100,6 +101,8 @@ uint64_t Dispatcher::add_task(Job& job, const TileTask& t, uint64_t task_id, v1:
   *task->mutable_settings() = job.meta.settings;
   *task->mutable_tile() = to_proto(t.rect);
   task->set_pass(t.pass);
+  if (t.pass_count > 1) task->set_pass_count(t.pass_count);
+  if (!t.base.empty()) task->set_base_sums(encode_sums(t.base));
   task->set_sample_begin(t.sample_begin);
   task->set_sample_end(t.sample_end);
   task->set_priority(job.meta.priority);

@@ -24,6 +24,7 @@ namespace tessera {
 class Dispatcher {
  public:
   static constexpr uint32_t kMaxTasksPerRequest = 256;
+  static constexpr uint32_t kMaxPassesPerTask = 64;  // a run of passes in one task, at most
   // A frame's end: a worker that would get nothing renders again tiles that others have
   // held for at least this long (a far worker's window, a slow machine), the oldest first.
   static constexpr double kBackupAfterSeconds = 0.25;
@@ -45,7 +46,8 @@ class Dispatcher {
   // Up to max_tasks tasks, stopping once they hold max_samples samples (0: no such limit);
   // always one if any is ready and the worker's share allows. Expires overdue leases
   // first. Throws RequestError for a quarantined or unknown worker.
-  v1::GetTaskResponse get_task(uint64_t worker, uint32_t max_tasks, uint64_t max_samples, double now, Effects& fx);
+  v1::GetTaskResponse get_task(uint64_t worker, uint32_t max_tasks, uint64_t max_samples, double now, Effects& fx,
+                               uint32_t max_passes = 1);
 
  private:
   // The task of `t` for the worker, leased as `task_id`, into `resp`; its samples.

@@ -188,7 +188,7 @@ grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskR
     c_.check_worker(req->worker_id(), req->worker_secret());
     const auto since = std::chrono::steady_clock::now(), until = since + std::chrono::seconds(1);
     while (true) {
-      *out = c_.get_task(req->worker_id(), req->max_tasks(), req->max_samples());
+      *out = c_.get_task(req->worker_id(), req->max_tasks(), req->max_samples(), req->max_passes());
       const auto now = std::chrono::steady_clock::now();
       if (out->tasks_size() > 0 || ctx->IsCancelled() || now >= until) {
         out->set_held_ms(uint32_t(std::chrono::duration_cast<std::chrono::milliseconds>(now - since).count()));
@@ -215,6 +215,7 @@ grpc::Status WorkerService::Heartbeat(grpc::ServerContext* ctx, const v1::Heartb
 }
 grpc::Status WorkerService::SubmitResults(grpc::ServerContext* ctx, const v1::ResultBatch* req, v1::ResultAcks* out) {
   return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+    const auto since = std::chrono::steady_clock::now();
     c_.check_worker(req->worker_id(), req->worker_secret());
     for (const v1::TaskResult& r : req->results())
       if (r.worker_id() != req->worker_id())
@@ -223,6 +224,8 @@ grpc::Status WorkerService::SubmitResults(grpc::ServerContext* ctx, const v1::Re
                                                                       std::to_string(req->worker_id()) + "'s batch");
     const std::vector<const v1::TaskResult*> results(req->results().pointer_begin(), req->results().pointer_end());
     for (v1::ResultAck& ack : c_.submit_results(results)) *out->add_acks() = std::move(ack);
+    out->set_held_ms(uint32_t(
+        std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - since).count()));
   });
 }
 grpc::Status WorkerService::ReleaseTask(grpc::ServerContext* ctx, const v1::ReleaseRequest* req, v1::ReleaseResponse*) {

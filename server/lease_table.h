@@ -24,6 +24,7 @@ struct Lease {
   std::shared_ptr<const v1::Task> task;
   uint64_t check = 0;
   double granted = 0;  // when (a backup goes to a tile leased long ago)
+  uint32_t pass_count = 1;  // a run of passes [pass, pass + pass_count) (FramePlan::take)
 };
 
 class LeaseTable {

@@ -5,7 +5,8 @@
 namespace tessera {
 
 uint64_t Leasing::grant(Job& job, const TileTask& task, WorkerInfo& worker, double now) {
-  const uint64_t id = leases_.grant({job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now});
+  const uint64_t id = leases_.grant(
+      {job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now, task.pass_count});
   job.tile_lease[task.tile] = id;
   ++worker.leases;
   ++counters_.tasks_dispatched;
@@ -15,7 +16,8 @@ uint64_t Leasing::grant(Job& job, const TileTask& task, WorkerInfo& worker, doub
 uint64_t Leasing::grant_backup(Job& job, const TileTask& task, WorkerInfo& worker, double now) {
   TESSERA_INVARIANT(job.tile_lease[task.tile] != 0 && !job.tile_backup.count(task.tile),
                     "a backup of tile " + std::to_string(task.tile) + " that is not leased once");
-  const uint64_t id = leases_.grant({job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now});
+  const uint64_t id = leases_.grant(
+      {job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now, task.pass_count});
   job.tile_backup[task.tile] = id;
   ++worker.leases;
   ++counters_.tasks_dispatched;

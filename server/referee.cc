@@ -1,5 +1,6 @@
 #include "server/referee.h"
 
+#include "core/render/frame_plan.h"
 #include "core/render/tile_renderer.h"
 #include "core/scene/load.h"
 
@@ -12,8 +13,10 @@ Referee local_referee(const SceneStore& scenes) {
     if (!task.active().empty() && task.active().size() != size_t(rect.area())) throw WireError("active mask size");
     const auto* mask = task.active().empty() ? nullptr : reinterpret_cast<const uint8_t*>(task.active().data());
     TileStats stats;
-    return TileRenderer(scene, from_proto(task.settings()))
-        .render(rect, task.sample_begin(), task.sample_end(), mask, &stats);
+    const RenderSettings settings = from_proto(task.settings());
+    const std::vector<PixelSums> base = task_base(task, rect);
+    return TileRenderer(scene, settings)
+        .render_passes(rect, task_passes(task, settings), base.empty() ? nullptr : base.data(), mask, &stats);
   };
 }
 

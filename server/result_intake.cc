@@ -39,8 +39,8 @@ ResultIntake::Batch ResultIntake::screen(const std::vector<const v1::TaskResult*
       continue;
     }
     const FramePlan& plan = p_.jobs.job(lease->job).plan;
-    const auto& [s0, s1] = plan.passes()[lease->pass];
-    b.incoming.push_back({i, size_t(plan.tiles()[lease->tile].area()), s1 - s0, std::nullopt});
+    b.incoming.push_back(
+        {i, size_t(plan.tiles()[lease->tile].area()), plan.run_samples(lease->pass, lease->pass_count), std::nullopt});
   }
   return b;
 }
@@ -64,12 +64,13 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
     const std::shared_ptr<Job> shared = p_.jobs.shared(lease->job);
     Job& job = *shared;
     const auto t0 = std::chrono::steady_clock::now();
-    if (job.plan.merge(lease->tile, lease->pass, *in.sums) != FramePlan::Merge::kMerged) {
+    uint64_t added = 0;
+    if (job.plan.merge(lease->tile, lease->pass, *in.sums, lease->pass_count, &added) != FramePlan::Merge::kMerged) {
       ++p_.counters.results_rejected;
       continue;
     }
     p_.counters.merge_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    p_.counters.samples_merged += in.sums->samples();
+    p_.counters.samples_merged += added;
     ++p_.counters.results_merged;
     // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends
     // (kept known, so a repeat of this result is recognised as a duplicate).

@@ -42,8 +42,8 @@ async function tick(){
     `${(100*s.utilization).toFixed(0)}% busy, up ${s.uptime_seconds.toFixed(0)} s`;
   document.getElementById('jobs').innerHTML = '<tr><th>id</th><th>name</th><th>state</th><th>samples</th><th>passes / frames</th><th>ETA</th></tr>' +
     jobs.map(j=>`<tr><td>${esc(j.id)}</td><td>${esc(j.name)}</td><td>${esc(j.state)}</td><td>${esc((100*j.samples_done/Math.max(1,j.samples_total)).toFixed(1))}%</td><td>${esc(j.frames_total ? 'frames ' + j.frames_done + '/' + j.frames_total : j.frame_passes_done + '/' + j.passes_total)}</td><td>${esc(j.eta_seconds.toFixed(0))} s</td></tr>`).join('');
-  document.getElementById('workers').innerHTML = '<tr><th>id</th><th>name</th><th>threads</th><th>samples/s</th><th>busy</th><th>tasks</th><th>leases</th><th>round trip</th><th>bytes/sample</th></tr>' +
-    workers.map(w=>`<tr><td>${esc(w.id)}</td><td>${esc(w.name)}</td><td>${esc(w.threads)}</td><td>${esc((w.samples_per_second/1e6).toFixed(2))} M</td><td>${esc((100*w.utilization).toFixed(0))}%</td><td>${esc(w.tasks_done)}</td><td>${esc(w.leases)}</td><td>${esc(w.round_trip_ms.toFixed(1))} ms</td><td>${esc(w.bytes_per_sample.toFixed(3))}</td></tr>`).join('');
+  document.getElementById('workers').innerHTML = '<tr><th>id</th><th>name</th><th>threads</th><th>samples/s</th><th>busy</th><th>tasks</th><th>leases</th><th>round trip</th><th>bytes/sample</th><th>passes/task</th></tr>' +
+    workers.map(w=>`<tr><td>${esc(w.id)}</td><td>${esc(w.name)}</td><td>${esc(w.threads)}</td><td>${esc((w.samples_per_second/1e6).toFixed(2))} M</td><td>${esc((100*w.utilization).toFixed(0))}%</td><td>${esc(w.tasks_done)}</td><td>${esc(w.leases)}</td><td>${esc(w.round_trip_ms.toFixed(1))} ms</td><td>${esc(w.bytes_per_sample.toFixed(3))}</td><td>${esc(w.passes_per_task)}</td></tr>`).join('');
   const job = jobs.find(j=>j.state==='RUNNING') || jobs[jobs.length-1];
   if (!job) return;
   let id = job.id, d = await (await fetch(`/api/jobs/${encodeURIComponent(id)}`)).json();
@@ -180,7 +180,7 @@ std::string StatusHttp::status_json() const {
   // Written out directly: with thousands of workers, building a JSON object per worker
   // was most of the endpoint's time.
   std::string out;
-  char buf[2048];  // a worker's name is at most 256 characters, at most 6 each escaped
+  char buf[2304];  // a worker's name is at most 256 characters, at most 6 each escaped
   auto num = [](double v) { return std::isfinite(v) ? v : 0.0; };
   std::snprintf(buf, sizeof buf, "{\"uptime_seconds\":%.17g,\"utilization\":%.17g,\"jobs\":[", num(c_.uptime()),
                 num(c_.utilization()));
@@ -198,12 +198,13 @@ std::string StatusHttp::status_json() const {
     std::snprintf(buf, sizeof buf,
                   "%s{\"id\":%llu,\"name\":%s,\"threads\":%u,\"samples_per_second\":%.17g,\"tasks_done\":%llu,"
                   "\"leases\":%u,\"active\":%s,\"busy_thread_seconds\":%.17g,\"thread_seconds\":%.17g,"
-                  "\"utilization\":%.17g,\"round_trip_ms\":%.17g,\"result_bytes\":%llu,\"bytes_per_sample\":%.17g}",
+                  "\"utilization\":%.17g,\"round_trip_ms\":%.17g,\"result_bytes\":%llu,\"bytes_per_sample\":%.17g,"
+                  "\"passes_per_task\":%u}",
                   i ? "," : "", (unsigned long long)w.id, nlohmann::json(w.name).dump().c_str(), w.threads,
                   num(w.samples_per_second), (unsigned long long)w.tasks_done, w.leases, w.leases ? "true" : "false",
                   num(w.busy_thread_seconds), num(w.thread_seconds), num(w.utilization), num(w.round_trip * 1e3),
                   (unsigned long long)w.result_bytes,
-                  w.result_samples ? double(w.result_bytes) / double(w.result_samples) : 0.0);
+                  w.result_samples ? double(w.result_bytes) / double(w.result_samples) : 0.0, w.passes_per_task);
     out += buf;
   }
   out += "]}";

@@ -21,6 +21,7 @@ struct WorkerInfo {
   double round_trip = 0;  // seconds, as the worker measures it (heartbeats); 0: not reported
   // The link's load: compressed sums of this worker's merged results, and their samples.
   uint64_t result_bytes = 0, result_samples = 0;
+  uint32_t passes_per_task = 1;  // what its last GetTask asked for (a slow link asks for runs)
   // Render-thread time as the worker reports it with each result, since it registered:
   // busy (rendering) and threads x wall. Utilization is their ratio over the last few
   // seconds of reports, so a worker idle between jobs does not dilute a busy one.

@@ -41,6 +41,7 @@ Fetcher::Leased Fetcher::lease(const std::atomic<bool>& stop) {
   req.set_worker_secret(me.secret);
   req.set_max_tasks(size->max_tasks);
   if (size->max_samples > 0) req.set_max_samples(size->max_samples);
+  if (size->max_passes > 1) req.set_max_passes(size->max_passes);
   v1::GetTaskResponse resp;
   const double t0 = now_seconds();
   const grpc::Status st = link_.stub->GetTask(link_.context(10).get(), req, &resp);
@@ -60,6 +61,8 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
       throw WireError("active mask size");
     if (h->rect.area() <= 0) throw WireError("empty tile");
     h->prepared = scenes_.prepare(h->task);
+    h->passes = task_passes(h->task, h->prepared->renderer->settings());
+    h->base = task_base(h->task, h->rect);
   } catch (const std::exception& e) {
     spdlog::warn("task {}: {}", h->task.task_id(), e.what());
     link_.release(h->task.task_id(), e.what());  // another worker may manage; this one backs off

@@ -25,12 +25,15 @@ struct QueueLoad {
   double samples_per_thread_second = 0;  // measured (smoothed); 0 until a task finished
   double round_trip = 0;                 // seconds from asking for work to having it (smoothed); 0: unknown
   size_t max_leases = kDefaultMaxLeases;  // the coordinator's bound (RegisterResponse), or --max-tasks if lower
+  uint32_t passes_per_task = 1;           // runs of passes the link needs (upload_budget.h)
 };
 
-// A GetTask request's size: up to max_tasks tasks, stopping at max_samples (0: no limit).
+// A GetTask request's size: up to max_tasks tasks, stopping at max_samples (0: no limit),
+// each a run of up to max_passes passes of a tile.
 struct LeaseRequest {
   uint32_t max_tasks = 0;
   uint64_t max_samples = 0;
+  uint32_t max_passes = 1;
 };
 
 struct Lookahead {
@@ -61,8 +64,8 @@ struct Lookahead {
   LeaseRequest request(const QueueLoad& load) const {
     const double window = window_samples(load);
     const uint32_t room = uint32_t(std::min<size_t>(load.max_leases - load.held, UINT32_MAX));
-    if (window <= 0) return {std::min(room, 2u), 0};
-    return {room, uint64_t(std::max(1.0, window - load.queued_samples))};
+    if (window <= 0) return {std::min(room, 2u), 0, load.passes_per_task};
+    return {room, uint64_t(std::max(1.0, window - load.queued_samples)), load.passes_per_task};
   }
 };
 

@@ -31,6 +31,11 @@ int main(int argc, char** argv) {
                  "bound)")
       ->capture_default_str()
       ->check(CLI::Range(0, 1000000));
+  app.add_option("--passes-per-task", opt.passes_per_task,
+                 "passes of a tile rendered and sent as one result, where the job allows (no -a, no "
+                 "--noise-target); 0: one, more once results outrun the link")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 64));
   app.add_flag("-v,--verbose", opt.verbose, "log connection events");
   app.add_option("--exit-when-idle", opt.exit_when_idle_seconds,
                  "leave after this many seconds without a task (0: never); for batch allocations")

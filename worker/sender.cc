@@ -53,11 +53,23 @@ void Sender::send_loop() {
     const TaskQueue::Batch batch = queue_.take_finished(std::chrono::milliseconds(kLingerMs));
     if (batch.tasks.empty()) return;  // stopped, and everything finished was sent
     const v1::ResultBatch results = encode(batch, now_seconds());
+    UploadBudget::Call call;  // results are in the batch's order
+    for (size_t i = 0; i < batch.tasks.size(); ++i) {
+      const uint64_t bytes = results.results(int(i)).sums_zstd().size();
+      call.bytes += bytes;
+      call.samples += double(batch.tasks[i]->stats.samples);
+      call.busy += batch.tasks[i]->busy;
+      call.single_pass_bytes += double(bytes) * double(batch.tasks[i]->passes.size());
+    }
     bool sent = false;
     for (int attempt = 0; attempt < kAttempts && !sent; ++attempt) {
       v1::ResultAcks acks;
+      call.start = now_seconds();
       const grpc::Status st = link_.stub->SubmitResults(link_.context(30).get(), results, &acks);
+      call.end = now_seconds();
+      call.held = acks.held_ms() / 1000.0;
       sent = st.ok();
+      if (sent) queue_.note_upload(call);
       if (!sent) {
         spdlog::debug("submit: {}", st.error_message());
         std::this_thread::sleep_for(std::chrono::milliseconds(100 << attempt));

@@ -1,5 +1,7 @@
 #include "worker/task_queue.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 
 namespace tessera::worker {
@@ -13,7 +15,8 @@ double Held::row_samples(int row) const {
 }
 
 QueueLoad TaskQueue::load_locked() const {
-  return {held_.size(), queued_rows_, queued_samples_, samples_per_thread_second_, round_trip_, max_leases_};
+  return {held_.size(), queued_rows_, queued_samples_,          samples_per_thread_second_,
+          round_trip_,  max_leases_,  budget_.passes_per_task()};
 }
 
 void TaskQueue::set_max_leases(size_t coordinator_bound, size_t own_cap) {
@@ -25,12 +28,22 @@ void TaskQueue::set_max_leases(size_t coordinator_bound, size_t own_cap) {
 void TaskQueue::note_round_trip(double seconds) {
   std::lock_guard<std::mutex> lock(mu_);
   seconds = std::clamp(seconds, 0.0, 60.0);
+  min_round_trip_ = min_round_trip_ <= 0 ? seconds : std::min(min_round_trip_, seconds);
   // As TCP smooths its round trip (RFC 6298, gain 1/8), but quicker to follow a longer one,
   // so that a slower link does not starve the threads while the average catches up.
   round_trip_ = round_trip_ <= 0        ? seconds
                 : seconds > round_trip_ ? 0.5 * (round_trip_ + seconds)
                                         : 0.875 * round_trip_ + 0.125 * seconds;
   if (lookahead_.wants_more(load_locked())) more_.notify_one();
+}
+
+void TaskQueue::note_upload(const UploadBudget::Call& call) {
+  std::lock_guard<std::mutex> lock(mu_);
+  const uint32_t before = budget_.passes_per_task();
+  budget_.note(call, min_round_trip_);
+  if (budget_.passes_per_task() != before)
+    spdlog::info("results outrun the link ({:.2f} MB/s): asking for tiles {} passes at a time",
+                 budget_.link_rate() / 1e6, budget_.passes_per_task());
 }
 
 QueueLoad TaskQueue::load() const {

@@ -21,6 +21,7 @@
 #include "tessera.grpc.pb.h"
 #include "worker/lookahead.h"
 #include "worker/scene_cache.h"
+#include "worker/upload_budget.h"
 
 namespace tessera::worker {
 
@@ -31,7 +32,9 @@ struct Held {
   Rect rect;
   const uint8_t* mask = nullptr;  // into task.active; null: every pixel
   int next_row = 0, rows_done = 0;
-  std::vector<PixelSums> sums;  // rect-sized
+  std::vector<std::pair<uint32_t, uint32_t>> passes;  // its sample ranges (task_passes())
+  std::vector<PixelSums> base;                        // a run's sums so far (task_base()); or empty
+  std::vector<PixelSums> sums;                        // rect-sized
   TileStats stats;
   std::atomic<bool> cancel{false};
   double first_row = 0, last_row = 0;  // steady seconds
@@ -42,7 +45,10 @@ struct Held {
 
 class TaskQueue {
  public:
-  explicit TaskQueue(Lookahead lookahead) : lookahead_(lookahead) {}
+  // passes_per_task > 0: every task a run of that many passes where the job allows
+  // (--passes-per-task); 0: as the link needs (upload_budget.h).
+  explicit TaskQueue(Lookahead lookahead, uint32_t passes_per_task = 0)
+      : lookahead_(lookahead), budget_(lookahead.threads, passes_per_task) {}
 
   // The fetcher's side.
   // Waits up to `timeout` until more work is wanted (lookahead.h); what to ask for then,
@@ -77,6 +83,8 @@ class TaskQueue {
   Batch take_finished(std::chrono::milliseconds linger);
   // The batch was submitted (`ok`) or given up (its leases expire; others render them).
   void sent(const Batch& batch, bool ok);
+  // A SubmitResults call answered: the upload budget (upload_budget.h) learns the link.
+  void note_upload(const UploadBudget::Call& call);
   uint64_t tasks_done() const { return tasks_done_; }
 
   // The lease keeper's side.
@@ -117,7 +125,9 @@ class TaskQueue {
   double busy_thread_seconds_ = 0;
   double samples_per_thread_second_ = 0;  // measured, smoothed
   double round_trip_ = 0;                 // measured, smoothed; 0 until measured
+  double min_round_trip_ = 0;             // the shortest measured; 0 until measured
   size_t max_leases_ = kDefaultMaxLeases;
+  UploadBudget budget_;
   bool stopping_ = false;
   std::atomic<uint64_t> tasks_done_{0};
 };

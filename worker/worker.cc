@@ -49,7 +49,8 @@ Worker::Worker(WorkerOptions options)
 Worker::Worker(WorkerOptions options, std::shared_ptr<v1::TesseraWorker::StubInterface> stub)
     : options_(resolved(std::move(options))),
       link_(std::make_unique<Link>(std::move(stub), options_.access)),
-      queue_(std::make_unique<TaskQueue>(Lookahead{options_.threads, options_.lookahead_seconds})),
+      queue_(std::make_unique<TaskQueue>(Lookahead{options_.threads, options_.lookahead_seconds},
+                                         uint32_t(options_.passes_per_task))),
       fetcher_(std::make_unique<Fetcher>(*link_, *queue_, options_.cache_dir, backoff_)) {}
 
 Worker::~Worker() = default;

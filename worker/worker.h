@@ -43,6 +43,9 @@ struct WorkerOptions {
   // Leases held at once, at most; 0: as many as the window asks for, up to the
   // coordinator's bound on one worker (RegisterResponse.max_leases).
   int max_tasks = 0;
+  // Passes of a tile a task holds where the job allows runs (no -a, no noise target); 0:
+  // as the link needs, more once results outrun it (worker/upload_budget.h).
+  int passes_per_task = 0;
   Access access;  // token and TLS
   // For the verification tests only (a hidden flag): every result's sums scaled by 0.8
   // (plausible, and wrong), as a broken or dishonest machine would send them.

@@ -33,6 +33,12 @@ Rect tile_from(const Rect& w, int tile, int x, int y) {
 }
 }  // namespace
 
+std::vector<std::pair<uint32_t, uint32_t>> pass_run(const RenderSettings& settings, uint32_t first, uint32_t count) {
+  const std::vector<std::pair<uint32_t, uint32_t>> all = settings.passes();
+  if (count == 0 || first >= all.size() || count > all.size() - first) return {};
+  return {all.begin() + first, all.begin() + first + count};
+}
+
 std::vector<Rect> frame_tiles(const RenderSettings& settings) {
   const Rect w = settings.effective_window();
   const int ts = std::max(1, settings.tile_size);
@@ -61,11 +67,28 @@ FramePlan::FramePlan(const RenderSettings& settings)
   advance_frame_passes();
 }
 
-std::optional<TileTask> FramePlan::take() {
+std::optional<TileTask> FramePlan::take(uint32_t max_passes) {
   if (ready_.empty()) return std::nullopt;
   const uint32_t t = ready_.begin()->second;
   ready_.erase(ready_.begin());
-  return task_of(t);
+  TileTask task = task_of(t);
+  if (max_passes > 1 && runs() && task.pass + 1 < passes_.size()) {
+    task.pass_count = std::min<uint32_t>(max_passes, uint32_t(passes_.size()) - task.pass);
+    task.sample_end = passes_[task.pass + task.pass_count - 1].second;
+    if (task.pass > 0) {
+      const Rect& r = task.rect;
+      const Rect& w = film_.window();
+      task.base.resize(size_t(r.area()));
+      for (int y = 0; y < r.h; ++y) std::copy_n(&film_.at(r.x - w.x, r.y - w.y + y), r.w, &task.base[size_t(y) * r.w]);
+    }
+  }
+  return task;
+}
+
+uint32_t FramePlan::run_samples(uint32_t pass, uint32_t count) const {
+  if (count == 0 || pass >= passes_.size() || count > passes_.size() - pass) return 0;
+  if (count == 1) return passes_[pass].second - passes_[pass].first;
+  return runs() ? passes_[pass + count - 1].second : 0;
 }
 
 std::optional<TileTask> FramePlan::retake(uint32_t tile) const {
@@ -117,17 +140,38 @@ FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const std::vecto
   return m;
 }
 
-FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const CheckedSums& checked) {
+FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const CheckedSums& checked, uint32_t pass_count,
+                                  uint64_t* added) {
   if (!wants(tile, pass)) return Merge::kDuplicate;
   const Rect& r = tiles_[tile];
-  const uint32_t pass_len = passes_[pass].second - passes_[pass].first;
-  if (checked.sums().size() != size_t(r.area()) || checked.pass_len() != pass_len) return Merge::kInvalid;
+  const uint32_t run_len = run_samples(pass, pass_count);
+  if (run_len == 0 || checked.sums().size() != size_t(r.area()) || checked.pass_len() != run_len)
+    return Merge::kInvalid;
+  const Rect& w = film_.window();
+  uint64_t before = 0;
+  if (pass_count > 1) {  // a run's result holds the tile's sums: all of them, grown
+    const std::vector<PixelSums>& s = checked.sums();
+    for (int y = 0; y < r.h; ++y)
+      for (int x = 0; x < r.w; ++x) {
+        const PixelSums& old = film_.at(r.x - w.x + x, r.y - w.y + y);
+        const PixelSums& now = s[size_t(y) * r.w + x];
+        if (now.n < old.n || now.r < old.r || now.g < old.g || now.b < old.b || now.lum2 < old.lum2)
+          return Merge::kInvalid;
+        before += old.n;
+      }
+  }
   ready_.erase({pass, tile});  // a late result for a tile waiting to be re-issued
-  film_.add_tile(r, checked.sums());
+  if (pass_count > 1)
+    for (int y = 0; y < r.h; ++y)
+      std::copy_n(&checked.sums()[size_t(y) * r.w], r.w, &film_.at(r.x - w.x, r.y - w.y + y));
+  else
+    film_.add_tile(r, checked.sums());
   ++merges_;
-  samples_merged_ += checked.samples();
-  work_done_ += double(pass_len) * double(r.area());
-  finish_pass(tile);
+  samples_merged_ += checked.samples() - before;
+  if (added) *added = checked.samples() - before;
+  for (uint32_t p = pass; p < pass + pass_count; ++p)
+    work_done_ += double(passes_[p].second - passes_[p].first) * double(r.area());
+  finish_passes(tile, pass_count);
   return Merge::kMerged;
 }
 
@@ -135,10 +179,10 @@ void FramePlan::advance_frame_passes() {
   while (frame_passes_ < passes_.size() && unfinished_at_[frame_passes_] == 0) ++frame_passes_;
 }
 
-void FramePlan::finish_pass(uint32_t tile) {
+void FramePlan::finish_passes(uint32_t tile, uint32_t count) {
   TileProgress& t = progress_[tile];
   --unfinished_at_[t.passes_done];
-  ++t.passes_done;
+  t.passes_done += count;
   const Rect& r = tiles_[tile];
   const Rect& win = film_.window();
   // Estimated relative error of the tile: sqrt of mean var/(mean^2 + 0.01), the relMSE

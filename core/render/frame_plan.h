@@ -9,6 +9,12 @@
 // checked for convergence (-a) and the tile against the noise target (--noise-target),
 // from merged sums only, so those decisions are reproducible too.
 //
+// A task may also be a run of a tile's passes (a worker on a slow link sends a tile's sums
+// once for several passes): it carries the tile's sums so far (`base`), the worker adds the
+// passes to them in order, as the film would, and its result takes the tile's place in the
+// film: the same bits as merging the passes one by one. Only where nothing is decided
+// between passes (no -a, no noise target).
+//
 // Not thread-safe: the local renderer and the coordinator each hold it under their lock.
 #pragma once
 
@@ -23,12 +29,16 @@
 
 namespace tessera {
 
-// Samples [sample_begin, sample_end) of the active pixels of one tile.
+// Samples [sample_begin, sample_end) of the active pixels of one tile: passes [pass, pass
+// + pass_count).
 struct TileTask {
-  uint32_t tile = 0, pass = 0;
+  uint32_t tile = 0, pass = 0, pass_count = 1;
   Rect rect;
   uint32_t sample_begin = 0, sample_end = 0;
   std::vector<uint8_t> active;  // rect-sized, row-major; empty: every pixel
+  // A run of passes after the first: the tile's sums so far, rect-sized, to which the run's
+  // passes are added (its result is the tile's sums after the run). Empty otherwise.
+  std::vector<PixelSums> base;
 };
 
 struct TileProgress {
@@ -77,6 +87,10 @@ class CheckedSums {
   uint64_t samples_;
 };
 
+// The sample ranges of passes [first, first + count) of a frame with these settings; empty
+// when they are not all passes of it.
+std::vector<std::pair<uint32_t, uint32_t>> pass_run(const RenderSettings& settings, uint32_t first, uint32_t count);
+
 // The tiles a frame with these settings is cut into, band by band (rows of tiles, from the
 // window's first row): squares of --tile pixels, cut short at the window's edge.
 std::vector<Rect> frame_tiles(const RenderSettings& settings);
@@ -89,8 +103,16 @@ class FramePlan {
   explicit FramePlan(const RenderSettings& settings);
 
   // The ready tile with the fewest passes merged (the frame refines evenly), taken out of
-  // the ready set; nothing when every unfinished tile is taken.
-  std::optional<TileTask> take();
+  // the ready set; nothing when every unfinished tile is taken. With max_passes > 1, as a
+  // run of up to that many passes where runs() allows.
+  std::optional<TileTask> take(uint32_t max_passes = 1);
+  // Whether tasks may be runs of passes: nothing is decided between passes (no -a, no
+  // noise target).
+  bool runs() const { return !settings_.adaptive && settings_.noise_target <= 0; }
+  // Samples a pixel at most in a result of passes [pass, pass + count): the pass's for one
+  // pass, every pass's until the run's end for a run (its result holds the tile's sums);
+  // 0 when no task could be that run (out of range, or several passes and not runs()).
+  uint32_t run_samples(uint32_t pass, uint32_t count) const;
   // A taken tile's task once more, the same as take() gave (for a second worker at the
   // frame's end: whichever result comes first is merged, with the same bits); nothing if
   // the tile is finished or not taken.
@@ -108,9 +130,12 @@ class FramePlan {
   // The per-pixel part of merge()'s check: nothing unless no pixel has more than pass_len
   // samples and every one is plausible().
   static std::optional<CheckedSums> check(std::vector<PixelSums> sums, uint32_t pass_len);
-  // merge() of checked sums: kInvalid unless they were checked for this pass's length and
-  // fit the tile.
-  Merge merge(uint32_t tile, uint32_t pass, const CheckedSums& sums);
+  // merge() of checked sums of passes [pass, pass + pass_count): kInvalid unless they were
+  // checked for that run's samples (run_samples()) and fit the tile, and a run's sums
+  // hold the tile's (no pixel with fewer samples or smaller sums). `added` receives the
+  // samples merged.
+  Merge merge(uint32_t tile, uint32_t pass, const CheckedSums& sums, uint32_t pass_count = 1,
+              uint64_t* added = nullptr);
 
   bool done() const { return tiles_done_ == tile_count_; }
   size_t ready() const { return ready_.size(); }  // tasks take() could hand out now
@@ -172,7 +197,7 @@ class FramePlan {
 
  private:
   TileTask task_of(uint32_t tile) const;  // the tile's task for its next pass
-  void finish_pass(uint32_t tile);
+  void finish_passes(uint32_t tile, uint32_t count);
   // Moves frame_passes_ up to the lowest pass that still has unfinished tiles.
   void advance_frame_passes();
 

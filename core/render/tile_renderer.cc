@@ -162,4 +162,18 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
   return out;
 }
 
+std::vector<PixelSums> TileRenderer::render_passes(const Rect& rect,
+                                                   const std::vector<std::pair<uint32_t, uint32_t>>& passes,
+                                                   const PixelSums* base, const uint8_t* active, TileStats* stats,
+                                                   const std::atomic<bool>* cancel) const {
+  if (passes.size() == 1 && !base) return render(rect, passes[0].first, passes[0].second, active, stats, cancel);
+  std::vector<PixelSums> sums(size_t(rect.area()));
+  if (base) std::copy_n(base, sums.size(), sums.begin());
+  for (const auto& [s0, s1] : passes) {
+    const std::vector<PixelSums> pass = render(rect, s0, s1, active, stats, cancel);
+    for (size_t i = 0; i < sums.size(); ++i) sums[i].add(pass[i]);  // Film::add_tile's order
+  }
+  return sums;
+}
+
 }  // namespace tessera

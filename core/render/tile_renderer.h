@@ -5,6 +5,7 @@
 #include <atomic>
 #include <memory>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "core/accel/accel.h"
@@ -48,6 +49,13 @@ class TileRenderer {
   // becomes true the render stops between rows and the result must be discarded.
   std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active, TileStats* stats,
                                 const std::atomic<bool>* cancel = nullptr) const;
+  // A run of passes (consecutive sample ranges, in pass order), each rendered on its own
+  // and added in pass order to `base` (rect-sized; null: zero), as a film adds them: from
+  // a tile's sums so far, the film's bits after those passes (FramePlan::take with more
+  // than one pass). One range and no base is render()'s result.
+  std::vector<PixelSums> render_passes(const Rect& rect, const std::vector<std::pair<uint32_t, uint32_t>>& passes,
+                                       const PixelSums* base, const uint8_t* active, TileStats* stats,
+                                       const std::atomic<bool>* cancel = nullptr) const;
 
   // Throws SettingsError when `settings` ask the scene for what it has not: an animation
   // (--animation) it does not have, an environment map (--env) that cannot be read beside

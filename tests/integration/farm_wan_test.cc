@@ -91,5 +91,25 @@ TEST_F(FarmWan, AConnectionCutMidResultLosesNothing) {
   EXPECT_GE(link.connections_accepted(), 2);  // cut, and connected again
 }
 
+// A link far narrower than the worker's results (2 Mbit/s; a pass of this frame is tens of
+// kilobytes of sums, rendered in tens of milliseconds): the worker sees its results queue,
+// asks for runs of passes, and sends a tile's sums once for several passes, from the
+// tile's first pass or from its sums so far. The image is still tessera render's.
+TEST_F(FarmWan, AWorkerOnANarrowLinkSendsRunsOfPassesAndTheImageIsTesseraRenders) {
+  const std::string flags = "-r 120 90 -s 96 --pass-spp 6 -m 6 --seed 5";
+  const std::string local = local_render(flags);
+  start_coordinator("127.0.0.1:0", "2");
+  wan::WanLink link("127.0.0.1", grpc_port(), {0.002, 250000});
+  start_far_worker(link, "narrow");
+  const std::string id = submit(flags);
+  ASSERT_FALSE(id.empty());
+  expect_local_image(id, local);
+  const nlohmann::json w = worker_status("narrow");
+  ASSERT_NE(w, nullptr);
+  EXPECT_GE(w["passes_per_task"].get<uint32_t>(), 2u);
+  const std::string log = slurp((dir / "worker-narrow.err").string());
+  EXPECT_NE(log.find("results outrun the link"), std::string::npos) << log;
+}
+
 }  // namespace
 }  // namespace tessera

@@ -263,5 +263,50 @@ TEST_F(DispatcherTest, OverdueLeasesExpireOnTheCall) {
   EXPECT_EQ(from_proto(r.tasks(0).tile()), job.plan.tiles()[0]);  // a's tile, again
 }
 
+// A worker on a slow link asks for runs of passes (GetTaskRequest.max_passes): it gets a
+// tile's remaining passes in one task with the tile's sums so far, and its result, those
+// sums and the run's passes added to them, takes the tile's place.
+TEST_F(DispatcherTest, ARunOfPassesCarriesTheTilesSumsAndItsResultTakesTheirPlace) {
+  const std::shared_ptr<Job> job = add_still();
+  testing::merge_passes(job->plan, 1);  // every tile has its first pass
+  const uint64_t w = add_worker();
+  const v1::GetTaskResponse r = dispatcher.get_task(w, 1, 0, now, fx, 8);
+  ASSERT_EQ(r.tasks_size(), 1);
+  const v1::Task& t = r.tasks(0);
+  EXPECT_EQ(t.pass(), 1u);
+  EXPECT_EQ(t.pass_count(), 2u);  // the two passes left
+  EXPECT_EQ(t.sample_begin(), 4u);
+  EXPECT_EQ(t.sample_end(), 10u);
+  EXPECT_EQ(worker(w).passes_per_task, 8u);  // shown on the status page
+  const Lease* lease = leases.live(t.task_id());
+  ASSERT_NE(lease, nullptr);
+  EXPECT_EQ(lease->pass_count, 2u);
+  const uint32_t tile = lease->tile;
+  const std::vector<PixelSums> first = testing::plausible_sums(job->plan, tile, 0);
+  std::vector<PixelSums> sums = task_base(t, from_proto(t.tile()));
+  ASSERT_EQ(sums.size(), first.size());
+  for (size_t i = 0; i < sums.size(); ++i) EXPECT_EQ(sums[i].r, first[i].r) << i;
+  for (uint32_t pass : {1u, 2u}) {
+    const std::vector<PixelSums> more = testing::plausible_sums(job->plan, tile, pass);
+    for (size_t i = 0; i < sums.size(); ++i) sums[i].add(more[i]);
+  }
+  v1::TaskResult result;
+  result.set_worker_id(w);
+  result.set_task_id(t.task_id());
+  result.set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
+  result.set_sums_zstd(encode_sums(sums));
+  const uint64_t merged = counters.samples_merged;
+  EXPECT_TRUE(submit(result).accepted());
+  EXPECT_TRUE(job->plan.progress(tile).finished);
+  EXPECT_EQ(counters.samples_merged - merged, uint64_t(6) * uint64_t(job->plan.tiles()[tile].area()));
+  EXPECT_EQ(leases.live(t.task_id()), nullptr);  // its lease ended with the merge
+  // The same result again is a duplicate; a single-pass request gets single passes.
+  EXPECT_TRUE(submit(result).duplicate());
+  const v1::GetTaskResponse one = dispatcher.get_task(w, 1, 0, now, fx);
+  ASSERT_EQ(one.tasks_size(), 1);
+  EXPECT_EQ(one.tasks(0).pass_count(), 0u);
+  EXPECT_TRUE(one.tasks(0).base_sums().empty());
+}
+
 }  // namespace
 }  // namespace tessera
