@@ -4,9 +4,16 @@
 // (one for the request on its way, one of margin for faster tiles), and never more leases
 // than the coordinator allows this worker. A pure rule over the queue's load, so that tests
 // can state it with numbers; nothing to tune for a far or near coordinator.
+//
+// A far worker also takes its tasks as runs of a tile's passes (FramePlan::take): a tile's
+// next pass is leased only once its last one is merged, so each pass of a tile costs a far
+// worker a round trip, hidden behind other tiles until the frame's last ones. Runs long
+// enough that a task renders for at least a round trip leave the frame's end no chain of
+// round trips to wait through.
 #pragma once
 
 #include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 
@@ -26,6 +33,7 @@ struct QueueLoad {
   double round_trip = 0;                 // seconds from asking for work to having it (smoothed); 0: unknown
   size_t max_leases = kDefaultMaxLeases;  // the coordinator's bound (RegisterResponse), or --max-tasks if lower
   uint32_t passes_per_task = 1;           // runs of passes the link needs (upload_budget.h)
+  double pass_samples = 0;                // camera samples in a task's pass (smoothed); 0: unknown
 };
 
 // A GetTask request's size: up to max_tasks tasks, stopping at max_samples (0: no limit),
@@ -37,6 +45,11 @@ struct LeaseRequest {
 };
 
 struct Lookahead {
+  // Nearer than this (a LAN), a tile's passes come one a task: the progressive image stays
+  // fine-grained and the chain costs nothing worth a run.
+  static constexpr double kFarRoundTrip = 0.005;
+  static constexpr uint32_t kMaxPasses = 64;  // the coordinator's bound too
+
   int threads = 1;
   double seconds = 0.3;  // --lookahead
 
@@ -59,13 +72,21 @@ struct Lookahead {
     const double refill = refill_samples(load);
     return refill > 0 && load.queued_samples < refill;
   }
+  // Passes a task should hold for the link's round trip (1 when near or unmeasured): enough
+  // that the worker's threads render a task for a round trip.
+  uint32_t chain_passes(const QueueLoad& load) const {
+    if (load.round_trip < kFarRoundTrip || load.pass_samples <= 0 || load.samples_per_thread_second <= 0) return 1;
+    const double pass_seconds = load.pass_samples / (load.samples_per_thread_second * threads);
+    return uint32_t(std::clamp(std::ceil(load.round_trip / pass_seconds), 1.0, double(kMaxPasses)));
+  }
   // The window less what is queued; two tasks until there is a measurement. Only when
   // wants_more().
   LeaseRequest request(const QueueLoad& load) const {
     const double window = window_samples(load);
     const uint32_t room = uint32_t(std::min<size_t>(load.max_leases - load.held, UINT32_MAX));
-    if (window <= 0) return {std::min(room, 2u), 0, load.passes_per_task};
-    return {room, uint64_t(std::max(1.0, window - load.queued_samples)), load.passes_per_task};
+    const uint32_t passes = std::max(load.passes_per_task, chain_passes(load));
+    if (window <= 0) return {std::min(room, 2u), 0, passes};
+    return {room, uint64_t(std::max(1.0, window - load.queued_samples)), passes};
   }
 };
 

@@ -15,8 +15,8 @@ double Held::row_samples(int row) const {
 }
 
 QueueLoad TaskQueue::load_locked() const {
-  return {held_.size(), queued_rows_, queued_samples_,          samples_per_thread_second_,
-          round_trip_,  max_leases_,  budget_.passes_per_task()};
+  return {held_.size(), queued_rows_, queued_samples_,           samples_per_thread_second_,
+          round_trip_,  max_leases_,  budget_.passes_per_task(), pass_samples_};
 }
 
 void TaskQueue::set_max_leases(size_t coordinator_bound, size_t own_cap) {
@@ -115,6 +115,8 @@ void TaskQueue::row_done(const Row& r, const std::vector<PixelSums>& sums, const
       const double rate = double(h.stats.samples) / h.busy;
       samples_per_thread_second_ =
           samples_per_thread_second_ > 0 ? 0.7 * samples_per_thread_second_ + 0.3 * rate : rate;
+      const double per_pass = double(h.stats.samples) / double(std::max<size_t>(1, h.passes.size()));
+      pass_samples_ = pass_samples_ > 0 ? 0.7 * pass_samples_ + 0.3 * per_pass : per_pass;
     }
     // The sender sleeps through its linger: only the first result of a batch wakes it.
     if (outbox_.empty()) outbox_cv_.notify_one();

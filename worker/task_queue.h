@@ -124,6 +124,7 @@ class TaskQueue {
   double queued_samples_ = 0;
   double busy_thread_seconds_ = 0;
   double samples_per_thread_second_ = 0;  // measured, smoothed
+  double pass_samples_ = 0;               // camera samples in a task's pass, smoothed
   double round_trip_ = 0;                 // measured, smoothed; 0 until measured
   double min_round_trip_ = 0;             // the shortest measured; 0 until measured
   size_t max_leases_ = kDefaultMaxLeases;

@@ -58,6 +58,26 @@ TEST(Lookahead, AFarCoordinatorGetsTheBandwidthDelayProductInFlight) {
 
 // The round trip is smoothed as TCP smooths it (gain 1/8), but a longer one is followed at
 // once by half the difference, so the threads do not run dry while the average catches up.
+// A far worker takes runs of a tile's passes, enough that its threads render a task for a
+// round trip: 2 threads at 2.7 M samples per thread-second, passes of 16384 samples (a
+// 32x32 tile at 16 samples a pixel, 3 ms of the worker's time).
+TEST(Lookahead, AFarWorkerAsksForRunsThatRenderForARoundTrip) {
+  const Lookahead l{2, 0.3};
+  QueueLoad load{0, 0, 0, 2.7e6, 0.150, 64, 1, 16384};
+  EXPECT_EQ(l.chain_passes(load), 50u);  // ceil(0.150 / 0.00303)
+  EXPECT_EQ(l.request(load).max_passes, 50u);
+  load.round_trip = 0.020;
+  EXPECT_EQ(l.chain_passes(load), 7u);
+  load.round_trip = 0.002;  // a LAN: one pass a task, the progressive image stays fine
+  EXPECT_EQ(l.chain_passes(load), 1u);
+  load.passes_per_task = 3;  // the link's budget asks for more (upload_budget.h)
+  EXPECT_EQ(l.request(load).max_passes, 3u);
+  load.round_trip = 5;  // never more than the coordinator's bound
+  EXPECT_EQ(l.chain_passes(load), Lookahead::kMaxPasses);
+  load.pass_samples = 0;  // nothing measured yet
+  EXPECT_EQ(l.chain_passes(load), 1u);
+}
+
 TEST(TaskQueue, SmoothsTheRoundTripAndFollowsALongerOneQuickly) {
   TaskQueue q(Lookahead{2, 0.3});
   EXPECT_EQ(q.load().round_trip, 0);  // unknown until measured
