@@ -34,6 +34,7 @@ struct QueueLoad {
   size_t max_leases = kDefaultMaxLeases;  // the coordinator's bound (RegisterResponse), or --max-tasks if lower
   uint32_t passes_per_task = 1;           // runs of passes the link needs (upload_budget.h)
   double pass_samples = 0;                // camera samples in a task's pass (smoothed); 0: unknown
+  bool passes_fixed = false;              // --passes-per-task: passes_per_task and nothing else
 };
 
 // A GetTask request's size: up to max_tasks tasks, stopping at max_samples (0: no limit),
@@ -84,7 +85,8 @@ struct Lookahead {
   LeaseRequest request(const QueueLoad& load) const {
     const double window = window_samples(load);
     const uint32_t room = uint32_t(std::min<size_t>(load.max_leases - load.held, UINT32_MAX));
-    const uint32_t passes = std::max(load.passes_per_task, chain_passes(load));
+    const uint32_t passes =
+        load.passes_fixed ? load.passes_per_task : std::max(load.passes_per_task, chain_passes(load));
     if (window <= 0) return {std::min(room, 2u), 0, passes};
     return {room, uint64_t(std::max(1.0, window - load.queued_samples)), passes};
   }

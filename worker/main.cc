@@ -33,7 +33,8 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0, 1000000));
   app.add_option("--passes-per-task", opt.passes_per_task,
                  "passes of a tile rendered and sent as one result, where the job allows (no -a, no "
-                 "--noise-target); 0: one, more once results outrun the link")
+                 "--noise-target); 0: as the link needs (more when the coordinator is far or results outrun "
+                 "the link)")
       ->capture_default_str()
       ->check(CLI::Range(0, 64));
   app.add_flag("-v,--verbose", opt.verbose, "log connection events");

@@ -15,8 +15,11 @@ double Held::row_samples(int row) const {
 }
 
 QueueLoad TaskQueue::load_locked() const {
-  return {held_.size(), queued_rows_, queued_samples_,           samples_per_thread_second_,
-          round_trip_,  max_leases_,  budget_.passes_per_task(), pass_samples_};
+  QueueLoad l{held_.size(), queued_rows_, queued_samples_, samples_per_thread_second_, round_trip_, max_leases_};
+  l.passes_per_task = budget_.passes_per_task();
+  l.pass_samples = pass_samples_;
+  l.passes_fixed = budget_.fixed();
+  return l;
 }
 
 void TaskQueue::set_max_leases(size_t coordinator_bound, size_t own_cap) {

@@ -79,6 +79,7 @@ class UploadBudget {
   }
 
   uint32_t passes_per_task() const { return passes_; }
+  bool fixed() const { return fixed_; }
   double link_rate() const { return rate_; }  // bytes a second, as last measured; 0: not limited yet
 
  private:

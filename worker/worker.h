@@ -44,7 +44,8 @@ struct WorkerOptions {
   // coordinator's bound on one worker (RegisterResponse.max_leases).
   int max_tasks = 0;
   // Passes of a tile a task holds where the job allows runs (no -a, no noise target); 0:
-  // as the link needs, more once results outrun it (worker/upload_budget.h).
+  // as the link needs: a task's render covering a far link's round trip (lookahead.h),
+  // more once results outrun the link (worker/upload_budget.h).
   int passes_per_task = 0;
   Access access;  // token and TLS
   // For the verification tests only (a hidden flag): every result's sums scaled by 0.8

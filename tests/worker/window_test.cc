@@ -76,6 +76,10 @@ TEST(Lookahead, AFarWorkerAsksForRunsThatRenderForARoundTrip) {
   EXPECT_EQ(l.chain_passes(load), Lookahead::kMaxPasses);
   load.pass_samples = 0;  // nothing measured yet
   EXPECT_EQ(l.chain_passes(load), 1u);
+  load.pass_samples = 16384;
+  load.passes_per_task = 1;
+  load.passes_fixed = true;  // --passes-per-task 1: one pass a task however far
+  EXPECT_EQ(l.request(load).max_passes, 1u);
 }
 
 TEST(TaskQueue, SmoothsTheRoundTripAndFollowsALongerOneQuickly) {
