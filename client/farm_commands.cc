@@ -13,7 +13,9 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
     auto c = std::make_shared<FarmContext>();
     CLI::App* cmd = app.add_subcommand(name, help);
     bind(cmd, *c);
-    cmd->add_option("--coordinator", c->coordinator, "coordinator gRPC address HOST:PORT")->capture_default_str();
+    cmd->add_option("--coordinator", c->coordinator, "coordinator gRPC address HOST:PORT (else $TESSERA_COORDINATOR)")
+        ->envname("TESSERA_COORDINATOR")
+        ->capture_default_str();
     cmd->add_flag("--json", c->json, "machine-readable output");
     auto token_file = std::make_shared<std::string>(), tls_ca = std::make_shared<std::string>();
     cmd->add_option("--token-file", *token_file,

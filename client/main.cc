@@ -5,6 +5,7 @@
 #include "client/farm_commands.h"
 #include "client/render_command.h"
 #include "core/scene/scene_error.h"
+#include "core/util/cli.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"Tessera: a path-tracing render farm"};
@@ -13,17 +14,18 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) cmdline += std::string(" ") + argv[i];
   std::vector<std::function<int()>> commands{tessera::add_render_command(app, cmdline)};
   for (auto& c : tessera::add_farm_commands(app)) commands.push_back(std::move(c));
+  tessera::add_version_flag(app, "tessera");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    return tessera::cli_exit(app, e);
   }
   try {
     for (auto& run : commands)
       if (int rc = run(); rc >= 0) return rc;
     return 1;
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+  } catch (const CLI::ParseError& e) {  // a flag's value found wrong once read (a --frames range, say)
+    return tessera::cli_exit(app, e);
   } catch (const tessera::SceneError& e) {
     std::fprintf(stderr, "tessera: error: %s\n", e.what());
     return 2;

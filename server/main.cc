@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "core/io/files.h"
+#include "core/util/cli.h"
 #include "core/util/log.h"
 #include "server/admission.h"
 #include "server/grpc_services.h"
@@ -168,7 +169,12 @@ int main(int argc, char** argv) {
   app.add_option("--tls-key", tls_key, "PEM private key of --tls-cert")->check(CLI::ExistingFile);
   app.add_flag("--insecure", insecure,
                "allow listening beyond loopback without access tokens (anyone who can connect may do anything)");
-  CLI11_PARSE(app, argc, argv);
+  tessera::add_version_flag(app, "tessera-coordinator");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return tessera::cli_exit(app, e);
+  }
   if (app.count("--max-live-pixels") == 0)  // a frame the machine cannot hold is refused at submit
     opt.max_live_pixels =
         tessera::live_pixel_default(uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGESIZE)));

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 #include <atomic>
 
+#include "core/util/cli.h"
 #include "core/util/log.h"
 #include "worker/worker.h"
 
@@ -16,7 +17,9 @@ void on_signal(int) { g_stop = true; }
 int main(int argc, char** argv) {
   CLI::App app{"tessera-worker: renders tiles for a Tessera coordinator"};
   tessera::WorkerOptions opt;
-  app.add_option("--coordinator", opt.coordinator, "coordinator gRPC address HOST:PORT")->required();
+  app.add_option("--coordinator", opt.coordinator, "coordinator gRPC address HOST:PORT (else $TESSERA_COORDINATOR)")
+      ->envname("TESSERA_COORDINATOR")
+      ->required();
   app.add_option("--threads", opt.threads, "render threads (0 = every core)")
       ->capture_default_str()
       ->check(CLI::Range(0, 1024));
@@ -47,7 +50,12 @@ int main(int argc, char** argv) {
   app.add_option("--token-file", token_file,
                  "file holding a worker access token (else $TESSERA_TOKEN_FILE, or the token in $TESSERA_TOKEN)");
   app.add_option("--tls-ca", tls_ca, "PEM certificate authority: connect over TLS (else $TESSERA_TLS_CA)");
-  CLI11_PARSE(app, argc, argv);
+  tessera::add_version_flag(app, "tessera-worker");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return tessera::cli_exit(app, e);
+  }
   tessera::init_logging("tessera-worker", opt.verbose);
   try {
     opt.access = tessera::load_access(token_file, tls_ca);

@@ -13,6 +13,7 @@
 #include <cstdio>
 
 #include "bench/wan/wan_link.h"
+#include "core/util/cli.h"
 
 namespace {
 std::atomic<int> g_cut{0};
@@ -34,10 +35,11 @@ int main(int argc, char** argv) {
   app.add_option("--rtt-ms", rtt_ms, "round-trip delay in milliseconds (half each way)")->check(CLI::Range(0.0, 1e5));
   app.add_option("--mbit", mbit, "bottleneck rate each way in Mbit/s (0: unlimited)")->check(CLI::Range(0.0, 1e6));
   app.add_option("--port", port, "port to listen on, on 127.0.0.1 (0: any)")->check(CLI::Range(0, 65535));
+  tessera::add_version_flag(app, "tessera-wan-proxy");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
+    return tessera::cli_exit(app, e);
   }
   const size_t colon = to.rfind(':');
   int to_port = 0;

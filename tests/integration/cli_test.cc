@@ -20,11 +20,13 @@ struct CommandResult {
   std::string out, err;
 };
 
-CommandResult run(const std::string& args) {
+// A shell command line (its programs named relative to the build's bin folder by the
+// caller), with its exit code and output.
+CommandResult run_line(const std::string& line) {
   const fs::path dir = fs::temp_directory_path() / ("tessera_cli_" + std::to_string(::getpid()));
   fs::create_directories(dir);
   const std::string out = (dir / "out.txt").string(), err = (dir / "err.txt").string();
-  const std::string cmd = std::string(TESSERA_BIN_DIR) + "/tessera " + args + " >" + out + " 2>" + err;
+  const std::string cmd = line + " >" + out + " 2>" + err;
   const int status = std::system(cmd.c_str());
   CommandResult r;
   r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
@@ -38,6 +40,8 @@ CommandResult run(const std::string& args) {
   r.err = slurp(err);
   return r;
 }
+
+CommandResult run(const std::string& args) { return run_line(std::string(TESSERA_BIN_DIR) + "/tessera " + args); }
 
 class Cli : public ::testing::Test {
  protected:
@@ -168,6 +172,36 @@ TEST_F(Cli, BadFlagsAreRefused) {
       EXPECT_NE(r.code, 0) << cmd << flags;
       EXPECT_NE(r.err.find(named), std::string::npos) << cmd << flags << ": " << r.err;
     }
+}
+
+// As the tools operators know: --version on every binary (the commit it was built from),
+// exit code 2 for a usage error (CLI11's own codes are 100 and up), 0 for --help.
+TEST_F(Cli, EveryBinaryHasVersionAndAUsageErrorExitsTwo) {
+  for (const std::string bin : {"tessera", "tessera-coordinator", "tessera-worker", "tessera-wan-proxy"}) {
+    const std::string path = std::string(TESSERA_BIN_DIR) + "/" + bin;
+    if (!fs::exists(path)) continue;  // (the relay is built with the tests and benches)
+    const CommandResult v = run_line(path + " --version");
+    EXPECT_EQ(v.code, 0) << bin << ": " << v.err;
+    EXPECT_EQ(v.out.rfind(bin + " ", 0), 0u) << v.out;
+    EXPECT_GT(v.out.size(), bin.size() + 2) << v.out;  // and a version after the name
+    const CommandResult bad = run_line(path + " --no-such-flag");
+    EXPECT_EQ(bad.code, 2) << bin << ": " << bad.err;
+    EXPECT_NE(bad.err.find("Run with --help"), std::string::npos) << bad.err;  // and what is wrong
+  }
+  EXPECT_EQ(run("render").code, 2);  // the scene is missing
+  EXPECT_EQ(run("render " + scene + " --frames 3-1").code, 2);
+  EXPECT_EQ(run("--help").code, 0);
+}
+
+// $TESSERA_COORDINATOR names the coordinator for every farm command (and the worker).
+TEST_F(Cli, TesseraCoordinatorNamesTheCoordinator) {
+  const CommandResult r = run_line("TESSERA_COORDINATOR=127.0.0.1:1 " + std::string(TESSERA_BIN_DIR) + "/tessera jobs");
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("coordinator 127.0.0.1:1 unreachable"), std::string::npos) << r.err;
+  // A flag still wins over the variable.
+  const CommandResult f = run_line("TESSERA_COORDINATOR=127.0.0.1:1 " + std::string(TESSERA_BIN_DIR) +
+                                   "/tessera jobs --coordinator 127.0.0.1:2");
+  EXPECT_NE(f.err.find("coordinator 127.0.0.1:2 unreachable"), std::string::npos) << f.err;
 }
 
 }  // namespace
