@@ -96,12 +96,13 @@ std::string describe_frames(const v1::JobStatus& s) {
   return out;
 }
 
-bool has_ext(const std::string& p, const char* ext) { return p.size() >= 4 && p.compare(p.size() - 4, 4, ext) == 0; }
-
-void check_outputs(const std::vector<std::string>& outputs) {
-  for (const std::string& out : outputs)  // before the download, which may be large
-    if (!has_ext(out, ".exr") && !has_ext(out, ".png"))
-      throw FarmError(out + ": unknown image format (use .exr or .png)");
+void check_outputs(const std::vector<std::string>& outputs) {  // before the job, and the download
+  try {
+    prepare_outputs(outputs);
+  } catch (const std::runtime_error& e) {  // (a usage error, CLI::ValidationError, goes on up: exit 2)
+    if (dynamic_cast<const CLI::Error*>(&e)) throw;
+    throw FarmError(e.what());
+  }
 }
 
 // One image of a job (a frame's, with `frame`) to each output. With `final`, only the

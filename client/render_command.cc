@@ -94,6 +94,7 @@ int run_render(const RenderArgs& a) {
   RenderSettings s = to_settings(a.flags);
   std::vector<std::string> outputs = output_paths(a.flags);
   const std::vector<int> frames = sequence_frames(a.flags);
+  prepare_outputs(outputs);  // before the render: a typo costs nothing
   const Scene scene = load_scene(a.flags.scene);
   print_scene_notes(scene, s, stderr);
   TileRenderer renderer(scene, s);

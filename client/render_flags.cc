@@ -127,6 +127,21 @@ std::vector<std::string> output_paths(const RenderFlags& f) {
   return {stem + ".exr", stem + ".png"};
 }
 
+void prepare_outputs(const std::vector<std::string>& outputs) {
+  for (const std::string& out : outputs) {
+    const std::filesystem::path p(out);
+    if (p.extension() != ".exr" && p.extension() != ".png")
+      throw CLI::ValidationError("-f", out + ": unknown image format (use .exr or .png)");
+    const std::filesystem::path dir = p.parent_path();
+    if (dir.empty() || dir.string().find('#') != std::string::npos) continue;
+    std::error_code ec;
+    std::filesystem::create_directories(dir, ec);
+    if (ec || !std::filesystem::is_directory(dir))
+      throw std::runtime_error(out + ": cannot make its folder " + dir.string() + ": " +
+                               (ec ? ec.message() : std::string("not a folder")));
+  }
+}
+
 std::vector<int> sequence_frames(const RenderFlags& f) {
   if (f.frames.empty()) return {};
   if (f.settings.frame) throw CLI::ValidationError("--frames", "give --frames or --frame, not both");

@@ -34,6 +34,11 @@ RenderSettings to_settings(const RenderFlags& f);
 // -f values, or SCENE.exr and SCENE.png in the current folder (SCENE.####.exr and
 // SCENE.####.png for a sequence).
 std::vector<std::string> output_paths(const RenderFlags& f);
+// Checks -f outputs before anything is rendered or downloaded: an unknown extension is a
+// usage error (CLI::ValidationError, exit 2), and a missing folder is created (an error
+// naming it if it cannot be). A folder whose name holds the frame's #### is made when the
+// frame is written.
+void prepare_outputs(const std::vector<std::string>& outputs);
 // The frames of --frames (empty without it). Throws CLI::ValidationError naming --frames
 // for a bad range, --frame given too, or several frames and an -f path without ####.
 std::vector<int> sequence_frames(const RenderFlags& f);

@@ -421,7 +421,8 @@ TEST_F(FarmClient, ErrorsNameTheProblem) {
   } catch (const FarmError& e) {
     EXPECT_NE(std::string(e.what()).find("no job 'no-such-job'"), std::string::npos) << e.what();
   }
-  EXPECT_THROW(fetch_image(*stub, "x", {(dir / "out.tiff").string()}, ctx), FarmError);  // before any download
+  // An unknown output format is a usage error (exit 2), found before any download.
+  EXPECT_THROW(fetch_image(*stub, "x", {(dir / "out.tiff").string()}, ctx), CLI::ValidationError);
   SubmitRequest bad = request({});
   bad.flags.settings.spp = 0;
   EXPECT_THROW(submit_job(*stub, bad, ctx), CLI::ValidationError);

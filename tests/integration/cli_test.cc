@@ -204,4 +204,17 @@ TEST_F(Cli, TesseraCoordinatorNamesTheCoordinator) {
   EXPECT_NE(f.err.find("coordinator 127.0.0.1:2 unreachable"), std::string::npos) << f.err;
 }
 
+// Outputs are checked before the render: a missing folder is made, an unknown format is a
+// usage error at once (not after the whole render).
+TEST_F(Cli, OutputsAreCheckedBeforeTheRender) {
+  const fs::path deep = dir / "new" / "folder" / "a.exr";
+  CommandResult r = run("render " + scene + " -s 1 -r 16 12 -q -f " + deep.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(deep));
+  r = run("render " + scene + " -s 100000 -r 1920 1080 -q -f " + (dir / "a.tif").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("a.tif: unknown image format (use .exr or .png)"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "a.tif"));
+}
+
 }  // namespace
