@@ -138,6 +138,7 @@ void Coordinator::record_sequence_end(const std::string& id) {
 }
 
 void Coordinator::archive(const Archival& a) {
+  std::lock_guard<std::mutex> counts(archive_counts_mu_);  // (job_counts: once, not twice)
   bool archived = false;
   try {
     archived = store_->archive(a.id, a.summary, a.merged);

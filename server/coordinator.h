@@ -33,6 +33,7 @@
 
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <type_traits>
@@ -293,6 +294,10 @@ class Coordinator {
   const Referee referee_;        // likewise
   const Snapshotter snapshotter_;
 
+  // Held across an archive's store write and the job's removal from memory, and across
+  // job_counts()'s two reads (the store's archived jobs, then memory's), so that a job
+  // being archived is counted once, not in both. Taken before mu_, never after.
+  mutable std::mutex archive_counts_mu_;
   mutable Mutex mu_;
   mutable CondVar changed_;
   // The farm's state.

@@ -84,6 +84,7 @@ std::vector<v1::JobStatus> Coordinator::recent(size_t n) const {
 }
 
 std::array<uint64_t, 5> Coordinator::job_counts() const {
+  std::lock_guard<std::mutex> counts(archive_counts_mu_);  // no job between the store and memory
   std::array<uint64_t, 5> n{};
   try {
     n = store_->archived_states();
