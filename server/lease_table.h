@@ -23,7 +23,7 @@ struct Lease {
   // worker; `check` names the check a lease renders (0: an ordinary task).
   std::shared_ptr<const v1::Task> task;
   uint64_t check = 0;
-  double granted = 0;  // when (a backup goes to a tile leased long ago)
+  double granted = 0;       // when (a backup goes to a tile leased long ago)
   uint32_t pass_count = 1;  // a run of passes [pass, pass + pass_count) (FramePlan::take)
 };
 

@@ -26,11 +26,11 @@ constexpr size_t kDefaultMaxLeases = 64;
 // What the worker holds and has queued, how fast it renders and how far away the
 // coordinator is.
 struct QueueLoad {
-  size_t held = 0;                       // leased and not yet submitted
-  uint64_t queued_rows = 0;              // rows not yet handed to a render thread
-  double queued_samples = 0;             // camera samples in those rows
-  double samples_per_thread_second = 0;  // measured (smoothed); 0 until a task finished
-  double round_trip = 0;                 // seconds from asking for work to having it (smoothed); 0: unknown
+  size_t held = 0;                        // leased and not yet submitted
+  uint64_t queued_rows = 0;               // rows not yet handed to a render thread
+  double queued_samples = 0;              // camera samples in those rows
+  double samples_per_thread_second = 0;   // measured (smoothed); 0 until a task finished
+  double round_trip = 0;                  // seconds from asking for work to having it (smoothed); 0: unknown
   size_t max_leases = kDefaultMaxLeases;  // the coordinator's bound (RegisterResponse), or --max-tasks if lower
   uint32_t passes_per_task = 1;           // runs of passes the link needs (upload_budget.h)
   double pass_samples = 0;                // camera samples in a task's pass (smoothed); 0: unknown

@@ -19,17 +19,19 @@
 #include <cstdint>
 #include <deque>
 
+#include "worker/lookahead.h"
+
 namespace tessera::worker {
 
 class UploadBudget {
  public:
-  static constexpr uint32_t kMaxPasses = 64;    // the coordinator's bound too
-  static constexpr size_t kCalls = 16;          // recent calls looked at
-  static constexpr size_t kMinCalls = 4;        // before any judgement
+  static constexpr uint32_t kMaxPasses = Lookahead::kMaxPasses;  // the coordinator's bound too
+  static constexpr size_t kCalls = 16;                           // recent calls looked at
+  static constexpr size_t kMinCalls = 4;                         // before any judgement
   // Seconds beyond a round trip that count as slowed: more than a loaded machine delays a
   // call on loopback, far less than a queue at a narrow link builds.
   static constexpr double kMinQueueing = 0.1;
-  static constexpr double kShare = 0.5;         // of the link's rate, for results
+  static constexpr double kShare = 0.5;  // of the link's rate, for results
 
   // One SubmitResults call: when it began and was answered (steady seconds), the
   // coordinator's time over it, its results' compressed bytes, their samples, the thread-

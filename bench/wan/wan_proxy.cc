@@ -44,8 +44,8 @@ int main(int argc, char** argv) {
   const size_t colon = to.rfind(':');
   int to_port = 0;
   const char* port_end = to.data() + to.size();
-  if (colon == std::string::npos ||
-      std::from_chars(to.data() + colon + 1, port_end, to_port).ptr != port_end || to_port < 1 || to_port > 65535) {
+  if (colon == std::string::npos || std::from_chars(to.data() + colon + 1, port_end, to_port).ptr != port_end ||
+      to_port < 1 || to_port > 65535) {
     std::fprintf(stderr, "--to: expected HOST:PORT with a port from 1 to 65535, got '%s'\n", to.c_str());
     return 2;
   }

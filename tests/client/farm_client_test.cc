@@ -201,14 +201,14 @@ class RestartedOnceStub : public v1::Tessera::StubInterface {
                                                                                     grpc::CompletionQueue*) override {
     return nullptr;
   }
-#define TESSERA_NO_ASYNC(Rpc, Request, Response)                                                                     \
-  grpc::ClientAsyncResponseReaderInterface<Response>* Async##Rpc##Raw(grpc::ClientContext*, const Request&,          \
-                                                                      grpc::CompletionQueue*) override {            \
-    return nullptr;                                                                                                 \
-  }                                                                                                                 \
-  grpc::ClientAsyncResponseReaderInterface<Response>* PrepareAsync##Rpc##Raw(grpc::ClientContext*, const Request&,   \
-                                                                             grpc::CompletionQueue*) override {     \
-    return nullptr;                                                                                                 \
+#define TESSERA_NO_ASYNC(Rpc, Request, Response)                                                                   \
+  grpc::ClientAsyncResponseReaderInterface<Response>* Async##Rpc##Raw(grpc::ClientContext*, const Request&,        \
+                                                                      grpc::CompletionQueue*) override {           \
+    return nullptr;                                                                                                \
+  }                                                                                                                \
+  grpc::ClientAsyncResponseReaderInterface<Response>* PrepareAsync##Rpc##Raw(grpc::ClientContext*, const Request&, \
+                                                                             grpc::CompletionQueue*) override {    \
+    return nullptr;                                                                                                \
   }
   TESSERA_NO_ASYNC(SubmitJob, v1::SubmitJobRequest, v1::JobId)
   TESSERA_NO_ASYNC(GetJob, v1::JobId, v1::JobStatus)
