@@ -18,16 +18,18 @@ struct Hit {
   Vec3 ng;             // unnormalised geometric normal (triangle winding / sphere outward)
   uint32_t shape = 0;  // mesh index, or sphere index when is_sphere
   uint32_t prim = 0;   // triangle index within the mesh
+  int32_t instance = -1;  // Scene::instances index of an instanced mesh's hit (ng in its object space)
   bool is_sphere = false;
 };
 
 class Accel {
  public:
-  // Builds the acceleration structure; `scene` must outlive the Accel. Throws
+  // Builds the acceleration structure; `scene` must outlive the Accel. Each instanced
+  // mesh's BVH is built once and placed by its instances. Throws
   // std::runtime_error if Embree reports an error.
   explicit Accel(const Scene& scene);
   // The static part of an animated scene: every mesh but those marked in `skip`, and the
-  // spheres. Built once for all frames.
+  // spheres. Built once for all frames. (Animated scenes have no instances.)
   Accel(const Scene& scene, const std::vector<bool>& skip);
   // One pose of an animated scene: the meshes marked in `moving` are built here from
   // `scene` (the pose, in world space); everything else is `fixed` (built from the same

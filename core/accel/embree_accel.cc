@@ -6,6 +6,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "core/accel/accel.h"
 
@@ -156,7 +157,13 @@ struct Accel::Impl {
   std::deque<AlphaData> alpha_data;    // (stable addresses: Embree keeps pointers)
   std::shared_ptr<const Accel> fixed;  // a pose's static part (its device is this one's)
   unsigned fixed_sphere_geom = RTC_INVALID_GEOMETRY_ID;
+  // Instanced meshes: one scene each (null for others), placed by instance geometries
+  // whose ids start at instance_base.
+  std::vector<RTCScene> prototypes;
+  unsigned instance_base = RTC_INVALID_GEOMETRY_ID;
   ~Impl() {
+    for (RTCScene p : prototypes)
+      if (p) rtcReleaseScene(p);
     if (scene) rtcReleaseScene(scene);
     if (device) rtcReleaseDevice(device);
   }
@@ -164,12 +171,40 @@ struct Accel::Impl {
     device = d;
     rtcRetainDevice(device);
     rtcSetDeviceErrorFunction(device, error_callback, &error);
-    scene = rtcNewScene(device);
-    // ROBUST: watertight triangle tests, so rays along shared edges never leak.
-    rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
-    rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+    scene = new_rtc_scene();
   }
-  void add_mesh(const Scene& s, unsigned id) {
+  RTCScene new_rtc_scene() const {
+    RTCScene sc = rtcNewScene(device);
+    // ROBUST: watertight triangle tests, so rays along shared edges never leak.
+    rtcSetSceneFlags(sc, RTC_SCENE_FLAG_ROBUST);
+    rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
+    return sc;
+  }
+  // Each instanced mesh in a scene of its own (geomID still the mesh index), committed, and
+  // one instance geometry per Scene::instances entry.
+  void add_instances(const Scene& s) {
+    if (s.instances.empty()) return;
+    prototypes.assign(s.meshes.size(), nullptr);
+    instance_base = unsigned(s.meshes.size() + 2);  // after the spheres and a pose's static part
+    for (size_t k = 0; k < s.instances.size(); ++k) {
+      const Instance& in = s.instances[k];
+      RTCScene& proto = prototypes[in.mesh];
+      if (!proto) {
+        proto = new_rtc_scene();
+        add_mesh(s, in.mesh, proto);
+        rtcCommitScene(proto);
+      }
+      RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_INSTANCE);
+      rtcSetGeometryInstancedScene(g, proto);
+      rtcSetGeometryTimeStepCount(g, 1);
+      rtcSetGeometryTransform(g, 0, RTC_FORMAT_FLOAT3X4_ROW_MAJOR, in.to_world.data());
+      rtcCommitGeometry(g);
+      rtcAttachGeometryByID(scene, g, instance_base + unsigned(k));
+      rtcReleaseGeometry(g);
+    }
+  }
+  void add_mesh(const Scene& s, unsigned id) { add_mesh(s, id, scene); }
+  void add_mesh(const Scene& s, unsigned id, RTCScene target) {
     const Mesh& m = s.meshes[id];
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     // Embree may read 16 bytes from the last vertex: pad by one.
@@ -191,7 +226,7 @@ struct Accel::Impl {
       rtcSetGeometryOccludedFilterFunction(g, alpha_filter);
     }
     rtcCommitGeometry(g);
-    rtcAttachGeometryByID(scene, g, id);  // geomID == mesh index
+    rtcAttachGeometryByID(target, g, id);  // geomID == mesh index
     rtcReleaseGeometry(g);
   }
   void add_spheres(const Scene& s) {
@@ -231,13 +266,16 @@ Accel::Accel(const Scene& scene, const std::vector<bool>& skip) : impl_(std::mak
   impl_->new_scene(d);
   rtcReleaseDevice(d);  // the Impl holds it
   for (size_t i = 0; i < scene.meshes.size(); ++i)
-    if (i >= skip.size() || !skip[i]) impl_->add_mesh(scene, unsigned(i));
+    if (!scene.meshes[i].instanced && (i >= skip.size() || !skip[i])) impl_->add_mesh(scene, unsigned(i));
   impl_->add_spheres(scene);
+  impl_->add_instances(scene);
   impl_->commit();
 }
 
 Accel::Accel(const Scene& scene, std::shared_ptr<const Accel> fixed, const std::vector<bool>& moving)
     : impl_(std::make_unique<Impl>()) {
+  if (!scene.instances.empty())  // (the loaders copy instances in animated scenes)
+    throw std::logic_error("an animated scene's pose cannot hold instanced meshes");
   impl_->new_scene(fixed->impl_->device);  // an instance must live on its scene's device
   impl_->fixed = fixed;
   impl_->fixed_sphere_geom = fixed->impl_->sphere_geom;
@@ -275,6 +313,9 @@ bool Accel::intersect(const Ray& ray, Hit* hit) const {
       rh.hit.geomID == (rh.hit.instID[0] == RTC_INVALID_GEOMETRY_ID ? impl_->sphere_geom : impl_->fixed_sphere_geom);
   hit->shape = hit->is_sphere ? rh.hit.primID : rh.hit.geomID;
   hit->prim = rh.hit.primID;
+  hit->instance = rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID && rh.hit.instID[0] >= impl_->instance_base
+                      ? int32_t(rh.hit.instID[0] - impl_->instance_base)
+                      : -1;
   return true;
 }
 

@@ -311,6 +311,17 @@ bool sheened_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* o
 
 constexpr float kCoatF0 = 0.04f;  // ((1.5 - 1) / (1.5 + 1))^2
 
+// clearcoatNormalTexture: the coat's own normal (Material::coat_normal, in the base's
+// shading frame). Its lobe and Fresnel are those of a coat whose normal is z in the coat's
+// frame; without a map the vectors pass unturned.
+struct CoatFrame {
+  explicit CoatFrame(const Material& m) : tilted(m.coat_normal.z < 1), f(m.coat_normal) {}
+  Vec3 in(Vec3 v) const { return tilted ? f.to_local(v) : v; }
+  Vec3 out(Vec3 v) const { return tilted ? f.to_world(v) : v; }
+  bool tilted;
+  Frame f;
+};
+
 float coat_fresnel(const Material& m, Vec3 wo) {
   const float x = 1 - std::min(std::fabs(wo.z), 1.0f), x5 = x * x * x * x * x;
   return m.clearcoat * (kCoatF0 + (1 - kCoatF0) * x5);
@@ -337,33 +348,44 @@ float coat_pdf(const Material& m, Vec3 wo, Vec3 wi) {
 Rgb coated_f(const Material& m, Vec3 wo, Vec3 wi) {
   const Rgb base = sheened_f(m, wo, wi);
   if (m.clearcoat <= 0) return base;
-  const float fc = coat_fresnel(m, wo);
-  return base * (1 - fc) + Rgb(fc * coat_f(m, wo, wi));
+  const CoatFrame c(m);
+  const Vec3 co = c.in(wo), ci = c.in(wi);
+  const float fc = coat_fresnel(m, co);
+  // A tilted coat's lobe reflects as it would about its own normal: its cosine, not the
+  // base's, weighs it (f |cos_base| = f_coat |cos_coat|), so it never gains energy.
+  const float cos_ratio = c.tilted ? std::fabs(ci.z) / std::max(std::fabs(wi.z), 1e-7f) : 1;
+  return base * (1 - fc) + Rgb(fc * coat_f(m, co, ci) * cos_ratio);
 }
 
 float coated_pdf(const Material& m, Vec3 wo, Vec3 wi) {
   if (m.clearcoat <= 0) return sheened_pdf(m, wo, wi);
-  const float pc = coat_probability(m, wo);
-  return (1 - pc) * sheened_pdf(m, wo, wi) + pc * coat_pdf(m, wo, wi);
+  const CoatFrame c(m);
+  const Vec3 co = c.in(wo);
+  const float pc = coat_probability(m, co);
+  return (1 - pc) * sheened_pdf(m, wo, wi) + pc * coat_pdf(m, co, c.in(wi));  // (densities turn unchanged)
 }
 
 bool coated_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
   if (m.clearcoat <= 0) return sheened_sample(m, wo, u1, u2, out);
   if (wo.z == 0) return false;
-  const float pc = coat_probability(m, wo), fc = coat_fresnel(m, wo);
+  const CoatFrame c(m);
+  const Vec3 co = c.in(wo);
+  if (co.z == 0) return false;
+  const float pc = coat_probability(m, co), fc = coat_fresnel(m, co);
   if (u1 < pc) {  // the coat
     out->etap = 1;
     if (coat_smooth(m)) {
-      out->wi = reflect_z(wo);
+      out->wi = c.out(reflect_z(co));
       out->delta = true;
       out->pdf = 1;
       out->weight = Rgb(fc / pc);
       return fc > 0;
     }
-    const Vec3 wo_up = wo.z > 0 ? wo : -wo;
+    const Vec3 wo_up = co.z > 0 ? co : -co;
     const Vec3 h = Ggx(m.clearcoat_alpha).sample_visible(wo_up, u2);
-    out->wi = h * (2 * dot(wo, h)) - wo;
-    if (out->wi.z * wo.z <= 0) return false;
+    const Vec3 wi = h * (2 * dot(co, h)) - co;
+    if (wi.z * co.z <= 0) return false;
+    out->wi = c.out(wi);
     out->delta = false;
   } else {  // the base, its own choice of lobe from the rest of u1
     if (!sheened_sample(m, wo, std::min((u1 - pc) / (1 - pc), 0x1.fffffep-1f), u2, out)) return false;

@@ -43,6 +43,31 @@ float next_float_down(float v) {
   return std::bit_cast<float>(bits);
 }
 
+// The normal map's frame from the triangle itself (pbrt's Triangle::InteractionFromIntersection:
+// dp/du and dp/dv of its texture coordinates `uvs`), where the file gives no tangents:
+// t along dp/du made orthogonal to n, b = cross(n, t) turned to image "up" (v decreasing,
+// glTF's convention) for an unmirrored mapping. False where the mapping degenerates.
+bool triangle_tangents(const Mesh& mesh, const std::vector<Vec2>& uvs, const Instance* in, uint32_t i0, uint32_t i1,
+                       uint32_t i2, Vec3 n, Vec3* t, Vec3* b) {
+  const Vec2 uv0 = uvs[i0], uv1 = uvs[i1], uv2 = uvs[i2];
+  const Vec2 d02{uv0.x - uv2.x, uv0.y - uv2.y}, d12{uv1.x - uv2.x, uv1.y - uv2.y};
+  const Vec3 p02 = mesh.positions[i0] - mesh.positions[i2], p12 = mesh.positions[i1] - mesh.positions[i2];
+  const float det = d02.x * d12.y - d02.y * d12.x;
+  if (!(std::fabs(det) > 1e-12f)) return false;
+  Vec3 dpdu = (p02 * d12.y - p12 * d02.y) / det, dpdv = (p12 * d02.x - p02 * d12.x) / det;
+  if (in) {  // into the world
+    dpdu = in->vector(dpdu);
+    dpdv = in->vector(dpdv);
+  }
+  *t = dpdu - n * dot(n, dpdu);
+  const float tl = length(*t);
+  if (!(tl > 0) || !std::isfinite(tl)) return false;
+  *t = *t / tl;
+  *b = cross(n, *t);
+  if (dot(*b, dpdv) > 0) *b = -*b;
+  return true;
+}
+
 }  // namespace
 
 SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& hit) {
@@ -67,8 +92,12 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
     return sp;
   }
   const Mesh& m = scene.meshes[hit.shape];
+  const Instance* in = hit.instance >= 0 ? &scene.instances[size_t(hit.instance)] : nullptr;
   const uint32_t i0 = m.indices[3 * hit.prim], i1 = m.indices[3 * hit.prim + 1], i2 = m.indices[3 * hit.prim + 2];
-  const Vec3 p0 = m.positions[i0], p1 = m.positions[i1], p2 = m.positions[i2];
+  Vec3 p0 = m.positions[i0], p1 = m.positions[i1], p2 = m.positions[i2];
+  // An instance's hit: the triangle placed in the world (each vertex rounded once).
+  const float obj_len = in ? length(cross(p1 - p0, p2 - p0)) : 0;
+  if (in) p0 = in->point(p0), p1 = in->point(p1), p2 = in->point(p2);
   const float b1 = hit.u, b2 = hit.v, b0 = 1 - b1 - b2;
   // p0 + b1 e1 + b2 e2 rather than b0 p0 + b1 p1 + b2 p2: far from the origin the edges
   // of a small triangle subtract exactly, so the error is one rounding of |p| plus the
@@ -77,12 +106,19 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
   sp.p = p0 + (e1 * b1 + e2 * b2);
   sp.p_err = abs(sp.p) * gamma(1) + (abs(e1 * b1) + abs(e2 * b2)) * gamma(4);
   Vec3 ng = cross(p1 - p0, p2 - p0);
+  if (in && in->mirrored) ng = -ng;  // the authored front face
   float len = length(ng);
   if (!(len > 0) || !std::isfinite(len)) {  // degenerate triangle: Embree's own normal
-    ng = hit.ng;
+    ng = in ? in->normal_to_world(hit.ng) : hit.ng;
     len = length(ng);
   }
   sp.ng = len > 0 ? ng / len : Vec3{0, 0, 1};
+  if (in) {
+    // The vertices' rounding into the world, and Embree taking the next ray's origin into
+    // object space and its plane test there (the floor below, in object units).
+    sp.p_err = sp.p_err + max(max(abs(p0), abs(p1)), abs(p2)) * gamma(1) + in->round_trip_error(sp.p) +
+               in->abs_vector(splat(kUnderflowFloor / std::clamp(obj_len, 1e-20f, 1.0f)));
+  }
   // The intersector's absolute error. The bound above is relative (pbrt-v4's model,
   // |fl(x) - x| <= eps |x|), which fails where products underflow: Embree's plane test
   // computes T = 2 dot(v0 - o, Ng) with |Ng| = len, so an origin 1 ulp off a plane through
@@ -92,6 +128,7 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
   // bound is larger by orders of magnitude, so nothing else moves (docs/ray-offsets.md).
   sp.p_err = max(sp.p_err, splat(kUnderflowFloor / std::clamp(len, 1e-20f, 1.0f)));
   Vec3 ns = m.normals[i0] * b0 + m.normals[i1] * b1 + m.normals[i2] * b2;
+  if (in) ns = in->normal_to_world(ns);
   const float ns_len = length(ns);
   sp.ns = ns_len > 0 ? ns / ns_len : sp.ng;
   sp.ns = face_forward(sp.ns, sp.ng);
@@ -107,36 +144,41 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
 }
 
 void apply_normal_map(const Scene& scene, const Material& m, const Hit& hit, SurfacePoint* sp) {
-  if (hit.is_sphere) return;
+  sp->ns = mapped_normal(scene, m.normal_texture, m.normal_scale, hit, *sp);
+}
+
+Vec3 mapped_normal(const Scene& scene, const TextureRef& ref, float scale, const Hit& hit, const SurfacePoint& sp) {
+  if (hit.is_sphere) return sp.ns;
   const Mesh& mesh = scene.meshes[hit.shape];
-  const TextureRef& ref = m.normal_texture;
   const std::vector<Vec2>& uvs = mesh.uv_set(ref.set);  // (the map's own set: its tangent frame)
-  if (uvs.empty()) return;
+  if (uvs.empty()) return sp.ns;
   const uint32_t i0 = mesh.indices[3 * hit.prim], i1 = mesh.indices[3 * hit.prim + 1],
                  i2 = mesh.indices[3 * hit.prim + 2];
-  // The triangle's dp/du and dp/dv (pbrt's Triangle::InteractionFromIntersection).
-  const Vec2 uv0 = uvs[i0], uv1 = uvs[i1], uv2 = uvs[i2];
-  const Vec2 d02{uv0.x - uv2.x, uv0.y - uv2.y}, d12{uv1.x - uv2.x, uv1.y - uv2.y};
-  const Vec3 p02 = mesh.positions[i0] - mesh.positions[i2], p12 = mesh.positions[i1] - mesh.positions[i2];
-  const float det = d02.x * d12.y - d02.y * d12.x;
-  if (!(std::fabs(det) > 1e-12f)) return;
-  const Vec3 dpdu = (p02 * d12.y - p12 * d02.y) / det, dpdv = (p12 * d02.x - p02 * d12.x) / det;
-  const Vec3 n = sp->ns;
-  Vec3 t = dpdu - n * dot(n, dpdu);
-  const float tl = length(t);
-  if (!(tl > 0) || !std::isfinite(tl)) return;
-  t = t / tl;
-  // glTF's bitangent is cross(N, T), image "up" (v decreasing) for an unmirrored mapping.
-  Vec3 b = cross(n, t);
-  if (dot(b, dpdv) > 0) b = -b;
-  const Rgb c = scene.textures[size_t(ref.index)].sample(ref.map(ref.set ? sp->uv1 : sp->uv));
-  const float x = (2 * c.r - 1) * m.normal_scale, y = (2 * c.g - 1) * m.normal_scale, z = 2 * c.b - 1;
+  const Instance* in = hit.instance >= 0 ? &scene.instances[size_t(hit.instance)] : nullptr;
+  const Vec3 n = sp.ns;
+  Vec3 t, b;
+  if (!mesh.tangents.empty()) {
+    // The file's tangents (MikkTSpace, as its author baked the map against), interpolated
+    // and made orthogonal to the shading normal; glTF's bitangent cross(N, T) x sign.
+    const float b1 = hit.u, b2 = hit.v;
+    t = mesh.tangents[i0].t * (1 - b1 - b2) + mesh.tangents[i1].t * b1 + mesh.tangents[i2].t * b2;
+    if (in) t = in->vector(t);
+    t = t - n * dot(n, t);
+    const float tl = length(t);
+    if (!(tl > 0) || !std::isfinite(tl)) return sp.ns;
+    t = t / tl;
+    b = cross(n, t) * (in && in->mirrored ? -mesh.tangents[i0].sign : mesh.tangents[i0].sign);
+  } else if (!triangle_tangents(mesh, uvs, in, i0, i1, i2, n, &t, &b)) {
+    return sp.ns;
+  }
+  const Rgb c = scene.textures[size_t(ref.index)].sample(ref.map(ref.set ? sp.uv1 : sp.uv));
+  const float x = (2 * c.r - 1) * scale, y = (2 * c.g - 1) * scale, z = 2 * c.b - 1;
   Vec3 mapped = t * x + b * y + n * z;
   const float len = length(mapped);
-  if (!(len > 0) || !std::isfinite(len)) return;
+  if (!(len > 0) || !std::isfinite(len)) return sp.ns;
   mapped = mapped / len;
-  if (dot(mapped, sp->ng) <= 0) return;  // a map that turns the normal under the surface: ignore it here
-  sp->ns = mapped;
+  if (dot(mapped, sp.ng) <= 0) return sp.ns;  // a map that turns the normal under the surface: ignore it here
+  return mapped;
 }
 
 Vec3 offset_point(Vec3 p, Vec3 p_err, Vec3 n, Vec3 w) {
@@ -228,7 +270,7 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
     // origin offset failed (acne). Counted so the stability tests can assert zero.
     // Likewise a ray that left a sphere outward (it is convex).
     if (depth > 0 && hit.is_sphere == prev_hit.is_sphere && hit.shape == prev_hit.shape &&
-        (hit.is_sphere ? dot(ray.d, prev.ng) > 0 : hit.prim == prev_hit.prim))
+        hit.instance == prev_hit.instance && (hit.is_sphere ? dot(ray.d, prev.ng) > 0 : hit.prim == prev_hit.prim))
       ++counters.self_hits;
     prev_hit = hit;
     SurfacePoint sp = make_surface_point(scene_, ray, hit);
@@ -236,9 +278,13 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
     // Only textured or vertex-coloured materials pay for a copy (not even its construction:
     // Material is a few hundred bytes).
     std::optional<Material> textured;
+    std::optional<Vec3> coat_ns;
     if (mp->has_textures()) {
       textured.emplace(scene_.textured(*mp, sp.uv, sp.uv1));
       mp = &*textured;
+      // The coat's normal from the surface's own (the base's map does not turn it).
+      if (mp->clearcoat_normal_texture.active() && mp->clearcoat > 0)
+        coat_ns = mapped_normal(scene_, mp->clearcoat_normal_texture, mp->clearcoat_normal_scale, hit, sp);
       if (mp->normal_texture.active()) apply_normal_map(scene_, *mp, hit, &sp);
     }
     if (sp.colored && mp->kind == Material::Kind::kPbr) {  // glTF COLOR_0 multiplies the base colour
@@ -279,6 +325,8 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
     }
     const Frame frame(ns);
     const Vec3 wo = frame.to_local(wo_world);
+    if (coat_ns)  // (m is *textured here) the coat's normal in the base's frame, turned with it
+      textured->coat_normal = frame.to_local(dot(sp.ns, ns) < 0 ? -*coat_ns : *coat_ns);
     if (nee_ && !m.is_delta()) L += beta * direct(sp, m, frame, wo, ng, sampler, counters);
 
     const float u1 = sampler.next_1d();

@@ -24,12 +24,12 @@ struct RayCounters {
 
 // A ray-surface intersection prepared for shading.
 struct SurfacePoint {
-  Vec3 p;      // rebuilt from barycentrics (triangles) or projected onto the sphere
-  Vec3 p_err;  // conservative absolute error bound of p, per component
-  Vec3 ng;     // unit geometric normal (winding / outward)
-  Vec3 ns;     // unit shading normal, same hemisphere as ng
-  Vec2 uv;     // texture coordinates (meshes with TEXCOORD_0)
-  Vec2 uv1;    // the second set (meshes with TEXCOORD_1; else uv)
+  Vec3 p;           // rebuilt from barycentrics (triangles) or projected onto the sphere
+  Vec3 p_err;       // conservative absolute error bound of p, per component
+  Vec3 ng;          // unit geometric normal (winding / outward)
+  Vec3 ns;          // unit shading normal, same hemisphere as ng
+  Vec2 uv;          // texture coordinates (meshes with TEXCOORD_0)
+  Vec2 uv1;         // the second set (meshes with TEXCOORD_1; else uv)
   Rgb color{1.0f};  // vertex colour (meshes with COLOR_0), when `colored`
   bool colored = false;
   uint32_t material = 0;
@@ -37,9 +37,14 @@ struct SurfacePoint {
 };
 
 SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& hit);
-// Turns sp->ns by material m's normal map (glTF tangent space: T along dp/du, B = N x T),
-// with the triangle's texture-space derivatives as the tangent frame.
+// Turns sp->ns by material m's normal map (glTF tangent space): mapped_normal of its
+// normalTexture.
 void apply_normal_map(const Scene& scene, const Material& m, const Hit& hit, SurfacePoint* sp);
+// sp.ns turned by the tangent-space normal map `ref` (x `scale` in x and y): the frame is
+// the mesh's TANGENTs where it has them (B = cross(N, T) x sign), else the triangle's
+// texture-space derivatives (T along dp/du, B toward image up). sp.ns where the map or
+// frame degenerates or would turn the normal under the surface.
+Vec3 mapped_normal(const Scene& scene, const TextureRef& ref, float scale, const Hit& hit, const SurfacePoint& sp);
 // A point p with error bound p_err on a surface with normal n, pushed off the surface along
 // n (to the side w points to) by the error bound, so that a ray between it and elsewhere
 // can neither start behind the surface nor hit it again.

@@ -219,6 +219,10 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
         for (size_t t = 0; t + 2 < m.indices.size(); t += 3) std::swap(m.indices[t + 1], m.indices[t + 2]);
       const Mat4 nt = w.normal_matrix();
       for (size_t i = 0; i < n.size(); ++i) m.normals[i] = nt.unit_vector(n[i].x, n[i].y, n[i].z);
+      const float* t4 = b.tangents.data();  // as gltf_meshes reads them
+      for (size_t i = 0; i < m.tangents.size() && 4 * i < b.tangents.size(); ++i)
+        m.tangents[i] = {w.unit_vector(t4[4 * i], t4[4 * i + 1], t4[4 * i + 2]),
+                         (t4[4 * i + 3] < 0) != (w.det3() < 0) ? -1.0f : 1.0f};
     }
     if (n.empty()) m.compute_normals();
   }

@@ -51,6 +51,7 @@ struct SceneAnimation {
   struct MeshBinding {
     uint32_t mesh = 0, node = 0;
     std::vector<Vec3> positions, normals;  // object space; normals empty unless the file gave them
+    std::vector<float> tangents;           // object space, 4 a vertex (Mesh::tangents), or empty
     std::vector<uint32_t> indices;         // as in the file (winding fixed per pose)
     // Morph targets (positions and normals above are before them), null without; a
     // weights channel on the node's glTF node animates their weights.

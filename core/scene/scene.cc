@@ -4,6 +4,8 @@
 #include <cmath>
 #include <cstdio>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "core/scene/scene_error.h"
 
@@ -27,15 +29,24 @@ void Mesh::compute_normals() {
 
 size_t Scene::triangle_count() const {
   size_t n = 0;
-  for (const Mesh& m : meshes) n += m.triangle_count();
+  for (const Mesh& m : meshes)
+    if (!m.instanced) n += m.triangle_count();
+  for (const Instance& in : instances) n += meshes[in.mesh].triangle_count();
   return n;
 }
 
 Bounds Scene::object_bounds() const {
   Bounds b;
   for (const Mesh& m : meshes) {
-    if (m.light >= 0 && lights[m.light].kind == Light::Kind::kRect) continue;
+    if (m.instanced || (m.light >= 0 && lights[m.light].kind == Light::Kind::kRect)) continue;
     for (uint32_t i : m.indices) b.extend(m.positions[i]);
+  }
+  for (const Instance& in : instances) {
+    const Mesh& m = meshes[in.mesh];
+    std::vector<bool> used(m.positions.size());
+    for (uint32_t i : m.indices) used[i] = true;
+    for (size_t i = 0; i < used.size(); ++i)
+      if (used[i]) b.extend(in.point(m.positions[i]));
   }
   for (const Sphere& s : spheres) {
     b.extend(s.center - Vec3{s.radius, s.radius, s.radius});
@@ -57,6 +68,48 @@ std::string describe(Vec3 p) {
   return buf;
 }
 
+bool unplaced(const Mesh& m) { return m.instanced; }  // (its instances, if any, are not lamps)
+bool unplaced(const Sphere&) { return false; }
+
+// Light sampling needs a lamp's triangles in world space: an instanced mesh whose material
+// is a lamp becomes one world-space copy per instance (the first takes the mesh's place).
+template <typename IsLight>
+void copy_instanced_lamps(Scene& s, const IsLight& is_light) {
+  std::vector<std::vector<const Instance*>> of(s.meshes.size());
+  for (const Instance& in : s.instances) of[in.mesh].push_back(&in);
+  std::vector<bool> copied(s.meshes.size());
+  size_t triangles = 0;
+  for (size_t i = 0; i < s.meshes.size(); ++i) {
+    // (One with no instance stays unplaced: nothing renders it, nothing samples it.)
+    if (!s.meshes[i].instanced || of[i].empty() || !is_light(s.materials[s.meshes[i].material])) continue;
+    copied[i] = true;
+    const Mesh object = std::move(s.meshes[i]);
+    triangles += object.triangle_count() * of[i].size();
+    if (triangles > Scene::kMaxCopiedTriangles)
+      throw SceneError(s.source, "mesh '" + object.name + "'",
+                       "an emissive instanced mesh is copied per instance to be sampled as a light, and " +
+                           std::to_string(of[i].size()) + " instances make more than the 50 M triangle limit");
+    for (size_t k = 0; k < of[i].size(); ++k) {
+      const Instance& in = *of[i][k];
+      Mesh m = object;
+      m.instanced = false;
+      for (Vec3& p : m.positions) p = in.point(p);
+      for (Vec3& n : m.normals) {
+        n = in.normal_to_world(n);
+        const float len = length(n);
+        n = len > 0 && std::isfinite(len) ? n / len : Vec3{};
+      }
+      if (in.mirrored)
+        for (size_t t = 0; t + 2 < m.indices.size(); t += 3) std::swap(m.indices[t + 1], m.indices[t + 2]);
+      if (k == 0)
+        s.meshes[i] = std::move(m);
+      else
+        s.meshes.push_back(std::move(m));
+    }
+  }
+  std::erase_if(s.instances, [&](const Instance& in) { return copied[in.mesh]; });
+}
+
 }  // namespace
 
 void Scene::finalize() {
@@ -71,6 +124,15 @@ void Scene::finalize() {
   for (const Mesh& m : meshes)
     for (size_t v = 0; v < m.positions.size(); ++v)
       check_point(m.positions[v], "mesh '" + m.name + "'", "vertex " + std::to_string(v));
+  for (size_t k = 0; k < instances.size(); ++k) {  // each placed box's corners
+    const Instance& in = instances[k];
+    Bounds box;
+    for (const Vec3& p : meshes[in.mesh].positions) box.extend(p);
+    if (box.empty()) continue;
+    for (int c = 0; c < 8; ++c)
+      check_point(in.point({c & 1 ? box.hi.x : box.lo.x, c & 2 ? box.hi.y : box.lo.y, c & 4 ? box.hi.z : box.lo.z}),
+                  "mesh '" + meshes[in.mesh].name + "' instance " + std::to_string(k), "bounding box corner");
+  }
   for (const Sphere& sp : spheres) {
     check_point(sp.center, "sphere '" + sp.name + "'", "centre");
     if (!(sp.radius > 0) || !in_range(sp.radius))
@@ -128,7 +190,7 @@ void Scene::finalize() {
     for (size_t i = 0; i < shapes.size(); ++i) {
       auto& shape = shapes[i];
       const Material& m = materials[shape.material];
-      if (shape.light >= 0 || !is_light(m)) continue;
+      if (shape.light >= 0 || unplaced(shape) || !is_light(m)) continue;
       Light l;
       l.kind = kind;
       l.name = shape.name;
@@ -139,6 +201,7 @@ void Scene::finalize() {
       lights.push_back(l);
     }
   };
+  copy_instanced_lamps(*this, is_light);
   add_emitter(meshes, Light::Kind::kMesh);
   add_emitter(spheres, Light::Kind::kSphere);
   for (Mesh& mesh : meshes)
@@ -225,6 +288,8 @@ Material Scene::textured(const Material& m, Vec2 uv, Vec2 uv1) const {
     out.metallic = std::clamp(m.metallic * mr.b, 0.0f, 1.0f);
   }
   if (m.emissive_texture.active()) out.radiance *= at(m.emissive_texture);
+  if (m.transmission_texture.active())
+    out.transmission = std::clamp(m.transmission * at(m.transmission_texture).r, 0.0f, 1.0f);
   if (m.specular_texture.active())
     out.specular *= textures[size_t(m.specular_texture.index)].sample_alpha(coords(m.specular_texture));
   if (m.specular_color_texture.active()) out.specular_color *= at(m.specular_color_texture);

@@ -1,5 +1,6 @@
 // The renderer's scene model: what every loader (COLLADA, glTF) produces and every other
-// part of the core consumes. Plain data in world space, +Y up; no file-format concepts.
+// part of the core consumes. Plain data in world space, +Y up (an instanced mesh in its own
+// object space, placed by Scene::instances); no file-format concepts.
 #pragma once
 
 #include <cstdint>
@@ -9,6 +10,7 @@
 #include <vector>
 
 #include "core/math/vec.h"
+#include "core/scene/instance.h"
 
 namespace tessera {
 
@@ -50,6 +52,7 @@ struct Material {
   float metallic = 0;      // 0 dielectric .. 1 metal (continuous)
   float roughness = 1;     // perceptual; alpha = roughness^2
   float transmission = 0;  // KHR_materials_transmission: the dielectric part's share that transmits
+  TextureRef transmission_texture;  // its R channel scales `transmission` (linear)
   // KHR_materials_volume: a solid (refracting, Beer-Lambert absorption `absorption` per unit
   // length inside) rather than thin-walled (transmission passes without bending).
   bool thin = true;
@@ -71,6 +74,12 @@ struct Material {
   // texture's R; roughness x its texture's G). 0: no coat, the plain path.
   float clearcoat = 0, clearcoat_roughness = 0, clearcoat_alpha = 0;
   TextureRef clearcoat_texture, clearcoat_roughness_texture;
+  // clearcoatNormalTexture (x its scale): the coat's own normal, which the integrator puts
+  // in `coat_normal`, in the base's shading frame (z: the base's normal; the coat follows
+  // it where there is no map).
+  TextureRef clearcoat_normal_texture;
+  float clearcoat_normal_scale = 1;
+  Vec3 coat_normal{0, 0, 1};
   // KHR_materials_sheen: a microfibre layer of colour `sheen_color` (x its texture, sRGB)
   // and roughness `sheen_roughness` (x its texture's alpha) over the base, under the coat
   // (core/bsdf/sheen.h). Black: no sheen, the plain path.
@@ -106,9 +115,17 @@ struct Material {
   }
   bool has_textures() const {
     return texture.active() || metal_rough_texture.active() || normal_texture.active() || emissive_texture.active() ||
-           specular_texture.active() || specular_color_texture.active() || clearcoat_texture.active() ||
-           clearcoat_roughness_texture.active() || sheen_color_texture.active() || sheen_roughness_texture.active();
+           transmission_texture.active() || specular_texture.active() || specular_color_texture.active() ||
+           clearcoat_texture.active() || clearcoat_roughness_texture.active() || clearcoat_normal_texture.active() ||
+           sheen_color_texture.active() || sheen_roughness_texture.active();
   }
+};
+
+// glTF TANGENT: a vertex's tangent (unit, along increasing u of the normal map's
+// coordinates) and the sign that makes the bitangent cross(N, T) x sign.
+struct Tangent {
+  Vec3 t;
+  float sign = 1;
 };
 
 struct Mesh {
@@ -120,7 +137,13 @@ struct Mesh {
   std::vector<Vec2> uvs1;          // a second set (glTF TEXCOORD_1), or empty
   std::vector<Rgb> colors;         // per vertex colour (glTF COLOR_0, linear), multiplying the base colour; or empty
   std::vector<float> color_alpha;  // COLOR_0's alpha where the file gives one below 1, or empty
-  bool file_normals = false;       // `normals` came from the file: keep them
+  // The file's TANGENTs, read only for a material with a normal map (else empty, and the
+  // normal map's frame is the triangle's own: apply_normal_map).
+  std::vector<Tangent> tangents;
+  bool file_normals = false;  // `normals` came from the file: keep them
+  // Placed only by Scene::instances: its positions and normals are in its object space,
+  // and it is in the world nowhere else.
+  bool instanced = false;
   uint32_t material = 0;
   int32_t light = -1;  // index into Scene::lights when the mesh emits
 
@@ -234,10 +257,14 @@ struct Scene {
   // sampled, where a light sample would cost more than the light it finds. CS184
   // emitters are always lights.
   static constexpr float kLampRadiance = 1.0f;
+  // An instanced mesh whose material is a lamp is copied into world space per instance
+  // (light sampling needs world triangles): at most this many triangles so copied.
+  static constexpr size_t kMaxCopiedTriangles = 50'000'000;
 
   std::string source;  // file it came from
   std::vector<Material> materials;
   std::vector<Mesh> meshes;
+  std::vector<Instance> instances;  // placements of Mesh::instanced meshes
   std::vector<Sphere> spheres;
   std::vector<Light> lights;
   std::vector<Texture> textures;
@@ -251,13 +278,15 @@ struct Scene {
   // glTF animations (core/scene/animation.h); null for a scene without any.
   std::shared_ptr<const SceneAnimation> animation;
 
+  // Triangles as rendered: an instanced mesh's once per instance.
   size_t triangle_count() const;
-  // Bounds of meshes and spheres that are objects (light shapes excluded), as CS184 frames.
+  // Bounds of meshes and spheres that are objects (light shapes excluded), instances
+  // placed, as CS184 frames.
   Bounds object_bounds() const;
   // Adds the emitter lights for emission materials and the visible rectangle of each rect
   // light; computes normals; checks every position, radius and the file camera are finite
-  // and within kMaxCoordinate (SceneError naming the element otherwise). Loaders call it
-  // last.
+  // and within kMaxCoordinate (SceneError naming the element otherwise); copies instanced
+  // lamps into the world. Loaders call it last.
   void finalize();
   uint32_t add_material(Material m);
   // The material at a surface point with texture coordinates uv (and uv1, of the second

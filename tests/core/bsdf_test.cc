@@ -246,6 +246,7 @@ struct PbrCase {
   float specular = -1;
   Rgb specular_color{1.0f};
   float clearcoat = 0, clearcoat_roughness = 0;  // KHR_materials_clearcoat
+  Vec3 coat_normal{0, 0, 1};                     // clearcoatNormalTexture's, in the shading frame
   Rgb sheen{0.0f};                               // KHR_materials_sheen
   float sheen_roughness = 0;
 };
@@ -269,6 +270,7 @@ Material pbr(const PbrCase& c) {
   m.clearcoat = c.clearcoat;
   m.clearcoat_roughness = c.clearcoat_roughness;
   m.clearcoat_alpha = c.clearcoat_roughness * c.clearcoat_roughness;
+  m.coat_normal = c.coat_normal;
   m.sheen_color = c.sheen;
   m.sheen_roughness = c.sheen_roughness;
   return m;
@@ -332,6 +334,10 @@ PbrCase with_coat(PbrCase c, float clearcoat, float roughness) {
   c.clearcoat_roughness = roughness;
   return c;
 }
+PbrCase tilted(PbrCase c, Vec3 coat_normal) {
+  c.coat_normal = normalize(coat_normal);
+  return c;
+}
 PbrCase with_sheen(PbrCase c, Rgb color, float roughness) {
   c.sheen = color;
   c.sheen_roughness = roughness;
@@ -355,6 +361,9 @@ INSTANTIATE_TEST_SUITE_P(
         with_coat({"rough_coat_on_plastic", 0, 0.6f, 0, true, 0.9f}, 1.0f, 0.3f),
         with_coat({"rough_coat_on_rough_metal", 1, 0.5f, 0, true, 1.2f}, 0.7f, 0.2f),
         with_coat({"rough_coat_on_rough_glass_inside", 0, 0.4f, 1, false, float(M_PI) - 0.5f}, 0.8f, 0.25f),
+        tilted(with_coat({"tilted_rough_coat_on_plastic", 0, 0.6f, 0, true, 0.9f}, 1.0f, 0.3f), {0.3f, -0.2f, 1}),
+        tilted(with_coat({"tilted_coat_on_rough_glass_inside", 0, 0.4f, 1, false, float(M_PI) - 0.5f}, 0.8f, 0.25f),
+               {-0.2f, 0.1f, 1}),
         with_sheen({"white_sheen_on_plastic", 0, 0.7f, 0, true, 0.8f}, Rgb(1.0f), 0.5f),
         with_sheen({"smooth_sheen_grazing_on_metal", 1, 0.4f, 0, true, 1.45f}, {1.0f, 0.8f, 0.6f}, 0.07f),
         with_sheen({"rough_sheen_on_rough_glass_inside", 0, 0.4f, 1, false, float(M_PI) - 0.5f}, Rgb(0.8f), 1.0f),

@@ -54,6 +54,24 @@ TEST_F(Gltf, AlphaModesAndCoverageAreRead) {
   expect_error(d, "baseColorFactor alpha 1.5");
 }
 
+// KHR_materials_transmission's texture: its R channel (linear) scales the factor, read
+// without a warning (the red/blue image: R 1 on the left half, 0 on the right).
+TEST_F(Gltf, TransmissionTextureScalesTheFactor) {
+  Doc d;
+  d.j["images"] = {{{"uri", red_blue_png_uri()}}};
+  d.j["textures"] = {{{"source", 0}, {"sampler", 0}}};
+  d.j["samplers"] = {{{"wrapS", 33071}, {"wrapT", 33071}}};  // clamped
+  d.j["materials"][0]["extensions"] = {
+      {"KHR_materials_transmission", {{"transmissionFactor", 0.8}, {"transmissionTexture", {{"index", 0}}}}}};
+  d.j["extensionsUsed"] = {"KHR_materials_transmission"};
+  const Scene s = load(d);
+  const Material& m = s.materials[s.meshes[0].material];
+  ASSERT_TRUE(m.transmission_texture.active());
+  EXPECT_NEAR(s.textured(m, {0.0f, 0.5f}).transmission, 0.8f, 1e-6);
+  EXPECT_NEAR(s.textured(m, {1.0f, 0.5f}).transmission, 0.0f, 1e-6);
+  for (const std::string& w : s.warnings) EXPECT_EQ(w.find("transmissionTexture"), std::string::npos) << w;
+}
+
 // Issue 29: KHR_materials_specular's factor, colour (above 1 allowed) and textures (the
 // factor from specularTexture's alpha), and KHR_materials_clearcoat's, are read; out of
 // range refused by name.
@@ -76,19 +94,22 @@ TEST_F(Gltf, SpecularAndClearcoatExtensionsAreRead) {
   EXPECT_NEAR(s.textured(m, {0.75f, 0.5f}).specular, 0.5f, 1e-6);
   d.j["materials"][0]["extensions"]["KHR_materials_specular"]["specularFactor"] = 1.5;
   expect_error(d, "KHR_materials_specular.specularFactor 1.500000 is outside [0, 1]");
-  // KHR_materials_clearcoat likewise; its normal texture is warned, not applied.
+  // KHR_materials_clearcoat likewise, its normal texture and scale read without a warning.
   d.j["materials"][0]["extensions"].erase("KHR_materials_specular");
   d.j["materials"][0]["extensions"]["KHR_materials_clearcoat"] = {
-      {"clearcoatFactor", 0.75}, {"clearcoatRoughnessFactor", 0.5}, {"clearcoatNormalTexture", {{"index", 0}}}};
+      {"clearcoatFactor", 0.75},
+      {"clearcoatRoughnessFactor", 0.5},
+      {"clearcoatNormalTexture", {{"index", 0}, {"scale", 0.5}}}};
   d.j["extensionsUsed"] = {"KHR_materials_clearcoat"};
   s = load(d);
   const Material& c = s.materials[s.meshes[0].material];
   EXPECT_FLOAT_EQ(c.clearcoat, 0.75f);
   EXPECT_FLOAT_EQ(c.clearcoat_alpha, 0.25f);
-  bool warned = false;
-  for (const std::string& w : s.warnings)
-    warned |= w.find("clearcoatNormalTexture is not applied") != std::string::npos;
-  EXPECT_TRUE(warned);
+  EXPECT_TRUE(c.clearcoat_normal_texture.active());
+  EXPECT_FLOAT_EQ(c.clearcoat_normal_scale, 0.5f);
+  for (const std::string& w : s.warnings) EXPECT_EQ(w.find("clearcoatNormalTexture"), std::string::npos) << w;
+  d.j["materials"][0]["extensions"]["KHR_materials_clearcoat"]["clearcoatNormalTexture"]["scale"] = "big";
+  expect_error(d, "clearcoatNormalTexture.scale is not a finite number");
   d.j["materials"][0]["extensions"]["KHR_materials_clearcoat"]["clearcoatFactor"] = -1;
   expect_error(d, "KHR_materials_clearcoat.clearcoatFactor");
 }

@@ -1,8 +1,8 @@
 // Issue 29: morph targets, skins and EXT_mesh_gpu_instancing, with known answers: a triangle morphed by weighted
 // targets (mesh and node weights, animated weights), a bar bent by a joint through a
 // known angle (rest pose and animated, the mesh node's own transform ignored, more than
-// four influences), hostile skins refused naming what is wrong, and instances placed by
-// their own transforms under the node's.
+// four influences), hostile skins refused naming what is wrong, instances placed by
+// their own transforms under the node's, and TANGENTs placed as directions.
 #include <cmath>
 
 #include "tests/core/gltf_fixture.h"
@@ -168,10 +168,35 @@ TEST_F(Gltf, GpuInstancesAreEachPlacedUnderTheNode) {
   d.j["nodes"][0]["translation"] = {0, 0, -1};
   d.j["extensionsUsed"] = {"EXT_mesh_gpu_instancing"};
   const Scene s = load(d);
-  ASSERT_EQ(s.meshes.size(), 3u);  // one triangle per instance
-  expect_vec(s.meshes[0].positions[1], {1, 0, -1});
-  expect_vec(s.meshes[1].positions[1], {10, 1, -1});  // turned 90 degrees about z: (1,0,0) -> (0,1,0)
-  expect_vec(s.meshes[2].positions[1], {2, 10, -1});  // scaled by 2
+  ASSERT_EQ(s.meshes.size(), 1u);  // the triangle stored once, in its object space
+  EXPECT_TRUE(s.meshes[0].instanced);
+  expect_vec(s.meshes[0].positions[1], {1, 0, 0});
+  ASSERT_EQ(s.instances.size(), 3u);
+  EXPECT_EQ(s.triangle_count(), 3u);
+  expect_vec(s.instances[0].point(s.meshes[0].positions[1]), {1, 0, -1});
+  expect_vec(s.instances[1].point(s.meshes[0].positions[1]), {10, 1, -1});  // turned 90 degrees about z
+  expect_vec(s.instances[2].point(s.meshes[0].positions[1]), {2, 10, -1});  // scaled by 2
+  expect_vec(s.object_bounds().hi, {10, 12, -1});
+  {  // In an animated file they are copies, posed with the node.
+    Doc a = d;
+    const int times = add_accessor(a, bytes<float>({0, 1, 2}), kFloat, 3, "SCALAR");
+    const json channel = {{"sampler", 0}, {"target", {{"node", 0}, {"path", "translation"}}}};
+    a.j["animations"] = json::array(
+        {{{"channels", json::array({channel})}, {"samplers", json::array({{{"input", times}, {"output", t}}})}}});
+    const Scene sa = load(a);
+    EXPECT_EQ(sa.meshes.size(), 3u);
+    EXPECT_TRUE(sa.instances.empty());
+  }
+  {  // A placement scaled to nothing is left out; a non-finite one is refused by name.
+    Doc z = d;
+    const int zero = add_accessor(z, bytes<float>({1, 1, 1, 0, 0, 0, 2, 2, 2}), kFloat, 3, "VEC3");
+    z.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]["SCALE"] = zero;
+    EXPECT_EQ(load(z).instances.size(), 2u);
+    const int huge = add_accessor(z, bytes<float>({1, 1, 1, 3e38f, 3e38f, 3e38f, 2, 2, 2}), kFloat, 3, "VEC3");
+    z.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]["SCALE"] = huge;
+    z.j["nodes"][0]["scale"] = {10, 10, 10};
+    expect_error(z, "EXT_mesh_gpu_instancing instance 1's transform is not finite");
+  }
   EXPECT_TRUE(s.warnings.empty() || s.warnings[0].find("EXT_mesh_gpu_instancing") == std::string::npos);
   // Counts that disagree, or none, are refused by name.
   const int short_t = add_accessor(d, bytes<float>({0, 0, 0, 1, 1, 1}), kFloat, 2, "VEC3");
@@ -179,6 +204,42 @@ TEST_F(Gltf, GpuInstancesAreEachPlacedUnderTheNode) {
   expect_error(d, "EXT_mesh_gpu_instancing: ROTATION has 3 instances, the others 2");
   d.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"] = json::object();
   expect_error(d, "has no instances");
+}
+
+TEST_F(Gltf, TangentsAreReadWhereANormalMapUsesThem) {
+  Doc d;
+  // The node turned 90 degrees about z and mirrored in x: (1, 0, 0) -> (0, 1, 0) -> (0, 1, 0).
+  const float h = float(std::sqrt(0.5));
+  d.j["nodes"][0]["rotation"] = {0, 0, h, h};
+  d.j["nodes"][0]["scale"] = {1, 1, -1};
+  const int tan = add_accessor(d, bytes<float>({1, 0, 0, 1, 1, 0, 0, -1, 1, 0, 0, 1}), kFloat, 3, "VEC4");
+  d.j["meshes"][0]["primitives"][0]["attributes"]["TANGENT"] = tan;
+  EXPECT_TRUE(load(d).meshes[0].tangents.empty());  // no normal map: not read
+  d.j["images"] = {{{"uri", red_blue_png_uri()}}};
+  d.j["textures"] = {{{"source", 0}}};
+  d.j["materials"][0]["normalTexture"] = {{"index", 0}};
+  const Scene s = load(d);
+  ASSERT_EQ(s.meshes[0].tangents.size(), 3u);
+  expect_vec(s.meshes[0].tangents[0].t, {0, 1, 0});
+  // det < 0 (the mirror): each sign turns.
+  EXPECT_EQ(s.meshes[0].tangents[0].sign, -1.0f);
+  EXPECT_EQ(s.meshes[0].tangents[1].sign, 1.0f);
+  {  // An animated node turns them with each pose: no turn at 0 s, 90 degrees about z at 1 s.
+    Doc a = d;
+    const int times = add_accessor(a, bytes<float>({0, 1}), kFloat, 2, "SCALAR");
+    const int turns = add_accessor(a, bytes<float>({0, 0, 0, 1, 0, 0, h, h}), kFloat, 2, "VEC4");
+    const json channel = {{"sampler", 0}, {"target", {{"node", 0}, {"path", "rotation"}}}};
+    a.j["animations"] = json::array(
+        {{{"channels", json::array({channel})}, {"samplers", json::array({{{"input", times}, {"output", turns}}})}}});
+    const Scene rest = load(a);
+    const Scene at0 = pose_scene(rest, 0, 0), at1 = pose_scene(rest, 0, 1);
+    expect_vec(at0.meshes[0].tangents[0].t, {1, 0, 0});
+    expect_vec(at1.meshes[0].tangents[0].t, {0, 1, 0});
+    EXPECT_EQ(at1.meshes[0].tangents[0].sign, -1.0f);
+  }
+  const int short_tan = add_accessor(d, bytes<float>({1, 0, 0, 1}), kFloat, 1, "VEC4");
+  d.j["meshes"][0]["primitives"][0]["attributes"]["TANGENT"] = short_tan;
+  expect_error(d, "TANGENT count differs from POSITION count");
 }
 
 }  // namespace

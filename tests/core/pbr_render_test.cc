@@ -105,22 +105,30 @@ TEST(PbrRender, VertexColoursMultiplyTheBaseColour) {
   EXPECT_NEAR(p.b / p.n, 0.5, 1e-4);
 }
 
-TEST(PbrRender, NormalMapTurnsTheShadingNormalInTangentSpace) {
+// A quad at z = 0 facing +z, u along +x and v along -y (an upright glTF texture), with a
+// normal map of one texel: tangent-space normal (0.6, 0, 0.8), tilted toward +T.
+Scene normal_mapped_quad(const std::vector<Tangent>& tangents = {}) {
   Scene s;
   Texture t;
   t.width = t.height = 1;
-  // Tangent-space normal (0.6, 0, 0.8): tilted toward +T (dp/du).
   t.texels = {Rgb(0.5f * 0.6f + 0.5f, 0.5f, 0.5f * 0.8f + 0.5f)};
   s.textures.push_back(t);
   Material m = pbr_material(0, 0.5f);
   m.normal_texture.index = 0;
   s.materials.push_back(m);
-  Mesh quad;  // z = 0, facing +z, u along +x and v along -y (an upright glTF texture)
+  Mesh quad;
   quad.positions = {{-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}};
   quad.uvs = {{0, 1}, {1, 1}, {1, 0}, {0, 0}};
   quad.indices = {0, 1, 2, 0, 2, 3};
+  quad.tangents = tangents;
   s.meshes.push_back(quad);
   s.finalize();
+  return s;
+}
+
+TEST(PbrRender, NormalMapTurnsTheShadingNormalInTangentSpace) {
+  Scene s = normal_mapped_quad();  // T = dp/du = +x
+  const Material m = s.materials[0];
   Hit hit;
   hit.shape = 0;
   hit.prim = 0;
@@ -145,6 +153,89 @@ TEST(PbrRender, NormalMapTurnsTheShadingNormalInTangentSpace) {
   sp = make_surface_point(s, ray, hit);
   apply_normal_map(s, m, hit, &sp);
   EXPECT_NEAR(sp.ns.z, 1.0f, 1e-6);
+}
+
+// glTF TANGENT: the file's tangents give the frame (here turned 90 degrees from the
+// triangle's dp/du, and with each bitangent sign), also through a mirroring instance.
+TEST(PbrRender, FileTangentsGiveTheNormalMapsFrame) {
+  Scene s = normal_mapped_quad(std::vector<Tangent>(4, Tangent{{0, 1, 0}, 1}));  // T = +y, not dp/du's +x
+  const Material m = s.materials[0];
+  Hit hit;
+  hit.u = 0.3f;
+  hit.v = 0.2f;
+  hit.t = 1;
+  const Ray ray{{0, 0, 1}, {0, 0, -1}, 0, 10};
+  SurfacePoint sp = make_surface_point(s, ray, hit);
+  apply_normal_map(s, m, hit, &sp);
+  EXPECT_NEAR(sp.ns.x, 0.0f, 1e-5);
+  EXPECT_NEAR(sp.ns.y, 0.6f, 1e-5);
+  EXPECT_NEAR(sp.ns.z, 0.8f, 1e-5);
+  // Green follows the bitangent cross(N, T) x sign: -x for sign 1, +x for -1.
+  s.textures[0].texels = {Rgb(0.5f, 0.5f * 0.6f + 0.5f, 0.5f * 0.8f + 0.5f)};
+  sp = make_surface_point(s, ray, hit);
+  apply_normal_map(s, m, hit, &sp);
+  EXPECT_NEAR(sp.ns.x, -0.6f, 1e-5);
+  for (Tangent& tg : s.meshes[0].tangents) tg.sign = -1;
+  sp = make_surface_point(s, ray, hit);
+  apply_normal_map(s, m, hit, &sp);
+  EXPECT_NEAR(sp.ns.x, 0.6f, 1e-5);
+  // Placed by an instance mirrored in x: the tangent stays +y, the bitangent turns with
+  // the mirror, so the world normal is the mirror image of the unmirrored one.
+  s.meshes[0].instanced = true;
+  s.instances.push_back(*Instance::make(0, Mat4::scale(-1, 1, 1)));
+  hit.instance = 0;
+  sp = make_surface_point(s, ray, hit);
+  apply_normal_map(s, m, hit, &sp);
+  EXPECT_NEAR(sp.ns.x, -0.6f, 1e-5);
+  EXPECT_NEAR(sp.ns.z, 0.8f, 1e-5);
+}
+
+// clearcoatNormalTexture: a smooth coat over a black base, seen straight down. Its normal
+// map tilts the coat's normal 20 degrees toward +x, so the camera sees, in the coat, a lamp
+// 40 degrees off the vertical with the coat's Fresnel (0.04 there); unmapped, the coat
+// reflects the dark above the camera.
+TEST(PbrRender, ClearcoatNormalTextureTurnsTheCoatsReflection) {
+  Scene s;
+  const float th = 20 * kPi / 180;
+  Texture t;
+  t.width = t.height = 1;
+  t.texels = {Rgb(0.5f * std::sin(th) + 0.5f, 0.5f, 0.5f * std::cos(th) + 0.5f)};
+  s.textures.push_back(t);
+  Material m = pbr_material(0, 1);
+  m.reflectance = Rgb(0.0f);
+  m.ior = 1;  // no base specular: black Lambert
+  m.clearcoat = 1;
+  m.clearcoat_normal_texture.index = 0;
+  s.materials.push_back(m);
+  Material lamp;
+  lamp.kind = Material::Kind::kEmission;
+  lamp.radiance = Rgb(1.0f);
+  s.materials.push_back(lamp);
+  Mesh floor;
+  floor.positions = {{-10, -10, 0}, {10, -10, 0}, {10, 10, 0}, {-10, 10, 0}};
+  floor.uvs = {{0, 1}, {1, 1}, {1, 0}, {0, 0}};  // u along +x: T = +x
+  floor.indices = {0, 1, 2, 0, 2, 3};
+  s.meshes.push_back(floor);
+  const Vec3 r{std::sin(2 * th), 0, std::cos(2 * th)}, c = r * 3, a{0, 2, 0}, b = cross(r, a);
+  Mesh light;  // 4 x 4, square to r, 3 away
+  light.positions = {c - a - b, c + a - b, c + a + b, c - a + b};
+  light.indices = {0, 1, 2, 0, 2, 3};
+  light.material = 1;
+  s.meshes.push_back(light);
+  s.camera.present = true;
+  s.camera.eye = {0, 0, 5};
+  s.camera.xfov_deg = 2;
+  s.camera.aspect_ratio = 1;
+  s.finalize();
+  RenderSettings rs;
+  rs.camera.framing = Framing::kFile;
+  rs.camera.width = rs.camera.height = 8;
+  rs.spp = 256;
+  rs.max_depth = 2;
+  const float fc = 0.04f + 0.96f * std::pow(1 - std::cos(th), 5.0f);
+  EXPECT_NEAR(film_estimate(render(s, rs).film).mean, fc, 0.006);
+  s.materials[0].clearcoat_normal_texture = TextureRef();
+  EXPECT_NEAR(film_estimate(render(s, rs).film).mean, 0, 1e-6);
 }
 
 TEST(PbrRender, EmissiveTextureScalesCameraHitsAndLightSamplesAlike) {

@@ -25,6 +25,7 @@ void GltfAnimationBuilder::add_mesh(uint32_t scene_mesh, int32_t node_entry, con
   for (size_t i = 0; i < b.positions.size(); ++i) b.positions[i] = Vec3{p3[3 * i], p3[3 * i + 1], p3[3 * i + 2]};
   b.normals.resize(n3.size() / 3);
   for (size_t i = 0; i < b.normals.size(); ++i) b.normals[i] = Vec3{n3[3 * i], n3[3 * i + 1], n3[3 * i + 2]};
+  b.tangents = primitive.tangents;
   b.morph = primitive.morph;
   b.skin = primitive.skin;
   b.indices = primitive.mesh.indices;

@@ -125,10 +125,13 @@ void GltfMaterials::read_clearcoat(const tinygltf::ExtensionMap& ex, const std::
   m.clearcoat_alpha = m.clearcoat_roughness * m.clearcoat_roughness;
   m.clearcoat_texture = ext_texture(ex, k, "clearcoatTexture", false, el);
   m.clearcoat_roughness_texture = ext_texture(ex, k, "clearcoatRoughnessTexture", false, el);
-  if (ext_value(ex, k, "clearcoatNormalTexture"))
-    ctx_.warn_once(el +
-                   ": KHR_materials_clearcoat.clearcoatNormalTexture is not applied: the coat follows the "
-                   "base's shading normal");
+  m.clearcoat_normal_texture = ext_texture(ex, k, "clearcoatNormalTexture", false, el);
+  if (const tinygltf::Value* v = ext_value(ex, k, "clearcoatNormalTexture"); v && v->Has("scale")) {
+    const tinygltf::Value& s = v->Get("scale");
+    m.clearcoat_normal_scale = s.IsNumber() ? float(s.GetNumberAsDouble()) : NAN;
+    if (!std::isfinite(m.clearcoat_normal_scale))
+      ctx_.fail(el, "KHR_materials_clearcoat.clearcoatNormalTexture.scale is not a finite number");
+  }
 }
 
 // KHR_materials_sheen (Material::sheen_color).
@@ -191,9 +194,7 @@ uint32_t GltfMaterials::material(int index) {
     if (!std::isfinite(m.normal_scale)) ctx_.fail(el, "normalTexture.scale is not finite");
     emissive_texture = textures_.texture_ref(g.emissiveTexture.index, g.emissiveTexture.texCoord,
                                              g.emissiveTexture.extensions, true, el, "emissiveTexture");
-    if (const tinygltf::Value* v = ext_value(ex, "KHR_materials_transmission", "transmissionTexture"))
-      if (v->IsObject() && v->Has("index"))
-        ctx_.warn_once(el + ": transmissionTexture is not supported; transmissionFactor is used");
+    m.transmission_texture = ext_texture(ex, "KHR_materials_transmission", "transmissionTexture", false, el);
     read_alpha(ctx_, g, el, m);
   }
   m.alpha = m.roughness * m.roughness;  // glTF's alpha = roughness^2

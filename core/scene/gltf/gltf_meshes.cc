@@ -135,10 +135,25 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
     for (const TextureRef* t : {&mat.texture, &mat.metal_rough_texture, &mat.normal_texture, &mat.emissive_texture})
       if (t->active() && t->set == 1 && m.uvs1.empty())
         ctx.warn_once(el + ": its material reads TEXCOORD_1, which it lacks; TEXCOORD_0 is used");
+    // TANGENT, object space: only where a normal map reads it (a skinned mesh's joints
+    // would have to carry it too: it takes the triangle's frame).
+    std::vector<float> t4;
+    if (auto tan = prim.attributes.find("TANGENT");
+        tan != prim.attributes.end() && mat.normal_texture.active() && !g.skin) {
+      t4 = read_accessor_floats(ctx, tan->second, 4, el + " TANGENT");
+      if (t4.size() / 4 != nv) ctx.fail(el, "TANGENT count differs from POSITION count");
+      // A direction (transformed as an edge is); the bitangent's sign turns with a mirror.
+      m.tangents.resize(nv);
+      for (size_t i = 0; i < nv; ++i) {
+        m.tangents[i].t = w.unit_vector(t4[4 * i], t4[4 * i + 1], t4[4 * i + 2]);
+        m.tangents[i].sign = (t4[4 * i + 3] < 0) != (det < 0) ? -1.0f : 1.0f;
+      }
+    }
     if (m.indices.empty()) continue;
     if (keep_object_space || g.skin) {
       g.positions = std::move(p3);
       g.normals = std::move(n3);
+      g.tangents = std::move(t4);
     }
     out.push_back(std::move(g));
   }

@@ -21,6 +21,7 @@ struct GltfPrimitive {
   // the file has none), before any morph target, when asked for or skinned: an animated
   // file poses them again, a skin places them.
   std::vector<float> positions, normals;
+  std::vector<float> tangents;  // likewise, 4 floats a vertex (empty unless mesh.tangents)
   // The transform's determinant is negative: mesh.indices' winding is swapped (never for a
   // skinned mesh, which follows its joints and keeps the file's winding).
   bool mirrored = false;

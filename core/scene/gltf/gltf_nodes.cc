@@ -104,6 +104,41 @@ class NodeWalk {
       entry = animation_.add_node(e);
     }
     const std::vector<Mat4> instances = n.mesh >= 0 ? gltf_instances(ctx_, n, el) : std::vector<Mat4>();
+    // Real instances (Scene::instances: each primitive stored once, in object space), but
+    // where a pose moves them (animated files, skins): copies, posed as any mesh.
+    if (instances.size() > 1 && !animation_.recording() && n.skin < 0) {
+      for (GltfPrimitive& p : read_gltf_mesh(ctx_, materials_, n, Mat4(), el, false)) {
+        const uint32_t id = uint32_t(ctx_.scene.meshes.size());
+        p.mesh.instanced = true;
+        for (size_t k = 0; k < instances.size(); ++k) {
+          const Mat4 m = world * instances[k];
+          for (int r = 0; r < 3; ++r)
+            for (int c = 0; c < 4; ++c)
+              if (!std::isfinite(float(m(r, c))))  // (as Embree gets it)
+                ctx_.fail(el, "EXT_mesh_gpu_instancing instance " + std::to_string(k) + "'s transform is not finite");
+          // (One scaled to nothing has no surface: left out.)
+          if (std::optional<Instance> in = Instance::make(id, m)) ctx_.scene.instances.push_back(*in);
+        }
+        ctx_.scene.meshes.push_back(std::move(p.mesh));
+      }
+    } else {
+      add_copies(n, instances, world, entry, el);
+    }
+    if (n.camera >= 0) {
+      const bool first = !ctx_.scene.camera.present;
+      add_gltf_camera(ctx_, n.camera, world, el);
+      if (animation_.recording() && first) animation_.set_camera(entry);
+    }
+    if (const std::optional<int> light = gltf_node_light(ctx_, n, el)) {
+      add_gltf_light(ctx_, *light, world, el);
+      if (animation_.recording()) animation_.add_light(uint32_t(ctx_.scene.lights.size() - 1), entry);
+    }
+    for (int c : n.children) visit(c, world, entry);
+  }
+
+  // Each instance a copy of the mesh in world space (one copy without the extension).
+  void add_copies(const tinygltf::Node& n, const std::vector<Mat4>& instances, const Mat4& world, int32_t entry,
+                  const std::string& el) {
     for (const Mat4& inst : instances)
       for (GltfPrimitive& p : read_gltf_mesh(ctx_, materials_, n, world * inst, el, animation_.recording())) {
         const uint32_t id = uint32_t(ctx_.scene.meshes.size());
@@ -111,7 +146,8 @@ class NodeWalk {
           instanced_triangles_ += p.mesh.triangle_count();
           if (instanced_triangles_ > kMaxInstancedTriangles)
             ctx_.fail(el, "EXT_mesh_gpu_instancing: " + std::to_string(instances.size()) +
-                              " instances make more than the 50 M triangle limit (instances are copied)");
+                              " instances make more than the 50 M triangle limit (an animated or skinned "
+                              "node's instances are copies)");
           // An animated node moves its instances as one: their object space includes the instance's own transform.
           for (size_t i = 0; i + 2 < p.positions.size(); i += 3) {
             const Dvec3 q = inst.point(p.positions[i], p.positions[i + 1], p.positions[i + 2]);
@@ -127,16 +163,6 @@ class NodeWalk {
         if (p.skin) skinned_.push_back({id, p.skin, p.morph, std::move(p.positions), std::move(p.normals)});
         ctx_.scene.meshes.push_back(std::move(p.mesh));
       }
-    if (n.camera >= 0) {
-      const bool first = !ctx_.scene.camera.present;
-      add_gltf_camera(ctx_, n.camera, world, el);
-      if (animation_.recording() && first) animation_.set_camera(entry);
-    }
-    if (const std::optional<int> light = gltf_node_light(ctx_, n, el)) {
-      add_gltf_light(ctx_, *light, world, el);
-      if (animation_.recording()) animation_.add_light(uint32_t(ctx_.scene.lights.size() - 1), entry);
-    }
-    for (int c : n.children) visit(c, world, entry);
   }
 
  private:
