@@ -24,7 +24,9 @@ namespace {
 
 void check(const grpc::Status& st, const FarmContext& c) {
   if (st.ok()) return;
-  if (unreachable(st)) throw FarmError("coordinator " + c.coordinator + " unreachable: " + st.error_message());
+  if (unreachable(st))
+    throw FarmError("coordinator " + c.coordinator + " unreachable: " + st.error_message() +
+                    tls_hint(st, !c.access.tls_ca_pem.empty()));
   throw FarmError(st.error_message());
 }
 

@@ -29,6 +29,19 @@ bool unreachable(const grpc::Status& status) {
          status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED;
 }
 
+std::string tls_hint(const grpc::Status& status, bool tls) {
+  if (!unreachable(status)) return "";
+  const std::string& m = status.error_message();
+  if (!tls && (m.find("Socket closed") != std::string::npos || m.find("Connection reset") != std::string::npos))
+    return " (a coordinator that serves TLS closes plaintext connections: give its certificate authority with "
+           "--tls-ca FILE or $TESSERA_TLS_CA)";
+  if (tls && (m.find("andshake") != std::string::npos || m.find("SSL") != std::string::npos ||
+              m.find("ssl") != std::string::npos))
+    return " (the TLS handshake failed: the coordinator may not serve TLS, or --tls-ca is not the authority that "
+           "signed its certificate)";
+  return "";
+}
+
 bool refused(const grpc::Status& status) {
   return status.error_code() == grpc::StatusCode::UNAUTHENTICATED ||
          status.error_code() == grpc::StatusCode::PERMISSION_DENIED ||

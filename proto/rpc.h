@@ -24,6 +24,10 @@ std::unique_ptr<grpc::ClientContext> call_context(const Access& access, double s
 
 // The coordinator could not be reached (down, restarting, a network blip): worth retrying.
 bool unreachable(const grpc::Status& status);
+// What an unreachable coordinator's error likely means where TLS is in question, as a
+// sentence to append (empty where nothing points to it): a plaintext call that a TLS
+// coordinator closed ("Socket closed"), or a TLS handshake that failed.
+std::string tls_hint(const grpc::Status& status, bool tls);
 // The coordinator will not take this caller (a bad or quarantined token, another protocol
 // version): retrying cannot help.
 bool refused(const grpc::Status& status);

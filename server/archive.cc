@@ -118,7 +118,7 @@ v1::JobStatus archived_status(const StoredJob& row) {
   return s;
 }
 
-void add_archived_tiles(v1::JobStatus& s) {
+void add_archived_tiles(v1::JobStatus& s, TileRange range) {
   if (s.frames_total() > 0) return;  // a sequence: its frames have the tiles
   RenderSettings settings;
   try {
@@ -130,9 +130,10 @@ void add_archived_tiles(v1::JobStatus& s) {
   const bool done = s.tiles_done() == s.tiles_total();
   const uint32_t passes_done =
       done ? uint32_t(passes.size()) : std::min<uint32_t>(s.frame_passes_done(), passes.size());
-  for (const Rect& r : frame_tiles(settings)) {  // as FramePlan cuts them
+  const std::vector<Rect> tiles = frame_tiles(settings);  // as FramePlan cuts them
+  for (uint32_t i = range.from; i < range.end(uint32_t(tiles.size())); ++i) {
     v1::TileProgress* t = s.add_tiles();
-    *t->mutable_rect() = to_proto(r);
+    *t->mutable_rect() = to_proto(tiles[i]);
     t->set_passes_done(passes_done);
     t->set_samples(passes_done ? passes[passes_done - 1].second : 0);
     t->set_finished(done);

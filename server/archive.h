@@ -55,7 +55,7 @@ v1::JobStatus archived_status(const StoredJob& row);
 // The tile map GetJob shows, for an archived still or frame: as a compacted job's
 // (FramePlan::tile_progress: every tile finished if the job is, else each at the passes the
 // whole frame completed), from its settings.
-void add_archived_tiles(v1::JobStatus& s);
+void add_archived_tiles(v1::JobStatus& s, TileRange range = {});
 // The same by id (a still, a sequence, or a frame of an archived sequence by its own id):
 // nothing when no archived row names it.
 std::optional<v1::JobStatus> archived_status(const JobStore& store, const std::string& id);

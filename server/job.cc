@@ -15,7 +15,7 @@ void Job::compact() {
   }
 }
 
-v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
+v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles, TileRange range) const {
   v1::JobStatus s;
   s.set_id(meta.id);
   s.set_name(meta.name);
@@ -45,7 +45,7 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles) const {
   *s.mutable_settings() = meta.settings;
   s.set_sequence(sequence);
   if (with_tiles)
-    for (uint32_t i = 0; i < plan.tile_count(); ++i) {
+    for (uint32_t i = range.from; i < range.end(plan.tile_count()); ++i) {
       const TileProgress p = plan.tile_progress(i);  // (an ended job's: as its frame's)
       v1::TileProgress* t = s.add_tiles();
       *t->mutable_rect() = to_proto(plan.tile_rect(i));

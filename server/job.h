@@ -3,8 +3,10 @@
 // change in one place, JobLifecycle.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
 #include <cstdint>
+#include <limits>
 #include <map>
 #include <memory>
 #include <optional>
@@ -17,6 +19,13 @@
 #include "server/job_meta.h"
 
 namespace tessera {
+
+// The tiles a status lists (with_tiles): [from, from + count) of the frame's, those that
+// exist. GetJob lists all; /api/jobs/<id> a page at a time.
+struct TileRange {
+  uint32_t from = 0, count = std::numeric_limits<uint32_t>::max();
+  uint32_t end(uint32_t tiles) const { return from >= tiles ? tiles : from + std::min(count, tiles - from); }
+};
 
 struct Job {
   using State = v1::JobStatus::State;
@@ -75,7 +84,7 @@ struct Job {
   bool ended_durably() const { return !live() && end_recorded; }
   State reported_state() const { return live() || end_recorded ? state_ : v1::JobStatus::RUNNING; }
   // `now` for the elapsed time; `workers` with live leases on it.
-  v1::JobStatus status(double now, uint32_t workers, bool with_tiles) const;
+  v1::JobStatus status(double now, uint32_t workers, bool with_tiles, TileRange range = {}) const;
   // An ended job whose image and checkpoint hold its whole film keeps only its counts
   // (FramePlan::compact), no lease table, and each worker's merged tiles once (a liar
   // found later flags it by them).

@@ -7,7 +7,7 @@
 namespace tessera {
 
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
-                         double now) {
+                         double now, TileRange range) {
   if (const Sequence* s = jobs.find_sequence(id)) {
     std::map<std::string, uint32_t> workers;  // per live frame
     for (const auto& j : s->jobs)
@@ -17,7 +17,7 @@ v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const s
   if (!jobs.find_job(id))
     if (const auto gone = jobs.left_frame(id)) return left_frame_status(*gone->sequence, gone->index);
   const Job& job = jobs.job(id);
-  return job.status(now, leases.workers_on(id), with_tiles);
+  return job.status(now, leases.workers_on(id), with_tiles, range);
 }
 
 v1::JobStatus left_frame_status(const Sequence& s, size_t i) {

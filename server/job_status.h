@@ -42,7 +42,7 @@ void keep_changed_frames(v1::JobStatus& s, std::vector<std::string>& sent);
 
 // Throws RequestError (kNotFound) for an unknown id.
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
-                         double now);
+                         double now, TileRange range = {});
 std::vector<v1::JobStatus> job_list(const JobTable& jobs, const LeaseTable& leases, double now);
 // A page of the list (ListJobsRequest): at most kMaxPage jobs, after the submission number
 // its page_token gives. Throws RequestError (kInvalidArgument) for a token never given.

@@ -2,6 +2,7 @@
 
 #include <httplib.h>
 
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <nlohmann/json.hpp>
@@ -34,6 +35,7 @@ table{border-collapse:collapse}td,th{padding:2px 10px;text-align:left}
 
 const char* kLiveJs = R"JS('use strict';
 const esc = v => String(v).replace(/[&<>"']/g, c => ({'&':'&amp;','<':'&lt;','>':'&gt;','"':'&quot;',"'":'&#39;'}[c]));
+let heat = {id: null, from: 0};  // the tile map's job and next page
 async function tick(){
   const s = await (await fetch('/api/status')).json();
   const jobs = s.jobs || [], workers = s.workers || [];
@@ -46,7 +48,9 @@ async function tick(){
     workers.map(w=>`<tr><td>${esc(w.id)}</td><td>${esc(w.name)}</td><td>${esc(w.threads)}</td><td>${esc((w.samples_per_second/1e6).toFixed(2))} M</td><td>${esc((100*w.utilization).toFixed(0))}%</td><td>${esc(w.tasks_done)}</td><td>${esc(w.leases)}</td><td>${esc(w.round_trip_ms.toFixed(1))} ms</td><td>${esc(w.bytes_per_sample.toFixed(3))}</td><td>${esc(w.passes_per_task)}</td></tr>`).join('');
   const job = jobs.find(j=>j.state==='RUNNING') || jobs[jobs.length-1];
   if (!job) return;
-  let id = job.id, d = await (await fetch(`/api/jobs/${encodeURIComponent(id)}`)).json();
+  // The tile map a page of tiles per tick (the API's tiles_next), redrawn from the first.
+  const tiles = id => `/api/jobs/${encodeURIComponent(id)}?tiles_from=${heat.id === id ? heat.from : 0}`;
+  let id = job.id, d = await (await fetch(tiles(id))).json();
   // A sequence: every frame by state (a finished one opens its image), and the frame being
   // rendered (else the last one started) in the preview and the tile map.
   const frames = d.frames || [];
@@ -58,12 +62,15 @@ async function tick(){
     const f = frames.find(f=>f.state==='RUNNING') || [...frames].reverse().find(f=>f.job_id);
     if (!f) return;
     id = f.job_id;
-    d = await (await fetch(`/api/jobs/${encodeURIComponent(id)}`)).json();
+    d = await (await fetch(tiles(id))).json();
   }
   document.getElementById('preview').src = `/jobs/${encodeURIComponent(id)}/preview.png?t=${Date.now()}`;
   const c = document.getElementById('heat'), ctx = c.getContext('2d');
-  c.width = d.settings.width; c.height = d.settings.height;
-  ctx.fillStyle = '#000'; ctx.fillRect(0, 0, c.width, c.height);
+  if (d.tiles_from === 0) {
+    c.width = d.settings.width; c.height = d.settings.height;
+    ctx.fillStyle = '#000'; ctx.fillRect(0, 0, c.width, c.height);
+  }
+  heat = {id, from: d.tiles_next ?? 0};
   for (const t of d.tiles || []) {
     const f = t.passes_done / Math.max(1, d.passes_total);
     ctx.fillStyle = t.finished ? '#fff' : `hsl(${240 - 240*f},80%,${25+35*f}%)`;
@@ -80,7 +87,7 @@ const char* kContentSecurityPolicy =
 
 }  // namespace
 
-std::string job_status_json(v1::JobStatus status) {
+std::string job_status_json(v1::JobStatus status, uint32_t tiles_from) {
   google::protobuf::RepeatedPtrField<v1::TileProgress> tiles;
   tiles.Swap(status.mutable_tiles());
   std::string out = proto_json(status);  // "{...}": every field printed, so never "{}"
@@ -101,7 +108,9 @@ std::string job_status_json(v1::JobStatus status) {
                                 t.rect().w(), t.rect().x(), t.rect().y(), err, t.samples());
     out.append(buf, size_t(n));
   }
-  out += "]}";
+  const uint64_t next = uint64_t(tiles_from) + uint64_t(tiles.size());
+  out += "],\"tiles_from\":" + std::to_string(tiles_from) +
+         ",\"tiles_next\":" + (!tiles.empty() && next < status.tiles_total() ? std::to_string(next) : "null") + "}";
   return out;
 }
 
@@ -135,8 +144,21 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
     res.set_content(status_json(), "application/json");
   });
   server.Get(R"(/api/jobs/([A-Za-z0-9-]+))", [this](const httplib::Request& req, httplib::Response& res) {
+    TileRange range{0, kMaxTilesPage};
+    for (auto [name, value] : {std::pair{"tiles_from", &range.from}, std::pair{"tiles_count", &range.count}}) {
+      if (!req.has_param(name)) continue;
+      const std::string v = req.get_param_value(name);
+      const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), *value);
+      if (ec != std::errc() || end != v.data() + v.size()) {
+        res.status = 400;
+        res.set_content(nlohmann::json{{"error", std::string(name) + " '" + v + "' is not a whole number"}}.dump(),
+                        "application/json");
+        return;
+      }
+    }
+    range.count = std::min(range.count, kMaxTilesPage);
     try {
-      res.set_content(job_status_json(c_.status(req.matches[1], true)), "application/json");
+      res.set_content(job_status_json(c_.status(req.matches[1], true, range), range.from), "application/json");
     } catch (const RequestError& e) {
       res.status = 404;
       res.set_content(nlohmann::json{{"error", e.what()}}.dump(), "application/json");

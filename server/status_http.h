@@ -1,6 +1,7 @@
 // The coordinator's HTTP status endpoint:
 //   /api/status          jobs and workers as JSON
-//   /api/jobs/<id>       one job with per-tile progress
+//   /api/jobs/<id>       one job with per-tile progress, a page of tiles at a time
+//                        (?tiles_from=N&tiles_count=M; kMaxTilesPage at most)
 //   /metrics             Prometheus text format
 //   /jobs/<id>/preview.png   the latest progressive preview
 //   /                    a live page: the progressive image and a per-tile heat map
@@ -19,14 +20,18 @@ namespace tessera {
 
 // A job's status as /api/jobs/<id> gives it: protobuf's JSON (proto_json), with the tiles
 // written here. protobuf's printer took 6.5 s and 0.9 GB of peak memory for the 262,144
-// tiles of an 8192 x 8192 frame at tile 16; this takes the string itself.
-std::string job_status_json(v1::JobStatus status);
+// tiles of an 8192 x 8192 frame at tile 16; this takes the string itself. The tiles are
+// those from number `tiles_from` on ("tiles_from"); "tiles_next" is where the next page
+// starts, null after the last.
+std::string job_status_json(v1::JobStatus status, uint32_t tiles_from = 0);
 
 class StatusHttp {
  public:
   // The status page's jobs: the ones submitted last and every live one before them (a farm
   // keeps thousands; `tessera jobs` and ListJobs page through them all).
   static constexpr size_t kStatusJobs = 200;
+  // Tiles in one /api/jobs/<id> answer at most (and by default): about 2 MB of JSON.
+  static constexpr uint32_t kMaxTilesPage = 16384;
   // With `tls_cert` and `tls_key` (PEM files) it serves HTTPS. Throws if they do not load.
   explicit StatusHttp(Coordinator& coordinator, const Authenticator* auth = nullptr, const std::string& tls_cert = "",
                       const std::string& tls_key = "");

@@ -87,7 +87,13 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
       refused_ = true;
       return false;
     }
-    spdlog::debug("coordinator {}: {}; retrying", options_.coordinator, st.error_message());
+    const std::string hint = tls_hint(st, !options_.access.tls_ca_pem.empty());
+    if (!hint.empty() && !tls_hinted_) {  // said once; the worker keeps retrying
+      spdlog::warn("coordinator {}: {}{}; retrying", options_.coordinator, st.error_message(), hint);
+      tls_hinted_ = true;
+    } else {
+      spdlog::debug("coordinator {}: {}; retrying", options_.coordinator, st.error_message());
+    }
     backoff_.wait(&stop);
   }
   return false;

@@ -86,6 +86,7 @@ class Worker {
   double last_contact_ = 0;                   // its last registration or GetTask that got through
   double last_work_ = 0;                      // when it last held or was given a task (--exit-when-idle)
   bool refused_ = false;                      // registration refused: retrying cannot help
+  bool tls_hinted_ = false;                   // the TLS hint (tls_hint) was logged
 };
 
 }  // namespace tessera

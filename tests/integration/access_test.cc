@@ -450,9 +450,10 @@ TEST_F(Access, TlsForGrpcAndHttp) {
   ASSERT_EQ(r.code, 0) << r.err;
   ASSERT_EQ(std::system((kBin + "/tessera render " + kScene + " " + kFlags + " -q -f " + local).c_str()), 0);
   expect_same_pixels(local, out);
-  // Plaintext is not spoken.
+  // Plaintext is not spoken, and the client says what to do.
   r = tessera("jobs", kAlice);
   EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("--tls-ca"), std::string::npos) << r.err;
   // HTTPS, verified against the same certificate.
   httplib::SSLClient https("127.0.0.1", http_port);
   https.set_ca_cert_path(cert.c_str());

@@ -24,8 +24,24 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   EXPECT_LE(s["workers"][0]["utilization"].get<double>(), 1);
   const nlohmann::json j = get_json("/api/jobs/" + id);
   EXPECT_EQ(j["tiles"].size(), size_t(4 * 3));  // 64x48 in 16-pixel tiles
+  EXPECT_EQ(j["tiles_from"], 0);
+  EXPECT_EQ(j["tiles_next"], nullptr);
+  // Paged: tiles 5-8 (the second row's second on), then the last two, then none.
+  const nlohmann::json p = get_json("/api/jobs/" + id + "?tiles_from=5&tiles_count=4");
+  ASSERT_EQ(p["tiles"].size(), 4u);
+  EXPECT_EQ(p["tiles"][0], j["tiles"][5]);
+  EXPECT_EQ(p["tiles_from"], 5);
+  EXPECT_EQ(p["tiles_next"], 9);
+  const nlohmann::json last = get_json("/api/jobs/" + id + "?tiles_from=10");
+  EXPECT_EQ(last["tiles"].size(), 2u);
+  EXPECT_EQ(last["tiles_next"], nullptr);
+  EXPECT_EQ(get_json("/api/jobs/" + id + "?tiles_from=99")["tiles"].size(), 0u);
   EXPECT_EQ(get_json("/api/jobs/no-such-job"), nullptr);
   httplib::Client cli("127.0.0.1", http_port);
+  const auto bad = cli.Get("/api/jobs/" + id + "?tiles_count=-1");
+  ASSERT_TRUE(bad);
+  EXPECT_EQ(bad->status, 400);
+  EXPECT_NE(bad->body.find("tiles_count '-1' is not a whole number"), std::string::npos) << bad->body;
   // Prometheus text: comments, or `name{labels} value` with a numeric value.
   const std::string metrics = cli.Get("/metrics")->body;
   std::istringstream lines(metrics);

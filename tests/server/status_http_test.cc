@@ -44,9 +44,18 @@ TEST(StatusHttp, AJobsTilesReadBackAsProtobufPrintsThem) {
   nlohmann::json rest = ours, their_rest = theirs;
   rest.erase("tiles");
   their_rest.erase("tiles");
+  rest.erase("tiles_from");
+  rest.erase("tiles_next");
   EXPECT_EQ(rest, their_rest);
   // No tiles: an empty list, as protobuf prints it.
   EXPECT_EQ(nlohmann::json::parse(job_status_json(v1::JobStatus()))["tiles"], nlohmann::json::array());
+  // A page: where it starts, and where the next does (none after the last).
+  EXPECT_EQ(ours["tiles_from"], 0);
+  EXPECT_EQ(ours["tiles_next"], nullptr);
+  s.set_tiles_total(10);
+  const nlohmann::json page = nlohmann::json::parse(job_status_json(s, 3));
+  EXPECT_EQ(page["tiles_from"], 3);
+  EXPECT_EQ(page["tiles_next"], 7);
 }
 
 }  // namespace
