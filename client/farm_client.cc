@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <functional>
 #include <map>
+#include <nlohmann/json.hpp>
 #include <set>
 
 #include "client/image_download.h"
@@ -275,8 +276,21 @@ int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const 
                 const FarmContext& c, const FetchWhat& what) {
   check_outputs(outputs);
   if (what.all && what.frame) throw FarmError("give --frame N or --all, not both");
+  // --json: what was written, as one object (numbers as numbers).
+  auto files_of = [&](std::optional<int> frame) {
+    nlohmann::json files = nlohmann::json::array();
+    for (const std::string& out : outputs) files.push_back(frame ? frame_path(out, *frame) : out);
+    return files;
+  };
   if (!what.all) {
     fetch_one(stub, job, what.frame, outputs, c);
+    if (c.json)
+      std::fprintf(c.out, "%s\n",
+                   nlohmann::json{{"job", job},
+                                  {"frame", what.frame ? nlohmann::json(*what.frame) : nlohmann::json(nullptr)},
+                                  {"files", files_of(what.frame)}}
+                       .dump()
+                       .c_str());
     return 0;
   }
   v1::JobId req;
@@ -289,9 +303,16 @@ int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const 
       if (out.find('#') == std::string::npos)
         throw FarmError("--all: several frames need a #### in every -f path (got '" + out + "')");
   int written = 0;
+  nlohmann::json frames = nlohmann::json::array();
   for (const v1::FrameStatus& f : s.frames())
-    if (f.state() == v1::JobStatus::DONE) written += fetch_one(stub, job, f.frame(), outputs, c, true);
-  if (!c.json)
+    if (f.state() == v1::JobStatus::DONE && fetch_one(stub, job, f.frame(), outputs, c, true)) {
+      ++written;
+      frames.push_back({{"frame", f.frame()}, {"files", files_of(f.frame())}});
+    }
+  if (c.json)
+    std::fprintf(c.out, "%s\n",
+                 nlohmann::json{{"job", job}, {"frames_total", s.frames_size()}, {"written", frames}}.dump().c_str());
+  else
     std::fprintf(c.err, "%d of %d frames finished and written%s\n", written, s.frames_size(),
                  written < s.frames_size() ? (" (the others: " + describe_frames(s) + ")").c_str() : "");
   return 0;

@@ -116,7 +116,9 @@ std::function<int()> add_render_command(CLI::App& app, const std::string& comman
   args->command_line = command_line;
   CLI::App* cmd = app.add_subcommand("render", "Render a scene in this process");
   add_render_flags(cmd, args->flags);
-  cmd->add_option("-t", args->threads, "Threads (0 = all cores)")->capture_default_str()->check(CLI::Range(0, 1024));
+  cmd->add_option("-t,--threads", args->threads, "Threads (0 = all cores)")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1024));
   cmd->add_option("--stats-json", args->stats_json, "Write timing figures as JSON");
   cmd->add_flag("-q,--quiet", args->quiet, "No progress output");
   return [args, cmd] {

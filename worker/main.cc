@@ -20,7 +20,7 @@ int main(int argc, char** argv) {
   app.add_option("--coordinator", opt.coordinator, "coordinator gRPC address HOST:PORT (else $TESSERA_COORDINATOR)")
       ->envname("TESSERA_COORDINATOR")
       ->required();
-  app.add_option("--threads", opt.threads, "render threads (0 = every core)")
+  app.add_option("-t,--threads", opt.threads, "render threads (0 = every core)")
       ->capture_default_str()
       ->check(CLI::Range(0, 1024));
   app.add_option("--cache", opt.cache_dir, "scene cache directory")->capture_default_str();

@@ -193,6 +193,21 @@ TEST_F(Cli, EveryBinaryHasVersionAndAUsageErrorExitsTwo) {
   EXPECT_EQ(run("--help").code, 0);
 }
 
+// One spelling per option: threads are -t or --threads for tessera render and the worker.
+TEST_F(Cli, ThreadsAreSpelledAlikeEverywhere) {
+  EXPECT_EQ(run("render " + scene + " -s 1 -r 16 12 -q --threads 1 -f " + (dir / "a.exr").string()).code, 0);
+  EXPECT_EQ(run("render " + scene + " -s 1 -r 16 12 -q -t 1 -f " + (dir / "b.exr").string()).code, 0);
+  const std::string worker = std::string(TESSERA_BIN_DIR) + "/tessera-worker";
+  for (const std::string flag : {"-t", "--threads"}) {
+    const CommandResult h = run_line(worker + " --help");
+    EXPECT_NE(h.out.find("-t,--threads"), std::string::npos) << h.out;
+    // A bad count is refused naming the option under either spelling (so both parse).
+    const CommandResult bad = run_line(worker + " --coordinator 127.0.0.1:1 " + flag + " -3");
+    EXPECT_EQ(bad.code, 2) << bad.err;
+    EXPECT_NE(bad.err.find("threads"), std::string::npos) << bad.err;
+  }
+}
+
 // $TESSERA_COORDINATOR names the coordinator for every farm command (and the worker).
 TEST_F(Cli, TesseraCoordinatorNamesTheCoordinator) {
   const CommandResult r = run_line("TESSERA_COORDINATOR=127.0.0.1:1 " + std::string(TESSERA_BIN_DIR) + "/tessera jobs");

@@ -66,9 +66,14 @@ TEST_F(Farm, ASequenceThroughAFarmLosingAWorkerGivesEveryFrameOfTesseraRender) {
   EXPECT_NE(w.out.find("frames 4/4"), std::string::npos) << w.out;
   const CommandResult st = run("status " + id + " --coordinator " + grpc_addr, dir);
   EXPECT_NE(st.out.find("frames: done 1-4"), std::string::npos) << st.out;
-  const CommandResult all =
-      run("fetch " + id + " --all -f " + (dir / "farm.####.exr").string() + " --coordinator " + grpc_addr, dir);
+  const CommandResult all = run(
+      "fetch " + id + " --all -f " + (dir / "farm.####.exr").string() + " --coordinator " + grpc_addr + " --json", dir);
   ASSERT_EQ(all.code, 0) << all.err;
+  const nlohmann::json fetched = nlohmann::json::parse(all.out);  // (it printed nothing with --json)
+  EXPECT_EQ(fetched.at("frames_total"), 4);
+  ASSERT_EQ(fetched.at("written").size(), 4u);
+  EXPECT_EQ(fetched.at("written").at(1).at("frame"), 2);
+  EXPECT_EQ(fetched.at("written").at(1).at("files").at(0), (dir / "farm.0002.exr").string());
   for (int n = 1; n <= 4; ++n) {
     char name[32];
     std::snprintf(name, sizeof name, "farm.%04d.exr", n);
@@ -84,10 +89,13 @@ TEST_F(Farm, ASequenceThroughAFarmLosingAWorkerGivesEveryFrameOfTesseraRender) {
       http.Get(("/jobs/" + seq.at("frames").at(1).at("job_id").get<std::string>() + "/preview.png").c_str());
   ASSERT_TRUE(preview && preview->status == 200);
   EXPECT_EQ(preview->body.substr(1, 3), "PNG");
-  const CommandResult one =
-      run("fetch " + id + " --frame 2 -f " + (dir / "two.png").string() + " --coordinator " + grpc_addr, dir);
+  const CommandResult one = run(
+      "fetch " + id + " --frame 2 -f " + (dir / "two.png").string() + " --coordinator " + grpc_addr + " --json", dir);
   EXPECT_EQ(one.code, 0) << one.err;
   EXPECT_TRUE(fs::exists(dir / "two.png"));
+  const nlohmann::json got = nlohmann::json::parse(one.out);
+  EXPECT_EQ(got.at("frame"), 2);
+  EXPECT_EQ(got.at("files"), nlohmann::json::array({(dir / "two.png").string()}));
   const CommandResult none =
       run("fetch " + id + " -f " + (dir / "x.exr").string() + " --coordinator " + grpc_addr, dir);
   EXPECT_NE(none.code, 0);
