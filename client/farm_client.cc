@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 #include <set>
 
+#include "client/cli_json.h"
 #include "client/image_download.h"
 #include "client/progress.h"
 #include "core/io/files.h"
@@ -115,7 +116,7 @@ bool fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::op
                const std::vector<std::string>& outputs, const FarmContext& c, bool final = false);
 
 void print_status(const v1::JobStatus& s, const FarmContext& c) {
-  std::fprintf(c.out, "%s\n", c.json ? proto_json(s).c_str() : describe(s).c_str());
+  std::fprintf(c.out, "%s\n", c.json ? cli_json(s).c_str() : describe(s).c_str());
 }
 
 // Streams progress until the job ends; returns its final status. A lost connection (the
@@ -194,7 +195,7 @@ int list_jobs(v1::Tessera::StubInterface& stub, const FarmContext& c) {
     if (page.next_page_token().empty()) break;
     req.set_page_token(page.next_page_token());
   }
-  if (c.json) std::fprintf(c.out, "%s\n", proto_json(all).c_str());
+  if (c.json) std::fprintf(c.out, "%s\n", cli_json(all).c_str());
   return 0;
 }
 
@@ -205,7 +206,7 @@ int show_status(v1::Tessera::StubInterface& stub, const std::string& job, const 
   v1::JobStatus s;
   check(stub.GetJob(deadline(c).get(), req, &s), c);
   if (c.json)
-    std::fprintf(c.out, "%s\n", proto_json(s).c_str());
+    std::fprintf(c.out, "%s\n", cli_json(s).c_str());
   else
     std::fprintf(c.out, "%s\n  elapsed %s, eta %s, %llu of %llu samples\n", describe(s).c_str(),
                  format_duration(s.elapsed_seconds()).c_str(), format_duration(s.eta_seconds()).c_str(),
@@ -352,7 +353,7 @@ int delete_job(v1::Tessera::StubInterface& stub, const std::string& job, const F
   v1::DeleteJobResponse r;
   check(stub.DeleteJob(deadline(c, 300).get(), req, &r), c);  // (waits for a write under way to stop)
   if (c.json)
-    std::fprintf(c.out, "%s\n", proto_json(r).c_str());
+    std::fprintf(c.out, "%s\n", cli_json(r).c_str());
   else
     std::fprintf(c.out, "job %s deleted (%.1f MB freed)\n", r.id().c_str(), double(r.bytes_freed()) / 1e6);
   return 0;
@@ -396,7 +397,7 @@ std::string upload_scene(v1::Tessera::StubInterface& stub, const SceneSource& sc
 int report_submitted(const std::string& id, const v1::JobStatus& final, const std::vector<std::string>& outputs,
                      const FarmContext& c) {
   if (c.json) {
-    std::fprintf(c.out, "%s\n", proto_json(final).c_str());
+    std::fprintf(c.out, "%s\n", cli_json(final).c_str());
   } else {
     std::fprintf(c.out, "%s: %s in %.2f s, %llu samples -> ", id.c_str(), state_name(final.state()),
                  final.elapsed_seconds(), (unsigned long long) final.samples_done());

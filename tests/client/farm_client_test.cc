@@ -347,6 +347,9 @@ TEST_F(FarmClient, SubmitWaitsAndWritesTheLocalImageThenListsStatusAndFetch) {
   const nlohmann::json final = nlohmann::json::parse(out.text());
   EXPECT_EQ(final["state"], "DONE");
   EXPECT_EQ(final["name"], "cornell");
+  // 64-bit counts are JSON numbers (protobuf's own JSON writes them as strings).
+  EXPECT_TRUE(final["samples_done"].is_number_unsigned()) << final["samples_done"];
+  EXPECT_EQ(final["samples_done"], final["samples_total"]);
   const std::string id = final["id"];
   // The image is `tessera render`'s, in every channel.
   const Scene scene = load_scene(r.flags.scene);

@@ -47,7 +47,7 @@ TEST_F(Lifecycle, ARequeueSurvivesAKillAfterItsRecordAndTheImageIsTheLocalOne) {
   const std::string id = first_line(sub.out);
   for (int i = 0; i < 400; ++i) {  // some samples in, not all
     const CommandResult s = tessera("status " + id + " --json");
-    if (s.code == 0 && nlohmann::json::parse(first_line(s.out)).value("samples_done", "0") != "0") break;
+    if (s.code == 0 && nlohmann::json::parse(first_line(s.out)).value("samples_done", uint64_t(0)) != 0) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(25));
   }
   ASSERT_EQ(tessera("cancel " + id).code, 0);

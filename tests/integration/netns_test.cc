@@ -159,8 +159,7 @@ TEST_F(NetnsFarm, TwoMachinesRenderTheLocalImageAndOneLosingItsLinkChangesNothin
   nlohmann::json st;
   for (int i = 0; i < 600; ++i) {
     st = nlohmann::json::parse(tessera("status " + id + " --json --coordinator " + addr));
-    if (std::stoull(st["samples_done"].get<std::string>()) * 5 > std::stoull(st["samples_total"].get<std::string>()))
-      break;
+    if (st["samples_done"].get<uint64_t>() * 5 > st["samples_total"].get<uint64_t>()) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   }
   ASSERT_EQ(st["state"], "RUNNING") << st.dump();
