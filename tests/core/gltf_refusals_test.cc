@@ -249,6 +249,24 @@ TEST_F(Gltf, TrianglesOverTheBudgetAreRefusedBeforeExpansion) {
   expect_error(d, "nodes: the scene expands to 160000000 triangles");
 }
 
+// EXT_mesh_gpu_instancing: real instances store the mesh once, so 3 instances of a mesh of
+// 40 M (declared) triangles pass the budget (and fail later, on the buffer that does not
+// hold them); in a file with animations they would be copies: 120 M, refused.
+TEST_F(Gltf, RealInstancesCountTheirMeshOnceCopiesEachTime) {
+  Doc d;
+  d.j["accessors"][3]["count"] = 3 * 40'000'000;  // declared; never read
+  d.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"] = {{"TRANSLATION", 0}};  // 3
+  d.j["extensionsUsed"] = {"EXT_mesh_gpu_instancing"};
+  try {
+    load(d);
+    FAIL() << "loaded";
+  } catch (const SceneError& e) {
+    EXPECT_EQ(std::string(e.what()).find("the scene expands to"), std::string::npos) << e.what();
+  }
+  d.j["animations"] = json::array({{{"channels", json::array()}, {"samplers", json::array()}}});
+  expect_error(d, "nodes: the scene expands to 120000000 triangles");
+}
+
 TEST_F(Gltf, HierarchyDeeperThanTheLimitIsRefused) {
   Doc d;
   for (int i = 0; i < 300; ++i) d.j["nodes"].push_back({{"children", {int(d.j["nodes"].size()) - 1}}});

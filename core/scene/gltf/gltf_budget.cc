@@ -33,7 +33,10 @@ class Budget {
       const tinygltf::Node& n = ctx_.model.nodes[size_t(index)];
       Count c;
       c.visits = 1;
-      if (n.mesh >= 0) c.triangles = mesh_triangles(n.mesh) * instances(n);
+      // EXT_mesh_gpu_instancing's instances are copies only where a pose moves them (a file
+      // with animations, a skinned node: gltf_nodes); else the mesh is stored once.
+      const bool copied = !ctx_.model.animations.empty() || n.skin >= 0;
+      if (n.mesh >= 0) c.triangles = mesh_triangles(n.mesh) * (copied ? instances(n) : 1);
       for (int child : n.children) {
         const Count k = node(child, depth + 1);
         c.visits += k.visits;
