@@ -179,19 +179,43 @@ std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::strin
   return v1::Tessera::NewStub(coordinator_channel(address, access));
 }
 
+// `tessera jobs`' table, one row per job under a header (as kubectl's): fixed widths, so
+// that pages print as they come.
+const char* const kJobsHeader =
+    "ID                STATE      PROGRESS  FRAMES      PRIORITY  OWNER         WORKERS  ELAPSED   ETA       NAME";
+std::string job_row(const v1::JobStatus& s) {
+  char progress[16], frames[24], buf[512];
+  std::snprintf(progress, sizeof progress, "%.1f%%",
+                100.0 * double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total())));
+  if (s.frames_total() > 0)
+    std::snprintf(frames, sizeof frames, "%u/%u", s.frames_done(), s.frames_total());
+  else
+    std::snprintf(frames, sizeof frames, "-");
+  const bool live = s.state() == v1::JobStatus::QUEUED || s.state() == v1::JobStatus::RUNNING;
+  std::snprintf(buf, sizeof buf, "%-16s  %-9s  %-8s  %-10s  %-8d  %-12s  %-7u  %-8s  %-8s  %s", s.id().c_str(),
+                state_name(s.state()), progress, frames, s.priority(), s.owner().empty() ? "-" : s.owner().c_str(),
+                s.active_workers(), format_duration(s.elapsed_seconds()).c_str(),
+                live && s.eta_seconds() > 0 ? format_duration(s.eta_seconds()).c_str() : "-", s.name().c_str());
+  return buf;
+}
+
 int list_jobs(v1::Tessera::StubInterface& stub, const FarmContext& c) {
   // A page at a time (a farm keeps thousands of jobs), each printed as it comes.
   v1::ListJobsRequest req;
   req.set_page_size(kListPageSize);
   v1::JobList all;
+  bool header = c.no_headers;  // printed, or not wanted
   for (;;) {
     v1::JobList page;
     check(stub.ListJobs(deadline(c).get(), req, &page), c);
     for (const auto& s : page.jobs())
-      if (c.json)
+      if (c.json) {
         *all.add_jobs() = s;
-      else
-        std::fprintf(c.out, "%s\n", describe(s).c_str());
+      } else {
+        if (!header) std::fprintf(c.out, "%s\n", kJobsHeader);
+        header = true;
+        std::fprintf(c.out, "%s\n", job_row(s).c_str());
+      }
     if (page.next_page_token().empty()) break;
     req.set_page_token(page.next_page_token());
   }

@@ -33,6 +33,7 @@ struct FarmContext {
   // How long watching a job (watch, submit --wait) keeps reconnecting to a coordinator
   // that went away before giving up.
   double reconnect_seconds = 300;
+  bool no_headers = false;  // `tessera jobs`: rows only (kubectl's --no-headers)
   // A scene is sent in pieces of at most this many bytes (tests send small ones).
   size_t scene_chunk_bytes = size_t(1) << 20;
 };

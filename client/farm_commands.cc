@@ -62,7 +62,8 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
   add("status", "Show one job, or every job", job_arg(false),
       [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return show_status(stub, *job, c); });
   add(
-      "jobs", "List jobs", [](CLI::App*, FarmContext&) {},
+      "jobs", "List jobs (a table under a header; --no-headers: rows only)",
+      [](CLI::App* cmd, FarmContext& c) { cmd->add_flag("--no-headers", c.no_headers, "rows only, for scripts"); },
       [](v1::Tessera::StubInterface& stub, const FarmContext& c) { return list_jobs(stub, c); });
   add("watch", "Show a job's progress until it ends", job_arg(true),
       [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return watch_job(stub, *job, c); });

@@ -72,7 +72,7 @@ std::vector<Archival> Archive::due(double now, size_t limit) {
     std::vector<std::string> done;
     if (s->state() == v1::JobStatus::DONE)
       for (size_t i = 0; i < s->frames.size(); ++i) done.push_back(s->frame_job_id(i));
-    out.push_back({id, s->status(now, {}, true).SerializeAsString(), merged_list(merged), done, nullptr, s});
+    out.push_back({id, s->status(now, 0, true).SerializeAsString(), merged_list(merged), done, nullptr, s});
   }
   for (const auto& [id, j] : jobs_.jobs()) {
     if (out.size() >= limit) return out;

@@ -78,7 +78,7 @@ uint64_t Sequence::samples_merged() const {
   return n;
 }
 
-v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>& workers, bool with_frames) const {
+v1::JobStatus Sequence::status(double now, uint32_t workers, bool with_frames) const {
   v1::JobStatus s;
   s.set_id(meta.id);
   s.set_name(meta.name);
@@ -89,7 +89,7 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
   s.set_frames_total(uint32_t(frames.size()));
   s.set_passes_total(uint32_t(settings.passes().size()));
   uint64_t done = 0, total = 0;
-  uint32_t tiles_done = 0, frames_done = 0, active = 0;
+  uint32_t tiles_done = 0, frames_done = 0;
   std::string e = error;
   for (size_t i = 0; i < frames.size(); ++i) {
     const Job* j = jobs[i].get();
@@ -104,7 +104,6 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
     } else if (j) {
       tiles_done += j->plan.tiles_done();
       frames_done += j->reported_state() == v1::JobStatus::DONE;
-      if (auto w = workers.find(j->id()); w != workers.end()) active += w->second;
       for (const std::string* why : {&j->image_error, &j->checkpoint_error})
         if (!why->empty()) e += (e.empty() ? "" : "; ") + ("frame " + std::to_string(frames[i]) + ": ") + *why;
     }
@@ -128,7 +127,7 @@ v1::JobStatus Sequence::status(double now, const std::map<std::string, uint32_t>
   s.set_tiles_total(uint32_t(std::min<uint64_t>(UINT32_MAX, uint64_t(frame_tiles()) * frames.size())));
   s.set_frames_done(frames_done);
   s.set_frame_passes_done(reported_state() == v1::JobStatus::DONE ? s.passes_total() : 0);
-  s.set_active_workers(active);
+  s.set_active_workers(workers);
   const double elapsed = started > 0 ? (live() ? now : finished_at) - started : 0;
   s.set_elapsed_seconds(elapsed);
   const double f = total ? double(done) / double(total) : 0;

@@ -156,8 +156,8 @@ struct Sequence {
   bool live() const { return job_live(state_); }
   bool ended_durably() const { return !live() && end_recorded; }  // as Job's
   State reported_state() const { return live() || end_recorded ? state_ : v1::JobStatus::RUNNING; }
-  // `workers`: with live leases on each frame's job (by id).
-  v1::JobStatus status(double now, const std::map<std::string, uint32_t>& workers, bool with_frames) const;
+  // `workers`: distinct workers with live leases on any of its frames.
+  v1::JobStatus status(double now, uint32_t workers, bool with_frames) const;
 
  private:
   friend class JobLifecycle;

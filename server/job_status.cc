@@ -1,6 +1,8 @@
 #include "server/job_status.h"
 
 #include <algorithm>
+#include <set>
+#include <string>
 
 #include "server/request_error.h"
 
@@ -9,10 +11,10 @@ namespace tessera {
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
                          double now, TileRange range) {
   if (const Sequence* s = jobs.find_sequence(id)) {
-    std::map<std::string, uint32_t> workers;  // per live frame
+    std::set<std::string> live;  // its live frames: a worker on several counts once
     for (const auto& j : s->jobs)
-      if (j && j->live()) workers[j->id()] = leases.workers_on(j->id());
-    return s->status(now, workers, true);
+      if (j && j->live()) live.insert(j->id());
+    return s->status(now, leases.workers_on(live), true);
   }
   if (!jobs.find_job(id))
     if (const auto gone = jobs.left_frame(id)) return left_frame_status(*gone->sequence, gone->index);

@@ -63,10 +63,12 @@ std::vector<uint64_t> LeaseTable::held_by(uint64_t worker) const {
   return out;
 }
 
-uint32_t LeaseTable::workers_on(const std::string& job) const {
+uint32_t LeaseTable::workers_on(const std::string& job) const { return workers_on(std::set<std::string>{job}); }
+
+uint32_t LeaseTable::workers_on(const std::set<std::string>& jobs) const {
   std::set<uint64_t> w;
   for (const auto& [id, l] : live_)
-    if (l.job == job) w.insert(l.worker);
+    if (jobs.count(l.job)) w.insert(l.worker);
   return uint32_t(w.size());
 }
 

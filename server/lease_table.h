@@ -7,6 +7,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -49,6 +50,8 @@ class LeaseTable {
   std::vector<uint64_t> held_by(uint64_t worker) const;
   // Live leases of a job: how many distinct workers hold them.
   uint32_t workers_on(const std::string& job) const;
+  // The same over several jobs (a sequence's frames): a worker on two frames counts once.
+  uint32_t workers_on(const std::set<std::string>& jobs) const;
   size_t live_count() const { return live_.size(); }
   const std::map<uint64_t, Lease>& live_leases() const { return live_; }  // oldest (lowest id) first
 

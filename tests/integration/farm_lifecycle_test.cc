@@ -93,7 +93,14 @@ TEST_F(Lifecycle, ADeleteSurvivesAKillAfterItsRecordAndTheDataFolderShrinksBack)
   const std::string a = (dir / "a.exr").string(), b = (dir / "b.exr").string();
   ASSERT_EQ(submit_wait(kScene, kFlags, a).code, 0);
   ASSERT_EQ(submit_wait(kScene, kFlags + std::string(" --frames 1-2"), (dir / "b.####.exr").string()).code, 0);
-  const CommandResult list = tessera("jobs");
+  // kubectl's way: a header over the rows, --no-headers for scripts.
+  const CommandResult table = tessera("jobs");
+  ASSERT_EQ(table.code, 0);
+  EXPECT_EQ(first_line(table.out).rfind("ID ", 0), 0u) << table.out;
+  for (const char* column : {"STATE", "PROGRESS", "FRAMES", "PRIORITY", "OWNER", "WORKERS", "ELAPSED", "ETA", "NAME"})
+    EXPECT_NE(first_line(table.out).find(column), std::string::npos) << column;
+  EXPECT_NE(table.out.find("  2/2  "), std::string::npos) << table.out;  // the sequence's frames
+  const CommandResult list = tessera("jobs --no-headers");
   ASSERT_EQ(list.code, 0);
   std::vector<std::string> ids;
   for (std::istringstream in(list.out); std::getline(in, ids.emplace_back(), ' ');) in.ignore(1 << 20, '\n');
@@ -123,7 +130,7 @@ TEST_F(Lifecycle, EndedJobsGoAfterKeepEnded) {
   start_worker(2);
   const std::string out = (dir / "farm.exr").string();
   ASSERT_EQ(submit_wait(kScene, kFlags, out).code, 0);
-  const std::string id = first_line(tessera("jobs").out).substr(0, 16);
+  const std::string id = first_line(tessera("jobs --no-headers").out).substr(0, 16);
   EXPECT_EQ(state_of(id), "DONE");
   bool gone = false;
   for (int i = 0; i < 200 && !gone; ++i, std::this_thread::sleep_for(std::chrono::milliseconds(50)))

@@ -67,6 +67,18 @@ TEST_F(JobStatusTest, AStillsErrorSaysWhyItsImageIsMissing) {
   EXPECT_EQ(status(job->id()).error(), "image not written: disk full; checkpoint not written: read-only");
 }
 
+// One worker on two frames of a sequence is one worker (the sum per frame counted it twice).
+TEST_F(JobStatusTest, AWorkerOnTwoFramesOfASequenceCountsOnce) {
+  Sequence& s = add_sequence({1, 2}, testing::small_settings(), "ann");
+  Job& one = start_frame(s);
+  Job& two = start_frame(s);
+  lease_next(one, a);
+  lease_next(two, a);
+  EXPECT_EQ(status(s.id()).active_workers(), 1u);
+  lease_next(two, b);
+  EXPECT_EQ(status(s.id()).active_workers(), 2u);
+}
+
 TEST_F(JobStatusTest, ASequencesStatusHasEveryFrame) {
   Sequence& s = add_sequence({3, 4, 5}, testing::small_settings(), "ann");
   Job& three = start_frame(s);
