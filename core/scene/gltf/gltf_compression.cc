@@ -2,6 +2,7 @@
 
 #include <meshoptimizer.h>
 
+#include <cmath>
 #include <cstring>
 #include <memory>
 #include <string>
@@ -25,9 +26,11 @@ uint64_t field(const GltfContext& ctx, const tinygltf::Value& ext, const char* k
     return uint64_t(fallback);
   }
   const tinygltf::Value& v = ext.Get(key);
-  if (!v.IsNumber() || v.GetNumberAsDouble() < 0 || v.GetNumberAsDouble() != double(int64_t(v.GetNumberAsDouble())))
-    ctx.fail(el, std::string(key) + " is not a non-negative integer");
-  return uint64_t(v.GetNumberAsDouble());
+  // (Range first: converting a double beyond 2^63 to an integer is undefined, fuzz_gltf
+  // found 3e116.)
+  const double d = v.IsNumber() ? v.GetNumberAsDouble() : -1;
+  if (!(d >= 0 && d < 0x1p63) || d != std::floor(d)) ctx.fail(el, std::string(key) + " is not a non-negative integer");
+  return uint64_t(d);
 }
 std::string text(const tinygltf::Value& ext, const char* key, const char* fallback) {
   return ext.Has(key) && ext.Get(key).IsString() ? ext.Get(key).Get<std::string>() : fallback;
