@@ -49,9 +49,20 @@ const char* state_name(v1::JobStatus::State s) { return v1::JobStatus::State_Nam
 
 bool ended(const v1::JobStatus& s) { return !job_live(s.state()); }
 
+double percent_done(const v1::JobStatus& s) {
+  return 100.0 * double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total()));
+}
+
+// The files the -f paths name for a frame (#### becomes its number), or for a still.
+std::vector<std::string> frame_files(const std::vector<std::string>& outputs, std::optional<int> frame) {
+  std::vector<std::string> paths;
+  for (const std::string& out : outputs) paths.push_back(frame ? frame_path(out, *frame) : out);
+  return paths;
+}
+
 std::string describe(const v1::JobStatus& s) {
   char buf[512];
-  const double percent = 100.0 * double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total()));
+  const double percent = percent_done(s);
   if (s.frames_total() > 0)
     std::snprintf(buf, sizeof buf, "%s  %-9s %5.1f%%  frames %u/%u  tiles %u/%u  workers %u  %s", s.id().c_str(),
                   state_name(s.state()), percent, s.frames_done(), s.frames_total(), s.tiles_done(), s.tiles_total(),
@@ -185,8 +196,7 @@ const char* const kJobsHeader =
     "ID                STATE      PROGRESS  FRAMES      PRIORITY  OWNER         WORKERS  ELAPSED   ETA       NAME";
 std::string job_row(const v1::JobStatus& s) {
   char progress[16], frames[24], buf[512];
-  std::snprintf(progress, sizeof progress, "%.1f%%",
-                100.0 * double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total())));
+  std::snprintf(progress, sizeof progress, "%.1f%%", percent_done(s));
   if (s.frames_total() > 0)
     std::snprintf(frames, sizeof frames, "%u/%u", s.frames_done(), s.frames_total());
   else
@@ -269,8 +279,7 @@ bool fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::op
   v1::FetchImageRequest req;
   req.set_id(job);
   if (frame) req.set_frame(*frame);
-  std::vector<std::string> paths;
-  for (const std::string& out : outputs) paths.push_back(frame ? frame_path(out, *frame) : out);
+  const std::vector<std::string> paths = frame_files(outputs, frame);
   // A lost connection (the coordinator restarting just as the job ended) is retried with
   // back-off for up to c.reconnect_seconds, as watching is, resuming where it was cut.
   Backoff backoff(Backoff::kClientFirstSeconds);
@@ -302,11 +311,7 @@ int fetch_image(v1::Tessera::StubInterface& stub, const std::string& job, const 
   check_outputs(outputs);
   if (what.all && what.frame) throw FarmError("give --frame N or --all, not both");
   // --json: what was written, as one object (numbers as numbers).
-  auto files_of = [&](std::optional<int> frame) {
-    nlohmann::json files = nlohmann::json::array();
-    for (const std::string& out : outputs) files.push_back(frame ? frame_path(out, *frame) : out);
-    return files;
-  };
+  auto files_of = [&](std::optional<int> frame) { return nlohmann::json(frame_files(outputs, frame)); };
   if (!what.all) {
     fetch_one(stub, job, what.frame, outputs, c);
     if (c.json)

@@ -18,7 +18,8 @@ struct Hit {
   Vec3 ng;             // unnormalised geometric normal (triangle winding / sphere outward)
   uint32_t shape = 0;  // mesh index, or sphere index when is_sphere
   uint32_t prim = 0;   // triangle index within the mesh
-  int32_t instance = -1;  // Scene::instances index of an instanced mesh's hit (ng in its object space)
+  // Scene::instances index of an instanced mesh's hit (ng then in its object space), or -1.
+  int32_t instance = -1;
   bool is_sphere = false;
 };
 

@@ -315,7 +315,7 @@ constexpr float kCoatF0 = 0.04f;  // ((1.5 - 1) / (1.5 + 1))^2
 // shading frame). Its lobe and Fresnel are those of a coat whose normal is z in the coat's
 // frame; without a map the vectors pass unturned.
 struct CoatFrame {
-  explicit CoatFrame(const Material& m) : tilted(m.coat_normal.z < 1), f(m.coat_normal) {}
+  explicit CoatFrame(const Material& m) : tilted(m.coat_normal.z < 1), f(tilted ? Frame(m.coat_normal) : Frame()) {}
   Vec3 in(Vec3 v) const { return tilted ? f.to_local(v) : v; }
   Vec3 out(Vec3 v) const { return tilted ? f.to_world(v) : v; }
   bool tilted;

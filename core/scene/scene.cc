@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -41,12 +42,17 @@ Bounds Scene::object_bounds() const {
     if (m.instanced || (m.light >= 0 && lights[m.light].kind == Light::Kind::kRect)) continue;
     for (uint32_t i : m.indices) b.extend(m.positions[i]);
   }
+  // Each instanced mesh's vertices that triangles use, found once however many instances.
+  std::vector<std::vector<uint32_t>> used(meshes.size());
   for (const Instance& in : instances) {
     const Mesh& m = meshes[in.mesh];
-    std::vector<bool> used(m.positions.size());
-    for (uint32_t i : m.indices) used[i] = true;
-    for (size_t i = 0; i < used.size(); ++i)
-      if (used[i]) b.extend(in.point(m.positions[i]));
+    std::vector<uint32_t>& u = used[in.mesh];
+    if (u.empty()) {
+      u = m.indices;
+      std::sort(u.begin(), u.end());
+      u.erase(std::unique(u.begin(), u.end()), u.end());
+    }
+    for (uint32_t i : u) b.extend(in.point(m.positions[i]));
   }
   for (const Sphere& s : spheres) {
     b.extend(s.center - Vec3{s.radius, s.radius, s.radius});
@@ -124,10 +130,15 @@ void Scene::finalize() {
   for (const Mesh& m : meshes)
     for (size_t v = 0; v < m.positions.size(); ++v)
       check_point(m.positions[v], "mesh '" + m.name + "'", "vertex " + std::to_string(v));
-  for (size_t k = 0; k < instances.size(); ++k) {  // each placed box's corners
+  std::vector<std::optional<Bounds>> boxes(meshes.size());  // each instanced mesh's, once
+  for (size_t k = 0; k < instances.size(); ++k) {           // each placed box's corners
     const Instance& in = instances[k];
-    Bounds box;
-    for (const Vec3& p : meshes[in.mesh].positions) box.extend(p);
+    std::optional<Bounds>& box_of = boxes[in.mesh];
+    if (!box_of) {
+      box_of.emplace();
+      for (const Vec3& p : meshes[in.mesh].positions) box_of->extend(p);
+    }
+    const Bounds& box = *box_of;
     if (box.empty()) continue;
     for (int c = 0; c < 8; ++c)
       check_point(in.point({c & 1 ? box.hi.x : box.lo.x, c & 2 ? box.hi.y : box.lo.y, c & 4 ? box.hi.z : box.lo.z}),

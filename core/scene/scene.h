@@ -52,7 +52,8 @@ struct Material {
   float metallic = 0;      // 0 dielectric .. 1 metal (continuous)
   float roughness = 1;     // perceptual; alpha = roughness^2
   float transmission = 0;  // KHR_materials_transmission: the dielectric part's share that transmits
-  TextureRef transmission_texture;  // its R channel scales `transmission` (linear)
+  // Its R channel scales `transmission` (linear).
+  TextureRef transmission_texture;
   // KHR_materials_volume: a solid (refracting, Beer-Lambert absorption `absorption` per unit
   // length inside) rather than thin-walled (transmission passes without bending).
   bool thin = true;

@@ -126,68 +126,58 @@ Scene normal_mapped_quad(const std::vector<Tangent>& tangents = {}) {
   return s;
 }
 
-TEST(PbrRender, NormalMapTurnsTheShadingNormalInTangentSpace) {
-  Scene s = normal_mapped_quad();  // T = dp/du = +x
-  const Material m = s.materials[0];
+// The quad's shading normal at barycentrics (0.3, 0.2), seen from above, after its normal map.
+Hit quad_hit() {
   Hit hit;
-  hit.shape = 0;
-  hit.prim = 0;
   hit.u = 0.3f;
   hit.v = 0.2f;
   hit.t = 1;
-  Ray ray;
-  ray.o = {0, 0, 1};
-  ray.d = {0, 0, -1};
+  return hit;
+}
+Vec3 mapped_normal_at(const Scene& s, const Hit& hit) {
+  const Ray ray{{0, 0, 1}, {0, 0, -1}, 0, 10};
   SurfacePoint sp = make_surface_point(s, ray, hit);
-  apply_normal_map(s, m, hit, &sp);
-  EXPECT_NEAR(sp.ns.x, 0.6f, 1e-5);
-  EXPECT_NEAR(sp.ns.y, 0.0f, 1e-5);
-  EXPECT_NEAR(sp.ns.z, 0.8f, 1e-5);
+  apply_normal_map(s, s.materials[0], hit, &sp);
+  return sp.ns;
+}
+
+TEST(PbrRender, NormalMapTurnsTheShadingNormalInTangentSpace) {
+  Scene s = normal_mapped_quad();  // T = dp/du = +x
+  const Hit hit = quad_hit();
+  Vec3 n = mapped_normal_at(s, hit);
+  EXPECT_NEAR(n.x, 0.6f, 1e-5);
+  EXPECT_NEAR(n.y, 0.0f, 1e-5);
+  EXPECT_NEAR(n.z, 0.8f, 1e-5);
   // Green is "up" in the image (v decreasing): +y here.
   s.textures[0].texels = {Rgb(0.5f, 0.5f * 0.6f + 0.5f, 0.5f * 0.8f + 0.5f)};
-  sp = make_surface_point(s, ray, hit);
-  apply_normal_map(s, m, hit, &sp);
-  EXPECT_NEAR(sp.ns.y, 0.6f, 1e-5);
+  EXPECT_NEAR(mapped_normal_at(s, hit).y, 0.6f, 1e-5);
   // A map that would turn the normal below the surface is ignored.
   s.textures[0].texels = {Rgb(1.0f, 0.5f, 0.0f)};
-  sp = make_surface_point(s, ray, hit);
-  apply_normal_map(s, m, hit, &sp);
-  EXPECT_NEAR(sp.ns.z, 1.0f, 1e-6);
+  EXPECT_NEAR(mapped_normal_at(s, hit).z, 1.0f, 1e-6);
 }
 
 // glTF TANGENT: the file's tangents give the frame (here turned 90 degrees from the
 // triangle's dp/du, and with each bitangent sign), also through a mirroring instance.
 TEST(PbrRender, FileTangentsGiveTheNormalMapsFrame) {
   Scene s = normal_mapped_quad(std::vector<Tangent>(4, Tangent{{0, 1, 0}, 1}));  // T = +y, not dp/du's +x
-  const Material m = s.materials[0];
-  Hit hit;
-  hit.u = 0.3f;
-  hit.v = 0.2f;
-  hit.t = 1;
-  const Ray ray{{0, 0, 1}, {0, 0, -1}, 0, 10};
-  SurfacePoint sp = make_surface_point(s, ray, hit);
-  apply_normal_map(s, m, hit, &sp);
-  EXPECT_NEAR(sp.ns.x, 0.0f, 1e-5);
-  EXPECT_NEAR(sp.ns.y, 0.6f, 1e-5);
-  EXPECT_NEAR(sp.ns.z, 0.8f, 1e-5);
+  Hit hit = quad_hit();
+  Vec3 n = mapped_normal_at(s, hit);
+  EXPECT_NEAR(n.x, 0.0f, 1e-5);
+  EXPECT_NEAR(n.y, 0.6f, 1e-5);
+  EXPECT_NEAR(n.z, 0.8f, 1e-5);
   // Green follows the bitangent cross(N, T) x sign: -x for sign 1, +x for -1.
   s.textures[0].texels = {Rgb(0.5f, 0.5f * 0.6f + 0.5f, 0.5f * 0.8f + 0.5f)};
-  sp = make_surface_point(s, ray, hit);
-  apply_normal_map(s, m, hit, &sp);
-  EXPECT_NEAR(sp.ns.x, -0.6f, 1e-5);
+  EXPECT_NEAR(mapped_normal_at(s, hit).x, -0.6f, 1e-5);
   for (Tangent& tg : s.meshes[0].tangents) tg.sign = -1;
-  sp = make_surface_point(s, ray, hit);
-  apply_normal_map(s, m, hit, &sp);
-  EXPECT_NEAR(sp.ns.x, 0.6f, 1e-5);
+  EXPECT_NEAR(mapped_normal_at(s, hit).x, 0.6f, 1e-5);
   // Placed by an instance mirrored in x: the tangent stays +y, the bitangent turns with
   // the mirror, so the world normal is the mirror image of the unmirrored one.
   s.meshes[0].instanced = true;
   s.instances.push_back(*Instance::make(0, Mat4::scale(-1, 1, 1)));
   hit.instance = 0;
-  sp = make_surface_point(s, ray, hit);
-  apply_normal_map(s, m, hit, &sp);
-  EXPECT_NEAR(sp.ns.x, -0.6f, 1e-5);
-  EXPECT_NEAR(sp.ns.z, 0.8f, 1e-5);
+  n = mapped_normal_at(s, hit);
+  EXPECT_NEAR(n.x, -0.6f, 1e-5);
+  EXPECT_NEAR(n.z, 0.8f, 1e-5);
 }
 
 // clearcoatNormalTexture: a smooth coat over a black base, seen straight down. Its normal
