@@ -20,14 +20,19 @@ std::string env(const char* name) {
 
 }  // namespace
 
+std::string read_token_file(const std::string& path) {
+  std::string token = trimmed(read_file_bytes(path));
+  if (token.empty()) throw std::runtime_error(path + ": no token in the file");
+  if (token.find_first_of(" \t\r\n") != std::string::npos)
+    throw std::runtime_error(path + ": a token file holds one token, on one line");
+  return token;
+}
+
 Access load_access(const std::string& token_file, const std::string& ca_file) {
   Access a;
   const std::string tf = token_file.empty() ? env("TESSERA_TOKEN_FILE") : token_file;
   if (!tf.empty()) {
-    a.token = trimmed(read_file_bytes(tf));
-    if (a.token.empty()) throw std::runtime_error(tf + ": no token in the file");
-    if (a.token.find_first_of(" \t\r\n") != std::string::npos)
-      throw std::runtime_error(tf + ": a token file holds one token, on one line");
+    a.token = read_token_file(tf);
   } else {
     a.token = trimmed(env("TESSERA_TOKEN"));
   }

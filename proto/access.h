@@ -20,6 +20,9 @@ struct Access {
 // $TESSERA_TLS_CA. Throws std::runtime_error naming a file that cannot be read or holds
 // no token.
 Access load_access(const std::string& token_file = "", const std::string& ca_file = "");
+// The one token a file holds (surrounding white space ignored). Throws std::runtime_error
+// naming the file.
+std::string read_token_file(const std::string& path);
 
 std::shared_ptr<grpc::ChannelCredentials> channel_credentials(const Access& access);
 // Adds the token to a call ("authorization: Bearer <token>").

@@ -5,22 +5,18 @@
 #include <sstream>
 
 #include "core/io/files.h"
+#include "server/credentials.h"
+#include "server/secrets.h"
 
 namespace tessera {
 namespace {
-
-std::string sha256(std::string_view s) {
-  unsigned char digest[EVP_MAX_MD_SIZE];
-  unsigned int n = 0;
-  EVP_Digest(s.data(), s.size(), digest, &n, EVP_sha256(), nullptr);
-  return std::string(reinterpret_cast<const char*>(digest), n);
-}
 
 std::optional<Role> parse_role(const std::string& s) {
   if (s == "viewer") return Role::kViewer;
   if (s == "client") return Role::kClient;
   if (s == "worker") return Role::kWorker;
   if (s == "admin") return Role::kAdmin;
+  if (s == "enrol") return Role::kEnrol;
   return std::nullopt;
 }
 
@@ -49,6 +45,8 @@ const char* role_name(Role role) {
       return "worker";
     case Role::kAdmin:
       return "admin";
+    case Role::kEnrol:
+      return "enrol";
   }
   return "?";
 }
@@ -75,7 +73,7 @@ Authenticator Authenticator::from_text(const std::string& text, const std::strin
     const std::string at = where + ":" + std::to_string(n) + ": ";
     if (!(words >> name >> token) || (words >> extra)) throw AuthConfigError(at + "expected ROLE NAME TOKEN");
     const std::optional<Role> r = parse_role(role);
-    if (!r) throw AuthConfigError(at + "unknown role '" + role + "' (viewer, client, worker or admin)");
+    if (!r) throw AuthConfigError(at + "unknown role '" + role + "' (viewer, client, worker, enrol or admin)");
     if (token.size() < kMinTokenLength)
       throw AuthConfigError(at + "token shorter than " + std::to_string(kMinTokenLength) + " characters");
     if (!a.tokens_.emplace(sha256(token), Principal{name, *r}).second)
@@ -89,9 +87,12 @@ std::optional<Principal> Authenticator::authenticate(std::string_view token) con
   if (!enabled()) return Principal{"", Role::kAdmin};
   if (token.empty()) return std::nullopt;
   // Looked up by digest: how long a comparison takes says nothing about the token.
-  auto it = tokens_.find(sha256(token));
-  if (it == tokens_.end()) return std::nullopt;
-  return it->second;
+  const std::string digest = sha256(token);
+  if (auto it = tokens_.find(digest); it != tokens_.end()) return it->second;
+  if (book_)
+    if (const std::optional<CredentialBook::Holder> h = book_->find(digest); h && !h->quarantined)
+      return Principal{h->name, Role::kWorker, true};
+  return std::nullopt;
 }
 
 std::string Authenticator::token_from_header(std::string_view v) {
@@ -113,6 +114,9 @@ std::string Authenticator::token_from_header(std::string_view v) {
 Authenticator::Check Authenticator::check(std::string_view authorization, Action action) const {
   const std::string token = token_from_header(authorization);
   const std::optional<Principal> p = authenticate(token);
+  if (!p && book_ && !token.empty())
+    if (const std::optional<CredentialBook::Holder> h = book_->find(sha256(token)); h && h->quarantined)
+      return {Check::kDenied, {}, "worker '" + h->name + "' is quarantined: " + h->why};
   if (!p)
     return {
         Check::kUnauthenticated,
@@ -128,11 +132,13 @@ bool Authenticator::allows(Role role, Action action) {
     case Role::kAdmin:
       return true;
     case Role::kClient:
-      return action != Action::kWork;
+      return action != Action::kWork && action != Action::kEnrol;
     case Role::kViewer:
       return action == Action::kRead;
     case Role::kWorker:
       return action == Action::kWork;
+    case Role::kEnrol:
+      return action == Action::kEnrol;
   }
   return false;
 }

@@ -5,6 +5,8 @@
 //   client   what a viewer may, and submit jobs; cancel, requeue, re-prioritise and delete
 //            its own
 //   worker   register, lease tasks, fetch scenes, return results; nothing else
+//   enrol    enrol workers: each gets a credential of its own (credentials.h), which then
+//            acts as a worker token for that worker only
 //   admin    everything, including changing or deleting anyone's job
 //
 // Without a token file every caller is an admin: the coordinator then listens on loopback
@@ -19,12 +21,16 @@
 
 namespace tessera {
 
-enum class Role { kViewer, kClient, kWorker, kAdmin };
-enum class Action { kRead, kSubmit, kCancel, kWork };  // kCancel: any change to a job after submit
+enum class Role { kViewer, kClient, kWorker, kAdmin, kEnrol };
+// kCancel: any change to a job after submit; kEnrol: a worker's credential made
+enum class Action { kRead, kSubmit, kCancel, kWork, kEnrol };
+
+class CredentialBook;
 
 struct Principal {
-  std::string name;  // from the token file: whose jobs are whose
+  std::string name;  // from the token file (whose jobs are whose), or an enrolled worker's
   Role role = Role::kAdmin;
+  bool enrolled = false;  // a worker's own credential, not a token from the file
 };
 
 class AuthConfigError : public std::runtime_error {
@@ -43,6 +49,9 @@ class Authenticator {
   static constexpr size_t kMinTokenLength = 16;
 
   bool enabled() const { return !tokens_.empty(); }
+  // Workers' own credentials are looked up in `book` too (after the file's tokens); a
+  // quarantined one is refused naming why. The book outlives this.
+  void use_credentials(CredentialBook* book) { book_ = book; }
   // The principal a token stands for; nothing if it stands for none. Open: the admin.
   std::optional<Principal> authenticate(std::string_view token) const;
   // The token in an "authorization" header or metadata value: "Bearer T", or HTTP Basic
@@ -61,6 +70,7 @@ class Authenticator {
 
  private:
   std::map<std::string, Principal> tokens_;  // SHA-256 of the token -> principal
+  CredentialBook* book_ = nullptr;
 };
 
 const char* role_name(Role role);

@@ -58,19 +58,14 @@ class CheckBook {
   }
 
   bool quarantined(uint64_t worker) const { return workers_.count(worker) > 0; }
-  bool quarantined(const std::string& principal) const { return principals_.count(principal) > 0; }
-  // False if the worker was already; its token name (if any) is refused from now on too.
-  bool quarantine(uint64_t worker, const std::string& principal) {
-    if (!workers_.insert(worker).second) return false;
-    if (!principal.empty()) principals_.insert(principal);
-    return true;
-  }
+  // False if the worker was already. (An enrolled worker's credential is quarantined in
+  // the CredentialBook; a token from the file, which many workers may share, never is.)
+  bool quarantine(uint64_t worker) { return workers_.insert(worker).second; }
 
  private:
   std::map<uint64_t, Check> checks_;
   uint64_t next_ = 1;
-  std::set<uint64_t> workers_;          // quarantined worker ids
-  std::set<std::string> principals_;    // their token names, refused at Register
+  std::set<uint64_t> workers_;  // quarantined worker ids
 };
 
 }  // namespace tessera

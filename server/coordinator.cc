@@ -29,6 +29,7 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
       clock_(std::move(clock)),
       sink_(sink ? std::move(sink) : std::make_unique<DiskImageSink>((fs::path(options_.data_dir) / "jobs").string())),
       store_(store ? std::move(store) : sqlite_store(options_)),
+      credentials_(*store_),
       scenes_((fs::path(options_.data_dir) / "scenes").string()),
       uploads_(scenes_, *clock_, options_.upload_kept_seconds),
       writer_(
@@ -89,6 +90,7 @@ void Coordinator::apply(Effects fx) {
       spdlog::error("worker {}: flagging the archived jobs that hold its results: {}", f.name, e.what());
     }
   for (const Archival& a : fx.archive) archive(a);
+  for (const auto& [name, why] : fx.credentials_quarantined) credentials_.quarantine(name, why);
   for (auto& [sequence, index] : fx.prepare) {
     std::shared_ptr<Job> job = SequenceScheduler::make_frame(*sequence, index);  // its films, outside the lock
     MutexLock lock(mu_);
@@ -278,9 +280,11 @@ uint64_t Coordinator::remove(const std::string& id, const std::string& requester
 
 // ---- workers ----
 
-v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& request, const std::string& principal) {
-  MutexLock lock(mu_);
-  return worker_lifecycle_.register_worker(request, principal, clock_->now());
+v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& request, const std::string& principal,
+                                                  bool enrolled) {
+  return locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    return worker_lifecycle_.register_worker(request, principal, enrolled, clock_->now(), fx);
+  });
 }
 
 void Coordinator::check_worker(uint64_t worker_id, const std::string& secret) const {
@@ -347,6 +351,10 @@ void Coordinator::unregister(uint64_t worker_id) {
 }
 
 size_t Coordinator::expire_leases() {
+  if (const double now = clock_->now(); now - credentials_swept_ >= 60) {  // credentials unused for an hour go
+    credentials_swept_ = now;
+    credentials_.expire();
+  }
   return locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     const double now = clock_->now();
     worker_lifecycle_.forget_silent(now);  // here, on the reaper's tick, not in every GetTask

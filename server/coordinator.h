@@ -31,6 +31,7 @@
 //     ImageSink's own locks are leaves: nothing is taken while one is held.
 #pragma once
 
+#include <atomic>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -43,6 +44,7 @@
 #include "server/archive.h"
 #include "server/clock.h"
 #include "server/counters.h"
+#include "server/credentials.h"
 #include "server/dispatcher.h"
 #include "server/image_sink.h"
 #include "server/image_stream.h"
@@ -113,8 +115,17 @@ class Coordinator {
   void image_chunks(const v1::FetchImageRequest& request, const std::function<bool(const v1::ImageChunk&)>& write);
 
   // Worker side.
-  // `principal`: the worker's access token name (a quarantined one may not register).
-  v1::RegisterResponse register_worker(const v1::RegisterRequest& request, const std::string& principal = "");
+  // A worker's own credential (credentials.h) for `name`, from the enrolment token named
+  // `enroller`. Throws RequestError.
+  std::string enrol(const std::string& name, const std::string& enroller) {
+    return credentials_.enrol(name, enroller, options_.max_workers_per_token);
+  }
+  // Workers' credentials: the Authenticator looks them up here.
+  CredentialBook& credentials() { return credentials_; }
+  // `principal`: the worker's access token name, or with `enrolled` its own credential's
+  // (quarantined ones never get this far: the Authenticator refuses them).
+  v1::RegisterResponse register_worker(const v1::RegisterRequest& request, const std::string& principal = "",
+                                       bool enrolled = false);
   // The gRPC layer's check before every worker request but Register and scene fetches:
   // throws RequestError unless `secret` is what worker `worker_id`'s registration was given.
   void check_worker(uint64_t worker_id, const std::string& secret) const;
@@ -287,6 +298,8 @@ class Coordinator {
   const std::unique_ptr<Clock> clock_;
   const std::unique_ptr<ImageSink> sink_;
   const std::unique_ptr<JobStore> store_;
+  CredentialBook credentials_;                // its own lock, a leaf
+  std::atomic<double> credentials_swept_{0};  // the reaper's last sweep of them
   SceneStore scenes_;
   SceneUploads uploads_;  // used without mu_, as scenes_ is
   double started_ = 0;

@@ -65,8 +65,11 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
       const uint64_t task_id = p_.leasing.grant(job, *t, *w, now);
       p_.lifecycle.start(job, now);
       samples += add_task(job, *t, task_id, resp);
-      if (verify && p_.verifier.pick())
+      // Checked: a worker's first tasks (probation), then a random fraction.
+      if (verify && (w->probation > 0 || p_.verifier.pick())) {
+        if (w->probation > 0) --w->probation;
         p_.leases.live(task_id)->task = std::make_shared<const v1::Task>(resp.tasks(resp.tasks_size() - 1));
+      }
     }
   };
   int64_t live_pixels = -1;  // counted when first needed

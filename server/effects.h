@@ -30,11 +30,13 @@ struct Effects {
     std::set<std::string> flagged_in_memory;
   };
   std::vector<Flag> flags;
+  // Enrolled workers' names quarantined, with why: their credentials are refused (and kept so).
+  std::vector<std::pair<std::string, std::string>> credentials_quarantined;
   bool changed = false;  // something waiters wait for happened
 
   bool empty() const {
     return writes.empty() && rows.empty() && sequence_ends.empty() && prepare.empty() && archive.empty() &&
-           flags.empty() && !changed;
+           flags.empty() && credentials_quarantined.empty() && !changed;
   }
 };
 

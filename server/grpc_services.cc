@@ -177,9 +177,16 @@ grpc::Status ClientService::FetchImageChunks(grpc::ServerContext* ctx, const v1:
   });
 }
 
+grpc::Status WorkerService::Enrol(grpc::ServerContext* ctx, const v1::EnrolRequest* req, v1::EnrolResponse* out) {
+  return as(auth_, ctx, Action::kEnrol, [&](const Principal& who) {
+    out->set_credential(c_.enrol(req->name(), who.name));
+    spdlog::info("worker '{}' enrolled (enrolment token '{}')", req->name(), who.name);
+  });
+}
 grpc::Status WorkerService::Register(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
                                      v1::RegisterResponse* out) {
-  return as(auth_, ctx, Action::kWork, [&](const Principal& who) { *out = c_.register_worker(*req, who.name); });
+  return as(auth_, ctx, Action::kWork,
+            [&](const Principal& who) { *out = c_.register_worker(*req, who.name, who.enrolled); });
 }
 grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) {
   // Long poll: an idle worker waits here (up to a second) and gets a new job's first task

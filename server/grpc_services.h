@@ -44,6 +44,7 @@ class ClientService final : public v1::Tessera::Service {
 class WorkerService final : public v1::TesseraWorker::Service {
  public:
   explicit WorkerService(Coordinator& c, const Authenticator* auth = nullptr) : c_(c), auth_(auth) {}
+  grpc::Status Enrol(grpc::ServerContext*, const v1::EnrolRequest* req, v1::EnrolResponse* out) override;
   grpc::Status Register(grpc::ServerContext*, const v1::RegisterRequest* req, v1::RegisterResponse* out) override;
   grpc::Status GetTask(grpc::ServerContext*, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) override;
   grpc::Status FetchSceneChunks(grpc::ServerContext* ctx, const v1::FetchSceneRequest* req,

@@ -10,59 +10,11 @@
 #include "core/io/files.h"
 #include "core/render/frames.h"
 #include "server/data_marker.h"
+#include "server/sqlite_statement.h"
 
 namespace tessera {
 
 namespace fs = std::filesystem;
-
-namespace {
-
-std::string sqlite_error(sqlite3* db, const std::string& what) {
-  return "job database: " + what + ": " + (db ? sqlite3_errmsg(db) : "out of memory");
-}
-
-// One prepared statement, finalized on scope exit.
-class Statement {
- public:
-  Statement(sqlite3* db, const char* sql) : db_(db) {
-    if (sqlite3_prepare_v2(db, sql, -1, &s_, nullptr) != SQLITE_OK) throw std::runtime_error(sqlite_error(db, sql));
-  }
-  ~Statement() { sqlite3_finalize(s_); }
-  Statement& text(int i, const std::string& v) {
-    sqlite3_bind_text(s_, i, v.data(), int(v.size()), SQLITE_TRANSIENT);
-    return *this;
-  }
-  Statement& blob(int i, const std::string& v) {
-    sqlite3_bind_blob(s_, i, v.data(), int(v.size()), SQLITE_TRANSIENT);
-    return *this;
-  }
-  Statement& integer(int i, int64_t v) {
-    sqlite3_bind_int64(s_, i, v);
-    return *this;
-  }
-  Statement& real(int i, double v) {
-    sqlite3_bind_double(s_, i, v);
-    return *this;
-  }
-  bool step() {  // true while there is a row
-    const int rc = sqlite3_step(s_);
-    if (rc == SQLITE_ROW) return true;
-    if (rc == SQLITE_DONE) return false;
-    throw std::runtime_error(sqlite_error(db_, "step"));
-  }
-  std::string column_text(int i) const {
-    const auto* p = reinterpret_cast<const char*>(sqlite3_column_blob(s_, i));
-    return p ? std::string(p, size_t(sqlite3_column_bytes(s_, i))) : std::string();
-  }
-  int64_t column_int(int i) const { return sqlite3_column_int64(s_, i); }
-  double column_real(int i) const { return sqlite3_column_double(s_, i); }
-
- private:
-  sqlite3* db_;
-  sqlite3_stmt* s_ = nullptr;
-};
-
-}  // namespace
 
 SqliteJobStore::SqliteJobStore(const std::string& data_dir) : dir_(data_dir) {
   fs::create_directories(dir_);
@@ -105,6 +57,8 @@ SqliteJobStore::SqliteJobStore(const std::string& data_dir) : dir_(data_dir) {
   exec("CREATE INDEX IF NOT EXISTS jobs_scene ON jobs(scene_hash)");
   exec("CREATE INDEX IF NOT EXISTS jobs_seq ON jobs(seq)");
   exec("CREATE INDEX IF NOT EXISTS merged_worker ON merged_into(worker)");
+  exec(R"(CREATE TABLE IF NOT EXISTS credentials(name TEXT PRIMARY KEY, digest BLOB NOT NULL,
+            enroller TEXT NOT NULL, created REAL NOT NULL, quarantined_at REAL NOT NULL, why TEXT NOT NULL))");
   set_data_marker(dir_, true);
 }
 

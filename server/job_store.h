@@ -57,6 +57,17 @@ struct RowEnd {
   double elapsed = 0;
 };
 
+// A worker's own credential (credentials.h), kept so that a restart still knows it and
+// its quarantine. Only the credential's SHA-256 is kept.
+struct StoredCredential {
+  std::string name;           // the worker's, unique
+  std::string digest;         // SHA-256 of the credential, raw
+  std::string enroller;       // the enrolment token's name
+  double created = 0;         // wall seconds (JobStore::wall)
+  double quarantined_at = 0;  // 0: not quarantined
+  std::string why;            // the quarantine's reason
+};
+
 // A checkpoint being written: CheckpointEncoder's pieces in order, then commit() puts it in
 // place (durably, replacing the last one); destroyed before commit() it leaves nothing.
 class CheckpointFile {
@@ -115,6 +126,12 @@ class JobStore {
   // `limit` of them (retention: --keep-ended).
   virtual std::vector<std::string> ended_before(double age, size_t limit) const = 0;
   virtual void ping() const = 0;                    // a query; throws std::runtime_error if it fails
+
+  // ---- workers' credentials (credentials.h) ----
+  // Inserts or replaces (by name); durable when it returns. Throws std::runtime_error.
+  virtual void put_credential(const StoredCredential& c) = 0;
+  virtual void remove_credentials(const std::vector<std::string>& names) = 0;
+  virtual std::vector<StoredCredential> credentials() const = 0;
   // A new checkpoint of the job. Throws std::runtime_error naming the file.
   virtual std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const = 0;
   // Reads the job's checkpoint into `plan` (checkpoint.h's read_checkpoint) and returns its
@@ -162,6 +179,9 @@ class SqliteJobStore : public JobStore {
   size_t scene_users(const std::string& hash) const override;
   std::vector<std::string> ended_before(double age, size_t limit) const override;
   void ping() const override;
+  void put_credential(const StoredCredential& c) override;  // (job_store_credentials.cc)
+  void remove_credentials(const std::vector<std::string>& names) override;
+  std::vector<StoredCredential> credentials() const override;
   // Written to a temporary file, synced, renamed into place.
   std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
   std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;
@@ -204,6 +224,9 @@ class MemoryJobStore : public JobStore {
   size_t scene_users(const std::string& hash) const override;
   std::vector<std::string> ended_before(double age, size_t limit) const override;
   void ping() const override;
+  void put_credential(const StoredCredential& c) override;
+  void remove_credentials(const std::vector<std::string>& names) override;
+  std::vector<StoredCredential> credentials() const override;
   std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
   std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;
   void discard_checkpoint(const std::string& id) override { set_checkpoint_bytes(id, std::nullopt); }
@@ -222,6 +245,7 @@ class MemoryJobStore : public JobStore {
     uint32_t tiles;
   };
   std::vector<Merge> merges_ TESSERA_GUARDED_BY(mu_);
+  std::map<std::string, StoredCredential> credentials_ TESSERA_GUARDED_BY(mu_);
   mutable std::map<std::string, std::string> checkpoints_ TESSERA_GUARDED_BY(mu_);
 };
 

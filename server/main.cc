@@ -113,6 +113,11 @@ int main(int argc, char** argv) {
                  "differs from the coordinator's own render is quarantined (0 turns it off)")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1.0));
+  app.add_option("--verify-first", opt.verify_first,
+                 "check every one of a newly registered worker's first this many tasks (probation), whatever "
+                 "--verify-fraction picks")
+      ->capture_default_str()
+      ->check(CLI::Range(0, 1000000));
   int write_delay_ms = 0, commit_delay_ms = 0;  // for the crash tests: windows in which to kill
   app.add_option("--test-checkpoint-delay-ms", write_delay_ms)->group("")->check(CLI::Range(0, 60000));
   app.add_option("--test-commit-delay-ms", commit_delay_ms)->group("")->check(CLI::Range(0, 60000));
@@ -161,7 +166,7 @@ int main(int argc, char** argv) {
   std::string tokens_file, tls_cert, tls_key;
   bool insecure = false;
   app.add_option("--tokens", tokens_file,
-                 "access tokens, one 'ROLE NAME TOKEN' a line (roles: viewer, client, worker, admin); "
+                 "access tokens, one 'ROLE NAME TOKEN' a line (roles: viewer, client, worker, enrol, admin); "
                  "also $TESSERA_TOKENS_FILE")
       ->check(CLI::ExistingFile);
   app.add_option("--tls-cert", tls_cert, "PEM certificate chain: serve gRPC and HTTP over TLS")
@@ -208,7 +213,7 @@ int main(int argc, char** argv) {
     // Checked with the others, before any port or the data folder is opened.
     const std::optional<std::pair<std::string, int>> health_at =
         health.empty() ? std::nullopt : std::optional(split_host_port(health, "--health"));
-    const tessera::Authenticator auth =
+    tessera::Authenticator auth =
         tokens_file.empty() ? tessera::Authenticator() : tessera::Authenticator::from_file(tokens_file);
     const bool open_network = !is_loopback(grpc_host) || !is_loopback(http_host);
     if (!auth.enabled()) {
@@ -249,6 +254,7 @@ int main(int argc, char** argv) {
       for (const auto& j : coordinator.list()) live += tessera::job_live(j.state());
       spdlog::info("took up {} jobs from {} ({} to finish)", restored, opt.data_dir, live);
     }
+    auth.use_credentials(&coordinator.credentials());  // enrolled workers' own
     tessera::ClientService client(coordinator, &auth);
     tessera::WorkerService worker(coordinator, &auth);
     grpc::ServerBuilder builder;

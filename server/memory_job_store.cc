@@ -180,6 +180,25 @@ void MemoryJobStore::forget_merges() {
 
 void MemoryJobStore::ping() const { check_writes(); }
 
+void MemoryJobStore::put_credential(const StoredCredential& c) {
+  MutexLock lock(mu_);
+  check_writes();
+  credentials_[c.name] = c;
+}
+
+void MemoryJobStore::remove_credentials(const std::vector<std::string>& names) {
+  MutexLock lock(mu_);
+  check_writes();
+  for (const std::string& n : names) credentials_.erase(n);
+}
+
+std::vector<StoredCredential> MemoryJobStore::credentials() const {
+  MutexLock lock(mu_);
+  std::vector<StoredCredential> out;
+  for (const auto& [name, c] : credentials_) out.push_back(c);
+  return out;
+}
+
 std::unique_ptr<CheckpointFile> MemoryJobStore::begin_checkpoint(const std::string& id) const {
   {
     MutexLock lock(mu_);

@@ -48,8 +48,12 @@ struct CoordinatorOptions {
   // second worker and the sums compared bit for bit. When they differ, the coordinator
   // renders the task itself, and a worker whose sums differ from its render is
   // quarantined: its leases end, the tiles it merged into live jobs are rendered again,
-  // and, with access tokens, its token may not register again.
+  // and an enrolled worker's credential (credentials.h) is refused from then on.
   double verify_fraction = 0.01;  // costs this fraction of the farm's render time
+  // Probation: every registration's first tasks are all checked (when verify_fraction > 0
+  // and another worker can check them), so a worker that lies from the start is caught
+  // before its lies can end up in an image, whatever the fraction.
+  uint32_t verify_first = 4;
   // Pieces of an image sent by FetchImageChunks (a setting so tests can make them small).
   size_t image_chunk_bytes = size_t(1) << 20;
   // Test seams: between an image snapshot leaving the lock and its write; between a

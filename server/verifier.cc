@@ -143,12 +143,13 @@ void Verifier::flag_sequence(Sequence& s, const std::string& flag, Effects& fx) 
 
 void Verifier::quarantine(uint64_t worker, const std::string& why, double now, Effects& fx) {
   std::string name = std::to_string(worker);
-  std::string principal;
   if (const WorkerInfo* w = workers_.find(worker)) {
-    name = "'" + w->name + "' (" + (w->principal.empty() ? "" : "token '" + w->principal + "', ") + name + ")";
-    principal = w->principal;
+    name = "'" + w->name + "' (" +
+           (w->principal.empty() ? "" : (w->enrolled ? "enrolled as '" : "token '") + w->principal + "', ") + name +
+           ")";
+    if (w->enrolled) fx.credentials_quarantined.push_back({w->principal, why});
   }
-  if (!checks_.quarantine(worker, principal)) return;
+  if (!checks_.quarantine(worker)) return;
   ++counters_.workers_quarantined;
   spdlog::warn("worker {} quarantined: {}", name, why);
   leasing_.end_worker(worker, now);

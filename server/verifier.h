@@ -57,10 +57,10 @@ class Verifier {
   // a job does not wait for a second worker forever.
   void skip_stale(double now, Effects& fx);
   bool quarantined(uint64_t worker) const { return checks_.quarantined(worker); }
-  bool quarantined(const std::string& principal) const { return checks_.quarantined(principal); }
   // A worker found lying (decide() calls it): its leases end, what it merged into live jobs
   // is rendered again, ended jobs (and sequences whose frames left memory) are flagged.
-  // Archived jobs (archive.h) are flagged in their rows, through fx.flags.
+  // Archived jobs (archive.h) are flagged in their rows, through fx.flags; an enrolled
+  // worker's credential is quarantined through fx.credentials_quarantined.
   void quarantine(uint64_t worker, const std::string& why, double now, Effects& fx);
   // What an ended job is flagged with when `tiles` of its tiles (a sequence's finished
   // frames': `frames`) hold results of `worker`, quarantined after it ended.

@@ -5,14 +5,13 @@
 namespace tessera {
 
 v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest& req, const std::string& principal,
-                                                      double now) {
+                                                      bool enrolled, double now, Effects& fx) {
   if (req.version() != kProtocolVersion)
     throw RequestError(RequestError::Code::kInvalidArgument,
                        "protocol version " + std::to_string(req.version()) + " not supported");
-  if (!principal.empty() && p_.checks.quarantined(principal))
-    throw RequestError(
-        RequestError::Code::kPermissionDenied,
-        "worker token '" + principal + "' is quarantined: its results differed from the same tasks rendered elsewhere");
+  if (enrolled)  // one credential, one worker: a restarted one replaces its last registration
+    for (const WorkerInfo& old : p_.workers.list())
+      if (old.enrolled && old.principal == principal) unregister(old.id, now, fx);
   if (p_.workers.size() >= options_.max_workers) forget_silent(now);
   if (p_.workers.size() >= options_.max_workers)
     throw RequestError(RequestError::Code::kResourceExhausted,
@@ -27,6 +26,8 @@ v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest&
   std::string secret;
   WorkerInfo& w = p_.workers.add(req.name(), req.threads(), now, &secret);
   w.principal = principal;
+  w.enrolled = enrolled;
+  w.probation = options_.verify_fraction > 0 ? options_.verify_first : 0;
   v1::RegisterResponse r;
   r.set_worker_id(w.id);
   r.set_worker_secret(secret);

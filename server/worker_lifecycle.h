@@ -1,4 +1,5 @@
-// Workers coming and going: registration (bounded, quarantined tokens refused), heartbeats
+// Workers coming and going: registration (bounded per token; an enrolled worker's replaces
+// its last, and starts on probation), heartbeats
 // (renewing leases, refusing tasks no longer theirs), a task given back (with the error
 // when the worker could not render it), and unregistering. Runs under the coordinator's lock.
 #pragma once
@@ -25,8 +26,11 @@ class WorkerLifecycle {
   };
   WorkerLifecycle(Parts parts, const CoordinatorOptions& options) : p_(parts), options_(options) {}
 
-  // `principal`: the worker's access token name. Throws RequestError.
-  v1::RegisterResponse register_worker(const v1::RegisterRequest& request, const std::string& principal, double now);
+  // `principal`: the worker's access token name, or with `enrolled` its own credential's
+  // (one registration each: registering again ends the last, its leases back). Throws
+  // RequestError.
+  v1::RegisterResponse register_worker(const v1::RegisterRequest& request, const std::string& principal, bool enrolled,
+                                       double now, Effects& fx);
   // Throws RequestError unless `secret` is the one worker `worker`'s registration was
   // given: kFailedPrecondition for an unknown worker (it registers again),
   // kPermissionDenied for a request under another worker's id.

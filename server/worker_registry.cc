@@ -1,42 +1,18 @@
 #include "server/worker_registry.h"
 
-#include <openssl/crypto.h>
-#include <openssl/evp.h>
-#include <openssl/rand.h>
-
 #include <algorithm>
-#include <cstring>
-#include <stdexcept>
+
+#include "server/secrets.h"
 
 namespace tessera {
-namespace {
-
-void random_bytes(unsigned char* out, int n) {
-  if (RAND_bytes(out, n) != 1) throw std::runtime_error("OpenSSL's random generator failed");
-}
-
-std::string sha256(const std::string& s) {
-  unsigned char d[EVP_MAX_MD_SIZE];
-  unsigned int n = 0;
-  EVP_Digest(s.data(), s.size(), d, &n, EVP_sha256(), nullptr);
-  return std::string(reinterpret_cast<const char*>(d), n);
-}
-
-}  // namespace
 
 WorkerInfo& WorkerRegistry::add(const std::string& name, uint32_t threads, double now, std::string* secret) {
   WorkerInfo w;
   // 53 random bits: unguessable, and exact as a JSON number in a browser.
   do {
-    uint64_t r = 0;
-    random_bytes(reinterpret_cast<unsigned char*>(&r), sizeof r);
-    w.id = r >> 11;
+    w.id = random_u64() >> 11;
   } while (w.id == 0 || workers_.count(w.id));
-  unsigned char raw[16];
-  random_bytes(raw, sizeof raw);
-  static const char* kHex = "0123456789abcdef";
-  std::string s;
-  for (unsigned char c : raw) s += {kHex[c >> 4], kHex[c & 15]};
+  const std::string s = random_hex(16);
   w.secret_digest = sha256(s);
   if (secret) *secret = s;
   w.name = name.substr(0, 256);
@@ -54,8 +30,7 @@ void WorkerRegistry::remove(uint64_t id) {
 }
 
 bool WorkerRegistry::secret_matches(const WorkerInfo& w, const std::string& secret) const {
-  const std::string d = sha256(secret);
-  return d.size() == w.secret_digest.size() && CRYPTO_memcmp(d.data(), w.secret_digest.data(), d.size()) == 0;
+  return equal_secret(sha256(secret), w.secret_digest);
 }
 
 size_t WorkerRegistry::count_principal(const std::string& principal) const {

@@ -12,6 +12,8 @@ struct WorkerInfo {
   uint64_t id = 0;
   std::string name;
   std::string principal;      // the access token's name ("" without tokens)
+  bool enrolled = false;      // principal is the worker's own credential (credentials.h)
+  uint32_t probation = 0;     // tasks still to check whatever the fraction (verify_first)
   std::string secret_digest;  // SHA-256 of the secret its registration was given
   uint32_t threads = 0;
   double last_seen = 0;

@@ -1,6 +1,7 @@
 // The worker's line to the coordinator, shared by its parts: the stub (a real channel, or a
-// fake coordinator in tests), the token sent with every call, and what registering gave:
-// the worker's id and heartbeat interval, which change when it registers again.
+// fake coordinator in tests), the token sent with every call (an enrolled worker's own
+// credential, which changes when it enrols again), and what registering gave: the worker's
+// id and heartbeat interval, which change when it registers again.
 #pragma once
 
 #include <atomic>
@@ -16,9 +17,8 @@
 namespace tessera::worker {
 
 struct Link {
-  Link(std::shared_ptr<v1::TesseraWorker::StubInterface> s, Access a) : stub(std::move(s)), access(std::move(a)) {}
+  Link(std::shared_ptr<v1::TesseraWorker::StubInterface> s, Access a) : stub(std::move(s)), access_(std::move(a)) {}
   std::shared_ptr<v1::TesseraWorker::StubInterface> stub;
-  Access access;
   std::atomic<uint32_t> heartbeat_ms{2000};
   std::atomic<uint32_t> lease_ms{10000};  // how long the coordinator keeps a silent worker's leases
 
@@ -36,8 +36,15 @@ struct Link {
     std::lock_guard<std::mutex> lock(mu_);
     identity_ = std::move(i);
   }
+  void set_token(std::string token) {  // the credential enrolling gave
+    std::lock_guard<std::mutex> lock(mu_);
+    access_.token = std::move(token);
+  }
 
-  std::unique_ptr<grpc::ClientContext> context(double seconds) const { return call_context(access, seconds); }
+  std::unique_ptr<grpc::ClientContext> context(double seconds) const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return call_context(access_, seconds);
+  }
   // Gives a lease back early; `error` says why this worker could not render the task.
   // Best effort: an unanswered release expires like any lease.
   void release(uint64_t task_id, const std::string& error = "") const {
@@ -53,6 +60,7 @@ struct Link {
 
  private:
   mutable std::mutex mu_;
+  Access access_;
   Identity identity_;
 };
 

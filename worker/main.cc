@@ -50,6 +50,11 @@ int main(int argc, char** argv) {
   app.add_option("--token-file", token_file,
                  "file holding a worker access token (else $TESSERA_TOKEN_FILE, or the token in $TESSERA_TOKEN)");
   app.add_option("--tls-ca", tls_ca, "PEM certificate authority: connect over TLS (else $TESSERA_TLS_CA)");
+  std::string enrol_file;
+  app.add_option("--enrol-token-file", enrol_file,
+                 "file holding an enrolment token: the worker enrols under --name for a credential of its own "
+                 "(docs/security.md; else $TESSERA_ENROL_TOKEN_FILE)")
+      ->envname("TESSERA_ENROL_TOKEN_FILE");
   tessera::add_version_flag(app, "tessera-worker");
   try {
     app.parse(argc, argv);
@@ -59,6 +64,7 @@ int main(int argc, char** argv) {
   tessera::init_logging("tessera-worker", opt.verbose);
   try {
     opt.access = tessera::load_access(token_file, tls_ca);
+    if (!enrol_file.empty()) opt.enrol_token = tessera::read_token_file(enrol_file);
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());
     return 2;

@@ -1,5 +1,10 @@
 #include "worker/scene_cache.h"
 
+#include <signal.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
 #include <filesystem>
 #include <fstream>
 
@@ -11,6 +16,23 @@
 namespace tessera::worker {
 
 namespace fs = std::filesystem;
+
+namespace {
+
+// Removes `hash`'s partial downloads left by processes no longer running (a worker killed
+// mid-fetch); another live worker's, sharing the cache folder, is left alone.
+void remove_orphaned_partials(const fs::path& dir, const std::string& hash) {
+  std::error_code ec;
+  const std::string prefix = hash + ".partial-";
+  for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind(prefix, 0) != 0) continue;
+    const long pid = std::strtol(name.c_str() + prefix.size(), nullptr, 10);
+    if (pid > 0 && kill(pid_t(pid), 0) != 0 && errno == ESRCH) fs::remove_all(e.path(), ec);
+  }
+}
+
+}  // namespace
 
 std::shared_ptr<Scene> SceneCache::scene(const std::string& hash) {
   if (auto it = scenes_.find(hash); it != scenes_.end()) return it->second;
@@ -29,8 +51,11 @@ std::shared_ptr<Scene> SceneCache::scene(const std::string& hash) {
 }
 
 std::string SceneCache::fetch(const std::string& hash) {
-  // Into a folder of its own, renamed into place once whole and checked.
-  const fs::path dir = fs::path(dir_) / hash, part = fs::path(dir_) / (hash + ".partial");
+  // Into a folder of this process's own, renamed into place once whole and checked: workers
+  // that share a cache folder each fetch into their own, and the first in place is used.
+  static std::atomic<uint64_t> fetches{0};
+  const fs::path dir = fs::path(dir_) / hash, part = fs::path(dir_) / (hash + ".partial-" + std::to_string(::getpid()) +
+                                                                       "-" + std::to_string(fetches++));
   struct Cleanup {
     fs::path part;
     ~Cleanup() {
@@ -38,7 +63,7 @@ std::string SceneCache::fetch(const std::string& hash) {
       fs::remove_all(part, ec);
     }
   } cleanup{part};
-  fs::remove_all(part);  // an earlier run's, cut short
+  remove_orphaned_partials(dir_, hash);  // earlier runs', cut short
   const std::string what = "scene " + hash;
   std::unique_ptr<SceneReceiver> rx;
   v1::FetchSceneRequest req;
@@ -74,8 +99,12 @@ std::string SceneCache::fetch(const std::string& hash) {
   rx.reset();
   if (!(std::ofstream(part / ".main") << main << "\n")) throw std::runtime_error("cannot write the scene cache");
   std::error_code ec;
-  fs::remove_all(dir, ec);  // an earlier run's, unfinished
-  fs::rename(part, dir);
+  fs::rename(part, dir, ec);
+  if (ec && fs::exists(dir / ".main")) return (dir / main).string();  // another worker's, the same bytes
+  if (ec) {
+    fs::remove_all(dir);  // an earlier run's, unfinished
+    fs::rename(part, dir);
+  }
   return (dir / main).string();
 }
 

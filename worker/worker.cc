@@ -57,7 +57,22 @@ Worker::~Worker() = default;
 
 uint64_t Worker::tasks_done() const { return queue_->tasks_done(); }
 
+grpc::Status Worker::enrol() {
+  v1::EnrolRequest req;
+  req.set_name(options_.name);
+  v1::EnrolResponse resp;
+  const grpc::Status st =
+      link_->stub->Enrol(call_context(Access{options_.enrol_token, options_.access.tls_ca_pem}, 5).get(), req, &resp);
+  if (st.ok()) {
+    link_->set_token(resp.credential());
+    enrolled_ = true;
+    spdlog::info("enrolled as '{}'", options_.name);
+  }
+  return st;
+}
+
 bool Worker::register_worker(const std::atomic<bool>& stop) {
+  bool fresh = false;  // the credential was made in this call: a refusal of it is final
   while (!stop) {
     // A coordinator that cannot be reached has no work for us either.
     if (options_.exit_when_idle_seconds > 0 && now_seconds() - last_work_ > options_.exit_when_idle_seconds) {
@@ -65,22 +80,35 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
                    options_.exit_when_idle_seconds, options_.coordinator);
       return false;
     }
-    v1::RegisterRequest req;
-    req.set_version(kProtocolVersion);
-    req.set_name(options_.name);
-    req.set_threads(uint32_t(options_.threads));
-    v1::RegisterResponse resp;
-    const grpc::Status st = link_->stub->Register(link_->context(5).get(), req, &resp);
+    grpc::Status st;
+    if (!options_.enrol_token.empty() && !enrolled_) {
+      st = enrol();
+      fresh = st.ok();
+    }
     if (st.ok()) {
-      link_->set_identity({resp.worker_id(), resp.worker_secret()});
-      link_->heartbeat_ms = std::max(50u, resp.heartbeat_interval_ms());
-      if (resp.lease_ms() > 0) link_->lease_ms = resp.lease_ms();
-      last_contact_ = now_seconds();
-      queue_->set_max_leases(resp.max_leases() > 0 ? resp.max_leases() : worker::kDefaultMaxLeases,
-                             size_t(options_.max_tasks));
-      backoff_.reset();
-      spdlog::debug("registered as {}", resp.worker_id());
-      return true;
+      v1::RegisterRequest req;
+      req.set_version(kProtocolVersion);
+      req.set_name(options_.name);
+      req.set_threads(uint32_t(options_.threads));
+      v1::RegisterResponse resp;
+      st = link_->stub->Register(link_->context(5).get(), req, &resp);
+      if (st.ok()) {
+        link_->set_identity({resp.worker_id(), resp.worker_secret()});
+        link_->heartbeat_ms = std::max(50u, resp.heartbeat_interval_ms());
+        if (resp.lease_ms() > 0) link_->lease_ms = resp.lease_ms();
+        last_contact_ = now_seconds();
+        queue_->set_max_leases(resp.max_leases() > 0 ? resp.max_leases() : worker::kDefaultMaxLeases,
+                               size_t(options_.max_tasks));
+        backoff_.reset();
+        spdlog::debug("registered as {}", resp.worker_id());
+        return true;
+      }
+      // A credential the coordinator no longer knows (unused for an hour, or its name
+      // enrolled again): enrol again, once.
+      if (enrolled_ && !fresh && st.error_code() == grpc::StatusCode::UNAUTHENTICATED) {
+        enrolled_ = false;
+        continue;
+      }
     }
     if (refused(st)) {
       spdlog::error("coordinator {} refused to register this worker: {}", options_.coordinator, st.error_message());

@@ -48,6 +48,10 @@ struct WorkerOptions {
   // more once results outrun the link (worker/upload_budget.h).
   int passes_per_task = 0;
   Access access;  // token and TLS
+  // An enrolment token (role enrol): the worker enrols under `name` for a credential of its
+  // own, and again whenever the coordinator no longer knows that credential. Empty: it
+  // works with access.token.
+  std::string enrol_token;
   // For the verification tests only (a hidden flag): every result's sums scaled by 0.8
   // (plausible, and wrong), as a broken or dishonest machine would send them.
   bool lie = false;
@@ -74,6 +78,8 @@ class Worker {
   // Registers, retrying with back-off; false if stopped, refused, or idle past
   // --exit-when-idle while the coordinator cannot be reached.
   bool register_worker(const std::atomic<bool>& stop);
+  // Enrols (options_.enrol_token) for a credential of this worker's own: the status of the call.
+  grpc::Status enrol();
   // Leases and queues work until `stop`, --exit-when-idle, or a refused registration;
   // registers again when the coordinator has forgotten this worker.
   void fetch(const std::atomic<bool>& stop);
@@ -87,6 +93,7 @@ class Worker {
   double last_work_ = 0;                      // when it last held or was given a task (--exit-when-idle)
   bool refused_ = false;                      // registration refused: retrying cannot help
   bool tls_hinted_ = false;                   // the TLS hint (tls_hint) was logged
+  bool enrolled_ = false;                     // holds a credential of its own (enrol_token)
 };
 
 }  // namespace tessera

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # CTest entry: a one-node Slurm cluster on this machine (munged, slurmctld, slurmd with a
-# generated configuration and state in a temporary folder), a coordinator on loopback,
-# deploy/slurm/tessera-workers.sbatch submitted with sbatch, a render job through them;
+# generated configuration and state in a temporary folder), a coordinator on loopback with
+# access tokens, deploy/slurm/tessera-workers.sbatch submitted with sbatch (each worker
+# enrolling with the enrolment token for a credential of its own), a render job through them;
 # the workers are scancel'ed mid-job and submitted again; the image must equal
 # `tessera render` bit for bit, and the allocation must end by itself once idle. Every
 # daemon it started is stopped by its PID. Skips, saying why, where Slurm or munge is
@@ -86,25 +87,32 @@ for _ in $(seq 100); do
 done
 [ -n "$up" ] || skip "the Slurm daemons did not bring the node up" "$T/slurmctld.log" "$T/slurmd.log" "$T/slurmd.out"
 
-# The coordinator, outside the cluster, on loopback.
+# The coordinator, outside the cluster, on loopback, with tokens as docs/deploy.md makes
+# them: the workers get only the enrolment token.
+(umask 077
+ for who in enrol client viewer; do openssl rand -hex 24 >"$T/$who.token"; done
+ printf 'enrol farm-enrol %s\nclient me %s\nviewer ops %s\n' "$(cat "$T/enrol.token")" "$(cat "$T/client.token")" \
+   "$(cat "$T/viewer.token")" >"$T/tokens")
+auth="Authorization: Bearer $(cat "$T/viewer.token")"
 flags=(-r 160 120 -s 384 --pass-spp 8 -m 6 --seed 4)  # long enough (~15 s on 2 cores) that scancel lands mid-job
 "$build/bin/tessera" render "$root/scenes/cornell-spheres.dae" "${flags[@]}" -q -f "$T/local.exr"
 "$build/bin/tessera-coordinator" --listen 127.0.0.1:0 --http 127.0.0.1:0 --data "$T/data" \
-  --lease-seconds 2 >"$T/coord.out" 2>"$T/coord.err" &
+  --lease-seconds 2 --tokens "$T/tokens" >"$T/coord.out" 2>"$T/coord.err" &
 pids+=($!)
 for _ in $(seq 100); do grep -q "http listening" "$T/coord.out" && break; sleep 0.1; done
 addr=$(sed -n 's/^grpc listening on \([^ ]*\).*/\1/p' "$T/coord.out")
 http=$(sed -n 's/^http listening on \([^ ]*\).*/\1/p' "$T/coord.out")
 [ -n "$addr" ] || { echo "FAIL: the coordinator did not start"; cat "$T/coord.err"; exit 1; }
-samples() { curl -s "http://$http/api/status" | python3 -c 'import json,sys; j=json.load(sys.stdin)["jobs"]; print(j[0]["samples_done"] if j else 0)'; }
-state() { curl -s "http://$http/api/status" | python3 -c 'import json,sys; j=json.load(sys.stdin)["jobs"]; print(j[0]["state"] if j else "")'; }
+samples() { curl -s -H "$auth" "http://$http/api/status" | python3 -c 'import json,sys; j=json.load(sys.stdin)["jobs"]; print(j[0]["samples_done"] if j else 0)'; }
+state() { curl -s -H "$auth" "http://$http/api/status" | python3 -c 'import json,sys; j=json.load(sys.stdin)["jobs"]; print(j[0]["state"] if j else "")'; }
 
 submit_workers() {
   (cd "$T" && TESSERA_COORDINATOR="$addr" TESSERA_BIN="$build/bin" TESSERA_IDLE_SECONDS=3 TESSERA_CACHE="$T/cache" \
-    sbatch --parsable "$root/deploy/slurm/tessera-workers.sbatch")
+    TESSERA_ENROL_TOKEN_FILE="$T/enrol.token" sbatch --parsable "$root/deploy/slurm/tessera-workers.sbatch")
 }
 job=$(submit_workers)
 echo "slurm job $job: workers"
+export TESSERA_TOKEN_FILE="$T/client.token"  # the client's, for submit and fetch
 id=$("$build/bin/tessera" submit "$root/scenes/cornell-spheres.dae" "${flags[@]}" --coordinator "$addr" -q)
 echo "render job $id"
 # Mid-job: cancel the workers' allocation, then submit them again.
@@ -125,4 +133,7 @@ grep -q '"identical":true' "$T/compare.json" || { echo "FAIL: the image differs 
 for _ in $(seq 200); do [ -z "$(squeue -h -j "$job" 2>/dev/null)" ] && break; sleep 0.1; done
 [ -z "$(squeue -h -j "$job" 2>/dev/null)" ] || { echo "FAIL: the workers did not leave when idle"; exit 1; }
 grep -q "exit-when-idle" "$T"/tessera-workers-"$job".out || { echo "FAIL: no idle exit in the log"; cat "$T"/tessera-workers-"$job".out; exit 1; }
-echo "PASS: Slurm workers, scancel mid-job and again, bit-identical; the allocation ended when idle"
+# Each allocation's worker enrolled for a credential of its own.
+enrolled=$(grep -c "enrolled (enrolment token 'farm-enrol')" "$T/coord.err" || true)
+[ "$enrolled" -ge 2 ] || { echo "FAIL: the workers did not enrol ($enrolled enrolments)"; tail -20 "$T/coord.err"; exit 1; }
+echo "PASS: Slurm workers enrolled, scancel mid-job and again, bit-identical; the allocation ended when idle"

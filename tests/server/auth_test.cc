@@ -29,7 +29,7 @@ TEST(Auth, TokenFilesThatCannotBeTrustedAreRefusedNamingTheLine) {
   EXPECT_EQ(refusal("client alice\n"), "tokens:1: expected ROLE NAME TOKEN");
   EXPECT_EQ(refusal("client alice 0123456789abcdef extra\n"), "tokens:1: expected ROLE NAME TOKEN");
   EXPECT_EQ(refusal("\nroot alice 0123456789abcdef\n"),
-            "tokens:2: unknown role 'root' (viewer, client, worker or admin)");
+            "tokens:2: unknown role 'root' (viewer, client, worker, enrol or admin)");
   EXPECT_EQ(refusal("client alice short\n"), "tokens:1: token shorter than 16 characters");
   EXPECT_EQ(refusal("client a 0123456789abcdef\nadmin b 0123456789abcdef\n"), "tokens:2: the same token appears twice");
   EXPECT_NE(refusal("").find("no tokens"), std::string::npos);

@@ -1,4 +1,5 @@
 // Verify by replay through the whole coordinator: liars caught, honest workers not.
+#include "server/secrets.h"
 #include "tests/server/coordinator_fixture.h"
 
 namespace tessera {
@@ -23,12 +24,19 @@ class VerifyTest : public CoordinatorTest {
     o.verify_fraction = fraction;
     c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   }
-  uint64_t worker_as(const std::string& principal) {
+  // A worker enrolled under `name` (its own credential, as deploy recipes run them).
+  uint64_t worker_as(const std::string& name) {
+    credential[name] = c->enrol(name, "farm-enrol");
     v1::RegisterRequest r;
     r.set_version(kProtocolVersion);
-    r.set_name(principal);
-    return c->register_worker(r, principal).worker_id();
+    r.set_name(name);
+    return c->register_worker(r, name, true).worker_id();
   }
+  bool credential_refused(const std::string& name) {
+    const auto h = c->credentials().find(sha256(credential.at(name)));
+    return !h || h->quarantined;
+  }
+  std::map<std::string, std::string> credential;
   // One task for worker w, rendered (and falsified if `lying`) and returned; false if it
   // got none or is refused.
   bool step(uint64_t w, bool lying) {
@@ -100,9 +108,12 @@ TEST_F(VerifyTest, ALyingWorkerIsQuarantinedAndWhatItMergedIsRenderedAgain) {
   EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
   // Every lie it got merged was rendered again: the image is the honest one, bit for bit.
   EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
-  // It gets no more work, and its token may not register again; the honest one goes on.
+  // It gets no more work, its credential is refused and its name may not enrol again; the
+  // honest one goes on.
   EXPECT_THROW(c->get_task(liar), RequestError);
-  EXPECT_THROW(worker_as("liar"), RequestError);
+  EXPECT_TRUE(credential_refused("liar"));
+  EXPECT_FALSE(credential_refused("honest"));
+  EXPECT_THROW(c->enrol("liar", "farm-enrol"), RequestError);
   EXPECT_NO_THROW(c->get_task(honest));
   // The job that ended before it was caught is flagged, not silently trusted.
   const std::string flag = c->status(before, false).error();
@@ -137,6 +148,26 @@ TEST_F(VerifyTest, ArchivedJobsHoldingALiarsResultsAreFlaggedInTheirRows) {
   EXPECT_NE(frames.find("tiles of finished frames hold results of worker 'liar'"), std::string::npos) << frames;
   restart(c, options(), &t);  // the flag is in the row
   EXPECT_EQ(c->status(still, false).error(), flag);
+}
+
+// Issue 23: probation. With a fraction that would almost never pick a task, a worker that
+// lies from its first task is still caught: every registration's first verify_first tasks
+// are checked, and a job does not end before its checks are decided, so no lie stays in
+// the image. Its credential is refused from then on; the honest worker's is not.
+TEST_F(VerifyTest, AWorkerLyingFromItsFirstTaskIsCaughtOnProbation) {
+  start(1e-12);
+  const RenderSettings s = job_settings();
+  const uint64_t honest = worker_as("honest"), liar = worker_as("liar");
+  const std::string id = c->submit(request(s));
+  run(honest, liar, true);
+  EXPECT_EQ(c->counters().workers_quarantined, 1u);
+  EXPECT_TRUE(credential_refused("liar"));
+  EXPECT_FALSE(credential_refused("honest"));
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_EQ(c->status(id, false).error(), "");
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+  // Past probation, the fraction decides: the honest worker's fifth task is not checked.
+  EXPECT_LE(c->counters().checks_issued, 2u * CoordinatorOptions{}.verify_first);
 }
 
 TEST_F(VerifyTest, AWorkerLyingOnlyAsTheCheckerIsTheOneQuarantined) {

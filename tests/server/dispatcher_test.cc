@@ -235,7 +235,7 @@ TEST_F(DispatcherTest, AnUnknownWorkerMustRegisterAgain) {
 TEST_F(DispatcherTest, AQuarantinedWorkerGetsNothing) {
   add_still();
   const uint64_t w = add_worker();
-  checks.quarantine(w, "");
+  checks.quarantine(w);
   const std::string why = refusal([&] { get(w); }, Code::kPermissionDenied);
   EXPECT_TRUE(has(why, "is quarantined")) << why;
   EXPECT_EQ(leases.live_count(), 0u);

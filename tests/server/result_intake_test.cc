@@ -55,7 +55,7 @@ TEST_F(ResultIntakeTest, AResultForATaskNeverIssuedIsRejectedAndCounted) {
 
 TEST_F(ResultIntakeTest, AQuarantinedWorkersResultIsRejectedAndCounted) {
   const uint64_t t = lease_next(*job, a);
-  checks.quarantine(a, "");
+  checks.quarantine(a);
   EXPECT_TRUE(rejected(submit(result(t))));
   EXPECT_EQ(counters.results_rejected, 1u);
   EXPECT_EQ(job->plan.merges(), 0u);

@@ -123,6 +123,15 @@ TEST_F(VerifierTest, EqualDigestsPassAndTheJobEndsOnceItsChecksAreDecided) {
   EXPECT_FALSE(verifier.decide(check, lease, b, v, now, fx));  // decided once
 }
 
+TEST_F(VerifierTest, AnEnrolledLiarsCredentialIsQuarantined) {
+  worker(a).enrolled = true;
+  fx = {};
+  verifier.quarantine(a, "a test", now, fx);
+  ASSERT_EQ(fx.credentials_quarantined.size(), 1u);
+  EXPECT_EQ(fx.credentials_quarantined[0].first, "liar");
+  EXPECT_EQ(fx.credentials_quarantined[0].second, "a test");
+}
+
 TEST_F(VerifierTest, OnlyTheChecksCurrentLeaseDecidesIt) {
   const uint64_t check = merged_and_picked(*job, a);
   const uint64_t lease = lease_check(b);
@@ -151,8 +160,10 @@ TEST_F(VerifierTest, AWorkerTheRefereeDisagreesWithIsQuarantinedAndItsWorkUndone
   fx = {};
   EXPECT_TRUE(verifier.decide(check, lease, b, v, now, fx));  // the checker's result counts
   EXPECT_TRUE(verifier.quarantined(a));
-  EXPECT_TRUE(verifier.quarantined("liar"));  // its token may not register again
   EXPECT_FALSE(verifier.quarantined(b));
+  // A token from the file (possibly every worker's) is never quarantined: only an enrolled
+  // worker's own credential is (VerifierTest.AnEnrolledLiarsCredentialIsQuarantined).
+  EXPECT_TRUE(fx.credentials_quarantined.empty());
   EXPECT_EQ(workers.find(a), nullptr);
   EXPECT_EQ(counters.check_mismatches, 1u);
   EXPECT_EQ(counters.workers_quarantined, 1u);

@@ -1,4 +1,5 @@
-// WorkerLifecycle: workers registering (bounded, quarantined tokens refused), renewing
+// WorkerLifecycle: workers registering (bounded per token, one registration per enrolled
+// credential, on probation), renewing
 // their leases, giving a task back (failed, or not) and leaving.
 #include "server/worker_lifecycle.h"
 
@@ -35,13 +36,18 @@ class WorkerLifecycleTest : public testing::PartsTest {
     r.set_threads(threads);
     return r;
   }
-  uint64_t join(const std::string& name, const std::string& principal = "") {
-    return worker_lifecycle.register_worker(request(name), principal, now).worker_id();
+  uint64_t join(const std::string& name, const std::string& principal = "", bool enrolled = false) {
+    Effects fx;
+    return worker_lifecycle.register_worker(request(name), principal, enrolled, now, fx).worker_id();
+  }
+  v1::RegisterResponse join_as(const v1::RegisterRequest& r, const std::string& principal) {
+    Effects fx;
+    return worker_lifecycle.register_worker(r, principal, false, now, fx);
   }
 };
 
 TEST_F(WorkerLifecycleTest, ARegisteredWorkerIsToldItsIdAndTimings) {
-  const v1::RegisterResponse r = worker_lifecycle.register_worker(request("render-1", 8), "tok", now);
+  const v1::RegisterResponse r = join_as(request("render-1", 8), "tok");
   const WorkerInfo& w = worker(r.worker_id());
   EXPECT_EQ(w.name, "render-1");
   EXPECT_EQ(w.principal, "tok");
@@ -54,23 +60,34 @@ TEST_F(WorkerLifecycleTest, ARegisteredWorkerIsToldItsIdAndTimings) {
 TEST_F(WorkerLifecycleTest, AnotherProtocolVersionIsRefused) {
   v1::RegisterRequest r = request("old");
   r.set_version(kProtocolVersion - 1);
-  const std::string why = refusal([&] { worker_lifecycle.register_worker(r, "", now); }, Code::kInvalidArgument);
+  const std::string why = refusal([&] { join_as(r, ""); }, Code::kInvalidArgument);
   EXPECT_TRUE(has(why, "protocol version " + std::to_string(kProtocolVersion - 1))) << why;
   EXPECT_EQ(workers.size(), 0u);
 }
 
-TEST_F(WorkerLifecycleTest, AQuarantinedTokenMayNotRegister) {
-  checks.quarantine(12345, "liar");
-  const std::string why = refusal([&] { join("again", "liar"); }, Code::kPermissionDenied);
-  EXPECT_TRUE(has(why, "worker token 'liar' is quarantined")) << why;
-  EXPECT_NO_THROW(join("honest", "honest"));
+// Issue 23: an enrolled worker's credential is one worker: registering again (a restarted
+// process) ends the last registration and gives its leases back, where a shared token's
+// registrations add up (to --max-workers-per-token). Every registration starts on
+// probation: its first verify_first tasks are checked.
+TEST_F(WorkerLifecycleTest, AnEnrolledWorkersRegistrationReplacesItsLast) {
+  const uint64_t first = join("render-1", "render-1", true);
+  Job& job = *add_still();
+  const uint64_t task = lease_next(job, first);
+  const uint64_t second = join("render-1", "render-1", true);
+  EXPECT_NE(first, second);
+  EXPECT_EQ(workers.find(first), nullptr);
+  EXPECT_EQ(leases.live(task), nullptr);  // back to its job
+  EXPECT_TRUE(worker(second).enrolled);
+  EXPECT_EQ(worker(second).probation, options.verify_fraction > 0 ? options.verify_first : 0u);
+  EXPECT_NO_THROW(join("render-2", "render-2", true));  // another credential: another worker
+  EXPECT_EQ(workers.size(), 2u);
 }
 
 // Issue 23: a worker is who holds the secret its registration was given, not whoever
 // names its id; registrations are bounded per token as well as in total.
 TEST_F(WorkerLifecycleTest, ARequestMustCarryItsWorkersSecret) {
-  const v1::RegisterResponse a = worker_lifecycle.register_worker(request("a"), "farm-a", now);
-  const v1::RegisterResponse b = worker_lifecycle.register_worker(request("b"), "farm-b", now);
+  const v1::RegisterResponse a = join_as(request("a"), "farm-a");
+  const v1::RegisterResponse b = join_as(request("b"), "farm-b");
   EXPECT_EQ(a.worker_secret().size(), 32u);
   EXPECT_NE(a.worker_secret(), b.worker_secret());
   EXPECT_NE(a.worker_id(), b.worker_id());

@@ -24,6 +24,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
 
   // What the test sets (under mu, or before the worker starts) ...
   std::deque<grpc::Status> register_failures;  // answers before Register succeeds
+  std::deque<grpc::Status> enrol_failures;     // answers before Enrol succeeds
   uint32_t heartbeat_interval_ms = 50;
   uint32_t max_leases = 0;                         // RegisterResponse.max_leases (0: as coordinators before it)
   std::deque<std::vector<v1::Task>> task_batches;  // GetTask: the front batch, up to max_tasks
@@ -41,6 +42,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
 
   // ... and what the worker did.
   std::vector<v1::RegisterRequest> registrations;
+  std::vector<v1::EnrolRequest> enrolments;       // every Enrol call, failed or not
   std::vector<Clock::time_point> register_times;  // of every Register call, failed or not
   std::vector<v1::GetTaskRequest> task_requests;
   std::vector<uint64_t> handed_out;  // task ids, in order
@@ -70,6 +72,19 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
     for (const v1::TaskResult& r : results)
       if (r.task_id() == task_id) return &r;
     return nullptr;
+  }
+
+  grpc::Status Enrol(grpc::ClientContext*, const v1::EnrolRequest& req, v1::EnrolResponse* resp) override {
+    std::lock_guard<std::mutex> lock(mu);
+    enrolments.push_back(req);
+    changed_.notify_all();
+    if (!enrol_failures.empty()) {
+      const grpc::Status st = enrol_failures.front();
+      enrol_failures.pop_front();
+      return st;
+    }
+    resp->set_credential("credential-" + std::to_string(enrolments.size()));
+    return grpc::Status::OK;
   }
 
   grpc::Status Register(grpc::ClientContext*, const v1::RegisterRequest& req, v1::RegisterResponse* resp) override {
@@ -222,6 +237,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
       grpc::ClientContext*, const v1::Request&, grpc::CompletionQueue*) override {                                  \
     return nullptr;                                                                                                 \
   }
+  TESSERA_NO_ASYNC(Enrol, EnrolRequest, EnrolResponse)
   TESSERA_NO_ASYNC(Register, RegisterRequest, RegisterResponse)
   TESSERA_NO_ASYNC(GetTask, GetTaskRequest, GetTaskResponse)
   TESSERA_NO_ASYNC(Heartbeat, HeartbeatRequest, HeartbeatResponse)

@@ -236,6 +236,47 @@ TEST_F(WorkerTest, ARefusedWorkerStopsAtOnce) {
   EXPECT_TRUE(fake->task_requests.empty());
 }
 
+// With an enrolment token the worker enrols under its name before registering, and again
+// when the coordinator no longer knows its credential (unused for an hour, or its name
+// enrolled again); a refusal of a credential it was just given is final.
+TEST_F(WorkerTest, AnEnrollingWorkerEnrolsThenRegistersAndEnrolsAgainWhenItsCredentialIsUnknown) {
+  WorkerOptions o = options();
+  o.enrol_token = "enrol-token-0123456789";
+  o.name = "render-7";
+  start(o);
+  ASSERT_TRUE(fake->wait_until([&] { return !fake->registrations.empty(); }));
+  // The coordinator forgets the worker and then its credential (unused for an hour): told
+  // to register again, it is refused as unknown, enrols again, and registers.
+  fake->set([&] {
+    fake->get_task_failures = {grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, "unknown worker 1")};
+    fake->register_failures = {grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "the access token is not known")};
+  });
+  ASSERT_TRUE(fake->wait_until([&] { return fake->registrations.size() == 2; }));
+  EXPECT_TRUE(finish());
+  ASSERT_EQ(fake->enrolments.size(), 2u);
+  EXPECT_EQ(fake->enrolments[0].name(), "render-7");
+  EXPECT_EQ(fake->register_times.size(), 3u);  // registered, refused (stale), registered
+
+  // A credential refused right after it was made: final, no loop of enrolments.
+  stop = false;
+  fake = std::make_shared<FakeCoordinator>();
+  fake->register_failures = {grpc::Status(grpc::StatusCode::UNAUTHENTICATED, "not known")};
+  start(o);
+  thread.join();
+  EXPECT_FALSE(returned);
+  EXPECT_EQ(fake->enrolments.size(), 1u);
+
+  // Enrolment refused (a quarantined name): the worker stops at once.
+  stop = false;
+  fake = std::make_shared<FakeCoordinator>();
+  fake->enrol_failures = {grpc::Status(grpc::StatusCode::PERMISSION_DENIED, "worker 'render-7' is quarantined")};
+  start(o);
+  thread.join();
+  EXPECT_FALSE(returned);
+  EXPECT_EQ(fake->enrolments.size(), 1u);
+  EXPECT_TRUE(fake->register_times.empty());
+}
+
 TEST_F(WorkerTest, ItAsksForTwoTasksThenForItsLookaheadOnceItsSpeedIsMeasured) {
   WorkerOptions o = options();
   o.max_tasks = 8;
@@ -413,7 +454,28 @@ TEST_F(SceneCacheTest, AFetchCutShortGoesOnFromTheFirstByteItLacks) {
   std::map<std::string, std::string> want{{".main", b.main_file() + "\n"}};
   for (const v1::SceneFile& f : b.files()) want[f.path()] = f.content();
   EXPECT_EQ(files_in(dir / hash), want);
-  EXPECT_FALSE(fs::exists(dir / (hash + ".partial")));
+  for (const fs::directory_entry& e : fs::directory_iterator(dir))
+    EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos) << e.path();
+}
+
+// Workers that share a cache folder (two on one machine) fetch the same scene at once:
+// each into a partial folder of its own, the first in place is used by both (they hashed
+// the same). A dead worker's partial folder is removed; a live one's is left alone.
+TEST_F(SceneCacheTest, WorkersSharingACacheFolderFetchTheSameSceneAtOnce) {
+  fs::create_directories(dir / (hash + ".partial-999999999-0"));  // no such process
+  const fs::path live = dir / (hash + ".partial-" + std::to_string(::getppid()) + "-0");
+  fs::create_directories(live);
+  FakeCoordinator other;
+  other.scenes = fake.scenes;
+  std::shared_ptr<const worker::PreparedRenderer> a, b;
+  std::thread t([&] { b = worker::SceneCache(dir.string(), fetch_from(other)).prepare(scene_task(hash)); });
+  a = worker::SceneCache(dir.string(), fetch_from(fake)).prepare(scene_task(hash));
+  t.join();
+  ASSERT_NE(a, nullptr);
+  ASSERT_NE(b, nullptr);
+  EXPECT_FALSE(fs::exists(dir / (hash + ".partial-999999999-0")));
+  EXPECT_TRUE(fs::exists(live));
+  EXPECT_TRUE(fs::exists(dir / hash / ".main"));
 }
 
 TEST_F(SceneCacheTest, BytesThatDoNotHashToTheSceneAreRefusedAndLeaveNothing) {
