@@ -4,15 +4,17 @@
 # honest workers and one that returns plausible but wrong sums (the hidden --test-lie) and,
 # each time it is caught, comes back under a new name (a new identity, on probation again).
 # Counts the jobs whose image is not bit-identical to `tessera render` (aim: 0), the
-# quarantines, and the checks' cost: the same N jobs on an honest farm with the default
-# checks (--verify-fraction 0.01, --verify-first 4) and with none, alternating.
+# quarantines, and the checks' cost: COST_JOBS jobs of COST_SPP samples (default 8 of 256,
+# ~2 s each here) on an honest farm with the default checks (--verify-fraction 0.01,
+# --verify-first 4) and with none, alternating, REPEAT times (default 3).
 # Usage: bench/liar_among_four.sh [N]   (default 30; the scene: scenes/cornell-spheres.dae)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=${BIN:-build/bin}
 N=${1:-30}
 SCENE=scenes/cornell-spheres.dae
-FLAGS=(-r 96 72 -s 32 --pass-spp 8 -m 4 --tile 16)  # 120 tasks a job
+BASE=(-r 96 72 --pass-spp 8 -m 4 --tile 16)
+FLAGS=("${BASE[@]}" -s 32)  # 120 tasks a job
 RUN=$(mktemp -d)
 pids=()
 stop_all() { for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done; wait 2>/dev/null || true; pids=(); }
@@ -64,8 +66,8 @@ for j in $(seq "$N"); do
     liar=$LAST
     workers_up 4
   fi
-  "$BIN/tessera" render "$SCENE" "${FLAGS[@]}" --seed "$j" -q -f "$RUN/local.exr" >/dev/null
-  "$BIN/tessera" submit "$SCENE" "${FLAGS[@]}" --seed "$j" --coordinator "$GRPC" --wait -q -f "$RUN/farm.exr" >/dev/null
+  "$BIN/tessera" render "$SCENE" "${FLAGS[@]}" --seed "$j" -q -f "$RUN/local.exr" >/dev/null 2>&1
+  "$BIN/tessera" submit "$SCENE" "${FLAGS[@]}" --seed "$j" --coordinator "$GRPC" --wait -q -f "$RUN/farm.exr" >/dev/null 2>&1
   if ! "$BIN/tessera_compare" "$RUN/farm.exr" "$RUN/local.exr" | grep -q '"identical":true'; then wrong=$((wrong + 1)); fi
 done
 echo "liar among 4 workers: $wrong of $N images wrong; quarantined $(metric tessera_workers_quarantined_total) times" \
@@ -80,8 +82,9 @@ farm_time() {  # coordinator flags...; N jobs through 4 honest workers: sets SEC
   for h in 1 2 3 4; do worker "honest-$h"; done
   workers_up 4
   local t0; t0=$(now)
-  for j in $(seq "$N"); do
-    "$BIN/tessera" submit "$SCENE" "${FLAGS[@]}" --seed "$j" --coordinator "$GRPC" --wait -q -f "$RUN/farm.exr" >/dev/null
+  for j in $(seq "${COST_JOBS:-8}"); do
+    "$BIN/tessera" submit "$SCENE" "${BASE[@]}" -s "${COST_SPP:-256}" --seed "$j" --coordinator "$GRPC" --wait -q \
+      -f "$RUN/farm.exr" >/dev/null 2>&1
   done
   local t1; t1=$(now)
   CHECKS=$(metric tessera_checks_issued_total)
@@ -89,11 +92,12 @@ farm_time() {  # coordinator flags...; N jobs through 4 honest workers: sets SEC
   SECONDS_TAKEN=$(awk "BEGIN {print $t1 - $t0}")
 }
 with=(); without=()
-for r in 1 2; do
+for r in $(seq "${REPEAT:-3}"); do
   farm_time; with+=("$SECONDS_TAKEN"); checks=$CHECKS
   farm_time --verify-fraction 0; without+=("$SECONDS_TAKEN")
-  echo "run $r: default checks $(printf %.2f "${with[-1]}") s ($checks checks of $((N * 120)) tasks), none $(printf %.2f "${without[-1]}") s"
+  echo "run $r: default checks $(printf %.2f "${with[-1]}") s ($checks checks of $((${COST_JOBS:-8} * 30 * ${COST_SPP:-256} / 8)) tasks)," \
+    "none $(printf %.2f "${without[-1]}") s"
 done
 best() { printf '%s\n' "$@" | sort -g | head -1; }
 bw=$(best "${with[@]}"); bo=$(best "${without[@]}")
-echo "best of 2: default checks $(printf %.2f "$bw") s, none $(printf %.2f "$bo") s, cost $(awk "BEGIN {printf \"%.1f\", 100 * ($bw / $bo - 1)}")%"
+echo "best of ${REPEAT:-3}: default checks $(printf %.2f "$bw") s, none $(printf %.2f "$bo") s, cost $(awk "BEGIN {printf \"%.1f\", 100 * ($bw / $bo - 1)}")%"
