@@ -5,6 +5,7 @@
 #include <chrono>
 #include <thread>
 
+#include "core/util/cancel.h"
 #include "core/util/invariant.h"
 #include "core/util/log.h"
 
@@ -55,6 +56,8 @@ grpc::Status guarded(F&& f) {
         break;
     }
     return grpc::Status(code, e.what());
+  } catch (const Cancelled& e) {  // a scene check whose client went away, or a coordinator stopping
+    return grpc::Status(grpc::StatusCode::CANCELLED, e.what());
   } catch (const InvariantError& e) {  // a bug, logged where it was found
     return internal_error(e.what());
   } catch (const std::exception& e) {
@@ -102,7 +105,11 @@ void configure_server(grpc::ServerBuilder& builder, int max_message_bytes) {
 }
 
 grpc::Status ClientService::SubmitJob(grpc::ServerContext* ctx, const v1::SubmitJobRequest* req, v1::JobId* out) {
-  return as(auth_, ctx, Action::kSubmit, [&](const Principal& who) { out->set_id(c_.submit(*req, who.name)); });
+  return as(auth_, ctx, Action::kSubmit, [&](const Principal& who) {
+    // The scene check stops when the client goes away or the coordinator is told to stop.
+    const CancelScope scope([ctx] { return ctx->IsCancelled(); });
+    out->set_id(c_.submit(*req, who.name));
+  });
 }
 grpc::Status ClientService::GetJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::JobStatus* out) {
   return as(auth_, ctx, Action::kRead, [&](const Principal&) { *out = c_.status(req->id(), true); });

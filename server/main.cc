@@ -11,10 +11,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <future>
 #include <optional>
 #include <thread>
 
 #include "core/io/files.h"
+#include "core/util/cancel.h"
 #include "core/util/cli.h"
 #include "core/util/log.h"
 #include "server/admission.h"
@@ -309,11 +311,29 @@ int main(int argc, char** argv) {
     int sig = 0;
     sigwait(&sigs, &sig);
     spdlog::info("signal {}, stopping", sig);
+    tessera::stop_all_scoped_work();  // scene checks under way give up at their next step
     stopping = true;
-    reaper.join();
-    janitor.join();
-    server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
-    status.stop();
+    // Down within seconds whatever a request is doing: past kStopSeconds what is left is
+    // left as a crash would leave it (a restart takes it up; a cut-short submit was never
+    // acknowledged).
+    constexpr int kStopSeconds = 8;
+    std::promise<void> closed;
+    std::future<void> closed_f = closed.get_future();
+    std::thread closer([&] {
+      reaper.join();
+      janitor.join();
+      server->Shutdown(std::chrono::system_clock::now() + std::chrono::seconds(2));
+      status.stop();
+      closed.set_value();
+    });
+    if (closed_f.wait_for(std::chrono::seconds(kStopSeconds)) != std::future_status::ready) {
+      spdlog::warn("requests still running {} s after the stop signal: stopping without them", kStopSeconds);
+      coordinator.checkpoint_all();
+      spdlog::default_logger()->flush();
+      std::fflush(nullptr);
+      _exit(0);
+    }
+    closer.join();
     coordinator.checkpoint_all();  // results merged since the last checkpoint are kept too
   } catch (const std::exception& e) {
     spdlog::error("{}", e.what());

@@ -1,5 +1,6 @@
 // The glTF loader refuses hostile and damaged files with a clear error, never a crash or a
 // huge allocation.
+#include "core/util/cancel.h"
 #include "tests/core/gltf_fixture.h"
 
 namespace tessera {
@@ -234,9 +235,36 @@ TEST_F(Gltf, DagBombsAreRefusedBeforeExpansion) {
   };
   expect_error(bomb(true, 30), "the scene's node graph expands to 2147483648 node visits");
   expect_error(bomb(false, 60), "node visits (a child listed more than once is expanded each time), over the limit");
+  // Within the visits, a one-triangle mesh copied 1 M times and more (2 M: 2 GB, 15 s to
+  // check): refused too.
+  expect_error(bomb(true, 21), "the scene's node graph expands to 2097152 meshes (a mesh is copied at each visit");
   // A child listed twice a few times over is an instance, rendered twice each time.
   const Scene s = load(bomb(true, 4));
   EXPECT_EQ(s.meshes.size(), 16u);
+}
+
+// Issue 23: a long load can be stopped (a coordinator's scene check whose client went away,
+// or a coordinator told to stop): under a CancelScope it polls at each node, primitive and
+// texture and throws Cancelled; without one (tessera render, workers) it never does.
+TEST_F(Gltf, ALoadUnderACancelScopeStopsAtItsNextStep) {
+  Doc d;
+  for (int i = 1; i <= 10; ++i) {  // 1024 visits of the mesh
+    const int child = i == 1 ? 0 : int(d.j["nodes"].size()) - 1;
+    d.j["nodes"].push_back({{"children", {child, child}}});
+  }
+  d.j["scenes"][0]["nodes"] = {int(d.j["nodes"].size()) - 1};
+  const std::string path = write(d);
+  int polls = 0;
+  {
+    const CancelScope scope([&] { return ++polls > 100; }, 0);  // asked at every step
+    EXPECT_THROW(load_gltf_file(path), Cancelled);
+  }
+  EXPECT_EQ(polls, 101);                                 // stopped at the first step after it was asked to
+  EXPECT_EQ(load_gltf_file(path).meshes.size(), 1024u);  // no scope: loads
+  {
+    const CancelScope scope([] { return false; });
+    EXPECT_EQ(load_gltf_file(path).meshes.size(), 1024u);
+  }
 }
 
 // Triangles are counted before expansion too, instances of EXT_mesh_gpu_instancing included.

@@ -13,6 +13,7 @@
 
 #include "core/math/transform.h"
 #include "core/scene/scene_error.h"
+#include "core/util/cancel.h"
 
 namespace tessera {
 namespace {
@@ -190,6 +191,7 @@ class ColladaLoader {
   }
 
   void process_node(pugi::xml_node node, const Mat4& parent, int depth) {
+    throw_if_cancelled();
     if (depth > 256) fail(node, "node hierarchy deeper than 256 levels");
     const Mat4 world = parent * local_transform(node);
     for (pugi::xml_node child : node.children("node")) process_node(child, world, depth + 1);

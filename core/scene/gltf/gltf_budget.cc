@@ -18,7 +18,7 @@ class Budget {
   explicit Budget(const GltfContext& ctx) : ctx_(ctx), memo_(ctx.model.nodes.size()) {}
 
   struct Count {
-    double visits = 0, triangles = 0;
+    double visits = 0, triangles = 0, meshes = 0;
     size_t height = 0;  // the longest chain of nodes from this one down, itself included
   };
 
@@ -36,11 +36,16 @@ class Budget {
       // EXT_mesh_gpu_instancing's instances are copies only where a pose moves them (a file
       // with animations, a skinned node: gltf_nodes); else the mesh is stored once.
       const bool copied = !ctx_.model.animations.empty() || n.skin >= 0;
-      if (n.mesh >= 0) c.triangles = mesh_triangles(n.mesh) * (copied ? instances(n) : 1);
+      if (n.mesh >= 0) {
+        const double copies = copied ? instances(n) : 1;
+        c.triangles = mesh_triangles(n.mesh) * copies;
+        c.meshes = mesh_primitives(n.mesh) * copies;
+      }
       for (int child : n.children) {
         const Count k = node(child, depth + 1);
         c.visits += k.visits;
         c.triangles += k.triangles;
+        c.meshes += k.meshes;
         c.height = std::max(c.height, k.height);
       }
       ++c.height;
@@ -75,6 +80,9 @@ class Budget {
     }
     return t;
   }
+  double mesh_primitives(int mesh) const {
+    return size_t(mesh) < ctx_.model.meshes.size() ? double(ctx_.model.meshes[size_t(mesh)].primitives.size()) : 0;
+  }
   // EXT_mesh_gpu_instancing's instance count (its first attribute's), else 1.
   double instances(const tinygltf::Node& n) const {
     auto ext = n.extensions.find("EXT_mesh_gpu_instancing");
@@ -94,16 +102,21 @@ class Budget {
 
 void check_gltf_budget(const GltfContext& ctx, const std::vector<int>& roots) {
   Budget budget(ctx);
-  double visits = 0, triangles = 0;
+  double visits = 0, triangles = 0, meshes = 0;
   for (int r : roots) {
     const Budget::Count c = budget.node(r, 0);
     visits += c.visits;
     triangles += c.triangles;
+    meshes += c.meshes;
   }
   if (visits > kMaxGltfNodeVisits)
     ctx.fail("nodes", "the scene's node graph expands to " + count_text(visits) +
                           " node visits (a child listed more than once is expanded each time), over the limit of " +
                           count_text(kMaxGltfNodeVisits));
+  if (meshes > kMaxGltfMeshCopies)
+    ctx.fail("nodes", "the scene's node graph expands to " + count_text(meshes) +
+                          " meshes (a mesh is copied at each visit of its node), over the limit of " +
+                          count_text(kMaxGltfMeshCopies));
   if (triangles > kMaxGltfTriangles)
     ctx.fail("nodes", "the scene expands to " + count_text(triangles) +
                           " triangles (every node visit and instance counted), over the limit of " +

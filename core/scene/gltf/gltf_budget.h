@@ -2,7 +2,7 @@
 // visited once each time they are listed, so a 1 KB file whose nodes list a child twice,
 // nested 30 deep, asks the walk for 2^30 visits (a "DAG bomb": memory, or with no meshes
 // a core pinned for days). check_gltf_budget counts, per node once (memoised), the visits
-// and triangles (EXT_mesh_gpu_instancing's instances included where they are copies, in a
+// meshes and triangles (EXT_mesh_gpu_instancing's instances included where they are copies, in a
 // file with animations or a skinned node; real instances store the mesh once) that the walk from `roots`
 // would make, from the declared accessor counts, and refuses the file naming the limit;
 // cycles and depth are refused here too, before the walk can recurse into them.
@@ -16,6 +16,10 @@ namespace tessera {
 
 constexpr double kMaxGltfNodeVisits = 4 << 20;     // node visits of the expanded graph
 constexpr double kMaxGltfTriangles = 100'000'000;  // triangles of the expanded graph
+// Meshes of the expanded graph (a primitive at each visit of its node): each copy has
+// arrays of its own, ~1 KB at least, so a 1 KB file listing a one-triangle mesh's node
+// twice, 21 deep, held 2 GB and took 15 s to check.
+constexpr double kMaxGltfMeshCopies = 1 << 20;
 constexpr size_t kMaxGltfNodeDepth = 256;
 
 void check_gltf_budget(const GltfContext& ctx, const std::vector<int>& roots);

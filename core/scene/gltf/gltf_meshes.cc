@@ -5,6 +5,7 @@
 
 #include "core/scene/gltf/gltf_accessors.h"
 #include "core/scene/gltf/gltf_skins.h"
+#include "core/util/cancel.h"
 
 namespace tessera {
 
@@ -36,6 +37,7 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
   const double det = w.det3();
   std::vector<GltfPrimitive> out;
   for (size_t p = 0; p < mesh.primitives.size(); ++p) {
+    throw_if_cancelled();  // a scene check whose client went away
     const tinygltf::Primitive& prim = mesh.primitives[p];
     const std::string el = "meshes[" + std::to_string(index) + "].primitives[" + std::to_string(p) + "]";
     static const char* kModes[] = {"POINTS",    "LINES",          "LINE_LOOP",   "LINE_STRIP",

@@ -12,6 +12,7 @@
 #include "core/scene/gltf/gltf_lights_cameras.h"
 #include "core/scene/gltf/gltf_meshes.h"
 #include "core/scene/gltf/gltf_skins.h"
+#include "core/util/cancel.h"
 
 namespace tessera {
 namespace {
@@ -82,6 +83,7 @@ class NodeWalk {
 
   // `parent_entry`: the parent's entry in the animation's hierarchy (-1: none).
   void visit(int index, const Mat4& parent, int32_t parent_entry) {
+    throw_if_cancelled();
     const std::string el = "nodes[" + std::to_string(index) + "]";
     // check_gltf_budget went over this graph first: every node exists, no cycle, no deeper
     // than kMaxGltfNodeDepth.

@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "core/scene/gltf/gltf_extensions.h"
+#include "core/util/cancel.h"
 
 namespace tessera {
 namespace {
@@ -91,6 +92,7 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
     ctx_.fail(el, "texture " + std::to_string(index) + " does not exist");
   const int key = 2 * index + (srgb ? 1 : 0);
   if (auto it = loaded_.find(key); it != loaded_.end()) return it->second;
+  throw_if_cancelled();
   const tinygltf::Texture& t = model.textures[size_t(index)];
   const std::string tel = "textures[" + std::to_string(index) + "]";
   for (const auto& [ext, format] : kGltfImageFormatExtensions)
