@@ -97,7 +97,9 @@ grpc::Status as(const Authenticator* auth, grpc::ServerContext* ctx, Action acti
 
 }  // namespace
 
-void configure_server(grpc::ServerBuilder& builder, int max_message_bytes) {
+void configure_server(grpc::ServerBuilder& builder, int max_message_bytes, ConnectionLimits limits) {
+  builder.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS, int(limits.handshake_seconds * 1000));
+  builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_IDLE_MS, int(limits.idle_seconds * 1000));
   builder.SetMaxReceiveMessageSize(max_message_bytes);
   builder.SetMaxSendMessageSize(max_message_bytes);
   const int cores = int(std::max(1u, std::thread::hardware_concurrency()));

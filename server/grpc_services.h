@@ -14,7 +14,15 @@ namespace tessera {
 // default keeps 2 idle threads and ends the rest after each call, so a busy coordinator
 // made and ended a thread for most calls, and its per-thread decoding scratch with it.)
 // `max_message_bytes`: tests lower it (scenes of any size stream in pieces below it).
-void configure_server(grpc::ServerBuilder& builder, int max_message_bytes = kMaxMessageBytes);
+// Connections: one that has not finished its handshake (TCP to HTTP/2, TLS included)
+// within `handshake_seconds` is closed, and one with no call for `idle_seconds` too (a
+// client's channel reconnects by itself): idle sockets cannot pile up descriptors.
+struct ConnectionLimits {
+  double handshake_seconds = 10;
+  double idle_seconds = 300;
+};
+void configure_server(grpc::ServerBuilder& builder, int max_message_bytes = kMaxMessageBytes,
+                      ConnectionLimits limits = {});
 
 // Without an Authenticator (or with an open one) every caller may do everything.
 class ClientService final : public v1::Tessera::Service {

@@ -120,6 +120,15 @@ int main(int argc, char** argv) {
                  "--verify-fraction picks")
       ->capture_default_str()
       ->check(CLI::Range(0, 1000000));
+  tessera::ConnectionLimits connection_limits;
+  app.add_option("--handshake-seconds", connection_limits.handshake_seconds,
+                 "close a gRPC connection that has not finished its handshake (TLS included) in this long")
+      ->capture_default_str()
+      ->check(CLI::Range(0.1, 3600.0));
+  app.add_option("--idle-connection-seconds", connection_limits.idle_seconds,
+                 "close a gRPC connection with no call for this long (clients reconnect by themselves)")
+      ->capture_default_str()
+      ->check(CLI::Range(1.0, 86400.0));
   int write_delay_ms = 0, commit_delay_ms = 0;  // for the crash tests: windows in which to kill
   app.add_option("--test-checkpoint-delay-ms", write_delay_ms)->group("")->check(CLI::Range(0, 60000));
   app.add_option("--test-commit-delay-ms", commit_delay_ms)->group("")->check(CLI::Range(0, 60000));
@@ -262,7 +271,7 @@ int main(int argc, char** argv) {
     grpc::ServerBuilder builder;
     int bound = 0;
     builder.AddListeningPort(grpc_host + ":" + std::to_string(grpc_port), credentials, &bound);
-    tessera::configure_server(builder);
+    tessera::configure_server(builder, tessera::kMaxMessageBytes, connection_limits);
     builder.RegisterService(&client);
     builder.RegisterService(&worker);
     std::unique_ptr<grpc::Server> server = builder.BuildAndStart();

@@ -338,6 +338,48 @@ TEST_F(Access, TheCoordinatorRaisesItsDescriptorLimit) {
   EXPECT_EQ(soft, hard) << "the soft limit is raised to the hard one";
 }
 
+// Issue 23: connections that never finish their handshake, or that go idle, are closed
+// (--handshake-seconds, --idle-connection-seconds): a thousand such sockets once held a
+// thousand descriptors for good. Fifty raw TCP connections that send nothing are closed
+// within the handshake time, and the coordinator's descriptors come back to where they were.
+TEST_F(Access, HalfOpenAndIdleConnectionsAreClosed) {
+  start_coordinator({"--handshake-seconds", "1", "--idle-connection-seconds", "2"});
+  const auto open_fds = [&] {
+    const fs::path fds = "/proc/" + std::to_string(coordinator->pid()) + "/fd";
+    return size_t(std::distance(fs::directory_iterator(fds), fs::directory_iterator()));
+  };
+  const size_t before = open_fds();
+  const int port = std::stoi(grpc_addr.substr(grpc_addr.rfind(':') + 1));
+  std::vector<int> socks;
+  for (int i = 0; i < 50; ++i) {
+    const int fd = socket(AF_INET, SOCK_STREAM, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(uint16_t(port));
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    ASSERT_EQ(connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a), 0);
+    socks.push_back(fd);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  EXPECT_GE(open_fds(), before + 40);  // held, for now
+  size_t closed = 0;
+  for (int fd : socks) {  // each sees the coordinator close it (end of stream) within a few seconds
+    timeval tv{5, 0};
+    setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    char buf[256];
+    ssize_t got;
+    while ((got = recv(fd, buf, sizeof buf, 0)) > 0) {
+    }
+    closed += got == 0 || (got < 0 && errno == ECONNRESET);
+    close(fd);
+  }
+  EXPECT_EQ(closed, socks.size());
+  std::this_thread::sleep_for(std::chrono::milliseconds(200));
+  EXPECT_LE(open_fds(), before + 2);
+  // A real client is unaffected: its channel connects again when it next calls.
+  EXPECT_EQ(tessera("jobs", kAlice).code, 0);
+}
+
 // Issue 22: requeue, priority and delete follow the cancel rule: a client changes only its
 // own jobs, a viewer none, an admin any.
 TEST_F(Access, ChangingAJobAfterSubmitIsTheOwnersOrAnAdminsRight) {
