@@ -186,11 +186,11 @@ class Coordinator {
 
   std::vector<WorkerInfo> workers() const {
     MutexLock lock(mu_);
-    return workers_.list();
+    return workers_.list(clock_->now());
   }
-  double utilization() const {  // of every live worker's render threads, recently
+  double utilization() const {  // of every live worker's render threads, recently (0 when idle)
     MutexLock lock(mu_);
-    return workers_.utilization();
+    return workers_.utilization(clock_->now());
   }
   CoordinatorCounters counters() const {
     MutexLock lock(mu_);

@@ -3,6 +3,8 @@
 
 #include <cstdint>
 
+#include "server/histogram.h"
+
 namespace tessera {
 
 struct CoordinatorCounters {
@@ -16,6 +18,7 @@ struct CoordinatorCounters {
   uint64_t result_bytes = 0;   // compressed sums of merged results (the bulk of the workers' traffic)
   uint64_t backup_leases = 0;  // tiles leased a second time at a frame's end
   double merge_seconds = 0;
+  Histogram task_seconds;  // merged results' render time, as their workers measured it
 };
 
 }  // namespace tessera

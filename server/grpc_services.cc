@@ -8,6 +8,7 @@
 #include "core/util/cancel.h"
 #include "core/util/invariant.h"
 #include "core/util/log.h"
+#include "server/histogram.h"
 
 namespace tessera {
 namespace {
@@ -87,12 +88,17 @@ grpc::Status caller(const Authenticator* auth, grpc::ServerContext* ctx, Action 
   return grpc::Status(grpc::StatusCode::PERMISSION_DENIED, c.why);
 }
 
-// Checks the caller, then runs f(principal) under guarded().
+// Checks the caller, then runs f(principal) under guarded(); the time it takes goes to
+// the method's tessera_rpc_seconds.
 template <typename F>
-grpc::Status as(const Authenticator* auth, grpc::ServerContext* ctx, Action action, F&& f) {
+grpc::Status as(const char* method, const Authenticator* auth, grpc::ServerContext* ctx, Action action, F&& f) {
+  const auto since = std::chrono::steady_clock::now();
   Principal who;
-  if (grpc::Status st = caller(auth, ctx, action, &who); !st.ok()) return st;
-  return guarded([&] { f(who); });
+  grpc::Status st = caller(auth, ctx, action, &who);
+  if (st.ok()) st = guarded([&] { f(who); });
+  RpcLatency::process().observe(method,
+                                std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count());
+  return st;
 }
 
 }  // namespace
@@ -107,24 +113,25 @@ void configure_server(grpc::ServerBuilder& builder, int max_message_bytes, Conne
 }
 
 grpc::Status ClientService::SubmitJob(grpc::ServerContext* ctx, const v1::SubmitJobRequest* req, v1::JobId* out) {
-  return as(auth_, ctx, Action::kSubmit, [&](const Principal& who) {
+  return as(__func__, auth_, ctx, Action::kSubmit, [&](const Principal& who) {
     // The scene check stops when the client goes away or the coordinator is told to stop.
     const CancelScope scope([ctx] { return ctx->IsCancelled(); });
     out->set_id(c_.submit(*req, who.name));
   });
 }
 grpc::Status ClientService::GetJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::JobStatus* out) {
-  return as(auth_, ctx, Action::kRead, [&](const Principal&) { *out = c_.status(req->id(), true); });
+  return as(__func__, auth_, ctx, Action::kRead, [&](const Principal&) { *out = c_.status(req->id(), true); });
 }
 grpc::Status ClientService::ListJobs(grpc::ServerContext* ctx, const v1::ListJobsRequest* req, v1::JobList* out) {
-  return as(auth_, ctx, Action::kRead, [&](const Principal&) { *out = c_.list(req->page_size(), req->page_token()); });
+  return as(__func__, auth_, ctx, Action::kRead,
+            [&](const Principal&) { *out = c_.list(req->page_size(), req->page_token()); });
 }
 grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* req,
                                      grpc::ServerWriter<v1::JobStatus>* w) {
   // At most kUpdatesPerSecond updates (and always the last): a status with every tile on
   // every merge cost the render farm's cores more than the watcher gains.
   constexpr double kUpdatesPerSecond = 4;
-  return as(auth_, ctx, Action::kRead, [&](const Principal& who) {
+  return as(__func__, auth_, ctx, Action::kRead, [&](const Principal& who) {
     const StreamSlots::Slot slot = streams_.take(stream_peer(who, *ctx));
     // Progress only: a watcher that wants every tile asks GetJob.
     v1::JobStatus s = c_.status(req->id(), false);
@@ -143,28 +150,28 @@ grpc::Status ClientService::WatchJob(grpc::ServerContext* ctx, const v1::JobId* 
   });
 }
 grpc::Status ClientService::CancelJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::JobStatus* out) {
-  return as(auth_, ctx, Action::kCancel,
+  return as(__func__, auth_, ctx, Action::kCancel,
             [&](const Principal& who) { *out = c_.cancel(req->id(), who.name, who.role == Role::kAdmin); });
 }
 // Requeue, priority and delete: a client's own jobs, an admin's any (as CancelJob).
 grpc::Status ClientService::RequeueJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::JobStatus* out) {
-  return as(auth_, ctx, Action::kCancel,
+  return as(__func__, auth_, ctx, Action::kCancel,
             [&](const Principal& who) { *out = c_.requeue(req->id(), who.name, who.role == Role::kAdmin); });
 }
 grpc::Status ClientService::SetJobPriority(grpc::ServerContext* ctx, const v1::SetPriorityRequest* req,
                                            v1::JobStatus* out) {
-  return as(auth_, ctx, Action::kCancel, [&](const Principal& who) {
+  return as(__func__, auth_, ctx, Action::kCancel, [&](const Principal& who) {
     *out = c_.set_priority(req->id(), req->priority(), who.name, who.role == Role::kAdmin);
   });
 }
 grpc::Status ClientService::DeleteJob(grpc::ServerContext* ctx, const v1::JobId* req, v1::DeleteJobResponse* out) {
-  return as(auth_, ctx, Action::kCancel, [&](const Principal& who) {
+  return as(__func__, auth_, ctx, Action::kCancel, [&](const Principal& who) {
     out->set_bytes_freed(c_.remove(req->id(), who.name, who.role == Role::kAdmin));
     out->set_id(req->id());
   });
 }
 grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::FetchImageRequest* req, v1::Image* out) {
-  return as(auth_, ctx, Action::kRead, [&](const Principal&) {
+  return as(__func__, auth_, ctx, Action::kRead, [&](const Principal&) {
     const bool any = req->exr() || req->png();  // neither: both, as before the choice existed
     *out = c_.image(req->id(), req->exr() || !any, req->png() || !any,
                     req->has_frame() ? std::optional<int>(req->frame()) : std::nullopt);
@@ -173,34 +180,34 @@ grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::Fetch
 
 grpc::Status ClientService::UploadScene(grpc::ServerContext* ctx, grpc::ServerReader<v1::SceneChunk>* reader,
                                         v1::SceneUpload* out) {
-  return as(auth_, ctx, Action::kSubmit, [&](const Principal& who) {
+  return as(__func__, auth_, ctx, Action::kSubmit, [&](const Principal& who) {
     *out = c_.upload_scene([&](v1::SceneChunk* chunk) { return reader->Read(chunk); }, who.name);
   });
 }
 
 grpc::Status ClientService::FetchImageChunks(grpc::ServerContext* ctx, const v1::FetchImageRequest* req,
                                              grpc::ServerWriter<v1::ImageChunk>* w) {
-  return as(auth_, ctx, Action::kRead, [&](const Principal& who) {
+  return as(__func__, auth_, ctx, Action::kRead, [&](const Principal& who) {
     const StreamSlots::Slot slot = streams_.take(stream_peer(who, *ctx));
     c_.image_chunks(*req, [&](const v1::ImageChunk& c) { return !ctx->IsCancelled() && w->Write(c); });
   });
 }
 
 grpc::Status WorkerService::Enrol(grpc::ServerContext* ctx, const v1::EnrolRequest* req, v1::EnrolResponse* out) {
-  return as(auth_, ctx, Action::kEnrol, [&](const Principal& who) {
+  return as(__func__, auth_, ctx, Action::kEnrol, [&](const Principal& who) {
     out->set_credential(c_.enrol(req->name(), who.name));
     spdlog::info("worker '{}' enrolled (enrolment token '{}')", req->name(), who.name);
   });
 }
 grpc::Status WorkerService::Register(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
                                      v1::RegisterResponse* out) {
-  return as(auth_, ctx, Action::kWork,
+  return as(__func__, auth_, ctx, Action::kWork,
             [&](const Principal& who) { *out = c_.register_worker(*req, who.name, who.enrolled); });
 }
 grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) {
   // Long poll: an idle worker waits here (up to a second) and gets a new job's first task
   // the moment it is submitted, instead of sleeping through a retry interval.
-  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal&) {
     c_.check_worker(req->worker_id(), req->worker_secret());
     const auto since = std::chrono::steady_clock::now(), until = since + std::chrono::seconds(1);
     while (true) {
@@ -216,13 +223,13 @@ grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskR
 }
 grpc::Status WorkerService::FetchSceneChunks(grpc::ServerContext* ctx, const v1::FetchSceneRequest* req,
                                              grpc::ServerWriter<v1::SceneChunk>* w) {
-  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal&) {
     c_.scene_chunks(*req, [&](const v1::SceneChunk& chunk) { return !ctx->IsCancelled() && w->Write(chunk); });
   });
 }
 grpc::Status WorkerService::Heartbeat(grpc::ServerContext* ctx, const v1::HeartbeatRequest* req,
                                       v1::HeartbeatResponse* out) {
-  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal&) {
     c_.check_worker(req->worker_id(), req->worker_secret());
     for (uint64_t id :
          c_.heartbeat(req->worker_id(), {req->task_ids().begin(), req->task_ids().end()}, req->round_trip_us() / 1e6))
@@ -230,7 +237,7 @@ grpc::Status WorkerService::Heartbeat(grpc::ServerContext* ctx, const v1::Heartb
   });
 }
 grpc::Status WorkerService::SubmitResults(grpc::ServerContext* ctx, const v1::ResultBatch* req, v1::ResultAcks* out) {
-  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal&) {
     const auto since = std::chrono::steady_clock::now();
     c_.check_worker(req->worker_id(), req->worker_secret());
     for (const v1::TaskResult& r : req->results())
@@ -245,7 +252,7 @@ grpc::Status WorkerService::SubmitResults(grpc::ServerContext* ctx, const v1::Re
   });
 }
 grpc::Status WorkerService::ReleaseTask(grpc::ServerContext* ctx, const v1::ReleaseRequest* req, v1::ReleaseResponse*) {
-  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal&) {
     c_.check_worker(req->worker_id(), req->worker_secret());
     c_.release(req->worker_id(), req->task_id(), req->error());
   });
@@ -253,7 +260,7 @@ grpc::Status WorkerService::ReleaseTask(grpc::ServerContext* ctx, const v1::Rele
 
 grpc::Status WorkerService::Unregister(grpc::ServerContext* ctx, const v1::UnregisterRequest* req,
                                        v1::UnregisterResponse*) {
-  return as(auth_, ctx, Action::kWork, [&](const Principal&) {
+  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal&) {
     c_.check_worker(req->worker_id(), req->worker_secret());
     c_.unregister(req->worker_id());
   });

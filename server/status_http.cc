@@ -8,6 +8,8 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "server/metrics.h"
+
 namespace tessera {
 namespace {
 
@@ -233,94 +235,6 @@ std::string StatusHttp::status_json() const {
   return out;
 }
 
-std::string StatusHttp::metrics_text() const {
-  const CoordinatorCounters k = c_.counters();
-  std::ostringstream m;
-  auto counter = [&](const char* name, const char* help, double v) {
-    m << "# HELP " << name << ' ' << help << "\n# TYPE " << name << " counter\n" << name << ' ' << v << '\n';
-  };
-  auto gauge = [&](const char* name, const char* help, double v) {
-    m << "# HELP " << name << ' ' << help << "\n# TYPE " << name << " gauge\n" << name << ' ' << v << '\n';
-  };
-  counter("tessera_tasks_dispatched_total", "Tasks handed to workers.", double(k.tasks_dispatched));
-  counter("tessera_results_merged_total", "Tile results merged into films.", double(k.results_merged));
-  counter("tessera_results_duplicate_total", "Results dropped because their tile pass was already merged.",
-          double(k.results_duplicate));
-  counter("tessera_results_rejected_total", "Results refused as unknown or malformed.", double(k.results_rejected));
-  counter("tessera_leases_expired_total", "Leases that expired without a result.", double(k.leases_expired));
-  counter("tessera_leases_released_total", "Leases given back early by workers.", double(k.leases_released));
-  counter("tessera_tasks_failed_total", "Tasks a worker could not render.", double(k.tasks_failed));
-  counter("tessera_samples_merged_total", "Camera samples merged.", double(k.samples_merged));
-  counter("tessera_backup_leases_total",
-          "Tiles leased a second time at a frame's end, to a worker that would idle (first result merged).",
-          double(k.backup_leases));
-  counter("tessera_result_bytes_total",
-          "Compressed sums of merged results, in bytes (over tessera_samples_merged_total: the link's bytes per "
-          "sample).",
-          double(k.result_bytes));
-  counter("tessera_jobs_submitted_total", "Jobs accepted.", double(k.jobs_submitted));
-  counter("tessera_jobs_refused_total", "Jobs refused at submit.", double(k.jobs_refused));
-  counter("tessera_jobs_deleted_total", "Jobs deleted (tessera delete, or --keep-ended).", double(k.jobs_deleted));
-  counter("tessera_jobs_requeued_total", "FAILED or CANCELLED jobs requeued.", double(k.jobs_requeued));
-  counter("tessera_images_written_total", "Progressive images written.", double(k.images_written));
-  counter("tessera_image_errors_total", "Progressive image writes that failed.", double(k.image_errors));
-  counter("tessera_checkpoints_written_total", "Film checkpoints written (crash safety).",
-          double(k.checkpoints_written));
-  counter("tessera_checkpoint_errors_total", "Film checkpoint writes that failed.", double(k.checkpoint_errors));
-  counter("tessera_jobs_restored_total", "Jobs taken up from the data folder at start.", double(k.jobs_restored));
-  counter("tessera_checks_issued_total", "Merged results picked to be rendered again by another worker.",
-          double(k.checks_issued));
-  counter("tessera_checks_passed_total", "Checks whose second render had the same bits.", double(k.checks_passed));
-  counter("tessera_check_mismatches_total", "Checks whose second render differed.", double(k.check_mismatches));
-  counter("tessera_checks_skipped_total", "Checks no other worker took in time.", double(k.checks_skipped));
-  counter("tessera_workers_quarantined_total", "Workers whose results differed from the coordinator's render.",
-          double(k.workers_quarantined));
-  counter("tessera_tiles_rendered_again_total", "Tiles started over because a quarantined worker merged into them.",
-          double(k.tiles_rendered_again));
-  const Coordinator::Queue q = c_.queue();
-  m << "# HELP tessera_queue_tasks Tasks of live jobs: ready to hand out, or leased to a worker.\n"
-       "# TYPE tessera_queue_tasks gauge\n"
-    << "tessera_queue_tasks{state=\"ready\"} " << q.tasks_ready << "\ntessera_queue_tasks{state=\"leased\"} "
-    << q.tasks_leased << '\n';
-  gauge("tessera_remaining_samples", "Camera samples of live jobs not yet merged (an upper bound with -a).",
-        double(q.samples_remaining));
-  gauge("tessera_thread_samples_per_second",
-        "Render speed per worker thread, measured lately (1e6 assumed before any result).",
-        q.samples_per_thread_second);
-  gauge("tessera_remaining_core_seconds",
-        "Work left in core-seconds at the measured speed: the autoscaling signal (workers = this / seconds wanted).",
-        q.core_seconds_remaining);
-  counter("tessera_merge_seconds_total", "Time spent adding tile sums into films.", k.merge_seconds);
-  const std::array<uint64_t, 5> counts = c_.job_counts();
-  m << "# HELP tessera_jobs Jobs by state.\n# TYPE tessera_jobs gauge\n";
-  const char* names[5] = {"queued", "running", "done", "cancelled", "failed"};
-  for (int i = 0; i < 5; ++i) m << "tessera_jobs{state=\"" << names[i] << "\"} " << counts[i] << '\n';
-  size_t busy = 0;
-  const auto workers = c_.workers();
-  for (const auto& w : workers) busy += w.leases != 0;
-  gauge("tessera_workers", "Live workers (heard from within the worker timeout).", double(workers.size()));
-  gauge("tessera_workers_busy", "Workers holding a lease.", double(busy));
-  gauge("tessera_uptime_seconds", "Seconds since start.", c_.uptime());
-  gauge("tessera_workers_utilization", "Busy over available render-thread time of all workers, last seconds.",
-        c_.utilization());
-  std::string lines;  // thousands of workers: snprintf, not the stream's formatting
-  auto per_worker = [&](const char* name, const char* type, const char* help, auto value) {
-    m << "# HELP " << name << ' ' << help << "\n# TYPE " << name << ' ' << type << '\n';
-    lines.clear();
-    char buf[160];
-    for (const auto& w : workers) {
-      std::snprintf(buf, sizeof buf, "%s{worker=\"%llu\"} %.9g\n", name, (unsigned long long)w.id, value(w));
-      lines += buf;
-    }
-    m << lines;
-  };
-  per_worker("tessera_worker_utilization", "gauge", "Busy over available render-thread time, last seconds.",
-             [](const WorkerInfo& w) { return w.utilization; });
-  per_worker("tessera_worker_busy_thread_seconds_total", "counter", "Render-thread time spent rendering.",
-             [](const WorkerInfo& w) { return w.busy_thread_seconds; });
-  per_worker("tessera_worker_thread_seconds_total", "counter", "Render threads x wall time since registering.",
-             [](const WorkerInfo& w) { return w.thread_seconds; });
-  return m.str();
-}
+std::string StatusHttp::metrics_text() const { return prometheus_text(c_); }
 
 }  // namespace tessera

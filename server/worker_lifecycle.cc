@@ -10,7 +10,7 @@ v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest&
     throw RequestError(RequestError::Code::kInvalidArgument,
                        "protocol version " + std::to_string(req.version()) + " not supported");
   if (enrolled)  // one credential, one worker: a restarted one replaces its last registration
-    for (const WorkerInfo& old : p_.workers.list())
+    for (const WorkerInfo& old : p_.workers.list(now))
       if (old.enrolled && old.principal == principal) unregister(old.id, now, fx);
   if (p_.workers.size() >= options_.max_workers) forget_silent(now);
   if (p_.workers.size() >= options_.max_workers)

@@ -58,9 +58,16 @@ std::vector<uint64_t> WorkerRegistry::forget_silent(double now, double timeout) 
   return gone;
 }
 
-std::vector<WorkerInfo> WorkerRegistry::list() const {
+double WorkerInfo::utilization_at(double now) const {
+  return now - last_report > 2 * WorkerRegistry::kWindowSeconds ? 0 : utilization;
+}
+
+std::vector<WorkerInfo> WorkerRegistry::list(double now) const {
   std::vector<WorkerInfo> out;
-  for (const auto& [id, w] : workers_) out.push_back(w);
+  for (const auto& [id, w] : workers_) {
+    out.push_back(w);
+    out.back().utilization = w.utilization_at(now);
+  }
   return out;
 }
 
@@ -69,6 +76,7 @@ void WorkerRegistry::record_result(uint64_t id, uint64_t samples, uint64_t bytes
   WorkerInfo* w = find(id);
   if (!w) return;
   w->last_seen = now;
+  w->last_report = now;
   ++w->tasks_done;
   w->result_bytes += bytes;
   w->result_samples += samples;
@@ -79,7 +87,6 @@ void WorkerRegistry::record_result(uint64_t id, uint64_t samples, uint64_t bytes
   // Reports only grow; one that does not (a restarted worker process reusing an id
   // cannot, ids are never reused) is ignored.
   if (!(thread_seconds >= w->thread_seconds) || !(busy_thread_seconds >= w->busy_thread_seconds)) return;
-  constexpr double kWindowSeconds = 5;
   if (w->window_start == 0 || now - w->window_start > kWindowSeconds) {
     w->window_busy = w->busy_thread_seconds;
     w->window_threads = w->thread_seconds;
@@ -91,9 +98,13 @@ void WorkerRegistry::record_result(uint64_t id, uint64_t samples, uint64_t bytes
   if (dt > 0) w->utilization = std::min(1.0, (w->busy_thread_seconds - w->window_busy) / dt);
 }
 
-double WorkerRegistry::utilization() const {
+double WorkerRegistry::utilization(double now) const {
   double busy = 0, threads = 0;
   for (const auto& [id, w] : workers_) {
+    if (now - w.last_report > 2 * kWindowSeconds) {  // idle: a window of its threads, unused
+      threads += w.threads * kWindowSeconds;
+      continue;
+    }
     busy += w.busy_thread_seconds - w.window_busy;
     threads += w.thread_seconds - w.window_threads;
   }

@@ -30,6 +30,10 @@ struct WorkerInfo {
   double busy_thread_seconds = 0, thread_seconds = 0;
   double utilization = 0;
   double window_busy = 0, window_threads = 0, window_start = 0;  // the window's first report
+  double last_report = 0;                                        // its last result's time
+  // Its utilization as of `now`: 0 once it has sent no result for two windows (an idle
+  // worker reports nothing, and its last figure must not stand for ever).
+  double utilization_at(double now) const;
 };
 
 class WorkerRegistry {
@@ -50,13 +54,16 @@ class WorkerRegistry {
   void remove(uint64_t id);
   size_t size() const { return workers_.size(); }
   uint64_t threads() const { return threads_; }  // of every known worker
-  std::vector<WorkerInfo> list() const;
+  // Every worker, its utilization as of `now`.
+  std::vector<WorkerInfo> list(double now) const;
   // A finished task: its render rate feeds the worker's smoothed speed; its thread-time
   // counters the utilization.
   void record_result(uint64_t id, uint64_t samples, uint64_t bytes, double seconds, double busy_thread_seconds,
                      double thread_seconds, double now);
-  // Busy over available render-thread time of every worker, over their windows.
-  double utilization() const;
+  // Busy over available render-thread time of every worker, over their windows; a worker
+  // silent for two windows counts as idle.
+  double utilization(double now) const;
+  static constexpr double kWindowSeconds = 5;
   // Samples a second per render thread, over the workers that have measured theirs; the
   // last such figure while none has (0 before any).
   double thread_speed() const;

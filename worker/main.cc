@@ -24,7 +24,8 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0, 1024));
   app.add_option("--cache", opt.cache_dir, "scene cache directory")->capture_default_str();
-  app.add_option("--name", opt.name, "name shown by the coordinator (default host:pid)");
+  app.add_option("--name", opt.name,
+                 "name shown by the coordinator and in /metrics (default host:pid, in a Slurm job host:slurm-JOBID)");
   app.add_option("--lookahead", opt.lookahead_seconds,
                  "seconds of work to keep leased beyond what the threads are rendering, at the measured speed")
       ->capture_default_str()

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdlib>
 #include <thread>
 
 #include "wire.h"
@@ -32,10 +33,15 @@ constexpr int kMaxReconnectBackoffMs = 2000;  // reconnect quickly after the coo
 
 WorkerOptions resolved(WorkerOptions o) {
   if (o.threads <= 0) o.threads = int(std::max(1u, std::thread::hardware_concurrency()));
-  if (o.name.empty()) {
+  if (o.name.empty()) {  // host:pid, or in a Slurm job host:slurm-JOB (the same across its restarts)
     char host[256] = {};
     gethostname(host, sizeof host - 1);
-    o.name = std::string(host) + ":" + std::to_string(getpid());
+    const char* job = std::getenv("SLURM_JOB_ID");
+    const char* task = std::getenv("SLURM_PROCID");
+    o.name =
+        std::string(host) + ":" +
+        (job && *job ? "slurm-" + std::string(job) + (task && std::string(task) != "0" ? "." + std::string(task) : "")
+                     : std::to_string(getpid()));
   }
   return o;
 }

@@ -15,6 +15,7 @@ const models = {
   v1: {
     Service: (await import("kubernetes-models/v1/Service")).Service,
     Secret: (await import("kubernetes-models/v1/Secret")).Secret,
+    Namespace: (await import("kubernetes-models/v1/Namespace")).Namespace,
   },
   "policy/v1": { PodDisruptionBudget: (await import("kubernetes-models/policy/v1/PodDisruptionBudget")).PodDisruptionBudget },
   "autoscaling/v2": {

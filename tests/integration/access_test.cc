@@ -278,18 +278,20 @@ TEST_F(Access, StreamsAreBoundedPerCaller) {
 }
 
 // Issue 23: SIGTERM stops the coordinator within seconds even while it checks a scene
-// that takes far longer to load (a 1 KB glTF whose node graph lists a child twice, 20 deep:
-// 1 M meshes, at the limit of the budgets, ~7 s and 1 GB here). The check gives up at its next
+// that takes far longer to load (a 1 KB glTF whose node graph lists a child twice, 19 deep,
+// with a mesh of two primitives: 1 M mesh copies, at the limit of the budgets, ~7 s and 1 GB
+// here). The check gives up at its next
 // step; the client, told nothing was accepted, keeps trying; the restarted coordinator has
 // no job and nothing half-kept.
 TEST_F(Access, SigtermStopsTheCoordinatorWithinSecondsDuringASceneCheck) {
   std::string nodes = R"({"mesh":0})";
-  for (int i = 1; i <= 20; ++i)
+  for (int i = 1; i <= 19; ++i)
     nodes += ",{\"children\":[" + std::to_string(i - 1) + "," + std::to_string(i - 1) + "]}";
   const std::string scene = (dir / "dag.gltf").string();
   write_file_atomic(scene,
-                    R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[20]}],"nodes":[)" + nodes +
-                        R"(],"meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1}]}],)"
+                    R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[19]}],"nodes":[)" + nodes +
+                        R"(],"meshes":[{"primitives":[{"attributes":{"POSITION":0},"indices":1},)"
+                        R"({"attributes":{"POSITION":0},"indices":1}]}],)"
                         R"("buffers":[{"byteLength":44,"uri":"data:application/octet-stream;base64,)"
                         R"(AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAAAAABAAIAAAA="}],)"
                         R"("bufferViews":[{"buffer":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":6}],)"
@@ -317,6 +319,9 @@ TEST_F(Access, SigtermStopsTheCoordinatorWithinSecondsDuringASceneCheck) {
   EXPECT_EQ(coordinator->wait(30), 0);
   client.join();
   EXPECT_EQ(slurp((dir / "coordinator.err").string()).find("internal error"), std::string::npos);
+  // The scene was being checked, not refused by a budget at once.
+  EXPECT_EQ(slurp((dir / "submit.err").string()).find("over the limit"), std::string::npos)
+      << slurp((dir / "submit.err").string());
 }
 
 // Issue 23: systemd's default soft limit of 1024 descriptors ran out at about a thousand

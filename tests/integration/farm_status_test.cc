@@ -49,11 +49,21 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   for (std::string line; std::getline(lines, line);) {
     if (line.empty() || line[0] == '#') continue;
     std::smatch m;
-    ASSERT_TRUE(std::regex_match(line, m, std::regex(R"(([a-z_]+)(\{[a-z_]+="[a-z0-9]+"\})? (-?[0-9.e+-]+))"))) << line;
-    std::stod(m[3]);
+    ASSERT_TRUE(std::regex_match(
+        line, m, std::regex(R"(([a-z_]+)(\{([a-z_]+="([^"\\]|\\.)*",?)+\})? (-?[0-9.e+-]+|\+Inf|NaN))")))
+        << line;
+    if (m[5] != "+Inf" && m[5] != "NaN") std::stod(m[5]);
     ++samples;
   }
   EXPECT_GT(samples, 10);
+  // Issue 24: integers exactly (not 6 significant digits), workers by name, the build, and
+  // histograms of task and RPC time.
+  const std::string samples_done = get_json("/api/jobs/" + id)["samples_done"].get<std::string>();
+  EXPECT_NE(metrics.find("\ntessera_samples_merged_total " + samples_done + "\n"), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_worker_tasks_total{worker=\"w0\"} "), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_build_info{version=\""), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_task_seconds_bucket{le=\"+Inf\"} "), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_rpc_seconds_count{method=\"GetTask\"} "), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("tessera_jobs{state=\"done\"} 1"), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("tessera_worker_utilization{worker=\""), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("tessera_workers_utilization "), std::string::npos) << metrics;
