@@ -233,6 +233,29 @@ int list_jobs(v1::Tessera::StubInterface& stub, const FarmContext& c) {
   return 0;
 }
 
+std::string resolve_job_id(v1::Tessera::StubInterface& stub, const std::string& given, const FarmContext& c) {
+  constexpr size_t kIdDigits = 16;  // a job id: 64 random bits in hex
+  if (given.empty() || given.size() >= kIdDigits || given.find_first_not_of("0123456789abcdef") != std::string::npos)
+    return given;  // a whole id, a frame's ("ID-fN"), or not an id at all: the coordinator says
+  v1::ListJobsRequest req;
+  req.set_page_size(kListPageSize);
+  std::vector<std::string> matches;
+  for (;;) {
+    v1::JobList page;
+    check(stub.ListJobs(deadline(c).get(), req, &page), c);
+    for (const auto& s : page.jobs())
+      if (s.id().compare(0, given.size(), given) == 0) matches.push_back(s.id());
+    if (page.next_page_token().empty()) break;
+    req.set_page_token(page.next_page_token());
+  }
+  if (matches.size() == 1) return matches[0];
+  if (matches.empty()) throw FarmError("no job id starts with '" + given + "'");
+  std::string some;
+  for (size_t i = 0; i < matches.size() && i < 3; ++i) some += (i ? ", " : "") + matches[i];
+  throw FarmError("job id prefix '" + given + "' is ambiguous: " + std::to_string(matches.size()) +
+                  " jobs start with it (" + some + (matches.size() > 3 ? ", ..." : "") + "); give more of it");
+}
+
 int show_status(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c) {
   if (job.empty()) return list_jobs(stub, c);
   v1::JobId req;

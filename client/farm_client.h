@@ -41,6 +41,11 @@ struct FarmContext {
 std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::string& address,
                                                                 const Access& access = Access());
 
+// A job named by a prefix of its id, as git and docker take them: the one job whose id
+// starts with it. A whole id (16 hex digits), a frame's id or an empty one is returned as
+// it is. Throws FarmError for a prefix no job or several jobs have (naming some).
+std::string resolve_job_id(v1::Tessera::StubInterface& stub, const std::string& given, const FarmContext& c);
+
 struct SubmitRequest {
   RenderFlags flags;
   int priority = 0;

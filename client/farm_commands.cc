@@ -43,7 +43,7 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
   auto job = std::make_shared<std::string>();
   auto job_arg = [job](bool required) {
     return [job, required](CLI::App* cmd, FarmContext&) {
-      CLI::Option* o = cmd->add_option("job", *job, "job id");
+      CLI::Option* o = cmd->add_option("job", *job, "job id, or the start of one that no other job's has");
       if (required) o->required();
     };
   };
@@ -60,13 +60,17 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
       },
       [submit](v1::Tessera::StubInterface& stub, const FarmContext& c) { return submit_job(stub, *submit, c); });
   add("status", "Show one job, or every job", job_arg(false),
-      [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return show_status(stub, *job, c); });
+      [job](v1::Tessera::StubInterface& stub, const FarmContext& c) {
+        return show_status(stub, resolve_job_id(stub, *job, c), c);
+      });
   add(
       "jobs", "List jobs (a table under a header; --no-headers: rows only)",
       [](CLI::App* cmd, FarmContext& c) { cmd->add_flag("--no-headers", c.no_headers, "rows only, for scripts"); },
       [](v1::Tessera::StubInterface& stub, const FarmContext& c) { return list_jobs(stub, c); });
   add("watch", "Show a job's progress until it ends", job_arg(true),
-      [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return watch_job(stub, *job, c); });
+      [job](v1::Tessera::StubInterface& stub, const FarmContext& c) {
+        return watch_job(stub, resolve_job_id(stub, *job, c), c);
+      });
   auto outputs = std::make_shared<std::vector<std::string>>();
   auto which = std::make_shared<FetchWhat>();
   add(
@@ -79,13 +83,16 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
         cmd->add_flag("--all", which->all, "every finished frame of a sequence (-f paths need ####)");
       },
       [job, outputs, which](v1::Tessera::StubInterface& stub, const FarmContext& c) {
-        return fetch_image(stub, *job, *outputs, c, *which);
+        return fetch_image(stub, resolve_job_id(stub, *job, c), *outputs, c, *which);
       });
   add("cancel", "Cancel a job (what was rendered is kept)", job_arg(true),
-      [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return cancel_job(stub, *job, c); });
+      [job](v1::Tessera::StubInterface& stub, const FarmContext& c) {
+        return cancel_job(stub, resolve_job_id(stub, *job, c), c);
+      });
   add("requeue", "Take a FAILED or CANCELLED job up again from what it rendered (a sequence: its unfinished frames)",
-      job_arg(true),
-      [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return requeue_job(stub, *job, c); });
+      job_arg(true), [job](v1::Tessera::StubInterface& stub, const FarmContext& c) {
+        return requeue_job(stub, resolve_job_id(stub, *job, c), c);
+      });
   auto priority = std::make_shared<int>(0);
   add(
       "priority", "Change a job's priority (higher runs first)",
@@ -94,13 +101,14 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
         cmd->add_option("priority", *priority, "the new priority")->required();
       },
       [job, priority](v1::Tessera::StubInterface& stub, const FarmContext& c) {
-        return set_job_priority(stub, *job, *priority, c);
+        return set_job_priority(stub, resolve_job_id(stub, *job, c), *priority, c);
       });
   add("delete",
       "Delete a job: its record, images, checkpoints, and scene if no other job uses it (a live job is "
       "cancelled first)",
-      job_arg(true),
-      [job](v1::Tessera::StubInterface& stub, const FarmContext& c) { return delete_job(stub, *job, c); });
+      job_arg(true), [job](v1::Tessera::StubInterface& stub, const FarmContext& c) {
+        return delete_job(stub, resolve_job_id(stub, *job, c), c);
+      });
   return runs;
 }
 

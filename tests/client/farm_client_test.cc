@@ -478,3 +478,48 @@ TEST_F(FarmClient, WatchReconnectsWhenTheCoordinatorComesBack) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Issue 24: job ids may be given by a prefix only one job's id has (as git and docker take
+// them); one several jobs share is refused naming them, one no job has too; a whole id, a
+// frame's id, or something that is not hex goes to the coordinator as it is.
+TEST_F(FarmClient, AJobIdPrefixNamesTheOneJobWithIt) {
+  v1::SubmitJobRequest req;
+  req.set_version(kProtocolVersion);
+  std::string main;
+  SubmitRequest r = request({});
+  pack_scene(r.flags.scene, &main, req.mutable_files());
+  req.set_main_file(main);
+  r.flags.resolution = {8, 8};
+  *req.mutable_settings() = to_proto(to_settings(r.flags));
+  std::vector<std::string> ids;
+  for (int i = 0; i < 17; ++i) {  // 17 ids: two share a first hex digit
+    grpc::ClientContext call;
+    v1::JobId id;
+    ASSERT_TRUE(stub->SubmitJob(&call, req, &id).ok());
+    ids.push_back(id.id());
+  }
+  for (const std::string& id : ids) EXPECT_EQ(resolve_job_id(*stub, id.substr(0, 12), ctx), id);
+  std::string shared;
+  for (size_t a = 0; a < ids.size() && shared.empty(); ++a)
+    for (size_t b = a + 1; b < ids.size() && shared.empty(); ++b)
+      if (ids[a][0] == ids[b][0]) shared = ids[a].substr(0, 1);
+  ASSERT_FALSE(shared.empty());
+  try {
+    resolve_job_id(*stub, shared, ctx);
+    ADD_FAILURE() << "an ambiguous prefix was taken";
+  } catch (const FarmError& e) {
+    EXPECT_NE(std::string(e.what()).find("job id prefix '" + shared + "' is ambiguous"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(resolve_job_id(*stub, ids[0], ctx), ids[0]);
+  EXPECT_EQ(resolve_job_id(*stub, ids[0] + "-f3", ctx), ids[0] + "-f3");
+  EXPECT_EQ(resolve_job_id(*stub, "no-such-job", ctx), "no-such-job");
+  EXPECT_EQ(resolve_job_id(*stub, "", ctx), "");
+  std::string none = "0000000000";  // ten hex digits no random id starts with (1 in 2^40)
+  EXPECT_THROW(resolve_job_id(*stub, none, ctx), FarmError);
+}
+
+}  // namespace
+}  // namespace tessera
