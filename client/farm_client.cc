@@ -3,6 +3,7 @@
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
+#include <ctime>
 #include <filesystem>
 #include <functional>
 #include <map>
@@ -193,7 +194,19 @@ std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::strin
 // `tessera jobs`' table, one row per job under a header (as kubectl's): fixed widths, so
 // that pages print as they come.
 const char* const kJobsHeader =
-    "ID                STATE      PROGRESS  FRAMES      PRIORITY  OWNER         WORKERS  ELAPSED   ETA       NAME";
+    "ID                STATE      PROGRESS  FRAMES      PRIORITY  OWNER         WORKERS  SUBMITTED         ELAPSED   "
+    "ETA       NAME";
+// A time as the table shows it: local, to the minute ("-" when not known).
+std::string table_time(const google::protobuf::Timestamp& t) {
+  if (t.seconds() <= 0) return "-";
+  const std::time_t when = std::time_t(t.seconds());
+  std::tm local{};
+  localtime_r(&when, &local);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M", &local);
+  return buf;
+}
+
 std::string job_row(const v1::JobStatus& s) {
   char progress[16], frames[24], buf[512];
   std::snprintf(progress, sizeof progress, "%.1f%%", percent_done(s));
@@ -202,9 +215,9 @@ std::string job_row(const v1::JobStatus& s) {
   else
     std::snprintf(frames, sizeof frames, "-");
   const bool live = s.state() == v1::JobStatus::QUEUED || s.state() == v1::JobStatus::RUNNING;
-  std::snprintf(buf, sizeof buf, "%-16s  %-9s  %-8s  %-10s  %-8d  %-12s  %-7u  %-8s  %-8s  %s", s.id().c_str(),
+  std::snprintf(buf, sizeof buf, "%-16s  %-9s  %-8s  %-10s  %-8d  %-12s  %-7u  %-16s  %-8s  %-8s  %s", s.id().c_str(),
                 state_name(s.state()), progress, frames, s.priority(), s.owner().empty() ? "-" : s.owner().c_str(),
-                s.active_workers(), format_duration(s.elapsed_seconds()).c_str(),
+                s.active_workers(), table_time(s.submitted_at()).c_str(), format_duration(s.elapsed_seconds()).c_str(),
                 live && s.eta_seconds() > 0 ? format_duration(s.eta_seconds()).c_str() : "-", s.name().c_str());
   return buf;
 }

@@ -5,6 +5,12 @@
 
 namespace tessera {
 
+// The wall clock, seconds since 1970: what users are shown (a job's submit, start and end
+// times); durations and deadlines use a Clock.
+inline double wall_seconds() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
 class Clock {
  public:
   virtual ~Clock() = default;

@@ -1,8 +1,25 @@
 #include "server/job.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace tessera {
+
+namespace {
+
+// Wall-clock times (seconds since 1970) as Timestamps; 0 (not known) leaves one unset, and
+// a live job has no end.
+void set_times(v1::JobStatus& s, double submitted, double started, double ended) {
+  const auto put = [](google::protobuf::Timestamp* ts, double t) {
+    ts->set_seconds(int64_t(std::floor(t)));
+    ts->set_nanos(std::min(999999999, int32_t((t - std::floor(t)) * 1e9)));
+  };
+  if (submitted > 0) put(s.mutable_submitted_at(), submitted);
+  if (started > 0) put(s.mutable_started_at(), started);
+  if (ended > 0 && !job_live(s.state())) put(s.mutable_ended_at(), ended);
+}
+
+}  // namespace
 
 void Job::compact() {
   plan.compact();
@@ -39,6 +56,7 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles, TileRan
   const double elapsed = started > 0 ? (live() ? now : finished_at) - started : 0;
   s.set_elapsed_seconds(elapsed);
   s.set_owner(meta.owner);
+  set_times(s, meta.submitted_at, started_at, ended_at);
   const double f = plan.fraction_done();
   if (live() && f > 0) s.set_eta_seconds(elapsed * (1 - f) / f);
   s.set_active_workers(workers);
@@ -130,6 +148,7 @@ v1::JobStatus Sequence::status(double now, uint32_t workers, bool with_frames) c
   s.set_active_workers(workers);
   const double elapsed = started > 0 ? (live() ? now : finished_at) - started : 0;
   s.set_elapsed_seconds(elapsed);
+  set_times(s, meta.submitted_at, started_at, ended_at);
   const double f = total ? double(done) / double(total) : 0;
   if (live() && f > 0) s.set_eta_seconds(elapsed * (1 - f) / f);
   return s;

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "core/render/frame_plan.h"
+#include "server/clock.h"
 #include "server/job_meta.h"
 
 namespace tessera {
@@ -52,7 +53,8 @@ struct Job {
   // ends only when none is left).
   std::map<uint64_t, std::vector<uint32_t>> merged_by;
   uint32_t pending_checks = 0;
-  double submitted = 0, started = 0, finished_at = 0;
+  double submitted = 0, started = 0, finished_at = 0;  // the coordinator's Clock
+  double started_at = 0, ended_at = 0;                 // wall clock, for users (0: not known)
 
   // Snapshots (Snapshotter): progressive images and checkpoints, written band by band by
   // one writer at a time; requests while it writes are marked due and it writes again.
@@ -134,7 +136,8 @@ struct Sequence {
   uint64_t changes = 0;           // merges into its frames and frame ends: watchers wait on it
   std::shared_ptr<Job> prepared;  // frames[next]'s job, made outside the coordinator's lock
   std::string error;
-  double submitted = 0, started = 0, finished_at = 0;
+  double submitted = 0, started = 0, finished_at = 0;  // the coordinator's Clock
+  double started_at = 0, ended_at = 0;                 // wall clock, for users (0: not known)
   bool end_recording = false, end_recorded = false;
   bool changing = false, removed = false, archiving = false;  // as Job's
 

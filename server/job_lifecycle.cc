@@ -9,18 +9,21 @@ void JobLifecycle::start(Job& job, double now) {
   if (job.state_ != v1::JobStatus::QUEUED) return;
   job.state_ = v1::JobStatus::RUNNING;
   job.started = now;
+  if (job.started_at == 0) job.started_at = wall_seconds();
 }
 
 void JobLifecycle::start(Sequence& s, double now) {
   if (s.state_ != v1::JobStatus::QUEUED) return;
   s.state_ = v1::JobStatus::RUNNING;
   s.started = now;
+  if (s.started_at == 0) s.started_at = wall_seconds();
 }
 
 void JobLifecycle::end(Job& job, Job::State state, double now, Effects& fx) {
   TESSERA_INVARIANT(job.live() && !job_live(state), "job " + job.id() + " ended twice, or into a live state");
   job.state_ = state;
   job.finished_at = now;
+  job.ended_at = wall_seconds();
   job.pending_checks = 0;
   leasing_.end_job(job, now);
   // Its scene is dropped, from memory and disk, once its end is on disk (SnapshotWriter)
@@ -51,6 +54,7 @@ void JobLifecycle::end(Sequence& s, Sequence::State state, double now, Effects& 
   TESSERA_INVARIANT(s.live() && !job_live(state), "sequence " + s.id() + " ended twice, or into a live state");
   s.state_ = state;
   s.finished_at = now;
+  s.ended_at = wall_seconds();
   s.prepared.reset();
   for (const std::shared_ptr<Job>& j : s.jobs)
     if (j && j->live()) {

@@ -25,8 +25,14 @@ class JobLifecycle {
   static void restore(Job& job, Job::State state) { job.state_ = state; }
   static void restore(Sequence& s, Sequence::State state) { s.state_ = state; }
   // A requeued job or sequence (JobControl) is live again: RUNNING once it has rendered.
-  void requeue(Job& job, bool rendered) { job.state_ = rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED; }
-  void requeue(Sequence& s, bool rendered) { s.state_ = rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED; }
+  void requeue(Job& job, bool rendered) {
+    job.state_ = rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED;
+    job.ended_at = 0;
+  }
+  void requeue(Sequence& s, bool rendered) {
+    s.state_ = rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED;
+    s.ended_at = 0;
+  }
   void start(Job& job, double now);  // its first lease
   void start(Sequence& s, double now);  // its first frame
 

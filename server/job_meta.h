@@ -18,6 +18,7 @@ struct JobMeta {
   int32_t priority = 0;
   uint64_t seq = 0;            // submission order
   uint64_t scene_bytes = 0;    // the bundle's, counted against the owner's limit
+  double submitted_at = 0;     // wall clock, seconds since 1970 (0: a job of an older database)
   v1::RenderSettings settings;  // as on the wire; a frame's carries its frame number
 };
 

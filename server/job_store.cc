@@ -53,6 +53,10 @@ SqliteJobStore::SqliteJobStore(const std::string& data_dir) : dir_(data_dir) {
   bool has_summary = false;
   for (Statement q(db_, "PRAGMA table_info(jobs)"); q.step();) has_summary |= q.column_text(1) == "summary";
   if (!has_summary) exec("ALTER TABLE jobs ADD COLUMN summary BLOB");
+  // ... and when each job was submitted (wall clock; 0 for jobs of an older database).
+  bool has_submitted_at = false;
+  for (Statement q(db_, "PRAGMA table_info(jobs)"); q.step();) has_submitted_at |= q.column_text(1) == "submitted_at";
+  if (!has_submitted_at) exec("ALTER TABLE jobs ADD COLUMN submitted_at REAL NOT NULL DEFAULT 0");
   exec("CREATE TABLE IF NOT EXISTS merged_into(worker INTEGER NOT NULL, job TEXT NOT NULL, tiles INTEGER NOT NULL)");
   exec("CREATE INDEX IF NOT EXISTS jobs_scene ON jobs(scene_hash)");
   exec("CREATE INDEX IF NOT EXISTS jobs_seq ON jobs(seq)");
@@ -107,7 +111,7 @@ void SqliteJobStore::add(const StoredJob& j) {
   MutexLock lock(mu_);
   Statement(db_,
             "INSERT INTO jobs(id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, "
-            "frames) VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)")
+            "frames, submitted_at) VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13)")
       .text(1, j.meta.id)
       .integer(2, int64_t(j.meta.seq))
       .text(3, j.meta.name)
@@ -120,6 +124,7 @@ void SqliteJobStore::add(const StoredJob& j) {
       .text(10, j.error)
       .real(11, j.elapsed)
       .text(12, frames_text(j.frames))
+      .real(13, j.meta.submitted_at)
       .step();
 }
 
@@ -192,7 +197,7 @@ namespace {
 // The columns a StoredJob is read from, and the reading (`summary`: the archived status too).
 constexpr const char* kRowColumns =
     "id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, frames, ended_at, "
-    "summary IS NOT NULL";
+    "submitted_at";
 
 StoredJob read_row(const Statement& q, bool with_summary) {
   StoredJob j;
@@ -216,6 +221,7 @@ StoredJob read_row(const Statement& q, bool with_summary) {
     throw std::runtime_error("job database: job " + j.meta.id + ": unreadable frames: " + e.what());
   }
   j.ended_at = q.column_real(12);
+  j.meta.submitted_at = q.column_real(13);
   if (with_summary) j.summary = q.column_text(14);
   return j;
 }

@@ -45,12 +45,14 @@ Recovery::Ended Recovery::load_ended(const StoredJob& row, const JobStore& store
     }
     e.job->error = row.error;
     e.job->submitted = now;
+    e.job->ended_at = row.ended_at;
     as_ended(*e.job, now, row.elapsed);
     return e;
   }
   Sequence& s = *(e.sequence = std::make_shared<Sequence>(row.meta, settings, row.frames, row.state));
   s.error = row.error;
   s.submitted = now;
+  s.ended_at = row.ended_at;
   double elapsed = 0;
   for (size_t i = 0; i < s.frames.size(); ++i) {  // a frame that started has a checkpoint
     std::shared_ptr<Job> job = SequenceScheduler::make_frame(s, i);
@@ -98,6 +100,7 @@ void Recovery::resume(JobLifecycle& lifecycle, Job& j, double elapsed, bool chec
   const bool rendered = j.plan.merges() > 0 || elapsed > 0;
   lifecycle.requeue(j, rendered);
   if (rendered) j.started = now - elapsed;
+  if (rendered && j.started_at == 0) j.started_at = wall_seconds() - elapsed;  // about: its render time
   j.snaps.last_checkpoint = now;
   j.snaps.checkpoint_merges = j.plan.merges();
   if (checkpointed) j.written.checkpoints = 1, j.written.checkpoint_merges = j.plan.merges();

@@ -32,6 +32,7 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
   meta.main_file = main_file;
   meta.priority = req.priority();
   meta.scene_bytes = a.scene_bytes;
+  meta.submitted_at = store.wall();
   meta.settings = to_proto(a.settings);
   Submission sub;
   if (a.frames.empty()) {

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <nlohmann/json.hpp>
+#include <regex>
 #include <set>
 #include <thread>
 
@@ -368,6 +369,21 @@ TEST_F(FarmClient, SubmitWaitsAndWritesTheLocalImageThenListsStatusAndFetch) {
   ctx.out = listing.file();
   EXPECT_EQ(list_jobs(*stub, ctx), 0);
   EXPECT_NE(listing.text().find(id + "  DONE"), std::string::npos) << listing.text();
+  EXPECT_NE(listing.text().find("  SUBMITTED  "), std::string::npos) << listing.text();
+  // Issue 24: when it was submitted, started and ended, in --json as RFC 3339 times.
+  ctx.json = true;
+  Output as_json;
+  ctx.out = as_json.file();
+  EXPECT_EQ(show_status(*stub, id, ctx), 0);
+  const nlohmann::json j = nlohmann::json::parse(as_json.text());
+  const std::regex rfc3339(R"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(\.\d+)?Z)");
+  for (const char* t : {"submitted_at", "started_at", "ended_at"}) {
+    ASSERT_TRUE(j.contains(t)) << as_json.text();
+    EXPECT_TRUE(std::regex_match(j[t].get<std::string>(), rfc3339)) << j[t];
+  }
+  EXPECT_LE(j["submitted_at"].get<std::string>(), j["started_at"].get<std::string>());
+  EXPECT_LE(j["started_at"].get<std::string>(), j["ended_at"].get<std::string>());
+  ctx.json = false;
   Output one;
   ctx.out = one.file();
   EXPECT_EQ(show_status(*stub, id, ctx), 0);

@@ -217,6 +217,7 @@ TEST(JobStore, JobsAndGenerationsSurviveReopening) {
     j.meta.priority = -3;
     j.meta.seq = 7;
     j.meta.settings.set_spp(99);
+    j.meta.submitted_at = 1764179999.25;  // wall clock: shown to users after a restart too
     store.add(j);
     StoredJob k = j;
     k.meta.id = "00000000000000cd";
@@ -236,6 +237,7 @@ TEST(JobStore, JobsAndGenerationsSurviveReopening) {
   EXPECT_EQ(jobs[0].elapsed, 4.5);
   EXPECT_EQ(jobs[0].meta.priority, -3);
   EXPECT_EQ(jobs[0].meta.settings.spp(), 99u);
+  EXPECT_EQ(jobs[0].meta.submitted_at, 1764179999.25);
   EXPECT_EQ(jobs[1].state, v1::JobStatus::QUEUED);
   FramePlan plan(plan_settings());
   EXPECT_FALSE(store.read_checkpoint(jobs[0].meta.id, plan));
