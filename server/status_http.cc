@@ -31,6 +31,7 @@ const char* kLivePage = R"HTML(<!doctype html>
 const char* kLiveCss = R"CSS(body{font-family:sans-serif;margin:1.5em;background:#111;color:#ddd}
 table{border-collapse:collapse}td,th{padding:2px 10px;text-align:left}
 .row{display:flex;gap:1.5em;align-items:flex-start}canvas,img{image-rendering:pixelated;border:1px solid #444}
+#preview{max-width:48vw;max-height:60vh;height:auto}
 .frame{display:inline-block;min-width:2.5em;margin:1px;padding:1px 3px;text-align:center;background:#333;color:#ddd}
 .frame.DONE{background:#2a6}.frame.RUNNING{background:#c80}.frame.CANCELLED,.frame.FAILED{background:#733}
 )CSS";
@@ -44,8 +45,9 @@ async function tick(){
   document.getElementById('summary').textContent =
     `${jobs.length} jobs, ${workers.filter(w=>w.active).length} active workers, ` +
     `${(100*s.utilization).toFixed(0)}% busy, up ${s.uptime_seconds.toFixed(0)} s`;
-  document.getElementById('jobs').innerHTML = '<tr><th>id</th><th>name</th><th>state</th><th>samples</th><th>passes / frames</th><th>ETA</th></tr>' +
-    jobs.map(j=>`<tr><td>${esc(j.id)}</td><td>${esc(j.name)}</td><td>${esc(j.state)}</td><td>${esc((100*j.samples_done/Math.max(1,j.samples_total)).toFixed(1))}%</td><td>${esc(j.frames_total ? 'frames ' + j.frames_done + '/' + j.frames_total : j.frame_passes_done + '/' + j.passes_total)}</td><td>${esc(j.eta_seconds.toFixed(0))} s</td></tr>`).join('');
+  const when = t => t ? new Date(t).toLocaleString() : '-';
+  document.getElementById('jobs').innerHTML = '<tr><th>id</th><th>name</th><th>owner</th><th>priority</th><th>state</th><th>samples</th><th>passes / frames</th><th>submitted</th><th>ended</th><th>elapsed</th><th>ETA</th></tr>' +
+    jobs.map(j=>`<tr><td>${esc(j.id)}</td><td>${esc(j.name)}</td><td>${esc(j.owner || '-')}</td><td>${esc(j.priority || 0)}</td><td>${esc(j.state)}</td><td>${esc((100*j.samples_done/Math.max(1,j.samples_total)).toFixed(1))}%</td><td>${esc(j.frames_total ? 'frames ' + j.frames_done + '/' + j.frames_total : j.frame_passes_done + '/' + j.passes_total)}</td><td>${esc(when(j.submitted_at))}</td><td>${esc(when(j.ended_at))}</td><td>${esc(j.elapsed_seconds.toFixed(0))} s</td><td>${esc(j.eta_seconds.toFixed(0))} s</td></tr>`).join('');
   document.getElementById('workers').innerHTML = '<tr><th>id</th><th>name</th><th>threads</th><th>samples/s</th><th>busy</th><th>tasks</th><th>leases</th><th>round trip</th><th>bytes/sample</th><th>passes/task</th></tr>' +
     workers.map(w=>`<tr><td>${esc(w.id)}</td><td>${esc(w.name)}</td><td>${esc(w.threads)}</td><td>${esc((w.samples_per_second/1e6).toFixed(2))} M</td><td>${esc((100*w.utilization).toFixed(0))}%</td><td>${esc(w.tasks_done)}</td><td>${esc(w.leases)}</td><td>${esc(w.round_trip_ms.toFixed(1))} ms</td><td>${esc(w.bytes_per_sample.toFixed(3))}</td><td>${esc(w.passes_per_task)}</td></tr>`).join('');
   const job = jobs.find(j=>j.state==='RUNNING') || jobs[jobs.length-1];
