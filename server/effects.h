@@ -19,7 +19,7 @@ namespace tessera {
 struct Effects {
   std::vector<std::shared_ptr<Job>> writes;  // jobs whose snapshot writer this operation became
   std::vector<RowEnd> rows;                  // database rows to rewrite
-  std::vector<std::string> sequence_ends;          // sequences whose end to record (once it can be)
+  std::vector<std::string> sequence_ends;    // sequences whose end to record (once it can be)
   std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> prepare;  // sequences whose next frame's job to make
   std::vector<Archival> archive;                                      // ended jobs to leave memory (archive.h)
   // A worker quarantined: archived jobs holding its results are flagged in their rows (but

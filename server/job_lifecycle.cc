@@ -39,7 +39,7 @@ void JobLifecycle::frame_ended(Job& job, double now, Effects& fx) {
   Sequence& s = *sp;
   if (s.live_frames > 0) --s.live_frames;
   fx.sequence_ends.push_back(s.id());  // (recorded once every frame's end is)
-  if (!s.live()) return;  // the sequence ended first and ends its frames itself
+  if (!s.live()) return;               // the sequence ended first and ends its frames itself
   if (job.state() == v1::JobStatus::FAILED) {
     s.error = "frame " + std::to_string(s.frames[job.frame_index]) + ": " + job.error;
     end(s, v1::JobStatus::FAILED, now, fx);

@@ -16,9 +16,9 @@ struct JobMeta {
   std::string scene_hash;  // the bundle's content hash (SceneStore)
   std::string main_file;   // the scene file inside the bundle
   int32_t priority = 0;
-  uint64_t seq = 0;            // submission order
-  uint64_t scene_bytes = 0;    // the bundle's, counted against the owner's limit
-  double submitted_at = 0;     // wall clock, seconds since 1970 (0: a job of an older database)
+  uint64_t seq = 0;             // submission order
+  uint64_t scene_bytes = 0;     // the bundle's, counted against the owner's limit
+  double submitted_at = 0;      // wall clock, seconds since 1970 (0: a job of an older database)
   v1::RenderSettings settings;  // as on the wire; a frame's carries its frame number
 };
 

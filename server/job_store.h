@@ -32,7 +32,7 @@ struct StoredJob {
   JobMeta meta;  // (scene_bytes is not stored: a restart counts the bundle again)
   v1::JobStatus::State state = v1::JobStatus::QUEUED;
   std::string error;
-  double elapsed = 0;  // render seconds, once the job has ended
+  double elapsed = 0;   // render seconds, once the job has ended
   double ended_at = 0;  // when its end was recorded (JobStore::wall), 0 while live
   // A sequence's frames (its frames' jobs have no rows: each is found by its checkpoint).
   std::vector<int> frames;
@@ -125,7 +125,7 @@ class JobStore {
   // Ended jobs whose end was recorded more than `age` seconds ago, oldest first, at most
   // `limit` of them (retention: --keep-ended).
   virtual std::vector<std::string> ended_before(double age, size_t limit) const = 0;
-  virtual void ping() const = 0;                    // a query; throws std::runtime_error if it fails
+  virtual void ping() const = 0;  // a query; throws std::runtime_error if it fails
 
   // ---- workers' credentials (credentials.h) ----
   // Inserts or replaces (by name); durable when it returns. Throws std::runtime_error.

@@ -30,8 +30,14 @@ class Verifier {
  public:
   Verifier(double verify_fraction, double lease_seconds, CheckBook& checks, JobTable& jobs, Leasing& leasing,
            WorkerRegistry& workers, JobLifecycle& lifecycle, CoordinatorCounters& counters)
-      : fraction_(verify_fraction), lease_seconds_(lease_seconds), checks_(checks), jobs_(jobs), leasing_(leasing),
-        workers_(workers), lifecycle_(lifecycle), counters_(counters) {}
+      : fraction_(verify_fraction),
+        lease_seconds_(lease_seconds),
+        checks_(checks),
+        jobs_(jobs),
+        leasing_(leasing),
+        workers_(workers),
+        lifecycle_(lifecycle),
+        counters_(counters) {}
 
   bool active() const { return fraction_ > 0 && workers_.size() > 1; }  // it needs a second worker
   bool pick() { return std::uniform_real_distribution<double>(0, 1)(rng_) < fraction_; }

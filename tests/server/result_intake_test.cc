@@ -161,7 +161,7 @@ TEST_F(ResultIntakeTest, TheLastMergeEndsTheJobDoneWithItsFinalSnapshot) {
   EXPECT_EQ(job->state(), v1::JobStatus::DONE);
   EXPECT_EQ(counters.results_merged, kTiles * testing::kPasses);
   EXPECT_EQ(job->plan.samples_merged(), testing::kSamples);
-  ASSERT_TRUE(testing::contains(fx.writes, job));  // this caller writes its snapshots
+  ASSERT_TRUE(testing::contains(fx.writes, job));         // this caller writes its snapshots
   const SnapshotPlan last = snapshotter.next(*job, now);  // what is due now: the final ones
   EXPECT_TRUE(last.ended);
   EXPECT_EQ(last.state, v1::JobStatus::DONE);
