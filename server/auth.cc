@@ -83,17 +83,21 @@ Authenticator Authenticator::from_text(const std::string& text, const std::strin
   return a;
 }
 
-std::optional<Principal> Authenticator::authenticate(std::string_view token) const {
+std::optional<Principal> Authenticator::lookup(std::string_view token, std::string* quarantined) const {
   if (!enabled()) return Principal{"", Role::kAdmin};
   if (token.empty()) return std::nullopt;
   // Looked up by digest: how long a comparison takes says nothing about the token.
   const std::string digest = sha256(token);
   if (auto it = tokens_.find(digest); it != tokens_.end()) return it->second;
-  if (book_)
-    if (const std::optional<CredentialBook::Holder> h = book_->find(digest); h && !h->quarantined)
-      return Principal{h->name, Role::kWorker, true};
+  if (!book_) return std::nullopt;
+  const std::optional<CredentialBook::Holder> h = book_->find(digest);
+  if (!h) return std::nullopt;
+  if (!h->quarantined) return Principal{h->name, Role::kWorker, true};
+  if (quarantined) *quarantined = "worker '" + h->name + "' is quarantined: " + h->why;
   return std::nullopt;
 }
+
+std::optional<Principal> Authenticator::authenticate(std::string_view token) const { return lookup(token, nullptr); }
 
 std::string Authenticator::token_from_header(std::string_view v) {
   auto strip = [](std::string_view s) {
@@ -113,10 +117,9 @@ std::string Authenticator::token_from_header(std::string_view v) {
 
 Authenticator::Check Authenticator::check(std::string_view authorization, Action action) const {
   const std::string token = token_from_header(authorization);
-  const std::optional<Principal> p = authenticate(token);
-  if (!p && book_ && !token.empty())
-    if (const std::optional<CredentialBook::Holder> h = book_->find(sha256(token)); h && h->quarantined)
-      return {Check::kDenied, {}, "worker '" + h->name + "' is quarantined: " + h->why};
+  std::string quarantined;
+  const std::optional<Principal> p = lookup(token, &quarantined);
+  if (!quarantined.empty()) return {Check::kDenied, {}, quarantined};
   if (!p)
     return {
         Check::kUnauthenticated,

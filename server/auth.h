@@ -69,6 +69,9 @@ class Authenticator {
   Check check(std::string_view authorization, Action action) const;
 
  private:
+  // authenticate(), saying in `quarantined` (if given) why a quarantined worker's
+  // credential stands for nobody: one digest and one look-up for check().
+  std::optional<Principal> lookup(std::string_view token, std::string* quarantined) const;
   std::map<std::string, Principal> tokens_;  // SHA-256 of the token -> principal
   CredentialBook* book_ = nullptr;
 };

@@ -79,23 +79,23 @@ class Access : public ::testing::Test {
     return start_worker(token, extra);
   }
   Process& start_worker(const char* token, const std::vector<std::string>& extra) {
-    std::vector<std::string> args{"--coordinator",          grpc_addr,      "--threads",      "1", "--cache",
-                                  (dir / "cache").string(), "--token-file", token_file(token)};
+    std::vector<std::string> args{"--token-file", token_file(token)};
     args.insert(args.end(), extra.begin(), extra.end());
-    const std::string n = std::to_string(workers.size());
-    workers.push_back(
-        std::make_unique<Process>(kBin + "/tessera-worker", args, (dir / ("worker" + n + ".err")).string()));
-    return *workers.back();
+    return spawn_worker(args);
   }
   // A worker that enrols as `name` with the enrolment token (as the deploy recipes run them).
   Process& start_enrolled(const std::string& name, const std::vector<std::string>& extra = {}) {
-    std::vector<std::string> args{
-        "--coordinator",      grpc_addr,          "--threads", "1", "--cache", (dir / "cache").string(),
-        "--enrol-token-file", token_file(kEnrol), "--name",    name};
+    std::vector<std::string> args{"--enrol-token-file", token_file(kEnrol), "--name", name};
     args.insert(args.end(), extra.begin(), extra.end());
+    return spawn_worker(args);
+  }
+  // A one-thread worker of this coordinator with `args` besides; its stderr in workerN.err.
+  Process& spawn_worker(const std::vector<std::string>& args) {
+    std::vector<std::string> all{"--coordinator", grpc_addr, "--threads", "1", "--cache", (dir / "cache").string()};
+    all.insert(all.end(), args.begin(), args.end());
     const std::string n = std::to_string(workers.size());
     workers.push_back(
-        std::make_unique<Process>(kBin + "/tessera-worker", args, (dir / ("worker" + n + ".err")).string()));
+        std::make_unique<Process>(kBin + "/tessera-worker", all, (dir / ("worker" + n + ".err")).string()));
     return *workers.back();
   }
   // `tessera ARGS --coordinator ADDR`, with the token (if any) from a file.
