@@ -65,11 +65,7 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
       const uint64_t task_id = p_.leasing.grant(job, *t, *w, now);
       p_.lifecycle.start(job, now);
       samples += add_task(job, *t, task_id, resp);
-      // Checked: a worker's first tasks (probation), then a random fraction.
-      if (verify && (w->probation > 0 || p_.verifier.pick())) {
-        if (w->probation > 0) --w->probation;
-        p_.leases.live(task_id)->task = std::make_shared<const v1::Task>(resp.tasks(resp.tasks_size() - 1));
-      }
+      if (verify) mark_for_check(*w, task_id, resp);
     }
   };
   int64_t live_pixels = -1;  // counted when first needed
@@ -135,8 +131,23 @@ void Dispatcher::back_up(WorkerInfo& w, uint32_t max_tasks, uint64_t max_samples
   uint64_t samples = 0;
   for (const Old& o : old) {
     if (max_samples > 0 && samples >= max_samples) break;
-    if (const std::optional<TileTask> t = o.job->plan.retake(o.tile))
-      samples += add_task(*o.job, *t, p_.leasing.grant_backup(*o.job, *t, w, now), resp);
+    if (const std::optional<TileTask> t = o.job->plan.retake(o.tile)) {
+      const uint64_t task_id = p_.leasing.grant_backup(*o.job, *t, w, now);
+      samples += add_task(*o.job, *t, task_id, resp);
+      if (p_.verifier.active()) mark_for_check(w, task_id, resp);  // a backup may win: checked as any task
+    }
+  }
+}
+
+void Dispatcher::mark_for_check(WorkerInfo& w, uint64_t task_id, const v1::GetTaskResponse& resp) {
+  // Checked: a worker's first tasks (probation), then a random fraction.
+  const bool probation = w.probation > 0;
+  if (!probation && !p_.verifier.pick()) return;
+  Lease* lease = p_.leases.live(task_id);
+  lease->task = std::make_shared<const v1::Task>(resp.tasks(resp.tasks_size() - 1));
+  if (probation) {
+    --w.probation;
+    lease->probation = true;
   }
 }
 

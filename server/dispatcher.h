@@ -55,6 +55,9 @@ class Dispatcher {
   // Backups (kBackupAfterSeconds) into `resp`, within the request's count and sample
   // limits as get_task's own tasks.
   void back_up(WorkerInfo& w, uint32_t max_tasks, uint64_t max_samples, double now, v1::GetTaskResponse& resp);
+  // The task just added to `resp` (leased as `task_id`) is to be checked if the worker is on
+  // probation or the verify fraction picks it (Verifier::pick).
+  void mark_for_check(WorkerInfo& w, uint64_t task_id, const v1::GetTaskResponse& resp);
 
   Parts p_;
   int64_t max_live_pixels_;

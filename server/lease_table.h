@@ -26,6 +26,10 @@ struct Lease {
   uint64_t check = 0;
   double granted = 0;       // when (a backup goes to a tile leased long ago)
   uint32_t pass_count = 1;  // a run of passes [pass, pass + pass_count) (FramePlan::take)
+  // One of its worker's probation tasks (WorkerInfo::probation): given back to the worker's
+  // probation if the lease ends without its result merged (another lease of the tile won,
+  // or it expired), so a registration's first merged results are the checked ones.
+  bool probation = false;
 };
 
 class LeaseTable {

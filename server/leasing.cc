@@ -61,7 +61,10 @@ void Leasing::ended(uint64_t id, const Lease& l, bool requeue, double now) {
       }
     }
   }
-  if (WorkerInfo* w = workers_.find(l.worker); w && w->leases > 0) --w->leases;
+  if (WorkerInfo* w = workers_.find(l.worker)) {
+    if (w->leases > 0) --w->leases;
+    if (l.probation) ++w->probation;  // its result was not merged: the next task is checked instead
+  }
 }
 
 void Leasing::end(uint64_t id, bool requeue, double now) {

@@ -75,6 +75,7 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
     // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends
     // (kept known, so a repeat of this result is recognised as a duplicate).
     // (A live lease of this (tile, pass) is the tile's first lease or its backup.)
+    if (Lease* merged = p_.leases.live(result.task_id())) merged->probation = false;  // it served
     p_.leasing.end_tile(job, lease->tile, now);
     job.merged_by[result.worker_id()].push_back(lease->tile);
     if (!job.sequence.empty()) ++p_.jobs.find_sequence(job.sequence)->changes;

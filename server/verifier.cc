@@ -28,6 +28,7 @@ void Verifier::issue(Job& job, const Lease& lease, uint64_t worker, uint64_t dig
   c.pass = lease.pass;
   c.task = lease.task;
   c.first_worker = worker;
+  if (const WorkerInfo* w = workers_.find(worker)) c.first_serial = w->serial;
   c.digest = digest;
   c.since = now;
   checks_.add(std::move(c));
@@ -38,11 +39,19 @@ void Verifier::issue(Job& job, const Lease& lease, uint64_t worker, uint64_t dig
 void Verifier::lease_checks(WorkerInfo& worker, uint32_t max, double now, v1::GetTaskResponse& out) {
   for (auto& [id, c] : checks_.all()) {  // few, and a job waits for its checks to end
     if (uint32_t(out.tasks_size()) >= max) break;
-    if (c.lease || c.first_worker == worker.id) continue;
+    if (c.lease || !may_check(c, worker)) continue;
     v1::Task* task = out.add_tasks();
     *task = *c.task;
     task->set_task_id(leasing_.grant_check(id, worker, now));
   }
+}
+
+bool Verifier::may_check(const Check& c, const WorkerInfo& worker) {
+  if (worker.id == c.first_worker) return false;
+  // Its first worker's registration ended (without a catch: that drops its checks). A
+  // worker registered since may be the same process under a new id (a shared token tells
+  // them apart by nothing), which would pass its own result: only those registered before it.
+  return workers_.find(c.first_worker) || worker.serial < c.first_serial;
 }
 
 std::optional<Check> Verifier::pending(uint64_t check, uint64_t task_id) const {
@@ -103,7 +112,7 @@ void Verifier::skip_stale(double now, Effects& fx) {
   std::set<std::string> touched;
   std::vector<uint64_t> stale;
   for (const auto& [id, c] : checks_.all()) {
-    const size_t others = workers_.size() - (workers_.find(c.first_worker) ? 1 : 0);
+    const size_t others = workers_.find(c.first_worker) ? workers_.size() - 1 : workers_.count_before(c.first_serial);
     if (c.lease == 0 && (others == 0 || now - c.since > 2 * lease_seconds_)) stale.push_back(id);
   }
   for (uint64_t id : stale) {

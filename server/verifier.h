@@ -43,9 +43,12 @@ class Verifier {
   bool pick() { return std::uniform_real_distribution<double>(0, 1)(rng_) < fraction_; }
   // A picked task's result was merged: its check waits for another worker.
   void issue(Job& job, const Lease& lease, uint64_t worker, uint64_t digest, double now);
-  // Leases waiting checks to the worker (never its own results), up to `max` tasks in all
+  // Leases waiting checks to the worker (only those it may_check), up to `max` tasks in all
   // in `out`.
   void lease_checks(WorkerInfo& worker, uint32_t max, double now, v1::GetTaskResponse& out);
+  // Whether the worker may render the check: not the first worker, nor, once the first
+  // worker's registration has ended, a worker registered after it (maybe itself again).
+  bool may_check(const Check& c, const WorkerInfo& worker);
 
   // A check's result came: the check, unless it was decided or became moot.
   std::optional<Check> pending(uint64_t check, uint64_t task_id) const;

@@ -15,6 +15,7 @@ WorkerInfo& WorkerRegistry::add(const std::string& name, uint32_t threads, doubl
   const std::string s = random_hex(16);
   w.secret_digest = sha256(s);
   if (secret) *secret = s;
+  w.serial = ++serial_;
   w.name = name.substr(0, 256);
   w.threads = std::clamp<uint32_t>(threads, 1, kMaxThreads);
   w.last_seen = now;
@@ -36,6 +37,12 @@ bool WorkerRegistry::secret_matches(const WorkerInfo& w, const std::string& secr
 size_t WorkerRegistry::count_principal(const std::string& principal) const {
   size_t n = 0;
   for (const auto& [id, w] : workers_) n += w.principal == principal;
+  return n;
+}
+
+size_t WorkerRegistry::count_before(uint64_t serial) const {
+  size_t n = 0;
+  for (const auto& [id, w] : workers_) n += w.serial < serial;
   return n;
 }
 

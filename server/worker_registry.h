@@ -10,6 +10,7 @@ namespace tessera {
 
 struct WorkerInfo {
   uint64_t id = 0;
+  uint64_t serial = 0;  // registrations count up: a higher serial registered later
   std::string name;
   std::string principal;      // the access token's name ("" without tokens)
   bool enrolled = false;      // principal is the worker's own credential (credentials.h)
@@ -48,6 +49,8 @@ class WorkerRegistry {
   bool secret_matches(const WorkerInfo& w, const std::string& secret) const;
   // Workers registered under this access token name.
   size_t count_principal(const std::string& principal) const;
+  // Workers registered before the one given `serial`.
+  size_t count_before(uint64_t serial) const;
   // Forgets workers not heard from for `timeout` seconds; returns their ids. (A forgotten
   // worker that comes back is told to register again.)
   std::vector<uint64_t> forget_silent(double now, double timeout);
@@ -71,6 +74,7 @@ class WorkerRegistry {
  private:
   std::map<uint64_t, WorkerInfo> workers_;
   uint64_t threads_ = 0;
+  uint64_t serial_ = 0;
   mutable double last_thread_speed_ = 0;
 };
 

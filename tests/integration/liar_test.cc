@@ -85,11 +85,9 @@ TEST_F(Liar, ALiarAmongEnrolledWorkersIsCaughtOnProbationAndOnlyItsIdentityIsRef
 // liar's registration but never refuses the token, which its honest peers hold too: the
 // liar registers again, and each registration is caught on probation again, so the image
 // is still exact and an honest worker started after the catch is not locked out.
-// DISABLED: under load (ctest -j2) about 1 run in 6 ends with a wrong image: a liar that
-// registers again under a shared token after each catch sometimes gets lies past the
-// checks (cause not found yet; issue 23's note). With enrolled workers (the shipped
-// recipes, the test above) no such run was seen. Run it with --gtest_also_run_disabled_tests.
-TEST_F(Liar, DISABLED_WithASharedWorkerTokenTheLiarIsCaughtEachTimeAndHonestWorkersAreNotLockedOut) {
+// (Once 1 run in 6 under load ended with a wrong image: the liar, registered again, got
+// backups of others' tiles at a frame's end, which nobody checked; now they are checked.)
+TEST_F(Liar, WithASharedWorkerTokenTheLiarIsCaughtEachTimeAndHonestWorkersAreNotLockedOut) {
   start_coordinator();
   start_worker(kWorker);
   start_worker(kWorker);

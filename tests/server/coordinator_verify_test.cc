@@ -170,6 +170,74 @@ TEST_F(VerifyTest, AWorkerLyingFromItsFirstTaskIsCaughtOnProbation) {
   EXPECT_LE(c->counters().checks_issued, 2u * CoordinatorOptions{}.verify_first);
 }
 
+// A worker on probation that gets only backups of others' tiles (it joined at a frame's
+// end) and returns first: its backups are its first merged results, so they are checked.
+TEST_F(VerifyTest, BackupsOfAWorkerOnProbationAreChecked) {
+  start(1e-12);
+  const RenderSettings s = job_settings();
+  const uint64_t honest = worker_as("honest");
+  const std::string id = c->submit(request(s));
+  std::vector<v1::Task> held;  // alone, the honest worker takes every task and sits on them
+  for (v1::GetTaskResponse r; (r = c->get_task(honest, 256)).tasks_size() > 0;)
+    held.insert(held.end(), r.tasks().begin(), r.tasks().end());
+  const uint64_t liar = worker_as("liar");
+  t += 1;  // old enough to back up
+  const v1::GetTaskResponse backups = c->get_task(liar, 256);
+  ASSERT_GE(backups.tasks_size(), int(CoordinatorOptions{}.verify_first));
+  for (const v1::Task& task : backups.tasks()) ASSERT_TRUE(c->submit_result(lie(render_task(task, liar))).accepted());
+  EXPECT_EQ(c->counters().checks_issued, CoordinatorOptions{}.verify_first);
+  for (const v1::Task& task : held) c->submit_result(render_task(task, honest));  // the backed-up ones: too late
+  run(honest, liar, true);
+  EXPECT_EQ(c->counters().workers_quarantined, 1u);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
+// A probation task whose lease ends without its result merged (a backup won, or it
+// expired) is given back to the worker's probation: its next tasks are checked instead.
+TEST_F(VerifyTest, ProbationTasksLostToABackupAreCheckedLater) {
+  start(1e-12);
+  const RenderSettings s = job_settings();
+  const uint64_t honest = worker_as("honest"), liar = worker_as("liar");
+  const std::string first = c->submit(request(s));
+  const uint32_t n = CoordinatorOptions{}.verify_first;
+  ASSERT_EQ(c->get_task(liar, n).tasks_size(), int(n));  // its probation tasks, never returned
+  t += 1;
+  drain(honest);  // everything, backups of the liar's tiles included
+  EXPECT_EQ(c->counters().backup_leases, n);
+  run(honest, liar, false);  // the honest worker's own probation checks
+  ASSERT_EQ(c->status(first, false).state(), v1::JobStatus::DONE);
+  ASSERT_EQ(c->counters().workers_quarantined, 0u);
+  const std::string id = c->submit(request(s));
+  run(honest, liar, true);  // it lies from now on: its first merged tasks are on probation
+  EXPECT_EQ(c->counters().workers_quarantined, 1u);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
+// With one token for every worker, a worker that registers again (it was forgotten, or
+// restarted) may be the one whose results wait for a check: it never checks a result of a
+// registration that ended before it registered, or its lies would confirm themselves.
+TEST_F(VerifyTest, AWorkerRegisteredAgainNeverChecksAnEarlierRegistrationsResults) {
+  start(1e-12);
+  const RenderSettings s = job_settings();
+  const uint64_t honest = worker(), liar = worker();
+  const std::string id = c->submit(request(s));
+  const uint32_t n = CoordinatorOptions{}.verify_first;
+  for (uint32_t k = 0; k < n; ++k) ASSERT_TRUE(step(liar, true));  // merged, waiting for checks
+  ASSERT_EQ(c->counters().checks_issued, n);
+  c->unregister(liar);
+  const uint64_t again = worker();
+  const v1::GetTaskResponse r = c->get_task(again, 256);
+  ASSERT_GT(r.tasks_size(), 0);
+  for (const v1::Task& task : r.tasks()) c->submit_result(lie(render_task(task, again)));
+  EXPECT_EQ(c->counters().checks_passed, 0u);  // it got none of its earlier lies to confirm
+  run(honest, again, true);
+  EXPECT_EQ(c->counters().checks_passed, 0u);
+  EXPECT_EQ(c->counters().workers_quarantined, 2u);  // both registrations, by the honest worker's checks
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
 TEST_F(VerifyTest, AWorkerLyingOnlyAsTheCheckerIsTheOneQuarantined) {
   start(1.0);
   const RenderSettings s = job_settings();
