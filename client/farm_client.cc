@@ -23,7 +23,6 @@
 #include "wire.h"
 
 namespace tessera {
-namespace {
 
 void check(const grpc::Status& st, const FarmContext& c) {
   if (st.ok()) return;
@@ -33,6 +32,12 @@ void check(const grpc::Status& st, const FarmContext& c) {
   throw FarmError(st.error_message());
 }
 
+std::unique_ptr<grpc::ClientContext> deadline(const FarmContext& c, double seconds) {
+  return call_context(c.access, seconds);
+}
+
+namespace {
+
 // Waits before trying a coordinator that went away again, said on stderr unless quiet.
 // `then` names what comes next ("reconnecting").
 void wait_to_retry(Backoff& backoff, const FarmContext& c, const grpc::Status& st, const char* lead, const char* then) {
@@ -40,10 +45,6 @@ void wait_to_retry(Backoff& backoff, const FarmContext& c, const grpc::Status& s
     std::fprintf(c.err, "%stessera: lost coordinator %s (%s); %s in %.1f s\n", lead, c.coordinator.c_str(),
                  st.error_message().c_str(), then, backoff.seconds());
   backoff.wait();
-}
-
-std::unique_ptr<grpc::ClientContext> deadline(const FarmContext& c, double seconds = 30) {
-  return call_context(c.access, seconds);
 }
 
 const char* state_name(v1::JobStatus::State s) { return v1::JobStatus::State_Name(s).c_str(); }

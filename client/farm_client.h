@@ -1,5 +1,5 @@
 // The farm subcommands (`submit`, `status`, `jobs`, `watch`, `fetch`, `cancel`, `requeue`,
-// `priority`, `delete`) as one
+// `priority`, `delete`; `events` in events_command.h) as one
 // function each over a coordinator stub: farm_commands.cc binds them to flags, tests call
 // them against an in-process coordinator. Each returns the process exit code and throws
 // FarmError for what the user must be told (an unreachable coordinator, a refused job).
@@ -37,6 +37,12 @@ struct FarmContext {
   // A scene is sent in pieces of at most this many bytes (tests send small ones).
   size_t scene_chunk_bytes = size_t(1) << 20;
 };
+
+// Throws FarmError saying why a call failed (an unreachable coordinator named, with a hint
+// when TLS is the likely cause).
+void check(const grpc::Status& st, const FarmContext& c);
+// A call's context: the access token, and a deadline `seconds` away.
+std::unique_ptr<grpc::ClientContext> deadline(const FarmContext& c, double seconds = 30);
 
 std::unique_ptr<v1::Tessera::StubInterface> connect_coordinator(const std::string& address,
                                                                 const Access& access = Access());

@@ -2,6 +2,7 @@
 
 #include <memory>
 
+#include "client/events_command.h"
 #include "client/farm_client.h"
 
 namespace tessera {
@@ -108,6 +109,24 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
       "cancelled first)",
       job_arg(true), [job](v1::Tessera::StubInterface& stub, const FarmContext& c) {
         return delete_job(stub, resolve_job_id(stub, *job, c), c);
+      });
+  auto events = std::make_shared<EventsRequest>();
+  add(
+      "events",
+      "What happened on the farm, newest last: jobs submitted, started, ended (and why), cancelled, requeued, "
+      "deleted; workers registered, lost, quarantined; who did it",
+      [job_arg, events](CLI::App* cmd, FarmContext& c) {
+        job_arg(false)(cmd, c);
+        cmd->add_option("--tail", events->tail, "the newest this many (at most 1000)")
+            ->capture_default_str()
+            ->check(CLI::Range(1, 1000));
+        cmd->add_flag("--follow", events->follow, "then print new events as they come, until interrupted");
+        cmd->add_flag("--no-headers", c.no_headers, "rows only, for scripts");
+      },
+      [job, events](v1::Tessera::StubInterface& stub, const FarmContext& c) {
+        EventsRequest r = *events;
+        if (!job->empty()) r.job = resolve_job_id(stub, *job, c);
+        return list_events(stub, r, c);
       });
   return runs;
 }

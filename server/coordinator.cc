@@ -21,6 +21,15 @@ std::unique_ptr<JobStore> sqlite_store(const CoordinatorOptions& o) {
   return store;
 }
 
+// What a submit's event says: the job's name, size, samples and frames.
+std::string submitted_detail(const v1::SubmitJobRequest& req) {
+  const v1::RenderSettings& s = req.settings();
+  std::string d = (req.name().empty() ? "" : "'" + req.name().substr(0, 256) + "', ") + std::to_string(s.width()) +
+                  "x" + std::to_string(s.height()) + ", " + std::to_string(s.spp()) + " spp";
+  if (req.frames_size() > 0) d += ", " + std::to_string(req.frames_size()) + " frames";
+  return d;
+}
+
 }  // namespace
 
 Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> clock, std::unique_ptr<ImageSink> sink,
@@ -59,6 +68,9 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
     const auto restore_scene = [this](const std::string& hash) { return scenes_.restore(hash); };
     Recovery({*store_, jobs_, lifecycle_, snapshotter_, counters_, restore_scene}).restore(clock_->now(), fx);
     for (const auto& [id, s] : jobs_.sequences()) fx.sequence_ends.push_back(id);  // ended, not yet recorded
+    size_t taken_up = jobs_.sequences().size();
+    for (const auto& [id, job] : jobs_.jobs()) taken_up += job->sequence.empty();
+    fx.event("coordinator.started", "", "", "jobs taken up: " + std::to_string(taken_up));
     scenes.merge(jobs_.scene_hashes());
     scenes_.remove_unused(scenes);  // scenes of deleted jobs, or of a submit the crash cut short
     // Files of jobs deleted while their files were being removed: no row names them now.
@@ -76,6 +88,7 @@ Coordinator::~Coordinator() = default;
 
 void Coordinator::apply(Effects fx) {
   if (fx.changed) changed_.notify_all();
+  if (!fx.events.empty()) record(fx.events);
   for (const std::shared_ptr<Job>& job : fx.writes) write(job);
   for (const RowEnd& r : fx.rows) try {
       store_->end(r.id, r.state, r.error, r.elapsed);
@@ -96,6 +109,25 @@ void Coordinator::apply(Effects fx) {
     MutexLock lock(mu_);
     sequences_.offer(*sequence, index, std::move(job));
   }
+}
+
+void Coordinator::record(std::vector<Event>& events) {
+  const double wall = store_->wall();
+  for (Event& e : events) {
+    e.time = wall;
+    const bool bad = e.kind == "job.failed" || e.kind == "frame.failed" || e.kind == "task.failed" ||
+                     e.kind == "worker.quarantined" || e.kind == "worker.lost";
+    spdlog::log(bad ? spdlog::level::warn : spdlog::level::info, "{}", event_line(e));
+  }
+  try {
+    store_->append_events(events);
+  } catch (const std::exception& e) {  // the log has them
+    spdlog::error("keeping {} events in the database: {}", events.size(), e.what());
+  }
+}
+
+std::vector<Event> Coordinator::events(const std::string& job, uint64_t after, size_t limit, bool newest) const {
+  return store_->events(job, after, limit, newest);
 }
 
 void Coordinator::write(const std::shared_ptr<Job>& job) {
@@ -190,6 +222,8 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     const double now = clock_->now();
     ++counters_.jobs_submitted;
+    fx.actor = owner;
+    fx.event("job.submitted", id, "", submitted_detail(req));
     fx.changed = true;
     if (sub.sequence) {
       sub.sequence->submitted = now;
@@ -213,7 +247,10 @@ v1::SceneUpload Coordinator::upload_scene(const std::function<bool(v1::SceneChun
 
 v1::JobStatus Coordinator::cancel(const std::string& id, const std::string& requester, bool any) {
   if (!archived_change(id, requester, any, "cancel"))  // (an archived job has ended: nothing to cancel)
-    locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { lifecycle_.cancel(id, requester, any, clock_->now(), fx); });
+    locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+      fx.actor = requester;
+      lifecycle_.cancel(id, requester, any, clock_->now(), fx);
+    });
   return status(id, false);
 }
 
@@ -222,7 +259,10 @@ v1::JobStatus Coordinator::set_priority(const std::string& id, int32_t priority,
   if (!archived_change(id, requester, any, "change the priority of"))
     locked([&](Effects&) TESSERA_REQUIRES(mu_) { jobs_.check_change(id, requester, any, "change the priority of"); });
   with_store([&] { store_->set_priority(id, priority); });  // the row first: a restart keeps it
-  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.set_priority(id, priority, fx); });
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    fx.actor = requester;
+    control_.set_priority(id, priority, fx);
+  });
   return status(id, false);
 }
 
@@ -248,7 +288,10 @@ v1::JobStatus Coordinator::requeue(const std::string& id, const std::string& req
   });
   undo_on_throw([&] { load_requeue(q, *store_, scenes_, options_.data_dir); },  // the scene, the row, the films
                 [&](Effects&) TESSERA_REQUIRES(mu_) { control_.requeue_failed(q); });
-  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.finish_requeue(q, clock_->now(), fx); });
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    fx.actor = requester;
+    control_.finish_requeue(q, clock_->now(), fx);
+  });
   return status(id, false);
 }
 
@@ -259,6 +302,7 @@ uint64_t Coordinator::remove(const std::string& id, const std::string& requester
         undo_on_throw([&] { return finish_removal(r, false, *store_, *sink_, scenes_, options_.data_dir); },
                       [&](Effects&) TESSERA_REQUIRES(mu_) { control_.end_archived(id); });
     locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+      fx.actor = requester;
       control_.end_archived(id);
       control_.removed(r, fx);
     });
@@ -266,6 +310,7 @@ uint64_t Coordinator::remove(const std::string& id, const std::string& requester
   }
   bool holds_scene = false;
   const JobControl::Removal r = locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    fx.actor = requester;  // (a live job is cancelled first)
     JobControl::Removal r = control_.begin_delete(id, requester, any, clock_->now(), fx);
     await([&] { return JobControl::quiet(r); });  // a writer stops at its next band
     holds_scene = JobControl::holds_scene(r);
@@ -274,7 +319,10 @@ uint64_t Coordinator::remove(const std::string& id, const std::string& requester
   const uint64_t bytes =
       undo_on_throw([&] { return finish_removal(r, holds_scene, *store_, *sink_, scenes_, options_.data_dir); },
                     [&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.delete_failed(r, clock_->now(), fx); });
-  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { control_.removed(r, fx); });
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    fx.actor = requester;
+    control_.removed(r, fx);
+  });
   return bytes;
 }
 
@@ -283,6 +331,7 @@ uint64_t Coordinator::remove(const std::string& id, const std::string& requester
 v1::RegisterResponse Coordinator::register_worker(const v1::RegisterRequest& request, const std::string& principal,
                                                   bool enrolled) {
   return locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    fx.actor = principal;
     return worker_lifecycle_.register_worker(request, principal, enrolled, clock_->now(), fx);
   });
 }
@@ -357,7 +406,7 @@ size_t Coordinator::expire_leases() {
   }
   return locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     const double now = clock_->now();
-    worker_lifecycle_.forget_silent(now);  // here, on the reaper's tick, not in every GetTask
+    worker_lifecycle_.forget_silent(now, fx);  // here, on the reaper's tick, not in every GetTask
     const size_t expired = leasing_.expire(now);
     fx.changed = expired > 0;
     verifier_.skip_stale(now, fx);

@@ -118,7 +118,10 @@ class Coordinator {
   // A worker's own credential (credentials.h) for `name`, from the enrolment token named
   // `enroller`. Throws RequestError.
   std::string enrol(const std::string& name, const std::string& enroller) {
-    return credentials_.enrol(name, enroller, options_.max_workers_per_token);
+    std::string credential = credentials_.enrol(name, enroller, options_.max_workers_per_token);
+    std::vector<Event> enrolled{{0, 0, "worker.enrolled", "", name, enroller, ""}};
+    record(enrolled);
+    return credential;
   }
   // Workers' credentials: the Authenticator looks them up here.
   CredentialBook& credentials() { return credentials_; }
@@ -192,6 +195,8 @@ class Coordinator {
     MutexLock lock(mu_);
     return workers_.utilization(clock_->now());
   }
+  // Events (events.h), as JobStore::events reads them.
+  std::vector<Event> events(const std::string& job, uint64_t after, size_t limit, bool newest) const;
   CoordinatorCounters counters() const {
     MutexLock lock(mu_);
     return counters_;
@@ -202,6 +207,9 @@ class Coordinator {
  private:
   // Carries out what operations under the lock left to do (rule 3). mu_ not held.
   void apply(Effects fx) TESSERA_EXCLUDES(mu_);
+  // Stamps the events with the wall clock, logs them (one structured line each) and keeps
+  // them in the database.
+  void record(std::vector<Event>& events) TESSERA_EXCLUDES(mu_);
   // Runs op(effects) under mu_, then apply()s the effects; returns what op returns.
   template <typename Op>
   auto locked(Op&& op) TESSERA_EXCLUDES(mu_) {

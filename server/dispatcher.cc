@@ -63,7 +63,7 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
       std::optional<TileTask> t = job.plan.take(w->passes_per_task);
       if (!t) break;
       const uint64_t task_id = p_.leasing.grant(job, *t, *w, now);
-      p_.lifecycle.start(job, now);
+      p_.lifecycle.start(job, now, fx);
       samples += add_task(job, *t, task_id, resp);
       if (verify) mark_for_check(*w, task_id, resp);
     }

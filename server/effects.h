@@ -1,7 +1,7 @@
 // The slow work a state change leaves for after the coordinator's lock. Nothing under the
 // lock writes to disk, encodes an image or waits: each operation appends what it needs
 // done to one Effects, and the coordinator carries it out once the lock is released
-// (Coordinator::apply): waking the waiters, then images and checkpoints, database rows,
+// (Coordinator::apply): waking the waiters, events, then images and checkpoints, database rows,
 // sequence ends, frames to prepare, jobs to archive and flags for archived jobs.
 #pragma once
 
@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "server/archive.h"
+#include "server/events.h"
 #include "server/snapshotter.h"
 
 namespace tessera {
@@ -33,10 +34,17 @@ struct Effects {
   // Enrolled workers' names quarantined, with why: their credentials are refused (and kept so).
   std::vector<std::pair<std::string, std::string>> credentials_quarantined;
   bool changed = false;  // something waiters wait for happened
+  // Events (events.h) to log and keep; `actor` is who asked for this operation (a token's
+  // name), and who each event made under it did it.
+  std::string actor;
+  std::vector<Event> events;
+  void event(std::string kind, std::string job, std::string worker, std::string detail) {
+    events.push_back({0, 0, std::move(kind), std::move(job), std::move(worker), actor, std::move(detail)});
+  }
 
   bool empty() const {
     return writes.empty() && rows.empty() && sequence_ends.empty() && prepare.empty() && archive.empty() &&
-           flags.empty() && credentials_quarantined.empty() && !changed;
+           flags.empty() && credentials_quarantined.empty() && events.empty() && !changed;
   }
 };
 

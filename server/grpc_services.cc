@@ -170,6 +170,11 @@ grpc::Status ClientService::DeleteJob(grpc::ServerContext* ctx, const v1::JobId*
     out->set_id(req->id());
   });
 }
+grpc::Status ClientService::ListEvents(grpc::ServerContext* ctx, const v1::ListEventsRequest* req, v1::EventList* out) {
+  return as(__func__, auth_, ctx, Action::kRead, [&](const Principal&) {
+    *out = to_proto(c_.events(req->job_id(), req->after(), event_limit(req->limit()), !req->oldest()));
+  });
+}
 grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::FetchImageRequest* req, v1::Image* out) {
   return as(__func__, auth_, ctx, Action::kRead, [&](const Principal&) {
     const bool any = req->exr() || req->png();  // neither: both, as before the choice existed
@@ -195,8 +200,7 @@ grpc::Status ClientService::FetchImageChunks(grpc::ServerContext* ctx, const v1:
 
 grpc::Status WorkerService::Enrol(grpc::ServerContext* ctx, const v1::EnrolRequest* req, v1::EnrolResponse* out) {
   return as(__func__, auth_, ctx, Action::kEnrol, [&](const Principal& who) {
-    out->set_credential(c_.enrol(req->name(), who.name));
-    spdlog::info("worker '{}' enrolled (enrolment token '{}')", req->name(), who.name);
+    out->set_credential(c_.enrol(req->name(), who.name));  // (an event says so)
   });
 }
 grpc::Status WorkerService::Register(grpc::ServerContext* ctx, const v1::RegisterRequest* req,

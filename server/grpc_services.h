@@ -37,6 +37,7 @@ class ClientService final : public v1::Tessera::Service {
   grpc::Status RequeueJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) override;
   grpc::Status SetJobPriority(grpc::ServerContext*, const v1::SetPriorityRequest* req, v1::JobStatus* out) override;
   grpc::Status DeleteJob(grpc::ServerContext*, const v1::JobId* req, v1::DeleteJobResponse* out) override;
+  grpc::Status ListEvents(grpc::ServerContext*, const v1::ListEventsRequest* req, v1::EventList* out) override;
   grpc::Status FetchImage(grpc::ServerContext*, const v1::FetchImageRequest* req, v1::Image* out) override;
   grpc::Status FetchImageChunks(grpc::ServerContext* ctx, const v1::FetchImageRequest* req,
                                 grpc::ServerWriter<v1::ImageChunk>* w) override;

@@ -27,6 +27,7 @@ void JobControl::set_priority(const std::string& id, int32_t priority, Effects& 
   } else if (Job* j = jobs_.find_job(id)) {
     j->meta.priority = priority;
   }
+  fx.event("job.priority", id, "", "priority " + std::to_string(priority));
   fx.changed = true;  // the dispatcher's order changed
 }
 
@@ -87,6 +88,7 @@ void JobControl::removed(const Removal& r, Effects& fx) {
   for (const std::shared_ptr<Job>& j : r.jobs) jobs_.remove_job(j->id());
   if (r.sequence) jobs_.remove_sequence(r.id);
   ++counters_.jobs_deleted;
+  fx.event("job.deleted", r.id, "", "");
   fx.changed = true;
 }
 
@@ -174,6 +176,7 @@ void JobControl::finish_requeue(Requeue& q, double now, Effects& fx) {
     if (q.sequence) q.sequence->jobs[j.frame_index] = q.fresh[i];
     Recovery::resume(lifecycle_, j, q.elapsed[i], q.checkpointed[i], now);
   }
+  fx.event("job.requeued", q.id, "", std::to_string(q.fresh.size()) + (q.sequence ? " frames" : " job"));
   for (const std::shared_ptr<Job>& j : q.fresh) lifecycle_.finish_if_done(*j, now, fx);  // whole already
   if (Sequence* s = q.sequence.get(); s && s->live() && s->frames_done == s->frames.size())
     lifecycle_.end(*s, v1::JobStatus::DONE, now, fx);

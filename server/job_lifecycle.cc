@@ -5,18 +5,26 @@
 
 namespace tessera {
 
-void JobLifecycle::start(Job& job, double now) {
+namespace {
+const char* end_word(v1::JobStatus::State state) {
+  return state == v1::JobStatus::DONE ? "done" : state == v1::JobStatus::FAILED ? "failed" : "cancelled";
+}
+}  // namespace
+
+void JobLifecycle::start(Job& job, double now, Effects& fx) {
   if (job.state_ != v1::JobStatus::QUEUED) return;
   job.state_ = v1::JobStatus::RUNNING;
   job.started = now;
   if (job.started_at == 0) job.started_at = wall_seconds();
+  if (job.sequence.empty()) fx.event("job.started", job.id(), "", "");  // (a frame: its sequence started)
 }
 
-void JobLifecycle::start(Sequence& s, double now) {
+void JobLifecycle::start(Sequence& s, double now, Effects& fx) {
   if (s.state_ != v1::JobStatus::QUEUED) return;
   s.state_ = v1::JobStatus::RUNNING;
   s.started = now;
   if (s.started_at == 0) s.started_at = wall_seconds();
+  fx.event("job.started", s.id(), "", "");
 }
 
 void JobLifecycle::end(Job& job, Job::State state, double now, Effects& fx) {
@@ -26,6 +34,7 @@ void JobLifecycle::end(Job& job, Job::State state, double now, Effects& fx) {
   job.ended_at = wall_seconds();
   job.pending_checks = 0;
   leasing_.end_job(job, now);
+  if (job.sequence.empty()) fx.event(std::string("job.") + end_word(state), job.id(), "", job.error);
   // Its scene is dropped, from memory and disk, once its end is on disk (SnapshotWriter)
   // and no live job uses it: a crash before then finds the job live and its scene there.
   // A sequence holds the scene for its frames until its own end is recorded.
@@ -37,6 +46,9 @@ void JobLifecycle::frame_ended(Job& job, double now, Effects& fx) {
   Sequence* sp = jobs_.find_sequence(job.sequence);
   TESSERA_INVARIANT(sp, "frame " + job.id() + " has no sequence");
   Sequence& s = *sp;
+  if (job.state() != v1::JobStatus::CANCELLED)  // (cancelled with its sequence, which says so)
+    fx.event(std::string("frame.") + end_word(job.state()), s.id(), "",
+             "frame " + std::to_string(s.frames[job.frame_index]) + (job.error.empty() ? "" : ": " + job.error));
   if (s.live_frames > 0) --s.live_frames;
   fx.sequence_ends.push_back(s.id());  // (recorded once every frame's end is)
   if (!s.live()) return;               // the sequence ended first and ends its frames itself
@@ -56,6 +68,7 @@ void JobLifecycle::end(Sequence& s, Sequence::State state, double now, Effects& 
   s.finished_at = now;
   s.ended_at = wall_seconds();
   s.prepared.reset();
+  fx.event(std::string("job.") + end_word(state), s.id(), "", s.error);
   for (const std::shared_ptr<Job>& j : s.jobs)
     if (j && j->live()) {
       end(*j, v1::JobStatus::CANCELLED, now, fx);

@@ -33,8 +33,8 @@ class JobLifecycle {
     s.state_ = rendered ? v1::JobStatus::RUNNING : v1::JobStatus::QUEUED;
     s.ended_at = 0;
   }
-  void start(Job& job, double now);     // its first lease
-  void start(Sequence& s, double now);  // its first frame
+  void start(Job& job, double now, Effects& fx);     // its first lease
+  void start(Sequence& s, double now, Effects& fx);  // its first frame
 
   // Ends a live job: its leases and checks end; a frame's end goes to its sequence. The
   // caller asks for its last image and checkpoint (Snapshotter::final_snapshot).

@@ -63,6 +63,9 @@ SqliteJobStore::SqliteJobStore(const std::string& data_dir) : dir_(data_dir) {
   exec("CREATE INDEX IF NOT EXISTS merged_worker ON merged_into(worker)");
   exec(R"(CREATE TABLE IF NOT EXISTS credentials(name TEXT PRIMARY KEY, digest BLOB NOT NULL,
             enroller TEXT NOT NULL, created REAL NOT NULL, quarantined_at REAL NOT NULL, why TEXT NOT NULL))");
+  exec(R"(CREATE TABLE IF NOT EXISTS events(id INTEGER PRIMARY KEY AUTOINCREMENT, time REAL NOT NULL,
+            kind TEXT NOT NULL, job TEXT NOT NULL, worker TEXT NOT NULL, who TEXT NOT NULL, detail TEXT NOT NULL))");
+  exec("CREATE INDEX IF NOT EXISTS events_job ON events(job, id)");
   set_data_marker(dir_, true);
 }
 

@@ -11,6 +11,7 @@
 
 #include <array>
 #include <chrono>
+#include <deque>
 #include <functional>
 #include <map>
 #include <memory>
@@ -22,6 +23,7 @@
 
 #include "core/util/mutex.h"
 #include "server/checkpoint.h"
+#include "server/events.h"
 #include "server/job_meta.h"
 
 struct sqlite3;
@@ -132,6 +134,14 @@ class JobStore {
   virtual void put_credential(const StoredCredential& c) = 0;
   virtual void remove_credentials(const std::vector<std::string>& names) = 0;
   virtual std::vector<StoredCredential> credentials() const = 0;
+
+  // ---- events (events.h) ----
+  // Gives each event its id and keeps it; only the newest kMaxEvents stay. Throws
+  // std::runtime_error.
+  virtual void append_events(std::vector<Event>& events) = 0;
+  // Events with ids after `after`, oldest first: the first `limit` of them, or with `newest`
+  // the last `limit`. Of one job when `job` is given (a sequence's include its frames').
+  virtual std::vector<Event> events(const std::string& job, uint64_t after, size_t limit, bool newest) const = 0;
   // A new checkpoint of the job. Throws std::runtime_error naming the file.
   virtual std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const = 0;
   // Reads the job's checkpoint into `plan` (checkpoint.h's read_checkpoint) and returns its
@@ -182,6 +192,8 @@ class SqliteJobStore : public JobStore {
   void put_credential(const StoredCredential& c) override;  // (job_store_credentials.cc)
   void remove_credentials(const std::vector<std::string>& names) override;
   std::vector<StoredCredential> credentials() const override;
+  void append_events(std::vector<Event>& events) override;  // (job_store_events.cc)
+  std::vector<Event> events(const std::string& job, uint64_t after, size_t limit, bool newest) const override;
   // Written to a temporary file, synced, renamed into place.
   std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
   std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;
@@ -227,6 +239,8 @@ class MemoryJobStore : public JobStore {
   void put_credential(const StoredCredential& c) override;
   void remove_credentials(const std::vector<std::string>& names) override;
   std::vector<StoredCredential> credentials() const override;
+  void append_events(std::vector<Event>& events) override;
+  std::vector<Event> events(const std::string& job, uint64_t after, size_t limit, bool newest) const override;
   std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
   std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;
   void discard_checkpoint(const std::string& id) override { set_checkpoint_bytes(id, std::nullopt); }
@@ -246,6 +260,8 @@ class MemoryJobStore : public JobStore {
   };
   std::vector<Merge> merges_ TESSERA_GUARDED_BY(mu_);
   std::map<std::string, StoredCredential> credentials_ TESSERA_GUARDED_BY(mu_);
+  std::deque<Event> events_ TESSERA_GUARDED_BY(mu_);
+  uint64_t last_event_ TESSERA_GUARDED_BY(mu_) = 0;
   mutable std::map<std::string, std::string> checkpoints_ TESSERA_GUARDED_BY(mu_);
 };
 

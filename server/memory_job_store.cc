@@ -199,6 +199,26 @@ std::vector<StoredCredential> MemoryJobStore::credentials() const {
   return out;
 }
 
+void MemoryJobStore::append_events(std::vector<Event>& events) {
+  MutexLock lock(mu_);
+  check_writes();
+  for (Event& e : events) {
+    e.id = ++last_event_;
+    events_.push_back(e);
+  }
+  while (events_.size() > kMaxEvents) events_.pop_front();
+}
+
+std::vector<Event> MemoryJobStore::events(const std::string& job, uint64_t after, size_t limit, bool newest) const {
+  MutexLock lock(mu_);
+  std::vector<Event> out;
+  for (const Event& e : events_)
+    if (e.id > after && (job.empty() || e.job == job)) out.push_back(e);
+  if (out.size() > limit)
+    out.erase(newest ? out.begin() : out.begin() + ptrdiff_t(limit), newest ? out.end() - ptrdiff_t(limit) : out.end());
+  return out;
+}
+
 std::unique_ptr<CheckpointFile> MemoryJobStore::begin_checkpoint(const std::string& id) const {
   {
     MutexLock lock(mu_);

@@ -31,7 +31,7 @@ Job* SequenceScheduler::start_next(Sequence& s, double now, Effects& fx) {
   s.jobs[s.next++] = std::move(job);
   ++s.frames_started;
   ++s.live_frames;
-  lifecycle_.start(s, now);
+  lifecycle_.start(s, now, fx);
   if (j.plan.done()) lifecycle_.finish_if_done(j, now, fx);  // nothing to render (cannot happen today)
   return &j;
 }

@@ -26,6 +26,7 @@ const char* kLivePage = R"HTML(<!doctype html>
 <div id="frames"></div>
 <h3>Jobs</h3><table id="jobs"></table>
 <h3>Workers</h3><table id="workers"></table>
+<h3>Events</h3><table id="events"></table>
 <script src="/app.js"></script></body></html>)HTML";
 
 const char* kLiveCss = R"CSS(body{font-family:sans-serif;margin:1.5em;background:#111;color:#ddd}
@@ -50,6 +51,9 @@ async function tick(){
     jobs.map(j=>`<tr><td>${esc(j.id)}</td><td>${esc(j.name)}</td><td>${esc(j.owner || '-')}</td><td>${esc(j.priority || 0)}</td><td>${esc(j.state)}</td><td>${esc((100*j.samples_done/Math.max(1,j.samples_total)).toFixed(1))}%</td><td>${esc(j.frames_total ? 'frames ' + j.frames_done + '/' + j.frames_total : j.frame_passes_done + '/' + j.passes_total)}</td><td>${esc(when(j.submitted_at))}</td><td>${esc(when(j.ended_at))}</td><td>${esc(j.elapsed_seconds.toFixed(0))} s</td><td>${esc(j.eta_seconds.toFixed(0))} s</td></tr>`).join('');
   document.getElementById('workers').innerHTML = '<tr><th>id</th><th>name</th><th>threads</th><th>samples/s</th><th>busy</th><th>tasks</th><th>leases</th><th>round trip</th><th>bytes/sample</th><th>passes/task</th></tr>' +
     workers.map(w=>`<tr><td>${esc(w.id)}</td><td>${esc(w.name)}</td><td>${esc(w.threads)}</td><td>${esc((w.samples_per_second/1e6).toFixed(2))} M</td><td>${esc((100*w.utilization).toFixed(0))}%</td><td>${esc(w.tasks_done)}</td><td>${esc(w.leases)}</td><td>${esc(w.round_trip_ms.toFixed(1))} ms</td><td>${esc(w.bytes_per_sample.toFixed(3))}</td><td>${esc(w.passes_per_task)}</td></tr>`).join('');
+  const ev = (await (await fetch('/api/events?limit=20')).json()).events || [];
+  document.getElementById('events').innerHTML = '<tr><th>time</th><th>event</th><th>job</th><th>worker</th><th>who</th><th>detail</th></tr>' +
+    ev.reverse().map(e=>`<tr><td>${esc(when(e.time))}</td><td>${esc(e.kind)}</td><td>${esc(e.job_id || '-')}</td><td>${esc(e.worker || '-')}</td><td>${esc(e.who || '-')}</td><td>${esc(e.detail)}</td></tr>`).join('');
   const job = jobs.find(j=>j.state==='RUNNING') || jobs[jobs.length-1];
   if (!job) return;
   // The tile map a page of tiles per tick (the API's tiles_next), redrawn from the first.
@@ -119,6 +123,20 @@ std::string job_status_json(v1::JobStatus status, uint32_t tiles_from) {
 }
 
 namespace {
+// The query parameter `name`, when given, as a whole number into `value`; false (and a 400
+// answer naming it) when it is not one.
+template <typename T>
+bool whole_param(const httplib::Request& req, httplib::Response& res, const char* name, T* value) {
+  if (!req.has_param(name)) return true;
+  const std::string v = req.get_param_value(name);
+  const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), *value);
+  if (ec == std::errc() && end == v.data() + v.size()) return true;
+  res.status = 400;
+  res.set_content(nlohmann::json{{"error", std::string(name) + " '" + v + "' is not a whole number"}}.dump(),
+                  "application/json");
+  return false;
+}
+
 std::unique_ptr<httplib::Server> make_server(const std::string& cert, const std::string& key) {
   if (cert.empty() && key.empty()) return std::make_unique<httplib::Server>();
   auto tls = std::make_unique<httplib::SSLServer>(cert.c_str(), key.c_str());
@@ -149,17 +167,8 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
   });
   server.Get(R"(/api/jobs/([A-Za-z0-9-]+))", [this](const httplib::Request& req, httplib::Response& res) {
     TileRange range{0, kMaxTilesPage};
-    for (auto [name, value] : {std::pair{"tiles_from", &range.from}, std::pair{"tiles_count", &range.count}}) {
-      if (!req.has_param(name)) continue;
-      const std::string v = req.get_param_value(name);
-      const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), *value);
-      if (ec != std::errc() || end != v.data() + v.size()) {
-        res.status = 400;
-        res.set_content(nlohmann::json{{"error", std::string(name) + " '" + v + "' is not a whole number"}}.dump(),
-                        "application/json");
-        return;
-      }
-    }
+    if (!whole_param(req, res, "tiles_from", &range.from) || !whole_param(req, res, "tiles_count", &range.count))
+      return;
     range.count = std::min(range.count, kMaxTilesPage);
     try {
       res.set_content(job_status_json(c_.status(req.matches[1], true, range), range.from), "application/json");
@@ -167,6 +176,14 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
       res.status = 404;
       res.set_content(nlohmann::json{{"error", e.what()}}.dump(), "application/json");
     }
+  });
+  // Events (events.h), newest last: ?job=ID (that job's), ?after=ID (newer ones), ?limit=N.
+  server.Get("/api/events", [this](const httplib::Request& req, httplib::Response& res) {
+    uint64_t after = 0, limit = 0;
+    if (!whole_param(req, res, "after", &after) || !whole_param(req, res, "limit", &limit)) return;
+    const std::string job = req.has_param("job") ? req.get_param_value("job") : "";
+    const auto events = c_.events(job, after, event_limit(uint32_t(std::min<uint64_t>(limit, 1000))), true);
+    res.set_content(events_json(events), "application/json");
   });
   server.Get("/metrics", [this](const httplib::Request&, httplib::Response& res) {
     res.set_content(metrics_text(), "text/plain; version=0.0.4");

@@ -160,7 +160,9 @@ void Verifier::quarantine(uint64_t worker, const std::string& why, double now, E
   }
   if (!checks_.quarantine(worker)) return;
   ++counters_.workers_quarantined;
-  spdlog::warn("worker {} quarantined: {}", name, why);
+  const WorkerInfo* w = workers_.find(worker);
+  fx.events.push_back(
+      {0, 0, "worker.quarantined", "", w ? w->name : std::to_string(worker), w ? w->principal : "", why});
   leasing_.end_worker(worker, now);
   // What it merged is rendered again: every tile of a live job it added sums to starts
   // over (a tile's passes build on each other). An ended job is flagged.

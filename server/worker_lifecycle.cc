@@ -12,12 +12,12 @@ v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest&
   if (enrolled)  // one credential, one worker: a restarted one replaces its last registration
     for (const WorkerInfo& old : p_.workers.list(now))
       if (old.enrolled && old.principal == principal) unregister(old.id, now, fx);
-  if (p_.workers.size() >= options_.max_workers) forget_silent(now);
+  if (p_.workers.size() >= options_.max_workers) forget_silent(now, fx);
   if (p_.workers.size() >= options_.max_workers)
     throw RequestError(RequestError::Code::kResourceExhausted,
                        "the coordinator has its " + std::to_string(options_.max_workers) + " workers (--max-workers)");
   if (!principal.empty() && p_.workers.count_principal(principal) >= options_.max_workers_per_token) {
-    forget_silent(now);
+    forget_silent(now, fx);
     if (p_.workers.count_principal(principal) >= options_.max_workers_per_token)
       throw RequestError(RequestError::Code::kResourceExhausted, "worker token '" + principal + "' has its " +
                                                                      std::to_string(options_.max_workers_per_token) +
@@ -28,6 +28,8 @@ v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest&
   w.principal = principal;
   w.enrolled = enrolled;
   w.probation = options_.verify_fraction > 0 ? options_.verify_first : 0;
+  fx.events.push_back({0, 0, "worker.registered", "", w.name, principal,
+                       "threads " + std::to_string(w.threads) + (enrolled ? ", its own credential" : "")});
   v1::RegisterResponse r;
   r.set_worker_id(w.id);
   r.set_worker_secret(secret);
@@ -69,13 +71,31 @@ void WorkerLifecycle::release(uint64_t worker, uint64_t task, const std::string&
   ++p_.counters.leases_released;
   fx.changed = true;
   if (error.empty()) return;
-  if (Job* job = p_.jobs.find_job(job_id)) p_.lifecycle.task_failed(*job, worker, error, now, fx);
+  Job* job = p_.jobs.find_job(job_id);
+  if (!job) return;
+  if (const WorkerInfo* w = p_.workers.find(worker))
+    fx.events.push_back({0, 0, "task.failed", job->sequence.empty() ? job_id : job->sequence, w->name, w->principal,
+                         error.substr(0, 1024)});
+  p_.lifecycle.task_failed(*job, worker, error, now, fx);
 }
 
 void WorkerLifecycle::unregister(uint64_t worker, double now, Effects& fx) {
-  p_.counters.leases_released += p_.leasing.end_worker(worker, now);
+  const size_t held = p_.leasing.end_worker(worker, now);
+  p_.counters.leases_released += held;
+  if (const WorkerInfo* w = p_.workers.find(worker))
+    fx.events.push_back(
+        {0, 0, "worker.unregistered", "", w->name, w->principal,
+         std::to_string(w->tasks_done) + " tasks done, " + std::to_string(held) + " leases given back"});
   p_.workers.remove(worker);
   fx.changed = true;
+}
+
+void WorkerLifecycle::forget_silent(double now, Effects& fx) {
+  for (const WorkerInfo& w : p_.workers.forget_silent(now, options_.worker_timeout_seconds)) {
+    fx.events.push_back({0, 0, "worker.lost", "", w.name, w.principal,
+                         "silent for " + std::to_string(int64_t(now - w.last_seen)) + " s"});
+    fx.changed = true;
+  }
 }
 
 }  // namespace tessera

@@ -42,7 +42,7 @@ class WorkerLifecycle {
   // The worker stops: its leases go back to their jobs and it is forgotten.
   void unregister(uint64_t worker, double now, Effects& fx);
   // Forgets workers silent for longer than the timeout (they register again if they return).
-  void forget_silent(double now) { p_.workers.forget_silent(now, options_.worker_timeout_seconds); }
+  void forget_silent(double now, Effects& fx);
 
  private:
   Parts p_;

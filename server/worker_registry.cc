@@ -51,11 +51,11 @@ WorkerInfo* WorkerRegistry::find(uint64_t id) {
   return it == workers_.end() ? nullptr : &it->second;
 }
 
-std::vector<uint64_t> WorkerRegistry::forget_silent(double now, double timeout) {
-  std::vector<uint64_t> gone;
+std::vector<WorkerInfo> WorkerRegistry::forget_silent(double now, double timeout) {
+  std::vector<WorkerInfo> gone;
   for (auto it = workers_.begin(); it != workers_.end();) {
     if (now - it->second.last_seen > timeout) {
-      gone.push_back(it->first);
+      gone.push_back(it->second);
       threads_ -= it->second.threads;
       it = workers_.erase(it);
     } else {

@@ -51,9 +51,9 @@ class WorkerRegistry {
   size_t count_principal(const std::string& principal) const;
   // Workers registered before the one given `serial`.
   size_t count_before(uint64_t serial) const;
-  // Forgets workers not heard from for `timeout` seconds; returns their ids. (A forgotten
-  // worker that comes back is told to register again.)
-  std::vector<uint64_t> forget_silent(double now, double timeout);
+  // Forgets workers not heard from for `timeout` seconds; returns them. (A forgotten worker
+  // that comes back is told to register again.)
+  std::vector<WorkerInfo> forget_silent(double now, double timeout);
   void remove(uint64_t id);
   size_t size() const { return workers_.size(); }
   uint64_t threads() const { return threads_; }  // of every known worker

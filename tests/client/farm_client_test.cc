@@ -14,6 +14,7 @@
 #include <set>
 #include <thread>
 
+#include "client/events_command.h"
 #include "core/io/image_io.h"
 #include "core/render/local_renderer.h"
 #include "core/scene/load.h"
@@ -168,6 +169,9 @@ class RestartedOnceStub : public v1::Tessera::StubInterface {
   grpc::Status DeleteJob(grpc::ClientContext* c, const v1::JobId& r, v1::DeleteJobResponse* o) override {
     return real_.DeleteJob(c, r, o);
   }
+  grpc::Status ListEvents(grpc::ClientContext* c, const v1::ListEventsRequest& r, v1::EventList* o) override {
+    return real_.ListEvents(c, r, o);
+  }
   grpc::ClientWriterInterface<v1::SceneChunk>* UploadSceneRaw(grpc::ClientContext* c, v1::SceneUpload* o) override {
     return real_.UploadScene(c, o).release();
   }
@@ -219,6 +223,7 @@ class RestartedOnceStub : public v1::Tessera::StubInterface {
   TESSERA_NO_ASYNC(SetJobPriority, v1::SetPriorityRequest, v1::JobStatus)
   TESSERA_NO_ASYNC(DeleteJob, v1::JobId, v1::DeleteJobResponse)
   TESSERA_NO_ASYNC(FetchImage, v1::FetchImageRequest, v1::Image)
+  TESSERA_NO_ASYNC(ListEvents, v1::ListEventsRequest, v1::EventList)
 #undef TESSERA_NO_ASYNC
   grpc::ClientAsyncWriterInterface<v1::SceneChunk>* AsyncUploadSceneRaw(grpc::ClientContext*, v1::SceneUpload*,
                                                                         grpc::CompletionQueue*, void*) override {
@@ -392,6 +397,24 @@ TEST_F(FarmClient, SubmitWaitsAndWritesTheLocalImageThenListsStatusAndFetch) {
   const std::string again = (dir / "again.exr").string();
   EXPECT_EQ(fetch_image(*stub, id, {again}, ctx), 0);
   EXPECT_EQ(read_exr(again).channels.at("R"), img.channels.at("R"));
+
+  // `tessera events JOB`: its life under a header; --json with numbers and RFC 3339 times.
+  Output events;
+  ctx.out = events.file();
+  EXPECT_EQ(list_events(*stub, {id}, ctx), 0);
+  EXPECT_EQ(events.text().rfind(kEventsHeader, 0), 0u) << events.text();
+  for (const char* kind : {"job.submitted", "job.started", "job.done"})
+    EXPECT_NE(events.text().find(kind), std::string::npos) << events.text();
+  ctx.json = true;
+  Output events_json;
+  ctx.out = events_json.file();
+  EXPECT_EQ(list_events(*stub, {id}, ctx), 0);
+  const nlohmann::json ev = nlohmann::json::parse(events_json.text())["events"];
+  ASSERT_EQ(ev.size(), 3u) << events_json.text();
+  EXPECT_TRUE(ev[0]["id"].is_number_unsigned()) << ev[0];
+  EXPECT_TRUE(std::regex_match(ev[0]["time"].get<std::string>(), rfc3339)) << ev[0];
+  EXPECT_EQ(ev[0]["kind"], "job.submitted");
+  EXPECT_EQ(ev[0]["job_id"], id);
 }
 
 // Issue 22: a scene larger than any one message the coordinator takes or sends (here 64

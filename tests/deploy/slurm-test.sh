@@ -134,6 +134,6 @@ for _ in $(seq 200); do [ -z "$(squeue -h -j "$job" 2>/dev/null)" ] && break; sl
 [ -z "$(squeue -h -j "$job" 2>/dev/null)" ] || { echo "FAIL: the workers did not leave when idle"; exit 1; }
 grep -q "exit-when-idle" "$T"/tessera-workers-"$job".out || { echo "FAIL: no idle exit in the log"; cat "$T"/tessera-workers-"$job".out; exit 1; }
 # Each allocation's worker enrolled for a credential of its own.
-enrolled=$(grep -c "enrolled (enrolment token 'farm-enrol')" "$T/coord.err" || true)
+enrolled=$(grep -c 'event=worker.enrolled worker=[^ ]* who=farm-enrol' "$T/coord.err" || true)
 [ "$enrolled" -ge 2 ] || { echo "FAIL: the workers did not enrol ($enrolled enrolments)"; tail -20 "$T/coord.err"; exit 1; }
 echo "PASS: Slurm workers enrolled, scancel mid-job and again, bit-identical; the allocation ended when idle"

@@ -42,6 +42,19 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   ASSERT_TRUE(bad);
   EXPECT_EQ(bad->status, 400);
   EXPECT_NE(bad->body.find("tiles_count '-1' is not a whole number"), std::string::npos) << bad->body;
+  // Issue 24: events, newest last, of the farm or one job; the coordinator's log has them
+  // as structured lines.
+  const nlohmann::json ev = get_json("/api/events?job=" + id)["events"];
+  ASSERT_EQ(ev.size(), 3u) << ev;
+  EXPECT_EQ(ev[0]["kind"], "job.submitted");
+  EXPECT_EQ(ev[2]["kind"], "job.done");
+  const nlohmann::json newest = get_json("/api/events?limit=1")["events"];
+  ASSERT_EQ(newest.size(), 1u);
+  EXPECT_EQ(get_json("/api/events?after=" + std::to_string(newest[0]["id"].get<uint64_t>()))["events"].size(), 0u);
+  EXPECT_EQ(cli.Get("/api/events?after=x")->status, 400);
+  const std::string log = slurp((dir / "coordinator1.err").string());
+  EXPECT_NE(log.find("event=job.done job=" + id), std::string::npos) << log;
+  EXPECT_NE(log.find("event=worker.registered worker="), std::string::npos) << log;
   // Prometheus text: comments, or `name{labels} value` with a numeric value.
   const std::string metrics = cli.Get("/metrics")->body;
   std::istringstream lines(metrics);

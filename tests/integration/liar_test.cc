@@ -60,7 +60,7 @@ TEST_F(Liar, ALiarAmongEnrolledWorkersIsCaughtOnProbationAndOnlyItsIdentityIsRef
   EXPECT_NE(slurp((dir / "worker3.err").string()).find("is quarantined"), std::string::npos)
       << slurp((dir / "worker3.err").string());
   const std::string log = slurp((dir / "coordinator.err").string());
-  EXPECT_NE(log.find("enrolled as 'liar'"), std::string::npos) << log;
+  EXPECT_NE(log.find("event=worker.quarantined worker=liar who=liar detail="), std::string::npos) << log;
   EXPECT_NE(metrics().find("tessera_workers_quarantined_total 1\n"), std::string::npos);
 
   // The same name may not enrol again.

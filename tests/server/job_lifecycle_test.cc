@@ -25,22 +25,22 @@ class JobLifecycleTest : public testing::PartsTest {
 
 TEST_F(JobLifecycleTest, AJobStartsOnlyFromQueued) {
   Job& job = *add_still();
-  lifecycle.start(job, now);
+  lifecycle.start(job, now, fx);
   EXPECT_EQ(job.state(), RUNNING);
   EXPECT_EQ(job.started, now);
-  lifecycle.start(job, now + 5);  // its first lease started it; later ones do not
+  lifecycle.start(job, now + 5, fx);  // its first lease started it; later ones do not
   EXPECT_EQ(job.started, now);
   Job& ended = *add_still();
   lifecycle.end(ended, CANCELLED, now, fx);
-  lifecycle.start(ended, now);
+  lifecycle.start(ended, now, fx);
   EXPECT_EQ(ended.state(), CANCELLED);
   EXPECT_EQ(ended.started, 0);
 }
 
 TEST_F(JobLifecycleTest, ASequenceStartsOnlyFromQueued) {
   Sequence& s = add_sequence({1, 2});
-  lifecycle.start(s, now);
-  lifecycle.start(s, now + 5);
+  lifecycle.start(s, now, fx);
+  lifecycle.start(s, now + 5, fx);
   EXPECT_EQ(s.state(), RUNNING);
   EXPECT_EQ(s.started, now);
 }

@@ -206,7 +206,7 @@ class PartsTest : public ::testing::Test {
     const std::optional<TileTask> t = job.plan.take();
     if (!t) throw std::logic_error("job " + job.id() + " has no ready task");
     const uint64_t id = leasing.grant(job, *t, worker(w), now);
-    lifecycle.start(job, now);
+    lifecycle.start(job, now, fx);
     return id;
   }
   // The result of a known lease, from its holder.

@@ -99,7 +99,7 @@ TEST_F(SnapshotterTest, OneWriterAJobLaterAsksAreTakenByIt) {
 
 TEST_F(SnapshotterTest, NextDescribesTheWrite) {
   merge_passes(job->plan, 1);
-  lifecycle.start(*job, now - 3);
+  lifecycle.start(*job, now - 3, fx);
   ASSERT_TRUE(snapshotter.request(*job, true, true));
   const SnapshotPlan p = snapshotter.next(*job, now);
   EXPECT_EQ(p.merges, job->plan.merges());
