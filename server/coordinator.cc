@@ -395,6 +395,18 @@ void Coordinator::release(uint64_t worker_id, uint64_t task_id, const std::strin
              TESSERA_REQUIRES(mu_) { worker_lifecycle_.release(worker_id, task_id, error, clock_->now(), fx); });
 }
 
+void Coordinator::drain_worker(uint64_t worker_id, bool drain, const std::string& requester) {
+  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    WorkerInfo* w = workers_.find(worker_id);
+    if (!w) throw RequestError(RequestError::Code::kNotFound, "no worker " + std::to_string(worker_id));
+    if (w->draining == drain) return;
+    w->draining = drain;
+    fx.actor = requester;
+    fx.event(drain ? "worker.drained" : "worker.resumed", "", w->name, "");
+    fx.changed = true;
+  });
+}
+
 void Coordinator::unregister(uint64_t worker_id) {
   locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { worker_lifecycle_.unregister(worker_id, clock_->now(), fx); });
 }

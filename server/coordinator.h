@@ -187,6 +187,10 @@ class Coordinator {
   // takes writes); else what is wrong. For readiness probes.
   std::string unready_reason() const;
 
+  // An operator drains a worker (no new tasks; what it holds it finishes) or resumes it.
+  // Throws RequestError (kNotFound) for an unknown worker.
+  void drain_worker(uint64_t worker_id, bool drain, const std::string& requester);
+  double now() const { return clock_->now(); }  // the clock WorkerInfo's times are on
   std::vector<WorkerInfo> workers() const {
     MutexLock lock(mu_);
     return workers_.list(clock_->now());

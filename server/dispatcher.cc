@@ -20,6 +20,10 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
                        "unknown worker " + std::to_string(worker_id) + "; register again");
   w->last_seen = now;
   w->passes_per_task = std::clamp<uint32_t>(max_passes, 1, kMaxPassesPerTask);
+  if (w->draining) {  // (it finishes what it holds; the heartbeat keeps those leases)
+    resp.set_retry_after_ms(1000);
+    return resp;
+  }
   struct Source {
     int32_t priority;
     uint64_t seq;

@@ -8,6 +8,7 @@ uint64_t Leasing::grant(Job& job, const TileTask& task, WorkerInfo& worker, doub
   const uint64_t id = leases_.grant(
       {job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now, task.pass_count});
   job.tile_lease[task.tile] = id;
+  worker.last_task = job.id() + " tile " + std::to_string(task.tile) + " pass " + std::to_string(task.pass);
   ++worker.leases;
   ++counters_.tasks_dispatched;
   return id;
@@ -19,6 +20,8 @@ uint64_t Leasing::grant_backup(Job& job, const TileTask& task, WorkerInfo& worke
   const uint64_t id = leases_.grant(
       {job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now, task.pass_count});
   job.tile_backup[task.tile] = id;
+  worker.last_task =
+      job.id() + " tile " + std::to_string(task.tile) + " pass " + std::to_string(task.pass) + " (backup)";
   ++worker.leases;
   ++counters_.tasks_dispatched;
   ++counters_.backup_leases;

@@ -4,7 +4,9 @@
 //                        (?tiles_from=N&tiles_count=M; kMaxTilesPage at most)
 //   /metrics             Prometheus text format
 //   /jobs/<id>/preview.png   the latest progressive preview
-//   /                    a live page: the progressive image and a per-tile heat map
+//   /api/events          events (events.h), newest last: ?job=ID, ?after=ID, ?limit=N
+//   /                    the live page (live_page.h): jobs, workers, events; a job's image,
+//                        tiles, frames, settings and events; actions (page_actions.h)
 // With access tokens, every request needs one that may read (viewer, client or admin), as
 // "Authorization: Bearer TOKEN" or HTTP Basic auth with the token as the password (so a
 // browser asks for it).

@@ -15,6 +15,8 @@ struct WorkerInfo {
   std::string principal;      // the access token's name ("" without tokens)
   bool enrolled = false;      // principal is the worker's own credential (credentials.h)
   uint32_t probation = 0;     // tasks still to check whatever the fraction (verify_first)
+  bool draining = false;      // an operator drained it: no new tasks until resumed
+  std::string last_task;      // what it was given last: "JOB tile T pass P" (the live page)
   std::string secret_digest;  // SHA-256 of the secret its registration was given
   uint32_t threads = 0;
   double last_seen = 0;
