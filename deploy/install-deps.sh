@@ -14,6 +14,7 @@ PACKAGES=(
   iproute2 libssl-dev openssl
   clang libclang-rt-14-dev
   podman slurm-wlm munge curl
+  chromium  # the live page's browser test (tests/web)
 )
 
 missing=()
