@@ -71,6 +71,7 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
     size_t taken_up = jobs_.sequences().size();
     for (const auto& [id, job] : jobs_.jobs()) taken_up += job->sequence.empty();
     fx.event("coordinator.started", "", "", "jobs taken up: " + std::to_string(taken_up));
+    sequence(fx);
     scenes.merge(jobs_.scene_hashes());
     scenes_.remove_unused(scenes);  // scenes of deleted jobs, or of a submit the crash cut short
     // Files of jobs deleted while their files were being removed: no row names them now.
@@ -88,7 +89,7 @@ Coordinator::~Coordinator() = default;
 
 void Coordinator::apply(Effects fx) {
   if (fx.changed) changed_.notify_all();
-  if (!fx.events.empty()) record(fx.events);
+  if (fx.events_seq) record(std::move(fx.events), fx.events_seq);
   for (const std::shared_ptr<Job>& job : fx.writes) write(job);
   for (const RowEnd& r : fx.rows) try {
       store_->end(r.id, r.state, r.error, r.elapsed);
@@ -111,18 +112,26 @@ void Coordinator::apply(Effects fx) {
   }
 }
 
-void Coordinator::record(std::vector<Event>& events) {
-  const double wall = store_->wall();
-  for (Event& e : events) {
-    e.time = wall;
-    const bool bad = e.kind == "job.failed" || e.kind == "frame.failed" || e.kind == "task.failed" ||
-                     e.kind == "worker.quarantined" || e.kind == "worker.lost";
-    spdlog::log(bad ? spdlog::level::warn : spdlog::level::info, "{}", event_line(e));
-  }
-  try {
-    store_->append_events(events);
-  } catch (const std::exception& e) {  // the log has them
-    spdlog::error("keeping {} events in the database: {}", events.size(), e.what());
+void Coordinator::record(std::vector<Event> events, uint64_t seq) {
+  std::lock_guard<std::mutex> lock(events_mu_);
+  events_waiting_[seq] = std::move(events);
+  // Every operation's events are recorded by the thread that finds them next in line.
+  for (auto it = events_waiting_.begin(); it != events_waiting_.end() && it->first == events_recorded_ + 1;
+       it = events_waiting_.erase(it)) {
+    ++events_recorded_;
+    std::vector<Event>& batch = it->second;
+    const double wall = store_->wall();
+    for (Event& e : batch) {
+      e.time = wall;
+      const bool bad = e.kind == "job.failed" || e.kind == "frame.failed" || e.kind == "task.failed" ||
+                       e.kind == "worker.quarantined" || e.kind == "worker.lost";
+      spdlog::log(bad ? spdlog::level::warn : spdlog::level::info, "{}", event_line(e));
+    }
+    try {
+      store_->append_events(batch);
+    } catch (const std::exception& e) {  // the log has them
+      spdlog::error("keeping {} events in the database: {}", batch.size(), e.what());
+    }
   }
 }
 

@@ -119,8 +119,12 @@ class Coordinator {
   // `enroller`. Throws RequestError.
   std::string enrol(const std::string& name, const std::string& enroller) {
     std::string credential = credentials_.enrol(name, enroller, options_.max_workers_per_token);
-    std::vector<Event> enrolled{{0, 0, "worker.enrolled", "", name, enroller, ""}};
-    record(enrolled);
+    uint64_t seq;
+    {
+      MutexLock lock(mu_);
+      seq = ++events_sequenced_;
+    }
+    record({{0, 0, "worker.enrolled", "", name, enroller, ""}}, seq);
     return credential;
   }
   // Workers' credentials: the Authenticator looks them up here.
@@ -211,9 +215,18 @@ class Coordinator {
  private:
   // Carries out what operations under the lock left to do (rule 3). mu_ not held.
   void apply(Effects fx) TESSERA_EXCLUDES(mu_);
+  // An operation's events get their place in the order operations held the lock (mu_ held),
+  // so that record() keeps them in that order whichever thread gets there first.
+  void sequence(Effects& fx) TESSERA_REQUIRES(mu_) {
+    if (!fx.events.empty()) fx.events_seq = ++events_sequenced_;
+  }
   // Stamps the events with the wall clock, logs them (one structured line each) and keeps
-  // them in the database.
-  void record(std::vector<Event>& events) TESSERA_EXCLUDES(mu_);
+  // them in the database, in their sequence's order (a later one waits for an earlier one).
+  void record(std::vector<Event> events, uint64_t seq) TESSERA_EXCLUDES(mu_);
+  uint64_t events_sequenced_ TESSERA_GUARDED_BY(mu_) = 0;
+  std::mutex events_mu_;  // a leaf: the events waiting for an earlier operation's, and the log's order
+  std::map<uint64_t, std::vector<Event>> events_waiting_;  // by sequence (events_mu_)
+  uint64_t events_recorded_ = 0;                           // the last sequence recorded (events_mu_)
   // Runs op(effects) under mu_, then apply()s the effects; returns what op returns.
   template <typename Op>
   auto locked(Op&& op) TESSERA_EXCLUDES(mu_) {
@@ -222,12 +235,15 @@ class Coordinator {
       {
         MutexLock lock(mu_);
         op(fx);
+        sequence(fx);
       }
       apply(std::move(fx));
     } else {
       auto result = [&] {
         MutexLock lock(mu_);
-        return op(fx);
+        auto r = op(fx);
+        sequence(fx);
+        return r;
       }();
       apply(std::move(fx));
       return result;

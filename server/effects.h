@@ -38,6 +38,7 @@ struct Effects {
   // name), and who each event made under it did it.
   std::string actor;
   std::vector<Event> events;
+  uint64_t events_seq = 0;  // their place among every operation's events (Coordinator::sequence)
   void event(std::string kind, std::string job, std::string worker, std::string detail) {
     events.push_back({0, 0, std::move(kind), std::move(job), std::move(worker), actor, std::move(detail)});
   }
