@@ -88,6 +88,8 @@ void SqliteJobStore::exec(const char* sql) const {
   }
 }
 
+void SqliteJobStore::rollback() const { sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr); }
+
 namespace {
 std::string frames_text(const std::vector<int>& frames) {  // as parse_frames reads it
   std::string out;
@@ -245,8 +247,7 @@ std::vector<StoredJob> SqliteJobStore::jobs() const {
 
 bool SqliteJobStore::archive(const std::string& id, const std::string& summary, const std::vector<MergedInto>& merged) {
   MutexLock lock(mu_);
-  exec("BEGIN IMMEDIATE");
-  try {
+  return transaction([&] {
     Statement(db_, "DELETE FROM merged_into WHERE job = ?1").text(1, id).step();
     Statement(db_, "UPDATE jobs SET summary = ?2 WHERE id = ?1 AND state >= 2").text(1, id).blob(2, summary).step();
     const bool took = sqlite3_changes(db_) > 0;
@@ -257,12 +258,8 @@ bool SqliteJobStore::archive(const std::string& id, const std::string& summary, 
             .text(2, id)
             .integer(3, m.tiles)
             .step();
-    exec("COMMIT");
     return took;
-  } catch (...) {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    throw;
-  }
+  });
 }
 
 std::optional<StoredJob> SqliteJobStore::job(const std::string& id) const {
@@ -325,8 +322,7 @@ void SqliteJobStore::flag_merged(uint64_t worker, const std::set<std::string>& s
     while (q.step())
       if (!skip.count(q.column_text(0))) hits.emplace_back(q.column_text(0), uint32_t(q.column_int(1)));
   }
-  exec("BEGIN IMMEDIATE");
-  try {
+  transaction([&] {
     for (const auto& [job, tiles] : hits) {
       Statement f(db_, "SELECT frames != '' FROM jobs WHERE id = ?1");
       if (!f.text(1, job).step()) continue;
@@ -337,11 +333,7 @@ void SqliteJobStore::flag_merged(uint64_t worker, const std::set<std::string>& s
           .step();
     }
     Statement(db_, "DELETE FROM merged_into WHERE worker = ?1").integer(1, int64_t(worker)).step();
-    exec("COMMIT");
-  } catch (...) {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    throw;
-  }
+  });
 }
 
 void SqliteJobStore::forget_merges() {

@@ -18,6 +18,7 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -207,6 +208,26 @@ class SqliteJobStore : public JobStore {
 
  private:
   void exec(const char* sql) const;
+  // Runs body() as one transaction (BEGIN IMMEDIATE ... COMMIT), rolled back if it throws;
+  // returns what body() returns. mu_ held.
+  template <typename Body>
+  auto transaction(Body&& body) const {
+    exec("BEGIN IMMEDIATE");
+    try {
+      if constexpr (std::is_void_v<decltype(body())>) {
+        body();
+        exec("COMMIT");
+      } else {
+        auto result = body();
+        exec("COMMIT");
+        return result;
+      }
+    } catch (...) {
+      rollback();
+      throw;
+    }
+  }
+  void rollback() const;
   std::string dir_;
   sqlite3* db_ = nullptr;
   mutable Mutex mu_;  // one statement at a time on db_

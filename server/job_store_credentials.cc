@@ -20,14 +20,9 @@ void SqliteJobStore::put_credential(const StoredCredential& c) {
 
 void SqliteJobStore::remove_credentials(const std::vector<std::string>& names) {
   MutexLock lock(mu_);
-  exec("BEGIN IMMEDIATE");
-  try {
+  transaction([&] {
     for (const std::string& n : names) Statement(db_, "DELETE FROM credentials WHERE name = ?1").text(1, n).step();
-    exec("COMMIT");
-  } catch (...) {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    throw;
-  }
+  });
 }
 
 std::vector<StoredCredential> SqliteJobStore::credentials() const {

@@ -9,8 +9,7 @@ namespace tessera {
 void SqliteJobStore::append_events(std::vector<Event>& events) {
   if (events.empty()) return;
   MutexLock lock(mu_);
-  exec("BEGIN IMMEDIATE");
-  try {
+  transaction([&] {
     for (Event& e : events) {
       Statement(db_, "INSERT INTO events(time, kind, job, worker, who, detail) VALUES(?1, ?2, ?3, ?4, ?5, ?6)")
           .real(1, e.time)
@@ -26,26 +25,17 @@ void SqliteJobStore::append_events(std::vector<Event>& events) {
     Statement(db_, "DELETE FROM events WHERE id <= ?1")
         .integer(1, int64_t(events.back().id) - int64_t(kMaxEvents))
         .step();
-    exec("COMMIT");
-  } catch (...) {
-    sqlite3_exec(db_, "ROLLBACK", nullptr, nullptr, nullptr);
-    throw;
-  }
+  });
 }
 
 std::vector<Event> SqliteJobStore::events(const std::string& job, uint64_t after, size_t limit, bool newest) const {
   MutexLock lock(mu_);
   std::vector<Event> out;
   // With `newest`, the last `limit` by id, read backwards and turned round.
-  const char* sql = newest ? (job.empty() ? "SELECT id, time, kind, job, worker, who, detail FROM events WHERE id > ?1 "
-                                            "ORDER BY id DESC LIMIT ?3"
-                                          : "SELECT id, time, kind, job, worker, who, detail FROM events WHERE id > ?1 "
-                                            "AND job = ?2 ORDER BY id DESC LIMIT ?3")
-                           : (job.empty() ? "SELECT id, time, kind, job, worker, who, detail FROM events WHERE id > ?1 "
-                                            "ORDER BY id LIMIT ?3"
-                                          : "SELECT id, time, kind, job, worker, who, detail FROM events WHERE id > ?1 "
-                                            "AND job = ?2 ORDER BY id LIMIT ?3");
-  Statement q(db_, sql);
+  std::string sql = "SELECT id, time, kind, job, worker, who, detail FROM events WHERE id > ?1";
+  if (!job.empty()) sql += " AND job = ?2";
+  sql += newest ? " ORDER BY id DESC LIMIT ?3" : " ORDER BY id LIMIT ?3";
+  Statement q(db_, sql.c_str());
   q.integer(1, int64_t(after)).integer(3, int64_t(limit));
   if (!job.empty()) q.text(2, job);
   while (q.step())
