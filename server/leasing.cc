@@ -3,12 +3,21 @@
 #include "core/util/invariant.h"
 
 namespace tessera {
+namespace {
+// What the worker was given last (the live page shows it).
+void note_given(WorkerInfo& worker, const Job& job, const TileTask& task, bool backup) {
+  worker.last_job = job.id();
+  worker.last_tile = task.tile;
+  worker.last_pass = task.pass;
+  worker.last_backup = backup;
+}
+}  // namespace
 
 uint64_t Leasing::grant(Job& job, const TileTask& task, WorkerInfo& worker, double now) {
   const uint64_t id = leases_.grant(
       {job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now, task.pass_count});
   job.tile_lease[task.tile] = id;
-  worker.last_task = job.id() + " tile " + std::to_string(task.tile) + " pass " + std::to_string(task.pass);
+  note_given(worker, job, task, false);
   ++worker.leases;
   ++counters_.tasks_dispatched;
   return id;
@@ -20,8 +29,7 @@ uint64_t Leasing::grant_backup(Job& job, const TileTask& task, WorkerInfo& worke
   const uint64_t id = leases_.grant(
       {job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now, task.pass_count});
   job.tile_backup[task.tile] = id;
-  worker.last_task =
-      job.id() + " tile " + std::to_string(task.tile) + " pass " + std::to_string(task.pass) + " (backup)";
+  note_given(worker, job, task, true);
   ++worker.leases;
   ++counters_.tasks_dispatched;
   ++counters_.backup_leases;

@@ -147,6 +147,15 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
 
 StatusHttp::~StatusHttp() { stop(); }  // before anything its handlers reach goes
 
+namespace {
+// What the worker was given last, as the page shows it: "JOB tile T pass P" ("" before any).
+std::string last_task(const WorkerInfo& w) {
+  if (w.last_job.empty()) return "";
+  return w.last_job + " tile " + std::to_string(w.last_tile) + " pass " + std::to_string(w.last_pass) +
+         (w.last_backup ? " (backup)" : "");
+}
+}  // namespace
+
 std::string StatusHttp::status_json() const {
   // Written out directly: with thousands of workers, building a JSON object per worker
   // was most of the endpoint's time.
@@ -177,7 +186,7 @@ std::string StatusHttp::status_json() const {
                   num(w.busy_thread_seconds), num(w.thread_seconds), num(w.utilization), num(w.round_trip * 1e3),
                   (unsigned long long)w.result_bytes,
                   w.result_samples ? double(w.result_bytes) / double(w.result_samples) : 0.0, w.passes_per_task,
-                  w.draining ? "true" : "false", num(now - w.last_seen), nlohmann::json(w.last_task).dump().c_str());
+                  w.draining ? "true" : "false", num(now - w.last_seen), nlohmann::json(last_task(w)).dump().c_str());
     out += buf;
   }
   out += "]}";

@@ -16,7 +16,10 @@ struct WorkerInfo {
   bool enrolled = false;      // principal is the worker's own credential (credentials.h)
   uint32_t probation = 0;     // tasks still to check whatever the fraction (verify_first)
   bool draining = false;      // an operator drained it: no new tasks until resumed
-  std::string last_task;      // what it was given last: "JOB tile T pass P" (the live page)
+  // What it was given last (the live page): job, tile, pass, and whether as a backup.
+  std::string last_job;
+  uint32_t last_tile = 0, last_pass = 0;
+  bool last_backup = false;
   std::string secret_digest;  // SHA-256 of the secret its registration was given
   uint32_t threads = 0;
   double last_seen = 0;

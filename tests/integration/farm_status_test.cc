@@ -22,6 +22,12 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   EXPECT_LE(busy, total);
   EXPECT_GT(s["workers"][0]["utilization"].get<double>(), 0);
   EXPECT_LE(s["workers"][0]["utilization"].get<double>(), 1);
+  // What it was given last, and when it was last heard from (the page's worker columns).
+  EXPECT_TRUE(std::regex_match(s["workers"][0]["last_task"].get<std::string>(),
+                               std::regex(id + R"( tile \d+ pass \d+( \(backup\))?)")))
+      << s["workers"][0]["last_task"];
+  EXPECT_GE(s["workers"][0]["seen_seconds_ago"].get<double>(), 0);
+  EXPECT_EQ(s["workers"][0]["draining"], false);
   const nlohmann::json j = get_json("/api/jobs/" + id);
   EXPECT_EQ(j["tiles"].size(), size_t(4 * 3));  // 64x48 in 16-pixel tiles
   EXPECT_EQ(j["tiles_from"], 0);
