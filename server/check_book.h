@@ -20,9 +20,9 @@ struct Check {
   std::shared_ptr<const v1::Task> task;  // as the first worker got it
   uint64_t first_worker = 0;
   uint64_t first_serial = 0;  // its registration's (WorkerInfo::serial)
-  uint64_t digest = 0;  // of the merged sums
-  uint64_t lease = 0;   // the check's live lease (0: waiting for a worker)
-  double since = 0;     // waiting since
+  uint64_t digest = 0;        // of the merged sums
+  uint64_t lease = 0;         // the check's live lease (0: waiting for a worker)
+  double since = 0;           // waiting since
 };
 
 class CheckBook {

@@ -113,7 +113,7 @@ TEST_F(JobLifecycleTest, AFailedFrameFailsItsSequenceAndCancelsTheOtherLiveFrame
   EXPECT_EQ(s.state(), FAILED);
   EXPECT_EQ(s.error, "frame 4: out of memory");
   EXPECT_EQ(five.state(), CANCELLED);
-  EXPECT_TRUE(contains(fx.writes, five_shared));              // it keeps what it rendered
+  EXPECT_TRUE(contains(fx.writes, five_shared));  // it keeps what it rendered
   EXPECT_TRUE(five.snaps.image_due && five.snaps.checkpoint_due);
   EXPECT_FALSE(contains(fx.writes, jobs.shared(four.id())));  // the caller's
   EXPECT_EQ(s.prepared, nullptr);

@@ -252,7 +252,7 @@ TEST_F(SnapshotWriterTest, ADoneJobsEndIsRecordedOnlyOnceItsWholeFilmIsInACheckp
   EXPECT_TRUE(job->end_recorded);
   EXPECT_EQ(stored_state(), v1::JobStatus::DONE);
   EXPECT_EQ(released, std::vector<std::string>{job->meta.scene_hash});
-  EXPECT_FALSE(job->plan.has_film());  // disk holds it all
+  EXPECT_FALSE(job->plan.has_film());            // disk holds it all
   EXPECT_FALSE(write(true, true).end_recorded);  // recorded once (nothing left to write)
   EXPECT_EQ(released.size(), 1u);
 }
@@ -291,8 +291,8 @@ TEST_F(SnapshotWriterTest, AFailureIsInTheOutcomeWithTheDataFolderHidden) {
   EXPECT_EQ(out.image, R::kFailed);
   EXPECT_EQ(out.image_why, "cannot write <data>/jobs/" + job->id() + "/image.exr: No space left on device");
   EXPECT_EQ(out.checkpoint, R::kWritten);
-  EXPECT_TRUE(job->end_recorded);      // the checkpoint holds the whole film
-  EXPECT_TRUE(job->plan.has_film());   // but the image does not: the film stays for a retry
+  EXPECT_TRUE(job->end_recorded);     // the checkpoint holds the whole film
+  EXPECT_TRUE(job->plan.has_film());  // but the image does not: the film stays for a retry
   EXPECT_EQ(job->written.images, 0u);
   EXPECT_FALSE(Snapshotter::image_current(*job, false, job->plan.merges()));
 }
