@@ -28,7 +28,7 @@ auth="Authorization: Bearer $(cat "$RUN/viewer.token")"
 
 coordinator() {  # extra flags; sets GRPC and HTTP
   rm -rf "$RUN/data"
-  "$BIN/tessera-coordinator" --listen 127.0.0.1:0 --http 127.0.0.1:0 --data "$RUN/data" --tokens "$RUN/tokens" "$@" \
+  "$BIN/tessera-coordinator" --listen 127.0.0.1:0 --http 127.0.0.1:0 --data "$RUN/data" --tokens-file "$RUN/tokens" "$@" \
     >"$RUN/c.out" 2>"$RUN/c.err" &
   pids+=($!)
   for _ in $(seq 100); do grep -q '^http' "$RUN/c.out" 2>/dev/null && break; sleep 0.05; done

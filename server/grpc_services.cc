@@ -23,13 +23,15 @@ grpc::Status internal_error(const char* what) {
                       "internal error #" + std::to_string(n) + " (the coordinator's log has its details)");
 }
 
-// Whom a stream counts against: the token's name, or without tokens the caller's address
-// ("ipv4:127.0.0.1:5000" -> "ipv4:127.0.0.1").
-std::string stream_peer(const Principal& who, const grpc::ServerContext& ctx) {
-  if (!who.name.empty()) return "token " + who.name;
-  const std::string peer = ctx.peer();
+// The caller's address without its port ("ipv4:127.0.0.1:5000" -> "ipv4:127.0.0.1").
+std::string peer_address(const std::string& peer) {
   const size_t colon = peer.rfind(':');
   return colon == std::string::npos || colon < 5 ? peer : peer.substr(0, colon);
+}
+
+// Whom a stream counts against: the token's name, or without tokens the caller's address.
+std::string stream_peer(const Principal& who, const grpc::ServerContext& ctx) {
+  return who.name.empty() ? peer_address(ctx.peer()) : "token " + who.name;
 }
 
 // Runs f, mapping the coordinator's errors to gRPC status codes.
@@ -205,8 +207,15 @@ grpc::Status WorkerService::Enrol(grpc::ServerContext* ctx, const v1::EnrolReque
 }
 grpc::Status WorkerService::Register(grpc::ServerContext* ctx, const v1::RegisterRequest* req,
                                      v1::RegisterResponse* out) {
-  return as(__func__, auth_, ctx, Action::kWork,
-            [&](const Principal& who) { *out = c_.register_worker(*req, who.name, who.enrolled); });
+  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal& who) {
+    if (!req->host().empty()) {
+      *out = c_.register_worker(*req, who.name, who.enrolled);
+      return;
+    }
+    v1::RegisterRequest named = *req;  // a worker from before hosts were sent: where it called from
+    named.set_host(peer_address(ctx->peer()));
+    *out = c_.register_worker(named, who.name, who.enrolled);
+  });
 }
 grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) {
   // Long poll: an idle worker waits here (up to a second) and gets a new job's first task

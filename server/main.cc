@@ -144,7 +144,7 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
   app.add_option("--max-workers-per-token", opt.max_workers_per_token,
-                 "registered workers of one worker token at most (with --tokens)")
+                 "registered workers of one worker token at most (with --tokens-file)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
   app.add_option("--max-leases-per-worker", opt.max_leases_per_worker,
@@ -172,14 +172,17 @@ int main(int argc, char** argv) {
                  "camera samples still to render of one client's live jobs together, at most")
       ->capture_default_str()
       ->check(CLI::Range(uint64_t(1), uint64_t(1) << 62));
-  app.add_option("--image-interval", opt.image_interval_seconds, "write progressive images at most this often (s)")
+  app.add_option("--image-interval-seconds", opt.image_interval_seconds, "write progressive images at most this often")
       ->capture_default_str();
+  tessera::add_old_spelling(app, "--image-interval", "--image-interval-seconds", opt.image_interval_seconds);
   std::string tokens_file, tls_cert, tls_key;
   bool insecure = false;
-  app.add_option("--tokens", tokens_file,
+  app.add_option("--tokens-file", tokens_file,
                  "access tokens, one 'ROLE NAME TOKEN' a line (roles: viewer, client, worker, enrol, admin); "
-                 "also $TESSERA_TOKENS_FILE")
+                 "else $TESSERA_TOKENS_FILE")
+      ->envname("TESSERA_TOKENS_FILE")
       ->check(CLI::ExistingFile);
+  tessera::add_old_spelling(app, "--tokens", "--tokens-file", tokens_file)->check(CLI::ExistingFile);
   app.add_option("--tls-cert", tls_cert, "PEM certificate chain: serve gRPC and HTTP over TLS")
       ->check(CLI::ExistingFile);
   app.add_option("--tls-key", tls_key, "PEM private key of --tls-cert")->check(CLI::ExistingFile);
@@ -199,8 +202,6 @@ int main(int argc, char** argv) {
     spdlog::error("--tls-cert and --tls-key go together");
     return 2;
   }
-  if (tokens_file.empty())
-    if (const char* env = std::getenv("TESSERA_TOKENS_FILE")) tokens_file = env;
   opt.heartbeat_seconds = std::min(2.0, opt.lease_seconds / 4);
   double keep_seconds = 0;
   try {
@@ -230,7 +231,7 @@ int main(int argc, char** argv) {
     if (!auth.enabled()) {
       if (open_network && !insecure) {
         spdlog::error(
-            "refusing to listen beyond loopback ({}, {}) without access tokens: give --tokens FILE, or --insecure "
+            "refusing to listen beyond loopback ({}, {}) without access tokens: give --tokens-file FILE, or --insecure "
             "to allow anyone who can connect to do anything",
             listen, http);
         return 2;

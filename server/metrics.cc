@@ -100,7 +100,8 @@ std::string prometheus_text(const Coordinator& c) {
   std::map<std::string, int> seen;
   for (const WorkerInfo& w : workers) {
     const int n = ++seen[w.name];
-    labels.push_back("worker=\"" + metric_label(n == 1 ? w.name : w.name + "#" + std::to_string(n)) + "\"");
+    labels.push_back("worker=\"" + metric_label(n == 1 ? w.name : w.name + "#" + std::to_string(n)) + "\",host=\"" +
+                     metric_label(w.host) + "\"");
   }
   auto per_worker = [&](const char* name, const char* type, const char* help, auto value) {
     m.head(name, type, help);

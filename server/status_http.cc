@@ -160,7 +160,7 @@ std::string StatusHttp::status_json() const {
   // Written out directly: with thousands of workers, building a JSON object per worker
   // was most of the endpoint's time.
   std::string out;
-  char buf[4096];  // a worker's name and last task: at most 256 characters each, 6 bytes each escaped
+  char buf[8192];  // a worker's name, host and last task: at most 256 characters each, 6 bytes each escaped
   auto num = [](double v) { return std::isfinite(v) ? v : 0.0; };
   std::snprintf(buf, sizeof buf, "{\"uptime_seconds\":%.17g,\"utilization\":%.17g,\"jobs\":[", num(c_.uptime()),
                 num(c_.utilization()));
@@ -176,17 +176,18 @@ std::string StatusHttp::status_json() const {
   out.reserve(out.size() + workers.size() * 280);
   for (size_t i = 0; i < workers.size(); ++i) {
     const WorkerInfo& w = workers[i];
-    std::snprintf(buf, sizeof buf,
-                  "%s{\"id\":%llu,\"name\":%s,\"threads\":%u,\"samples_per_second\":%.17g,\"tasks_done\":%llu,"
-                  "\"leases\":%u,\"active\":%s,\"busy_thread_seconds\":%.17g,\"thread_seconds\":%.17g,"
-                  "\"utilization\":%.17g,\"round_trip_ms\":%.17g,\"result_bytes\":%llu,\"bytes_per_sample\":%.17g,"
-                  "\"passes_per_task\":%u,\"draining\":%s,\"seen_seconds_ago\":%.17g,\"last_task\":%s}",
-                  i ? "," : "", (unsigned long long)w.id, nlohmann::json(w.name).dump().c_str(), w.threads,
-                  num(w.samples_per_second), (unsigned long long)w.tasks_done, w.leases, w.leases ? "true" : "false",
-                  num(w.busy_thread_seconds), num(w.thread_seconds), num(w.utilization), num(w.round_trip * 1e3),
-                  (unsigned long long)w.result_bytes,
-                  w.result_samples ? double(w.result_bytes) / double(w.result_samples) : 0.0, w.passes_per_task,
-                  w.draining ? "true" : "false", num(now - w.last_seen), nlohmann::json(last_task(w)).dump().c_str());
+    std::snprintf(
+        buf, sizeof buf,
+        "%s{\"id\":%llu,\"name\":%s,\"host\":%s,\"threads\":%u,\"samples_per_second\":%.17g,\"tasks_done\":%llu,"
+        "\"leases\":%u,\"active\":%s,\"busy_thread_seconds\":%.17g,\"thread_seconds\":%.17g,"
+        "\"utilization\":%.17g,\"round_trip_ms\":%.17g,\"result_bytes\":%llu,\"bytes_per_sample\":%.17g,"
+        "\"passes_per_task\":%u,\"draining\":%s,\"seen_seconds_ago\":%.17g,\"last_task\":%s}",
+        i ? "," : "", (unsigned long long)w.id, nlohmann::json(w.name).dump().c_str(),
+        nlohmann::json(w.host).dump().c_str(), w.threads, num(w.samples_per_second), (unsigned long long)w.tasks_done,
+        w.leases, w.leases ? "true" : "false", num(w.busy_thread_seconds), num(w.thread_seconds), num(w.utilization),
+        num(w.round_trip * 1e3), (unsigned long long)w.result_bytes,
+        w.result_samples ? double(w.result_bytes) / double(w.result_samples) : 0.0, w.passes_per_task,
+        w.draining ? "true" : "false", num(now - w.last_seen), nlohmann::json(last_task(w)).dump().c_str());
     out += buf;
   }
   out += "]}";

@@ -25,6 +25,7 @@ v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest&
   }
   std::string secret;
   WorkerInfo& w = p_.workers.add(req.name(), req.threads(), now, &secret);
+  w.host = req.host().substr(0, 256);
   w.principal = principal;
   w.enrolled = enrolled;
   w.probation = options_.verify_fraction > 0 ? options_.verify_first : 0;

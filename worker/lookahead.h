@@ -31,7 +31,7 @@ struct QueueLoad {
   double queued_samples = 0;              // camera samples in those rows
   double samples_per_thread_second = 0;   // measured (smoothed); 0 until a task finished
   double round_trip = 0;                  // seconds from asking for work to having it (smoothed); 0: unknown
-  size_t max_leases = kDefaultMaxLeases;  // the coordinator's bound (RegisterResponse), or --max-tasks if lower
+  size_t max_leases = kDefaultMaxLeases;  // the coordinator's bound (RegisterResponse), or --max-leases if lower
   uint32_t passes_per_task = 1;           // runs of passes the link needs (upload_budget.h)
   double pass_samples = 0;                // camera samples in a task's pass (smoothed); 0: unknown
   bool passes_fixed = false;              // --passes-per-task: passes_per_task and nothing else
@@ -52,7 +52,7 @@ struct Lookahead {
   static constexpr uint32_t kMaxPasses = 64;  // the coordinator's bound too
 
   int threads = 1;
-  double seconds = 0.3;  // --lookahead
+  double seconds = 0.3;  // --lookahead-seconds
 
   // Samples the window holds once the speed is known.
   double window_samples(const QueueLoad& load) const {

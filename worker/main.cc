@@ -26,15 +26,18 @@ int main(int argc, char** argv) {
   app.add_option("--cache", opt.cache_dir, "scene cache directory")->capture_default_str();
   app.add_option("--name", opt.name,
                  "name shown by the coordinator and in /metrics (default host:pid, in a Slurm job host:slurm-JOBID)");
-  app.add_option("--lookahead", opt.lookahead_seconds,
+  app.add_option("--lookahead-seconds", opt.lookahead_seconds,
                  "seconds of work to keep leased beyond what the threads are rendering, at the measured speed")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 60.0));
-  app.add_option("--max-tasks", opt.max_tasks,
+  tessera::add_old_spelling(app, "--lookahead", "--lookahead-seconds", opt.lookahead_seconds)
+      ->check(CLI::Range(0.0, 60.0));
+  app.add_option("--max-leases", opt.max_tasks,
                  "leases held at once, at most (0: as the window of work in flight asks, up to the coordinator's "
                  "bound)")
       ->capture_default_str()
       ->check(CLI::Range(0, 1000000));
+  tessera::add_old_spelling(app, "--max-tasks", "--max-leases", opt.max_tasks)->check(CLI::Range(0, 1000000));
   app.add_option("--passes-per-task", opt.passes_per_task,
                  "passes of a tile rendered and sent as one result, where the job allows (no -a, no "
                  "--noise-target); 0: as the link needs (more when the coordinator is far or results outrun "
@@ -42,9 +45,11 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0, 64));
   app.add_flag("-v,--verbose", opt.verbose, "log connection events");
-  app.add_option("--exit-when-idle", opt.exit_when_idle_seconds,
+  app.add_option("--exit-when-idle-seconds", opt.exit_when_idle_seconds,
                  "leave after this many seconds without a task (0: never); for batch allocations")
       ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e9));
+  tessera::add_old_spelling(app, "--exit-when-idle", "--exit-when-idle-seconds", opt.exit_when_idle_seconds)
       ->check(CLI::Range(0.0, 1e9));
   app.add_flag("--test-lie", opt.lie)->group("");  // verification tests: wrong sums
   std::string token_file, tls_ca;

@@ -104,7 +104,7 @@ class TaskQueue {
 
   QueueLoad load() const;
   // The coordinator's bound on this worker's leases (at registration), and its own
-  // --max-tasks if lower (0: none).
+  // --max-leases if lower (0: none).
   void set_max_leases(size_t coordinator_bound, size_t own_cap);
   // One GetTask's time on the link (its call time less the coordinator's long poll); the
   // window follows its smoothed value.

@@ -31,15 +31,20 @@ namespace {
 
 constexpr int kMaxReconnectBackoffMs = 2000;  // reconnect quickly after the coordinator comes back
 
+std::string host_name() {
+  char host[256] = {};
+  gethostname(host, sizeof host - 1);
+  return host;
+}
+
 WorkerOptions resolved(WorkerOptions o) {
   if (o.threads <= 0) o.threads = int(std::max(1u, std::thread::hardware_concurrency()));
   if (o.name.empty()) {  // host:pid, or in a Slurm job host:slurm-JOB (the same across its restarts)
-    char host[256] = {};
-    gethostname(host, sizeof host - 1);
+    const std::string host = host_name();
     const char* job = std::getenv("SLURM_JOB_ID");
     const char* task = std::getenv("SLURM_PROCID");
     o.name =
-        std::string(host) + ":" +
+        host + ":" +
         (job && *job ? "slurm-" + std::string(job) + (task && std::string(task) != "0" ? "." + std::string(task) : "")
                      : std::to_string(getpid()));
   }
@@ -82,7 +87,7 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
   while (!stop) {
     // A coordinator that cannot be reached has no work for us either.
     if (options_.exit_when_idle_seconds > 0 && now_seconds() - last_work_ > options_.exit_when_idle_seconds) {
-      spdlog::info("no work for {:g} s (--exit-when-idle; coordinator {} unreachable): leaving",
+      spdlog::info("no work for {:g} s (--exit-when-idle-seconds; coordinator {} unreachable): leaving",
                    options_.exit_when_idle_seconds, options_.coordinator);
       return false;
     }
@@ -96,6 +101,7 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
       req.set_version(kProtocolVersion);
       req.set_name(options_.name);
       req.set_threads(uint32_t(options_.threads));
+      req.set_host(host_name());
       v1::RegisterResponse resp;
       st = link_->stub->Register(link_->context(5).get(), req, &resp);
       if (st.ok()) {
@@ -139,7 +145,7 @@ void Worker::fetch(const std::atomic<bool>& stop) {
       if (queue_->holds_tasks()) {
         last_work_ = now_seconds();
       } else if (now_seconds() - last_work_ > options_.exit_when_idle_seconds) {
-        spdlog::info("no work for {:g} s (--exit-when-idle): leaving", options_.exit_when_idle_seconds);
+        spdlog::info("no work for {:g} s (--exit-when-idle-seconds): leaving", options_.exit_when_idle_seconds);
         return;
       }
     }

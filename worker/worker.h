@@ -76,11 +76,11 @@ class Worker {
 
  private:
   // Registers, retrying with back-off; false if stopped, refused, or idle past
-  // --exit-when-idle while the coordinator cannot be reached.
+  // --exit-when-idle-seconds while the coordinator cannot be reached.
   bool register_worker(const std::atomic<bool>& stop);
   // Enrols (options_.enrol_token) for a credential of this worker's own: the status of the call.
   grpc::Status enrol();
-  // Leases and queues work until `stop`, --exit-when-idle, or a refused registration;
+  // Leases and queues work until `stop`, --exit-when-idle-seconds, or a refused registration;
   // registers again when the coordinator has forgotten this worker.
   void fetch(const std::atomic<bool>& stop);
 
@@ -90,7 +90,7 @@ class Worker {
   std::unique_ptr<worker::TaskQueue> queue_;
   std::unique_ptr<worker::Fetcher> fetcher_;  // its scenes and renderers are kept across reconnections
   double last_contact_ = 0;                   // its last registration or GetTask that got through
-  double last_work_ = 0;                      // when it last held or was given a task (--exit-when-idle)
+  double last_work_ = 0;                      // when it last held or was given a task (--exit-when-idle-seconds)
   bool refused_ = false;                      // registration refused: retrying cannot help
   bool tls_hinted_ = false;                   // the TLS hint (tls_hint) was logged
   bool enrolled_ = false;                     // holds a credential of its own (enrol_token)

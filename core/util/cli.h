@@ -4,6 +4,7 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <cstdio>
 #include <string>
 
 #include "core/util/version.h"
@@ -12,6 +13,20 @@ namespace tessera {
 
 inline void add_version_flag(CLI::App& app, const std::string& program) {
   app.set_version_flag("--version", program + " " + version());
+}
+
+// An option's spelling before a rename (one spelling per option across the binaries),
+// still accepted so that scripts and unit files written earlier keep working: listed apart
+// in --help (CLI11 drops a hidden option's name from its errors), bound to the same value,
+// and saying on stderr which name to use now. The caller repeats the new option's checks on
+// the returned option.
+template <typename T>
+CLI::Option* add_old_spelling(CLI::App& app, const std::string& old_name, const std::string& new_name, T& value) {
+  return app.add_option(old_name, value, "now " + new_name)
+      ->group("Old spellings, still accepted")
+      ->each([old_name, new_name](const std::string&) {
+        std::fprintf(stderr, "%s is now spelled %s; the old spelling will go\n", old_name.c_str(), new_name.c_str());
+      });
 }
 
 // Prints CLI11's message for a parse error (usage to stdout for --help) and returns the

@@ -97,7 +97,7 @@ auth="Authorization: Bearer $(cat "$T/viewer.token")"
 flags=(-r 160 120 -s 384 --pass-spp 8 -m 6 --seed 4)  # long enough (~15 s on 2 cores) that scancel lands mid-job
 "$build/bin/tessera" render "$root/scenes/cornell-spheres.dae" "${flags[@]}" -q -f "$T/local.exr"
 "$build/bin/tessera-coordinator" --listen 127.0.0.1:0 --http 127.0.0.1:0 --data "$T/data" \
-  --lease-seconds 2 --tokens "$T/tokens" >"$T/coord.out" 2>"$T/coord.err" &
+  --lease-seconds 2 --tokens-file "$T/tokens" >"$T/coord.out" 2>"$T/coord.err" &
 pids+=($!)
 for _ in $(seq 100); do grep -q "http listening" "$T/coord.out" && break; sleep 0.1; done
 addr=$(sed -n 's/^grpc listening on \([^ ]*\).*/\1/p' "$T/coord.out")

@@ -62,8 +62,8 @@ class Access : public ::testing::Test {
     return path;
   }
   void start_coordinator(std::vector<std::string> extra = {}) {
-    std::vector<std::string> args{"--listen", "127.0.0.1:0",           "--http",   "127.0.0.1:0",
-                                  "--data",   (dir / "data").string(), "--tokens", (dir / "tokens").string()};
+    std::vector<std::string> args{"--listen", "127.0.0.1:0",           "--http",        "127.0.0.1:0",
+                                  "--data",   (dir / "data").string(), "--tokens-file", (dir / "tokens").string()};
     args.insert(args.end(), extra.begin(), extra.end());
     coordinator = std::make_unique<Process>(kBin + "/tessera-coordinator", args, (dir / "coordinator.err").string());
     const std::string g = coordinator->read_line(), h = coordinator->read_line();

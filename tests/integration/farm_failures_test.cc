@@ -156,15 +156,15 @@ TEST_F(Farm, CoordinatorKilledMidSequenceLosesNoFrame) {
                        (dir / ("farm." + std::string(n) + ".exr")).string());
 }
 
-// For batch allocations (Slurm): a worker with --exit-when-idle leaves cleanly once the
+// For batch allocations (Slurm): a worker with --exit-when-idle-seconds leaves cleanly once the
 // queue has been empty that long, and not while there is work.
 TEST_F(Farm, WorkerWithExitWhenIdleLeavesOnceTheQueueIsEmpty) {
   start_coordinator();
-  Process& w = start_worker(1, {"--exit-when-idle", "3"});
+  Process& w = start_worker(1, {"--exit-when-idle-seconds", "3"});
   const CommandResult r = submit_wait(kScene, "-r 64 48 -s 16 --pass-spp 4", (dir / "idle.exr").string());
   ASSERT_EQ(r.code, 0) << r.err;  // it stayed while there was work
   EXPECT_EQ(w.wait(20), 0);
-  EXPECT_NE(slurp((dir / "worker0.err").string()).find("--exit-when-idle"), std::string::npos);
+  EXPECT_NE(slurp((dir / "worker0.err").string()).find("--exit-when-idle-seconds"), std::string::npos);
   const nlohmann::json s = get_json("/api/status");
   EXPECT_TRUE(s["workers"].empty()) << s.dump();  // it said goodbye
 }
@@ -172,7 +172,7 @@ TEST_F(Farm, WorkerWithExitWhenIdleLeavesOnceTheQueueIsEmpty) {
 // A coordinator that cannot be reached has no work either: an idle batch worker leaves.
 TEST_F(Farm, WorkerWithExitWhenIdleLeavesWhenTheCoordinatorIsUnreachable) {
   grpc_addr = "127.0.0.1:1";  // nothing listens there
-  Process& w = start_worker(1, {"--exit-when-idle", "1"});
+  Process& w = start_worker(1, {"--exit-when-idle-seconds", "1"});
   EXPECT_EQ(w.wait(20), 0);
   EXPECT_NE(slurp((dir / "worker0.err").string()).find("unreachable"), std::string::npos);
 }

@@ -55,9 +55,16 @@ class Farm : public ::testing::Test {
   }
   void start_coordinator(const std::string& listen = "127.0.0.1:0", const std::string& lease = "2",
                          const std::vector<std::string>& extra = {}) {
-    std::vector<std::string> args{
-        "--listen",        listen, "--http",           "127.0.0.1:0", "--data", (dir / "data").string(),
-        "--lease-seconds", lease,  "--image-interval", "0.2"};
+    std::vector<std::string> args{"--listen",
+                                  listen,
+                                  "--http",
+                                  "127.0.0.1:0",
+                                  "--data",
+                                  (dir / "data").string(),
+                                  "--lease-seconds",
+                                  lease,
+                                  "--image-interval-seconds",
+                                  "0.2"};
     args.insert(args.end(), extra.begin(), extra.end());
     coordinator = std::make_unique<Process>(kBin + "/tessera-coordinator", args,
                                             (dir / ("coordinator" + std::to_string(++coordinators) + ".err")).string());

@@ -28,6 +28,9 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
       << s["workers"][0]["last_task"];
   EXPECT_GE(s["workers"][0]["seen_seconds_ago"].get<double>(), 0);
   EXPECT_EQ(s["workers"][0]["draining"], false);
+  char host[256] = {};
+  gethostname(host, sizeof host - 1);
+  EXPECT_EQ(s["workers"][0]["host"], host);  // the worker's machine, beside its name
   const nlohmann::json j = get_json("/api/jobs/" + id);
   EXPECT_EQ(j["tiles"].size(), size_t(4 * 3));  // 64x48 in 16-pixel tiles
   EXPECT_EQ(j["tiles_from"], 0);
@@ -79,7 +82,9 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   // histograms of task and RPC time.
   const std::string samples_done = get_json("/api/jobs/" + id)["samples_done"].get<std::string>();
   EXPECT_NE(metrics.find("\ntessera_samples_merged_total " + samples_done + "\n"), std::string::npos) << metrics;
-  EXPECT_NE(metrics.find("tessera_worker_tasks_total{worker=\"w0\"} "), std::string::npos) << metrics;
+  EXPECT_NE(metrics.find("tessera_worker_tasks_total{worker=\"w0\",host=\"" + std::string(host) + "\"} "),
+            std::string::npos)
+      << metrics;
   EXPECT_NE(metrics.find("tessera_build_info{version=\""), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("tessera_task_seconds_bucket{le=\"+Inf\"} "), std::string::npos) << metrics;
   EXPECT_NE(metrics.find("tessera_rpc_seconds_count{method=\"GetTask\"} "), std::string::npos) << metrics;

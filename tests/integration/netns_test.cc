@@ -129,7 +129,7 @@ TEST_F(NetnsFarm, TwoMachinesRenderTheLocalImageAndOneLosingItsLinkChangesNothin
   Process coordinator(
       "/usr/sbin/ip",
       in("c", {kBin + "/tessera-coordinator", "--listen", "192.0.2.1:0", "--http", "127.0.0.1:0", "--data",
-               (dir / "data").string(), "--lease-seconds", "2", "--tokens", (dir / "tokens").string()}),
+               (dir / "data").string(), "--lease-seconds", "2", "--tokens-file", (dir / "tokens").string()}),
       (dir / "coordinator.err").string());
   std::smatch m;
   const std::string line = coordinator.read_line();

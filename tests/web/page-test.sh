@@ -30,7 +30,7 @@ worker=worker-$(openssl rand -hex 12)
 printf 'client alice %s\nviewer ops %s\nadmin root %s\nworker farm %s\n' "$alice" "$viewer" "$admin" "$worker" >"$T/tokens"
 chmod 600 "$T/tokens"
 echo "$alice" >"$T/alice" && echo "$worker" >"$T/worker"
-"$bin/tessera-coordinator" --listen 127.0.0.1:0 --http 127.0.0.1:0 --data "$T/data" --tokens "$T/tokens" \
+"$bin/tessera-coordinator" --listen 127.0.0.1:0 --http 127.0.0.1:0 --data "$T/data" --tokens-file "$T/tokens" \
   >"$T/coord.out" 2>"$T/coord.err" &
 pids+=($!)
 for _ in $(seq 100); do grep -q "http listening" "$T/coord.out" 2>/dev/null && break; sleep 0.1; done
