@@ -15,6 +15,8 @@ PACKAGES=(
   clang libclang-rt-14-dev
   podman slurm-wlm munge curl
   chromium  # the live page's browser test (tests/web)
+  systemd   # systemd-analyze: the units' check (tests/deploy/systemd-units.sh)
+  python3-grpcio python3-protobuf python3-xxhash  # the Python client (client/python)
 )
 
 missing=()
