@@ -1,0 +1,170 @@
+"""Render settings as Python keywords: the flags of `tessera submit`, by name, with the same
+defaults, so that a job submitted from Python renders the image `tessera render` makes
+with the same flags, bit for bit.
+
+    samples=64          -s        camera samples per pixel (a maximum with adaptive or noise_target)
+    light_samples=1     -l        samples per area light per shading point
+    max_depth=16        -m        scattering events per path (0: emitters only)
+    resolution=(480, 360) -r      width, height
+    adaptive=None       -a        (batch, tolerance): CS184's adaptive sampling
+    lens_radius=0.0     -b        thin-lens radius (0: pinhole)
+    focal_distance=4.7  -d        focal distance
+    window=None         -p        (x, y, w, h): only this cell, lower-left pixel, y from the bottom
+    seed=0              --seed
+    frame=None          --frame   a still's frame number (animation time)
+    camera="auto"       --camera  "cs184", "file", or "auto" (file for glTF, cs184 for COLLADA)
+    camera_path=None    --camera-path  a dict, a JSON string, or a path to a JSON file
+    turntable=None      --turntable    frames one turn takes
+    env=None            -e        an environment map (.exr/.hdr): sent with the scene
+    env_color=None      --env-color    (r, g, b)
+    env_strength=1.0, env_rotate=0.0, exposure=0.0, no_default_env=False
+    animation="", fps=24.0, pass_spp=16, tile=32, noise_target=0.0, no_nee=False, no_mis=False
+
+Unknown keywords raise TypeError naming them; values the coordinator refuses come back as
+a TesseraError carrying its message (it checks every setting, as `tessera render` does).
+"""
+import json
+import os
+import re
+
+from tessera._pb import tessera_pb2 as pb
+
+DEFAULTS = {
+    "samples": 64,
+    "light_samples": 1,
+    "max_depth": 16,
+    "resolution": (480, 360),
+    "adaptive": None,
+    "lens_radius": 0.0,
+    "focal_distance": 4.7,
+    "window": None,
+    "seed": 0,
+    "frame": None,
+    "camera": "auto",
+    "camera_path": None,
+    "turntable": None,
+    "env": None,
+    "env_color": None,
+    "env_strength": 1.0,
+    "env_rotate": 0.0,
+    "exposure": 0.0,
+    "no_default_env": False,
+    "animation": "",
+    "fps": 24.0,
+    "pass_spp": 16,
+    "tile": 32,
+    "noise_target": 0.0,
+    "no_nee": False,
+    "no_mis": False,
+}
+
+MAX_FRAMES = 100000  # core/render/frames.h's kMaxFrames
+MAX_FRAME = 1000000  # RenderSettings::kMaxFrame
+
+
+def parse_frames(spec):
+    """Frames as `tessera submit --frames` reads them: "1-240", "1-240x2", "1,5,9" or a
+    mix ("1-10,20,30-40x5"), in the order given; or an iterable of ints. Raises ValueError
+    naming the part that is wrong."""
+    if not isinstance(spec, str):
+        frames = [int(f) for f in spec]
+    else:
+        frames = []
+        for part in spec.split(","):
+            m = re.fullmatch(r"\s*(-?\d+)(?:\s*-\s*(-?\d+)(?:\s*x\s*(\d+))?)?\s*", part)
+            if not m:
+                raise ValueError(f"frames: '{part}' is not N, A-B or A-BxSTEP")
+            a = int(m.group(1))
+            b = int(m.group(2)) if m.group(2) is not None else a
+            step = int(m.group(3)) if m.group(3) is not None else 1
+            if b < a:
+                raise ValueError(f"frames: '{part}' runs backwards")
+            if step < 1:
+                raise ValueError(f"frames: '{part}': the step must be at least 1")
+            if (b - a) // step + 1 + len(frames) > MAX_FRAMES:
+                raise ValueError(f"frames: more than {MAX_FRAMES} frames")
+            frames.extend(range(a, b + 1, step))
+    if not frames:
+        raise ValueError("frames: none given")
+    seen = set()
+    for f in frames:
+        if abs(f) > MAX_FRAME:
+            raise ValueError(f"frames: {f} is beyond +-{MAX_FRAME}")
+        if f in seen:
+            raise ValueError(f"frames: {f} is given twice")
+        seen.add(f)
+    if len(frames) > MAX_FRAMES:
+        raise ValueError(f"frames: more than {MAX_FRAMES} frames")
+    return frames
+
+
+def _camera_path_json(value, turntable, frames):
+    path = {}
+    if value is not None:
+        if isinstance(value, dict):
+            path = dict(value)
+        elif isinstance(value, str) and value.lstrip().startswith("{"):
+            path = json.loads(value)
+        else:
+            with open(value) as f:
+                path = json.load(f)
+    if turntable is not None:
+        # As the CLI: the first frame faces as the still does.
+        path["turntable"] = {"frames": float(turntable), "start": float(frames[0]) if frames else 0.0}
+    return json.dumps(path) if path else ""
+
+
+def to_proto(scene, frames=None, **kwargs):
+    """(RenderSettings message, environment map path on disk or None) for `scene` and the
+    keywords above."""
+    unknown = sorted(set(kwargs) - set(DEFAULTS))
+    if unknown:
+        raise TypeError(f"unknown render setting{'s' if len(unknown) > 1 else ''}: {', '.join(unknown)} "
+                        f"(known: {', '.join(sorted(DEFAULTS))})")
+    s = dict(DEFAULTS, **kwargs)
+    p = pb.RenderSettings()
+    p.spp = int(s["samples"])
+    p.light_samples = int(s["light_samples"])
+    p.max_depth = int(s["max_depth"])
+    p.adaptive_batch, p.adaptive_tolerance = 32, 0.05
+    if s["adaptive"] is not None:
+        batch, tolerance = s["adaptive"]
+        p.adaptive = True
+        p.adaptive_batch = int(batch)
+        p.adaptive_tolerance = float(tolerance)
+    p.seed = int(s["seed"])
+    if s["frame"] is not None:
+        p.frame = int(s["frame"])
+    p.fps = float(s["fps"])
+    p.camera_path = _camera_path_json(s["camera_path"], s["turntable"], frames)
+    p.animation = str(s["animation"])
+    if s["env_color"] is not None:
+        p.environment.extend(float(c) for c in s["env_color"])
+    p.no_default_environment = bool(s["no_default_env"])
+    if float(s["env_strength"]) != 1.0:
+        p.environment_strength = float(s["env_strength"])
+    p.environment_rotation = float(s["env_rotate"])
+    p.exposure = float(s["exposure"])
+    p.pass_spp = int(s["pass_spp"])
+    width, height = s["resolution"]
+    p.width, p.height = int(width), int(height)
+    p.lens_radius = float(s["lens_radius"])
+    p.focal_distance = float(s["focal_distance"])
+    camera = s["camera"]
+    if camera not in ("auto", "cs184", "file"):
+        raise ValueError(f"camera: '{camera}' is not auto, cs184 or file")
+    collada = os.path.splitext(str(scene))[1].lower() == ".dae"
+    p.framing = pb.RenderSettings.FILE if camera == "file" or (camera == "auto" and not collada) \
+        else pb.RenderSettings.CS184
+    if s["window"] is not None:
+        # CS184's -p x y w h: lower-left pixel, y counted from the bottom.
+        x, y, w, h = (int(v) for v in s["window"])
+        if w < 1 or h < 1 or y < 0:
+            raise ValueError(f"window: ({x}, {y}, {w}, {h}) is not a cell of the image")
+        p.window.x, p.window.y, p.window.w, p.window.h = x, p.height - (y + h), w, h
+    p.tile_size = int(s["tile"])
+    p.noise_target = float(s["noise_target"])
+    p.no_nee = bool(s["no_nee"])
+    p.no_mis = bool(s["no_mis"])
+    env = os.path.abspath(s["env"]) if s["env"] else None
+    return p, env

@@ -1,0 +1,218 @@
+#!/usr/bin/python3
+"""CTest entry (Python.ClientAgainstALocalFarm): the Python client (build/python/tessera)
+against real farms on loopback: a still and a sequence bit-identical to `tessera render`,
+a glTF with external files and an environment map, typed statuses and events, id prefixes,
+cancel / requeue / priority / delete, errors carrying the coordinator's message, and a farm
+with tokens and TLS. Usage: client_test.py BIN_DIR PYTHON_DIR SOURCE_DIR"""
+import base64
+import datetime
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import unittest
+
+BIN, PYDIR, SRC = (os.path.abspath(a) for a in sys.argv[1:4])
+del sys.argv[1:4]
+sys.path.insert(0, PYDIR)
+sys.path.insert(0, os.path.dirname(__file__))
+import tessera  # noqa: E402
+from local_farm import LocalFarm, identical, render_local  # noqa: E402
+
+SPHERES = os.path.join(SRC, "scenes", "cornell-spheres.dae")
+SPHERES_GLTF = os.path.join(SRC, "scenes", "cornell-spheres.gltf")
+SKY = os.path.join(SRC, "scenes", "sky.hdr")
+SMALL = dict(samples=4, resolution=(32, 24), pass_spp=2, tile=16)
+SMALL_FLAGS = ["-s", "4", "-r", "32", "24", "--pass-spp", "2", "--tile", "16"]
+
+
+class Plain(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.farm_procs = LocalFarm(BIN, workers=1, threads=2)
+        cls.farm = tessera.Farm(cls.farm_procs.address)
+        cls.tmp = tempfile.mkdtemp(prefix="tessera-pyclient-")
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.farm.close()
+        cls.farm_procs.stop()
+        subprocess.run(["rm", "-rf", cls.tmp])
+
+    def out(self, name):
+        return os.path.join(self.tmp, name)
+
+    def test_a_still_is_the_local_render_bit_for_bit(self):
+        job = self.farm.submit(SPHERES, name="still", **SMALL, max_depth=3, seed=7)
+        self.assertRegex(job.id, r"^[0-9a-f]{16}$")
+        final = job.wait()
+        self.assertEqual(final.state, "DONE")
+        self.assertEqual(final.progress, 1.0)
+        self.assertIsInstance(final.samples_done, int)
+        self.assertEqual(final.samples_done, 32 * 24 * 4)
+        self.assertIsInstance(final.elapsed_seconds, float)
+        for t in (final.submitted_at, final.started_at, final.ended_at):
+            self.assertIsInstance(t, datetime.datetime)
+            self.assertEqual(t.utcoffset(), datetime.timedelta(0))
+        self.assertLessEqual(final.submitted_at, final.ended_at)
+        self.assertEqual(final.settings["spp"], 4)
+        self.assertEqual(final.settings["max_depth"], 3)
+        self.assertEqual(final.name, "still")
+        got = job.fetch(self.out("new/folder/still.exr")) + job.fetch(self.out("still.png"))
+        self.assertEqual([f.path for f in got], [self.out("new/folder/still.exr"), self.out("still.png")])
+        self.assertTrue(all(f.final for f in got))
+        with open(self.out("still.png"), "rb") as f:
+            self.assertEqual(f.read(8), b"\x89PNG\r\n\x1a\n")
+        render_local(BIN, SPHERES, self.out("local.exr"), *SMALL_FLAGS, "-m", "3", "--seed", "7")
+        self.assertTrue(identical(BIN, self.out("new/folder/still.exr"), self.out("local.exr")))
+        # The CLI sees the same job.
+        cli = json.loads(self.farm_procs.cli("status", job.id, "--json").stdout)
+        self.assertEqual(cli["samples_done"], final.samples_done)
+
+    def test_a_sequence_is_watched_and_its_frames_fetched(self):
+        job = self.farm.submit(SPHERES, frames="3-5x2", **SMALL)
+        seen = list(job.watch())
+        self.assertTrue(seen[-1].ended)
+        self.assertFalse(any(s.ended for s in seen[:-1]))
+        self.assertEqual(seen[-1].state, "DONE")
+        self.assertEqual([f.frame for f in seen[-1].frames], [3, 5])
+        self.assertEqual(seen[-1].frames_total, 2)
+        self.assertTrue(all(f.state == "DONE" for f in seen[-1].frames))
+        got = job.fetch(self.out("seq/shot.####.exr"))
+        self.assertEqual(sorted(os.path.basename(f.path) for f in got), ["shot.0003.exr", "shot.0005.exr"])
+        one = job.fetch(self.out("one.exr"), frame=5)
+        self.assertEqual(one[0].frame, 5)
+        render_local(BIN, SPHERES, self.out("local5.exr"), *SMALL_FLAGS, "--frame", "5")
+        self.assertTrue(identical(BIN, self.out("seq/shot.0005.exr"), self.out("local5.exr")))
+        self.assertTrue(identical(BIN, self.out("one.exr"), self.out("local5.exr")))
+        with self.assertRaisesRegex(tessera.TesseraError, "give frame=N, or a path with ####"):
+            job.fetch(self.out("seq.exr"))
+
+    def test_a_gltf_with_external_files_and_an_environment_map(self):
+        # cornell-spheres.gltf with its buffer moved out to "buffers/scene data.bin" (a
+        # percent-encoded URI), lit by sky.hdr too.
+        with open(SPHERES_GLTF) as f:
+            doc = json.load(f)
+        uri = doc["buffers"][0]["uri"]
+        os.makedirs(self.out("ext/buffers"), exist_ok=True)
+        with open(self.out("ext/buffers/scene data.bin"), "wb") as f:
+            f.write(base64.b64decode(uri.split(",", 1)[1]))
+        doc["buffers"][0]["uri"] = "buffers/scene%20data.bin"
+        with open(self.out("ext/scene.gltf"), "w") as f:
+            json.dump(doc, f)
+        job = self.farm.submit(self.out("ext/scene.gltf"), env=SKY, env_strength=0.5, **SMALL)
+        job.wait()
+        job.fetch(self.out("ext.exr"))
+        render_local(BIN, self.out("ext/scene.gltf"), self.out("ext-local.exr"), *SMALL_FLAGS, "-e", SKY,
+                     "--env-strength", "0.5")
+        self.assertTrue(identical(BIN, self.out("ext.exr"), self.out("ext-local.exr")))
+        os.unlink(self.out("ext/buffers/scene data.bin"))
+        with self.assertRaisesRegex(tessera.TesseraError, "scene data.bin"):
+            self.farm.submit(self.out("ext/scene.gltf"), **SMALL)
+
+    def test_jobs_prefixes_events_and_control(self):
+        job = self.farm.submit(SPHERES, samples=4096, resolution=(64, 48), priority=2, name="long")
+        self.assertEqual(self.farm.job(job.id[:7]).id, job.id)
+        listed = {j.id: j for j in self.farm.jobs()}
+        self.assertIn(job.id, listed)
+        self.assertEqual(listed[job.id].priority, 2)
+        self.assertEqual(job.set_priority(5).priority, 5)
+        self.assertEqual(job.cancel().id, job.id)
+        with self.assertRaises(tessera.JobFailed) as e:
+            job.wait()
+        self.assertEqual(e.exception.status.state, "CANCELLED")
+        self.assertEqual(job.wait(check=False).state, "CANCELLED")
+        self.assertIn(job.requeue().state, ("QUEUED", "RUNNING"))
+        job.cancel()
+        kinds = [e.kind for e in job.events()]
+        for k in ("job.submitted", "job.priority", "job.cancelled", "job.requeued"):
+            self.assertIn(k, kinds)
+        self.assertTrue(all(isinstance(e.time, datetime.datetime) for e in job.events()))
+        self.assertGreaterEqual(job.delete(), 0)
+        with self.assertRaises(tessera.TesseraError) as e:
+            job.status()
+        self.assertEqual(e.exception.code, "NOT_FOUND")
+        self.assertIn(job.id, e.exception.message)
+
+    def test_errors_name_the_problem(self):
+        with self.assertRaisesRegex(TypeError, "unknown render setting: sampels"):
+            self.farm.submit(SPHERES, sampels=4)
+        with self.assertRaises(tessera.TesseraError) as e:
+            self.farm.submit(SPHERES, samples=0, resolution=(32, 24))
+        self.assertEqual(e.exception.code, "INVALID_ARGUMENT")
+        self.assertRegex(e.exception.message, r"-s|spp|samples")
+        with self.assertRaisesRegex(tessera.TesseraError, "no-such.dae"):
+            self.farm.submit(self.out("no-such.dae"))
+        with self.assertRaisesRegex(ValueError, "runs backwards"):
+            self.farm.submit(SPHERES, frames="5-3")
+        with self.assertRaisesRegex(tessera.TesseraError, "no job id starts with 'abcdef'"):
+            self.farm.job("abcdef")
+        job = self.farm.submit(SPHERES, **SMALL)
+        with self.assertRaisesRegex(tessera.TesseraError, r"\.exr or \.png"):
+            job.fetch(self.out("x.jpg"))
+        job.wait()
+        gone = tessera.Farm("127.0.0.1:1", timeout=2)
+        with self.assertRaises(tessera.TesseraError) as e:
+            gone.jobs()
+        self.assertIn(e.exception.code, ("UNAVAILABLE", "DEADLINE_EXCEEDED"))
+
+    def test_defaults_are_the_clis(self):
+        # Every default that `tessera submit --help` prints is the Python client's.
+        help_text = subprocess.run([os.path.join(BIN, "tessera"), "submit", "--help"], capture_output=True,
+                                   text=True).stdout
+        names = {"-s": "samples", "-l": "light_samples", "-m": "max_depth", "-b": "lens_radius",
+                 "-d": "focal_distance", "--seed": "seed", "--pass-spp": "pass_spp", "--tile": "tile",
+                 "--noise-target": "noise_target", "--fps": "fps", "--env-strength": "env_strength",
+                 "--env-rotate": "env_rotate", "--exposure": "exposure", "--camera": "camera"}
+        checked = 0
+        for line in help_text.splitlines():
+            m = re.match(r"^\s+(?:-\w,)?(--?[\w-]+) \S+?=(\S+)", line)
+            if m and m.group(1) in names:
+                want = tessera.DEFAULTS[names[m.group(1)]]
+                self.assertEqual(str(want) if isinstance(want, str) else float(m.group(2)),
+                                 m.group(2) if isinstance(want, str) else float(want), m.group(1))
+                checked += 1
+            m = re.match(r"^\s+-r \S+=\[(\d+),(\d+)\]", line)
+            if m:
+                self.assertEqual(tessera.DEFAULTS["resolution"], (int(m.group(1)), int(m.group(2))))
+                checked += 1
+        self.assertGreaterEqual(checked, len(names))
+
+
+class Secure(unittest.TestCase):
+    """Tokens and TLS: the client's token and CA as the CLI takes them."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.farm_procs = LocalFarm(BIN, tokens=["client me", "viewer eye", "worker w"], tls=True)
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.farm_procs.stop()
+
+    def test_token_and_tls(self):
+        f = self.farm_procs
+        with tessera.Farm(f.address, token_file=f.tokens["me"], tls_ca=f.ca) as farm:
+            job = farm.submit(SPHERES, **SMALL)
+            self.assertEqual(job.wait().owner, "me")
+        os.environ.update(TESSERA_COORDINATOR=f.address, TESSERA_TOKEN_FILE=f.tokens["eye"], TESSERA_TLS_CA=f.ca)
+        try:
+            with tessera.Farm() as viewer:  # everything from the environment
+                self.assertEqual(viewer.job(job.id).status().state, "DONE")
+                with self.assertRaises(tessera.TesseraError) as e:
+                    viewer.job(job.id).cancel()
+                self.assertEqual(e.exception.code, "PERMISSION_DENIED")
+        finally:
+            for k in ("TESSERA_COORDINATOR", "TESSERA_TOKEN_FILE", "TESSERA_TLS_CA"):
+                del os.environ[k]
+        with self.assertRaises(tessera.TesseraError) as e:
+            tessera.Farm(f.address, tls_ca=f.ca).jobs()
+        self.assertEqual(e.exception.code, "UNAUTHENTICATED")
+        with self.assertRaisesRegex(tessera.TesseraError, "serves TLS closes plaintext connections"):
+            tessera.Farm(f.address, token_file=f.tokens["me"], timeout=5).jobs()
+
+
+if __name__ == "__main__":
+    unittest.main(verbosity=2)
