@@ -36,17 +36,9 @@ def check(ok, what):
 
 
 def cli_flags(settings, frame):
-    """`tessera render` flags for the add-on's settings (the client's keywords)."""
-    f = ["-s", str(settings["samples"]), "-m", str(settings["max_depth"]), "--tile", str(settings["tile"]),
-         "-r", *map(str, settings["resolution"]), "--camera", "file", "--fps", repr(settings["fps"]),
-         "--frame", str(frame)]
-    if "env_color" in settings:
-        f += ["--env-color", *map(repr, settings["env_color"])]
-    if settings.get("no_default_env"):
-        f += ["--no-default-env"]
-    if "lens_radius" in settings:
-        f += ["-b", repr(settings["lens_radius"]), "-d", repr(settings["focal_distance"])]
-    return f
+    """`tessera render` flags for the add-on's settings (the Python client's keywords)."""
+    import tessera.settings  # the add-on's copy (its lib/ is on sys.path once it ran)
+    return tessera.settings.cli_flags(frame=frame, **settings)
 
 
 tmp = tempfile.mkdtemp(prefix="tessera-blender-test-")

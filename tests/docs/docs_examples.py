@@ -31,7 +31,9 @@
      elsewhere (the Slurm example's tokens and certificate) gets them from FIXTURES,
      printed; `sbatch` is a stand-in that runs the batch script here as a one-node,
      one-CPU allocation (with `srun` running its command). ```json camera paths are
-     rendered with --camera-path.
+     rendered with --camera-path. ```python blocks that import tessera run with
+     build/python on the path against the same farm, shrunk (samples=1, 32 pixels wide,
+     two frames of a range).
   6. Skips: lines and blocks that cannot run on a test machine are in ALLOW, each with
      its reason, printed when skipped; an ALLOW entry that matches nothing fails (the
      list stays exact). A line that needs ../shared is skipped, saying so, where it is
@@ -50,7 +52,8 @@ import tempfile
 import time
 
 from docs_parse import (check_flags, check_paths, check_render_reference, check_script_flags, doc_files,
-                        expected_files, fail, failures, fenced, logical_lines, our_commands, rewrite)
+                        expected_files, fail, failures, fenced, logical_lines, our_commands, rewrite,
+                        shrink_python)
 from docs_tables import ALLOW, FAKE_SBATCH, FAKE_SRUN, FIXTURES, PLACEHOLDERS, PRELUDE
 
 # ---- running ----------------------------------------------------------------------------
@@ -85,8 +88,11 @@ def make_tree(src, bin_dir, scratch, n):
     d = os.path.join(scratch, "blocks", f"{n:02d}")
     os.makedirs(os.path.join(d, "build"))
     os.symlink(bin_dir, os.path.join(d, "build", "bin"))
-    for sub in ("scenes", "deploy", "bench", "docs"):
+    for sub in ("scenes", "deploy", "bench", "docs", "tests"):
         os.symlink(os.path.join(src, sub), os.path.join(d, sub))
+    for built in ("python", "blender"):  # the Python client and the Blender add-on
+        if os.path.isdir(os.path.join(os.path.dirname(bin_dir), built)):
+            os.symlink(os.path.join(os.path.dirname(bin_dir), built), os.path.join(d, "build", built))
     return d
 
 
@@ -243,6 +249,9 @@ def main():
                             used_allow.add(i)
                     if why is None and "../shared" in line and not have_shared:
                         why = f"needs the CS184 scenes in {shared}, absent here"
+                    if why is None and re.search(r"(^|[\s;&|])(blender|bench/blender/)", line) \
+                            and not shutil.which("blender"):
+                        why = "needs Blender (deploy/install-deps.sh installs it), absent here"
                     if why:
                         print(f"skip  {rel}:{lineno}: {line[:100]}\n        ({why})")
                         skipped += 1
@@ -274,6 +283,22 @@ def main():
                 if r.returncode != 0:
                     fail(f"{rel}:{first}: the camera path example, `{' '.join(cmd[1:])}`, exited {r.returncode}: "
                          f"{r.stderr.strip()[-400:]}")
+            # The Python client's examples: run shrunk with build/python on the path.
+            for first, body in fenced(src, rel, "python"):
+                text = "\n".join(body)
+                if "import tessera" not in text:
+                    continue
+                blocks += 1
+                d = make_tree(src, bin_dir, scratch, blocks)
+                run = shrink_python(text)
+                open(os.path.join(d, "example.py"), "w").write(run)
+                print(f"\n{rel}:{first}: ```python block, run shrunk:\n" + "\n".join("      " + x for x in run.splitlines()))
+                py_env = dict(env, PYTHONPATH=os.path.join(os.path.dirname(bin_dir), "python"))
+                r = subprocess.run(["/usr/bin/python3", "example.py"], cwd=d, capture_output=True, text=True,
+                                   timeout=a.timeout, env=py_env)
+                ran += 1
+                if r.returncode != 0:
+                    fail(f"{rel}:{first}: the Python example exited {r.returncode}:\n{r.stderr.strip()[-600:]}")
         if not a.only or "README.md" in a.only:
             check_render_reference(src, bin_dir)
         for i, (f, pat, scope, why) in enumerate(ALLOW):

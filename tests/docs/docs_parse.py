@@ -311,3 +311,15 @@ def expected_files(line):
                 elif not m:
                     out.append(path)
     return out
+
+
+def shrink_python(text):
+    """A ```python example of the Python client, shrunk as the shell lines are: samples=1,
+    a 32-pixel-wide resolution, two frames of a range."""
+    text = re.sub(r"\bsamples=\d+", "samples=1", text)
+
+    def res(m):
+        w, h = int(m.group(1)), int(m.group(2))
+        return f"resolution=(32, {max(1, round(32 * h / w))})"
+    text = re.sub(r"\bresolution=\((\d+),\s*(\d+)\)", res, text)
+    return re.sub(r'\bframes="(-?\d+)-(-?\d+)"', lambda m: f'frames="{m.group(1)}-{int(m.group(1)) + 1}"', text)

@@ -35,11 +35,25 @@ SUBSTITUTIONS = [
 SHRINK_SCRIPTS = {
     "bench/error_report.py": ["--spp", "1", "--seeds", "1", "--ref-spp", "2", "--flags", "-r 32 24 -m 16 -l 1"],
     "bench/features.py": ["--spp", "1", "--ref-spp", "2"],
+    # (the gallery into the block's folder: docs/ is the repository's own)
+    "bench/blender/fidelity.py": ["--scenes", "diffuse-metal", "--spp", "4", "--width", "32", "--height", "24",
+                                  "--out", "out/report", "--gallery", "out/gallery"],
 }
 # Placeholder files the examples name: made from a scene we ship.
 PLACEHOLDERS = {"scene.dae": "scenes/cornell-spheres.dae", "shot.dae": "scenes/cornell-spheres.dae"}
 # (file, regex of a line in the block, why, shell run before the block).
 FIXTURES = [
+    ("docs/blender.md", r"blender -b shot\.blend",
+     "a shot.blend (the factory scene, 32 x 18, frames 1-2, 1 sample, output //out/shot_) and the add-on "
+     "installed and enabled in this home, as the page's install steps leave them",
+     """blender -b --factory-startup --python-expr "import bpy
+bpy.ops.preferences.addon_install(filepath='$DOCS_BIN/../blender/tessera_blender.zip')
+bpy.ops.preferences.addon_enable(module='tessera_blender')
+bpy.ops.wm.save_userpref()
+s = bpy.context.scene
+s.render.resolution_x, s.render.resolution_y, s.frame_end, s.tessera.samples = 32, 18, 2, 1
+s.render.filepath = '//out/shot_'
+bpy.ops.wm.save_as_mainfile(filepath='$PWD/shot.blend')" >/dev/null"""),
     ("docs/deploy.md", r"deploy/slurm/tessera-workers\.sbatch",
      "the tokens and certificate docs/security.md has the reader make first, the enrolment token in "
      "~/.tessera, and the client's token and CA exported as README's farm section does",

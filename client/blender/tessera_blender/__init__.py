@@ -105,7 +105,7 @@ class TESSERA_OT_render_on_farm(bpy.types.Operator):
         if props.tls_ca:
             farm_args["tls_ca"] = bpy.path.abspath(props.tls_ca)
         printer = _print_status if bpy.app.background else None
-        return FarmJob(tessera, farm_args, path, frames, outputs, export.render_settings(scene, props),
+        return FarmJob(tessera, farm_args, path, frames, outputs, export.render_settings(scene, props, folder),
                        export.blend_name(), on_status=printer)
 
     def _finish(self, context, state):

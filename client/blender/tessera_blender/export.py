@@ -12,7 +12,7 @@ EXPRESSIBLE = {
     "BSDF_PRINCIPLED", "OUTPUT_MATERIAL", "TEX_IMAGE", "NORMAL_MAP", "MAPPING", "TEX_COORD", "UVMAP",
     "SEPRGB", "SEPARATE_COLOR", "SEPXYZ", "SEPARATE_XYZ", "EMISSION", "BSDF_TRANSPARENT", "MIX_SHADER",
     "VERTEX_COLOR", "ATTRIBUTE", "REROUTE", "GROUP_INPUT", "GROUP_OUTPUT", "MIX_RGB", "MIX", "VALUE", "RGB",
-    "CLAMP", "MATH", "BSDF_DIFFUSE", "BSDF_GLOSSY",
+    "CLAMP", "MATH", "BSDF_DIFFUSE", "BSDF_GLOSSY", "GROUP",
 }
 # Principled BSDF inputs the exporter drops (value, or a link), with what it means here.
 DROPPED_INPUTS = {
@@ -34,6 +34,17 @@ def _input_used(node, name):
     return float(v) > 0 if isinstance(v, float) else False
 
 
+def _has_volume(mat):
+    """The exporter writes KHR_materials_volume from a "glTF Material Output" (or "glTF
+    Settings") group node's Thickness input."""
+    for n in mat.node_tree.nodes:
+        if n.type == "GROUP" and n.node_tree and n.node_tree.name in ("glTF Material Output", "glTF Settings"):
+            t = n.inputs.get("Thickness")
+            if t is not None and (t.is_linked or t.default_value > 0):
+                return True
+    return False
+
+
 def export_notes(scene):
     """What the export drops or changes, one line each, before anything is sent."""
     notes = []
@@ -51,6 +62,10 @@ def export_notes(scene):
         for node in mat.node_tree.nodes:
             if node.type == "BSDF_PRINCIPLED":
                 principled = True
+                if _input_used(node, "Transmission") and not _has_volume(mat):
+                    notes.append(f"material '{mat.name}': transmission without a glTF Material Output's Thickness "
+                                 "exports as a thin wall (KHR_materials_transmission alone): light passes without "
+                                 "bending, unlike Cycles' solid glass")
                 for name, what in DROPPED_INPUTS.items():
                     if name != "Clearcoat" and _input_used(node, name):
                         notes.append(f"material '{mat.name}': {what}")
@@ -84,9 +99,41 @@ def export_notes(scene):
     return notes
 
 
-def world_settings(scene):
+def write_rgbe(path, rgb):
+    """A Radiance .hdr (RGBE, flat scanlines, top row first) of `rgb`, float (h, w, 3) rows
+    bottom-up as Blender holds pixels. Written here because Blender's Image.save of a float
+    image applies the view transform."""
+    import numpy as np
+    h, w, _ = rgb.shape
+    rgb = np.maximum(rgb[::-1].astype(np.float64), 0)
+    top = rgb.max(axis=2)
+    mant, exp = np.frexp(top)
+    scale = np.where(top > 1e-32, mant * 256.0 / np.where(top > 1e-32, top, 1), 0)
+    out = np.zeros((h, w, 4), dtype=np.uint8)
+    out[..., :3] = np.clip(rgb * scale[..., None], 0, 255).astype(np.uint8)
+    out[..., 3] = np.where(top > 1e-32, exp + 128, 0).astype(np.uint8)
+    with open(path, "wb") as f:
+        f.write(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n" + f"-Y {h} +X {w}\n".encode())
+        f.write(out.tobytes())
+    return path
+
+
+def mirrored_environment(image, path):
+    """Writes `image` mirrored left to right as a Radiance .hdr at `path`. Cycles looks an
+    equirectangular image up at u = 0.5 - atan2(y, x) / 2 pi (+Z up), Tessera at u = 0.5 +
+    atan2(y, x) / 2 pi (CS184's convention, docs/gltf.md): the same image would render
+    mirrored, its mirror image renders as Blender shows it."""
+    import numpy as np
+    w, h = image.size
+    px = np.empty(w * h * 4, dtype=np.float32)
+    image.pixels.foreach_get(px)  # scene-linear for a float image, rows bottom-up
+    return write_rgbe(path, px.reshape(h, w, 4)[:, ::-1, :3])
+
+
+def world_settings(scene, folder=None):
     """env / env_color / env_strength for the scene's world: an Environment Texture's image
-    (an HDRI) as the farm's environment map, a plain Background's colour as a uniform one."""
+    (an HDRI) as the farm's environment map (mirrored into `folder`, see
+    mirrored_environment), a plain Background's colour as a uniform one."""
     world = scene.world
     if world is None:
         return {"no_default_env": True}
@@ -101,8 +148,9 @@ def world_settings(scene):
     color = bg.inputs["Color"]
     if color.is_linked and color.links[0].from_node.type == "TEX_ENVIRONMENT":
         image = color.links[0].from_node.image
-        if image is not None and image.filepath:
-            return {"env": bpy.path.abspath(image.filepath), "env_strength": strength}
+        if image is not None and image.size[0] > 0:
+            path = os.path.join(folder or bpy.app.tempdir, "environment.hdr")
+            return {"env": mirrored_environment(image, path), "env_strength": strength}
     c = color.default_value
     return {"env_color": (c[0] * strength, c[1] * strength, c[2] * strength)}
 
@@ -151,12 +199,13 @@ def export_gltf(scene, path, animation):
     return path
 
 
-def render_settings(scene, props):
-    """The Python client's keywords for this scene and the panel's settings."""
+def render_settings(scene, props, folder=None):
+    """The Python client's keywords for this scene and the panel's settings (files made
+    for them, the environment map, go into `folder`)."""
     s = dict(samples=props.samples, max_depth=props.max_bounces, tile=props.tile_size,
              noise_target=props.noise_target, resolution=resolution(scene), camera="file",
              fps=scene.render.fps / scene.render.fps_base)
-    s.update(world_settings(scene))
+    s.update(world_settings(scene, folder))
     s.update(camera_settings(scene))
     if math.isclose(s.get("env_strength", 1.0), 1.0):
         s.pop("env_strength", None)

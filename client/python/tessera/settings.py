@@ -168,3 +168,36 @@ def to_proto(scene, frames=None, **kwargs):
     p.no_mis = bool(s["no_mis"])
     env = os.path.abspath(s["env"]) if s["env"] else None
     return p, env
+
+
+# The `tessera render` / `tessera submit` flag of each keyword, and how many values it takes.
+FLAGS = {
+    "samples": ("-s", 1), "light_samples": ("-l", 1), "max_depth": ("-m", 1), "resolution": ("-r", 2),
+    "adaptive": ("-a", 2), "lens_radius": ("-b", 1), "focal_distance": ("-d", 1), "window": ("-p", 4),
+    "seed": ("--seed", 1), "frame": ("--frame", 1), "camera": ("--camera", 1), "camera_path": ("--camera-path", 1),
+    "turntable": ("--turntable", 1), "env": ("-e", 1), "env_color": ("--env-color", 3),
+    "env_strength": ("--env-strength", 1), "env_rotate": ("--env-rotate", 1), "exposure": ("--exposure", 1),
+    "no_default_env": ("--no-default-env", 0), "animation": ("--animation", 1), "fps": ("--fps", 1),
+    "pass_spp": ("--pass-spp", 1), "tile": ("--tile", 1), "noise_target": ("--noise-target", 1),
+    "no_nee": ("--no-nee", 0), "no_mis": ("--no-mis", 0),
+}
+
+
+def cli_flags(**kwargs):
+    """The `tessera render` flags that make the image these keywords make on the farm
+    (floats written exactly: repr), defaults left out. camera_path must be a file here."""
+    unknown = sorted(set(kwargs) - set(DEFAULTS))
+    if unknown:
+        raise TypeError(f"unknown render setting{'s' if len(unknown) > 1 else ''}: {', '.join(unknown)}")
+    out = []
+    for key, value in kwargs.items():
+        if value is None or value == DEFAULTS[key]:
+            continue
+        flag, n = FLAGS[key]
+        if n == 0:
+            if value:
+                out.append(flag)
+            continue
+        values = list(value) if n > 1 else [value]
+        out += [flag] + [repr(float(v)) if isinstance(v, float) else str(v) for v in values]
+    return out
