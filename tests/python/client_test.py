@@ -181,6 +181,59 @@ class Plain(unittest.TestCase):
         self.assertGreaterEqual(checked, len(names))
 
 
+class Units(unittest.TestCase):
+    """The client's pieces without a farm."""
+
+    def test_frames_as_the_cli_reads_them(self):
+        self.assertEqual(tessera.parse_frames("1-5x2,9,-3--1"), [1, 3, 5, 9, -3, -2, -1])
+        self.assertEqual(tessera.parse_frames([4, 2]), [4, 2])
+        for bad, why in (("3-1", "runs backwards"), ("1,1", "given twice"), ("a", "is not N"), ("1-4x0", "step"),
+                         ("1-200000", "more than 100000"), ("2000000", "beyond")):
+            with self.assertRaisesRegex(ValueError, why):
+                tessera.parse_frames(bad)
+
+    def test_frame_paths_as_the_cli_writes_them(self):
+        self.assertEqual(tessera.frame_path("out/shot.####.exr", 7), "out/shot.0007.exr")
+        self.assertEqual(tessera.frame_path("a#b.##.png", 123), "a#b.123.png")
+        self.assertEqual(tessera.frame_path("s.####.exr", -7), "s.-007.exr")
+        self.assertEqual(tessera.frame_path("still.exr", 3), "still.exr")
+
+    def test_cli_flags_round_trip_the_settings(self):
+        from tessera import settings
+        self.assertEqual(settings.cli_flags(samples=8, resolution=(64, 48), env_color=(0.5, 1, 0.25), no_mis=True,
+                                            max_depth=16),
+                         ["-s", "8", "-r", "64", "48", "--env-color", "0.5", "1", "0.25", "--no-mis"])
+        with self.assertRaisesRegex(TypeError, "sampels"):
+            settings.cli_flags(sampels=1)
+        p, env = settings.to_proto("x.gltf", window=(1, 2, 3, 4), resolution=(10, 20), adaptive=(8, 0.1))
+        self.assertEqual((p.window.x, p.window.y, p.window.w, p.window.h), (1, 20 - (2 + 4), 3, 4))
+        self.assertEqual(p.framing, p.FILE)
+        self.assertTrue(p.adaptive)
+        self.assertEqual(settings.to_proto("x.dae")[0].framing, p.CS184)
+
+    def test_a_bundle_names_what_a_gltf_needs_and_refuses_paths_outside(self):
+        from tessera.bundle import Bundle, SceneError, scene_files
+        d = tempfile.mkdtemp(prefix="tessera-pybundle-")
+        try:
+            with open(os.path.join(d, "a.gltf"), "w") as f:
+                json.dump({"buffers": [{"uri": "b%20c.bin"}, {"uri": "data:application/octet-stream;base64,AA=="}],
+                           "images": [{"uri": "t/i.png"}, {"uri": "b%20c.bin"}]}, f)
+            self.assertEqual([r for r, _ in scene_files(os.path.join(d, "a.gltf"))], ["a.gltf", "b c.bin", "t/i.png"])
+            os.makedirs(os.path.join(d, "t"))
+            for name in ("b c.bin", "t/i.png"):
+                with open(os.path.join(d, name), "wb") as f:
+                    f.write(b"x" * 3)
+            b = Bundle(os.path.join(d, "a.gltf"))
+            self.assertRegex(b.hash, r"^[0-9a-f]{32}$")
+            self.assertEqual(b.sizes[1:], [3, 3])
+            with open(os.path.join(d, "bad.gltf"), "w") as f:
+                json.dump({"images": [{"uri": "../secret.png"}]}, f)
+            with self.assertRaisesRegex(SceneError, "not a path inside the scene's folder"):
+                scene_files(os.path.join(d, "bad.gltf"))
+        finally:
+            subprocess.run(["rm", "-rf", d])
+
+
 class Secure(unittest.TestCase):
     """Tokens and TLS: the client's token and CA as the CLI takes them."""
 
