@@ -56,7 +56,8 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
     meta["time"] = std::to_string(s.time());  // seconds: frame / fps
   }
   if (s.exposure != 0) meta[kExposureAttribute] = exposure_text(s.exposure);
-  for (const std::string& out : outputs) write_image(out, r.film, meta);
+  if (s.aovs) meta["aovs"] = aov_names(s.aovs);
+  for (const std::string& out : outputs) write_image(out, r.film, meta, &r.aovs, s.aovs);
 
   const uint64_t rays = r.stats.rays.rays + r.stats.rays.shadow_rays;
   const double sps = r.stats.samples / std::max(r.seconds, 1e-9), rps = rays / std::max(r.seconds, 1e-9);

@@ -4,6 +4,7 @@
 #include <filesystem>
 
 #include "core/io/files.h"
+#include "core/render/aov.h"
 #include "core/render/frames.h"
 #include "core/scene/load.h"
 
@@ -62,6 +63,9 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
   cmd->add_option("--noise-target", s.noise_target,
                   "Stop refining a tile once its estimated relative error is below this (0 = off)")
       ->capture_default_str();
+  cmd->add_option("--aov", f.aovs,
+                  "AOV layers in the EXR beside the image, from the camera samples' first hits: a list of alpha, "
+                  "albedo, normal, depth, id (or all)");
   cmd->add_flag("--no-nee", f.no_nee, "Benchmarking: no next-event estimation (BSDF sampling only)");
   cmd->add_flag("--no-mis", f.no_mis, "Benchmarking: light sampling without MIS");
 }
@@ -87,6 +91,11 @@ RenderSettings to_settings(const RenderFlags& f) {
   }
   s.nee = !f.no_nee;
   s.mis = !f.no_mis;
+  try {
+    s.aovs = parse_aovs(f.aovs);
+  } catch (const SettingsError& e) {
+    throw CLI::ValidationError(e.flag(), std::string(e.what()).substr(e.flag().size() + 2));
+  }
   if (!f.env_color.empty()) s.environment = Rgb(f.env_color[0], f.env_color[1], f.env_color[2]);
   s.default_environment = !f.no_default_env;
   if (!f.env.empty()) s.environment_map = std::filesystem::absolute(f.env).string();

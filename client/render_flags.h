@@ -25,6 +25,7 @@ struct RenderFlags {
   std::string env;  // --env FILE  // --env-color R G B
   bool no_default_env = false;
   double turntable = 0;  // --turntable FRAMES: one turn in this many frames
+  std::string aovs;      // --aov LIST
 };
 
 void add_render_flags(CLI::App* cmd, RenderFlags& f);

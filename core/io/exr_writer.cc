@@ -13,12 +13,20 @@
 
 namespace tessera {
 
-ExrWriter::ExrWriter(std::string path, int width, int height, const ImageMetadata& metadata, bool compress)
-    : path_(std::move(path)), tmp_(path_ + ".tmp"), width_(width), height_(height) {
+ExrWriter::ExrWriter(std::string path, int width, int height, const ImageMetadata& metadata, bool compress,
+                     uint32_t aovs)
+    : path_(std::move(path)),
+      tmp_(path_ + ".tmp"),
+      width_(width),
+      height_(height),
+      aovs_(aovs),
+      aov_names_(aov_channels(aovs)),
+      aov_(aov_names_.size()) {
   Imf::Header header(width, height);
   header.compression() = compress ? Imf::ZIP_COMPRESSION : Imf::NO_COMPRESSION;
   for (const auto& [key, value] : metadata) header.insert("tessera/" + key, Imf::StringAttribute(value));
   for (const char* name : {"R", "G", "B", "spp", "variance"}) header.channels().insert(name, Imf::Channel(Imf::FLOAT));
+  for (const std::string& name : aov_names_) header.channels().insert(name, Imf::Channel(Imf::FLOAT));
   try {
     file_ = std::make_unique<Imf::OutputFile>(tmp_.c_str(), header);
   } catch (const std::exception& e) {
@@ -36,8 +44,9 @@ ExrWriter::~ExrWriter() {
   std::remove(tmp_.c_str());
 }
 
-void ExrWriter::write_rows(const PixelSums* sums, int rows) {
+void ExrWriter::write_rows(const PixelSums* sums, int rows, const AovSums* aov) {
   if (!file_ || rows <= 0 || next_row_ + rows > height_) throw std::runtime_error(path_ + ": EXR rows out of order");
+  if (aovs_ && !aov) throw std::runtime_error(path_ + ": EXR rows without the AOVs its header names");
   const size_t n = size_t(rows) * size_t(width_);
   for (std::vector<float>* v : {&r_, &g_, &b_, &spp_, &var_}) v->resize(n);
   for (size_t i = 0; i < n; ++i) {
@@ -56,6 +65,23 @@ void ExrWriter::write_rows(const PixelSums* sums, int rows) {
   for (const auto& [name, data] : channels)
     fb.insert(name, Imf::Slice::Make(Imf::FLOAT, data->data(), origin, width_, rows, sizeof(float),
                                      sizeof(float) * size_t(width_)));
+  if (aovs_) {
+    for (auto& plane : aov_) plane.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+      const AovPixel p = aov_pixel(aov[i]);
+      size_t c = 0;  // in aov_channels' order
+      if (aovs_ & kAovAlpha) aov_[c++][i] = p.alpha;
+      if (aovs_ & kAovAlbedo)
+        for (float v : p.albedo) aov_[c++][i] = v;
+      if (aovs_ & kAovNormal)
+        for (float v : p.normal) aov_[c++][i] = v;
+      if (aovs_ & kAovDepth) aov_[c++][i] = p.depth;
+      if (aovs_ & kAovId) aov_[c++][i] = p.id;
+    }
+    for (size_t c = 0; c < aov_.size(); ++c)
+      fb.insert(aov_names_[c], Imf::Slice::Make(Imf::FLOAT, aov_[c].data(), origin, width_, rows, sizeof(float),
+                                                sizeof(float) * size_t(width_)));
+  }
   try {
     file_->setFrameBuffer(fb);
     file_->writePixels(rows);

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "core/render/aov.h"
 #include "core/render/film.h"
 
 namespace tessera {
@@ -22,12 +23,16 @@ class ExrWriter {
  public:
   // Writes to PATH.tmp; commit() renames it into place. Throws std::runtime_error naming
   // the path.
-  ExrWriter(std::string path, int width, int height, const ImageMetadata& metadata, bool compress = true);
+  // `aovs` (aov.h's bits) adds their channels (aov_channels), each row's from write_rows'
+  // `aov` sums.
+  ExrWriter(std::string path, int width, int height, const ImageMetadata& metadata, bool compress = true,
+            uint32_t aovs = 0);
   ~ExrWriter();  // removes the temporary file unless committed
   ExrWriter(const ExrWriter&) = delete;
   ExrWriter& operator=(const ExrWriter&) = delete;
-  // The next `rows` rows of `width` sums each (row 0 the image's top).
-  void write_rows(const PixelSums* sums, int rows);
+  // The next `rows` rows of `width` sums each (row 0 the image's top), and their AOV sums
+  // when the file has AOV channels.
+  void write_rows(const PixelSums* sums, int rows, const AovSums* aov = nullptr);
   int rows_written() const { return next_row_; }
   // Every row written: the file goes into place.
   void commit();
@@ -37,6 +42,9 @@ class ExrWriter {
   int width_, height_, next_row_ = 0;
   std::unique_ptr<Imf::OutputFile> file_;
   std::vector<float> r_, g_, b_, spp_, var_;
+  uint32_t aovs_;
+  std::vector<std::string> aov_names_;
+  std::vector<std::vector<float>> aov_;  // one plane per AOV channel
 };
 
 }  // namespace tessera

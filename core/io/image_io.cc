@@ -29,9 +29,12 @@ uint8_t srgb_byte(float v) {
   return uint8_t(std::lround(s * 255));
 }
 
-void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata, bool fast) {
-  ExrWriter out(path, film.width(), film.height(), metadata, !fast);
-  if (film.height() > 0) out.write_rows(film.pixels().data(), film.height());
+void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata, bool fast, const AovFilm* aovs,
+               uint32_t aov_bits) {
+  const bool with_aovs = aovs && !aovs->empty() && aov_bits;
+  ExrWriter out(path, film.width(), film.height(), metadata, !fast, with_aovs ? aov_bits : 0);
+  if (film.height() > 0)
+    out.write_rows(film.pixels().data(), film.height(), with_aovs ? aovs->pixels().data() : nullptr);
   out.commit();
 }
 
@@ -92,8 +95,9 @@ void write_png(const std::string& path, const Film& film, bool fast, float scale
   write_file_atomic(path, bytes);
 }
 
-void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata) {
-  if (ends_with(path, ".exr")) return write_exr(path, film, metadata);
+void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata, const AovFilm* aovs,
+                 uint32_t aov_bits) {
+  if (ends_with(path, ".exr")) return write_exr(path, film, metadata, false, aovs, aov_bits);
   if (ends_with(path, ".png")) return write_png(path, film, false, exposure_scale(metadata));
   throw std::runtime_error(path + ": unknown image format (use .exr or .png)");
 }

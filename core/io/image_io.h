@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/render/aov.h"
 #include "core/render/film.h"
 #include "core/scene/image_read.h"  // read_exr
 
@@ -16,7 +17,9 @@ using ImageMetadata = std::map<std::string, std::string>;
 
 // Throws std::runtime_error naming the path on failure. `fast` trades file size for
 // speed (no EXR compression, light PNG compression): for frequent progressive images.
-void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata, bool fast = false);
+// With `aovs` (not empty, the film's window), their channels too (settings' --aov bits).
+void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata, bool fast = false,
+               const AovFilm* aovs = nullptr, uint32_t aov_bits = 0);
 // `scale` multiplies the linear values before the sRGB transfer (an exposure: 2^EV).
 void write_png(const std::string& path, const Film& film, bool fast = false, float scale = 1);
 // The PNG file's bytes for linear RGB planes of w x h (row 0 at the top).
@@ -24,7 +27,8 @@ std::string encode_png(int w, int h, const float* r, const float* g, const float
                        float scale = 1);
 // Picks the format from the extension (.exr or .png); throws on anything else. A PNG takes
 // its exposure from the metadata (exposure_scale), as every PNG made from the EXR does.
-void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata);
+void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata,
+                 const AovFilm* aovs = nullptr, uint32_t aov_bits = 0);
 
 // The metadata key that carries --exposure (the file's attribute: "tessera/exposure", as
 // the writer prefixes every key and read_exr reads it), and the scale 2^EV it asks for (1

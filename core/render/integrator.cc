@@ -245,7 +245,21 @@ Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& f
   return sum;
 }
 
-Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const {
+namespace {
+
+void record_first_hit(const Material& m, const SurfacePoint& sp, const Ray& ray, FirstHit* first) {
+  first->hit = true;
+  first->distance = length(sp.p - ray.o);
+  first->normal = dot(sp.ns, ray.d) > 0 ? -sp.ns : sp.ns;
+  first->albedo = m.kind == Material::Kind::kEmission
+                      ? (m.radiance.max() > 0 ? m.radiance * (1.0f / m.radiance.max()) : Rgb(0))
+                      : m.reflectance;
+  first->material = sp.material;
+}
+
+}  // namespace
+
+Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters, FirstHit* first) const {
   Rgb L(0), beta(1.0f);
   bool specular = true;  // the previous vertex was the camera or a delta lobe
   float prev_pdf = 0, eta_scale = 1;
@@ -293,6 +307,7 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters) const
       mp = &*textured;
     }
     const Material& m = *mp;
+    if (first && depth == 0) record_first_hit(m, sp, ray, first);
     const Vec3 wo_world = -ray.d;
     // Beer-Lambert absorption of a solid glTF volume: the segment just travelled was inside
     // if it leaves through the surface's back (its outward normal faces along the ray).

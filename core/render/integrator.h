@@ -10,6 +10,7 @@
 
 #include "core/accel/accel.h"
 #include "core/light/lights.h"
+#include "core/render/aov.h"
 #include "core/render/settings.h"
 #include "core/sampling/sampler.h"
 #include "core/scene/scene.h"
@@ -54,7 +55,9 @@ inline Vec3 offset_ray_origin(const SurfacePoint& sp, Vec3 w) { return offset_po
 class Integrator {
  public:
   Integrator(const Scene& scene, const Accel& accel, const LightSet& lights, const RenderSettings& settings);
-  Rgb radiance(Ray ray, Sampler& sampler, RayCounters& counters) const;
+  // The radiance along a camera ray; with `first`, also what its first hit saw (AOVs: no
+  // work at all without).
+  Rgb radiance(Ray ray, Sampler& sampler, RayCounters& counters, FirstHit* first = nullptr) const;
 
  private:
   Rgb direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng, Sampler& sampler,

@@ -15,6 +15,8 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
   std::mutex mu;  // guards plan, stats and running
   std::condition_variable cv;
   TileStats stats;
+  const bool with_aovs = renderer.settings().aovs != 0;
+  AovFilm aovs = with_aovs ? AovFilm(plan.film().window()) : AovFilm();  // guarded by mu
   int running = pool.size();
   const auto start = std::chrono::steady_clock::now();
   const auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
@@ -30,14 +32,16 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
           continue;
         }
         lock.unlock();
-        const std::vector<PixelSums> sums =
-            renderer.render(task->rect, task->sample_begin, task->sample_end,
-                            task->active.empty() ? nullptr : task->active.data(), &mine);
+        std::vector<AovSums> tile_aovs;
+        const std::vector<PixelSums> sums = renderer.render(task->rect, task->sample_begin, task->sample_end,
+                                                            task->active.empty() ? nullptr : task->active.data(), &mine,
+                                                            nullptr, with_aovs ? &tile_aovs : nullptr);
         lock.lock();
         // Our own sums always fit: anything else is a broken invariant, and stopping loudly
         // beats waiting forever for a tile that never advances.
         if (plan.merge(task->tile, task->pass, sums) != FramePlan::Merge::kMerged)
           throw std::logic_error("tessera render: the frame plan refused a tile's own sums");
+        if (with_aovs) aovs.add_tile(task->rect, tile_aovs);  // integers: any order gives the same bits
         cv.notify_all();
       }
       stats.add(mine);
@@ -65,7 +69,7 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
     if (progress) report(lock);
   }
   pool.wait();
-  return RenderResult{plan.film(), stats, elapsed()};
+  return RenderResult{plan.film(), std::move(aovs), stats, elapsed()};
 }
 
 }  // namespace tessera

@@ -21,6 +21,7 @@ using ProgressCallback = std::function<void(const RenderProgress&)>;
 
 struct RenderResult {
   Film film;
+  AovFilm aovs;  // empty unless the settings ask for AOVs
   TileStats stats;
   double seconds = 0;
 };

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/render/aov.h"
+
 namespace tessera {
 
 namespace {
@@ -28,6 +30,7 @@ void RenderSettings::validate() const {
   require(spp >= 1 && spp <= kMaxSpp, "-s", range(1, kMaxSpp));
   require(light_samples >= 1 && light_samples <= kMaxLightSamples, "-l", range(1, kMaxLightSamples));
   require(max_depth >= 0 && max_depth <= kMaxDepth, "-m", range(0, kMaxDepth));
+  require((aovs & ~kAovAll) == 0, "--aov", "unknown AOV bits " + std::to_string(aovs & ~kAovAll));
   if (adaptive)
     require(adaptive_batch >= 1 && adaptive_batch <= kMaxSpp && std::isfinite(adaptive_tolerance) &&
                 adaptive_tolerance >= 0,

@@ -101,6 +101,8 @@ struct RenderSettings {
   // MIS area lights are found by light sampling alone.
   bool nee = true;
   bool mis = true;
+  // --aov: the AOVs written beside the image (aov.h's bits; 0: none, and no work for them).
+  uint32_t aovs = 0;
   CameraSettings camera;  // -r, -b, -d, --camera: documented in core/camera/camera.h
   Rect window;            // -p: the part of the image rendered; the whole image when empty
 

@@ -118,8 +118,10 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
 }
 
 std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,
-                                            TileStats* stats, const std::atomic<bool>* cancel) const {
+                                            TileStats* stats, const std::atomic<bool>* cancel,
+                                            std::vector<AovSums>* aovs) const {
   std::vector<PixelSums> out(size_t(rect.area()));
+  if (aovs) aovs->assign(size_t(rect.area()), AovSums{});
   const int width = settings_.camera.width, height = settings_.camera.height;
   const bool lens = camera_->is_thin_lens();
   TileStats local;
@@ -140,7 +142,8 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
         const Vec2 u_lens = lens ? sampler.next_2d() : Vec2{};
         // The camera counts rows from the bottom (CS184 convention).
         const Ray ray = camera_->generate(float(px) + jitter.x, float(height - 1 - py) + jitter.y, u_lens);
-        const Rgb L = integrator_->radiance(ray, sampler, local.rays);
+        FirstHit first;
+        const Rgb L = integrator_->radiance(ray, sampler, local.rays, aovs ? &first : nullptr);
         ++local.samples;
         // Beyond kMaxSampleValue is as useless as NaN (only a delta light nearer than 1e-5
         // gets there), and dropping it keeps our own sums always plausible (frame_plan.h).
@@ -148,6 +151,7 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
           ++local.nan_samples;
           continue;
         }
+        if (aovs) (*aovs)[k].add_sample(first, s);
         const double lum = L.luminance();
         sums.r += L.r;
         sums.g += L.g;
@@ -165,13 +169,17 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
 std::vector<PixelSums> TileRenderer::render_passes(const Rect& rect,
                                                    const std::vector<std::pair<uint32_t, uint32_t>>& passes,
                                                    const PixelSums* base, const uint8_t* active, TileStats* stats,
-                                                   const std::atomic<bool>* cancel) const {
-  if (passes.size() == 1 && !base) return render(rect, passes[0].first, passes[0].second, active, stats, cancel);
+                                                   const std::atomic<bool>* cancel, std::vector<AovSums>* aovs) const {
+  if (passes.size() == 1 && !base) return render(rect, passes[0].first, passes[0].second, active, stats, cancel, aovs);
   std::vector<PixelSums> sums(size_t(rect.area()));
   if (base) std::copy_n(base, sums.size(), sums.begin());
+  if (aovs) aovs->assign(sums.size(), AovSums{});
+  std::vector<AovSums> pass_aovs;
   for (const auto& [s0, s1] : passes) {
-    const std::vector<PixelSums> pass = render(rect, s0, s1, active, stats, cancel);
+    const std::vector<PixelSums> pass = render(rect, s0, s1, active, stats, cancel, aovs ? &pass_aovs : nullptr);
     for (size_t i = 0; i < sums.size(); ++i) sums[i].add(pass[i]);  // Film::add_tile's order
+    if (aovs)
+      for (size_t i = 0; i < sums.size(); ++i) (*aovs)[i].add(pass_aovs[i]);
   }
   return sums;
 }

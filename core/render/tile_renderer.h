@@ -46,16 +46,19 @@ class TileRenderer {
 
   // Samples [s0, s1) of each pixel of `rect` whose `active` flag is set (all when active
   // is null; `active` is rect-sized, row-major). Returns rect-sized sums. If `cancel`
-  // becomes true the render stops between rows and the result must be discarded.
+  // becomes true the render stops between rows and the result must be discarded. With
+  // `aovs` (settings().aovs set), the same samples' AOV sums too, rect-sized (aov.h).
   std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active, TileStats* stats,
-                                const std::atomic<bool>* cancel = nullptr) const;
+                                const std::atomic<bool>* cancel = nullptr, std::vector<AovSums>* aovs = nullptr) const;
   // A run of passes (consecutive sample ranges, in pass order), each rendered on its own
   // and added in pass order to `base` (rect-sized; null: zero), as a film adds them: from
   // a tile's sums so far, the film's bits after those passes (FramePlan::take with more
-  // than one pass). One range and no base is render()'s result.
+  // than one pass). One range and no base is render()'s result. `aovs`: the passes' AOV
+  // sums together (no base: integer sums add in any grouping).
   std::vector<PixelSums> render_passes(const Rect& rect, const std::vector<std::pair<uint32_t, uint32_t>>& passes,
                                        const PixelSums* base, const uint8_t* active, TileStats* stats,
-                                       const std::atomic<bool>* cancel = nullptr) const;
+                                       const std::atomic<bool>* cancel = nullptr,
+                                       std::vector<AovSums>* aovs = nullptr) const;
 
   // Throws SettingsError when `settings` ask the scene for what it has not: an animation
   // (--animation) it does not have, an environment map (--env) that cannot be read beside
