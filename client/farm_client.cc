@@ -480,8 +480,6 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
   v1::SubmitJobRequest req;
   req.set_version(kProtocolVersion);
   RenderSettings settings = to_settings(r.flags);
-  if (settings.aovs)
-    throw FarmError("--aov: the farm does not render AOVs yet; `tessera render` writes them (docs/aov.md)");
   const std::vector<int> frames = sequence_frames(r.flags);
   for (const int f : frames) req.add_frames(f);
   const auto outputs = output_paths(r.flags);

@@ -55,6 +55,7 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   p.set_noise_target(s.noise_target);
   p.set_no_nee(!s.nee);
   p.set_no_mis(!s.mis);
+  p.set_aovs(s.aovs);
   return p;
 }
 
@@ -94,6 +95,7 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
   s.noise_target = p.noise_target();
   s.nee = !p.no_nee();
   s.mis = !p.no_mis();
+  s.aovs = p.aovs();
   try {
     if (!p.camera_path().empty())
       s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(p.camera_path()));
@@ -288,6 +290,65 @@ void decode_sums(const std::string& compressed, PixelSums* sums, size_t pixels) 
   for (const PixelSums* p = sums; p != sums + pixels; ++p)
     if (!std::isfinite(p->r) || !std::isfinite(p->g) || !std::isfinite(p->b) || !std::isfinite(p->lum2))
       throw WireError("sums: non-finite value");
+}
+
+namespace {
+constexpr Field kAovFields[] = {
+    {offsetof(AovSums, n), 4},          {offsetof(AovSums, hits), 4},        {offsetof(AovSums, albedo), 8},
+    {offsetof(AovSums, albedo) + 8, 8}, {offsetof(AovSums, albedo) + 16, 8}, {offsetof(AovSums, normal), 8},
+    {offsetof(AovSums, normal) + 8, 8}, {offsetof(AovSums, normal) + 16, 8}, {offsetof(AovSums, distance), 8},
+    {offsetof(AovSums, id), 4},         {offsetof(AovSums, id_sample), 4}};
+constexpr size_t aov_field_bytes() {
+  size_t n = 0;
+  for (const Field& f : kAovFields) n += f.bytes;
+  return n;
+}
+static_assert(aov_field_bytes() == kAovBytesPerPixel);
+}  // namespace
+
+std::string encode_aovs(const AovSums* sums, size_t n) {
+  Scratch z;
+  z->raw.resize(n * kAovBytesPerPixel);
+  uint8_t* plane = z->raw.data();
+  for (const Field& f : kAovFields) {
+    for (size_t i = 0; i < n; ++i) {
+      uint64_t v = 0;
+      std::memcpy(&v, reinterpret_cast<const char*>(sums + i) + f.offset, f.bytes);
+      for (size_t k = 0; k < f.bytes; ++k) plane[k * n + i] = uint8_t(v >> (8 * k));
+    }
+    plane += f.bytes * n;
+  }
+  z->packed.resize(ZSTD_compressBound(z->raw.size()));
+  const size_t size = ZSTD_compressCCtx(z->c, z->packed.data(), z->packed.size(), z->raw.data(), z->raw.size(), 1);
+  if (ZSTD_isError(size)) throw std::runtime_error(std::string("zstd: ") + ZSTD_getErrorName(size));
+  return std::string(reinterpret_cast<const char*>(z->packed.data()), size);
+}
+
+std::vector<AovSums> decode_aovs(const std::string& compressed, size_t pixels, uint32_t max_samples) {
+  const size_t want = pixels * kAovBytesPerPixel;
+  const unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
+  if (declared == ZSTD_CONTENTSIZE_ERROR) throw WireError("AOV sums: not zstd data");
+  if (declared != ZSTD_CONTENTSIZE_UNKNOWN && declared != want)
+    throw WireError("AOV sums: " + std::to_string(declared) + " bytes declared, " + std::to_string(want) + " expected");
+  Scratch z;
+  z->raw.resize(want);
+  const size_t got = ZSTD_decompressDCtx(z->d, z->raw.data(), z->raw.size(), compressed.data(), compressed.size());
+  if (ZSTD_isError(got)) throw WireError(std::string("AOV sums: ") + ZSTD_getErrorName(got));
+  if (got != want)
+    throw WireError("AOV sums: " + std::to_string(got) + " bytes, " + std::to_string(want) + " expected");
+  std::vector<AovSums> out(pixels);
+  const uint8_t* plane = z->raw.data();
+  for (const Field& f : kAovFields) {
+    for (size_t i = 0; i < pixels; ++i) {
+      uint64_t v = 0;
+      for (size_t k = 0; k < f.bytes; ++k) v |= uint64_t(plane[k * pixels + i]) << (8 * k);
+      std::memcpy(reinterpret_cast<char*>(&out[i]) + f.offset, &v, f.bytes);
+    }
+    plane += f.bytes * pixels;
+  }
+  for (const AovSums& a : out)
+    if (!a.plausible(max_samples)) throw WireError("AOV sums: a pixel's sums no render could give");
+  return out;
 }
 
 }  // namespace tessera

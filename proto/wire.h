@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "core/render/aov.h"
 #include "core/render/film.h"
 #include "core/render/settings.h"
 #include "tessera.grpc.pb.h"
@@ -65,5 +66,14 @@ inline std::string encode_sums(const std::vector<PixelSums>& sums) { return enco
 // Throws WireError unless the data decodes to exactly `pixels` finite pixels.
 void decode_sums(const std::string& compressed, PixelSums* out, size_t pixels);
 std::vector<PixelSums> decode_sums(const std::string& compressed, size_t pixels);
+
+// AOV sums (core/render/aov.h) <-> zstd-compressed little-endian bytes, kAovBytesPerPixel
+// each, field by field in byte planes as encode_sums does.
+constexpr size_t kAovBytesPerPixel = 72;
+std::string encode_aovs(const AovSums* sums, size_t pixels);
+inline std::string encode_aovs(const std::vector<AovSums>& sums) { return encode_aovs(sums.data(), sums.size()); }
+// Throws WireError unless the data decodes to exactly `pixels` pixels, each plausible()
+// for at most `max_samples` samples.
+std::vector<AovSums> decode_aovs(const std::string& compressed, size_t pixels, uint32_t max_samples);
 
 }  // namespace tessera

@@ -34,7 +34,7 @@ Admission admit(const v1::SubmitJobRequest& req) {
       if (!seen.insert(f).second) throw refuse("frame " + std::to_string(f) + " given twice");
     }
   }
-  a.pixels = a.settings.effective_window().area();
+  a.pixels = live_pixels_of(a.settings);
   a.samples = uint64_t(a.pixels) * uint64_t(a.settings.spp) * std::max<uint64_t>(1, a.frames.size());
   a.scene_bytes = bundle_bytes(req.files());  // an upload's: SceneUploads::bytes
   return a;

@@ -174,9 +174,11 @@ struct CheckpointEncoder::Hash {
   ~Hash() { XXH64_freeState(st); }
 };
 
-CheckpointEncoder::CheckpointEncoder(const FramePlan& plan, double elapsed,
-                                     std::function<void(const std::string&)> out)
-    : out_(std::move(out)), hash_(std::make_unique<Hash>()), adaptive_(plan.settings().adaptive) {
+CheckpointEncoder::CheckpointEncoder(const FramePlan& plan, double elapsed, std::function<void(const std::string&)> out)
+    : out_(std::move(out)),
+      hash_(std::make_unique<Hash>()),
+      adaptive_(plan.settings().adaptive),
+      aovs_(plan.settings().aovs != 0) {
   Writer w;
   w.out.append(kMagic, 4);
   w.put(kVersion3);
@@ -215,6 +217,7 @@ void CheckpointEncoder::band(const BandCopy& b) {
     w.bytes(mask);
   }
   w.bytes(encode_sums(b.pixels.data(), b.pixels.size()));
+  if (aovs_) w.bytes(encode_aovs(b.aovs));  // a job with AOVs: their sums follow the film's
   emit(std::move(w.out));
 }
 
@@ -315,6 +318,15 @@ double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with
       } catch (const WireError& e) {
         throw std::runtime_error(std::string("checkpoint: film: ") + e.what());
       }
+    band.aovs.clear();
+    if (plan.settings().aovs) {
+      const std::string aovs = in.bytes(uint64_t(pixels) * kAovBytesPerPixel * 2 + 4096);
+      if (with_film) try {
+          band.aovs = decode_aovs(aovs, pixels, RenderSettings::kMaxSpp);
+        } catch (const WireError& e) {
+          throw std::runtime_error(std::string("checkpoint: AOVs: ") + e.what());
+        }
+    }
     try {
       plan.restore_band(band);
     } catch (const std::invalid_argument& e) {

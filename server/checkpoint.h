@@ -35,6 +35,7 @@ class CheckpointEncoder {
   struct Hash;
   std::unique_ptr<Hash> hash_;
   bool adaptive_;
+  bool aovs_;  // the job has AOVs: each band carries their sums after the film's
 };
 
 // The whole file for a plan, band by band (tests, and small plans).

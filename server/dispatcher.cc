@@ -83,7 +83,7 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
     Sequence& sq = *src.sequence;
     while (room() && SequenceScheduler::may_start(sq)) {
       if (live_pixels < 0) live_pixels = p_.jobs.load().live_pixels;
-      const int64_t pixels = sq.settings.effective_window().area();
+      const int64_t pixels = live_pixels_of(sq.settings);
       if (sq.live_frames > 0 && live_pixels + pixels > max_live_pixels_) break;
       Job* job = p_.sequences.start_next(sq, now, fx);
       if (!job) break;

@@ -24,17 +24,18 @@ std::string DiskImageSink::path(const std::string& job, const char* file) const 
 }
 
 void ImageSink::write(const std::string& job, const Film& film, const ImageMetadata& meta) {
-  std::unique_ptr<Writer> w = begin(job, film.width(), film.height(), meta);
-  if (film.height() > 0) w->write_rows(film.pixels().data(), film.height());
+  std::unique_ptr<Writer> w = begin(job, film.width(), film.height(), meta, 0);
+  if (film.height() > 0) w->write_rows(film.pixels().data(), film.height(), nullptr);
   w->commit();
 }
 
 namespace {
 class DiskWriter : public ImageSink::Writer {
  public:
-  DiskWriter(std::string path, int width, int height, const ImageMetadata& meta, std::function<void()> done)
-      : exr_(std::move(path), width, height, meta), done_(std::move(done)) {}
-  void write_rows(const PixelSums* sums, int rows) override { exr_.write_rows(sums, rows); }
+  DiskWriter(std::string path, int width, int height, const ImageMetadata& meta, uint32_t aovs,
+             std::function<void()> done)
+      : exr_(std::move(path), width, height, meta, true, aovs), done_(std::move(done)) {}
+  void write_rows(const PixelSums* sums, int rows, const AovSums* aovs) override { exr_.write_rows(sums, rows, aovs); }
   void commit() override {
     exr_.commit();
     done_();
@@ -49,7 +50,7 @@ class FilmWriter : public ImageSink::Writer {
  public:
   FilmWriter(int width, int height, std::function<void(const Film&)> done)
       : film_(Rect{0, 0, width, height}), done_(std::move(done)) {}
-  void write_rows(const PixelSums* sums, int rows) override {
+  void write_rows(const PixelSums* sums, int rows, const AovSums*) override {  // (the film alone: tests)
     if (rows <= 0) return;
     std::copy_n(sums, size_t(rows) * size_t(film_.width()), &film_.at(0, next_));
     next_ += rows;
@@ -64,14 +65,14 @@ class FilmWriter : public ImageSink::Writer {
 }  // namespace
 
 std::unique_ptr<ImageSink::Writer> DiskImageSink::begin(const std::string& job, int width, int height,
-                                                        const ImageMetadata& meta) {
+                                                        const ImageMetadata& meta, uint32_t aovs) {
   fs::create_directories(fs::path(dir_) / job);
-  return std::make_unique<DiskWriter>(path(job, "image.exr"), width, height, meta,
+  return std::make_unique<DiskWriter>(path(job, "image.exr"), width, height, meta, aovs,
                                       [this, job] { forget_preview(job); });
 }
 
 std::unique_ptr<ImageSink::Writer> MemoryImageSink::begin(const std::string& job, int width, int height,
-                                                          const ImageMetadata& meta) {
+                                                          const ImageMetadata& meta, uint32_t) {
   return std::make_unique<FilmWriter>(width, height, [this, job, meta](const Film& f) { write(job, f, meta); });
 }
 

@@ -20,13 +20,15 @@ class ImageSink {
   class Writer {
    public:
     virtual ~Writer() = default;
-    virtual void write_rows(const PixelSums* sums, int rows) = 0;
+    // `aovs`: the rows' AOV sums, for an image begun with AOV bits (else null).
+    virtual void write_rows(const PixelSums* sums, int rows, const AovSums* aovs) = 0;
     virtual void commit() = 0;
   };
   virtual ~ImageSink() = default;
   // Slow (encoding, disk): the coordinator calls it, and the writer, without holding its
   // lock. Throws std::runtime_error on failure.
-  virtual std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta) = 0;
+  virtual std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta,
+                                        uint32_t aovs) = 0;
   // The whole film at once.
   void write(const std::string& job, const Film& film, const ImageMetadata& meta);
   // The last image written, to stream: read from one open file (a newer write replaces the
@@ -63,7 +65,8 @@ class ImageSink {
 class DiskImageSink : public ImageSink {
  public:
   explicit DiskImageSink(std::string dir) : dir_(std::move(dir)) {}
-  std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta) override;
+  std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta,
+                                uint32_t aovs) override;
   std::string exr(const std::string& job) const override;
   std::string png(const std::string& job) const override;
   std::unique_ptr<Reader> open(const std::string& job) const override;
@@ -88,7 +91,8 @@ class DiskImageSink : public ImageSink {
 class MemoryImageSink : public ImageSink {
  public:
   // Collects the rows; commit() hands the film to write(film).
-  std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta) override;
+  std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta,
+                                uint32_t aovs) override;
   // Keeps the film (tests override it to fail).
   virtual void write(const std::string& job, const Film& film, const ImageMetadata& meta);
   std::string exr(const std::string&) const override { return {}; }

@@ -184,7 +184,7 @@ Load JobTable::load(const std::string& owner) const {
     if (!j->live()) continue;
     const uint64_t total = j->plan.samples_total();
     const uint64_t left = total - std::min(total, j->plan.samples_merged());
-    l.live_pixels += j->plan.film().window().area();
+    l.live_pixels += live_pixels_of(j->plan.settings());
     l.tasks_ready += j->plan.ready();
     l.samples_remaining += left;
     if (j->meta.owner != owner) continue;

@@ -15,8 +15,12 @@ Referee local_referee(const SceneStore& scenes) {
     TileStats stats;
     const RenderSettings settings = from_proto(task.settings());
     const std::vector<PixelSums> base = task_base(task, rect);
-    return TileRenderer(scene, settings)
-        .render_passes(rect, task_passes(task, settings), base.empty() ? nullptr : base.data(), mask, &stats);
+    std::vector<AovSums> aovs;
+    std::vector<PixelSums> sums =
+        TileRenderer(scene, settings)
+            .render_passes(rect, task_passes(task, settings), base.empty() ? nullptr : base.data(), mask, &stats,
+                           nullptr, settings.aovs ? &aovs : nullptr);
+    return RefereeRender(std::move(sums), std::move(aovs));
   };
 }
 

@@ -39,16 +39,26 @@ ResultIntake::Batch ResultIntake::screen(const std::vector<const v1::TaskResult*
       continue;
     }
     const FramePlan& plan = p_.jobs.job(lease->job).plan;
-    b.incoming.push_back(
-        {i, size_t(plan.tiles()[lease->tile].area()), plan.run_samples(lease->pass, lease->pass_count), std::nullopt});
+    b.incoming.push_back({i,
+                          size_t(plan.tiles()[lease->tile].area()),
+                          plan.run_samples(lease->pass, lease->pass_count),
+                          plan.settings().aovs != 0,
+                          std::nullopt,
+                          {}});
   }
   return b;
 }
 
 void ResultIntake::decode(Batch& b) {
   for (Incoming& in : b.incoming) try {
-      in.sums = FramePlan::check(result_sums(*b.results[in.index], in.pixels), in.pass_len);
+      const v1::TaskResult& r = *b.results[in.index];
+      if (in.aovs_wanted)
+        in.aovs = decode_aovs(r.aovs_zstd(), in.pixels, in.pass_len);
+      else if (!r.aovs_zstd().empty())
+        throw WireError("AOV sums for a job without AOVs");
+      in.sums = FramePlan::check(result_sums(r, in.pixels), in.pass_len);
     } catch (const WireError&) {  // counted as rejected by merge()
+      in.sums.reset();
     }
 }
 
@@ -69,6 +79,7 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
       ++p_.counters.results_rejected;
       continue;
     }
+    if (in.aovs_wanted) job.plan.add_aovs(lease->tile, in.aovs);  // fits: decoded for this tile's size
     p_.counters.merge_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     p_.counters.samples_merged += added;
     ++p_.counters.results_merged;
@@ -80,7 +91,8 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
     job.merged_by[result.worker_id()].push_back(lease->tile);
     if (!job.sequence.empty()) ++p_.jobs.find_sequence(job.sequence)->changes;
     if (lease->task)  // picked for verification: another worker renders it again
-      p_.verifier.issue(job, *lease, result.worker_id(), sums_digest(in.sums->sums()), now);
+      p_.verifier.issue(job, *lease, result.worker_id(),
+                        sums_digest(in.sums->sums(), in.aovs_wanted ? &in.aovs : nullptr), now);
     p_.counters.result_bytes += result.sums_zstd().size();
     p_.counters.task_seconds.observe(result.render_seconds());
     p_.workers.record_result(result.worker_id(), result.samples(), result.sums_zstd().size(), result.render_seconds(),

@@ -36,7 +36,9 @@ class ResultIntake {
     size_t index = 0;  // in the batch
     size_t pixels = 0;
     uint32_t pass_len = 0;
+    bool aovs_wanted = false;         // the job has AOVs (settings.aovs)
     std::optional<CheckedSums> sums;  // decoded and plausible
+    std::vector<AovSums> aovs;        // likewise, when wanted
   };
   struct Batch {
     std::vector<const v1::TaskResult*> results;

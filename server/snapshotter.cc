@@ -137,7 +137,7 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
   std::unique_ptr<CheckpointFile> checkpoint;
   std::unique_ptr<CheckpointEncoder> encoder;
   if (plan.image) try {
-      image = sink_.begin(job.id(), w.w, w.h, plan.meta);
+      image = sink_.begin(job.id(), w.w, w.h, plan.meta, job.plan.settings().aovs);
     } catch (const std::exception& e) {
       failed("image", e, &out.image, &out.image_why);
     }
@@ -153,7 +153,7 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
   for (uint32_t b = 0; b < job.plan.bands() && (image || checkpoint); ++b) {
     if (!copy_band(b, &band)) return SnapshotOutcome{};  // the film is gone: nothing to write
     if (image) try {
-        image->write_rows(band.pixels.data(), band.rows);
+        image->write_rows(band.pixels.data(), band.rows, band.aovs.empty() ? nullptr : band.aovs.data());
       } catch (const std::exception& e) {
         image.reset();
         failed("image", e, &out.image, &out.image_why);

@@ -10,13 +10,17 @@
 
 namespace tessera {
 
-uint64_t sums_digest(const std::vector<PixelSums>& sums) {
+uint64_t sums_digest(const std::vector<PixelSums>& sums, const std::vector<AovSums>* aovs) {
   XXH3_state_t st;
   XXH3_64bits_reset(&st);
   for (const PixelSums& p : sums) {
     const double v[4] = {p.r, p.g, p.b, p.lum2};
     XXH3_64bits_update(&st, v, sizeof v);
     XXH3_64bits_update(&st, &p.n, sizeof p.n);
+  }
+  if (aovs) {
+    static_assert(sizeof(AovSums) == 72, "AovSums has no padding: its bytes are its value");
+    XXH3_64bits_update(&st, aovs->data(), aovs->size() * sizeof(AovSums));
   }
   return XXH3_64bits_digest(&st);
 }
@@ -63,7 +67,10 @@ std::optional<Check> Verifier::pending(uint64_t check, uint64_t task_id) const {
 
 std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check) {
   try {
-    return sums_digest(result_sums(result, size_t(from_proto(check.task->tile()).area())));
+    const size_t pixels = size_t(from_proto(check.task->tile()).area());
+    if (!check.task->settings().aovs()) return sums_digest(result_sums(result, pixels));
+    const std::vector<AovSums> aovs = decode_aovs(result.aovs_zstd(), pixels, RenderSettings::kMaxSpp);
+    return sums_digest(result_sums(result, pixels), &aovs);
   } catch (const WireError&) {
     return std::nullopt;
   }
@@ -76,7 +83,8 @@ Verifier::Verdict Verifier::judge(const Check& c, uint64_t digest, uint64_t chec
   // Two workers differ: this process renders the task too, and whoever differs from it is
   // quarantined (both, if all three differ). Rare, so done here, outside the lock.
   try {
-    const uint64_t ours = sums_digest(referee(*c.task));
+    const RefereeRender r = referee(*c.task);
+    const uint64_t ours = sums_digest(r.sums, r.aovs.empty() ? nullptr : &r.aovs);
     if (ours != c.digest) v.liars.push_back(c.first_worker);
     if (ours != digest) v.liars.push_back(checker);
     v.why = "job " + c.job + " tile " + std::to_string(c.tile) + " pass " + std::to_string(c.pass) +

@@ -18,11 +18,19 @@
 namespace tessera {
 
 // Renders a task as this process would: the referee when two workers differ.
-using Referee = std::function<std::vector<PixelSums>(const v1::Task&)>;
+// A job with AOVs: their sums too (empty otherwise).
+struct RefereeRender {
+  std::vector<PixelSums> sums;
+  std::vector<AovSums> aovs;
+  RefereeRender(std::vector<PixelSums> s, std::vector<AovSums> a = {})  // NOLINT: a tile's sums are a render
+      : sums(std::move(s)), aovs(std::move(a)) {}
+};
+using Referee = std::function<RefereeRender(const v1::Task&)>;
 
 // Of the sums' values (not their padding or wire encoding, which may differ between two
 // honest workers): equal digests, equal bits.
-uint64_t sums_digest(const std::vector<PixelSums>& sums);
+// The digest a check compares: a result's sums, and its AOV sums when the job has them.
+uint64_t sums_digest(const std::vector<PixelSums>& sums, const std::vector<AovSums>* aovs = nullptr);
 // The digest of a check's result (decoded as for merging); nothing when it is malformed.
 std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check);
 

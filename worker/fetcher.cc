@@ -71,6 +71,7 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
   }
   if (!h->task.active().empty()) h->mask = reinterpret_cast<const uint8_t*>(h->task.active().data());
   h->sums.resize(size_t(h->rect.area()));
+  if (h->prepared->renderer->settings().aovs) h->aovs.resize(size_t(h->rect.area()));
   queue_.add(std::move(h));
 }
 

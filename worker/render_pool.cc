@@ -14,10 +14,11 @@ void RenderPool::render_loop() {
     const double t0 = now_seconds();
     TileStats stats;
     const Rect rect{h.rect.x, h.rect.y + r->row, h.rect.w, 1};
+    std::vector<AovSums> aovs;
     const std::vector<PixelSums> sums = h.prepared->renderer->render_passes(
         rect, h.passes, h.base.empty() ? nullptr : h.base.data() + size_t(r->row) * h.rect.w,
-        h.mask ? h.mask + size_t(r->row) * h.rect.w : nullptr, &stats, &h.cancel);
-    queue_.row_done(*r, sums, stats, t0, now_seconds());
+        h.mask ? h.mask + size_t(r->row) * h.rect.w : nullptr, &stats, &h.cancel, h.aovs.empty() ? nullptr : &aovs);
+    queue_.row_done(*r, sums, stats, t0, now_seconds(), h.aovs.empty() ? nullptr : &aovs);
   }
 }
 

@@ -38,6 +38,7 @@ v1::ResultBatch Sender::encode(const TaskQueue::Batch& batch, double now) const 
     } else {
       r->set_sums_zstd(encode_sums(h->sums));
     }
+    if (!h->aovs.empty()) r->set_aovs_zstd(encode_aovs(h->aovs));
     r->set_samples(h->stats.samples);
     r->set_rays(h->stats.rays.rays + h->stats.rays.shadow_rays);
     r->set_nan_samples(h->stats.nan_samples);

@@ -103,8 +103,8 @@ std::optional<TaskQueue::Row> TaskQueue::next_row() {
   return r;
 }
 
-void TaskQueue::row_done(const Row& r, const std::vector<PixelSums>& sums, const TileStats& stats, double t0,
-                         double t1) {
+void TaskQueue::row_done(const Row& r, const std::vector<PixelSums>& sums, const TileStats& stats, double t0, double t1,
+                         const std::vector<AovSums>* aovs) {
   std::lock_guard<std::mutex> lock(mu_);
   Held& h = *r.task;
   busy_thread_seconds_ += t1 - t0;
@@ -112,6 +112,7 @@ void TaskQueue::row_done(const Row& r, const std::vector<PixelSums>& sums, const
   h.first_row = h.rows_done == 0 ? t0 : std::min(h.first_row, t0);
   h.last_row = std::max(h.last_row, t1);
   std::copy(sums.begin(), sums.end(), h.sums.begin() + ptrdiff_t(r.row) * h.rect.w);
+  if (aovs && !h.aovs.empty()) std::copy(aovs->begin(), aovs->end(), h.aovs.begin() + ptrdiff_t(r.row) * h.rect.w);
   h.stats.add(stats);
   if (++h.rows_done == h.rect.h && !h.cancel) {
     if (h.busy > 0) {

@@ -35,6 +35,7 @@ struct Held {
   std::vector<std::pair<uint32_t, uint32_t>> passes;  // its sample ranges (task_passes())
   std::vector<PixelSums> base;                        // a run's sums so far (task_base()); or empty
   std::vector<PixelSums> sums;                        // rect-sized
+  std::vector<AovSums> aovs;                          // rect-sized for a job with AOVs; else empty
   TileStats stats;
   std::atomic<bool> cancel{false};
   double first_row = 0, last_row = 0;  // steady seconds
@@ -71,7 +72,8 @@ class TaskQueue {
   std::optional<Row> next_row();
   // A row's sums, rendered from t0 to t1 (steady seconds). After a task's last row, the
   // task measures the speed and goes to the sender (unless it was cancelled).
-  void row_done(const Row& row, const std::vector<PixelSums>& sums, const TileStats& stats, double t0, double t1);
+  void row_done(const Row& row, const std::vector<PixelSums>& sums, const TileStats& stats, double t0, double t1,
+                const std::vector<AovSums>* aovs = nullptr);
 
   // The sender's side.
   struct Batch {

@@ -80,6 +80,24 @@ bool AovSums::operator==(const AovSums& o) const {
          std::equal(normal, normal + 3, o.normal) && distance == o.distance && id == o.id && id_sample == o.id_sample;
 }
 
+bool AovSums::plausible(uint32_t max_samples) const {
+  if (n > max_samples || hits > n) return false;
+  const double h = double(hits);
+  for (int c = 0; c < 3; ++c) {
+    if (albedo[c] < 0 || double(albedo[c]) > h * kUnit) return false;
+    if (double(normal[c]) < -h * kUnit || double(normal[c]) > h * kUnit) return false;
+  }
+  if (distance < 0 || double(distance) > h * kMaxDistance * kDistanceUnit) return false;
+  if ((id == kNoId) != (id_sample == kNoId) || (hits == 0 && id != kNoId)) return false;
+  return true;
+}
+
+void AovFilm::clear(const Rect& rect) {
+  for (int y = 0; y < rect.h; ++y)
+    std::fill_n(pixels_.begin() + ptrdiff_t(size_t(rect.y - window_.y + y) * window_.w + size_t(rect.x - window_.x)),
+                rect.w, AovSums{});
+}
+
 void AovFilm::add_tile(const Rect& rect, const std::vector<AovSums>& sums) {
   for (int y = 0; y < rect.h; ++y)
     for (int x = 0; x < rect.w; ++x)

@@ -60,6 +60,10 @@ struct AovSums {
   uint32_t id = kNoId, id_sample = kNoId;
 
   void add_sample(const FirstHit& h, uint32_t sample);
+  // Whether these sums could come from rendering at most `max_samples` samples: hits <= n
+  // <= max_samples, every sum within what that many hits can reach, an id with the sample
+  // it came from. What a worker sends is checked with it before it is added (no overflow).
+  bool plausible(uint32_t max_samples) const;
   void add(const AovSums& o);
   bool operator==(const AovSums& o) const;
 };
@@ -75,6 +79,8 @@ class AovFilm {
   const std::vector<AovSums>& pixels() const { return pixels_; }
   // Adds a tile's sums (rect in image coordinates, sums row-major over the rect).
   void add_tile(const Rect& rect, const std::vector<AovSums>& sums);
+  void clear(const Rect& rect);  // back to zero (a tile rendered again)
+  AovSums* row(int y) { return pixels_.data() + size_t(y) * window_.w; }
 
  private:
   Rect window_{};

@@ -49,7 +49,10 @@ std::vector<Rect> frame_tiles(const RenderSettings& settings) {
 }
 
 FramePlan::FramePlan(const RenderSettings& settings)
-    : settings_(settings), film_(settings.effective_window()), passes_(settings.passes()) {
+    : settings_(settings),
+      film_(settings.effective_window()),
+      aovs_(settings.aovs ? AovFilm(settings.effective_window()) : AovFilm()),
+      passes_(settings.passes()) {
   const Rect w = film_.window();
   const int ts = std::max(1, settings.tile_size);
   tiles_ = frame_tiles(settings);
@@ -244,6 +247,7 @@ void FramePlan::reset_tile(uint32_t tile) {
       px = PixelSums{};
       if (settings_.adaptive) active_[size_t(r.y - w.y + y) * w.w + (r.x - w.x + x)] = 1;
     }
+  if (!aovs_.empty()) aovs_.clear(r);
   t = TileProgress{};
   ++unfinished_at_[0];
   ready_.emplace(0, tile);
@@ -269,6 +273,16 @@ void FramePlan::copy_band(uint32_t band, BandCopy* out) const {
     out->active.clear();
   out->samples = 0;
   for (const PixelSums& p : out->pixels) out->samples += p.n;
+  if (!aovs_.empty())
+    out->aovs.assign(aovs_.pixels().begin() + ptrdiff_t(at), aovs_.pixels().begin() + ptrdiff_t(at + n));
+  else
+    out->aovs.clear();
+}
+
+void FramePlan::add_aovs(uint32_t tile, const std::vector<AovSums>& sums) {
+  if (aovs_.empty() || tile >= tiles_.size() || sums.size() != size_t(tiles_[tile].area()))
+    throw std::invalid_argument("frame plan: AOV sums that do not fit tile " + std::to_string(tile));
+  aovs_.add_tile(tiles_[tile], sums);
 }
 
 void FramePlan::restore_band(const BandCopy& b) {
@@ -279,7 +293,8 @@ void FramePlan::restore_band(const BandCopy& b) {
   const size_t n = size_t(first.h) * size_t(w.w);
   const bool with_film = !b.pixels.empty();
   if (b.y0 != first.y - w.y || b.rows != first.h || b.width != w.w || (with_film && b.pixels.size() != n) ||
-      b.progress.size() != tiles_per_band_ || b.active.size() != (settings_.adaptive && with_film ? n : 0))
+      b.progress.size() != tiles_per_band_ || b.active.size() != (settings_.adaptive && with_film ? n : 0) ||
+      b.aovs.size() != (settings_.aovs && with_film ? n : 0))
     bad("band " + std::to_string(b.band) + " does not fit the frame");
   for (const TileProgress& t : b.progress)
     if (t.passes_done > passes_.size() || (!t.finished && t.passes_done == passes_.size() && !passes_.empty()))
@@ -288,10 +303,15 @@ void FramePlan::restore_band(const BandCopy& b) {
   restored_samples_ += b.samples;
   if (!with_film) {
     film_ = Film(Rect{});
+    aovs_ = AovFilm();
     return;
   }
   if (!(film_.window() == w)) film_ = Film(w);
   std::copy(b.pixels.begin(), b.pixels.end(), &film_.at(0, b.y0));
+  if (settings_.aovs) {
+    if (!(aovs_.window() == w) || aovs_.empty()) aovs_ = AovFilm(w);
+    std::copy(b.aovs.begin(), b.aovs.end(), aovs_.row(b.y0));
+  }
   if (settings_.adaptive)
     std::copy(b.active.begin(), b.active.end(), active_.begin() + ptrdiff_t(size_t(b.y0) * size_t(w.w)));
 }

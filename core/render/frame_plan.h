@@ -24,6 +24,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/render/aov.h"
 #include "core/render/film.h"
 #include "core/render/settings.h"
 
@@ -68,6 +69,7 @@ struct BandCopy {
   std::vector<TileProgress> progress;  // the band's tiles, left to right
   std::vector<uint8_t> active;         // rows x width; empty unless adaptive sampling
   uint64_t samples = 0;                // the pixels' samples (n) together
+  std::vector<AovSums> aovs;           // rows x width; empty unless the settings ask for AOVs
 };
 
 // A task's sums found fit for a pass of pass_len samples a pixel (FramePlan::check): the
@@ -140,6 +142,11 @@ class FramePlan {
   bool done() const { return tiles_done_ == tile_count_; }
   size_t ready() const { return ready_.size(); }  // tasks take() could hand out now
   const Film& film() const { return film_; }
+  // AOVs (settings().aovs): their sums, beside the film; empty without. A task's AOV sums
+  // are added once its result is merged (add_aovs after merge() said kMerged): integers,
+  // so any grouping of passes gives the same bits.
+  const AovFilm& aovs() const { return aovs_; }
+  void add_aovs(uint32_t tile, const std::vector<AovSums>& sums);
   const RenderSettings& settings() const { return settings_; }
   const std::vector<Rect>& tiles() const { return tiles_; }
   const std::vector<std::pair<uint32_t, uint32_t>>& passes() const { return passes_; }
@@ -203,6 +210,7 @@ class FramePlan {
 
   RenderSettings settings_;
   Film film_;
+  AovFilm aovs_;
   std::vector<Rect> tiles_;
   std::vector<std::pair<uint32_t, uint32_t>> passes_;
   std::vector<TileProgress> progress_;

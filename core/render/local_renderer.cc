@@ -16,7 +16,6 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
   std::condition_variable cv;
   TileStats stats;
   const bool with_aovs = renderer.settings().aovs != 0;
-  AovFilm aovs = with_aovs ? AovFilm(plan.film().window()) : AovFilm();  // guarded by mu
   int running = pool.size();
   const auto start = std::chrono::steady_clock::now();
   const auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
@@ -41,7 +40,7 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
         // beats waiting forever for a tile that never advances.
         if (plan.merge(task->tile, task->pass, sums) != FramePlan::Merge::kMerged)
           throw std::logic_error("tessera render: the frame plan refused a tile's own sums");
-        if (with_aovs) aovs.add_tile(task->rect, tile_aovs);  // integers: any order gives the same bits
+        if (with_aovs) plan.add_aovs(task->tile, tile_aovs);  // integers: any order gives the same bits
         cv.notify_all();
       }
       stats.add(mine);
@@ -69,7 +68,7 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
     if (progress) report(lock);
   }
   pool.wait();
-  return RenderResult{plan.film(), std::move(aovs), stats, elapsed()};
+  return RenderResult{plan.film(), plan.aovs(), stats, elapsed()};
 }
 
 }  // namespace tessera

@@ -2,7 +2,8 @@
 # CTest entry (Cli.AovLayersReadByExrheaderAndBlender): `tessera render --aov all` writes the
 # AOV channels under the names docs/aov.md gives; OpenEXR's exrheader lists them, and
 # Debian's Blender reads the file as a multilayer image whose compositor Image node offers
-# each layer. `tessera submit --aov` is refused before anything is sent, saying why.
+# each layer. An unknown AOV is a usage error (exit 2) naming it. (Through the farm:
+# tests/integration/farm_aov_test.cc.)
 # Usage: aov_layers.sh BUILD_DIR
 set -u
 BIN=$(cd "$1/bin" && pwd)
@@ -31,9 +32,9 @@ print('OUTPUTS', ' '.join(o.name + ':' + o.type for o in n.outputs))" 2>&1 | gre
 else
   echo "FAIL: blender is not installed (deploy/install-deps.sh installs it)"; fail=1
 fi
-msg=$(TESSERA_COORDINATOR=127.0.0.1:1 "$BIN/tessera" submit "$SRC/scenes/cornell-spheres.gltf" --aov albedo 2>&1)
+msg=$("$BIN/tessera" render "$SRC/scenes/cornell-spheres.gltf" --aov albedo,zdepth -f "$T/b.exr" 2>&1)
 rc=$?
-if [[ $rc -ne 0 && $msg == *"farm does not render AOVs yet"* ]]; then echo "ok    submit --aov is refused: $msg"
-else echo "FAIL: submit --aov: exit $rc: $msg"; fail=1; fi
+if [[ $rc -eq 2 && $msg == *"'zdepth' is not an AOV"* ]]; then echo "ok    an unknown AOV: exit 2, $msg"
+else echo "FAIL: --aov zdepth: exit $rc: $msg"; fail=1; fi
 [[ $fail -eq 0 ]] && echo OK || echo FAILED
 exit $fail

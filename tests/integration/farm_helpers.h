@@ -29,14 +29,17 @@ inline std::string slurp(const std::string& path) {
   return ss.str();
 }
 
-// Bitwise equality of every channel.
+// Bitwise equality of every channel (the image's five and any AOV layers), and the same
+// channels in both.
 inline void expect_same_pixels(const std::string& a_path, const std::string& b_path) {
   const ExrImage a = read_exr(a_path), b = read_exr(b_path);
   ASSERT_EQ(a.width, b.width);
   ASSERT_EQ(a.height, b.height);
-  for (const char* ch : {"R", "G", "B", "spp", "variance"}) {
-    ASSERT_TRUE(a.channels.count(ch) && b.channels.count(ch)) << ch;
-    const auto &x = a.channels.at(ch), &y = b.channels.at(ch);
+  for (const char* ch : {"R", "G", "B", "spp", "variance"}) ASSERT_TRUE(a.channels.count(ch)) << ch;
+  ASSERT_EQ(a.channels.size(), b.channels.size());
+  for (const auto& [ch, x] : a.channels) {
+    ASSERT_TRUE(b.channels.count(ch)) << ch;
+    const auto& y = b.channels.at(ch);
     EXPECT_EQ(0, std::memcmp(x.data(), y.data(), x.size() * sizeof(float))) << "channel " << ch << " differs";
   }
 }

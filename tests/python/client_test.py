@@ -112,6 +112,15 @@ class Plain(unittest.TestCase):
         with self.assertRaisesRegex(tessera.TesseraError, "scene data.bin"):
             self.farm.submit(self.out("ext/scene.gltf"), **SMALL)
 
+    def test_aov_layers_through_the_farm_are_the_local_ones(self):
+        job = self.farm.submit(SPHERES_GLTF, aov=["albedo", "normal", "depth"], **SMALL)
+        self.assertEqual(job.wait().settings["aovs"], 2 | 4 | 8)
+        job.fetch(self.out("aov.exr"))
+        render_local(BIN, SPHERES_GLTF, self.out("aov-local.exr"), *SMALL_FLAGS, "--aov", "albedo,normal,depth")
+        self.assertTrue(identical(BIN, self.out("aov.exr"), self.out("aov-local.exr")))
+        with self.assertRaisesRegex(ValueError, "'zdepth' is not an AOV"):
+            self.farm.submit(SPHERES, aov="zdepth")
+
     def test_jobs_prefixes_events_and_control(self):
         job = self.farm.submit(SPHERES, samples=4096, resolution=(64, 48), priority=2, name="long")
         self.assertEqual(self.farm.job(job.id[:7]).id, job.id)

@@ -85,6 +85,27 @@ TEST_F(CoordinatorTest, LiveJobsPerClientAndLivePixelsAreBounded) {
   EXPECT_EQ(c->list().size(), 4u);  // nothing was kept of the refused ones
 }
 
+// A frame with AOVs holds their sums beside its film (72 bytes a pixel more than the 40):
+// it weighs 2.8 frames against --max-live-pixels.
+TEST_F(CoordinatorTest, AFrameWithAovsWeighsItsAovSumsAgainstTheLivePixels) {
+  RenderSettings s = job_settings();
+  const int64_t area = s.effective_window().area();
+  EXPECT_EQ(live_pixels_of(s), area);
+  s.aovs = kAovAll;
+  EXPECT_EQ(live_pixels_of(s), area + (area * 72 + 39) / 40);
+  CoordinatorOptions o = options();
+  o.max_live_pixels = 2 * area;  // two plain frames, but not one with AOVs
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  try {
+    c->submit(request(s), "alice");
+    ADD_FAILURE() << "a frame with AOVs past the live pixel limit";
+  } catch (const RequestError& e) {
+    EXPECT_NE(std::string(e.what()).find("--max-live-pixels"), std::string::npos) << e.what();
+  }
+  s.aovs = 0;
+  c->submit(request(s), "alice");
+}
+
 TEST_F(CoordinatorTest, SceneBytesAndQueuedSamplesPerClientAreBounded) {
   const v1::SubmitJobRequest one = request(job_settings());
   uint64_t bytes = 0;

@@ -252,3 +252,35 @@ TEST(Settings, EachSettingOutOfRangeIsRefusedByItsFlag) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// AOV sums (issue 26) cross the wire exactly, and sums no render could give are refused
+// before anything adds them.
+TEST(WireAovs, AovSumsRoundTripAndImplausibleOnesAreRefused) {
+  std::vector<AovSums> sums(37);
+  for (size_t i = 0; i < sums.size(); ++i) {
+    FirstHit h;
+    h.hit = i % 3 != 0;
+    h.distance = 1.5f * float(i);
+    h.normal = Vec3(0.0f, -0.6f, 0.8f);
+    h.albedo = Rgb(0.25f, 0.5f, 1.0f);
+    h.material = uint32_t(i % 5);
+    for (uint32_t s = 0; s < 4; ++s) sums[i].add_sample(h, 7 + s);
+  }
+  const std::vector<AovSums> back = decode_aovs(encode_aovs(sums), sums.size(), 4);
+  for (size_t i = 0; i < sums.size(); ++i) EXPECT_TRUE(back[i] == sums[i]) << i;
+  EXPECT_THROW(decode_aovs(encode_aovs(sums), sums.size(), 3), WireError);      // more samples than the task has
+  EXPECT_THROW(decode_aovs(encode_aovs(sums), sums.size() + 1, 4), WireError);  // another tile's size
+  std::vector<AovSums> bad = sums;
+  bad[1].albedo[0] = int64_t(1) << 62;  // (would overflow the frame's sum)
+  EXPECT_THROW(decode_aovs(encode_aovs(bad), bad.size(), 4), WireError);
+  bad = sums;
+  bad[0].hits = bad[0].n + 1;
+  EXPECT_THROW(decode_aovs(encode_aovs(bad), bad.size(), 4), WireError);
+  EXPECT_THROW(decode_aovs("not zstd", 1, 4), WireError);
+}
+
+}  // namespace
+}  // namespace tessera

@@ -19,6 +19,7 @@ with the same flags, bit for bit.
     env_color=None      --env-color    (r, g, b)
     env_strength=1.0, env_rotate=0.0, exposure=0.0, no_default_env=False
     animation="", fps=24.0, pass_spp=16, tile=32, noise_target=0.0, no_nee=False, no_mis=False
+    aov=None            --aov     "albedo,normal,depth,alpha,id", a list of them, or "all": EXR layers
 
 Unknown keywords raise TypeError naming them; values the coordinator refuses come back as
 a TesseraError carrying its message (it checks every setting, as `tessera render` does).
@@ -56,7 +57,26 @@ DEFAULTS = {
     "noise_target": 0.0,
     "no_nee": False,
     "no_mis": False,
+    "aov": None,
 }
+# --aov's names and their bits (core/render/aov.h).
+AOVS = {"alpha": 1, "albedo": 2, "normal": 4, "depth": 8, "id": 16}
+
+
+def aov_bits(value):
+    """--aov's list ("albedo,normal", a list of names, or "all") as the settings' bits."""
+    if not value:
+        return 0
+    names = value.split(",") if isinstance(value, str) else list(value)
+    bits = 0
+    for name in (n.strip() for n in names):
+        if name == "all":
+            bits |= sum(AOVS.values())
+        elif name in AOVS:
+            bits |= AOVS[name]
+        elif name:
+            raise ValueError(f"aov: '{name}' is not an AOV (alpha, albedo, normal, depth, id, or all)")
+    return bits
 
 MAX_FRAMES = 100000  # core/render/frames.h's kMaxFrames
 MAX_FRAME = 1000000  # RenderSettings::kMaxFrame
@@ -166,6 +186,7 @@ def to_proto(scene, frames=None, **kwargs):
     p.noise_target = float(s["noise_target"])
     p.no_nee = bool(s["no_nee"])
     p.no_mis = bool(s["no_mis"])
+    p.aovs = aov_bits(s["aov"])
     env = os.path.abspath(s["env"]) if s["env"] else None
     return p, env
 
@@ -179,7 +200,7 @@ FLAGS = {
     "env_strength": ("--env-strength", 1), "env_rotate": ("--env-rotate", 1), "exposure": ("--exposure", 1),
     "no_default_env": ("--no-default-env", 0), "animation": ("--animation", 1), "fps": ("--fps", 1),
     "pass_spp": ("--pass-spp", 1), "tile": ("--tile", 1), "noise_target": ("--noise-target", 1),
-    "no_nee": ("--no-nee", 0), "no_mis": ("--no-mis", 0),
+    "no_nee": ("--no-nee", 0), "no_mis": ("--no-mis", 0), "aov": ("--aov", 1),
 }
 
 
@@ -198,6 +219,8 @@ def cli_flags(**kwargs):
             if value:
                 out.append(flag)
             continue
+        if key == "aov" and not isinstance(value, str):
+            value = ",".join(value)
         values = list(value) if n > 1 else [value]
         out += [flag] + [repr(float(v)) if isinstance(v, float) else str(v) for v in values]
     return out

@@ -1,0 +1,62 @@
+// AOVs through the farm (issue 26): every layer of the farm's EXR is tessera render's, bit
+// for bit, whatever the workers (runs of passes included), and a coordinator killed mid-job
+// keeps them (they are in its checkpoints).
+#include "tests/integration/farm_fixture.h"
+
+namespace tessera {
+namespace {
+
+const std::string kAovFlags = kFlags + " --aov all";
+
+TEST_F(Farm, AovLayersAreTheLocalRendersBitForBit) {
+  const std::string local = local_render(kAovFlags);
+  start_coordinator();
+  start_worker();
+  start_worker(2, {"--passes-per-task", "3"});  // runs of passes: AOV sums of several at once
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r = submit_wait(kScene, kAovFlags, out);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+  const ExrImage img = read_exr(out);
+  for (const char* ch :
+       {"A", "albedo.R", "albedo.G", "albedo.B", "normal.X", "normal.Y", "normal.Z", "depth.Z", "id.V"})
+    EXPECT_TRUE(img.channels.count(ch)) << ch;
+}
+
+TEST_F(Farm, AovsSurviveACoordinatorKilledMidJob) {
+  const std::string flags = "-r 96 72 -s 512 --pass-spp 8 -m 6 --seed 5 --aov all";
+  const std::string local = local_render(flags);
+  const std::vector<std::string> crashy{"--checkpoint-seconds", "0.2"};
+  start_coordinator("127.0.0.1:0", "2", crashy);
+  const std::string addr = grpc_addr;
+  const std::string out = (dir / "farm.exr").string();
+  std::vector<std::string> args{"submit", kScene};
+  std::istringstream words(flags);
+  for (std::string w; words >> w;) args.push_back(w);
+  for (const std::string& w : {"--coordinator", addr.c_str(), "--wait", "-q", "-f", out.c_str()}) args.push_back(w);
+  Process client(kBin + "/tessera", args, (dir / "client.err").string());
+  start_worker();
+  // Once some of it is merged and checkpointed: killed, and started again on its folder.
+  bool merged = false;
+  for (int i = 0; i < 2000 && !merged; ++i) {
+    const nlohmann::json s = get_json("/api/status");
+    merged = s != nullptr && !s["jobs"].empty() && std::stoull(s["jobs"][0]["samples_done"].get<std::string>()) > 0;
+    if (!merged) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_TRUE(merged);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));  // a checkpoint or two
+  coordinator->signal(SIGKILL);
+  ASSERT_EQ(coordinator->wait(10), -SIGKILL);
+  start_coordinator(addr, "2", crashy);
+  ASSERT_EQ(grpc_addr, addr);
+  // It went on from its checkpoint (AOVs included: restore_band refuses a band without them).
+  const nlohmann::json s = get_json("/api/status");
+  ASSERT_NE(s, nullptr);
+  ASSERT_FALSE(s["jobs"].empty());
+  EXPECT_GT(std::stoull(s["jobs"][0]["samples_done"].get<std::string>()), 0u);
+  ASSERT_EQ(client.wait(120), 0) << slurp((dir / "client.err").string());
+  expect_same_pixels(local, out);
+}
+
+}  // namespace
+}  // namespace tessera
