@@ -20,7 +20,9 @@ namespace tessera {
 // Version 6: images stream in pieces (FetchImageChunks); farm EXRs ZIP-compressed; an end
 // is reported only once durable.
 // Version 7: a worker's requests carry the secret its registration gave (worker_secret).
-constexpr uint32_t kProtocolVersion = 7;
+// Version 8: AOVs (RenderSettings.aovs; a worker sends TaskResult.aovs_zstd for a job with
+// them: one before it would not, so it is refused at registration).
+constexpr uint32_t kProtocolVersion = 8;
 constexpr size_t kBytesPerPixel = 36;  // r, g, b, lum2 (float64) + n (uint32)
 // gRPC message limit, for images and inline scene bundles (scenes of any size stream in
 // pieces: scene_chunks.h).

@@ -68,6 +68,17 @@ try:
     check(settings["resolution"] == (32, 24) and settings["max_depth"] == 3, "resolution (with %) and bounces sent")
     render_local(BIN, props.last_export, os.path.join(tmp, "local.exr"), *cli_flags(settings, 1))
     check(identical(BIN, want, os.path.join(tmp, "local.exr")), "the farm's still is tessera render's, bit for bit")
+    # With AOV layers: the compositor's passes in the same EXR.
+    props.aovs = True
+    bpy.ops.tessera.render_on_farm()
+    image = bpy.data.images.load(want, check_existing=False)
+    scene.use_nodes = True
+    node = scene.node_tree.nodes.new("CompositorNodeImage")
+    node.image = image
+    outputs = [o.name for o in node.outputs]
+    check(all(n in outputs for n in ("albedo", "normal", "depth", "id", "Alpha")),
+          f"AOV layers reach Blender's compositor ({outputs})")
+    props.aovs = False
 
     # 3. An animation.
     cube = bpy.data.objects["Cube"]

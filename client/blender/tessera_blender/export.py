@@ -206,6 +206,9 @@ def render_settings(scene, props, folder=None):
              noise_target=props.noise_target, resolution=resolution(scene), camera="file",
              fps=scene.render.fps / scene.render.fps_base)
     s.update(world_settings(scene, folder))
+    if getattr(props, "aovs", False) and scene.render.image_settings.file_format in ("OPEN_EXR",
+                                                                                     "OPEN_EXR_MULTILAYER"):
+        s["aov"] = "all"  # layers the compositor reads (an EXR output only: PNG has no layers)
     s.update(camera_settings(scene))
     if math.isclose(s.get("env_strength", 1.0), 1.0):
         s.pop("env_strength", None)
