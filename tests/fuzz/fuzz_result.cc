@@ -1,8 +1,10 @@
 // libFuzzer target: what the coordinator decodes from bytes it did not write itself or
 // that a crash may have cut short: a worker's tile sums (decode_sums, then the plan's
-// plausibility check) and a film checkpoint (read_checkpoint into a small plan: every
-// version; decode_checkpoint for versions 1 and 2). The first input byte picks which; refusals are WireError / std::runtime_error; a decoded tile must hold only
-// finite numbers. Seeds: TESSERA_FUZZ_SEEDS=DIR writes some and exits.
+// plausibility check), its AOV sums (decode_aovs, then added up: no overflow may follow
+// from what passes the check) and a film checkpoint (read_checkpoint into a small plan,
+// with and without AOVs: every version; decode_checkpoint for versions 1 and 2). The first input byte picks which;
+// refusals are WireError / std::runtime_error; a decoded tile must hold only finite numbers. Seeds:
+// TESSERA_FUZZ_SEEDS=DIR writes some and exits.
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -58,6 +60,24 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
   }
   std::ofstream(fs::path(seeds) / "checkpoint3", std::ios::binary)
       << char(1) << tessera::encode_checkpoint(plan, 2.5);
+  tessera::RenderSettings with_aovs = checkpoint_settings();
+  with_aovs.aovs = tessera::kAovAll;
+  tessera::FramePlan aov_plan(with_aovs);
+  for (int k = 0; k < 5; ++k) {
+    const tessera::TileTask t = *aov_plan.take();
+    aov_plan.merge(t.tile, t.pass, tile(size_t(t.rect.area())));
+    aov_plan.add_aovs(t.tile, std::vector<tessera::AovSums>(size_t(t.rect.area())));
+  }
+  std::ofstream(fs::path(seeds) / "checkpoint3aov", std::ios::binary)
+      << char(1) << tessera::encode_checkpoint(aov_plan, 2.5);
+  std::vector<tessera::AovSums> aovs(16);
+  tessera::FirstHit hit;
+  hit.hit = true;
+  hit.distance = 2;
+  hit.albedo = tessera::Rgb(0.5f);
+  for (size_t i = 0; i < aovs.size(); ++i) aovs[i].add_sample(hit, uint32_t(i));
+  std::ofstream(fs::path(seeds) / "aovs16", std::ios::binary)
+      << char(2) << char(16) << char(0) << tessera::encode_aovs(aovs);
   std::exit(0);
 }
 
@@ -66,6 +86,18 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (data[0] % 2 == 0) {  // tile sums: two bytes of pixel count, then the payload
     if (size < 3) return 0;
     const size_t pixels = size_t(data[1]) | size_t(data[2]) << 8;
+    if (data[0] % 4 == 2) {  // AOV sums
+      try {
+        const auto aovs =
+            tessera::decode_aovs(std::string(reinterpret_cast<const char*>(data) + 3, size - 3), pixels, 64);
+        if (aovs.size() != pixels) __builtin_trap();
+        tessera::AovSums total;
+        for (const tessera::AovSums& a : aovs) total.add(a);  // (UBSan: no signed overflow)
+        (void)tessera::aov_pixel(total);
+      } catch (const tessera::WireError&) {
+      }
+      return 0;
+    }
     try {
       const auto sums = tessera::decode_sums(std::string(reinterpret_cast<const char*>(data) + 3, size - 3), pixels);
       if (sums.size() != pixels) __builtin_trap();
@@ -83,14 +115,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       if (c.film.pixels().size() != size_t(c.film.window().area())) __builtin_trap();
     } catch (const std::runtime_error&) {
     }
-    try {  // into a plan, as a restarted coordinator reads it
-      tessera::FramePlan plan(checkpoint_settings());
-      tessera::read_checkpoint(bytes, plan);
-      uint64_t n = 0;
-      for (const tessera::PixelSums& p : plan.film().pixels()) n += p.n;
-      if (n != plan.samples_merged()) __builtin_trap();
-    } catch (const std::runtime_error&) {
-    }
+    for (const uint32_t aov_bits : {0u, uint32_t(tessera::kAovAll)}) try {  // into a plan, as a restart reads it
+        tessera::RenderSettings s = checkpoint_settings();
+        s.aovs = aov_bits;
+        tessera::FramePlan plan(s);
+        tessera::read_checkpoint(bytes, plan);
+        uint64_t n = 0;
+        for (const tessera::PixelSums& p : plan.film().pixels()) n += p.n;
+        if (n != plan.samples_merged()) __builtin_trap();
+        if (aov_bits && plan.aovs().pixels().size() != plan.film().pixels().size()) __builtin_trap();
+      } catch (const std::runtime_error&) {
+      }
   }
   return 0;
 }
