@@ -121,6 +121,19 @@ class Plain(unittest.TestCase):
         with self.assertRaisesRegex(ValueError, "'zdepth' is not an AOV"):
             self.farm.submit(SPHERES, aov="zdepth")
 
+    def test_watch_rides_out_a_coordinator_killed_and_started_again(self):
+        job = self.farm.submit(SPHERES, samples=512, resolution=(64, 48), seed=3)
+        seen = []
+        for s in job.watch():
+            seen.append(s)
+            if len(seen) == 2:
+                self.farm_procs.restart_coordinator()  # mid-render: the stream breaks
+        self.assertEqual(seen[-1].state, "DONE")
+        self.assertGreater(len(seen), 2)  # statuses came after the restart too
+        job.fetch(self.out("restarted.exr"))
+        render_local(BIN, SPHERES, self.out("restarted-local.exr"), "-s", "512", "-r", "64", "48", "--seed", "3")
+        self.assertTrue(identical(BIN, self.out("restarted.exr"), self.out("restarted-local.exr")))
+
     def test_jobs_prefixes_events_and_control(self):
         job = self.farm.submit(SPHERES, samples=4096, resolution=(64, 48), priority=2, name="long")
         self.assertEqual(self.farm.job(job.id[:7]).id, job.id)

@@ -39,23 +39,9 @@ class LocalFarm:
                             "-out", self.path("cert.pem")], check=True, capture_output=True)
             self.ca = self.path("cert.pem")
             args += ["--tls-cert", self.ca, "--tls-key", self.path("key.pem")]
-        out = self.path("coordinator.out")
-        self.coordinator = self._start([os.path.join(bin_dir, "tessera-coordinator")] + args, out,
-                                       self.path("coordinator.err"))
+        self.coordinator_args = args
         self.address = None
-        for _ in range(600):
-            with open(out) as f:
-                text = f.read()
-            m = re.search(r"^grpc listening on (\S+)", text, re.M)
-            if m and "http listening on" in text:
-                self.address = m.group(1)
-                break
-            if self.coordinator.poll() is not None:
-                break
-            time.sleep(0.05)
-        if not self.address:
-            self.stop()
-            raise RuntimeError("the test's coordinator did not start: " + self.log()[-800:])
+        self.address = self._start_coordinator()
         worker_token = next((self.tokens[e.split()[1]] for e in tokens or () if e.startswith("worker ")), None)
         for i in range(workers):
             cmd = [os.path.join(bin_dir, "tessera-worker"), "--coordinator", self.address, "--threads", str(threads),
@@ -71,6 +57,36 @@ class LocalFarm:
             p = subprocess.Popen(cmd, stdout=o, stderr=e, stdin=subprocess.DEVNULL)
         self.procs.append(p)
         return p
+
+    def _start_coordinator(self):
+        """Starts the coordinator (again: on the address it had, and its --data) and returns
+        its gRPC address once it listens."""
+        args = list(self.coordinator_args)
+        if self.address:
+            args[args.index("--listen") + 1] = self.address
+        out = self.path("coordinator.out")
+        if self.address and os.path.exists(out):
+            os.unlink(out)
+        self.coordinator = self._start([os.path.join(self.bin, "tessera-coordinator")] + args, out,
+                                       self.path("coordinator.err"))
+        for _ in range(600):
+            with open(out) as f:
+                text = f.read()
+            m = re.search(r"^grpc listening on (\S+)", text, re.M)
+            if m and "http listening on" in text:
+                return m.group(1)
+            if self.coordinator.poll() is not None:
+                break
+            time.sleep(0.05)
+        self.stop()
+        raise RuntimeError("the test's coordinator did not start: " + self.log()[-800:])
+
+    def restart_coordinator(self):
+        """kill -9, then the same coordinator again on its address and data folder."""
+        self.coordinator.kill()
+        self.coordinator.wait()
+        self.procs.remove(self.coordinator)
+        self._start_coordinator()
 
     def path(self, *parts):
         return os.path.join(self.dir, *parts)
