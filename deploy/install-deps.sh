@@ -18,7 +18,9 @@ PACKAGES=(
   systemd   # systemd-analyze: the units' check (tests/deploy/systemd-units.sh)
   python3-grpcio python3-protobuf python3-xxhash  # the Python client (client/python)
   openexr   # exrheader: the AOV layers' check (tests/cli/aov_layers.sh)
-  blender xvfb  # the add-on's tests (tests/blender): Debian's Blender 3.4, and a virtual display for its interface
+  # The add-on's tests (tests/blender): Debian's Blender 3.4, and a virtual display for its
+  # interface (xvfb-run needs xauth, only recommended; Mesa's software OpenGL for Blender).
+  blender xvfb xauth libgl1-mesa-dri
 )
 
 missing=()

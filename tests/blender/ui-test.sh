@@ -7,7 +7,7 @@
 set -u
 BUILD=$(cd "$1" && pwd)
 SRC=$(cd "$(dirname "$0")/../.." && pwd)
-for tool in blender xvfb-run; do
+for tool in blender xvfb-run xauth; do
   command -v $tool >/dev/null || { echo "SKIP: $tool is not installed (deploy/install-deps.sh installs it)"; exit 77; }
 done
 T=$(mktemp -d)
