@@ -42,9 +42,9 @@ class ResultIntake {
   };
   struct Batch {
     std::vector<const v1::TaskResult*> results;
-    std::vector<v1::ResultAck> acks;                 // one each, in order
-    std::vector<Incoming> incoming;                  // to decode and merge
-    std::vector<std::pair<size_t, Lease>> checks;    // results of verification tasks
+    std::vector<v1::ResultAck> acks;               // one each, in order
+    std::vector<Incoming> incoming;                // to decode and merge
+    std::vector<std::pair<size_t, Lease>> checks;  // results of verification tasks
   };
   Batch screen(const std::vector<const v1::TaskResult*>& results);
   static void decode(Batch& batch);

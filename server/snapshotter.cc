@@ -8,7 +8,8 @@
 namespace tessera {
 
 std::string without_dir(std::string message, const std::string& dir) {
-  for (size_t at; !dir.empty() && (at = message.find(dir)) != std::string::npos;) message.replace(at, dir.size(), "<data>");
+  for (size_t at; !dir.empty() && (at = message.find(dir)) != std::string::npos;)
+    message.replace(at, dir.size(), "<data>");
   return message;
 }
 
@@ -24,7 +25,8 @@ bool Snapshotter::request(Job& job, bool image, bool checkpoint) const {
 bool Snapshotter::after_merge(Job& j, double now) const {
   const uint32_t frame = j.plan.frame_passes_done();
   const double stretch = kWriteShare * j.snaps.write_seconds;
-  const bool image = frame > j.snaps.image_frame_passes && now - j.snaps.last_image >= std::max(image_interval_, stretch);
+  const bool image =
+      frame > j.snaps.image_frame_passes && now - j.snaps.last_image >= std::max(image_interval_, stretch);
   const bool checkpoint = now - j.snaps.last_checkpoint >= std::max(checkpoint_interval_, stretch);
   if (!image && !checkpoint) return false;
   if (image) {

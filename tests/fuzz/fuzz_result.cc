@@ -58,8 +58,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
     const tessera::TileTask t = *plan.take();
     plan.merge(t.tile, t.pass, tile(size_t(t.rect.area())));
   }
-  std::ofstream(fs::path(seeds) / "checkpoint3", std::ios::binary)
-      << char(1) << tessera::encode_checkpoint(plan, 2.5);
+  std::ofstream(fs::path(seeds) / "checkpoint3", std::ios::binary) << char(1) << tessera::encode_checkpoint(plan, 2.5);
   tessera::RenderSettings with_aovs = checkpoint_settings();
   with_aovs.aovs = tessera::kAovAll;
   tessera::FramePlan aov_plan(with_aovs);
