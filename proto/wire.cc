@@ -194,6 +194,26 @@ class Scratch {
   }
   ZstdScratch& z_;
 };
+// z's byte planes (raw), zstd-compressed.
+std::string compress_planes(Scratch& z) {
+  z->packed.resize(ZSTD_compressBound(z->raw.size()));
+  const size_t size = ZSTD_compressCCtx(z->c, z->packed.data(), z->packed.size(), z->raw.data(), z->raw.size(), 1);
+  if (ZSTD_isError(size)) throw std::runtime_error(std::string("zstd: ") + ZSTD_getErrorName(size));
+  return std::string(reinterpret_cast<const char*>(z->packed.data()), size);
+}
+// Decompresses exactly `want` bytes of planes into z->raw; throws WireError("WHAT: ...")
+// for anything else (not zstd, another size declared or found).
+void decompress_planes(Scratch& z, const std::string& compressed, size_t want, const char* what) {
+  const std::string w(what);
+  const unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
+  if (declared == ZSTD_CONTENTSIZE_ERROR) throw WireError(w + ": not zstd data");
+  if (declared != ZSTD_CONTENTSIZE_UNKNOWN && declared != want)
+    throw WireError(w + ": " + std::to_string(declared) + " bytes declared, " + std::to_string(want) + " expected");
+  z->raw.resize(want);
+  const size_t n = ZSTD_decompressDCtx(z->d, z->raw.data(), z->raw.size(), compressed.data(), compressed.size());
+  if (ZSTD_isError(n)) throw WireError(w + ": " + ZSTD_getErrorName(n));
+  if (n != want) throw WireError(w + ": " + std::to_string(n) + " bytes, " + std::to_string(want) + " expected");
+}
 // Gathers B byte planes of n bytes each (plane k: byte k of every value) into n
 // little-endian values of B bytes, written sizeof(PixelSums) apart from `out` on.
 template <int B>
@@ -254,10 +274,7 @@ std::string encode_sums(const PixelSums* sums, size_t n) {
     for (size_t k = 0; k < f.bytes; ++k, plane += n)
       for (size_t i = 0; i < n; ++i) plane[i] = uint8_t(v[i] >> (8 * k));
   }
-  z->packed.resize(ZSTD_compressBound(z->raw.size()));
-  const size_t size = ZSTD_compressCCtx(z->c, z->packed.data(), z->packed.size(), z->raw.data(), z->raw.size(), 1);
-  if (ZSTD_isError(size)) throw std::runtime_error(std::string("zstd: ") + ZSTD_getErrorName(size));
-  return std::string(reinterpret_cast<const char*>(z->packed.data()), size);
+  return compress_planes(z);
 }
 
 std::vector<PixelSums> decode_sums(const std::string& compressed, size_t pixels) {
@@ -267,16 +284,8 @@ std::vector<PixelSums> decode_sums(const std::string& compressed, size_t pixels)
 }
 
 void decode_sums(const std::string& compressed, PixelSums* sums, size_t pixels) {
-  const size_t want = pixels * kBytesPerPixel;
-  const unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
-  if (declared == ZSTD_CONTENTSIZE_ERROR) throw WireError("sums: not zstd data");
-  if (declared != ZSTD_CONTENTSIZE_UNKNOWN && declared != want)
-    throw WireError("sums: " + std::to_string(declared) + " bytes declared, " + std::to_string(want) + " expected");
   Scratch z;
-  z->raw.resize(want);
-  const size_t n = ZSTD_decompressDCtx(z->d, z->raw.data(), z->raw.size(), compressed.data(), compressed.size());
-  if (ZSTD_isError(n)) throw WireError(std::string("sums: ") + ZSTD_getErrorName(n));
-  if (n != want) throw WireError("sums: " + std::to_string(n) + " bytes, " + std::to_string(want) + " expected");
+  decompress_planes(z, compressed, pixels * kBytesPerPixel, "sums");
   if (pixels == 0) return;  // (no planes: and no pointer arithmetic on an empty vector)
   const uint8_t* plane = z->raw.data();
   for (const Field& f : kFields) {  // each pixel's field from its byte planes
@@ -318,24 +327,12 @@ std::string encode_aovs(const AovSums* sums, size_t n) {
     }
     plane += f.bytes * n;
   }
-  z->packed.resize(ZSTD_compressBound(z->raw.size()));
-  const size_t size = ZSTD_compressCCtx(z->c, z->packed.data(), z->packed.size(), z->raw.data(), z->raw.size(), 1);
-  if (ZSTD_isError(size)) throw std::runtime_error(std::string("zstd: ") + ZSTD_getErrorName(size));
-  return std::string(reinterpret_cast<const char*>(z->packed.data()), size);
+  return compress_planes(z);
 }
 
 std::vector<AovSums> decode_aovs(const std::string& compressed, size_t pixels, uint32_t max_samples) {
-  const size_t want = pixels * kAovBytesPerPixel;
-  const unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
-  if (declared == ZSTD_CONTENTSIZE_ERROR) throw WireError("AOV sums: not zstd data");
-  if (declared != ZSTD_CONTENTSIZE_UNKNOWN && declared != want)
-    throw WireError("AOV sums: " + std::to_string(declared) + " bytes declared, " + std::to_string(want) + " expected");
   Scratch z;
-  z->raw.resize(want);
-  const size_t got = ZSTD_decompressDCtx(z->d, z->raw.data(), z->raw.size(), compressed.data(), compressed.size());
-  if (ZSTD_isError(got)) throw WireError(std::string("AOV sums: ") + ZSTD_getErrorName(got));
-  if (got != want)
-    throw WireError("AOV sums: " + std::to_string(got) + " bytes, " + std::to_string(want) + " expected");
+  decompress_planes(z, compressed, pixels * kAovBytesPerPixel, "AOV sums");
   std::vector<AovSums> out(pixels);
   const uint8_t* plane = z->raw.data();
   for (const Field& f : kAovFields) {

@@ -1,6 +1,7 @@
 # Writes OUT (tessera/_build.py): the commit this tree was built from, read from the
 # header core/util/version.cmake writes (VERSION_HEADER), and the protocol version the
 # coordinator speaks, read from proto/wire.h (WIRE_H). Rewritten only when it changes.
+include("${CMAKE_CURRENT_LIST_DIR}/../../core/util/write_if_changed.cmake")
 file(STRINGS "${VERSION_HEADER}" vline REGEX "TESSERA_GIT_VERSION")
 string(REGEX REPLACE ".*TESSERA_GIT_VERSION \"([^\"]*)\".*" "\\1" v "${vline}")
 file(STRINGS "${WIRE_H}" pline REGEX "kProtocolVersion = ")
@@ -9,10 +10,4 @@ if(NOT p MATCHES "^[0-9]+$")
   message(FATAL_ERROR "no kProtocolVersion in ${WIRE_H}")
 endif()
 set(text "# Written by the build (client/python/build_info.cmake).\nVERSION = \"${v}\"\nPROTOCOL_VERSION = ${p}\n")
-set(old "")
-if(EXISTS "${OUT}")
-  file(READ "${OUT}" old)
-endif()
-if(NOT old STREQUAL text)
-  file(WRITE "${OUT}" "${text}")
-endif()
+write_if_changed("${OUT}" "${text}")

@@ -67,16 +67,10 @@ void ExrWriter::write_rows(const PixelSums* sums, int rows, const AovSums* aov) 
                                      sizeof(float) * size_t(width_)));
   if (aovs_) {
     for (auto& plane : aov_) plane.resize(n);
+    float values[16];  // one pixel's, in aov_channels' order (at most 9)
     for (size_t i = 0; i < n; ++i) {
-      const AovPixel p = aov_pixel(aov[i]);
-      size_t c = 0;  // in aov_channels' order
-      if (aovs_ & kAovAlpha) aov_[c++][i] = p.alpha;
-      if (aovs_ & kAovAlbedo)
-        for (float v : p.albedo) aov_[c++][i] = v;
-      if (aovs_ & kAovNormal)
-        for (float v : p.normal) aov_[c++][i] = v;
-      if (aovs_ & kAovDepth) aov_[c++][i] = p.depth;
-      if (aovs_ & kAovId) aov_[c++][i] = p.id;
+      aov_channel_values(aov[i], aovs_, values);
+      for (size_t c = 0; c < aov_.size(); ++c) aov_[c][i] = values[c];
     }
     for (size_t c = 0; c < aov_.size(); ++c)
       fb.insert(aov_names_[c], Imf::Slice::Make(Imf::FLOAT, aov_[c].data(), origin, width_, rows, sizeof(float),

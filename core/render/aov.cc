@@ -132,4 +132,13 @@ std::vector<std::string> aov_channels(uint32_t aovs) {
   return out;
 }
 
+void aov_channel_values(const AovSums& s, uint32_t aovs, float* out) {
+  const AovPixel p = aov_pixel(s);
+  if (aovs & kAovAlpha) *out++ = p.alpha;
+  if (aovs & kAovAlbedo) out = std::copy(p.albedo, p.albedo + 3, out);
+  if (aovs & kAovNormal) out = std::copy(p.normal, p.normal + 3, out);
+  if (aovs & kAovDepth) *out++ = p.depth;
+  if (aovs & kAovId) *out = p.id;
+}
+
 }  // namespace tessera

@@ -102,5 +102,7 @@ AovPixel aov_pixel(const AovSums& s);
 
 // The EXR channels of each AOV, in the names Blender's and Nuke's readers expect (docs/aov.md).
 std::vector<std::string> aov_channels(uint32_t aovs);
+// A pixel's values of those channels, in that order, into out[0 .. aov_channels(aovs).size()).
+void aov_channel_values(const AovSums& s, uint32_t aovs, float* out);
 
 }  // namespace tessera

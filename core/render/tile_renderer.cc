@@ -136,13 +136,14 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
       const int px = rect.x + x, py = rect.y + y;  // image coordinates, row 0 at the top
       const uint64_t pixel_id = uint64_t(py) * uint64_t(width) + uint64_t(px);
       PixelSums sums;
+      FirstHit first;  // (filled, and reset for each sample, only when AOVs are asked for)
       for (uint32_t s = s0; s < s1; ++s) {
         Sampler sampler(seed, pixel_id, s);
         const Vec2 jitter = sampler.next_2d();
         const Vec2 u_lens = lens ? sampler.next_2d() : Vec2{};
         // The camera counts rows from the bottom (CS184 convention).
         const Ray ray = camera_->generate(float(px) + jitter.x, float(height - 1 - py) + jitter.y, u_lens);
-        FirstHit first;
+        if (aovs) first = FirstHit{};
         const Rgb L = integrator_->radiance(ray, sampler, local.rays, aovs ? &first : nullptr);
         ++local.samples;
         // Beyond kMaxSampleValue is as useless as NaN (only a delta light nearer than 1e-5
