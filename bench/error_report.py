@@ -8,8 +8,14 @@ seconds with the ideal slope -1) and prints a Markdown table.
 The reference is a long render with a seed no test render uses, cached under
 build/reference/ by scene and settings; the report says how many samples it has.
 
+With --denoise every render is also made with `--denoise` (renderer "tessera+denoise",
+its seconds the render's and the denoiser's together), and the report checks issue 26's
+aim at the largest sample count N: the denoised N-sample image's error at most that of 4N
+samples without (measured when 4N is in --spp, else predicted as N's relMSE / 4), in at
+most 1.2x the N-sample render's time.
+
 Usage: bench/error_report.py SCENE... [--spp 4,16,64,256] [--seeds 3] [--ref-spp 2048]
-                             [--flags "-r 480 360 -m 16 -l 1"] [--out build/report]
+                             [--flags "-r 480 360 -m 16 -l 1"] [--out build/report] [--denoise]
 """
 import argparse
 import csv
@@ -56,6 +62,8 @@ def main():
     ap.add_argument("--ref-spp", type=int, default=2048)
     ap.add_argument("--flags", default="-r 480 360 -m 16 -l 1")
     ap.add_argument("--out", default=os.path.join(ROOT, "build", "report"))
+    ap.add_argument("--denoise", action="store_true", help="also with --denoise, and check the aim")
+    ap.add_argument("--keep", action="store_true", help="keep the images (for crops: bench/denoise_crops.py)")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     rows = []
@@ -64,17 +72,41 @@ def main():
         name = os.path.splitext(os.path.basename(scene))[0]
         for spp in [int(s) for s in a.spp.split(",")]:
             for seed in range(1, a.seeds + 1):
-                img = os.path.join(a.out, "%s-%d-%d.exr" % (name, spp, seed))
-                stats = os.path.join(a.out, "stats.json")
-                run([os.path.join(BIN, "tessera"), "render", scene, "-s", str(spp), "--seed", str(seed), "-q",
-                     "-f", img, "--stats-json", stats] + a.flags.split())
-                with open(stats) as f:
-                    seconds = json.load(f)["seconds"]
-                e = compare(img, ref)
-                rows.append({"renderer": "tessera", "scene": name, "spp": spp, "seed": seed, "seconds": seconds,
-                             "rmse": e["rmse"], "relmse": e["relmse"], "efficiency": 1 / (e["relmse"] * seconds)})
-                os.remove(img)
+                for renderer, extra in [("tessera", [])] + ([("tessera+denoise", ["--denoise"])] if a.denoise else []):
+                    img = os.path.join(a.out, "%s-%d-%d%s.exr" % (name, spp, seed, "-denoised" if extra else ""))
+                    stats = os.path.join(a.out, "stats.json")
+                    run([os.path.join(BIN, "tessera"), "render", scene, "-s", str(spp), "--seed", str(seed), "-q",
+                         "-f", img, "--stats-json", stats] + a.flags.split() + extra)
+                    with open(stats) as f:
+                        st = json.load(f)
+                    seconds = st["seconds"] + st.get("denoise_seconds", 0)
+                    e = compare(img, ref)
+                    rows.append({"renderer": renderer, "scene": name, "spp": spp, "seed": seed, "seconds": seconds,
+                                 "rmse": e["rmse"], "relmse": e["relmse"], "efficiency": 1 / (e["relmse"] * seconds)})
+                    if not a.keep:
+                        os.remove(img)
     write_outputs(rows, a.out, "Tessera, flags `%s`, reference %d spp" % (a.flags, a.ref_spp))
+    if a.denoise:
+        check_aim(summarize(rows))
+
+
+def check_aim(table):
+    """Issue 26's aim: a denoised render has the error of 4x the samples in at most 1.2x the
+    time."""
+    print("\n| scene | spp | denoised relMSE | relMSE at 4x spp | time ratio | aim met |")
+    print("|---|---|---|---|---|---|")
+    for scene in sorted({t["scene"] for t in table}):
+        plain = {t["spp"]: t for t in table if t["scene"] == scene and t["renderer"] == "tessera"}
+        den = {t["spp"]: t for t in table if t["scene"] == scene and t["renderer"] == "tessera+denoise"}
+        # The largest count whose 4x was rendered too; else the largest, its 4x predicted.
+        measured = [s for s in den if 4 * s in plain]
+        n = max(measured) if measured else max(den)
+        target = plain[4 * n]["relmse"] if 4 * n in plain else plain[n]["relmse"] / 4
+        ratio = den[n]["seconds"] / plain[n]["seconds"]
+        met = den[n]["relmse"] <= target and ratio <= 1.2
+        print("| %s | %d | %.4g | %.4g%s | %.3f | %s |" % (scene, n, den[n]["relmse"], target,
+                                                         "" if 4 * n in plain else " (predicted)", ratio,
+                                                         "yes" if met else "no"))
 
 
 def summarize(rows):

@@ -2,6 +2,7 @@
 #include <CLI/CLI.hpp>
 #include <cstdio>
 
+#include "client/denoise_command.h"
 #include "client/farm_commands.h"
 #include "client/render_command.h"
 #include "core/scene/scene_error.h"
@@ -14,6 +15,7 @@ int main(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) cmdline += std::string(" ") + argv[i];
   std::vector<std::function<int()>> commands{tessera::add_render_command(app, cmdline)};
   for (auto& c : tessera::add_farm_commands(app)) commands.push_back(std::move(c));
+  commands.push_back(tessera::add_denoise_command(app));
   tessera::add_version_flag(app, "tessera");
   try {
     app.parse(argc, argv);

@@ -2,14 +2,18 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "client/progress.h"
 #include "client/render_flags.h"
+#include "core/denoise/denoise_exr.h"
+#include "core/io/files.h"
 #include "core/io/image_io.h"
 #include "core/render/frames.h"
 #include "core/render/lighting.h"
@@ -41,6 +45,34 @@ class ProgressPrinter {
   ProgressBar bar_;
 };
 
+// --denoise: the noisy EXR is written first (the first .exr asked for, else a temporary
+// beside the first output) and denoised in place, as the coordinator does a farm job's:
+// one path, so the same bits. The other outputs are made from the denoised file.
+double write_denoised(const RenderResult& r, const ImageMetadata& meta, const RenderSettings& s,
+                      const std::vector<std::string>& outputs, int threads) {
+  auto is_exr = [](const std::string& p) { return p.size() > 4 && p.compare(p.size() - 4, 4, ".exr") == 0; };
+  const auto first_exr = std::find_if(outputs.begin(), outputs.end(), is_exr);
+  const std::string exr = first_exr != outputs.end() ? *first_exr : outputs.front() + ".noisy.exr";
+  write_image(exr, r.film, meta, &r.aovs, s.aovs);
+  DenoiseOptions options;
+  options.threads = threads;
+  const DenoiseReport d = denoise_exr(exr, exr, options);
+  std::optional<ExrImage> img;
+  for (const std::string& out : outputs) {
+    if (out == exr) continue;
+    if (is_exr(out)) {
+      write_file_atomic(out, read_file_bytes(exr));
+      continue;
+    }
+    if (!img) img = read_exr(exr);
+    write_file_atomic(out,
+                      encode_png(img->width, img->height, img->channels.at("R").data(), img->channels.at("G").data(),
+                                 img->channels.at("B").data(), false, exposure_scale(img->metadata)));
+  }
+  if (first_exr == outputs.end()) std::remove(exr.c_str());
+  return d.seconds;
+}
+
 int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
                  const std::vector<std::string>& outputs) {
   ProgressPrinter printer(a.quiet);
@@ -57,13 +89,18 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
   }
   if (s.exposure != 0) meta[kExposureAttribute] = exposure_text(s.exposure);
   if (s.aovs) meta["aovs"] = aov_names(s.aovs);
-  for (const std::string& out : outputs) write_image(out, r.film, meta, &r.aovs, s.aovs);
+  double denoise_seconds = 0;
+  if (s.denoise)
+    denoise_seconds = write_denoised(r, meta, s, outputs, a.threads);
+  else
+    for (const std::string& out : outputs) write_image(out, r.film, meta, &r.aovs, s.aovs);
 
   const uint64_t rays = r.stats.rays.rays + r.stats.rays.shadow_rays;
   const double sps = r.stats.samples / std::max(r.seconds, 1e-9), rps = rays / std::max(r.seconds, 1e-9);
   std::printf("%s: %dx%d, %llu samples in %.2f s: %.2f M samples/s, %.2f M rays/s", a.flags.scene.c_str(),
               r.film.width(), r.film.height(), (unsigned long long)r.stats.samples, r.seconds, sps / 1e6, rps / 1e6);
   if (r.stats.nan_samples) std::printf(", %llu NaN/Inf samples dropped", (unsigned long long)r.stats.nan_samples);
+  if (s.denoise) std::printf(", denoised in %.2f s", denoise_seconds);
   std::printf(" -> ");
   for (size_t i = 0; i < outputs.size(); ++i) std::printf("%s%s", i ? ", " : "", outputs[i].c_str());
   std::printf("\n");
@@ -74,6 +111,7 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
                      {"height", r.film.height()},
                      {"spp", s.spp},
                      {"seconds", r.seconds},
+                     {"denoise_seconds", denoise_seconds},
                      {"samples", r.stats.samples},
                      {"samples_per_second", sps},
                      {"rays", rays},

@@ -65,7 +65,10 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
       ->capture_default_str();
   cmd->add_option("--aov", f.aovs,
                   "AOV layers in the EXR beside the image, from the camera samples' first hits: a list of alpha, "
-                  "albedo, normal, depth, id (or all)");
+                  "albedo, normal, depth, id (or all), halves (the even and odd samples' means), or denoising "
+                  "(albedo, normal, depth, halves: what tessera denoise needs)");
+  cmd->add_flag("--denoise", s.denoise,
+                "Denoise the final image (the noisy one is kept in the EXR as noisy.R/G/B); adds --aov denoising");
   cmd->add_flag("--no-nee", f.no_nee, "Benchmarking: no next-event estimation (BSDF sampling only)");
   cmd->add_flag("--no-mis", f.no_mis, "Benchmarking: light sampling without MIS");
 }
@@ -93,6 +96,7 @@ RenderSettings to_settings(const RenderFlags& f) {
   s.mis = !f.no_mis;
   try {
     s.aovs = parse_aovs(f.aovs);
+    if (s.denoise) s.aovs |= kAovDenoising;
   } catch (const SettingsError& e) {
     throw CLI::ValidationError(e.flag(), std::string(e.what()).substr(e.flag().size() + 2));
   }

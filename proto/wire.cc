@@ -56,6 +56,7 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   p.set_no_nee(!s.nee);
   p.set_no_mis(!s.mis);
   p.set_aovs(s.aovs);
+  p.set_denoise(s.denoise);
   return p;
 }
 
@@ -96,6 +97,7 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
   s.nee = !p.no_nee();
   s.mis = !p.no_mis();
   s.aovs = p.aovs();
+  s.denoise = p.denoise();
   try {
     if (!p.camera_path().empty())
       s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(p.camera_path()));
@@ -117,10 +119,10 @@ std::vector<std::pair<uint32_t, uint32_t>> task_passes(const v1::Task& task, con
   return run;
 }
 
-std::vector<PixelSums> task_base(const v1::Task& task, const Rect& rect) {
+std::vector<PixelSums> task_base(const v1::Task& task, const Rect& rect, uint32_t planes) {
   if (task.base_sums().empty()) return {};
   if (task.pass_count() <= 1) throw WireError("task: base sums without a run of passes");
-  return decode_sums(task.base_sums(), size_t(std::max<int64_t>(0, rect.area())));
+  return decode_sums(task.base_sums(), size_t(std::max<int64_t>(0, rect.area())) * planes);
 }
 
 v1::Rect to_proto(const Rect& r) {

@@ -22,7 +22,9 @@ namespace tessera {
 // Version 7: a worker's requests carry the secret its registration gave (worker_secret).
 // Version 8: AOVs (RenderSettings.aovs; a worker sends TaskResult.aovs_zstd for a job with
 // them: one before it would not, so it is refused at registration).
-constexpr uint32_t kProtocolVersion = 8;
+// Version 9: half-buffers (the kAovHalves bit of RenderSettings.aovs: a task's sums, its
+// result's and a run's base, are two planes) and RenderSettings.denoise.
+constexpr uint32_t kProtocolVersion = 9;
 constexpr size_t kBytesPerPixel = 36;  // r, g, b, lum2 (float64) + n (uint32)
 // gRPC message limit, for images and inline scene bundles (scenes of any size stream in
 // pieces: scene_chunks.h).
@@ -41,9 +43,10 @@ inline bool job_live(v1::JobStatus::State s) { return s == v1::JobStatus::QUEUED
 // (pass_count > 1), each pass of the run, which must span exactly the task's samples.
 // Throws WireError otherwise.
 std::vector<std::pair<uint32_t, uint32_t>> task_passes(const v1::Task& task, const RenderSettings& settings);
-// A run's base sums (empty without), decoded for a tile of `rect`; throws WireError when
-// they do not fit it or come with a single pass.
-std::vector<PixelSums> task_base(const v1::Task& task, const Rect& rect);
+// A run's base sums (empty without), decoded for a tile of `rect` with `planes` planes of
+// sums (RenderSettings::sum_planes()); throws WireError when they do not fit it or come
+// with a single pass.
+std::vector<PixelSums> task_base(const v1::Task& task, const Rect& rect, uint32_t planes);
 
 // A path that stays inside a folder when joined to it: relative, no "..", no NUL.
 bool bundle_relative(const std::string& path);

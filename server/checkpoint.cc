@@ -178,7 +178,8 @@ CheckpointEncoder::CheckpointEncoder(const FramePlan& plan, double elapsed, std:
     : out_(std::move(out)),
       hash_(std::make_unique<Hash>()),
       adaptive_(plan.settings().adaptive),
-      aovs_(plan.settings().aovs != 0) {
+      aovs_(plan.settings().aovs != 0),
+      halves_(plan.settings().halves()) {
   Writer w;
   w.out.append(kMagic, 4);
   w.put(kVersion3);
@@ -218,6 +219,7 @@ void CheckpointEncoder::band(const BandCopy& b) {
   }
   w.bytes(encode_sums(b.pixels.data(), b.pixels.size()));
   if (aovs_) w.bytes(encode_aovs(b.aovs));  // a job with AOVs: their sums follow the film's
+  if (halves_) w.bytes(encode_sums(b.odd.data(), b.odd.size()));  // then the film's second plane
   emit(std::move(w.out));
 }
 
@@ -325,6 +327,16 @@ double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with
           band.aovs = decode_aovs(aovs, pixels, RenderSettings::kMaxSpp);
         } catch (const WireError& e) {
           throw std::runtime_error(std::string("checkpoint: AOVs: ") + e.what());
+        }
+    }
+    band.odd.clear();
+    if (plan.settings().halves()) {
+      const std::string odd = in.bytes(uint64_t(pixels) * kBytesPerPixel * 2 + 4096);
+      if (with_film) try {
+          band.odd.resize(pixels);
+          decode_sums(odd, band.odd.data(), pixels);
+        } catch (const WireError& e) {
+          throw std::runtime_error(std::string("checkpoint: half-buffers: ") + e.what());
         }
     }
     try {

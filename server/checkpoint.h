@@ -35,7 +35,8 @@ class CheckpointEncoder {
   struct Hash;
   std::unique_ptr<Hash> hash_;
   bool adaptive_;
-  bool aovs_;  // the job has AOVs: each band carries their sums after the film's
+  bool aovs_;    // the job has AOVs: each band carries their sums after the film's
+  bool halves_;  // and half-buffers: then the film's second plane (film.h)
 };
 
 // The whole file for a plan, band by band (tests, and small plans).

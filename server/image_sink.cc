@@ -10,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 
+#include "core/denoise/denoise_exr.h"
 #include "core/io/exr_writer.h"
 #include "core/io/files.h"
 #include "core/io/preview.h"
@@ -24,25 +25,40 @@ std::string DiskImageSink::path(const std::string& job, const char* file) const 
 }
 
 void ImageSink::write(const std::string& job, const Film& film, const ImageMetadata& meta) {
-  std::unique_ptr<Writer> w = begin(job, film.width(), film.height(), meta, 0);
-  if (film.height() > 0) w->write_rows(film.pixels().data(), film.height(), nullptr);
+  std::unique_ptr<Writer> w = begin(job, film.width(), film.height(), meta, {});
+  if (film.height() > 0) w->write_rows(film.pixels().data(), film.height(), nullptr, nullptr);
   w->commit();
 }
 
 namespace {
 class DiskWriter : public ImageSink::Writer {
  public:
-  DiskWriter(std::string path, int width, int height, const ImageMetadata& meta, uint32_t aovs,
-             std::function<void()> done)
-      : exr_(std::move(path), width, height, meta, true, aovs), done_(std::move(done)) {}
-  void write_rows(const PixelSums* sums, int rows, const AovSums* aovs) override { exr_.write_rows(sums, rows, aovs); }
+  // `path`: where the image goes; with `denoised` there, the noisy one is written to
+  // noisy_path first.
+  DiskWriter(std::string path, std::string noisy_path, int width, int height, const ImageMetadata& meta,
+             ImageLayers layers, std::function<void()> done)
+      : exr_(layers.denoise ? noisy_path : path, width, height, meta, true, layers.aovs),
+        path_(std::move(path)),
+        noisy_path_(std::move(noisy_path)),
+        denoise_(layers.denoise),
+        done_(std::move(done)) {}
+  void write_rows(const PixelSums* sums, int rows, const AovSums* aovs, const PixelSums* odd) override {
+    exr_.write_rows(sums, rows, aovs, odd);
+  }
   void commit() override {
     exr_.commit();
+    if (denoise_) {
+      const DenoiseReport r = denoise_exr(noisy_path_, path_);
+      std::remove(noisy_path_.c_str());
+      spdlog::info("{}: denoised {}x{} in {:.2f} s", path_, r.width, r.height, r.seconds);
+    }
     done_();
   }
 
  private:
   ExrWriter exr_;
+  std::string path_, noisy_path_;
+  bool denoise_;
   std::function<void()> done_;
 };
 
@@ -50,7 +66,8 @@ class FilmWriter : public ImageSink::Writer {
  public:
   FilmWriter(int width, int height, std::function<void(const Film&)> done)
       : film_(Rect{0, 0, width, height}), done_(std::move(done)) {}
-  void write_rows(const PixelSums* sums, int rows, const AovSums*) override {  // (the film alone: tests)
+  void write_rows(const PixelSums* sums, int rows, const AovSums*,
+                  const PixelSums*) override {  // (the film alone: tests)
     if (rows <= 0) return;
     std::copy_n(sums, size_t(rows) * size_t(film_.width()), &film_.at(0, next_));
     next_ += rows;
@@ -65,14 +82,14 @@ class FilmWriter : public ImageSink::Writer {
 }  // namespace
 
 std::unique_ptr<ImageSink::Writer> DiskImageSink::begin(const std::string& job, int width, int height,
-                                                        const ImageMetadata& meta, uint32_t aovs) {
+                                                        const ImageMetadata& meta, ImageLayers layers) {
   fs::create_directories(fs::path(dir_) / job);
-  return std::make_unique<DiskWriter>(path(job, "image.exr"), width, height, meta, aovs,
+  return std::make_unique<DiskWriter>(path(job, "image.exr"), path(job, "image.noisy.exr"), width, height, meta, layers,
                                       [this, job] { forget_preview(job); });
 }
 
 std::unique_ptr<ImageSink::Writer> MemoryImageSink::begin(const std::string& job, int width, int height,
-                                                          const ImageMetadata& meta, uint32_t) {
+                                                          const ImageMetadata& meta, ImageLayers) {
   return std::make_unique<FilmWriter>(width, height, [this, job, meta](const Film& f) { write(job, f, meta); });
 }
 

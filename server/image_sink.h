@@ -13,6 +13,13 @@
 
 namespace tessera {
 
+// What an image holds besides its colour: AOV layers (aov.h's bits), and whether it is
+// denoised as it is committed (a --denoise job's final image: core/denoise/denoise_exr.h).
+struct ImageLayers {
+  uint32_t aovs = 0;
+  bool denoise = false;
+};
+
 class ImageSink {
  public:
   // A new image being written band by band (rows top to bottom); commit() replaces the
@@ -20,15 +27,16 @@ class ImageSink {
   class Writer {
    public:
     virtual ~Writer() = default;
-    // `aovs`: the rows' AOV sums, for an image begun with AOV bits (else null).
-    virtual void write_rows(const PixelSums* sums, int rows, const AovSums* aovs) = 0;
+    // `aovs`: the rows' AOV sums, for an image begun with AOV bits (else null); `odd`: the
+    // rows of the film's second plane, for one with half-buffers (else null).
+    virtual void write_rows(const PixelSums* sums, int rows, const AovSums* aovs, const PixelSums* odd) = 0;
     virtual void commit() = 0;
   };
   virtual ~ImageSink() = default;
   // Slow (encoding, disk): the coordinator calls it, and the writer, without holding its
   // lock. Throws std::runtime_error on failure.
   virtual std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta,
-                                        uint32_t aovs) = 0;
+                                        ImageLayers layers) = 0;
   // The whole film at once.
   void write(const std::string& job, const Film& film, const ImageMetadata& meta);
   // The last image written, to stream: read from one open file (a newer write replaces the
@@ -65,8 +73,10 @@ class ImageSink {
 class DiskImageSink : public ImageSink {
  public:
   explicit DiskImageSink(std::string dir) : dir_(std::move(dir)) {}
+  // A denoised image is written noisy beside it first (image.noisy.exr), then denoised
+  // into place: a reader sees the last image or the denoised one, never the noisy one.
   std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta,
-                                uint32_t aovs) override;
+                                ImageLayers layers) override;
   std::string exr(const std::string& job) const override;
   std::string png(const std::string& job) const override;
   std::unique_ptr<Reader> open(const std::string& job) const override;
@@ -92,7 +102,7 @@ class MemoryImageSink : public ImageSink {
  public:
   // Collects the rows; commit() hands the film to write(film).
   std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta,
-                                uint32_t aovs) override;
+                                ImageLayers layers) override;
   // Keeps the film (tests override it to fail).
   virtual void write(const std::string& job, const Film& film, const ImageMetadata& meta);
   std::string exr(const std::string&) const override { return {}; }

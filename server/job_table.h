@@ -17,11 +17,12 @@
 namespace tessera {
 
 // What a frame with these settings weighs against --max-live-pixels: its pixels, and with
-// AOVs as many more as their sums' memory is worth in films (72 bytes a pixel: 1.8 films).
+// AOVs as many more as their sums' memory is worth in films (72 bytes a pixel: 1.8 films),
+// with half-buffers a film more (the second plane of sums).
 inline int64_t live_pixels_of(const RenderSettings& s) {
-  const int64_t area = s.effective_window().area();
-  return s.aovs ? area + (area * int64_t(sizeof(AovSums)) + int64_t(sizeof(PixelSums)) - 1) / int64_t(sizeof(PixelSums))
-                : area;
+  const int64_t area = s.effective_window().area() * int64_t(s.sum_planes());
+  const int64_t aov_area = s.effective_window().area() * int64_t(sizeof(AovSums));
+  return s.aovs ? area + (aov_area + int64_t(sizeof(PixelSums)) - 1) / int64_t(sizeof(PixelSums)) : area;
 }
 
 // What the live work weighs, counted in one place for admission (one client's share),

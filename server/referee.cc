@@ -14,7 +14,7 @@ Referee local_referee(const SceneStore& scenes) {
     const auto* mask = task.active().empty() ? nullptr : reinterpret_cast<const uint8_t*>(task.active().data());
     TileStats stats;
     const RenderSettings settings = from_proto(task.settings());
-    const std::vector<PixelSums> base = task_base(task, rect);
+    const std::vector<PixelSums> base = task_base(task, rect, settings.sum_planes());
     std::vector<AovSums> aovs;
     std::vector<PixelSums> sums =
         TileRenderer(scene, settings)

@@ -41,6 +41,7 @@ ResultIntake::Batch ResultIntake::screen(const std::vector<const v1::TaskResult*
     const FramePlan& plan = p_.jobs.job(lease->job).plan;
     b.incoming.push_back({i,
                           size_t(plan.tiles()[lease->tile].area()),
+                          plan.settings().sum_planes(),
                           plan.run_samples(lease->pass, lease->pass_count),
                           plan.settings().aovs != 0,
                           std::nullopt,
@@ -56,7 +57,7 @@ void ResultIntake::decode(Batch& b) {
         in.aovs = decode_aovs(r.aovs_zstd(), in.pixels, in.pass_len);
       else if (!r.aovs_zstd().empty())
         throw WireError("AOV sums for a job without AOVs");
-      in.sums = FramePlan::check(result_sums(r, in.pixels), in.pass_len);
+      in.sums = FramePlan::check(result_sums(r, in.pixels * in.planes), in.pass_len, in.planes);
     } catch (const WireError&) {  // counted as rejected by merge()
       in.sums.reset();
     }

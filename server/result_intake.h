@@ -35,6 +35,7 @@ class ResultIntake {
   struct Incoming {
     size_t index = 0;  // in the batch
     size_t pixels = 0;
+    uint32_t planes = 1;  // of sums (RenderSettings::sum_planes())
     uint32_t pass_len = 0;
     bool aovs_wanted = false;         // the job has AOVs (settings.aovs)
     std::optional<CheckedSums> sums;  // decoded and plausible

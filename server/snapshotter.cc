@@ -139,7 +139,10 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
   std::unique_ptr<CheckpointFile> checkpoint;
   std::unique_ptr<CheckpointEncoder> encoder;
   if (plan.image) try {
-      image = sink_.begin(job.id(), w.w, w.h, plan.meta, job.plan.settings().aovs);
+      // A --denoise job's final image is denoised (its previews are not).
+      const RenderSettings& s = job.plan.settings();
+      image = sink_.begin(job.id(), w.w, w.h, plan.meta,
+                          {s.aovs, s.denoise && plan.ended && plan.state == v1::JobStatus::DONE});
     } catch (const std::exception& e) {
       failed("image", e, &out.image, &out.image_why);
     }
@@ -155,7 +158,8 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
   for (uint32_t b = 0; b < job.plan.bands() && (image || checkpoint); ++b) {
     if (!copy_band(b, &band)) return SnapshotOutcome{};  // the film is gone: nothing to write
     if (image) try {
-        image->write_rows(band.pixels.data(), band.rows, band.aovs.empty() ? nullptr : band.aovs.data());
+        image->write_rows(band.pixels.data(), band.rows, band.aovs.empty() ? nullptr : band.aovs.data(),
+                          band.odd.empty() ? nullptr : band.odd.data());
       } catch (const std::exception& e) {
         image.reset();
         failed("image", e, &out.image, &out.image_why);

@@ -62,7 +62,7 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
     if (h->rect.area() <= 0) throw WireError("empty tile");
     h->prepared = scenes_.prepare(h->task);
     h->passes = task_passes(h->task, h->prepared->renderer->settings());
-    h->base = task_base(h->task, h->rect);
+    h->base = task_base(h->task, h->rect, h->prepared->renderer->settings().sum_planes());
   } catch (const std::exception& e) {
     spdlog::warn("task {}: {}", h->task.task_id(), e.what());
     link_.release(h->task.task_id(), e.what());  // another worker may manage; this one backs off
@@ -70,7 +70,7 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
     return;
   }
   if (!h->task.active().empty()) h->mask = reinterpret_cast<const uint8_t*>(h->task.active().data());
-  h->sums.resize(size_t(h->rect.area()));
+  h->sums.resize(size_t(h->rect.area()) * h->prepared->renderer->settings().sum_planes());
   if (h->prepared->renderer->settings().aovs) h->aovs.resize(size_t(h->rect.area()));
   queue_.add(std::move(h));
 }

@@ -111,7 +111,9 @@ void TaskQueue::row_done(const Row& r, const std::vector<PixelSums>& sums, const
   h.busy += t1 - t0;
   h.first_row = h.rows_done == 0 ? t0 : std::min(h.first_row, t0);
   h.last_row = std::max(h.last_row, t1);
-  std::copy(sums.begin(), sums.end(), h.sums.begin() + ptrdiff_t(r.row) * h.rect.w);
+  const size_t w = size_t(h.rect.w), area = size_t(h.rect.area());  // each plane's row in its place
+  for (size_t plane = 0; plane < sums.size() / w; ++plane)
+    std::copy_n(sums.begin() + ptrdiff_t(plane * w), w, h.sums.begin() + ptrdiff_t(plane * area + size_t(r.row) * w));
   if (aovs && !h.aovs.empty()) std::copy(aovs->begin(), aovs->end(), h.aovs.begin() + ptrdiff_t(r.row) * h.rect.w);
   h.stats.add(stats);
   if (++h.rows_done == h.rect.h && !h.cancel) {

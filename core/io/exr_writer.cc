@@ -21,12 +21,15 @@ ExrWriter::ExrWriter(std::string path, int width, int height, const ImageMetadat
       height_(height),
       aovs_(aovs),
       aov_names_(aov_channels(aovs)),
-      aov_(aov_names_.size()) {
+      aov_(aov_names_.size()),
+      half_(aovs & kAovHalves ? 6 : 0) {
   Imf::Header header(width, height);
   header.compression() = compress ? Imf::ZIP_COMPRESSION : Imf::NO_COMPRESSION;
   for (const auto& [key, value] : metadata) header.insert("tessera/" + key, Imf::StringAttribute(value));
   for (const char* name : {"R", "G", "B", "spp", "variance"}) header.channels().insert(name, Imf::Channel(Imf::FLOAT));
   for (const std::string& name : aov_names_) header.channels().insert(name, Imf::Channel(Imf::FLOAT));
+  if (!half_.empty())
+    for (const char* name : kHalfChannels) header.channels().insert(name, Imf::Channel(Imf::FLOAT));
   try {
     file_ = std::make_unique<Imf::OutputFile>(tmp_.c_str(), header);
   } catch (const std::exception& e) {
@@ -44,9 +47,10 @@ ExrWriter::~ExrWriter() {
   std::remove(tmp_.c_str());
 }
 
-void ExrWriter::write_rows(const PixelSums* sums, int rows, const AovSums* aov) {
+void ExrWriter::write_rows(const PixelSums* sums, int rows, const AovSums* aov, const PixelSums* odd) {
   if (!file_ || rows <= 0 || next_row_ + rows > height_) throw std::runtime_error(path_ + ": EXR rows out of order");
-  if (aovs_ && !aov) throw std::runtime_error(path_ + ": EXR rows without the AOVs its header names");
+  if ((aovs_ & kAovAll && !aov) || (!half_.empty() && !odd))
+    throw std::runtime_error(path_ + ": EXR rows without the AOVs its header names");
   const size_t n = size_t(rows) * size_t(width_);
   for (std::vector<float>* v : {&r_, &g_, &b_, &spp_, &var_}) v->resize(n);
   for (size_t i = 0; i < n; ++i) {
@@ -65,7 +69,21 @@ void ExrWriter::write_rows(const PixelSums* sums, int rows, const AovSums* aov) 
   for (const auto& [name, data] : channels)
     fb.insert(name, Imf::Slice::Make(Imf::FLOAT, data->data(), origin, width_, rows, sizeof(float),
                                      sizeof(float) * size_t(width_)));
-  if (aovs_) {
+  if (!half_.empty()) {
+    for (auto& plane : half_) plane.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+      float even_rgb[3], odd_rgb[3];
+      half_means(sums[i], odd[i], even_rgb, odd_rgb);
+      for (int c = 0; c < 3; ++c) {
+        half_[c][i] = even_rgb[c];
+        half_[3 + c][i] = odd_rgb[c];
+      }
+    }
+    for (size_t c = 0; c < half_.size(); ++c)
+      fb.insert(kHalfChannels[c], Imf::Slice::Make(Imf::FLOAT, half_[c].data(), origin, width_, rows, sizeof(float),
+                                                   sizeof(float) * size_t(width_)));
+  }
+  if (aovs_ & kAovAll) {
     for (auto& plane : aov_) plane.resize(n);
     float values[16];  // one pixel's, in aov_channels' order (at most 9)
     for (size_t i = 0; i < n; ++i) {

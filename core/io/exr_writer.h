@@ -24,15 +24,16 @@ class ExrWriter {
   // Writes to PATH.tmp; commit() renames it into place. Throws std::runtime_error naming
   // the path.
   // `aovs` (aov.h's bits) adds their channels (aov_channels), each row's from write_rows'
-  // `aov` sums.
+  // `aov` sums; with kAovHalves, the half-buffers' (kHalfChannels) from its `odd` sums.
   ExrWriter(std::string path, int width, int height, const ImageMetadata& metadata, bool compress = true,
             uint32_t aovs = 0);
   ~ExrWriter();  // removes the temporary file unless committed
   ExrWriter(const ExrWriter&) = delete;
   ExrWriter& operator=(const ExrWriter&) = delete;
   // The next `rows` rows of `width` sums each (row 0 the image's top), and their AOV sums
-  // when the file has AOV channels.
-  void write_rows(const PixelSums* sums, int rows, const AovSums* aov = nullptr);
+  // when the file has AOV channels, and the rows' odd-numbered samples' sums (the film's
+  // second plane) when it has the half-buffers'.
+  void write_rows(const PixelSums* sums, int rows, const AovSums* aov = nullptr, const PixelSums* odd = nullptr);
   int rows_written() const { return next_row_; }
   // Every row written: the file goes into place.
   void commit();
@@ -45,6 +46,7 @@ class ExrWriter {
   uint32_t aovs_;
   std::vector<std::string> aov_names_;
   std::vector<std::vector<float>> aov_;  // one plane per AOV channel
+  std::vector<std::vector<float>> half_;  // even.R/G/B, odd.R/G/B (kAovHalves)
 };
 
 }  // namespace tessera

@@ -34,7 +34,8 @@ void write_exr(const std::string& path, const Film& film, const ImageMetadata& m
   const bool with_aovs = aovs && !aovs->empty() && aov_bits;
   ExrWriter out(path, film.width(), film.height(), metadata, !fast, with_aovs ? aov_bits : 0);
   if (film.height() > 0)
-    out.write_rows(film.pixels().data(), film.height(), with_aovs ? aovs->pixels().data() : nullptr);
+    out.write_rows(film.pixels().data(), film.height(), with_aovs ? aovs->pixels().data() : nullptr,
+                   with_aovs && film.halves() ? film.odd().data() : nullptr);
   out.commit();
 }
 

@@ -10,8 +10,9 @@ namespace tessera {
 
 namespace {
 
-constexpr std::pair<const char*, uint32_t> kNames[] = {
-    {"alpha", kAovAlpha}, {"albedo", kAovAlbedo}, {"normal", kAovNormal}, {"depth", kAovDepth}, {"id", kAovId}};
+constexpr std::pair<const char*, uint32_t> kNames[] = {{"alpha", kAovAlpha},   {"albedo", kAovAlbedo},
+                                                       {"normal", kAovNormal}, {"depth", kAovDepth},
+                                                       {"id", kAovId},         {"halves", kAovHalves}};
 
 int64_t fixed(float v, double unit) { return int64_t(std::llround(double(v) * unit)); }
 
@@ -25,13 +26,14 @@ uint32_t parse_aovs(const std::string& list) {
     name.erase(0, name.find_first_not_of(" \t"));
     name.erase(name.find_last_not_of(" \t") + 1);
     if (name.empty()) continue;
-    if (name == "all") {
-      bits |= kAovAll;
+    if (name == "all" || name == "denoising") {
+      bits |= name == "all" ? kAovAll : kAovDenoising;
       continue;
     }
     const auto* it = std::find_if(std::begin(kNames), std::end(kNames), [&](const auto& e) { return name == e.first; });
     if (it == std::end(kNames))
-      throw SettingsError("--aov", "'" + name + "' is not an AOV (alpha, albedo, normal, depth, id, or all)");
+      throw SettingsError("--aov",
+                          "'" + name + "' is not an AOV (alpha, albedo, normal, depth, id, halves, all or denoising)");
     bits |= it->second;
   }
   return bits;

@@ -26,11 +26,20 @@ enum Aov : uint32_t {
   kAovNormal = 1u << 2,
   kAovDepth = 1u << 3,
   kAovId = 1u << 4,
+  // The half-buffers: the means of each pixel's even- and odd-numbered samples (layers
+  // even.R/G/B and odd.R/G/B), two independent estimates of the image for the denoiser.
+  // Not an AovSums field: a film's second plane of sums (film.h), added in pass order.
+  kAovHalves = 1u << 5,
 };
+// The compositing passes ("all").
 constexpr uint32_t kAovAll = kAovAlpha | kAovAlbedo | kAovNormal | kAovDepth | kAovId;
+// What the denoiser reads besides the image ("denoising", as Blender's "Denoising Data").
+constexpr uint32_t kAovDenoising = kAovAlbedo | kAovNormal | kAovDepth | kAovHalves;
+constexpr uint32_t kAovKnown = kAovAll | kAovHalves;
 
-// "albedo,normal,depth,alpha,id" (any of them, in any order; "all"; "" none) -> bits.
-// Throws SettingsError("--aov", ...) naming an unknown one.
+// "albedo,normal,depth,alpha,id,halves" (any of them, in any order; "all" the first five;
+// "denoising" albedo, normal, depth and halves; "" none) -> bits. Throws
+// SettingsError("--aov", ...) naming an unknown one.
 uint32_t parse_aovs(const std::string& list);
 std::string aov_names(uint32_t aovs);  // the list parse_aovs reads back
 
@@ -100,8 +109,10 @@ struct AovPixel {
 };
 AovPixel aov_pixel(const AovSums& s);
 
-// The EXR channels of each AOV, in the names Blender's and Nuke's readers expect (docs/aov.md).
+// The EXR channels of each AOV in AovSums, in the names Blender's and Nuke's readers expect
+// (docs/aov.md); the half-buffers' are kHalfChannels.
 std::vector<std::string> aov_channels(uint32_t aovs);
+inline constexpr const char* kHalfChannels[6] = {"even.R", "even.G", "even.B", "odd.R", "odd.G", "odd.B"};
 // A pixel's values of those channels, in that order, into out[0 .. aov_channels(aovs).size()).
 void aov_channel_values(const AovSums& s, uint32_t aovs, float* out);
 

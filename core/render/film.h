@@ -4,6 +4,12 @@
 // the sample count. A tile renders one pass into fresh sums; the film adds them. Addition
 // happens per pixel in pass order, so any tiling, thread count or machine split gives the
 // same bits.
+//
+// With the half-buffers (--aov halves, for the denoiser) a film keeps a second plane: the
+// sums of each pixel's odd-numbered samples only. A tile's sums are then two rect-sized
+// planes, every sample's then the odd ones', and travel, merge and check as one vector
+// (twice the pixels), so the second plane is added in pass order like the first. The
+// even samples' sums are the difference.
 #pragma once
 
 #include <algorithm>
@@ -41,7 +47,8 @@ struct PixelSums {
 
 class Film {
  public:
-  Film(Rect window) : window_(window), pixels_(size_t(window.area())) {}
+  Film(Rect window, bool halves = false)
+      : window_(window), pixels_(size_t(window.area())), odd_(halves ? size_t(window.area()) : 0) {}
   const Rect& window() const { return window_; }
   int width() const { return window_.w; }
   int height() const { return window_.h; }
@@ -49,13 +56,26 @@ class Film {
   PixelSums& at(int x, int y) { return pixels_[size_t(y) * window_.w + x]; }
   const PixelSums& at(int x, int y) const { return pixels_[size_t(y) * window_.w + x]; }
   const std::vector<PixelSums>& pixels() const { return pixels_; }
-  // Adds a tile's sums (rect in image coordinates, sums row-major over the rect).
+  // The odd-numbered samples' sums (the second plane): empty without half-buffers.
+  bool halves() const { return !odd_.empty(); }
+  PixelSums& odd_at(int x, int y) { return odd_[size_t(y) * window_.w + x]; }
+  const PixelSums& odd_at(int x, int y) const { return odd_[size_t(y) * window_.w + x]; }
+  const std::vector<PixelSums>& odd() const { return odd_; }
+  // Adds a tile's sums (rect in image coordinates, sums row-major over the rect; with
+  // half-buffers, two such planes).
   void add_tile(const Rect& rect, const std::vector<PixelSums>& sums);
+  // Sets a tile's sums (in the same layout), or zeroes them (sums null).
+  void set_tile(const Rect& rect, const PixelSums* sums);
   double mean_luminance() const;  // average over the film of per-pixel mean luminance
 
  private:
   Rect window_;
   std::vector<PixelSums> pixels_;
+  std::vector<PixelSums> odd_;
 };
+
+// The means of a pixel's even- and odd-numbered samples (the EXR's even.* and odd.*, the
+// denoiser's half-buffers): the one conversion, so every writer gives the same floats.
+void half_means(const PixelSums& all, const PixelSums& odd, float even_rgb[3], float odd_rgb[3]);
 
 }  // namespace tessera

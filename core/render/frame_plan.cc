@@ -27,6 +27,11 @@ bool plausible(const PixelSums& p) {
 }
 
 namespace {
+// Whether a run's result holds what the film had of a pixel (sums only grow).
+bool grown(const PixelSums& old, const PixelSums& now) {
+  return now.n >= old.n && now.r >= old.r && now.g >= old.g && now.b >= old.b && now.lum2 >= old.lum2;
+}
+
 // The tile whose lower-left pixel is (x, y): `tile` square, cut short at the window's edge.
 Rect tile_from(const Rect& w, int tile, int x, int y) {
   return {x, y, std::min(tile, w.x + w.w - x), std::min(tile, w.y + w.h - y)};
@@ -50,7 +55,7 @@ std::vector<Rect> frame_tiles(const RenderSettings& settings) {
 
 FramePlan::FramePlan(const RenderSettings& settings)
     : settings_(settings),
-      film_(settings.effective_window()),
+      film_(settings.effective_window(), settings.halves()),
       aovs_(settings.aovs ? AovFilm(settings.effective_window()) : AovFilm()),
       passes_(settings.passes()) {
   const Rect w = film_.window();
@@ -81,8 +86,13 @@ std::optional<TileTask> FramePlan::take(uint32_t max_passes) {
     if (task.pass > 0) {
       const Rect& r = task.rect;
       const Rect& w = film_.window();
-      task.base.resize(size_t(r.area()));
-      for (int y = 0; y < r.h; ++y) std::copy_n(&film_.at(r.x - w.x, r.y - w.y + y), r.w, &task.base[size_t(y) * r.w]);
+      const size_t area = size_t(r.area());
+      task.base.resize(area * settings_.sum_planes());
+      for (int y = 0; y < r.h; ++y) {
+        std::copy_n(&film_.at(r.x - w.x, r.y - w.y + y), r.w, &task.base[size_t(y) * r.w]);
+        if (film_.halves())
+          std::copy_n(&film_.odd_at(r.x - w.x, r.y - w.y + y), r.w, &task.base[area + size_t(y) * r.w]);
+      }
     }
   }
   return task;
@@ -125,18 +135,24 @@ bool FramePlan::wants(uint32_t tile, uint32_t pass) const {
   return tile < tiles_.size() && !progress_[tile].finished && progress_[tile].passes_done == pass;
 }
 
-std::optional<CheckedSums> FramePlan::check(std::vector<PixelSums> sums, uint32_t pass_len) {
+std::optional<CheckedSums> FramePlan::check(std::vector<PixelSums> sums, uint32_t pass_len, uint32_t planes) {
+  if (planes < 1 || planes > 2 || sums.size() % planes) return std::nullopt;
+  const size_t area = sums.size() / planes;
   uint64_t n = 0;
-  for (const PixelSums& p : sums) {
+  for (size_t i = 0; i < sums.size(); ++i) {
+    const PixelSums& p = sums[i];
     if (p.n > pass_len || !plausible(p)) return std::nullopt;
-    n += p.n;
+    if (i < area)
+      n += p.n;
+    else if (p.n > sums[i - area].n)  // the odd samples are some of the pixel's
+      return std::nullopt;
   }
   return CheckedSums(std::move(sums), pass_len, n);
 }
 
 FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const std::vector<PixelSums>& sums, uint64_t* samples) {
   if (!wants(tile, pass)) return Merge::kDuplicate;
-  std::optional<CheckedSums> checked = check(sums, passes_[pass].second - passes_[pass].first);
+  std::optional<CheckedSums> checked = check(sums, passes_[pass].second - passes_[pass].first, settings_.sum_planes());
   if (!checked) return Merge::kInvalid;
   const Merge m = merge(tile, pass, *checked);
   if (m == Merge::kMerged && samples) *samples = checked->samples();
@@ -148,7 +164,8 @@ FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const CheckedSum
   if (!wants(tile, pass)) return Merge::kDuplicate;
   const Rect& r = tiles_[tile];
   const uint32_t run_len = run_samples(pass, pass_count);
-  if (run_len == 0 || checked.sums().size() != size_t(r.area()) || checked.pass_len() != run_len)
+  const size_t area = size_t(r.area());
+  if (run_len == 0 || checked.sums().size() != area * settings_.sum_planes() || checked.pass_len() != run_len)
     return Merge::kInvalid;
   const Rect& w = film_.window();
   uint64_t before = 0;
@@ -156,17 +173,16 @@ FramePlan::Merge FramePlan::merge(uint32_t tile, uint32_t pass, const CheckedSum
     const std::vector<PixelSums>& s = checked.sums();
     for (int y = 0; y < r.h; ++y)
       for (int x = 0; x < r.w; ++x) {
+        const size_t k = size_t(y) * r.w + x;
         const PixelSums& old = film_.at(r.x - w.x + x, r.y - w.y + y);
-        const PixelSums& now = s[size_t(y) * r.w + x];
-        if (now.n < old.n || now.r < old.r || now.g < old.g || now.b < old.b || now.lum2 < old.lum2)
+        if (!grown(old, s[k]) || (film_.halves() && !grown(film_.odd_at(r.x - w.x + x, r.y - w.y + y), s[area + k])))
           return Merge::kInvalid;
         before += old.n;
       }
   }
   ready_.erase({pass, tile});  // a late result for a tile waiting to be re-issued
   if (pass_count > 1)
-    for (int y = 0; y < r.h; ++y)
-      std::copy_n(&checked.sums()[size_t(y) * r.w], r.w, &film_.at(r.x - w.x, r.y - w.y + y));
+    film_.set_tile(r, checked.sums().data());
   else
     film_.add_tile(r, checked.sums());
   ++merges_;
@@ -242,11 +258,10 @@ void FramePlan::reset_tile(uint32_t tile) {
   const Rect& w = film_.window();
   for (int y = 0; y < r.h; ++y)
     for (int x = 0; x < r.w; ++x) {
-      PixelSums& px = film_.at(r.x - w.x + x, r.y - w.y + y);
-      samples_merged_ -= px.n;
-      px = PixelSums{};
+      samples_merged_ -= film_.at(r.x - w.x + x, r.y - w.y + y).n;
       if (settings_.adaptive) active_[size_t(r.y - w.y + y) * w.w + (r.x - w.x + x)] = 1;
     }
+  film_.set_tile(r, nullptr);
   if (!aovs_.empty()) aovs_.clear(r);
   t = TileProgress{};
   ++unfinished_at_[0];
@@ -277,6 +292,10 @@ void FramePlan::copy_band(uint32_t band, BandCopy* out) const {
     out->aovs.assign(aovs_.pixels().begin() + ptrdiff_t(at), aovs_.pixels().begin() + ptrdiff_t(at + n));
   else
     out->aovs.clear();
+  if (film_.halves())
+    out->odd.assign(film_.odd().begin() + ptrdiff_t(at), film_.odd().begin() + ptrdiff_t(at + n));
+  else
+    out->odd.clear();
 }
 
 void FramePlan::add_aovs(uint32_t tile, const std::vector<AovSums>& sums) {
@@ -294,7 +313,8 @@ void FramePlan::restore_band(const BandCopy& b) {
   const bool with_film = !b.pixels.empty();
   if (b.y0 != first.y - w.y || b.rows != first.h || b.width != w.w || (with_film && b.pixels.size() != n) ||
       b.progress.size() != tiles_per_band_ || b.active.size() != (settings_.adaptive && with_film ? n : 0) ||
-      b.aovs.size() != (settings_.aovs && with_film ? n : 0))
+      b.aovs.size() != (settings_.aovs && with_film ? n : 0) ||
+      b.odd.size() != (settings_.halves() && with_film ? n : 0))
     bad("band " + std::to_string(b.band) + " does not fit the frame");
   for (const TileProgress& t : b.progress)
     if (t.passes_done > passes_.size() || (!t.finished && t.passes_done == passes_.size() && !passes_.empty()))
@@ -306,8 +326,9 @@ void FramePlan::restore_band(const BandCopy& b) {
     aovs_ = AovFilm();
     return;
   }
-  if (!(film_.window() == w)) film_ = Film(w);
+  if (!(film_.window() == w)) film_ = Film(w, settings_.halves());
   std::copy(b.pixels.begin(), b.pixels.end(), &film_.at(0, b.y0));
+  if (settings_.halves()) std::copy(b.odd.begin(), b.odd.end(), &film_.odd_at(0, b.y0));
   if (settings_.aovs) {
     if (!(aovs_.window() == w) || aovs_.empty()) aovs_ = AovFilm(w);
     std::copy(b.aovs.begin(), b.aovs.end(), aovs_.row(b.y0));
@@ -368,6 +389,7 @@ void FramePlan::restore(const PlanState& s, Film film) {
   const Rect w = settings_.effective_window();
   auto bad = [](const std::string& why) { throw std::invalid_argument("saved frame plan: " + why); };
   if (!(film.window() == w) && !(film.window() == Rect{})) bad("the film does not fit the frame");
+  if (film.window() == w && film.halves() != settings_.halves()) bad("the film's half-buffers do not fit the settings");
   if (s.progress.size() != tiles_.size())
     bad("tile count " + std::to_string(s.progress.size()) + ", expected " + std::to_string(tiles_.size()));
   if (s.active.size() != (settings_.adaptive ? size_t(w.area()) : 0)) bad("the active-pixel mask does not fit");

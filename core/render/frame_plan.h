@@ -37,7 +37,8 @@ struct TileTask {
   Rect rect;
   uint32_t sample_begin = 0, sample_end = 0;
   std::vector<uint8_t> active;  // rect-sized, row-major; empty: every pixel
-  // A run of passes after the first: the tile's sums so far, rect-sized, to which the run's
+  // A run of passes after the first: the tile's sums so far (as a result's: rect-sized, two
+  // planes with half-buffers), to which the run's
   // passes are added (its result is the tile's sums after the run). Empty otherwise.
   std::vector<PixelSums> base;
 };
@@ -70,6 +71,7 @@ struct BandCopy {
   std::vector<uint8_t> active;         // rows x width; empty unless adaptive sampling
   uint64_t samples = 0;                // the pixels' samples (n) together
   std::vector<AovSums> aovs;           // rows x width; empty unless the settings ask for AOVs
+  std::vector<PixelSums> odd;          // rows x width: the film's second plane; empty without half-buffers
 };
 
 // A task's sums found fit for a pass of pass_len samples a pixel (FramePlan::check): the
@@ -130,8 +132,9 @@ class FramePlan {
   // kMerged. `samples` receives the samples merged.
   Merge merge(uint32_t tile, uint32_t pass, const std::vector<PixelSums>& sums, uint64_t* samples = nullptr);
   // The per-pixel part of merge()'s check: nothing unless no pixel has more than pass_len
-  // samples and every one is plausible().
-  static std::optional<CheckedSums> check(std::vector<PixelSums> sums, uint32_t pass_len);
+  // samples and every one is plausible(); of `planes` planes (settings' sum_planes()), the
+  // second's pixels with no more samples than the first's. samples() counts the first's.
+  static std::optional<CheckedSums> check(std::vector<PixelSums> sums, uint32_t pass_len, uint32_t planes = 1);
   // merge() of checked sums of passes [pass, pass + pass_count): kInvalid unless they were
   // checked for that run's samples (run_samples()) and fit the tile, and a run's sums
   // hold the tile's (no pixel with fewer samples or smaller sums). `added` receives the

@@ -30,7 +30,9 @@ void RenderSettings::validate() const {
   require(spp >= 1 && spp <= kMaxSpp, "-s", range(1, kMaxSpp));
   require(light_samples >= 1 && light_samples <= kMaxLightSamples, "-l", range(1, kMaxLightSamples));
   require(max_depth >= 0 && max_depth <= kMaxDepth, "-m", range(0, kMaxDepth));
-  require((aovs & ~kAovAll) == 0, "--aov", "unknown AOV bits " + std::to_string(aovs & ~kAovAll));
+  require((aovs & ~kAovKnown) == 0, "--aov", "unknown AOV bits " + std::to_string(aovs & ~kAovKnown));
+  require(!denoise || (aovs & kAovDenoising) == kAovDenoising, "--denoise",
+          "needs the denoising layers (--aov denoising: albedo, normal, depth and halves)");
   if (adaptive)
     require(adaptive_batch >= 1 && adaptive_batch <= kMaxSpp && std::isfinite(adaptive_tolerance) &&
                 adaptive_tolerance >= 0,

@@ -13,6 +13,7 @@
 
 #include "core/camera/camera.h"
 #include "core/math/rect.h"
+#include "core/render/aov.h"
 
 namespace tessera {
 
@@ -103,6 +104,9 @@ struct RenderSettings {
   bool mis = true;
   // --aov: the AOVs written beside the image (aov.h's bits; 0: none, and no work for them).
   uint32_t aovs = 0;
+  // --denoise: the final image is denoised (core/denoise/), the noisy one kept beside it in
+  // the EXR. Needs aovs to hold kAovDenoising (the flag adds them).
+  bool denoise = false;
   CameraSettings camera;  // -r, -b, -d, --camera: documented in core/camera/camera.h
   Rect window;            // -p: the part of the image rendered; the whole image when empty
 
@@ -111,6 +115,10 @@ struct RenderSettings {
   // The settings a frame is rendered with: with a camera path (camera.path), its values at
   // this frame (0 for a still) in camera.pose, lens radius, focal distance and max depth.
   RenderSettings at_frame() const;
+  // With the half-buffers (kAovHalves) a tile's sums are two planes, every sample's then
+  // the odd-numbered samples' (film.h); else one.
+  bool halves() const { return (aovs & kAovHalves) != 0; }
+  uint32_t sum_planes() const { return halves() ? 2 : 1; }
   Rect effective_window() const { return window.area() > 0 ? window : Rect{0, 0, camera.width, camera.height}; }
   // Tiles the frame is cut into (FramePlan cuts them).
   int64_t tile_count() const;

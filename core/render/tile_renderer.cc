@@ -120,8 +120,10 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
 std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,
                                             TileStats* stats, const std::atomic<bool>* cancel,
                                             std::vector<AovSums>* aovs) const {
-  std::vector<PixelSums> out(size_t(rect.area()));
-  if (aovs) aovs->assign(size_t(rect.area()), AovSums{});
+  const size_t area = size_t(rect.area());
+  const bool halves = settings_.halves();
+  std::vector<PixelSums> out(area * settings_.sum_planes());
+  if (aovs) aovs->assign(area, AovSums{});
   const int width = settings_.camera.width, height = settings_.camera.height;
   const bool lens = camera_->is_thin_lens();
   TileStats local;
@@ -135,7 +137,7 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
       if (active && !active[k]) continue;
       const int px = rect.x + x, py = rect.y + y;  // image coordinates, row 0 at the top
       const uint64_t pixel_id = uint64_t(py) * uint64_t(width) + uint64_t(px);
-      PixelSums sums;
+      PixelSums sums, odd;  // odd: the odd-numbered samples' (half-buffers only)
       FirstHit first;  // (filled, and reset for each sample, only when AOVs are asked for)
       for (uint32_t s = s0; s < s1; ++s) {
         Sampler sampler(seed, pixel_id, s);
@@ -159,8 +161,16 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
         sums.b += L.b;
         sums.lum2 += lum * lum;
         ++sums.n;
+        if (halves && (s & 1)) {
+          odd.r += L.r;
+          odd.g += L.g;
+          odd.b += L.b;
+          odd.lum2 += lum * lum;
+          ++odd.n;
+        }
       }
       out[k] = sums;
+      if (halves) out[area + k] = odd;
     }
   }
   if (stats) stats->add(local);
@@ -172,15 +182,15 @@ std::vector<PixelSums> TileRenderer::render_passes(const Rect& rect,
                                                    const PixelSums* base, const uint8_t* active, TileStats* stats,
                                                    const std::atomic<bool>* cancel, std::vector<AovSums>* aovs) const {
   if (passes.size() == 1 && !base) return render(rect, passes[0].first, passes[0].second, active, stats, cancel, aovs);
-  std::vector<PixelSums> sums(size_t(rect.area()));
+  std::vector<PixelSums> sums(size_t(rect.area()) * settings_.sum_planes());
   if (base) std::copy_n(base, sums.size(), sums.begin());
-  if (aovs) aovs->assign(sums.size(), AovSums{});
+  if (aovs) aovs->assign(size_t(rect.area()), AovSums{});
   std::vector<AovSums> pass_aovs;
   for (const auto& [s0, s1] : passes) {
     const std::vector<PixelSums> pass = render(rect, s0, s1, active, stats, cancel, aovs ? &pass_aovs : nullptr);
     for (size_t i = 0; i < sums.size(); ++i) sums[i].add(pass[i]);  // Film::add_tile's order
     if (aovs)
-      for (size_t i = 0; i < sums.size(); ++i) (*aovs)[i].add(pass_aovs[i]);
+      for (size_t i = 0; i < aovs->size(); ++i) (*aovs)[i].add(pass_aovs[i]);
   }
   return sums;
 }

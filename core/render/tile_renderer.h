@@ -45,13 +45,14 @@ class TileRenderer {
   TileRenderer(const TileRenderer& base, const RenderSettings& settings);
 
   // Samples [s0, s1) of each pixel of `rect` whose `active` flag is set (all when active
-  // is null; `active` is rect-sized, row-major). Returns rect-sized sums. If `cancel`
+  // is null; `active` is rect-sized, row-major). Returns rect-sized sums (two planes of
+  // them with half-buffers: settings().sum_planes(), film.h). If `cancel`
   // becomes true the render stops between rows and the result must be discarded. With
   // `aovs` (settings().aovs set), the same samples' AOV sums too, rect-sized (aov.h).
   std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active, TileStats* stats,
                                 const std::atomic<bool>* cancel = nullptr, std::vector<AovSums>* aovs = nullptr) const;
   // A run of passes (consecutive sample ranges, in pass order), each rendered on its own
-  // and added in pass order to `base` (rect-sized; null: zero), as a film adds them: from
+  // and added in pass order to `base` (as render() returns; null: zero), as a film adds them: from
   // a tile's sums so far, the film's bits after those passes (FramePlan::take with more
   // than one pass). One range and no base is render()'s result. `aovs`: the passes' AOV
   // sums together (no base: integer sums add in any grouping).

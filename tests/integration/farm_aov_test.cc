@@ -23,8 +23,31 @@ TEST_F(Farm, AovLayersAreTheLocalRendersBitForBit) {
     EXPECT_TRUE(img.channels.count(ch)) << ch;
 }
 
+// --denoise: the coordinator denoises the final image from the same float layers tessera
+// render denoises, so the denoised image, the noisy one kept beside it and the half-buffers
+// are the local render's, bit for bit (runs of passes carry the second plane of sums too).
+TEST_F(Farm, DenoisedFinalIsTheLocalRendersBitForBit) {
+  const std::string flags = kFlags + " --denoise";
+  const std::string local = local_render(flags);
+  start_coordinator();
+  start_worker();
+  start_worker(2, {"--passes-per-task", "3"});
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r = submit_wait(kScene, flags, out);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+  const ExrImage img = read_exr(out);
+  for (const char* ch : {"noisy.R", "noisy.G", "noisy.B", "even.R", "odd.B", "albedo.G", "normal.Z", "depth.Z"})
+    EXPECT_TRUE(img.channels.count(ch)) << ch;
+  EXPECT_EQ(img.metadata.count("tessera/denoiser"), 1u);
+  EXPECT_NE(img.channels.at("R"), img.channels.at("noisy.R"));          // it was denoised
+  for (const auto& e : fs::recursive_directory_iterator(dir / "data"))  // the noisy file went once denoised
+    EXPECT_EQ(e.path().string().find("noisy"), std::string::npos) << e.path();
+}
+
 TEST_F(Farm, AovsSurviveACoordinatorKilledMidJob) {
-  const std::string flags = "-r 96 72 -s 512 --pass-spp 8 -m 6 --seed 5 --aov all";
+  // The half-buffers too: the film's second plane is in the checkpoints.
+  const std::string flags = "-r 96 72 -s 512 --pass-spp 8 -m 6 --seed 5 --aov all,halves";
   const std::string local = local_render(flags);
   const std::vector<std::string> crashy{"--checkpoint-seconds", "0.2"};
   start_coordinator("127.0.0.1:0", "2", crashy);

@@ -121,6 +121,15 @@ class Plain(unittest.TestCase):
         with self.assertRaisesRegex(ValueError, "'zdepth' is not an AOV"):
             self.farm.submit(SPHERES, aov="zdepth")
 
+    def test_denoise_through_the_farm_is_the_local_one(self):
+        job = self.farm.submit(SPHERES_GLTF, denoise=True, **SMALL)
+        settings = job.wait().settings
+        self.assertTrue(settings["denoise"])
+        self.assertEqual(settings["aovs"], 2 | 4 | 8 | 32)  # the denoising layers come with it
+        job.fetch(self.out("denoised.exr"))
+        render_local(BIN, SPHERES_GLTF, self.out("denoised-local.exr"), *SMALL_FLAGS, "--denoise")
+        self.assertTrue(identical(BIN, self.out("denoised.exr"), self.out("denoised-local.exr")))
+
     def test_watch_rides_out_a_coordinator_killed_and_started_again(self):
         job = self.farm.submit(SPHERES, samples=512, resolution=(64, 48), seed=3)
         seen = []

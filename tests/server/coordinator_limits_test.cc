@@ -91,6 +91,8 @@ TEST_F(CoordinatorTest, AFrameWithAovsWeighsItsAovSumsAgainstTheLivePixels) {
   RenderSettings s = job_settings();
   const int64_t area = s.effective_window().area();
   EXPECT_EQ(live_pixels_of(s), area);
+  s.aovs = kAovDenoising;  // half-buffers: a second film's worth of sums
+  EXPECT_EQ(live_pixels_of(s), 2 * area + (area * 72 + 39) / 40);
   s.aovs = kAovAll;
   EXPECT_EQ(live_pixels_of(s), area + (area * 72 + 39) / 40);
   CoordinatorOptions o = options();

@@ -283,7 +283,7 @@ TEST_F(DispatcherTest, ARunOfPassesCarriesTheTilesSumsAndItsResultTakesTheirPlac
   EXPECT_EQ(lease->pass_count, 2u);
   const uint32_t tile = lease->tile;
   const std::vector<PixelSums> first = testing::plausible_sums(job->plan, tile, 0);
-  std::vector<PixelSums> sums = task_base(t, from_proto(t.tile()));
+  std::vector<PixelSums> sums = task_base(t, from_proto(t.tile()), 1);
   ASSERT_EQ(sums.size(), first.size());
   for (size_t i = 0; i < sums.size(); ++i) EXPECT_EQ(sums[i].r, first[i].r) << i;
   for (uint32_t pass : {1u, 2u}) {

@@ -156,6 +156,35 @@ TEST(WireSettings, RoundTripAndRangeChecks) {
   }
 }
 
+// Issue 26: --denoise and the half-buffers travel; a run's base has both planes of sums.
+TEST(WireSettings, DenoiseAndHalvesRoundTripAndARunsBaseHasBothPlanes) {
+  RenderSettings s;
+  s.denoise = true;
+  s.aovs = kAovDenoising;
+  const RenderSettings r = from_proto(to_proto(s));
+  EXPECT_TRUE(r.denoise);
+  EXPECT_EQ(r.aovs, kAovDenoising);
+  v1::RenderSettings p = to_proto(s);
+  p.set_aovs(kAovAlbedo);  // --denoise without its layers
+  try {
+    from_proto(p);
+    ADD_FAILURE();
+  } catch (const WireError& e) {
+    EXPECT_NE(std::string(e.what()).find("--denoise"), std::string::npos) << e.what();
+  }
+  v1::Task task;
+  task.set_pass_count(2);
+  const Rect rect{0, 0, 3, 2};
+  std::vector<PixelSums> base(12);
+  base[7].r = 1;
+  base[7].lum2 = 1;
+  base[7].n = 1;
+  task.set_base_sums(encode_sums(base));
+  EXPECT_EQ(task_base(task, rect, 2).size(), 12u);
+  EXPECT_EQ(task_base(task, rect, 2)[7].n, 1u);
+  EXPECT_THROW(task_base(task, rect, 1), WireError);  // one plane where the data has two
+}
+
 // Issue 12 and 13's settings: camera path, fps, animation, environment.
 TEST(WireSettings, SequenceAndEnvironmentSettingsRoundTrip) {
   RenderSettings s;

@@ -4,7 +4,7 @@ The scene goes as glTF (Blender's own exporter) with what glTF cannot carry (res
 frame range, fps, depth of field, the world colour or HDRI) as the farm's settings; frames
 come back where the output path says (its #### convention), a still into the Image Editor.
 For scripts: bpy.context.scene.tessera (coordinator, token_file, tls_ca, samples,
-max_bounces, tile_size, noise_target, animation, aovs) and bpy.ops.tessera.render_on_farm(),
+max_bounces, tile_size, noise_target, animation, aovs, denoise) and bpy.ops.tessera.render_on_farm(),
 which in background mode (blender -b) waits for the job and writes the frames before it
 returns. docs/blender.md has the details."""
 import os
@@ -75,6 +75,9 @@ class TesseraSettings(bpy.types.PropertyGroup):
     aovs: bpy.props.BoolProperty(name="AOV layers", default=False,
                                  description="Alpha, albedo, normal, depth and material index layers in OpenEXR "
                                              "outputs, for the compositor (docs/aov.md)")
+    denoise: bpy.props.BoolProperty(name="Denoise", default=False,
+                                    description="The coordinator denoises the final image (as Cycles' denoiser "
+                                                "does; the noisy one stays in an EXR as noisy.R/G/B: docs/denoise.md)")
     # What the last render did (shown in the panel; read by scripts).
     last_job: bpy.props.StringProperty(name="Last job")
     last_status: bpy.props.StringProperty(name="Last status")
@@ -184,7 +187,7 @@ class TESSERA_PT_farm(bpy.types.Panel):
         props = context.scene.tessera
         col = self.layout.column()
         for name in ("coordinator", "token_file", "tls_ca", "samples", "max_bounces", "tile_size", "noise_target",
-                     "animation", "aovs"):
+                     "animation", "aovs", "denoise"):
             col.prop(props, name)
         col.operator(TESSERA_OT_render_on_farm.bl_idname, icon="RENDER_STILL")
         if props.last_status:

@@ -209,6 +209,8 @@ def render_settings(scene, props, folder=None):
     if getattr(props, "aovs", False) and scene.render.image_settings.file_format in ("OPEN_EXR",
                                                                                      "OPEN_EXR_MULTILAYER"):
         s["aov"] = "all"  # layers the compositor reads (an EXR output only: PNG has no layers)
+    if getattr(props, "denoise", False):
+        s["denoise"] = True
     s.update(camera_settings(scene))
     if math.isclose(s.get("env_strength", 1.0), 1.0):
         s.pop("env_strength", None)

@@ -19,7 +19,8 @@ with the same flags, bit for bit.
     env_color=None      --env-color    (r, g, b)
     env_strength=1.0, env_rotate=0.0, exposure=0.0, no_default_env=False
     animation="", fps=24.0, pass_spp=16, tile=32, noise_target=0.0, no_nee=False, no_mis=False
-    aov=None            --aov     "albedo,normal,depth,alpha,id", a list of them, or "all": EXR layers
+    aov=None            --aov     "albedo,normal,depth,alpha,id,halves", a list of them, "all" or "denoising": EXR layers
+    denoise=False       --denoise the coordinator denoises the final image (adds aov "denoising")
 
 Unknown keywords raise TypeError naming them; values the coordinator refuses come back as
 a TesseraError carrying its message (it checks every setting, as `tessera render` does).
@@ -58,24 +59,29 @@ DEFAULTS = {
     "no_nee": False,
     "no_mis": False,
     "aov": None,
+    "denoise": False,
 }
 # --aov's names and their bits (core/render/aov.h).
-AOVS = {"alpha": 1, "albedo": 2, "normal": 4, "depth": 8, "id": 16}
+AOVS = {"alpha": 1, "albedo": 2, "normal": 4, "depth": 8, "id": 16, "halves": 32}
+ALL_AOVS = 1 | 2 | 4 | 8 | 16  # "all": the compositing passes
+DENOISING_AOVS = 2 | 4 | 8 | 32  # "denoising": what the denoiser reads
 
 
 def aov_bits(value):
-    """--aov's list ("albedo,normal", a list of names, or "all") as the settings' bits."""
+    """--aov's list ("albedo,normal", a list of names, "all" or "denoising") as the settings' bits."""
     if not value:
         return 0
     names = value.split(",") if isinstance(value, str) else list(value)
     bits = 0
     for name in (n.strip() for n in names):
         if name == "all":
-            bits |= sum(AOVS.values())
+            bits |= ALL_AOVS
+        elif name == "denoising":
+            bits |= DENOISING_AOVS
         elif name in AOVS:
             bits |= AOVS[name]
         elif name:
-            raise ValueError(f"aov: '{name}' is not an AOV (alpha, albedo, normal, depth, id, or all)")
+            raise ValueError(f"aov: '{name}' is not an AOV (alpha, albedo, normal, depth, id, halves, all or denoising)")
     return bits
 
 MAX_FRAMES = 100000  # core/render/frames.h's kMaxFrames
@@ -187,6 +193,9 @@ def to_proto(scene, frames=None, **kwargs):
     p.no_nee = bool(s["no_nee"])
     p.no_mis = bool(s["no_mis"])
     p.aovs = aov_bits(s["aov"])
+    p.denoise = bool(s["denoise"])
+    if p.denoise:
+        p.aovs |= DENOISING_AOVS
     env = os.path.abspath(s["env"]) if s["env"] else None
     return p, env
 
@@ -201,6 +210,7 @@ FLAGS = {
     "no_default_env": ("--no-default-env", 0), "animation": ("--animation", 1), "fps": ("--fps", 1),
     "pass_spp": ("--pass-spp", 1), "tile": ("--tile", 1), "noise_target": ("--noise-target", 1),
     "no_nee": ("--no-nee", 0), "no_mis": ("--no-mis", 0), "aov": ("--aov", 1),
+    "denoise": ("--denoise", 0),
 }
 
 

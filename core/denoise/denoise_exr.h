@@ -1,0 +1,37 @@
+// Denoising an image file: the one path from an EXR with the denoising layers to a
+// denoised EXR, taken by `tessera denoise`, by `tessera render --denoise` (which writes the
+// noisy EXR first) and by the coordinator for a --denoise job's final image. The denoiser
+// reads only the file's float channels, so the same noisy file gives the same bits
+// wherever it was rendered (the farm's EXR already equals tessera render's).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/denoise/denoiser.h"
+#include "core/scene/image_read.h"
+
+namespace tessera {
+
+// The EXR channels the denoiser needs besides R, G, B (--aov denoising writes them).
+extern const std::vector<std::string> kDenoiseChannels;
+// The noisy image, kept in a denoised file.
+inline constexpr const char* kNoisyChannels[3] = {"noisy.R", "noisy.G", "noisy.B"};
+
+// The denoiser's input from an image: its noisy RGB (noisy.* where the image was denoised
+// before, else R, G, B), the half-buffers and the first-hit layers. Throws
+// std::runtime_error naming `what` (the file) and every channel missing.
+DenoiseBuffers denoise_buffers(const ExrImage& image, const std::string& what);
+
+struct DenoiseReport {
+  int width = 0, height = 0;
+  double seconds = 0;  // the denoiser's own time (reading and writing apart)
+};
+
+// Reads `in`, denoises it and writes `out` (may be `in`; written to a temporary file and
+// renamed into place): every channel and string attribute of `in`, with R, G, B denoised
+// and the noisy image as noisy.R/G/B, ZIP-compressed, and the attribute tessera/denoiser.
+// Throws std::runtime_error naming the file: unreadable, or without the layers needed.
+DenoiseReport denoise_exr(const std::string& in, const std::string& out, const DenoiseOptions& options = {});
+
+}  // namespace tessera

@@ -1,0 +1,139 @@
+// Denoising rendered images (issue 26): a noisy render of a known scene comes closer to its
+// converged reference, the same bits every time and with any thread count, the noisy image
+// stays in the file, a file is denoised again from its noisy image, and a file without the
+// layers the denoiser needs is refused naming them.
+#include "core/denoise/denoise_exr.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "core/io/image_io.h"
+#include "core/scene/load.h"
+#include "tests/core/render_helpers.h"
+#include "tests/core/test_paths.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+
+// relMSE over pixels and channels, as bench/error_report.py computes it.
+double rel_mse(const ExrImage& img, const char* const channels[3], const ExrImage& ref) {
+  double sum = 0;
+  const char* ref_channels[3] = {"R", "G", "B"};
+  for (int c = 0; c < 3; ++c) {
+    const std::vector<float>&x = img.channels.at(channels[c]), &y = ref.channels.at(ref_channels[c]);
+    for (size_t i = 0; i < x.size(); ++i) sum += (x[i] - y[i]) * double(x[i] - y[i]) / (double(y[i]) * y[i] + 0.01);
+  }
+  return sum / (3.0 * double(img.width) * img.height);
+}
+
+class DenoiseExr : public ::testing::Test {
+ protected:
+  fs::path dir = fs::temp_directory_path() / ("tessera_denoise_" + std::to_string(::getpid()));
+  void SetUp() override { fs::create_directories(dir); }
+  void TearDown() override { fs::remove_all(dir); }
+
+  std::string render(const Scene& scene, RenderSettings s, const std::string& name) {
+    const RenderResult r = testing::render(scene, s, 2, 16);
+    const std::string path = (dir / name).string();
+    write_exr(path, r.film, {}, false, &r.aovs, s.aovs);
+    return path;
+  }
+  // The noisy render and the reference's relMSE against the reference, before and after.
+  void expect_denoising_helps(const Scene& scene, RenderSettings s, int ref_spp, double factor) {
+    s.aovs = kAovDenoising;
+    const std::string noisy = render(scene, s, "noisy.exr");
+    RenderSettings rs = s;
+    rs.spp = ref_spp;
+    rs.pass_spp = 64;
+    rs.seed = 99;
+    rs.aovs = 0;
+    const ExrImage ref = read_exr(render(scene, rs, "ref.exr"));
+    const std::string out = (dir / "denoised.exr").string();
+    const DenoiseReport rep = denoise_exr(noisy, out);
+    EXPECT_EQ(rep.width, s.camera.width);
+    const ExrImage den = read_exr(out);
+    const char* rgb[3] = {"R", "G", "B"};
+    const char* noisy_rgb[3] = {"noisy.R", "noisy.G", "noisy.B"};
+    const double before = rel_mse(den, noisy_rgb, ref), after = rel_mse(den, rgb, ref);
+    std::printf("relMSE %.5f noisy, %.5f denoised (%.1fx), %.3f s\n", before, after, before / after, rep.seconds);
+    EXPECT_LT(after * factor, before);
+    // The noisy image is kept, as it was rendered.
+    EXPECT_EQ(den.channels.at("noisy.G"), read_exr(noisy).channels.at("G"));
+  }
+};
+
+TEST_F(DenoiseExr, ANoisyDiffuseSphereComesCloserToItsReference) {
+  Material m;
+  m.reflectance = Rgb(0.7f, 0.5f, 0.3f);
+  RenderSettings s;
+  s.camera.width = 48;
+  s.camera.height = 48;
+  s.spp = 8;
+  s.max_depth = 4;
+  s.environment = Rgb(1.0f);  // the light
+  expect_denoising_helps(testing::lone_sphere(m), s, 1024, 3);
+}
+
+TEST_F(DenoiseExr, ANoisyCornellBoxComesCloserToItsReference) {
+  TESSERA_REQUIRE_SHARED_SCENE(path, "CBspheres_lambertian.dae");
+  const Scene scene = load_scene(path);
+  RenderSettings s;
+  s.camera.width = 64;
+  s.camera.height = 48;
+  s.spp = 8;
+  s.max_depth = 5;
+  expect_denoising_helps(scene, s, 512, 3);
+}
+
+TEST_F(DenoiseExr, TheSameBitsEveryTimeWithAnyThreadsAndAgainFromTheNoisyImage) {
+  Material m;
+  m.reflectance = Rgb(0.5f);
+  RenderSettings s;
+  s.camera.width = 40;
+  s.camera.height = 30;
+  s.spp = 4;
+  s.environment = Rgb(1.0f);
+  s.aovs = kAovDenoising;
+  const std::string noisy = render(testing::lone_sphere(m), s, "noisy.exr");
+  const std::string a = (dir / "a.exr").string(), b = (dir / "b.exr").string(), c = (dir / "c.exr").string();
+  DenoiseOptions one, three;
+  one.threads = 1;
+  three.threads = 3;
+  denoise_exr(noisy, a, one);
+  denoise_exr(noisy, b, three);
+  denoise_exr(a, c);  // a denoised file is denoised from its noisy image, not twice
+  const ExrImage ia = read_exr(a), ib = read_exr(b), ic = read_exr(c);
+  for (const char* ch : {"R", "G", "B", "noisy.R", "even.R", "odd.B"}) {
+    EXPECT_EQ(ia.channels.at(ch), ib.channels.at(ch)) << ch;
+    EXPECT_EQ(ia.channels.at(ch), ic.channels.at(ch)) << ch;
+  }
+  EXPECT_EQ(ia.channels.size(), ic.channels.size());
+}
+
+TEST_F(DenoiseExr, AnImageWithoutTheLayersIsRefusedNamingThem) {
+  Material m;
+  RenderSettings s;
+  s.camera.width = 8;
+  s.camera.height = 8;
+  s.spp = 2;
+  s.aovs = kAovAlbedo | kAovNormal;  // no depth, no halves
+  const std::string in = render(testing::lone_sphere(m), s, "plain.exr");
+  try {
+    denoise_exr(in, (dir / "out.exr").string());
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    const std::string why = e.what();
+    EXPECT_NE(why.find(in), std::string::npos) << why;
+    EXPECT_NE(why.find("even.R"), std::string::npos) << why;
+    EXPECT_NE(why.find("depth.Z"), std::string::npos) << why;
+    EXPECT_EQ(why.find("albedo.R"), std::string::npos) << why;  // it has that
+    EXPECT_NE(why.find("--aov denoising"), std::string::npos) << why;
+  }
+  EXPECT_FALSE(fs::exists(dir / "out.exr"));
+}
+
+}  // namespace
+}  // namespace tessera
