@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <stdexcept>
 #include <string>
 #include <thread>
@@ -19,7 +20,7 @@ using nfor::GuidePlanes;
 using nfor::parallel_for;
 
 constexpr int kVarianceRadius = 3;   // 7 x 7: 49 samples of the dual-buffer variance a channel
-constexpr int kErrorRadius = 4;      // 9 x 9: the MSE estimates are about as noisy as the variance
+constexpr int kErrorRadius = 2;      // 5 x 5: a pixel's MSE estimates are noisy; wider boxes miss detail
 constexpr int kSelectionRadius = 2;  // 5 x 5: softens the seams between the candidates
 constexpr float kMinDepth = 1e-6f;   // log depth stays finite at (or, wrongly, below) zero distance
 constexpr float kMaxDepth = 1e10f;   // the background's depth; further counts as background
@@ -127,22 +128,40 @@ bool noise_free(const GuidePlanes& g, int x, int y) {
   return g.variance[0][p] == 0 && g.variance[1][p] == 0 && g.variance[2][p] == 0;
 }
 
-// Blends the candidates by their smoothed errors; noise-free pixels keep their colour.
+// Blends the candidates, the noisy colour among them, by their smoothed errors: the one
+// with the least per pixel, as a 0/1 map a candidate, each map smoothed by a box (which is
+// counting, over the box, the pixels that chose each). Noise-free pixels keep their colour.
 std::vector<float> combine(const DenoiseBuffers& in, const GuidePlanes& g, const Candidates& c, int threads) {
   const int w = in.width, h = in.height;
-  const std::vector<float> error0 = box_filter(c.error[0], w, h, kErrorRadius, threads);
-  const std::vector<float> error1 = box_filter(c.error[1], w, h, kErrorRadius, threads);
-  std::vector<float> choose(error0.size());
-  for (size_t i = 0; i < choose.size(); ++i) choose[i] = error1[i] < error0[i] ? 1.f : 0.f;
-  const std::vector<float> blend = box_filter(choose, w, h, kSelectionRadius, threads);
+  const size_t pixels = size_t(w) * size_t(h);
+  std::vector<float> least(pixels);
+  std::vector<uint8_t> choice(pixels, 0);
+  for (int b = 0; b < Candidates::kCount; ++b) {
+    const std::vector<float> error = box_filter(c.error[b], w, h, kErrorRadius, threads);
+    for (size_t i = 0; i < pixels; ++i)
+      if (b == 0 || error[i] < least[i]) least[i] = error[i], choice[i] = uint8_t(b);
+  }
   std::vector<float> out(in.color.size());
   parallel_for(h, threads, [&](int y, int) {
+    const int y0 = std::max(0, y - kSelectionRadius), y1 = std::min(h - 1, y + kSelectionRadius);
     for (int x = 0; x < w; ++x) {
       const size_t i = size_t(y) * size_t(w) + size_t(x);
-      const bool keep = noise_free(g, x, y);
-      for (size_t ch = 0; ch < 3; ++ch)
-        out[3 * i + ch] =
-            keep ? in.color[3 * i + ch] : (1 - blend[i]) * c.color[0][ch][i] + blend[i] * c.color[1][ch][i];
+      if (noise_free(g, x, y)) {
+        for (size_t ch = 0; ch < 3; ++ch) out[3 * i + ch] = in.color[3 * i + ch];
+        continue;
+      }
+      const int x0 = std::max(0, x - kSelectionRadius), x1 = std::min(w - 1, x + kSelectionRadius);
+      int count[Candidates::kCount] = {};
+      for (int v = y0; v <= y1; ++v)
+        for (int u = x0; u <= x1; ++u) ++count[choice[size_t(v) * size_t(w) + size_t(u)]];
+      float sum[3] = {};
+      for (int b = 0; b < Candidates::kCount; ++b) {
+        if (count[b] == 0) continue;
+        for (size_t ch = 0; ch < 3; ++ch)
+          sum[ch] += float(count[b]) * (b < Candidates::kFiltered ? c.color[b][ch][i] : in.color[3 * i + ch]);
+      }
+      const float area = float((x1 - x0 + 1) * (y1 - y0 + 1));
+      for (size_t ch = 0; ch < 3; ++ch) out[3 * i + ch] = sum[ch] / area;
     }
   });
   return out;

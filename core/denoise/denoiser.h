@@ -18,11 +18,17 @@
 //     features, background) solvable; Gaussian elimination with the intercept last gives a
 //     without the slopes. Where the fit is negative though the weighted mean is not (a line
 //     extrapolated past what the window holds, next to fireflies), the weighted mean is used.
-//     Two candidates: NL-means bandwidth k = 1 and k = 2.
+//     Four candidates: NL-means bandwidth k = 0.5 and k = 1, each fitted over the whole
+//     window and over its central 7 x 7 (the same sums, split: less bias where the features
+//     explain little, as on mirrors, whose first hit says nothing of what they reflect).
 //  3. Selection (NFOR 5.3): each candidate's MSE, estimated from the halves (the other half
-//     as the reference, less its variance and the filtered halves' residual difference),
-//     relative to colour^2 and smoothed; the better candidate per pixel, as a 0/1 map,
-//     smoothed, blends the two. A candidate's colour is the mean of its two filtered halves.
+//     as the reference, less the filtered halves' residual difference and the pixel's own
+//     (even - odd)^2 / 2), and a fifth candidate, the noisy colour itself, whose MSE is
+//     estimated as (even - odd)^2 / 4 on the same footing. Each relative to an estimate of
+//     colour^2 that no candidate moves (even x odd) and smoothed; the candidate with the
+//     least per pixel, as a 0/1 map a candidate, each map smoothed, blends them. Where no
+//     filter beats the noise (detail no feature explains: reflections, refractions) the
+//     pixel stays (nearly) as noisy as it came, rather than blurred.
 //  4. Zero estimated variance keeps the pixel: where the smoothed variance is 0 in every
 //     channel the output is the input colour, bit for bit (a noise-free image comes back
 //     unchanged by construction, not by the filter's luck).
@@ -30,16 +36,18 @@
 // Where it departs from NFOR, for speed (a 1080p frame in seconds on two cores; NFOR's
 // reference implementation takes minutes on many) or because these buffers differ:
 //  - a 13 x 13 window and 5 x 5 patches (NFOR: 19 x 19 and 7 x 7), and no collaborative
-//    (overlapping-window) averaging of the fits: each pixel keeps its own window's intercept;
-//  - no slopes along screen x and y: in a window this small they cost more variance than
-//    they are worth;
+//    (overlapping-window) averaging of the fits: each pixel keeps its own window's intercept
+//    (measured on rendered scenes: no better, and worse on diffuse ones);
+//  - no slopes along screen x and y: measured, they help smooth diffuse shading only, for
+//    two more unknowns (about 40% more time);
 //  - features are used as given (NFOR prefilters them with NL-means on their own half-
 //    buffers, which these buffers do not have), and depth enters as log depth;
-//  - bandwidths k = 1 and 2 (NFOR: 0.5 and 1; the distances here are means over channels
-//    where NFOR's take the channels' maximum, and the window is smaller);
-//  - the MSE estimates and selection maps are smoothed by 9 x 9 and 5 x 5 boxes where NFOR
-//    uses NL-means guided by the colour, and the selection is per pixel, not per channel;
-//  - no second pass (NFOR 5.4 filters the combined result once more);
+//  - bandwidths k = 0.5 and 1, as NFOR's, but over two window sizes, and the noisy colour
+//    as a candidate;
+//  - the MSE estimates and selection maps are smoothed by 5 x 5 boxes where NFOR uses
+//    NL-means guided by the colour, and the selection is per pixel, not per channel;
+//  - no second pass (NFOR 5.4 filters once more, guided by the first pass's output): tried,
+//    it did not help on rendered scenes;
 //  - loose feature weights multiply the NL-means weights (as in Rousselle 2013), and the
 //    NL-means distance is symmetric (2 min(var p, var q) is the variance cancelled), which
 //    lets the weights at offset -o be read from those at o.

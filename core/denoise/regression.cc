@@ -55,10 +55,9 @@ void filter_tiles(const GuidePlanes& in, int threads,
 Candidates regress(const GuidePlanes& in, int threads, bool wide) {
   const size_t pixels = size_t(in.grid.width) * size_t(in.grid.height);
   Candidates out;
-  for (int b = 0; b < Candidates::kCount; ++b) {
+  for (int b = 0; b < Candidates::kFiltered; ++b)
     for (auto& plane : out.color[b]) plane.resize(pixels);
-    out.error[b].resize(pixels);
-  }
+  for (auto& plane : out.error) plane.resize(pixels);
 #ifdef NFOR_HAS_AVX2_KERNELS
   if (wide && __builtin_cpu_supports("avx2")) {
     filter_tiles<Lanes8>(in, threads, filter_tile_8, out);

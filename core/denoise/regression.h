@@ -1,7 +1,8 @@
 // The denoiser's candidate filters (internal to core/denoise; denoiser.h says what they do
 // and where they come from): per pixel, a weighted first-order regression of each half-buffer
 // on the features, weighted by NL-means distances on the other half, at two NL-means
-// bandwidths, with each candidate's error estimated from the half-buffers.
+// bandwidths and over two window sizes, with each candidate's error (and the noisy colour's)
+// estimated from the half-buffers.
 #pragma once
 
 #include <cstddef>
@@ -11,6 +12,7 @@ namespace tessera {
 namespace nfor {
 
 constexpr int kWindowRadius = 6;  // the regression's window: 13 x 13 pixels (NFOR: 19 x 19; see denoiser.h)
+constexpr int kInnerRadius = 3;   // and its central 7 x 7, fitted too: less bias where the features explain little
 constexpr int kPatchRadius = 2;   // NL-means patches of 5 x 5 pixels (NFOR: 7 x 7)
 constexpr int kTileWidth = 32;    // filter tiles: multiples of kMaxLanes wide, and small enough
 constexpr int kTileHeight = 16;   // that their per-offset NL-means weights stay in L2
@@ -21,7 +23,7 @@ constexpr int kFeatures = 7;      // albedo r, g, b; normal x, y, z; log depth
 // only keep it from fitting one plane across very different surfaces (and rule the
 // background out next to a hit). The feature planes hold features over their bandwidths.
 constexpr float kAlbedoBandwidth = 1.0f;  // per |albedo difference| (rgb, each in [0, 1])
-constexpr float kNormalBandwidth = 2.0f;  // per |normal difference| (2: opposite normals)
+constexpr float kNormalBandwidth = 1.0f;  // per |normal difference| (2: opposite normals)
 constexpr float kDepthBandwidth = 1.0f;   // in log depth: a factor e of distance
 constexpr int kMaxLanes = 8;              // the widest SIMD kernels' (lanes.h)
 
@@ -51,9 +53,12 @@ struct GuidePlanes {
 
 // The candidate filters' results, width x height planes without a border.
 struct Candidates {
-  static constexpr int kCount = 2;      // NL-means bandwidths k = 1 and k = 2, in that order
-  std::vector<float> color[kCount][3];  // the mean of the two filtered halves
-  std::vector<float> error[kCount];     // its MSE estimate relative to colour^2, per pixel: noisy, smooth before use
+  // NL-means bandwidths k = 0.5 and 1 over the 13 x 13 window, then k = 0.5 and 1 over its
+  // central 7 x 7; then the noisy colour itself, which has an error but no plane here.
+  static constexpr int kFiltered = 4;
+  static constexpr int kCount = kFiltered + 1;
+  std::vector<float> color[kFiltered][3];  // the mean of the two filtered halves
+  std::vector<float> error[kCount];        // MSE estimate relative to colour^2, per pixel: noisy, smooth before use
 };
 
 // wide: the 8-lane AVX2 kernels where the CPU has them (the same bits as the 4-lane ones).

@@ -6,7 +6,8 @@
 // against every offset of the window, on each half, by box sums of per-pixel distances.
 // Then, kWidth<V> pixels of a row at a time, the regression: a row of the window's design
 // (feature differences, colours, weights) laid out, its terms added to the normal equations
-// of the four filters (sums held in registers), and at the end the intercepts solved for.
+// of the four filters (sums held in registers), those of the central 7 x 7 kept apart too,
+// and at the end the intercepts solved for, over the whole window and over its centre.
 #pragma once
 
 #include <utility>
@@ -42,7 +43,7 @@ constexpr int kDistanceCols = round_up_to_lanes(kMapCols + 2 * kPatchRadius);
 constexpr float kVarianceEpsilon = 1e-10f;  // noise-free against noise-free: 0 / 0 counts as no difference
 constexpr float kDistanceClamp = 1e4f;      // one noise-free mismatch already rules a neighbour out; stays finite
 constexpr float kPatchScale = 1.f / (3 * kPatch * kPatch);
-constexpr float kWideK = 2;  // the wider candidate's NL-means bandwidth (the other's is 1)
+constexpr float kStoredK = 1;  // the weight maps' NL-means bandwidth, the wider candidate's (the other's is 0.5)
 
 // The regression's unknowns: the colour's slope along each feature, then its value at the
 // pixel, the intercept: last, so that eliminating the others leaves it alone in the last row.
@@ -50,7 +51,15 @@ constexpr float kWideK = 2;  // the wider candidate's NL-means bandwidth (the ot
 // cost more variance than the gradients they follow are worth.
 constexpr int kUnknowns = kFeatures + 1;
 constexpr int kIntercept = kUnknowns - 1;
-constexpr int kFilters = 4;  // [half filtered: even, odd][NL-means bandwidth k = 1, 2]
+constexpr int kFilters = 4;  // [half filtered: even, odd][NL-means bandwidth k = 0.5, 1]
+
+// A design row's columns are stored centre first, so that the central 7 x 7's terms are a
+// contiguous run: window column i (offset dx = i - kWindowRadius) is at slot_of(i).
+constexpr int kInner = 2 * kInnerRadius + 1;
+constexpr int slot_of(int i) {
+  const int dx = i - kWindowRadius;
+  return dx < -kInnerRadius ? kInner + i : dx > kInnerRadius ? i : dx + kInnerRadius;
+}
 
 // Ridge on the slopes, relative to their own diagonal entry (scale-free: a feature's units
 // do not matter) plus a little of the weight sum (so that a feature constant over the
@@ -60,8 +69,8 @@ constexpr float kRidgeAbsolute = 1e-4f;
 constexpr float kTiny = 1e-30f;  // pivots of pixels off the image (their lanes are not written)
 
 // One pixel group's regression data over one row of the window (a row at a time keeps it in
-// L1): the unknowns' coefficients (feature differences, 1), the neighbour's colour in each
-// half, the filters' weights.
+// L1), by slot: the unknowns' coefficients (feature differences, 1), the neighbour's colour
+// in each half, the filters' weights.
 template <typename V>
 struct Design {
   V x[kWindow][kFeatures];  // the intercept's 1 is implied
@@ -71,7 +80,7 @@ struct Design {
 
 template <typename V>
 struct Scratch {
-  std::vector<float> patch_weight[2];  // [guide half][map][kMapRows][kMapCols]: exp(-max(0, distance) / k^2), k = 2
+  std::vector<float> patch_weight[2];  // [guide half][map][kMapRows][kMapCols]: exp(-max(0, distance) / k^2), k = 1
   std::vector<float> distance[2];      // [kDistanceRows][kDistanceCols] for the current map
   std::vector<float> row_sum[2];       // [kDistanceRows][kMapCols]: distances summed across the patch
   Design<V> design;
@@ -105,7 +114,7 @@ NFOR_INLINE size_t map_base(int offset) {
 template <typename V>
 NFOR_INLINE void compute_patch_weights(const GuidePlanes& in, int tx0, int ty0, Scratch<V>& s) {
   constexpr int kW = kWidth<V>;
-  constexpr float kScale = kPatchScale / (kWideK * kWideK);
+  constexpr float kScale = kPatchScale / (kStoredK * kStoredK);
   const Grid& g = in.grid;
   for (int o = 0; o < kMaps; ++o) {
     const int dx = dx_of(o), dy = dy_of(o);
@@ -163,25 +172,25 @@ NFOR_INLINE void build_design(const GuidePlanes& in, const Scratch<V>& s, int x,
 #pragma GCC unroll 8
   for (int j = 0; j < kFeatures; ++j) center[j] = load<V>(&in.feature[j][p]);
   for (int i = 0; i < kWindow; ++i) {
-    const int o = (dy + kWindowRadius) * kWindow + i;
+    const int o = (dy + kWindowRadius) * kWindow + i, slot = slot_of(i);
     const size_t q = size_t(ptrdiff_t(p) + shift_of(g, o));
     V feature_distance = {};
 #pragma GCC unroll 8
     for (int j = 0; j < kFeatures; ++j) {
       const V diff = load<V>(&in.feature[j][q]) - center[j];
-      d.x[i][j] = diff;
+      d.x[slot][j] = diff;
       feature_distance += diff * diff;  // the features are in units of their bandwidths
     }
     for (int h = 0; h < 2; ++h)
-      for (int c = 0; c < 3; ++c) d.color[i][3 * h + c] = load<V>(&in.half[h][c][q]);
+      for (int c = 0; c < 3; ++c) d.color[slot][3 * h + c] = load<V>(&in.half[h][c][q]);
     const V feature_weight = exp_nonpositive<V>(-feature_distance) * load<V>(&in.inside[q]);
     for (int h = 0; h < 2; ++h) {
       // Half h is filtered with the other half's patch weights (cross-filtering). They are
-      // kept at k = 2; k = 1 multiplies the distance by 4, which raises the weight to the 4th power.
+      // kept at k = 1; k = 0.5 multiplies the distance by 4, which raises the weight to the 4th power.
       const V w = load<V>(&s.patch_weight[1 - h][map_base(o) + size_t(pixel)]);
       const V w2 = w * w;
-      d.weight[2 * h][i] = w2 * w2 * feature_weight;
-      d.weight[2 * h + 1][i] = w * feature_weight;
+      d.weight[2 * h][slot] = w2 * w2 * feature_weight;
+      d.weight[2 * h + 1][slot] = w * feature_weight;
     }
   }
 }
@@ -193,9 +202,10 @@ struct NormalEquations {
   V r[kUnknowns][3];
 };
 
-// Adds the design's terms to row I of N and R, the sums held in registers meanwhile. The
-// intercept's coefficient is 1: its column adds the weight times x_I, and its row the weight.
-template <typename V, int I>
+// Adds the terms of the design's slots [Begin, End) to row I of N and R, the sums held in
+// registers meanwhile. The intercept's coefficient is 1: its column adds the weight times
+// x_I, and its row the weight.
+template <typename V, int Begin, int End, int I>
 NFOR_INLINE void accumulate_row(const Design<V>& d, int filter, NormalEquations<V>& eq) {
   constexpr int kCount = kUnknowns - I;
   const int color = 3 * (filter / 2);
@@ -204,7 +214,7 @@ NFOR_INLINE void accumulate_row(const Design<V>& d, int filter, NormalEquations<
   for (int j = 0; j < kCount; ++j) sum[j] = eq.n[I][I + j];
 #pragma GCC unroll 4
   for (int j = 0; j < 3; ++j) sum[kCount + j] = eq.r[I][j];
-  for (int o = 0; o < kWindow; ++o) {
+  for (int o = Begin; o < End; ++o) {
     V a = d.weight[filter][o];
     if constexpr (I < kIntercept) {
       a *= d.x[o][I];
@@ -222,9 +232,22 @@ NFOR_INLINE void accumulate_row(const Design<V>& d, int filter, NormalEquations<
   for (int j = 0; j < 3; ++j) eq.r[I][j] = sum[kCount + j];
 }
 
-template <typename V, int... I>
+template <typename V, int Begin, int End, int... I>
 NFOR_INLINE void accumulate(const Design<V>& d, int filter, NormalEquations<V>& eq, std::integer_sequence<int, I...>) {
-  (accumulate_row<V, I>(d, filter, eq), ...);
+  (accumulate_row<V, Begin, End, I>(d, filter, eq), ...);
+}
+template <typename V, int Begin, int End>
+NFOR_INLINE void accumulate(const Design<V>& d, int filter, NormalEquations<V>& eq) {
+  accumulate<V, Begin, End>(d, filter, eq, std::make_integer_sequence<int, kUnknowns>());
+}
+
+// eq += other: the central window's sums joined to the rest of the window's.
+template <typename V>
+NFOR_INLINE void add(const NormalEquations<V>& other, NormalEquations<V>& eq) {
+  for (int i = 0; i < kUnknowns; ++i) {
+    for (int j = i; j < kUnknowns; ++j) eq.n[i][j] += other.n[i][j];
+    for (int c = 0; c < 3; ++c) eq.r[i][c] += other.r[i][c];
+  }
 }
 
 // The intercept of (N + ridge) beta = R: Gaussian elimination of the slopes (N is symmetric
@@ -258,38 +281,48 @@ NFOR_INLINE void solve_intercept(NormalEquations<V>& eq, V (&out)[3]) {
   }
 }
 
-// Each candidate's colour (the mean of the filtered halves) and its MSE estimate for the
-// pixels from (x, y) on, from their filtered halves f[filter] (NFOR section 5.3): the other
-// half as the reference, less its variance and the halves' residual difference.
+// Each candidate's colour (the mean of its filtered halves) and the MSE estimates for the
+// pixels from (x, y) on, from the filtered halves f[window][filter] (NFOR section 5.3): the
+// other half as the reference, less the halves' residual difference and the reference's own
+// noise. That noise is the pixel's (even - odd)^2 / 2, not the smoothed variance: it is what
+// the reference's squared difference holds at this pixel (a firefly's in full), and its
+// estimate for the noisy colour, (even - odd)^2 / 4, is then on the same footing (the
+// noisy colour is the candidate whose filtered halves are the halves). Errors are relative
+// to even x odd, whose mean is the colour squared (the halves are independent): a scale that
+// no candidate's smoothing moves (the filtered colour, on a texture no feature explains,
+// would be brighter than the dark pixels it blurs, and weigh their error down). It is floored
+// at a quarter of the first candidate's colour squared, so that where the halves straddle 0
+// (a few samples) a pixel's scale is not near 0 and its error does not outweigh the rest.
 template <typename V>
-NFOR_INLINE void write_candidates(const GuidePlanes& in, int x, int y, const V (&f)[kFilters][3], Candidates& out) {
+NFOR_INLINE void write_candidates(const GuidePlanes& in, int x, int y, const V (&f)[2][kFilters][3], Candidates& out) {
   constexpr int kW = kWidth<V>;
   constexpr float kRelativeEpsilon = 1e-2f;  // as in relMSE: dark pixels do not dominate the error
   const Grid& g = in.grid;
   const size_t p = g.at(x, y);
-  float color[Candidates::kCount][3][kW], error[Candidates::kCount][kW];
-  V reference[3];
-  for (int b = 0; b < Candidates::kCount; ++b) {
-    V relative_mse = {};
-    for (int c = 0; c < 3; ++c) {
-      const V fe = f[b][c], fo = f[2 + b][c];
-      const V even = load<V>(&in.half[0][c][p]), odd = load<V>(&in.half[1][c][p]);
-      const V var = load<V>(&in.variance[c][p]);
-      const V mean = 0.5f * (fe + fo);
-      const V mse = 0.5f * ((fe - odd) * (fe - odd) + (fo - even) * (fo - even)) - var - 0.25f * (fe - fo) * (fe - fo);
-      if (b == 0) reference[c] = mean * mean + kRelativeEpsilon;
-      relative_mse += mse / reference[c];
-      store<V>(color[b][c], mean);
+  float color[Candidates::kFiltered][3][kW], error[Candidates::kCount][kW];
+  V relative_mse[Candidates::kCount] = {};
+  for (int c = 0; c < 3; ++c) {
+    const V even = load<V>(&in.half[0][c][p]), odd = load<V>(&in.half[1][c][p]);
+    const V noise = 0.5f * (even - odd) * (even - odd);
+    const V first = 0.5f * (f[0][0][c] + f[0][2][c]);
+    const V inverse_scale = 1.f / (max<V>(even * odd, 0.25f * first * first) + kRelativeEpsilon);
+    for (int b = 0; b < Candidates::kFiltered; ++b) {
+      const V fe = f[b / 2][b % 2][c], fo = f[b / 2][2 + b % 2][c];  // [window][filter: half, k]
+      const V mse =
+          0.5f * ((fe - odd) * (fe - odd) + (fo - even) * (fo - even)) - 0.25f * (fe - fo) * (fe - fo) - noise;
+      relative_mse[b] += mse * inverse_scale;
+      store<V>(color[b][c], 0.5f * (fe + fo));
     }
-    store<V>(error[b], relative_mse * (1.f / 3));
+    relative_mse[Candidates::kFiltered] += 0.5f * noise * inverse_scale;
   }
+  for (int b = 0; b < Candidates::kCount; ++b) store<V>(error[b], relative_mse[b] * (1.f / 3));
   const int count = g.width - x < kW ? g.width - x : kW;
   const size_t at = size_t(y) * size_t(g.width) + size_t(x);
-  for (int l = 0; l < count; ++l)
-    for (int b = 0; b < Candidates::kCount; ++b) {
+  for (int l = 0; l < count; ++l) {
+    for (int b = 0; b < Candidates::kFiltered; ++b)
       for (int c = 0; c < 3; ++c) out.color[b][c][at + size_t(l)] = color[b][c][l];
-      out.error[b][at + size_t(l)] = error[b][l];
-    }
+    for (int b = 0; b < Candidates::kCount; ++b) out.error[b][at + size_t(l)] = error[b][l];
+  }
 }
 
 template <typename V>
@@ -297,14 +330,23 @@ NFOR_INLINE void filter_tile(const GuidePlanes& in, int tx0, int ty0, Scratch<V>
   compute_patch_weights<V>(in, tx0, ty0, s);
   for (int ty = 0; ty < kTileHeight && ty0 + ty < in.grid.height; ++ty)
     for (int tx = 0; tx < kTileWidth && tx0 + tx < in.grid.width; tx += kWidth<V>) {
-      NormalEquations<V> eq[kFilters] = {};
+      NormalEquations<V> eq[kFilters] = {}, inner[kFilters] = {};  // the window less its centre; the centre
       for (int dy = -kWindowRadius; dy <= kWindowRadius; ++dy) {
         build_design<V>(in, s, tx0 + tx, ty0 + ty, ty * kMapCols + tx, dy, s.design);
         for (int filter = 0; filter < kFilters; ++filter)
-          accumulate<V>(s.design, filter, eq[filter], std::make_integer_sequence<int, kUnknowns>());
+          if (dy < -kInnerRadius || dy > kInnerRadius) {
+            accumulate<V, 0, kWindow>(s.design, filter, eq[filter]);
+          } else {
+            accumulate<V, 0, kInner>(s.design, filter, inner[filter]);
+            accumulate<V, kInner, kWindow>(s.design, filter, eq[filter]);
+          }
       }
-      V f[kFilters][3];
-      for (int filter = 0; filter < kFilters; ++filter) solve_intercept<V>(eq[filter], f[filter]);
+      V f[2][kFilters][3];  // [window: whole, centre][filter][channel]
+      for (int filter = 0; filter < kFilters; ++filter) {
+        add<V>(inner[filter], eq[filter]);
+        solve_intercept<V>(eq[filter], f[0][filter]);
+        solve_intercept<V>(inner[filter], f[1][filter]);
+      }
       write_candidates<V>(in, tx0 + tx, ty0 + ty, f, out);
     }
 }
