@@ -24,7 +24,7 @@ CS184 = os.path.join(ROOT, "..", "shared", "scenes", "cs184")
 # name, scene, flags, crops (x, y, w, h in the frame: what each shows)
 SCENES = [
     ("cbspheres", os.path.join(CS184, "CBspheres.dae"), "-r 320 240 -m 8 -l 1",
-     [(170, 120, 80, 80, "glass sphere and its caustic"), (60, 100, 80, 80, "mirror sphere, wall edge")]),
+     [(170, 120, 80, 80, "the glass sphere's rim and highlight"), (60, 100, 80, 80, "the mirror sphere")]),
     ("dof-row", os.path.join(ROOT, "scenes", "dof-row.gltf"), "-r 360 240 -m 8 -b 0.15 -d 7",
      [(0, 150, 90, 90, "checker texture out of focus"), (140, 90, 90, 90, "spheres in and out of focus")]),
     ("cbdragon", os.path.join(CS184, "CBdragon.dae"), "-r 320 240 -m 8 -l 1",
