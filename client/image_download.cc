@@ -19,8 +19,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-bool is_exr(const std::string& p) { return p.size() >= 4 && p.compare(p.size() - 4, 4, ".exr") == 0; }
-
 // The download's temporary file and the hash of what it holds.
 struct Part {
   explicit Part(const std::string& path) : file(path), hash(XXH64_createState()) { XXH64_reset(hash, 0); }
@@ -96,7 +94,7 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
   std::string at = download;  // where the EXR is
   std::optional<ExrImage> img;
   for (const std::string& p : paths) {
-    if (is_exr(p)) {
+    if (is_exr_path(p)) {
       if (at == download) {
         fs::rename(download, p);
         at = p;
@@ -106,8 +104,7 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
       continue;
     }
     if (!img) img = read_exr(at);
-    write_file_atomic(p, encode_png(img->width, img->height, img->channels.at("R").data(), img->channels.at("G").data(),
-                                    img->channels.at("B").data(), false, exposure_scale(img->metadata)));
+    write_file_atomic(p, encode_png(*img));
   }
   if (at == download) fs::remove(download);
   return got;

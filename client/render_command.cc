@@ -50,8 +50,7 @@ class ProgressPrinter {
 // one path, so the same bits. The other outputs are made from the denoised file.
 double write_denoised(const RenderResult& r, const ImageMetadata& meta, const RenderSettings& s,
                       const std::vector<std::string>& outputs, int threads) {
-  auto is_exr = [](const std::string& p) { return p.size() > 4 && p.compare(p.size() - 4, 4, ".exr") == 0; };
-  const auto first_exr = std::find_if(outputs.begin(), outputs.end(), is_exr);
+  const auto first_exr = std::find_if(outputs.begin(), outputs.end(), is_exr_path);
   const std::string exr = first_exr != outputs.end() ? *first_exr : outputs.front() + ".noisy.exr";
   write_image(exr, r.film, meta, &r.aovs, s.aovs);
   DenoiseOptions options;
@@ -60,14 +59,12 @@ double write_denoised(const RenderResult& r, const ImageMetadata& meta, const Re
   std::optional<ExrImage> img;
   for (const std::string& out : outputs) {
     if (out == exr) continue;
-    if (is_exr(out)) {
+    if (is_exr_path(out)) {
       write_file_atomic(out, read_file_bytes(exr));
       continue;
     }
     if (!img) img = read_exr(exr);
-    write_file_atomic(out,
-                      encode_png(img->width, img->height, img->channels.at("R").data(), img->channels.at("G").data(),
-                                 img->channels.at("B").data(), false, exposure_scale(img->metadata)));
+    write_file_atomic(out, encode_png(*img));
   }
   if (first_exr == outputs.end()) std::remove(exr.c_str());
   return d.seconds;

@@ -218,7 +218,7 @@ void CheckpointEncoder::band(const BandCopy& b) {
     w.bytes(mask);
   }
   w.bytes(encode_sums(b.pixels.data(), b.pixels.size()));
-  if (aovs_) w.bytes(encode_aovs(b.aovs));  // a job with AOVs: their sums follow the film's
+  if (aovs_) w.bytes(encode_aovs(b.aovs));                        // a job with AOVs: their sums follow the film's
   if (halves_) w.bytes(encode_sums(b.odd.data(), b.odd.size()));  // then the film's second plane
   emit(std::move(w.out));
 }

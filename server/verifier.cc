@@ -68,7 +68,7 @@ std::optional<Check> Verifier::pending(uint64_t check, uint64_t task_id) const {
 std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check) {
   try {
     const size_t pixels = size_t(from_proto(check.task->tile()).area());
-    const size_t planes = check.task->settings().aovs() & kAovHalves ? 2 : 1;
+    const size_t planes = from_proto(check.task->settings()).sum_planes();
     if (!check.task->settings().aovs()) return sums_digest(result_sums(result, pixels));
     const std::vector<AovSums> aovs = decode_aovs(result.aovs_zstd(), pixels, RenderSettings::kMaxSpp);
     return sums_digest(result_sums(result, pixels * planes), &aovs);

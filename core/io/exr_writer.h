@@ -45,7 +45,7 @@ class ExrWriter {
   std::vector<float> r_, g_, b_, spp_, var_;
   uint32_t aovs_;
   std::vector<std::string> aov_names_;
-  std::vector<std::vector<float>> aov_;  // one plane per AOV channel
+  std::vector<std::vector<float>> aov_;   // one plane per AOV channel
   std::vector<std::vector<float>> half_;  // even.R/G/B, odd.R/G/B (kAovHalves)
 };
 

@@ -96,6 +96,13 @@ void write_png(const std::string& path, const Film& film, bool fast, float scale
   write_file_atomic(path, bytes);
 }
 
+std::string encode_png(const ExrImage& img) {
+  return encode_png(img.width, img.height, img.channels.at("R").data(), img.channels.at("G").data(),
+                    img.channels.at("B").data(), false, exposure_scale(img.metadata));
+}
+
+bool is_exr_path(const std::string& path) { return ends_with(path, ".exr"); }
+
 void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata, const AovFilm* aovs,
                  uint32_t aov_bits) {
   if (ends_with(path, ".exr")) return write_exr(path, film, metadata, false, aovs, aov_bits);

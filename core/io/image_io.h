@@ -25,6 +25,11 @@ void write_png(const std::string& path, const Film& film, bool fast = false, flo
 // The PNG file's bytes for linear RGB planes of w x h (row 0 at the top).
 std::string encode_png(int w, int h, const float* r, const float* g, const float* b, bool fast = false,
                        float scale = 1);
+// An EXR's R, G, B as a PNG at the exposure its metadata records (as every PNG made from
+// an EXR: a farm download, a denoised render).
+std::string encode_png(const ExrImage& image);
+// Whether a path names an EXR (its extension).
+bool is_exr_path(const std::string& path);
 // Picks the format from the extension (.exr or .png); throws on anything else. A PNG takes
 // its exposure from the metadata (exposure_scale), as every PNG made from the EXR does.
 void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata,

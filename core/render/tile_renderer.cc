@@ -138,7 +138,7 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
       const int px = rect.x + x, py = rect.y + y;  // image coordinates, row 0 at the top
       const uint64_t pixel_id = uint64_t(py) * uint64_t(width) + uint64_t(px);
       PixelSums sums, odd;  // odd: the odd-numbered samples' (half-buffers only)
-      FirstHit first;  // (filled, and reset for each sample, only when AOVs are asked for)
+      FirstHit first;       // (filled, and reset for each sample, only when AOVs are asked for)
       for (uint32_t s = s0; s < s1; ++s) {
         Sampler sampler(seed, pixel_id, s);
         const Vec2 jitter = sampler.next_2d();

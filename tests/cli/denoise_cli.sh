@@ -2,7 +2,8 @@
 # CTest entry (Cli.DenoiseOnRenderAndAsACommand): `tessera render --denoise` writes the
 # denoised image with the noisy one and the denoising layers beside it (no temporary left,
 # a PNG alone too), `tessera denoise IN OUT` denoises a file rendered with --aov denoising,
-# and refuses one without those layers (exit 1) naming the channels it lacks.
+# and refuses one without those layers (exit 1) naming the channels it lacks, and a file that
+# is not an EXR (exit 1, naming it).
 # Usage: denoise_cli.sh BUILD_DIR
 set -u
 BIN=$(cd "$1/bin" && pwd)
@@ -38,6 +39,11 @@ rc=$?
 if [[ $rc -eq 1 && $msg == *"even.R"* && $msg == *"depth.Z"* && $msg == *"--aov denoising"* && ! -e $T/p2.exr ]]; then
   ok "without the layers: exit 1, $msg"
 else bad "without the layers: exit $rc: $msg"; fi
+head -c 3000 /dev/urandom > "$T/junk.exr"
+msg=$("$BIN/tessera" denoise "$T/junk.exr" "$T/j2.exr" 2>&1)
+rc=$?
+if [[ $rc -eq 1 && $msg == *"junk.exr: cannot read EXR"* && ! -e $T/j2.exr ]]; then ok "a file that is not an EXR: exit 1, $msg"
+else bad "a file that is not an EXR: exit $rc: $msg"; fi
 msg=$("$BIN/tessera" denoise "$T/none.exr" "$T/x.exr" 2>&1)
 rc=$?
 [[ $rc -eq 2 ]] && ok "a missing input: exit 2, $msg" || bad "a missing input: exit $rc: $msg"
