@@ -1,7 +1,6 @@
 #include "core/render/integrator.h"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -15,8 +14,6 @@ namespace {
 
 constexpr float kMachineEps = std::numeric_limits<float>::epsilon() * 0.5f;
 constexpr float gamma(int n) { return (n * kMachineEps) / (1 - n * kMachineEps); }
-// Margin over the error bound for Embree's own rounding in its plane test.
-constexpr float kOffsetSafety = 2.0f;
 // Offsets never below this over |Ng| (clamped to 1): 4 FLT_MIN, see make_surface_point.
 constexpr float kUnderflowFloor = 4 * std::numeric_limits<float>::min();
 // The double-precision sphere test's error in the sign of |o - c|^2 - r^2, relative to r,
@@ -26,22 +23,6 @@ constexpr float kSphereTestError = 0x1p-40f;
 constexpr float kRouletteFloor = 0.25f;
 
 Vec3 splat(float v) { return {v, v, v}; }
-
-// std::nextafter is an out-of-line libm call; these are a few integer operations.
-float next_float_up(float v) {
-  if (std::isinf(v) && v > 0) return v;
-  if (v == -0.0f) v = 0.0f;
-  uint32_t bits = std::bit_cast<uint32_t>(v);
-  bits = v >= 0 ? bits + 1 : bits - 1;
-  return std::bit_cast<float>(bits);
-}
-float next_float_down(float v) {
-  if (std::isinf(v) && v < 0) return v;
-  if (v == 0.0f) v = -0.0f;
-  uint32_t bits = std::bit_cast<uint32_t>(v);
-  bits = v > 0 ? bits - 1 : bits + 1;
-  return std::bit_cast<float>(bits);
-}
 
 // The normal map's frame from the triangle itself (pbrt's Triangle::InteractionFromIntersection:
 // dp/du and dp/dv of its texture coordinates `uvs`), where the file gives no tangents:
@@ -179,22 +160,6 @@ Vec3 mapped_normal(const Scene& scene, const TextureRef& ref, float scale, const
   mapped = mapped / len;
   if (dot(mapped, sp.ng) <= 0) return sp.ns;  // a map that turns the normal under the surface: ignore it here
   return mapped;
-}
-
-Vec3 offset_point(Vec3 p, Vec3 p_err, Vec3 n, Vec3 w) {
-  const float d = dot(abs(n), p_err) * kOffsetSafety;
-  const Vec3 side = dot(w, n) < 0 ? -n : n;
-  Vec3 po = p + side * d;
-  // Round one ulp further away in every component the normal has. This matters when
-  // the bound is zero: a point on a coordinate plane (a floor at y = 0) is exact, and
-  // without the nudge the ray would start on the surface, where Embree reports t = 0.
-  for (int i = 0; i < 3; ++i) {
-    if (side[i] > 0)
-      po[i] = next_float_up(po[i]);
-    else if (side[i] < 0)
-      po[i] = next_float_down(po[i]);
-  }
-  return po;
 }
 
 Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& lights, const RenderSettings& s)

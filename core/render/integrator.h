@@ -10,6 +10,7 @@
 
 #include "core/accel/accel.h"
 #include "core/light/lights.h"
+#include "core/math/ulp.h"
 #include "core/render/aov.h"
 #include "core/render/settings.h"
 #include "core/sampling/sampler.h"
@@ -49,7 +50,16 @@ Vec3 mapped_normal(const Scene& scene, const TextureRef& ref, float scale, const
 // A point p with error bound p_err on a surface with normal n, pushed off the surface along
 // n (to the side w points to) by the error bound, so that a ray between it and elsewhere
 // can neither start behind the surface nor hit it again.
-Vec3 offset_point(Vec3 p, Vec3 p_err, Vec3 n, Vec3 w);
+inline Vec3 offset_point(Vec3 p, Vec3 p_err, Vec3 n, Vec3 w) {
+  constexpr float kOffsetSafety = 2.0f;  // margin for Embree's own rounding in its plane test
+  const float d = (std::fabs(n.x) * p_err.x + std::fabs(n.y) * p_err.y + std::fabs(n.z) * p_err.z) * kOffsetSafety;
+  const Vec3 side = dot(w, n) < 0 ? -n : n;
+  // Then one ulp further in every component the normal has: where the bound is zero (a
+  // point on a coordinate plane, exact) the ray would otherwise start on the surface, where
+  // Embree reports t = 0. (Inline, per component: this runs three times a vertex.)
+  return {step_toward(p.x + side.x * d, side.x), step_toward(p.y + side.y * d, side.y),
+          step_toward(p.z + side.z * d, side.z)};
+}
 inline Vec3 offset_ray_origin(const SurfacePoint& sp, Vec3 w) { return offset_point(sp.p, sp.p_err, sp.ng, w); }
 
 class Integrator {
