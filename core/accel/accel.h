@@ -23,15 +23,23 @@ struct Hit {
   bool is_sphere = false;
 };
 
+struct AccelOptions {
+  // Embree's RTC_SCENE_FLAG_ROBUST: watertight triangle tests, so a ray through a shared edge
+  // or vertex of a closed mesh cannot slip between its triangles. The renderer always sets
+  // it; the watertightness tests and tessera_bench also build without it, to measure what
+  // it buys and costs (docs/ray-offsets.md).
+  bool robust = true;
+};
+
 class Accel {
  public:
   // Builds the acceleration structure; `scene` must outlive the Accel. Each instanced
   // mesh's BVH is built once and placed by its instances. Throws
   // std::runtime_error if Embree reports an error.
-  explicit Accel(const Scene& scene);
+  explicit Accel(const Scene& scene, AccelOptions options = {});
   // The static part of an animated scene: every mesh but those marked in `skip`, and the
   // spheres. Built once for all frames. (Animated scenes have no instances.)
-  Accel(const Scene& scene, const std::vector<bool>& skip);
+  Accel(const Scene& scene, const std::vector<bool>& skip, AccelOptions options = {});
   // One pose of an animated scene: the meshes marked in `moving` are built here from
   // `scene` (the pose, in world space); everything else is `fixed` (built from the same
   // scene's static part with skip = moving), reached through an instance with the identity

@@ -154,6 +154,7 @@ struct Accel::Impl {
   unsigned sphere_geom = RTC_INVALID_GEOMETRY_ID;
   SphereData sphere_data{};
   std::string error;
+  bool robust = true;
   std::deque<AlphaData> alpha_data;    // (stable addresses: Embree keeps pointers)
   std::shared_ptr<const Accel> fixed;  // a pose's static part (its device is this one's)
   unsigned fixed_sphere_geom = RTC_INVALID_GEOMETRY_ID;
@@ -176,7 +177,7 @@ struct Accel::Impl {
   RTCScene new_rtc_scene() const {
     RTCScene sc = rtcNewScene(device);
     // ROBUST: watertight triangle tests, so rays along shared edges never leak.
-    rtcSetSceneFlags(sc, RTC_SCENE_FLAG_ROBUST);
+    rtcSetSceneFlags(sc, robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
     rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
     return sc;
   }
@@ -259,9 +260,11 @@ RTCDevice new_device() {
 }
 }  // namespace
 
-Accel::Accel(const Scene& scene) : Accel(scene, std::vector<bool>()) {}
+Accel::Accel(const Scene& scene, AccelOptions options) : Accel(scene, std::vector<bool>(), options) {}
 
-Accel::Accel(const Scene& scene, const std::vector<bool>& skip) : impl_(std::make_unique<Impl>()) {
+Accel::Accel(const Scene& scene, const std::vector<bool>& skip, AccelOptions options)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->robust = options.robust;
   RTCDevice d = new_device();
   impl_->new_scene(d);
   rtcReleaseDevice(d);  // the Impl holds it

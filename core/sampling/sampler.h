@@ -19,8 +19,7 @@ constexpr uint32_t reverse_bits(uint32_t x) {
   x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
   x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
   x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
-  x = ((x >> 8) & 0x00FF00FFu) | ((x & 0x00FF00FFu) << 8);
-  return (x >> 16) | (x << 16);
+  return __builtin_bswap32(x);  // (each byte is reversed: reverse their order)
 }
 
 // 64-bit finaliser (splitmix64): a well-mixed hash of its input.
@@ -81,9 +80,12 @@ inline uint32_t sobol_dim1_reversed(uint32_t r) {
   return t[0][r & 255] ^ t[1][(r >> 8) & 255] ^ t[2][(r >> 16) & 255] ^ t[3][r >> 24];
 }
 
-// Largest float below 1: keeps u in [0,1).
+// Largest float below 1.
 constexpr float kOneMinusEpsilon = 0x1.fffffep-1f;
-inline float to_unit_float(uint32_t x) { return std::min(float(x >> 8) * 0x1p-24f, kOneMinusEpsilon); }
+// The top 24 bits as a float in [0, 1): exact (24 bits fit the significand), so the largest
+// is kOneMinusEpsilon and no clamp is needed.
+inline float to_unit_float(uint32_t x) { return float(x >> 8) * 0x1p-24f; }
+static_assert(float(0xFFFFFFFFu >> 8) * 0x1p-24f == kOneMinusEpsilon);
 
 class Sampler {
  public:
