@@ -3,11 +3,15 @@
 #include <OpenEXR/ImfChannelList.h>
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStringAttribute.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <map>
+#include <memory>
 #include <stdexcept>
 
 #include "core/io/files.h"
@@ -21,21 +25,27 @@ const std::vector<std::string> kDenoiseChannels = {"even.R",   "even.G",   "even
 namespace {
 
 constexpr const char* kDenoiserName = "tessera first-order regression (core/denoise/denoiser.h)";
+using Planes = std::map<std::string, std::vector<float>>;
 
-// Interleaves three planes of `image` into RGB triples.
-std::vector<float> interleave(const ExrImage& image, const std::string& a, const std::string& b, const std::string& c) {
-  const std::vector<float>* planes[3] = {&image.channels.at(a), &image.channels.at(b), &image.channels.at(c)};
-  const size_t n = size_t(image.width) * size_t(image.height);
+// A band is denoised with this many rows more on each side: the denoiser's reach, exactly
+// (DenoiseExr.BandsOfRowsGiveTheWholeImagesBits fails with one row less).
+constexpr int kHalo = kDenoiseReach;
+constexpr size_t kBandPixels = size_t(1) << 20;
+
+// Interleaves three planes into RGB triples.
+std::vector<float> interleave(const Planes& planes, const std::string& a, const std::string& b, const std::string& c) {
+  const std::vector<float>* p[3] = {&planes.at(a), &planes.at(b), &planes.at(c)};
+  const size_t n = p[0]->size();
   std::vector<float> out(3 * n);
   for (size_t i = 0; i < n; ++i)
-    for (int k = 0; k < 3; ++k) out[3 * i + k] = (*planes[k])[i];
+    for (int k = 0; k < 3; ++k) out[3 * i + k] = (*p[k])[i];
   return out;
 }
 
-}  // namespace
-
-DenoiseBuffers denoise_buffers(const ExrImage& image, const std::string& what) {
-  const bool again = image.channels.count(kNoisyChannels[0]) != 0;  // denoised before: start from the noisy image
+// The channels the denoiser reads, given which exist; throws naming `what` and the missing.
+bool check_channels(const std::vector<std::string>& present, const std::string& what) {
+  auto has = [&](const std::string& c) { return std::find(present.begin(), present.end(), c) != present.end(); };
+  const bool again = has(kNoisyChannels[0]);  // denoised before: start from the noisy image
   std::vector<std::string> needed = kDenoiseChannels;
   if (again)
     needed.insert(needed.end(), std::begin(kNoisyChannels), std::end(kNoisyChannels));
@@ -43,64 +53,129 @@ DenoiseBuffers denoise_buffers(const ExrImage& image, const std::string& what) {
     needed.insert(needed.end(), {"R", "G", "B"});
   std::string missing;
   for (const std::string& c : needed)
-    if (!image.channels.count(c)) missing += (missing.empty() ? "" : ", ") + c;
+    if (!has(c)) missing += (missing.empty() ? "" : ", ") + c;
   if (!missing.empty())
     throw std::runtime_error(what + ": cannot denoise: no " + missing +
                              " channel(s); render with --denoise or --aov denoising (albedo, normal, depth, halves)");
+  return again;
+}
+
+DenoiseBuffers buffers_of(const Planes& planes, int width, int rows, int first_row, bool again) {
   DenoiseBuffers in;
-  in.width = image.width;
-  in.height = image.height;
-  in.color = again ? interleave(image, kNoisyChannels[0], kNoisyChannels[1], kNoisyChannels[2])
-                   : interleave(image, "R", "G", "B");
-  in.even = interleave(image, "even.R", "even.G", "even.B");
-  in.odd = interleave(image, "odd.R", "odd.G", "odd.B");
-  in.albedo = interleave(image, "albedo.R", "albedo.G", "albedo.B");
-  in.normal = interleave(image, "normal.X", "normal.Y", "normal.Z");
-  in.depth = image.channels.at("depth.Z");
+  in.width = width;
+  in.height = rows;
+  in.first_row = first_row;
+  in.color = again ? interleave(planes, kNoisyChannels[0], kNoisyChannels[1], kNoisyChannels[2])
+                   : interleave(planes, "R", "G", "B");
+  in.even = interleave(planes, "even.R", "even.G", "even.B");
+  in.odd = interleave(planes, "odd.R", "odd.G", "odd.B");
+  in.albedo = interleave(planes, "albedo.R", "albedo.G", "albedo.B");
+  in.normal = interleave(planes, "normal.X", "normal.Y", "normal.Z");
+  in.depth = planes.at("depth.Z");
   return in;
 }
 
+std::vector<std::string> names_of(const Planes& planes) {
+  std::vector<std::string> names;
+  for (const auto& [name, plane] : planes) names.push_back(name);
+  return names;
+}
+
+// A slice addressing `plane` (rows of `width` floats) as image rows from `first_row` on,
+// with the image's origin at (x0, y0).
+Imf::Slice slice(std::vector<float>& plane, int width, long long first_row, long long x0, long long y0) {
+  char* base =
+      reinterpret_cast<char*>(plane.data()) - ptrdiff_t((x0 + (y0 + first_row) * width) * ptrdiff_t(sizeof(float)));
+  return Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(width));
+}
+
+}  // namespace
+
+DenoiseBuffers denoise_buffers(const ExrImage& image, const std::string& what) {
+  Planes planes = image.channels;
+  return buffers_of(planes, image.width, image.height, 0, check_channels(names_of(planes), what));
+}
+
 DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_path, const DenoiseOptions& options) {
-  ExrImage image = read_exr(in_path);
-  const DenoiseBuffers in = denoise_buffers(image, in_path);
-  DenoiseReport report;
-  report.width = image.width;
-  report.height = image.height;
-  const auto t0 = std::chrono::steady_clock::now();
-  std::vector<float> rgb;
+  std::unique_ptr<Imf::InputFile> input;
+  std::vector<std::string> channels;
+  std::map<std::string, std::string> metadata;
+  int width = 0, height = 0;
+  Imath::Box2i dw;
   try {
-    rgb = denoise(in, options);
-  } catch (const std::invalid_argument& e) {
-    throw std::runtime_error(in_path + ": cannot denoise: " + e.what());
+    input = std::make_unique<Imf::InputFile>(in_path.c_str());
+    dw = input->header().dataWindow();
+    const long long w = (long long)dw.max.x - dw.min.x + 1, h = (long long)dw.max.y - dw.min.y + 1;
+    if (w < 1 || h < 1 || w > (1 << 20) || h > (1 << 20))
+      throw std::runtime_error(std::to_string(w) + " x " + std::to_string(h) + " pixels is beyond the limit");
+    width = int(w);
+    height = int(h);
+    for (auto it = input->header().channels().begin(); it != input->header().channels().end(); ++it)
+      channels.push_back(it.name());
+    for (auto it = input->header().begin(); it != input->header().end(); ++it)
+      if (const auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) metadata[it.name()] = s->value();
+  } catch (const std::exception& e) {
+    throw std::runtime_error(in_path + ": cannot read EXR: " + e.what());
   }
-  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const bool again = check_channels(channels, in_path);
+  DenoiseReport report;
+  report.width = width;
+  report.height = height;
 
-  // The noisy image moves to noisy.*, unless it is there already (denoised again).
-  const size_t n = size_t(image.width) * size_t(image.height);
-  for (int c = 0; c < 3; ++c) {
-    std::vector<float>& plane = image.channels[std::string(1, "RGB"[c])];
-    if (!image.channels.count(kNoisyChannels[c])) image.channels[kNoisyChannels[c]] = plane;
-    for (size_t i = 0; i < n; ++i) plane[i] = rgb[3 * i + size_t(c)];
-  }
-
-  Imf::Header header(image.width, image.height);
+  // The output: the input's channels and the noisy image's (noisy.* unless there already).
+  Imf::Header header(width, height);
   header.compression() = Imf::ZIP_COMPRESSION;
-  image.metadata["tessera/denoiser"] = kDenoiserName;
-  for (const auto& [key, value] : image.metadata) header.insert(key, Imf::StringAttribute(value));
-  Imf::FrameBuffer fb;
-  for (auto& [name, plane] : image.channels) {
-    header.channels().insert(name, Imf::Channel(Imf::FLOAT));
-    fb.insert(name, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(plane.data()), sizeof(float),
-                               sizeof(float) * size_t(image.width)));
-  }
+  metadata["tessera/denoiser"] = kDenoiserName;
+  for (const auto& [key, value] : metadata) header.insert(key, Imf::StringAttribute(value));
+  std::vector<std::string> out_channels = channels;
+  if (!again) out_channels.insert(out_channels.end(), std::begin(kNoisyChannels), std::end(kNoisyChannels));
+  for (const std::string& c : out_channels) header.channels().insert(c, Imf::Channel(Imf::FLOAT));
+
+  const int band = options.band_rows > 0 ? options.band_rows : int(std::max<size_t>(16, kBandPixels / size_t(width)));
   const std::string tmp = out_path + ".tmp";
   try {
     Imf::OutputFile file(tmp.c_str(), header);
-    file.setFrameBuffer(fb);
-    file.writePixels(image.height);
+    for (int b0 = 0; b0 < height; b0 += band) {
+      const int b1 = std::min(height, b0 + band), r0 = std::max(0, b0 - kHalo), r1 = std::min(height, b1 + kHalo);
+      // Rows r0..r1 of every channel: the band and its halo.
+      Planes planes;
+      Imf::FrameBuffer in_fb;
+      for (const std::string& c : channels) {
+        std::vector<float>& plane = planes[c];
+        plane.resize(size_t(width) * size_t(r1 - r0));
+        in_fb.insert(c, slice(plane, width, r0, dw.min.x, dw.min.y));
+      }
+      try {
+        input->setFrameBuffer(in_fb);
+        input->readPixels(dw.min.y + r0, dw.min.y + r1 - 1);
+      } catch (const std::exception& e) {
+        throw std::runtime_error(in_path + ": cannot read EXR: " + e.what());
+      }
+      const auto t0 = std::chrono::steady_clock::now();
+      std::vector<float> rgb;
+      try {
+        rgb = denoise(buffers_of(planes, width, r1 - r0, r0, again), options);
+      } catch (const std::invalid_argument& e) {
+        throw std::runtime_error(in_path + ": cannot denoise: " + e.what());
+      }
+      report.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      // The band's rows out: the noisy image to noisy.* (unless there), the denoised to R, G, B.
+      const size_t skip = size_t(b0 - r0) * size_t(width), n = size_t(b1 - b0) * size_t(width);
+      for (int c = 0; c < 3; ++c) {
+        std::vector<float>& plane = planes[std::string(1, "RGB"[c])];
+        if (!again) planes[kNoisyChannels[c]] = plane;
+        for (size_t i = 0; i < n; ++i) plane[skip + i] = rgb[3 * (skip + i) + size_t(c)];
+      }
+      Imf::FrameBuffer out_fb;
+      for (const std::string& c : out_channels) out_fb.insert(c, slice(planes[c], width, r0, 0, 0));
+      file.setFrameBuffer(out_fb);
+      file.writePixels(b1 - b0);
+    }
   } catch (const std::exception& e) {
     std::remove(tmp.c_str());
-    throw std::runtime_error(out_path + ": cannot write EXR: " + e.what());
+    const std::string what = e.what();
+    if (what.rfind(in_path + ": ", 0) == 0) throw;
+    throw std::runtime_error(out_path + ": cannot write EXR: " + what);
   }
   commit_file(tmp, out_path);
   return report;

@@ -32,6 +32,10 @@ struct DenoiseReport {
 // renamed into place): every channel and string attribute of `in`, with R, G, B denoised
 // and the noisy image as noisy.R/G/B, ZIP-compressed, and the attribute tessera/denoiser.
 // Throws std::runtime_error naming the file: unreadable, or without the layers needed.
+// Works in bands of rows (options.band_rows; about a million pixels each), each read with
+// kDenoiseReach rows more on both sides and written as it is done: memory is a band's,
+// not the image's (an 8K frame's final costs a coordinator about 400 MB, not 5 GB), and
+// the bits are the whole image's.
 DenoiseReport denoise_exr(const std::string& in, const std::string& out, const DenoiseOptions& options = {});
 
 }  // namespace tessera

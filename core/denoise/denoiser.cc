@@ -24,10 +24,12 @@ constexpr int kErrorRadius = 2;      // 5 x 5: a pixel's MSE estimates are noisy
 constexpr int kSelectionRadius = 2;  // 5 x 5: softens the seams between the candidates
 constexpr float kMinDepth = 1e-6f;   // log depth stays finite at (or, wrongly, below) zero distance
 constexpr float kMaxDepth = 1e10f;   // the background's depth; further counts as background
+static_assert(kDenoiseReach ==
+              kVarianceRadius + nfor::kPatchRadius + nfor::kWindowRadius + kErrorRadius + kSelectionRadius);
 
 [[noreturn]] void refuse(const std::string& what) { throw std::invalid_argument("denoise: " + what); }
 
-void check_plane(const char* name, const std::vector<float>& v, int channels, int w, int h) {
+void check_plane(const char* name, const std::vector<float>& v, int channels, int w, int h, int first_row) {
   const size_t expected = size_t(channels) * size_t(w) * size_t(h);
   if (v.size() != expected)
     refuse("the '" + std::string(name) + "' buffer has " + std::to_string(v.size()) + " values, " +
@@ -37,7 +39,7 @@ void check_plane(const char* name, const std::vector<float>& v, int channels, in
     if (!std::isfinite(v[i])) {
       const size_t pixel = i / size_t(channels);
       refuse("the '" + std::string(name) + "' buffer has a non-finite value (" + std::to_string(v[i]) + ") at pixel (" +
-             std::to_string(pixel % size_t(w)) + ", " + std::to_string(pixel / size_t(w)) + ")");
+             std::to_string(pixel % size_t(w)) + ", " + std::to_string(pixel / size_t(w) + size_t(first_row)) + ")");
     }
 }
 
@@ -46,12 +48,12 @@ void validate(const DenoiseBuffers& in) {
     refuse("the image is " + std::to_string(in.width) + " x " + std::to_string(in.height) +
            " pixels; both sides must be at least 1");
   const int w = in.width, h = in.height;
-  check_plane("color", in.color, 3, w, h);
-  check_plane("even", in.even, 3, w, h);
-  check_plane("odd", in.odd, 3, w, h);
-  check_plane("albedo", in.albedo, 3, w, h);
-  check_plane("normal", in.normal, 3, w, h);
-  check_plane("depth", in.depth, 1, w, h);
+  check_plane("color", in.color, 3, w, h, in.first_row);
+  check_plane("even", in.even, 3, w, h, in.first_row);
+  check_plane("odd", in.odd, 3, w, h, in.first_row);
+  check_plane("albedo", in.albedo, 3, w, h, in.first_row);
+  check_plane("normal", in.normal, 3, w, h, in.first_row);
+  check_plane("depth", in.depth, 1, w, h, in.first_row);
 }
 
 // Channel `channel` of an image of `channels` floats a pixel, times `scale`, onto the grid;

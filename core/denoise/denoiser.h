@@ -60,6 +60,7 @@ namespace tessera {
 // Per-pixel planes, row-major, row 0 at the top; RGB planes hold 3 floats a pixel.
 struct DenoiseBuffers {
   int width = 0, height = 0;
+  int first_row = 0;             // the image row the buffers' row 0 is (a band of a larger image; for messages)
   std::vector<float> color;      // RGB: the mean of all of each pixel's samples (what the noisy image shows)
   std::vector<float> even, odd;  // RGB: means of each pixel's even- and odd-numbered samples (independent halves)
   std::vector<float> albedo;     // RGB: first-hit albedo in [0, 1], averaged over the pixel (0: background)
@@ -70,7 +71,16 @@ struct DenoiseBuffers {
 struct DenoiseOptions {
   int threads = 0;         // 0: std::thread::hardware_concurrency()
   bool wide_lanes = true;  // 8-lane AVX2 kernels where the CPU has them; the same bits as the 4-lane ones
+  // denoise_exr: rows a band; 0: about a million pixels a band. Any band height gives the
+  // same bits.
+  int band_rows = 0;
 };
+
+// How far the output reaches: a pixel's result depends on the input within this many rows
+// and columns of it (the variance's box 3, the NL-means patch 2, the regression window 6,
+// the error box 2, the selection box 2). A band of rows denoised with this many rows more
+// on each side (a halo) gives its rows the whole image's bits (denoise_exr).
+constexpr int kDenoiseReach = 15;
 
 // The denoised image, RGB, 3 floats a pixel. Throws std::invalid_argument naming the buffer
 // that is missing, of the wrong size or holds a non-finite value, or the size if it is empty.

@@ -4,9 +4,14 @@
 // layers the denoiser needs is refused naming them.
 #include "core/denoise/denoise_exr.h"
 
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfOutputFile.h>
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <limits>
 
 #include "core/io/image_io.h"
 #include "core/scene/load.h"
@@ -133,6 +138,73 @@ TEST_F(DenoiseExr, AnImageWithoutTheLayersIsRefusedNamingThem) {
     EXPECT_NE(why.find("--aov denoising"), std::string::npos) << why;
   }
   EXPECT_FALSE(fs::exists(dir / "out.exr"));
+}
+
+TEST_F(DenoiseExr, BandsOfRowsGiveTheWholeImagesBits) {
+  // denoise_exr works a band of rows at a time with a halo of the denoiser's reach: any
+  // band height, bands that end mid-image and a last band shorter than the rest, gives
+  // the bits of the image denoised whole.
+  TESSERA_REQUIRE_SHARED_SCENE(path, "CBspheres_refract.dae");
+  RenderSettings s;
+  s.camera.width = 72;
+  s.camera.height = 150;
+  s.spp = 4;
+  s.max_depth = 6;
+  s.aovs = kAovDenoising;
+  const std::string noisy = render(load_scene(path), s, "noisy.exr");
+  DenoiseOptions whole;
+  whole.band_rows = 1 << 20;
+  const std::string ref = (dir / "whole.exr").string();
+  denoise_exr(noisy, ref, whole);
+  const ExrImage expected = read_exr(ref);
+  for (const int rows : {1, 7, 16, 40, 64, 144}) {
+    DenoiseOptions banded;
+    banded.band_rows = rows;
+    banded.threads = rows % 3 + 1;
+    const std::string out = (dir / ("band" + std::to_string(rows) + ".exr")).string();
+    denoise_exr(noisy, out, banded);
+    const ExrImage got = read_exr(out);
+    ASSERT_EQ(got.channels.size(), expected.channels.size());
+    for (const auto& [name, plane] : expected.channels) EXPECT_EQ(got.channels.at(name), plane) << rows << " " << name;
+  }
+}
+
+TEST_F(DenoiseExr, ANonFiniteValueIsRefusedNamingItsPixelInTheImage) {
+  // A band's error names the image's row, not the band's.
+  Material m;
+  RenderSettings s;
+  s.camera.width = 20;
+  s.camera.height = 70;
+  s.spp = 2;
+  s.environment = Rgb(1.0f);
+  s.aovs = kAovDenoising;
+  ExrImage img = read_exr(render(testing::lone_sphere(m), s, "noisy.exr"));
+  img.channels.at("even.G")[size_t(57) * 20 + 3] = std::numeric_limits<float>::infinity();
+  const std::string bad = (dir / "bad.exr").string();
+  {
+    Imf::Header header(img.width, img.height);
+    Imf::FrameBuffer fb;
+    for (auto& [name, plane] : img.channels) {
+      header.channels().insert(name, Imf::Channel(Imf::FLOAT));
+      fb.insert(name, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(plane.data()), sizeof(float),
+                                 sizeof(float) * size_t(img.width)));
+    }
+    Imf::OutputFile file(bad.c_str(), header);
+    file.setFrameBuffer(fb);
+    file.writePixels(img.height);
+  }
+  DenoiseOptions banded;
+  banded.band_rows = 16;
+  try {
+    denoise_exr(bad, (dir / "out.exr").string(), banded);
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    const std::string why = e.what();
+    EXPECT_NE(why.find(bad), std::string::npos) << why;
+    EXPECT_NE(why.find("'even' buffer has a non-finite value (inf) at pixel (3, 57)"), std::string::npos) << why;
+  }
+  EXPECT_FALSE(fs::exists(dir / "out.exr"));
+  EXPECT_FALSE(fs::exists(dir / "out.exr.tmp"));
 }
 
 }  // namespace
