@@ -36,6 +36,48 @@ TEST(Sampler, ReversedDomainFormEqualsTheTextbookOwenScrambledSobol) {
   }
 }
 
+// The sampler as it was written before its reversals became 24-bit table lookups: whole
+// 32-bit reversals, then the top 24 bits as the float.
+struct FullReversalSampler {
+  uint64_t key;
+  uint32_t reversed_index, dim = 0;
+  FullReversalSampler(uint64_t seed, uint64_t pixel, uint32_t index)
+      : key(mix64(seed * 0x9E3779B97F4A7C15ull + pixel)), reversed_index(reverse_bits(index)) {}
+  static float unit(uint32_t x) { return float(x >> 8) * 0x1p-24f; }
+  uint64_t hash() { return mix64(key ^ (uint64_t(++dim) * 0xD1B54A32D192ED03ull)); }
+  float next_1d() {
+    const uint64_t h = hash();
+    const uint32_t r = laine_karras_permutation(reversed_index, uint32_t(h));
+    return unit(reverse_bits(laine_karras_permutation(reverse_bits(r), uint32_t(h >> 32))));
+  }
+  Vec2 next_2d() {
+    const uint64_t h = hash(), h2 = mix64(h);
+    const uint32_t r = laine_karras_permutation(reversed_index, uint32_t(h));
+    return {unit(reverse_bits(laine_karras_permutation(reverse_bits(r), uint32_t(h >> 32)))),
+            unit(reverse_bits(laine_karras_permutation(sobol_dim1_reversed(r), uint32_t(h2))))};
+  }
+};
+
+TEST(Sampler, TableReversalsGiveTheFullReversalsBits) {
+  std::mt19937 rng(5);
+  for (int k = 0; k < 100000; ++k) {
+    const uint32_t x = rng();
+    ASSERT_EQ(reverse_low24(x), reverse_bits(x) >> 8) << x;
+  }
+  for (int k = 0; k < 20000; ++k) {
+    const uint64_t seed = rng(), pixel = rng();
+    const uint32_t index = rng() % 100000;
+    Sampler a(seed, pixel, index);
+    FullReversalSampler b(seed, pixel, index);
+    for (int d = 0; d < 4; ++d) {
+      ASSERT_EQ(a.next_1d(), b.next_1d());
+      const Vec2 va = a.next_2d(), vb = b.next_2d();
+      ASSERT_EQ(va.x, vb.x);
+      ASSERT_EQ(va.y, vb.y);
+    }
+  }
+}
+
 TEST(Sampler, IsAPureFunctionOfSeedPixelIndexAndDimension) {
   Sampler a(42, 1234, 17), b(42, 1234, 17), c(43, 1234, 17), d(42, 1235, 17);
   for (int k = 0; k < 8; ++k) {
