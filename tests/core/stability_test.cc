@@ -99,6 +99,59 @@ TEST(HardCases, TotalInternalReflectionTrapsAndReleasesLightInsideASphere) {
   expect_energy_conserved(s, 5e-3);
 }
 
+TEST(HardCases, ACameraInsideGlassSeesTheRadianceInsideTheGlass) {
+  // The eye inside a glass sphere (ior 1.5) in the white furnace: every path leaves the
+  // glass once more than it enters (x eta^2 each time it leaves, 1 / eta^2 each time it
+  // enters, 1 at each reflection), so each sample is exactly eta^2 = 2.25, the radiance
+  // inside a dielectric in equilibrium with radiance 1 outside. From 0.5 inside a sphere of
+  // radius 2 no ray meets the surface beyond the critical angle (sin <= 0.25 < 1 / 1.5), so
+  // none is trapped. The thin lens too, its lens inside the glass.
+  for (const float lens : {0.0f, 0.2f}) {
+    const Scene s = furnace_with({Sphere{"glass", {0, 0, 0}, 2, 0, -1}}, glass(1.5f), 10, 0.5f, 70);
+    RenderSettings st = furnace_settings();
+    st.camera.lens_radius = lens;
+    st.camera.focal_distance = 3;
+    const RenderResult r = render(s, st);
+    EXPECT_EQ(r.stats.nan_samples, 0u);
+    for (const PixelSums& p : r.film.pixels()) ASSERT_NEAR(p.lum_sum() / p.n, 2.25, 1e-4) << "lens " << lens;
+  }
+}
+
+TEST(HardCases, AnEmitterInsideGlassIsSeenThroughItAndNothingBlowsUp) {
+  // An emitting sphere (radiance 1) inside a glass sphere, nothing else, seen from outside:
+  // a path that reaches the emitter has entered the glass once more than it left (1 / eta^2)
+  // and reflected any number of times (1), so every sample is 0 or 1 / eta^2: no pixel
+  // brighter, none NaN. Straight through the middle (normal incidence) the mean is the
+  // Fresnel transmittance over eta^2, 0.96 / 2.25.
+  Scene s;
+  s.materials.push_back(glass(1.5f));
+  Material e;
+  e.kind = Material::Kind::kEmission;
+  e.radiance = Rgb(1);
+  e.two_sided_emission = true;
+  s.materials.push_back(e);
+  s.spheres = {Sphere{"glass", {0, 0, 0}, 1, 0, -1}, Sphere{"lamp", {0, 0, 0}, 0.4f, 1, -1}};
+  s.camera.present = true;
+  s.camera.eye = {0, 0, 4};
+  s.camera.xfov_deg = 40;
+  s.camera.aspect_ratio = 1;
+  s.finalize();
+  RenderSettings st = furnace_settings();
+  st.camera.width = st.camera.height = 15;
+  st.spp = 1024;
+  const RenderResult r = render(s, st);
+  EXPECT_EQ(r.stats.nan_samples, 0u);
+  for (const PixelSums& p : r.film.pixels()) {
+    ASSERT_TRUE(std::isfinite(p.lum_sum()));
+    ASSERT_GE(p.lum_sum() / p.n, 0.0);
+    ASSERT_LE(p.lum_sum() / p.n, 1 / 2.25 + 1e-5);
+  }
+  const PixelSums& centre = r.film.pixels()[7 * 15 + 7];
+  const double f0 = 0.04, expected = (1 - f0) / 2.25;  // ((1.5 - 1) / (1.5 + 1))^2
+  const double se = std::sqrt(f0 * (1 - f0) / double(centre.n)) / 2.25;
+  EXPECT_NEAR(centre.lum_sum() / centre.n, expected, 4 * se + 2e-3);
+}
+
 Scene quad_scene(std::vector<Vec3> positions, std::vector<uint32_t> indices) {
   Scene s;
   Material white;
