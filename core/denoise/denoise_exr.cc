@@ -75,12 +75,6 @@ DenoiseBuffers buffers_of(const Planes& planes, int width, int rows, int first_r
   return in;
 }
 
-std::vector<std::string> names_of(const Planes& planes) {
-  std::vector<std::string> names;
-  for (const auto& [name, plane] : planes) names.push_back(name);
-  return names;
-}
-
 // A slice addressing `plane` (rows of `width` floats) as image rows from `first_row` on,
 // with the image's origin at (x0, y0).
 Imf::Slice slice(std::vector<float>& plane, int width, long long first_row, long long x0, long long y0) {
@@ -90,11 +84,6 @@ Imf::Slice slice(std::vector<float>& plane, int width, long long first_row, long
 }
 
 }  // namespace
-
-DenoiseBuffers denoise_buffers(const ExrImage& image, const std::string& what) {
-  Planes planes = image.channels;
-  return buffers_of(planes, image.width, image.height, 0, check_channels(names_of(planes), what));
-}
 
 DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_path, const DenoiseOptions& options) {
   std::unique_ptr<Imf::InputFile> input;
@@ -133,8 +122,18 @@ DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_pat
 
   const int band = options.band_rows > 0 ? options.band_rows : int(std::max<size_t>(16, kBandPixels / size_t(width)));
   const std::string tmp = out_path + ".tmp";
+  // OpenEXR's errors on the output name the output file; those reading or denoising the
+  // input name it already (below).
+  auto writing = [&](auto&& step) {
+    try {
+      step();
+    } catch (const std::exception& e) {
+      throw std::runtime_error(out_path + ": cannot write EXR: " + e.what());
+    }
+  };
   try {
-    Imf::OutputFile file(tmp.c_str(), header);
+    std::unique_ptr<Imf::OutputFile> file;
+    writing([&] { file = std::make_unique<Imf::OutputFile>(tmp.c_str(), header); });
     for (int b0 = 0; b0 < height; b0 += band) {
       const int b1 = std::min(height, b0 + band), r0 = std::max(0, b0 - kHalo), r1 = std::min(height, b1 + kHalo);
       // Rows r0..r1 of every channel: the band and its halo.
@@ -168,14 +167,14 @@ DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_pat
       }
       Imf::FrameBuffer out_fb;
       for (const std::string& c : out_channels) out_fb.insert(c, slice(planes[c], width, r0, 0, 0));
-      file.setFrameBuffer(out_fb);
-      file.writePixels(b1 - b0);
+      writing([&] {
+        file->setFrameBuffer(out_fb);
+        file->writePixels(b1 - b0);
+      });
     }
-  } catch (const std::exception& e) {
+  } catch (...) {
     std::remove(tmp.c_str());
-    const std::string what = e.what();
-    if (what.rfind(in_path + ": ", 0) == 0) throw;
-    throw std::runtime_error(out_path + ": cannot write EXR: " + what);
+    throw;
   }
   commit_file(tmp, out_path);
   return report;

@@ -9,7 +9,6 @@
 #include <vector>
 
 #include "core/denoise/denoiser.h"
-#include "core/scene/image_read.h"
 
 namespace tessera {
 
@@ -17,11 +16,6 @@ namespace tessera {
 extern const std::vector<std::string> kDenoiseChannels;
 // The noisy image, kept in a denoised file.
 inline constexpr const char* kNoisyChannels[3] = {"noisy.R", "noisy.G", "noisy.B"};
-
-// The denoiser's input from an image: its noisy RGB (noisy.* where the image was denoised
-// before, else R, G, B), the half-buffers and the first-hit layers. Throws
-// std::runtime_error naming `what` (the file) and every channel missing.
-DenoiseBuffers denoise_buffers(const ExrImage& image, const std::string& what);
 
 struct DenoiseReport {
   int width = 0, height = 0;

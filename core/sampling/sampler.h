@@ -96,12 +96,10 @@ inline uint32_t reverse_low24(uint32_t x) {
   return (uint32_t(t[x & 255]) << 16) | (uint32_t(t[(x >> 8) & 255]) << 8) | t[(x >> 16) & 255];
 }
 
-// Largest float below 1.
-constexpr float kOneMinusEpsilon = 0x1.fffffep-1f;
-// The top 24 bits as a float in [0, 1): exact (24 bits fit the significand), so the largest
-// is kOneMinusEpsilon and no clamp is needed.
-inline float to_unit_float(uint32_t x) { return float(x >> 8) * 0x1p-24f; }
-static_assert(float(0xFFFFFFFFu >> 8) * 0x1p-24f == kOneMinusEpsilon);
+// A 24-bit number as a float in [0, 1): exact (24 bits fit the significand), so the largest
+// is the largest float below 1 and no clamp is needed.
+constexpr float unit_float24(uint32_t v) { return float(v) * 0x1p-24f; }
+static_assert(unit_float24((1u << 24) - 1) == 0x1.fffffep-1f);
 
 class Sampler {
  public:
@@ -118,21 +116,20 @@ class Sampler {
   float next_1d() {
     const uint64_t h = dimension_hash();
     const uint32_t r = laine_karras_permutation(reversed_index_, uint32_t(h));
-    return unit24(reverse_low24(laine_karras_permutation(reverse_low24(r >> 8), uint32_t(h >> 32))));
+    return unit_float24(reverse_low24(laine_karras_permutation(reverse_low24(r >> 8), uint32_t(h >> 32))));
   }
 
   Vec2 next_2d() {
     const uint64_t h = dimension_hash();
     const uint64_t h2 = mix64(h);
     const uint32_t r = laine_karras_permutation(reversed_index_, uint32_t(h));
-    return {unit24(reverse_low24(laine_karras_permutation(reverse_low24(r >> 8), uint32_t(h >> 32)))),
-            unit24(reverse_low24(laine_karras_permutation(sobol_dim1_reversed(r), uint32_t(h2))))};
+    return {unit_float24(reverse_low24(laine_karras_permutation(reverse_low24(r >> 8), uint32_t(h >> 32)))),
+            unit_float24(reverse_low24(laine_karras_permutation(sobol_dim1_reversed(r), uint32_t(h2))))};
   }
 
   uint32_t dimension() const { return dim_; }
 
  private:
-  static float unit24(uint32_t v) { return float(v) * 0x1p-24f; }  // v < 2^24: exact, below 1
   // 64 well-mixed bits per (pixel key, dimension): the scrambling seeds.
   uint64_t dimension_hash() { return mix64(key_ ^ (uint64_t(++dim_) * 0xD1B54A32D192ED03ull)); }
 

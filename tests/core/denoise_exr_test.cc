@@ -207,5 +207,23 @@ TEST_F(DenoiseExr, ANonFiniteValueIsRefusedNamingItsPixelInTheImage) {
   EXPECT_FALSE(fs::exists(dir / "out.exr.tmp"));
 }
 
+TEST_F(DenoiseExr, AnOutputThatCannotBeWrittenIsNamed) {
+  Material m;
+  RenderSettings s;
+  s.camera.width = 8;
+  s.camera.height = 8;
+  s.spp = 2;
+  s.aovs = kAovDenoising;
+  const std::string noisy = render(testing::lone_sphere(m), s, "noisy.exr");
+  const std::string out = (dir / "no-such-folder" / "out.exr").string();
+  try {
+    denoise_exr(noisy, out);
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    const std::string why = e.what();
+    EXPECT_EQ(why.rfind(out + ": cannot write EXR", 0), 0u) << why;
+  }
+}
+
 }  // namespace
 }  // namespace tessera

@@ -74,6 +74,15 @@ Mesh sliver_cone(int n, Vec3 base_center, float radius, float height) {
   return m;
 }
 
+// The mesh alone, as a scene (its material never matters here).
+Scene scene_of(const Mesh& m) {
+  Scene scene;
+  scene.materials.push_back(Material{});
+  scene.meshes.push_back(m);
+  scene.finalize();
+  return scene;
+}
+
 // Rays aimed at vertices and at edges, and how many of each missed.
 struct Leaks {
   int vertex_rays = 0, edge_rays = 0, vertex_misses = 0, edge_misses = 0;
@@ -83,10 +92,7 @@ struct Leaks {
 // Rays from each of `inside` toward every vertex of `m` and toward points at fractions
 // 1/2, 1/3 and 1/7 along every edge; each must hit within twice the distance.
 Leaks shoot(const Mesh& m, const std::vector<Vec3>& inside, bool robust) {
-  Scene scene;
-  scene.materials.push_back(Material{});
-  scene.meshes.push_back(m);
-  scene.finalize();
+  const Scene scene = scene_of(m);
   const Accel accel(scene, AccelOptions{robust});
   std::vector<Vec3> targets = m.positions;
   const size_t vertex_targets = targets.size();
@@ -142,11 +148,8 @@ TEST(Watertight, GeodesicSpheresAtSeveralPlacesAndScales) {
                                       center + Vec3{-0.45f, 0.2f, 0.35f} * radius};
     expect_watertight(("sphere of radius " + std::to_string(radius)).c_str(), m, inside);
     // And rays in random directions, as a render sends them: none may leak with ROBUST.
+    const Scene scene = scene_of(m);
     for (const bool robust : {true, false}) {
-      Scene scene;
-      scene.materials.push_back(Material{});
-      scene.meshes.push_back(m);
-      scene.finalize();
       const Accel accel(scene, AccelOptions{robust});
       std::normal_distribution<float> g;
       int misses = 0;
@@ -185,15 +188,12 @@ TEST(Watertight, RaysDownTheDiagonalOfAWallQuad) {
       const uint32_t a = uint32_t(y * (n + 1) + x), b = a + 1, c = a + uint32_t(n + 1), d = c + 1;
       m.indices.insert(m.indices.end(), {a, b, d, a, d, c});
     }
-  Scene scene;
-  scene.materials.push_back(Material{});
-  scene.meshes.push_back(m);
-  scene.finalize();
+  const Scene scene = scene_of(m);
   for (const bool robust : {true, false}) {
     const Accel accel(scene, AccelOptions{robust});
     int misses = 0, rays = 0;
     for (size_t i = 0; i < m.indices.size(); i += 3) {
-      const Vec3 a = m.positions[m.indices[i]], d = m.positions[m.indices[i + 1 + 1]];  // the diagonal a-d
+      const Vec3 a = m.positions[m.indices[i]], d = m.positions[m.indices[i + 2]];  // the diagonal a-d
       for (int k = 1; k < 16; ++k) {
         const Vec3 q = a + (d - a) * (float(k) / 16);
         Hit hit;
