@@ -98,6 +98,10 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
               r.film.width(), r.film.height(), (unsigned long long)r.stats.samples, r.seconds, sps / 1e6, rps / 1e6);
   if (r.stats.nan_samples) std::printf(", %llu NaN/Inf samples dropped", (unsigned long long)r.stats.nan_samples);
   if (s.denoise) std::printf(", denoised in %.2f s", denoise_seconds);
+  if (r.light_tracing.on)
+    std::printf(", %llu light paths, %llu splats", (unsigned long long)r.light_paths,
+                (unsigned long long)r.stats.rays.splats);
+  if (r.dropped_splats) std::printf(" (%llu dropped)", (unsigned long long)r.dropped_splats);
   std::printf(" -> ");
   for (size_t i = 0; i < outputs.size(); ++i) std::printf("%s%s", i ? ", " : "", outputs[i].c_str());
   std::printf("\n");
@@ -117,7 +121,12 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
                      {"rays_per_second", rps},
                      {"nan_samples", r.stats.nan_samples},
                      {"mean_luminance", r.film.mean_luminance()},
-                     {"self_hits", r.stats.rays.self_hits}};
+                     {"self_hits", r.stats.rays.self_hits},
+                     {"light_tracer", r.light_tracing.on},
+                     {"light_tracer_why", r.light_tracing.why},
+                     {"light_paths", r.light_paths},
+                     {"splats", r.stats.rays.splats},
+                     {"dropped_splats", r.dropped_splats}};
     const std::string path = s.frame ? frame_path(a.stats_json, *s.frame) : a.stats_json;  // one per frame with ####
     std::ofstream f(path);
     f << j.dump(2) << "\n";

@@ -69,6 +69,11 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
                   "(albedo, normal, depth, halves: what tessera denoise needs)");
   cmd->add_flag("--denoise", s.denoise,
                 "Denoise the final image (the noisy one is kept in the EXR as noisy.R/G/B); adds --aov denoising");
+  cmd->add_option("--light-tracer", f.light_tracer,
+                  "Light paths for caustics (camera -> diffuse -> mirror/glass -> light): on, off, or auto (on where "
+                  "the scene has mirror or glass surfaces and a finite light); tessera render only, for now")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"off", "on", "auto"}));
   cmd->add_flag("--no-nee", f.no_nee, "Benchmarking: no next-event estimation (BSDF sampling only)");
   cmd->add_flag("--no-mis", f.no_mis, "Benchmarking: light sampling without MIS");
 }
@@ -93,6 +98,9 @@ RenderSettings to_settings(const RenderFlags& f) {
     if (w < 1 || h < 1 || y < 0) s.window = Rect{-1, -1, 1, 1};  // refused below, by -p
   }
   s.nee = !f.no_nee;
+  s.light_tracer = f.light_tracer == "on"     ? RenderSettings::LightTracer::kOn
+                   : f.light_tracer == "auto" ? RenderSettings::LightTracer::kAuto
+                                              : RenderSettings::LightTracer::kOff;
   s.mis = !f.no_mis;
   try {
     s.aovs = parse_aovs(f.aovs);

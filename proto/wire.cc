@@ -57,6 +57,7 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   p.set_no_mis(!s.mis);
   p.set_aovs(s.aovs);
   p.set_denoise(s.denoise);
+  p.set_light_tracer(uint32_t(s.light_tracer));
   return p;
 }
 
@@ -98,6 +99,9 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
   s.mis = !p.no_mis();
   s.aovs = p.aovs();
   s.denoise = p.denoise();
+  if (p.light_tracer() > uint32_t(RenderSettings::LightTracer::kAuto))
+    throw WireError("render settings: light_tracer " + std::to_string(p.light_tracer()) + " is not 0, 1 or 2");
+  s.light_tracer = RenderSettings::LightTracer(p.light_tracer());
   try {
     if (!p.camera_path().empty())
       s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(p.camera_path()));

@@ -119,4 +119,39 @@ Ray Camera::generate(float fx, float fy, Vec2 u_lens) const {
   return r;
 }
 
+bool Camera::connect(Vec3 p, Vec2 u_lens, CameraConnection* out) const {
+  if (ortho_h_ > 0) return false;
+  Vec3 lens_c{0, 0, 0};  // camera space: the lens in the plane z = 0, looking along -z
+  if (lens_radius_ > 0) {
+    const Vec2 disk = square_to_concentric_disk(u_lens);
+    lens_c = {lens_radius_ * disk.x, lens_radius_ * disk.y, 0};
+  }
+  const Vec3 rel = p - eye_;
+  const Vec3 pc{dot(rel, x_), dot(rel, y_), dot(rel, z_)};
+  if (!(pc.z < 0)) return false;
+  // The film point generate() would aim through this lens point at p: where the line from
+  // the lens point through p meets the plane in focus (z = -F), over F. A pinhole: p / -z.
+  Vec3 dc;
+  if (lens_radius_ > 0) {
+    const Vec3 focus = lens_c + (pc - lens_c) * (focal_distance_ / -pc.z);
+    dc = focus / focal_distance_;
+  } else {
+    dc = pc / -pc.z;
+  }
+  const float fx = (dc.x / tan_h_ + 1) * 0.5f / inv_w_, fy = (dc.y / tan_v_ + 1) * 0.5f / inv_h_;
+  if (!(fx >= 0 && fx < 1 / inv_w_ && fy >= 0 && fy < 1 / inv_h_)) return false;
+  const Vec3 to_p = pc - lens_c;
+  const float dist = length(to_p);
+  if (!(dist > 0) || dist < tmin_ || dist > tmax_) return false;
+  const float cos_t = -to_p.z / dist;
+  const float area = 4 * tan_h_ * tan_v_;
+  out->fx = fx;
+  out->fy = fy;
+  out->lens = eye_ + x_ * lens_c.x + y_ * lens_c.y;
+  out->wi = normalize(out->lens - p);
+  out->dist = dist;
+  out->weight = 1 / (area * cos_t * cos_t * cos_t * dist * dist);
+  return std::isfinite(out->weight);
+}
+
 }  // namespace tessera

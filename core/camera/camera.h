@@ -35,6 +35,21 @@ struct CameraSettings {
   CameraPath::At pose;
 };
 
+// A point seen by the camera, for light tracing (Camera::connect): where on the film it
+// lands and the importance that carries it there.
+struct CameraConnection {
+  float fx = 0, fy = 0;  // film position in pixels, y counted from the bottom row (as generate())
+  Vec3 lens;             // the point on the lens (the eye for a pinhole)
+  Vec3 wi;               // unit, from the seen point toward `lens`
+  float dist = 0;        // from the seen point to `lens`
+  // We / pdf: the importance of the ray (lens -> point) over the density of choosing the
+  // lens point, per unit area at the point, without the point's own cosine:
+  // 1 / (A cos^3 theta dist^2), A the film's area at unit distance, theta the ray's angle
+  // to the optical axis. A light path's value at a pixel is beta f |cos| x this, and a
+  // pixel's estimate from N light paths is (width x height / N) x the sum of those values.
+  float weight = 0;
+};
+
 class Camera {
  public:
   Camera(const Scene& scene, const CameraSettings& settings);
@@ -42,6 +57,12 @@ class Camera {
   // A ray through film position (fx, fy) in pixels, y counted from the bottom row;
   // u_lens is used only by the thin lens.
   Ray generate(float fx, float fy, Vec2 u_lens) const;
+  // The film position and importance of point p seen through the lens point u_lens (thin
+  // lens; unused by a pinhole). False where the camera cannot see p: behind it, outside the
+  // film, nearer or farther than the clip planes, or an orthographic camera (light tracing
+  // needs a perspective one).
+  bool connect(Vec3 p, Vec2 u_lens, CameraConnection* out) const;
+  bool is_orthographic() const { return ortho_h_ > 0; }
   bool is_thin_lens() const { return lens_radius_ > 0; }
   Vec3 eye() const { return eye_; }
   Vec3 forward() const { return -z_; }

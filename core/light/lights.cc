@@ -61,14 +61,18 @@ bool finish_area_sample(Vec3 p, Vec3 q, Vec3 q_err, Vec3 n, float area_pdf, Rgb 
 
 }  // namespace
 
-bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) const {
+bool LightSet::area_point(size_t i, float u_pick, Vec2 u, AreaPoint* out) const {
   const Light& l = lights_[i];
   switch (l.kind) {
     case Light::Kind::kRect: {
       const Vec3 ex = l.edge_x * (u.x - 0.5f), ey = l.edge_y * (u.y - 0.5f);
-      const Vec3 q = l.position + (ex + ey);
-      const Vec3 err = abs(q) * gamma(1) + (abs(ex) + abs(ey)) * gamma(3);
-      return finish_area_sample(p, q, err, l.normal, 1 / l.area, l.color, false, out);
+      out->q = l.position + (ex + ey);
+      out->err = abs(out->q) * gamma(1) + (abs(ex) + abs(ey)) * gamma(3);
+      out->n = l.normal;
+      out->area_pdf = 1 / l.area;
+      out->radiance = l.color;
+      out->two_sided = false;
+      return true;
     }
     case Light::Kind::kMesh: {
       const MeshLightData& d = mesh_data_[i];
@@ -80,8 +84,8 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
                  c = m.positions[m.indices[3 * t + 2]];
       const Vec2 bc = square_to_triangle(u);
       const Vec3 e1 = (b - a) * bc.x, e2 = (c - a) * bc.y;
-      const Vec3 q = a + (e1 + e2);  // as make_surface_point: exact edges far from the origin
-      const Vec3 err = abs(q) * gamma(1) + (abs(e1) + abs(e2)) * gamma(4);
+      out->q = a + (e1 + e2);  // as make_surface_point: exact edges far from the origin
+      out->err = abs(out->q) * gamma(1) + (abs(e1) + abs(e2)) * gamma(4);
       const Vec3 n = cross(b - a, c - a);
       const float len = length(n);
       if (!(len > 0)) return false;
@@ -100,14 +104,37 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
       const TextureRef& tex = mat.emissive_texture;
       if (tex.active() && !m.uv_set(tex.set).empty())  // glTF emissiveTexture
         radiance *= scene_.textures[size_t(tex.index)].sample(tex.map(m.uv_at(t, bc.x, bc.y, tex.set)));
-      return finish_area_sample(p, q, err, n / len, 1 / d.area, radiance, l.two_sided, out);
+      out->n = n / len;
+      out->area_pdf = 1 / d.area;
+      out->radiance = radiance;
+      out->two_sided = l.two_sided;
+      return true;
     }
     case Light::Kind::kSphere: {
       const Sphere& s = scene_.spheres[l.shape];
       const Vec3 n = square_to_uniform_sphere(u);
-      const Vec3 q = s.center + n * s.radius;
-      const Vec3 err = abs(q) * gamma(1) + abs(n * s.radius) * gamma(3);
-      return finish_area_sample(p, q, err, n, 1 / (4 * kPi * s.radius * s.radius), l.color, l.two_sided, out);
+      out->q = s.center + n * s.radius;
+      out->err = abs(out->q) * gamma(1) + abs(n * s.radius) * gamma(3);
+      out->n = n;
+      out->area_pdf = 1 / (4 * kPi * s.radius * s.radius);
+      out->radiance = l.color;
+      out->two_sided = l.two_sided;
+      return true;
+    }
+    default:
+      return false;
+  }
+}
+
+bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) const {
+  const Light& l = lights_[i];
+  switch (l.kind) {
+    case Light::Kind::kRect:
+    case Light::Kind::kMesh:
+    case Light::Kind::kSphere: {
+      AreaPoint a;
+      return area_point(i, u_pick, u, &a) &&
+             finish_area_sample(p, a.q, a.err, a.n, a.area_pdf, a.radiance, a.two_sided, out);
     }
     case Light::Kind::kPoint: {
       Vec3 d = l.position - p;

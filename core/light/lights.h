@@ -29,6 +29,16 @@ struct LightSample {
   float pdf = 0;   // solid-angle density, or 1 for delta lights
 };
 
+// A light path's start on a finite light (core/light/emission.cc): the point, and what
+// leaves it (LightSet::emitted_toward says toward where).
+struct EmissionPoint {
+  Vec3 point, point_err;  // on the light (point_err zero for point and spot lights)
+  Vec3 normal;            // the emitting surface's unit normal; zero for point and spot lights
+  Rgb le;                 // radiance there (area lights, textures and alpha applied) or intensity
+  float area_pdf = 1;     // density of the point per unit area (1 for point and spot lights)
+  bool two_sided = false;
+};
+
 class LightSet {
  public:
   // The scene's lights, then `extra` ones the settings add (an environment).
@@ -44,6 +54,30 @@ class LightSet {
   // Solid-angle density with which sample() would pick the point q (normal nq) on area
   // light i seen from p at distance dist.
   float pdf_area_hit(size_t i, Vec3 p, Vec3 q, Vec3 nq, float dist) const;
+
+  // A light path's start on finite light i (rect, mesh, sphere, point, spot): the point
+  // sample() takes for (u_pick, u). False for infinite lights and where the point carries
+  // nothing (core/light/emission.cc).
+  bool emission_point(size_t i, float u_pick, Vec2 u, EmissionPoint* out) const;
+  // What leaves that point along unit dir: radiance x |cos| for an area light (zero on a
+  // side it does not emit from), intensity (x a spot's falloff) for a point or spot. The
+  // light tracer divides it by the densities of the point and the direction.
+  Rgb emitted_toward(size_t i, const EmissionPoint& e, Vec3 dir) const;
+  // A light's power as light tracing picks lights by it: luminance x area x pi (x 2 when
+  // two-sided) for area lights, x 4 pi (point) or the cone's solid angle (spot); 0 for
+  // infinite lights. Textures and alpha are not looked at (only a pick probability).
+  float emitted_power(size_t i) const;
+  // The point of area light i (rect, mesh, sphere) that sample() takes for (u_pick, u),
+  // with its error bound, unit normal, radiance there (textures, alpha), the density of
+  // the point per unit area, and whether the light emits from both sides. False where the
+  // point carries nothing.
+  struct AreaPoint {
+    Vec3 q, err, n;
+    Rgb radiance;
+    float area_pdf = 0;
+    bool two_sided = false;
+  };
+  bool area_point(size_t i, float u_pick, Vec2 u, AreaPoint* out) const;
 
   // Radiance of the infinite lights along an escaped ray direction, and each one's pdf.
   bool has_infinite() const { return !infinite_.empty(); }

@@ -162,6 +162,27 @@ Vec3 mapped_normal(const Scene& scene, const TextureRef& ref, float scale, const
   return mapped;
 }
 
+const Material& material_at(const Scene& scene, const Hit& hit, SurfacePoint* sp, std::optional<Material>* textured,
+                            std::optional<Vec3>* coat_ns) {
+  const Material* mp = &scene.materials[sp->material];
+  // Only textured or vertex-coloured materials pay for a copy.
+  textured->reset();
+  if (mp->has_textures()) {
+    textured->emplace(scene.textured(*mp, sp->uv, sp->uv1));
+    mp = &**textured;
+    // The coat's normal from the surface's own (the base's map does not turn it).
+    if (mp->clearcoat_normal_texture.active() && mp->clearcoat > 0)
+      *coat_ns = mapped_normal(scene, mp->clearcoat_normal_texture, mp->clearcoat_normal_scale, hit, *sp);
+    if (mp->normal_texture.active()) apply_normal_map(scene, *mp, hit, sp);
+  }
+  if (sp->colored && mp->kind == Material::Kind::kPbr) {  // glTF COLOR_0 multiplies the base colour
+    if (!*textured) textured->emplace(*mp);
+    (*textured)->reflectance = (*textured)->reflectance * sp->color;
+    mp = &**textured;
+  }
+  return *mp;
+}
+
 Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& lights, const RenderSettings& s)
     : scene_(scene),
       accel_(accel),
@@ -226,7 +247,8 @@ void record_first_hit(const Material& m, const SurfacePoint& sp, const Ray& ray,
 
 Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters, FirstHit* first) const {
   Rgb L(0), beta(1.0f);
-  bool specular = true;  // the previous vertex was the camera or a delta lobe
+  bool specular = true;       // the previous vertex was the camera or a delta lobe
+  bool first_smooth = false;  // the first hit scattered by a non-delta lobe
   float prev_pdf = 0, eta_scale = 1;
   SurfacePoint prev;
   Hit prev_hit;
@@ -257,24 +279,8 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters, First
       ++counters.self_hits;
     prev_hit = hit;
     SurfacePoint sp = make_surface_point(scene_, ray, hit);
-    const Material* mp = &scene_.materials[sp.material];
-    // Only textured or vertex-coloured materials pay for a copy.
-    textured.reset();
     std::optional<Vec3> coat_ns;
-    if (mp->has_textures()) {
-      textured.emplace(scene_.textured(*mp, sp.uv, sp.uv1));
-      mp = &*textured;
-      // The coat's normal from the surface's own (the base's map does not turn it).
-      if (mp->clearcoat_normal_texture.active() && mp->clearcoat > 0)
-        coat_ns = mapped_normal(scene_, mp->clearcoat_normal_texture, mp->clearcoat_normal_scale, hit, sp);
-      if (mp->normal_texture.active()) apply_normal_map(scene_, *mp, hit, &sp);
-    }
-    if (sp.colored && mp->kind == Material::Kind::kPbr) {  // glTF COLOR_0 multiplies the base colour
-      if (!textured) textured.emplace(*mp);
-      textured->reflectance = textured->reflectance * sp.color;
-      mp = &*textured;
-    }
-    const Material& m = *mp;
+    const Material& m = material_at(scene_, hit, &sp, &textured, &coat_ns);
     if (first && depth == 0) record_first_hit(m, sp, ray, first);
     const Vec3 wo_world = -ray.d;
     // Beer-Lambert absorption of a solid glTF volume: the segment just travelled was inside
@@ -292,7 +298,10 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters, First
           w = mis_ ? power_heuristic(1, prev_pdf, n_light,
                                      lights_.pdf_area_hit(size_t(sp.light), prev.p, sp.p, sp.ng, hit.t))
                    : 0;  // light sampling alone accounts for it
-        L += beta * m.radiance * w;
+        // A path camera -> smooth -> ... -> delta -> a light the light tracer starts from is
+        // the light tracer's (light_tracer.h): nothing is counted twice.
+        if (!(specular && first_smooth && !light_traced_.empty() && sp.light >= 0 && light_traced_[size_t(sp.light)]))
+          L += beta * m.radiance * w;
       }
       if (m.kind == Material::Kind::kEmission) break;
     }
@@ -322,6 +331,7 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters, First
     beta *= bs.weight;
     if (beta.is_black() || !beta.is_finite()) break;
     specular = bs.delta;
+    if (depth == 0) first_smooth = !bs.delta;
     prev_pdf = bs.pdf;
     prev = sp;
     eta_scale *= bs.etap * bs.etap;

@@ -7,6 +7,8 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
+#include <vector>
 
 #include "core/accel/accel.h"
 #include "core/light/lights.h"
@@ -22,6 +24,7 @@ struct RayCounters {
   uint64_t rays = 0;         // closest-hit queries
   uint64_t shadow_rays = 0;  // occlusion queries
   uint64_t self_hits = 0;    // continuation rays that hit their own primitive at t ~ 0
+  uint64_t splats = 0;       // light paths' connections to the camera added to the frame
 };
 
 // A ray-surface intersection prepared for shading.
@@ -47,6 +50,12 @@ void apply_normal_map(const Scene& scene, const Material& m, const Hit& hit, Sur
 // texture-space derivatives (T along dp/du, B toward image up). sp.ns where the map or
 // frame degenerates or would turn the normal under the surface.
 Vec3 mapped_normal(const Scene& scene, const TextureRef& ref, float scale, const Hit& hit, const SurfacePoint& sp);
+// The material at a hit as shading sees it: the scene's, or where textures or vertex
+// colours apply, a copy in *textured with them applied (its normal map turning sp->ns,
+// and the coat's own mapped normal, world space, in *coat_ns). Shared by the path and
+// light tracers so that both see the same surface.
+const Material& material_at(const Scene& scene, const Hit& hit, SurfacePoint* sp, std::optional<Material>* textured,
+                            std::optional<Vec3>* coat_ns);
 // A point p with error bound p_err on a surface with normal n, pushed off the surface along
 // n (to the side w points to) by the error bound, so that a ray between it and elsewhere
 // can neither start behind the surface nor hit it again.
@@ -68,6 +77,10 @@ class Integrator {
   // The radiance along a camera ray; with `first`, also what its first hit saw (AOVs: no
   // work at all without).
   Rgb radiance(Ray ray, Sampler& sampler, RayCounters& counters, FirstHit* first = nullptr) const;
+  // Leaves the caustic paths that end on these lights (a flag per LightSet index) to the
+  // light tracer: a path whose first hit scatters by a non-delta lobe and whose last
+  // scattering before reaching one of them is a delta lobe adds nothing here. Empty: none.
+  void leave_to_light_tracer(std::vector<uint8_t> lights) { light_traced_ = std::move(lights); }
 
  private:
   Rgb direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng, Sampler& sampler,
@@ -79,6 +92,7 @@ class Integrator {
   int max_depth_;
   int light_samples_;
   bool nee_ = true, mis_ = true;
+  std::vector<uint8_t> light_traced_;
 };
 
 }  // namespace tessera

@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <condition_variable>
+#include <memory>
 #include <mutex>
 #include <stdexcept>
 
@@ -17,6 +18,9 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
   TileStats stats;
   const bool with_aovs = renderer.settings().aovs != 0;
   int running = pool.size();
+  // Light paths' splats (light_tracer.h): integers added as they come, in any order.
+  std::unique_ptr<SplatFilm> splats;
+  if (renderer.light_tracing()) splats = renderer.make_splat_film();
   const auto start = std::chrono::steady_clock::now();
   const auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
 
@@ -34,7 +38,7 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
         std::vector<AovSums> tile_aovs;
         const std::vector<PixelSums> sums = renderer.render(task->rect, task->sample_begin, task->sample_end,
                                                             task->active.empty() ? nullptr : task->active.data(), &mine,
-                                                            nullptr, with_aovs ? &tile_aovs : nullptr);
+                                                            nullptr, with_aovs ? &tile_aovs : nullptr, splats.get());
         lock.lock();
         // Our own sums always fit: anything else is a broken invariant, and stopping loudly
         // beats waiting forever for a tile that never advances.
@@ -68,7 +72,17 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
     if (progress) report(lock);
   }
   pool.wait();
-  return RenderResult{plan.film(), plan.aovs(), stats, elapsed()};
+  RenderResult result;
+  result.film = splats ? splats->fold_into(plan.film()) : plan.film();
+  result.aovs = plan.aovs();
+  result.stats = stats;
+  result.seconds = elapsed();
+  result.light_tracing = renderer.light_tracing_decision();
+  if (splats) {
+    result.light_paths = splats->paths();
+    result.dropped_splats = splats->dropped();
+  }
+  return result;
 }
 
 }  // namespace tessera

@@ -20,10 +20,15 @@ struct RenderProgress {
 using ProgressCallback = std::function<void(const RenderProgress&)>;
 
 struct RenderResult {
-  Film film;
+  Film film{Rect{}};
   AovFilm aovs;  // empty unless the settings ask for AOVs
   TileStats stats;
   double seconds = 0;
+  // Light tracing (light_tracer.h): whether it ran and why; the light paths traced and the
+  // splats dropped (over SplatFilm::kMaxSplatValue or not finite). With it, `film` holds the
+  // splats folded in (SplatFilm::fold_into).
+  LightTracingDecision light_tracing;
+  uint64_t light_paths = 0, dropped_splats = 0;
 };
 
 // threads <= 0 uses every core. The callback runs on the calling thread, about every

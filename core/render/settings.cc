@@ -37,6 +37,8 @@ void RenderSettings::validate() const {
     require(adaptive_batch >= 1 && adaptive_batch <= kMaxSpp && std::isfinite(adaptive_tolerance) &&
                 adaptive_tolerance >= 0,
             "-a", "batch " + range(1, kMaxSpp) + " and tolerance must be >= 0");
+  require(light_tracer != LightTracer::kOn || (!adaptive && noise_target <= 0), "--light-tracer",
+          "on needs every pixel's samples (light paths land anywhere on the frame): not with -a or --noise-target");
   require(pass_spp >= 1 && pass_spp <= kMaxSpp, "--pass-spp", range(1, kMaxSpp));
   require(tile_size >= 1 && tile_size <= kMaxTileSize, "--tile", range(1, kMaxTileSize));
   require(!frame || (*frame >= -kMaxFrame && *frame <= kMaxFrame), "--frame", range(-kMaxFrame, kMaxFrame));

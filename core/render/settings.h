@@ -102,6 +102,13 @@ struct RenderSettings {
   // MIS area lights are found by light sampling alone.
   bool nee = true;
   bool mis = true;
+  // --light-tracer: light paths for the caustic paths camera -> diffuse -> mirror/glass ->
+  // light (core/render/light_tracer.h). kAuto turns it on where the scene has a mirror or
+  // glass surface and a light it can trace from (TileRenderer decides; --stats-json says).
+  // Not with -a or --noise-target (they decide from a pixel's or tile's own sums, and
+  // light paths land anywhere) nor, for now, through the farm.
+  enum class LightTracer : uint8_t { kOff, kOn, kAuto };
+  LightTracer light_tracer = LightTracer::kOff;
   // --aov: the AOVs written beside the image (aov.h's bits; 0: none, and no work for them).
   uint32_t aovs = 0;
   // --denoise: the final image is denoised (core/denoise/), the noisy one kept beside it in

@@ -115,11 +115,24 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
   accel_scene_ = scene_;
   camera_.emplace(*scene_, s.camera);
   integrator_.emplace(*scene_, *accel_, *lights_, s);
+  light_tracer_.reset();
+  light_decision_ = tessera::light_tracing_decision(*scene_, *lights_, *camera_, s);
+  if (light_decision_.on) {
+    light_tracer_.emplace(*scene_, *accel_, *lights_, *camera_, s);
+    integrator_->leave_to_light_tracer(light_tracer_->traced_lights());
+  }
+}
+
+std::unique_ptr<SplatFilm> TileRenderer::make_splat_film() const {
+  return std::make_unique<SplatFilm>(settings_.effective_window(),
+                                     int64_t(settings_.camera.width) * settings_.camera.height, settings_.halves());
 }
 
 std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,
                                             TileStats* stats, const std::atomic<bool>* cancel,
-                                            std::vector<AovSums>* aovs) const {
+                                            std::vector<AovSums>* aovs, SplatFilm* splats) const {
+  if (light_tracer_ && !splats)
+    throw SettingsError("--light-tracer", "light paths need a splat film: farm tasks do not carry them yet");
   const size_t area = size_t(rect.area());
   const bool halves = settings_.halves();
   std::vector<PixelSums> out(area * settings_.sum_planes());
@@ -148,6 +161,7 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
         if (aovs) first = FirstHit{};
         const Rgb L = integrator_->radiance(ray, sampler, local.rays, aovs ? &first : nullptr);
         ++local.samples;
+        if (light_tracer_) light_tracer_->trace(seed, pixel_id, s, *splats, halves && (s & 1), local.rays);
         // Beyond kMaxSampleValue is as useless as NaN (only a delta light nearer than 1e-5
         // gets there), and dropping it keeps our own sums always plausible (frame_plan.h).
         if (!L.is_finite() || L.max() > kMaxSampleValue) {

@@ -13,7 +13,9 @@
 #include "core/light/lights.h"
 #include "core/render/film.h"
 #include "core/render/integrator.h"
+#include "core/render/light_tracer.h"
 #include "core/render/settings.h"
+#include "core/render/splats.h"
 #include "core/scene/scene.h"
 
 namespace tessera {
@@ -28,6 +30,7 @@ struct TileStats {
     rays.rays += o.rays.rays;
     rays.shadow_rays += o.rays.shadow_rays;
     rays.self_hits += o.rays.self_hits;
+    rays.splats += o.rays.splats;
   }
 };
 
@@ -49,8 +52,11 @@ class TileRenderer {
   // them with half-buffers: settings().sum_planes(), film.h). If `cancel`
   // becomes true the render stops between rows and the result must be discarded. With
   // `aovs` (settings().aovs set), the same samples' AOV sums too, rect-sized (aov.h).
+  // With light tracing (light_tracing()), each camera sample's light path too, its splats
+  // added to `splats` (which must then be given: SettingsError otherwise).
   std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active, TileStats* stats,
-                                const std::atomic<bool>* cancel = nullptr, std::vector<AovSums>* aovs = nullptr) const;
+                                const std::atomic<bool>* cancel = nullptr, std::vector<AovSums>* aovs = nullptr,
+                                SplatFilm* splats = nullptr) const;
   // A run of passes (consecutive sample ranges, in pass order), each rendered on its own
   // and added in pass order to `base` (as render() returns; null: zero), as a film adds them: from
   // a tile's sums so far, the film's bits after those passes (FramePlan::take with more
@@ -74,6 +80,12 @@ class TileRenderer {
   // path, the camera change; the scene's acceleration structure is built once for a whole
   // sequence. Not while rendering.
   void set_frame(std::optional<int> frame);
+
+  // Whether this frame traces light paths for its caustics (light_tracer.h), and why.
+  bool light_tracing() const { return light_tracer_.has_value(); }
+  const LightTracingDecision& light_tracing_decision() const { return light_decision_; }
+  // A frame's splat film for these settings (light_tracing() only).
+  std::unique_ptr<SplatFilm> make_splat_film() const;
 
   const Scene& scene() const { return *scene_; }  // as posed for the frame
   const RenderSettings& settings() const { return settings_; }
@@ -100,6 +112,8 @@ class TileRenderer {
   std::shared_ptr<const LightSet> lights_;
   std::optional<Camera> camera_;
   std::optional<Integrator> integrator_;
+  std::optional<LightTracer> light_tracer_;
+  LightTracingDecision light_decision_;
 };
 
 }  // namespace tessera

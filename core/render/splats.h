@@ -1,0 +1,75 @@
+// Light paths' contributions ("splats") to the frame: they land on any pixel, whichever tile
+// traced them, so they cannot be added in a tile's pass order as the film's doubles are.
+// Their sums are fixed-point integers instead (as the AOVs', aov.h): integer addition is
+// associative, so any thread count, task order or grouping gives the same bits.
+//
+// Per pixel: the sum of the splats' RGB values (2^-24 units) and of their squared luminance
+// (2^-12 units, for the variance layer). A splat's value is what Camera::connect describes:
+// a pixel's estimate from N light paths is (width x height / N) x the sum. A splat with a
+// channel above kMaxSplatValue (or not finite) is dropped and counted, as a sample over
+// kMaxSampleValue is; sums saturate rather than wrap.
+//
+// With the half-buffers each plane gets its own light paths: those traced for the pixels'
+// odd-numbered samples go to the second plane too (film.h).
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <vector>
+
+#include "core/math/rect.h"
+#include "core/math/vec.h"
+#include "core/render/film.h"
+
+namespace tessera {
+
+struct SplatSums {
+  static constexpr double kUnit = double(1 << 24);
+  static constexpr double kLum2Unit = double(1 << 12);
+  int64_t rgb[3] = {0, 0, 0};
+  int64_t lum2 = 0;
+  double r() const { return double(rgb[0]) / kUnit; }
+  double g() const { return double(rgb[1]) / kUnit; }
+  double b() const { return double(rgb[2]) / kUnit; }
+  double lum_sq() const { return double(lum2) / kLum2Unit; }
+};
+
+class SplatFilm {
+ public:
+  static constexpr float kMaxSplatValue = float(1 << 20);
+
+  // A frame's splats: `window` the pixels rendered (image coordinates), `image_pixels` the
+  // camera film's width x height (the estimate's scale), with a second plane for halves.
+  SplatFilm(Rect window, int64_t image_pixels, bool halves);
+  const Rect& window() const { return window_; }
+  bool halves() const { return halves_; }
+
+  // Adds a splat to image pixel (x, y) (row 0 at the top), and to the odd plane too when
+  // `odd`; outside the window it is not seen. Thread-safe. False when the value was dropped.
+  bool add(int x, int y, Rgb value, bool odd);
+  // One light path traced (whether or not it splatted), for the plane(s) it belongs to.
+  void count_path(bool odd);
+  uint64_t paths() const { return paths_[0].load(); }
+  uint64_t odd_paths() const { return paths_[1].load(); }
+  uint64_t dropped() const { return dropped_.load(); }
+  // (x, y) relative to the window.
+  SplatSums at(int x, int y, bool odd = false) const;
+
+  // The film with these splats folded into its sums: each pixel's mean gains (image
+  // pixels / paths) x its splat sum, and its mean's variance (PixelSums::mean_variance)
+  // gains (image pixels / paths)^2 x its squared-luminance sum (the splats taken as
+  // independent: a light path's splats on one pixel are rare). A pixel without samples
+  // keeps nothing. The film must cover this window.
+  Film fold_into(const Film& film) const;
+
+ private:
+  void add_to(size_t index, const int64_t v[4]);
+  Rect window_;
+  int64_t image_pixels_;
+  bool halves_;
+  std::vector<std::atomic<int64_t>> sums_;  // per plane, per pixel: r, g, b, lum2
+  std::atomic<uint64_t> paths_[2] = {0, 0};
+  std::atomic<uint64_t> dropped_{0};
+};
+
+}  // namespace tessera

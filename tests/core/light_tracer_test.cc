@@ -1,0 +1,336 @@
+// The light tracer (core/render/light_tracer.h): its sampling routines, its agreement with
+// the path tracer alone on caustic scenes, energy through glass, determinism, and that it
+// costs a scene without caustic casters nothing.
+#include "core/render/light_tracer.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+
+#include "core/camera/camera.h"
+#include "core/light/lights.h"
+#include "core/render/delta_targets.h"
+#include "core/sampling/sampler.h"
+#include "tests/core/chi2.h"
+#include "tests/core/render_helpers.h"
+
+namespace tessera {
+namespace {
+
+using testing::chi2_directions;
+using testing::film_estimate;
+using testing::render;
+using LT = RenderSettings::LightTracer;
+
+Material diffuse(float albedo) {
+  Material m;
+  m.kind = Material::Kind::kDiffuse;
+  m.reflectance = Rgb(albedo);
+  return m;
+}
+Material glass() {
+  Material m;
+  m.kind = Material::Kind::kGlass;
+  m.reflectance = Rgb(1.0f);
+  m.transmittance = Rgb(1.0f);
+  m.ior = 1.5f;
+  return m;
+}
+Material mirror() {
+  Material m;
+  m.kind = Material::Kind::kMirror;
+  m.reflectance = Rgb(1.0f);
+  return m;
+}
+
+// A diffuse floor (y = 0, [-2, 2]^2) under a sphere of `caster` (centre (0, 0.6, 0),
+// radius 0.5; none when `caster_present` is false), lit by a rect light at y = 2.2 or
+// a physical point light (1 / d^2) at `point_at`, seen from above at an angle.
+Scene caustic_scene(Material caster, bool caster_present = true, std::optional<Vec3> point_at = std::nullopt) {
+  Scene s;
+  s.materials.push_back(diffuse(0.8f));
+  s.materials.push_back(caster);
+  Mesh floor;
+  floor.name = "floor";
+  floor.positions = {{-2, 0, -2}, {2, 0, -2}, {2, 0, 2}, {-2, 0, 2}};
+  floor.indices = {0, 2, 1, 0, 3, 2};
+  floor.material = 0;
+  s.meshes.push_back(floor);
+  if (caster_present) s.spheres.push_back(Sphere{"caster", {0, 0.6f, 0}, 0.5f, 1, -1});
+  Light l;
+  if (point_at) {
+    l.kind = Light::Kind::kPoint;
+    l.position = *point_at;
+    l.color = Rgb(4.0f);
+    l.att_constant = 0;
+    l.att_quadratic = 1;
+  } else {
+    l.kind = Light::Kind::kRect;
+    l.name = "lamp";
+    l.position = {0.2f, 2.2f, 0.1f};
+    l.edge_x = {0.8f, 0, 0};  // large enough that the path tracer alone converges in a test's time
+    l.edge_y = {0, 0, 0.8f};
+    l.normal = {0, -1, 0};
+    l.area = 0.64f;
+    l.color = Rgb(6.0f);
+  }
+  s.lights.push_back(l);
+  s.camera.present = true;
+  s.camera.eye = {0, 2.6f, 2.6f};
+  s.camera.forward = normalize(Vec3{0, -2.6f, -2.6f});
+  s.camera.up = {0, 1, 0};
+  s.camera.xfov_deg = 50;
+  s.camera.aspect_ratio = 4.0 / 3.0;
+  s.finalize();
+  return s;
+}
+
+RenderSettings caustic_settings(LT mode, int spp) {
+  RenderSettings s;
+  s.camera.framing = Framing::kFile;
+  s.camera.width = 32;
+  s.camera.height = 24;
+  s.spp = spp;
+  s.max_depth = 8;
+  s.light_tracer = mode;
+  return s;
+}
+
+bool same_sums(const std::vector<PixelSums>& a, const std::vector<PixelSums>& b) {
+  if (a.size() != b.size()) return false;
+  for (size_t i = 0; i < a.size(); ++i)  // field by field: PixelSums has padding
+    if (std::memcmp(&a[i].r, &b[i].r, 4 * sizeof(double)) != 0 || a[i].n != b[i].n) return false;
+  return true;
+}
+bool same_bits(const Film& a, const Film& b) {
+  return same_sums(a.pixels(), b.pixels()) && same_sums(a.odd(), b.odd());
+}
+
+// Mean luminance over the pixels of a block, with its standard error (from the film's own
+// variance estimate: the path tracer's samples and, folded in, the splats').
+testing::Estimate block(const Film& f, int x0, int y0, int w, int h) {
+  testing::Estimate e;
+  double var = 0;
+  for (int y = y0; y < y0 + h; ++y)
+    for (int x = x0; x < x0 + w; ++x) {
+      e.mean += f.at(x, y).lum_sum() / f.at(x, y).n;
+      var += f.at(x, y).mean_variance();
+    }
+  e.mean /= w * h;
+  e.stderr_ = std::sqrt(var) / (w * h);
+  return e;
+}
+
+void expect_agree(const testing::Estimate& a, const testing::Estimate& b, const char* what) {
+  const double sigma = std::sqrt(a.stderr_ * a.stderr_ + b.stderr_ * b.stderr_);
+  EXPECT_LT(std::fabs(a.mean - b.mean), 4.5 * sigma + 1e-4)
+      << what << ": " << a.mean << " +- " << a.stderr_ << " against " << b.mean << " +- " << b.stderr_;
+}
+
+TEST(DeltaTargets, DirectionsFollowTheirDensity) {
+  Scene s = caustic_scene(glass());
+  s.spheres.push_back(Sphere{"second", {1.2f, 0.4f, -0.5f}, 0.3f, 1, -1});
+  const DeltaTargets targets(s);
+  ASSERT_EQ(targets.targets().size(), 2u);
+  for (const Vec3 from : {Vec3{0.2f, 2.2f, 0.1f}, Vec3{0, 0.6f, 0.2f} /* inside the first */}) {
+    const testing::Chi2Result r = chi2_directions(
+        [&](int i) -> std::optional<Vec3> {
+          Sampler sm(7, 0, uint32_t(i));
+          const float u = sm.next_1d();
+          float pdf = 0;
+          const Vec3 d = targets.sample(from, u, sm.next_2d(), &pdf);
+          EXPECT_NEAR(pdf, targets.pdf(from, d), 1e-3f * pdf);
+          return d;
+        },
+        [&](Vec3 w) { return double(targets.pdf(from, w)); }, 400000, 20, 40, 48);
+    EXPECT_GT(r.p_value, 1e-3) << r.describe();
+  }
+}
+
+TEST(DeltaTargets, BoundEveryDeltaShapeAndNothingElse) {
+  EXPECT_TRUE(DeltaTargets(caustic_scene(diffuse(0.5f))).empty());
+  EXPECT_FALSE(has_delta_lobe(testing::pbr_material(0, 0.5f)));
+  EXPECT_TRUE(has_delta_lobe(testing::pbr_material(1, 0)));
+  const DeltaTargets t(caustic_scene(mirror()));
+  ASSERT_EQ(t.targets().size(), 1u);
+  EXPECT_NEAR(t.targets()[0].radius, 0.5f, 1e-3f);
+  EXPECT_GE(t.targets()[0].radius, 0.5f);
+}
+
+// Camera::connect inverts generate(): the film position a ray was generated for, and the
+// lens point it left from.
+TEST(CameraConnect, InvertsGenerate) {
+  const Scene s = caustic_scene(glass());
+  for (const float lens : {0.0f, 0.2f}) {
+    CameraSettings cs;
+    cs.framing = Framing::kFile;
+    cs.width = 32;
+    cs.height = 24;
+    cs.lens_radius = lens;
+    cs.focal_distance = 3;
+    const Camera cam(s, cs);
+    for (uint32_t i = 0; i < 2000; ++i) {
+      Sampler sm(3, 1, i);
+      const Vec2 f = sm.next_2d(), u = sm.next_2d();
+      const float t = 0.5f + 5 * sm.next_1d();
+      const Ray r = cam.generate(f.x * 32, f.y * 24, u);
+      CameraConnection c;
+      ASSERT_TRUE(cam.connect(r.o + r.d * t, u, &c));
+      EXPECT_NEAR(c.fx, f.x * 32, 2e-3f);
+      EXPECT_NEAR(c.fy, f.y * 24, 2e-3f);
+      EXPECT_NEAR(length(c.lens - r.o), 0, 1e-5f);
+      EXPECT_NEAR(dot(c.wi, -r.d), 1, 1e-5f);
+      EXPECT_NEAR(c.dist, t, 1e-4f * t);
+    }
+  }
+}
+
+// The camera's importance integrates to one over what it sees: over a plane filling the
+// view, the sum of weight x cos x area of points sampled uniformly on it, for a pinhole
+// and for a thin lens (any lens point).
+TEST(CameraConnect, ImportanceIntegratesToOne) {
+  Scene s;
+  s.camera.present = true;
+  s.camera.xfov_deg = 60;
+  s.camera.aspect_ratio = 4.0 / 3.0;
+  s.finalize();
+  for (const float lens : {0.0f, 0.3f}) {
+    CameraSettings cs;
+    cs.framing = Framing::kFile;
+    cs.width = 40;
+    cs.height = 30;
+    cs.lens_radius = lens;
+    cs.focal_distance = 2;
+    const Camera cam(s, cs);
+    const float half = 8, depth = 5;  // the plane z = -5, [-8, 8]^2: wider than the view
+    double sum = 0;
+    const int n = 400000;
+    for (int i = 0; i < n; ++i) {
+      Sampler sm(5, 2, uint32_t(i));
+      const Vec2 u = sm.next_2d();
+      const Vec3 p{(2 * u.x - 1) * half, (2 * u.y - 1) * half, -depth};
+      CameraConnection c;
+      if (!cam.connect(p, sm.next_2d(), &c)) continue;
+      sum += double(c.weight) * std::fabs(c.wi.z) * (4 * half * half);
+    }
+    EXPECT_NEAR(sum / n, 1.0, 0.01) << "lens " << lens;
+  }
+}
+
+TEST(LightEmission, SpotsAndPointsEmitAsNextEventEstimationSeesThem) {
+  Scene s = caustic_scene(glass(), true, Vec3{0, 2, 0});
+  Light spot = s.lights[0];
+  spot.kind = Light::Kind::kSpot;
+  spot.direction = {0, -1, 0};
+  spot.cos_inner = 0.9f;
+  spot.cos_outer = 0.7f;
+  s.lights.push_back(spot);
+  const LightSet lights(s);
+  for (size_t i = 0; i < 2; ++i) {
+    EmissionPoint e;
+    ASSERT_TRUE(lights.emission_point(i, 0.5f, {0.5f, 0.5f}, &e));
+    for (const Vec3 p : {Vec3{0, 0, 0}, Vec3{0.5f, 0, 0.3f}, Vec3{1.5f, 0, 0}}) {
+      LightSample ls;
+      const bool lit = lights.sample(i, p, 0.5f, {0.5f, 0.5f}, &ls);
+      const Rgb out = lights.emitted_toward(i, e, normalize(p - e.point));
+      const float d = length(p - e.point);
+      EXPECT_NEAR(out.r, lit ? ls.li.r * d * d : 0.0f, 1e-4f * out.r + 1e-6f) << i;
+    }
+  }
+  EXPECT_GT(lights.emitted_power(0), 0);
+}
+
+// Light tracing and the path tracer alone estimate the same image: over the whole frame
+// and in the caustic under the sphere, for glass and a mirror, pinhole and thin lens.
+TEST(LightTracer, AgreesWithThePathTracerAlone) {
+  for (const bool lens : {false, true})
+    for (const Material& caster : {glass(), mirror()}) {
+      const Scene scene = caustic_scene(caster);
+      RenderSettings off = caustic_settings(LT::kOff, 1024), on = caustic_settings(LT::kOn, 128);
+      if (lens) off.camera.lens_radius = on.camera.lens_radius = 0.15f;
+      const RenderResult a = render(scene, off), b = render(scene, on);
+      ASSERT_TRUE(b.light_tracing.on) << b.light_tracing.why;
+      EXPECT_GT(b.stats.rays.splats, 1000u);
+      EXPECT_EQ(b.light_paths, 32u * 24u * 128u);
+      SCOPED_TRACE(std::string(caster.kind == Material::Kind::kGlass ? "glass" : "mirror") +
+                   (lens ? ", thin lens" : ""));
+      expect_agree(film_estimate(a.film), film_estimate(b.film), "frame");
+      for (int by = 0; by < 24; by += 8)
+        for (int bx = 0; bx < 32; bx += 8) {
+          SCOPED_TRACE("block at " + std::to_string(bx) + ", " + std::to_string(by));
+          expect_agree(block(a.film, bx, by, 8, 8), block(b.film, bx, by, 8, 8), "block");
+        }
+    }
+}
+
+// A point light at the centre of a glass sphere: every ray leaves radially and, Fresnel
+// reflections included, all of its flux gets out (lossless glass), so the floor is lit as if
+// the sphere were not there. The path tracer alone sees none of it (a delta light behind
+// glass); light tracing must carry it without the radiance's eta^2.
+TEST(LightTracer, PointLightThroughAGlassSphereKeepsItsEnergy) {
+  const Vec3 centre{0, 0.6f, 0};
+  const RenderResult bare = render(caustic_scene(glass(), false, centre), caustic_settings(LT::kOff, 64));
+  RenderSettings s = caustic_settings(LT::kOn, 64);
+  s.max_depth = 64;
+  const RenderResult through = render(caustic_scene(glass(), true, centre), s);
+  ASSERT_TRUE(through.light_tracing.on);
+  // The floor's corners, away from the sphere's silhouette.
+  for (const auto& [x, y] : {std::pair{0, 16}, std::pair{24, 16}, std::pair{0, 0}, std::pair{24, 0}})
+    expect_agree(block(bare.film, x, y, 8, 8), block(through.film, x, y, 8, 8), "floor");
+  EXPECT_EQ(through.stats.nan_samples, 0u);
+  EXPECT_EQ(through.dropped_splats, 0u);
+}
+
+// Degenerate chains stay finite: a light inside glass, grazing glass, a camera inside glass.
+TEST(LightTracer, DegenerateChainsStayFinite) {
+  Scene scene = caustic_scene(glass(), true, Vec3{0, 0.6f, 0.49f});  // just inside the sphere's skin
+  RenderSettings s = caustic_settings(LT::kOn, 32);
+  s.max_depth = 100;
+  const RenderResult r = render(scene, s);
+  EXPECT_EQ(r.stats.nan_samples, 0u);
+  EXPECT_EQ(r.dropped_splats, 0u);
+  for (const PixelSums& p : r.film.pixels()) ASSERT_TRUE(std::isfinite(p.r) && std::isfinite(p.lum2));
+  scene.camera.eye = {0, 0.6f, 0.2f};  // the camera inside the glass
+  const RenderResult inside = render(scene, s);
+  EXPECT_EQ(inside.stats.nan_samples, 0u);
+  for (const PixelSums& p : inside.film.pixels()) ASSERT_TRUE(std::isfinite(p.r));
+}
+
+TEST(LightTracer, SameBitsAtAnyThreadCountAndTiling) {
+  const Scene scene = caustic_scene(glass());
+  RenderSettings s = caustic_settings(LT::kOn, 32);
+  s.aovs = kAovHalves;
+  const RenderResult a = testing::render(scene, s, 1, 8), b = testing::render(scene, s, 2, 16);
+  EXPECT_TRUE(same_bits(a.film, b.film));
+  ASSERT_TRUE(a.film.halves());
+  // Each half has its own light paths: both halves' means agree with the whole.
+  double all = 0, odd = 0;
+  for (size_t i = 0; i < a.film.pixels().size(); ++i) {
+    all += a.film.pixels()[i].lum_sum() / a.film.pixels()[i].n;
+    odd += a.film.odd()[i].lum_sum() / a.film.odd()[i].n;
+  }
+  EXPECT_NEAR(odd / all, 1, 0.05);
+}
+
+// Auto: on where a mirror or glass surface can carry a finite light's flux; a scene
+// without one renders the same bits as with light tracing off, at no cost.
+TEST(LightTracer, AutoTurnsOnOnlyWhereItCanHelp) {
+  const RenderResult with = render(caustic_scene(glass()), caustic_settings(LT::kAuto, 4));
+  EXPECT_TRUE(with.light_tracing.on) << with.light_tracing.why;
+  const Scene plain = caustic_scene(diffuse(0.5f));
+  const RenderResult autod = render(plain, caustic_settings(LT::kAuto, 16)),
+                     off = render(plain, caustic_settings(LT::kOff, 16));
+  EXPECT_FALSE(autod.light_tracing.on);
+  EXPECT_NE(autod.light_tracing.why.find("no mirror"), std::string::npos) << autod.light_tracing.why;
+  EXPECT_TRUE(same_bits(autod.film, off.film));
+  EXPECT_EQ(autod.stats.rays.rays, off.stats.rays.rays);
+  RenderSettings adaptive = caustic_settings(LT::kAuto, 16);
+  adaptive.adaptive = true;
+  EXPECT_FALSE(render(caustic_scene(glass()), adaptive).light_tracing.on);
+  adaptive.light_tracer = LT::kOn;
+  EXPECT_THROW(adaptive.validate(), SettingsError);
+}
+
+}  // namespace
+}  // namespace tessera
