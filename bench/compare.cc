@@ -2,8 +2,9 @@
 //   rmse     sqrt(mean over pixels and channels of (x - ref)^2)
 //   relmse   mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01)
 //   regions  mean RGB of each named rectangle, in both images (--regions FILE.json, a map
-//            of name -> [x, y, w, h] in pixels, row 0 at the top), and the standard error
-//            of IMAGE's mean luminance there when IMAGE has a variance channel
+//            of name -> [x, y, w, h] in pixels, row 0 at the top), the relmse over its
+//            pixels, and the standard error of IMAGE's mean luminance there when IMAGE has
+//            a variance channel
 //   identical  every channel of both images (R, G, B, spp, variance) equal bit for bit
 // Usage: tessera_compare IMAGE.exr REFERENCE.exr [--regions FILE.json]
 #include <cmath>
@@ -53,19 +54,25 @@ int main(int argc, char** argv) {
       const nlohmann::json regions = nlohmann::json::parse(f);
       for (const auto& [name, rect] : regions.items()) {
         const int x0 = rect[0], y0 = rect[1], w = rect[2], h = rect[3];
-        double sa[3] = {}, sr[3] = {}, var = 0;
+        if (x0 < 0 || y0 < 0 || w < 1 || h < 1 || x0 + w > a.width || y0 + h > a.height)
+          throw std::runtime_error("region '" + name + "' is not inside the image");
+        double sa[3] = {}, sr[3] = {}, var = 0, region_rel = 0;
         const auto v = a.channels.find("variance");
         for (int y = y0; y < y0 + h; ++y)
           for (int x = x0; x < x0 + w; ++x) {
             for (int c = 0; c < 3; ++c) {
-              sa[c] += a.channels.at(ch[c])[size_t(y) * a.width + x];
-              sr[c] += r.channels.at(ch[c])[size_t(y) * r.width + x];
+              const double xi = a.channels.at(ch[c])[size_t(y) * a.width + x];
+              const double yi = r.channels.at(ch[c])[size_t(y) * r.width + x];
+              sa[c] += xi;
+              sr[c] += yi;
+              region_rel += (xi - yi) * (xi - yi) / (yi * yi + 0.01);
             }
             if (v != a.channels.end()) var += v->second[size_t(y) * a.width + x];
           }
         const double k = double(w) * h;
         out["regions"][name] = {{"image", {sa[0] / k, sa[1] / k, sa[2] / k}},
-                                {"reference", {sr[0] / k, sr[1] / k, sr[2] / k}}};
+                                {"reference", {sr[0] / k, sr[1] / k, sr[2] / k}},
+                                {"relmse", region_rel / (3 * k)}};
         // The standard error of the image's mean luminance over the region, from its
         // per-pixel variance channel (a Tessera EXR), when it has one.
         if (v != a.channels.end()) out["regions"][name]["image_luminance_stderr"] = std::sqrt(var) / k;
