@@ -86,6 +86,7 @@ class LightSet {
   float infinite_pdf(size_t i, Vec3 dir) const;
 
  private:
+  bool mesh_point(size_t i, float u_pick, Vec2 u, AreaPoint* out) const;
   struct MeshLightData {
     std::vector<float> cdf;  // cumulative triangle areas, normalised to end at 1
     float area = 0;

@@ -162,27 +162,6 @@ Vec3 mapped_normal(const Scene& scene, const TextureRef& ref, float scale, const
   return mapped;
 }
 
-const Material& material_at(const Scene& scene, const Hit& hit, SurfacePoint* sp, std::optional<Material>* textured,
-                            std::optional<Vec3>* coat_ns) {
-  const Material* mp = &scene.materials[sp->material];
-  // Only textured or vertex-coloured materials pay for a copy.
-  textured->reset();
-  if (mp->has_textures()) {
-    textured->emplace(scene.textured(*mp, sp->uv, sp->uv1));
-    mp = &**textured;
-    // The coat's normal from the surface's own (the base's map does not turn it).
-    if (mp->clearcoat_normal_texture.active() && mp->clearcoat > 0)
-      *coat_ns = mapped_normal(scene, mp->clearcoat_normal_texture, mp->clearcoat_normal_scale, hit, *sp);
-    if (mp->normal_texture.active()) apply_normal_map(scene, *mp, hit, sp);
-  }
-  if (sp->colored && mp->kind == Material::Kind::kPbr) {  // glTF COLOR_0 multiplies the base colour
-    if (!*textured) textured->emplace(*mp);
-    (*textured)->reflectance = (*textured)->reflectance * sp->color;
-    mp = &**textured;
-  }
-  return *mp;
-}
-
 Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& lights, const RenderSettings& s)
     : scene_(scene),
       accel_(accel),

@@ -54,8 +54,27 @@ Vec3 mapped_normal(const Scene& scene, const TextureRef& ref, float scale, const
 // colours apply, a copy in *textured with them applied (its normal map turning sp->ns,
 // and the coat's own mapped normal, world space, in *coat_ns). Shared by the path and
 // light tracers so that both see the same surface.
-const Material& material_at(const Scene& scene, const Hit& hit, SurfacePoint* sp, std::optional<Material>* textured,
-                            std::optional<Vec3>* coat_ns);
+// (Inline: in the bounce loop, where it was written before the light tracer shared it.)
+inline const Material& material_at(const Scene& scene, const Hit& hit, SurfacePoint* sp,
+                                   std::optional<Material>* textured, std::optional<Vec3>* coat_ns) {
+  const Material* mp = &scene.materials[sp->material];
+  // Only textured or vertex-coloured materials pay for a copy.
+  textured->reset();
+  if (mp->has_textures()) {
+    textured->emplace(scene.textured(*mp, sp->uv, sp->uv1));
+    mp = &**textured;
+    // The coat's normal from the surface's own (the base's map does not turn it).
+    if (mp->clearcoat_normal_texture.active() && mp->clearcoat > 0)
+      *coat_ns = mapped_normal(scene, mp->clearcoat_normal_texture, mp->clearcoat_normal_scale, hit, *sp);
+    if (mp->normal_texture.active()) apply_normal_map(scene, *mp, hit, sp);
+  }
+  if (sp->colored && mp->kind == Material::Kind::kPbr) {  // glTF COLOR_0 multiplies the base colour
+    if (!*textured) textured->emplace(*mp);
+    (*textured)->reflectance = (*textured)->reflectance * sp->color;
+    mp = &**textured;
+  }
+  return *mp;
+}
 // A point p with error bound p_err on a surface with normal n, pushed off the surface along
 // n (to the side w points to) by the error bound, so that a ray between it and elsewhere
 // can neither start behind the surface nor hit it again.
