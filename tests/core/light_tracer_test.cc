@@ -264,6 +264,29 @@ TEST(LightTracer, AgreesWithThePathTracerAlone) {
     }
 }
 
+// glTF's materials: a smooth solid glass and a smooth metal casting onto a rough glTF
+// floor (its GGX coat and diffuse base are the connection vertex's lobes, evaluated the
+// camera's way round), and a rough metal caster that is not a caustic caster at all.
+TEST(LightTracer, AgreesWithThePathTracerAloneOnGltfMaterials) {
+  for (const Material& caster :
+       {testing::pbr_material(0, 0, 1, false), testing::pbr_material(1, 0), testing::pbr_material(1, 0.4f)}) {
+    Scene scene = caustic_scene(caster);
+    scene.materials[0] = testing::pbr_material(0, 0.5f);
+    scene.materials[0].reflectance = Rgb(0.8f);
+    const RenderResult a = render(scene, caustic_settings(LT::kOff, 1024)),
+                       b = render(scene, caustic_settings(LT::kOn, 128));
+    ASSERT_TRUE(b.light_tracing.on);
+    SCOPED_TRACE("caster metallic " + std::to_string(caster.metallic) + " roughness " +
+                 std::to_string(caster.roughness));
+    expect_agree(film_estimate(a.film), film_estimate(b.film), "frame");
+    for (int by = 0; by < 24; by += 8)
+      for (int bx = 0; bx < 32; bx += 8) {
+        SCOPED_TRACE("block at " + std::to_string(bx) + ", " + std::to_string(by));
+        expect_agree(block(a.film, bx, by, 8, 8), block(b.film, bx, by, 8, 8), "block");
+      }
+  }
+}
+
 // A point light at the centre of a glass sphere: every ray leaves radially and, Fresnel
 // reflections included, all of its flux gets out (lossless glass), so the floor is lit as if
 // the sphere were not there. The path tracer alone sees none of it (a delta light behind
