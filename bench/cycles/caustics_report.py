@@ -106,7 +106,11 @@ def main():
                 b, t = table[(scene, base, spp)], table[(scene, rend, spp)]
                 print("| %d | " % spp + " | ".join(
                     "%.2f" % ((b[k] * b["seconds"]) / (t[k] * t["seconds"])) if t[k] > 0 else "-" for k in keys) + " |")
-    import matplotlib
+    try:
+        import matplotlib
+    except ImportError:
+        print("\n(no matplotlib: no plot; apt-get install python3-matplotlib)", file=sys.stderr)
+        return
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     cols = 4

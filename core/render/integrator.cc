@@ -228,6 +228,7 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters, First
   Rgb L(0), beta(1.0f);
   bool specular = true;       // the previous vertex was the camera or a delta lobe
   bool first_smooth = false;  // the first hit scattered by a non-delta lobe
+  int smooth_vertices = 0;    // vertices so far that scattered by a non-delta lobe
   float prev_pdf = 0, eta_scale = 1;
   SurfacePoint prev;
   Hit prev_hit;
@@ -279,7 +280,8 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters, First
                    : 0;  // light sampling alone accounts for it
         // A path camera -> smooth -> ... -> delta -> a light the light tracer starts from is
         // the light tracer's (light_tracer.h): nothing is counted twice.
-        if (!(specular && first_smooth && !light_traced_.empty() && sp.light >= 0 && light_traced_[size_t(sp.light)]))
+        if (!(specular && first_smooth && smooth_vertices <= light_traced_smooth_ && !light_traced_.empty() &&
+              sp.light >= 0 && light_traced_[size_t(sp.light)]))
           L += beta * m.radiance * w;
       }
       if (m.kind == Material::Kind::kEmission) break;
@@ -311,6 +313,7 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters, First
     if (beta.is_black() || !beta.is_finite()) break;
     specular = bs.delta;
     if (depth == 0) first_smooth = !bs.delta;
+    smooth_vertices += !bs.delta;
     prev_pdf = bs.pdf;
     prev = sp;
     eta_scale *= bs.etap * bs.etap;

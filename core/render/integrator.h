@@ -99,7 +99,11 @@ class Integrator {
   // Leaves the caustic paths that end on these lights (a flag per LightSet index) to the
   // light tracer: a path whose first hit scatters by a non-delta lobe and whose last
   // scattering before reaching one of them is a delta lobe adds nothing here. Empty: none.
-  void leave_to_light_tracer(std::vector<uint8_t> lights) { light_traced_ = std::move(lights); }
+  // Only paths with at most `smooth` non-delta vertices (LightTracer::max_smooth()).
+  void leave_to_light_tracer(std::vector<uint8_t> lights, int smooth) {
+    light_traced_ = std::move(lights);
+    light_traced_smooth_ = smooth;
+  }
 
  private:
   Rgb direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng, Sampler& sampler,
@@ -112,6 +116,7 @@ class Integrator {
   int light_samples_;
   bool nee_ = true, mis_ = true;
   std::vector<uint8_t> light_traced_;
+  int light_traced_smooth_ = 0;
 };
 
 }  // namespace tessera

@@ -119,7 +119,7 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
   light_decision_ = tessera::light_tracing_decision(*scene_, *lights_, *camera_, s);
   if (light_decision_.on) {
     light_tracer_.emplace(*scene_, *accel_, *lights_, *camera_, s);
-    integrator_->leave_to_light_tracer(light_tracer_->traced_lights());
+    integrator_->leave_to_light_tracer(light_tracer_->traced_lights(), light_tracer_->max_smooth());
   }
 }
 
@@ -161,7 +161,8 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
         if (aovs) first = FirstHit{};
         const Rgb L = integrator_->radiance(ray, sampler, local.rays, aovs ? &first : nullptr);
         ++local.samples;
-        if (light_tracer_) light_tracer_->trace(seed, pixel_id, s, *splats, halves && (s & 1), local.rays);
+        if (light_tracer_ && LightTracer::traces(pixel_id, s))
+          light_tracer_->trace(seed, pixel_id, s, *splats, halves && (s & 1), local.rays);
         // Beyond kMaxSampleValue is as useless as NaN (only a delta light nearer than 1e-5
         // gets there), and dropping it keeps our own sums always plausible (frame_plan.h).
         if (!L.is_finite() || L.max() > kMaxSampleValue) {

@@ -263,7 +263,7 @@ TEST(LightTracer, AgreesWithThePathTracerAlone) {
       const RenderResult a = render(scene, off), b = render(scene, on);
       ASSERT_TRUE(b.light_tracing.on) << b.light_tracing.why;
       EXPECT_GT(b.stats.rays.splats, 1000u);
-      EXPECT_EQ(b.light_paths, 32u * 24u * 128u);
+      EXPECT_EQ(b.light_paths, 32u * 24u * 128u / LightTracer::kSamplesPerLightPath);
       SCOPED_TRACE(std::string(caster.kind == Material::Kind::kGlass ? "glass" : "mirror") +
                    (lens ? ", thin lens" : ""));
       expect_same_image(a.film, b.film);
