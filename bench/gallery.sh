@@ -34,6 +34,22 @@ done
 for b in 0.05 0.10 0.15 0.20; do
   render "cbdragon-b$b-middle" "$SHARED/CBdragon.dae" -s 64 -l 4 -m 8 -b "$b" -d 4.80
 done
+# The caustics converging (issue 28, docs/light-tracing.md): the path tracer alone at 16,
+# 64 and 256 spp, and with the light tracer at 12, 48 and 192 (about the same times on 2
+# cores), the lower right quarter at full size: the caustic under the glass sphere, the
+# light the spheres throw on the walls.
+crop() {  # full-size PNG -> its lower right quarter
+  /usr/bin/python3 -c "import sys; from PIL import Image; im = Image.open(sys.argv[1]); w, h = im.size; im.crop((w // 2, h // 2, w, h)).save(sys.argv[2], optimize=True)" "$1" "$2"
+}
+for spp in 16:12 64:48 256:192; do
+  for lt in off on; do
+    s=${spp%%:*}
+    [ "$lt" = on ] && s=${spp##*:}
+    echo "+ tessera render $SHARED/CBspheres.dae -s $s -m 16 --light-tracer $lt" >&2
+    "$BIN" render "$SHARED/CBspheres.dae" -s "$s" -m 16 -t 2 --light-tracer "$lt" -q -f "$TMP/c.png" | tee -a "$TMP/log.txt"
+    crop "$TMP/c.png" "$OUT/cbspheres-caustics-$lt-$s.png"
+  done
+done
 # glTF's material model under scenes/sky.hdr; with Blender installed, Cycles' image of the
 # same file (as Blender imports it: bench/cycles/gltf_to_cycles.py) beside it.
 render material-spheres scenes/material-spheres.gltf --env scenes/sky.hdr -s 256 -m 16

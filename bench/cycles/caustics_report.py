@@ -16,6 +16,7 @@ prints Markdown tables.
 
 Usage: bench/cycles/caustics_report.py [SCENE.dae...] [--spp 16,64,256] [--seeds 2]
           [--ref-spp 2048] [--flags "-r 480 360 -m 16 -l 1"] [--out build/report] [--no-cycles]
+          [--from-csv OUT/caustics.csv]
 """
 import argparse
 import json
@@ -38,52 +39,9 @@ def measure(img, ref, rfile):
     return out
 
 
-def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("scenes", nargs="*")
-    ap.add_argument("--spp", default="16,64,256")
-    ap.add_argument("--seeds", type=int, default=2)
-    ap.add_argument("--ref-spp", type=int, default=2048)
-    ap.add_argument("--flags", default="-r 480 360 -m 16 -l 1")
-    ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.dirname(HERE)), "build", "report"))
-    ap.add_argument("--no-cycles", action="store_true", help="Tessera's two variants only")
-    a = ap.parse_args()
-    scenes = a.scenes or [os.path.join(SHARED, "CBspheres.dae")]
-    for s in scenes:
-        if not os.path.exists(s):
-            sys.exit("error: %s is missing (the CS184 scenes live in ../shared/scenes/cs184)" % s)
-    os.makedirs(a.out, exist_ok=True)
-    regions = json.load(open(os.path.join(HERE, "regions.json")))
-    stats = os.path.join(a.out, "stats.json")
-    rows = []
-    for scene in scenes:
-        name = os.path.splitext(os.path.basename(scene))[0]
-        ref = er.reference(scene, a.flags + " --light-tracer on -t 2", a.ref_spp)
-        rfile = os.path.join(a.out, "regions-%s.json" % name)
-        json.dump(regions.get(name, {}), open(rfile, "w"))
-        img = os.path.join(a.out, "caustics.exr")
-        for spp in [int(s) for s in a.spp.split(",")]:
-            for seed in range(1, a.seeds + 1):
-                runs = [] if a.no_cycles else ["cycles"]
-                for renderer in runs + ["tessera", "tessera+lt"]:
-                    if renderer == "cycles":
-                        secs = cycles(scene, img, spp, seed, stats)
-                    else:
-                        lt = "on" if renderer == "tessera+lt" else "off"
-                        er.run([os.path.join(er.BIN, "tessera"), "render", scene, "-s", str(spp), "--seed", str(seed),
-                                "-t", "2", "-q", "-f", img, "--stats-json", stats, "--light-tracer", lt] + a.flags.split())
-                        secs = json.load(open(stats))["seconds"]
-                    row = {"renderer": renderer, "scene": name, "spp": spp, "seed": seed, "seconds": secs}
-                    row.update({"relmse:" + k: v for k, v in measure(img, ref, rfile).items()})
-                    rows.append(row)
-                    print("%s %s %d spp seed %d: %.2f s, relMSE %.4g, caustic %.4g" %
-                          (name, renderer, spp, seed, secs, row["relmse:image"], row.get("relmse:caustic", 0)),
-                          file=sys.stderr)
-    keys = [k for k in rows[0] if k.startswith("relmse:")]
-    with open(os.path.join(a.out, "caustics.csv"), "w") as f:
-        f.write(",".join(rows[0].keys()) + "\n")
-        for r in rows:
-            f.write(",".join(str(r.get(k, "")) for k in rows[0].keys()) + "\n")
+def report(rows, a):
+    """Markdown tables and the plot, from the rows (rendered now, or read back: --from-csv)."""
+    keys = [k for k in rows[0] if k.startswith("relmse:") and any(r[k] > 0 for r in rows)]  # (the light: exact)
     # Mean over seeds.
     groups = {}
     for r in rows:
@@ -91,14 +49,16 @@ def main():
     table = {k: {f: sum(r[f] for r in g) / len(g) for f in ["seconds"] + keys} for k, g in groups.items()}
     renderers = [r for r in ["cycles", "tessera", "tessera+lt"] if any(k[1] == r for k in table)]
     for scene in sorted({k[0] for k in table}):
-        print("\n%s, `%s`, mean of %d seeds: seconds and relMSE per region\n" % (scene, a.flags, a.seeds))
+        seeds = len({r["seed"] for r in rows})
+        print("\n%s, `%s`, mean of %d seeds: seconds and relMSE per region\n" % (scene, a.flags, seeds))
         print("| renderer | spp | seconds | " + " | ".join(k[7:] for k in keys) + " |")
         print("|---|---|---|" + "---|" * len(keys))
         for (sc, rend, spp), t in sorted(table.items(), key=lambda kv: (kv[0][0], renderers.index(kv[0][1]), kv[0][2])):
             if sc == scene:
                 print("| %s | %d | %.2f | " % (rend, spp, t["seconds"]) + " | ".join("%.3g" % t[k] for k in keys) + " |")
-        base = "cycles" if "cycles" in renderers else "tessera"
-        for rend in [r for r in renderers if r != base]:
+        pairs = [(r, b) for b in ["cycles", "tessera"] for r in ["tessera", "tessera+lt"]
+                 if r != b and r in renderers and b in renderers]
+        for rend, base in pairs:
             print("\n%s: efficiency (1 / (relMSE x seconds)) of %s over %s, per region\n" % (scene, rend, base))
             print("| spp | " + " | ".join(k[7:] for k in keys) + " |")
             print("|---|" + "---|" * len(keys))
@@ -131,6 +91,67 @@ def main():
         fig.suptitle("%s: relMSE against seconds (2 threads), `%s`" % (scene, a.flags), fontsize=9)
         fig.tight_layout()
         fig.savefig(os.path.join(a.out, "caustics-%s.png" % scene), dpi=100)
+
+
+def read_csv(path):
+    import csv
+    rows = []
+    for r in csv.DictReader(open(path)):
+        rows.append({k: (v if k in ("renderer", "scene") else float(v) if "." in v or "e" in v else int(v))
+                     for k, v in r.items()})
+    return rows
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("scenes", nargs="*")
+    ap.add_argument("--spp", default="16,64,256")
+    ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--ref-spp", type=int, default=2048)
+    ap.add_argument("--flags", default="-r 480 360 -m 16 -l 1")
+    ap.add_argument("--out", default=os.path.join(os.path.dirname(os.path.dirname(HERE)), "build", "report"))
+    ap.add_argument("--no-cycles", action="store_true", help="Tessera's two variants only")
+    ap.add_argument("--from-csv", help="no renders: the tables and plot of an earlier run's caustics.csv")
+    a = ap.parse_args()
+    if a.from_csv:
+        os.makedirs(a.out, exist_ok=True)
+        return report(read_csv(a.from_csv), a)
+    scenes = a.scenes or [os.path.join(SHARED, "CBspheres.dae")]
+    for s in scenes:
+        if not os.path.exists(s):
+            sys.exit("error: %s is missing (the CS184 scenes live in ../shared/scenes/cs184)" % s)
+    os.makedirs(a.out, exist_ok=True)
+    regions = json.load(open(os.path.join(HERE, "regions.json")))
+    stats = os.path.join(a.out, "stats.json")
+    rows = []
+    for scene in scenes:
+        name = os.path.splitext(os.path.basename(scene))[0]
+        ref = er.reference(scene, a.flags + " --light-tracer on -t 2", a.ref_spp)
+        rfile = os.path.join(a.out, "regions-%s.json" % name)
+        json.dump(regions.get(name, {}), open(rfile, "w"))
+        img = os.path.join(a.out, "caustics.exr")
+        for spp in [int(s) for s in a.spp.split(",")]:
+            for seed in range(1, a.seeds + 1):
+                runs = [] if a.no_cycles else ["cycles"]
+                for renderer in runs + ["tessera", "tessera+lt"]:
+                    if renderer == "cycles":
+                        secs = cycles(scene, img, spp, seed, stats)
+                    else:
+                        lt = "on" if renderer == "tessera+lt" else "off"
+                        er.run([os.path.join(er.BIN, "tessera"), "render", scene, "-s", str(spp), "--seed", str(seed),
+                                "-t", "2", "-q", "-f", img, "--stats-json", stats, "--light-tracer", lt] + a.flags.split())
+                        secs = json.load(open(stats))["seconds"]
+                    row = {"renderer": renderer, "scene": name, "spp": spp, "seed": seed, "seconds": secs}
+                    row.update({"relmse:" + k: v for k, v in measure(img, ref, rfile).items()})
+                    rows.append(row)
+                    print("%s %s %d spp seed %d: %.2f s, relMSE %.4g, caustic %.4g" %
+                          (name, renderer, spp, seed, secs, row["relmse:image"], row.get("relmse:caustic", 0)),
+                          file=sys.stderr)
+    with open(os.path.join(a.out, "caustics.csv"), "w") as f:
+        f.write(",".join(rows[0].keys()) + "\n")
+        for r in rows:
+            f.write(",".join(str(r.get(k, "")) for k in rows[0].keys()) + "\n")
+    report(rows, a)
     print("\nwrote %s" % os.path.join(a.out, "caustics.csv"), file=sys.stderr)
 
 
