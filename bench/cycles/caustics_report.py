@@ -128,7 +128,10 @@ def main():
         name = os.path.splitext(os.path.basename(scene))[0]
         ref = er.reference(scene, a.flags + " --light-tracer on -t 2", a.ref_spp)
         rfile = os.path.join(a.out, "regions-%s.json" % name)
-        json.dump(regions.get(name, {}), open(rfile, "w"))
+        flags = a.flags.split()
+        size = (int(flags[flags.index("-r") + 1]), int(flags[flags.index("-r") + 2])) if "-r" in flags else (480, 360)
+        fits = {k: v for k, v in regions.get(name, {}).items() if v[0] + v[2] <= size[0] and v[1] + v[3] <= size[1]}
+        json.dump(fits, open(rfile, "w"))
         img = os.path.join(a.out, "caustics.exr")
         for spp in [int(s) for s in a.spp.split(",")]:
             for seed in range(1, a.seeds + 1):

@@ -35,6 +35,10 @@ SUBSTITUTIONS = [
 SHRINK_SCRIPTS = {
     "bench/error_report.py": ["--spp", "1", "--seeds", "1", "--ref-spp", "2", "--flags", "-r 32 24 -m 16 -l 1"],
     "bench/features.py": ["--spp", "1", "--ref-spp", "2"],
+    # (Tessera's two variants only: Blender is not on test machines; regions that do not fit
+    # a 32x24 image are left out)
+    "bench/cycles/caustics_report.py": ["--no-cycles", "--spp", "1", "--seeds", "1", "--ref-spp", "2", "--flags",
+                                        "-r 32 24 -m 16 -l 1"],
     # (the gallery into the block's folder: docs/ is the repository's own)
     "bench/blender/fidelity.py": ["--scenes", "diffuse-metal", "--spp", "4", "--width", "32", "--height", "24",
                                   "--out", "out/report", "--gallery", "out/gallery"],
