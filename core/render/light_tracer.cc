@@ -62,7 +62,8 @@ LightTracer::LightTracer(const Scene& scene, const Accel& accel, const LightSet&
   for (size_t i = 0; i < lights.size(); ++i) {
     acc += power[i];
     cdf_[i] = total > 0 ? float(acc / total) : 0;
-    pmf_[i] = total > 0 ? float(power[i] / total) : 0;
+    // The probability the float cdf gives (u is a float in [0, 1)), not the double's.
+    pmf_[i] = cdf_[i] - (i ? cdf_[i - 1] : 0.0f);
     traced_[i] = pmf_[i] > 0;
   }
 }
