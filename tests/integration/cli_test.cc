@@ -76,6 +76,31 @@ TEST_F(Cli, RendersExrWithSppVarianceAndMetadataAndAPngAndStats) {
   EXPECT_EQ(j.at("nan_samples").get<uint64_t>(), 0u);
 }
 
+// Issue 28: --light-tracer, and --stats-json saying which ran and why.
+TEST_F(Cli, LightTracingIsChosenAndReported) {
+  const std::string json = (dir / "lt.json").string(), exr = (dir / "lt.exr").string();
+  const auto stats = [&](const std::string& flags) {
+    const CommandResult r = run("render " + scene + " -s 4 -r 40 30 -q -f " + exr + " --stats-json " + json + flags);
+    EXPECT_EQ(r.code, 0) << flags << ": " << r.err;
+    std::ifstream jf(json);
+    return nlohmann::json::parse(jf);
+  };
+  const nlohmann::json on = stats(" --light-tracer auto");  // the glass and mirror spheres
+  EXPECT_TRUE(on.at("light_tracer").get<bool>()) << on.dump();
+  EXPECT_EQ(on.at("light_paths").get<uint64_t>(), 40u * 30u * 4u / 4u);
+  EXPECT_EQ(on.at("dropped_splats").get<uint64_t>(), 0u);
+  const nlohmann::json adaptive = stats(" --light-tracer auto -a 2 0.05");
+  EXPECT_FALSE(adaptive.at("light_tracer").get<bool>());
+  EXPECT_NE(adaptive.at("light_tracer_why").get<std::string>().find("-a"), std::string::npos) << adaptive.dump();
+  const nlohmann::json off = stats("");  // the default
+  EXPECT_FALSE(off.at("light_tracer").get<bool>());
+  EXPECT_EQ(off.at("light_paths").get<uint64_t>(), 0u);
+  const CommandResult refused = run("render " + scene + " -s 4 -r 8 8 -q --light-tracer on -a 2 0.05");
+  EXPECT_NE(refused.code, 0);
+  EXPECT_NE(refused.err.find("--light-tracer"), std::string::npos) << refused.err;
+  EXPECT_EQ(run("render " + scene + " --light-tracer sometimes").code, 2);
+}
+
 // Issue 12: a sequence renders each frame as `--frame N` alone would, to its own files.
 TEST_F(Cli, FramesRenderASequenceEachFrameAsItsOwnRenderWould) {
   const std::string pattern = (dir / "seq.##.exr").string();
