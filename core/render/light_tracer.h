@@ -12,8 +12,8 @@
 // (and never a point light's): they are 93-96% of its variance on the CS184 spheres boxes
 // (issue 28); from the light they are found by a connection to the camera.
 //
-// One light path per camera sample, numbered by (pixel, sample) like the camera's, so the
-// image does not depend on threads or tiles. Each starts on a finite light picked by power
+// One light path per kSamplesPerLightPath camera samples, numbered by (pixel, sample) like
+// the camera's, so the image does not depend on threads or tiles. Each starts on a finite light picked by power
 // (LightSet::emission_point), aimed at the bounding sphere of a mirror or glass shape
 // (delta_targets.h), continues only if its first hit scatters by a delta lobe,
 // and at every later vertex with a smooth lobe is connected to the camera (Camera::connect):
