@@ -51,6 +51,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   std::vector<v1::HeartbeatRequest> heartbeats;
   std::vector<v1::TaskResult> results;
   int submissions = 0;                                             // SubmitResults calls begun
+  std::vector<uint64_t> submitted_ids;                             // their results' tasks, held or not
   std::vector<std::pair<uint64_t, std::string>> batch_identities;  // each result batch's worker id and secret
   std::vector<v1::ReleaseRequest> releases;
   int unregisters = 0;
@@ -199,6 +200,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   grpc::Status SubmitResults(grpc::ClientContext*, const v1::ResultBatch& req, v1::ResultAcks* resp) override {
     std::unique_lock<std::mutex> lock(mu);
     ++submissions;
+    for (const v1::TaskResult& r : req.results()) submitted_ids.push_back(r.task_id());
     changed_.notify_all();
     changed_.wait(lock, [this] { return !hold_submissions; });
     batch_identities.emplace_back(req.worker_id(), req.worker_secret());

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <filesystem>
 #include <thread>
@@ -175,8 +176,11 @@ TEST_F(WorkerTest, OnStopUnfinishedLeasesAreReleasedAndFinishedResultsSent) {
   fake->hold_submissions = true;  // the first results are still on their way at the stop
   fake->unregister_status = grpc::Status(grpc::StatusCode::UNAVAILABLE, "gone");
   start(options(1));
-  ASSERT_TRUE(fake->wait_until([&] {
-    return fake->submissions > 0 && fake->handed_out.size() == 3;  // 33 is being rendered
+  ASSERT_TRUE(fake->wait_until([&] {  // 31 and 32 rendered and on their way, 33 being rendered
+    const auto sent = [&](uint64_t id) {
+      return std::find(fake->submitted_ids.begin(), fake->submitted_ids.end(), id) != fake->submitted_ids.end();
+    };
+    return sent(31) && sent(32) && fake->handed_out.size() == 3;
   }));
   stop = true;
   fake->set([&] { fake->hold_submissions = false; });
