@@ -169,18 +169,23 @@ TEST(DeltaTargets, BoundEveryDeltaShapeAndNothingElse) {
   EXPECT_GE(t.targets()[0].radius, 0.5f);
 }
 
+// The file's camera at width x height, with a thin lens of this radius and focal distance.
+CameraSettings file_camera(int width, int height, float lens, float focus) {
+  CameraSettings cs;
+  cs.framing = Framing::kFile;
+  cs.width = width;
+  cs.height = height;
+  cs.lens_radius = lens;
+  cs.focal_distance = focus;
+  return cs;
+}
+
 // Camera::connect inverts generate(): the film position a ray was generated for, and the
 // lens point it left from.
 TEST(CameraConnect, InvertsGenerate) {
   const Scene s = caustic_scene(glass());
   for (const float lens : {0.0f, 0.2f}) {
-    CameraSettings cs;
-    cs.framing = Framing::kFile;
-    cs.width = 32;
-    cs.height = 24;
-    cs.lens_radius = lens;
-    cs.focal_distance = 3;
-    const Camera cam(s, cs);
+    const Camera cam(s, file_camera(32, 24, lens, 3));
     for (uint32_t i = 0; i < 2000; ++i) {
       Sampler sm(3, 1, i);
       const Vec2 f = sm.next_2d(), u = sm.next_2d();
@@ -207,13 +212,7 @@ TEST(CameraConnect, ImportanceIntegratesToOne) {
   s.camera.aspect_ratio = 4.0 / 3.0;
   s.finalize();
   for (const float lens : {0.0f, 0.3f}) {
-    CameraSettings cs;
-    cs.framing = Framing::kFile;
-    cs.width = 40;
-    cs.height = 30;
-    cs.lens_radius = lens;
-    cs.focal_distance = 2;
-    const Camera cam(s, cs);
+    const Camera cam(s, file_camera(40, 30, lens, 2));
     const float half = 8, depth = 5;  // the plane z = -5, [-8, 8]^2: wider than the view
     double sum = 0;
     const int n = 400000;
