@@ -8,51 +8,38 @@
 #include "core/sampling/warp.h"
 
 namespace tessera {
-bool LightSet::emission_point(size_t i, float u_pick, Vec2 u, EmissionPoint* out) const {
+
+bool LightSet::emission_point(size_t i, float u_pick, Vec2 u, LightPoint* out) const {
   const Light& l = lights_[i];
   switch (l.kind) {
     case Light::Kind::kRect:
     case Light::Kind::kMesh:
-    case Light::Kind::kSphere: {
-      AreaPoint a;
-      if (!area_point(i, u_pick, u, &a) || a.radiance.is_black() || !(a.area_pdf > 0)) return false;
-      out->point = a.q;
-      out->point_err = a.err;
-      out->normal = a.n;
-      out->le = a.radiance;
-      out->area_pdf = a.area_pdf;
-      out->two_sided = a.two_sided;
-      return true;
-    }
+    case Light::Kind::kSphere:
+      return area_point(i, u_pick, u, out) && !out->radiance.is_black() && out->area_pdf > 0;
     case Light::Kind::kPoint:
     case Light::Kind::kSpot:
-      out->point = l.position;
-      out->point_err = Vec3{};
-      out->normal = Vec3{};
-      out->le = l.color;
-      out->area_pdf = 1;
-      out->two_sided = true;
+      *out = LightPoint{l.position, Vec3{}, Vec3{}, l.color, 1, true};
       return !l.color.is_black();
     default:
       return false;
   }
 }
 
-Rgb LightSet::emitted_toward(size_t i, const EmissionPoint& e, Vec3 dir) const {
+Rgb LightSet::emitted_toward(size_t i, const LightPoint& e, Vec3 dir) const {
   const Light& l = lights_[i];
   switch (l.kind) {
     case Light::Kind::kPoint:
-      return e.le;
+      return e.radiance;
     case Light::Kind::kSpot: {  // KHR_lights_punctual's falloff, as sample() has it
       const float cd = dot(l.direction, dir);
       const float scale = 1 / std::max(0.001f, l.cos_inner - l.cos_outer);
       float a = std::clamp((cd - l.cos_outer) * scale, 0.0f, 1.0f);
-      return e.le * (a * a);
+      return e.radiance * (a * a);
     }
     default: {
-      const float c = dot(e.normal, dir);
+      const float c = dot(e.n, dir);
       if (!(c > 0) && !(e.two_sided && c < 0)) return Rgb(0);
-      return e.le * std::fabs(c);
+      return e.radiance * std::fabs(c);
     }
   }
 }

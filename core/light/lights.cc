@@ -63,7 +63,7 @@ bool finish_area_sample(Vec3 p, Vec3 q, Vec3 q_err, Vec3 n, float area_pdf, Rgb 
 
 // The points of rect, mesh and sphere lights, one function each so that sample()'s switch
 // inlines them (next-event estimation runs it at every vertex).
-[[gnu::always_inline]] static inline void rect_point(const Light& l, Vec2 u, LightSet::AreaPoint* out) {
+[[gnu::always_inline]] static inline void rect_point(const Light& l, Vec2 u, LightPoint* out) {
   const Vec3 ex = l.edge_x * (u.x - 0.5f), ey = l.edge_y * (u.y - 0.5f);
   out->q = l.position + (ex + ey);
   out->err = abs(out->q) * gamma(1) + (abs(ex) + abs(ey)) * gamma(3);
@@ -73,8 +73,7 @@ bool finish_area_sample(Vec3 p, Vec3 q, Vec3 q_err, Vec3 n, float area_pdf, Rgb 
   out->two_sided = false;
 }
 
-[[gnu::always_inline]] static inline void sphere_point(const Light& l, const Sphere& s, Vec2 u,
-                                                       LightSet::AreaPoint* out) {
+[[gnu::always_inline]] static inline void sphere_point(const Light& l, const Sphere& s, Vec2 u, LightPoint* out) {
   const Vec3 n = square_to_uniform_sphere(u);
   out->q = s.center + n * s.radius;
   out->err = abs(out->q) * gamma(1) + abs(n * s.radius) * gamma(3);
@@ -84,7 +83,7 @@ bool finish_area_sample(Vec3 p, Vec3 q, Vec3 q_err, Vec3 n, float area_pdf, Rgb 
   out->two_sided = l.two_sided;
 }
 
-[[gnu::always_inline]] inline bool LightSet::mesh_point(size_t i, float u_pick, Vec2 u, AreaPoint* out) const {
+[[gnu::always_inline]] inline bool LightSet::mesh_point(size_t i, float u_pick, Vec2 u, LightPoint* out) const {
   const Light& l = lights_[i];
   const MeshLightData& d = mesh_data_[i];
   if (d.cdf.empty() || !(d.area > 0)) return false;
@@ -122,7 +121,7 @@ bool finish_area_sample(Vec3 p, Vec3 q, Vec3 q_err, Vec3 n, float area_pdf, Rgb 
   return true;
 }
 
-bool LightSet::area_point(size_t i, float u_pick, Vec2 u, AreaPoint* out) const {
+bool LightSet::area_point(size_t i, float u_pick, Vec2 u, LightPoint* out) const {
   const Light& l = lights_[i];
   switch (l.kind) {
     case Light::Kind::kRect:
@@ -142,17 +141,17 @@ bool LightSet::sample(size_t i, Vec3 p, float u_pick, Vec2 u, LightSample* out) 
   const Light& l = lights_[i];
   switch (l.kind) {
     case Light::Kind::kRect: {
-      AreaPoint a;
+      LightPoint a;
       rect_point(l, u, &a);
       return finish_area_sample(p, a.q, a.err, a.n, a.area_pdf, a.radiance, a.two_sided, out);
     }
     case Light::Kind::kMesh: {
-      AreaPoint a;
+      LightPoint a;
       return mesh_point(i, u_pick, u, &a) &&
              finish_area_sample(p, a.q, a.err, a.n, a.area_pdf, a.radiance, a.two_sided, out);
     }
     case Light::Kind::kSphere: {
-      AreaPoint a;
+      LightPoint a;
       sphere_point(l, scene_.spheres[l.shape], u, &a);
       return finish_area_sample(p, a.q, a.err, a.n, a.area_pdf, a.radiance, a.two_sided, out);
     }

@@ -29,13 +29,13 @@ struct LightSample {
   float pdf = 0;   // solid-angle density, or 1 for delta lights
 };
 
-// A light path's start on a finite light (core/light/emission.cc): the point, and what
-// leaves it (LightSet::emitted_toward says toward where).
-struct EmissionPoint {
-  Vec3 point, point_err;  // on the light (point_err zero for point and spot lights)
-  Vec3 normal;            // the emitting surface's unit normal; zero for point and spot lights
-  Rgb le;                 // radiance there (area lights, textures and alpha applied) or intensity
-  float area_pdf = 1;     // density of the point per unit area (1 for point and spot lights)
+// A point on a finite light: where next-event estimation aims (area lights) and where a
+// light path starts (core/light/emission.cc).
+struct LightPoint {
+  Vec3 q, err;         // the point and its absolute error bound (zero for point and spot lights)
+  Vec3 n;              // the emitting surface's unit normal; zero for point and spot lights
+  Rgb radiance;        // radiance there (textures and alpha applied), or a point's intensity
+  float area_pdf = 1;  // density of the point per unit area (1 for point and spot lights)
   bool two_sided = false;
 };
 
@@ -58,27 +58,15 @@ class LightSet {
   // A light path's start on finite light i (rect, mesh, sphere, point, spot): the point
   // sample() takes for (u_pick, u). False for infinite lights and where the point carries
   // nothing (core/light/emission.cc).
-  bool emission_point(size_t i, float u_pick, Vec2 u, EmissionPoint* out) const;
+  bool emission_point(size_t i, float u_pick, Vec2 u, LightPoint* out) const;
   // What leaves that point along unit dir: radiance x |cos| for an area light (zero on a
   // side it does not emit from), intensity (x a spot's falloff) for a point or spot. The
   // light tracer divides it by the densities of the point and the direction.
-  Rgb emitted_toward(size_t i, const EmissionPoint& e, Vec3 dir) const;
+  Rgb emitted_toward(size_t i, const LightPoint& e, Vec3 dir) const;
   // A light's power as light tracing picks lights by it: luminance x area x pi (x 2 when
   // two-sided) for area lights, x 4 pi (point) or the cone's solid angle (spot); 0 for
   // infinite lights. Textures and alpha are not looked at (only a pick probability).
   float emitted_power(size_t i) const;
-  // The point of area light i (rect, mesh, sphere) that sample() takes for (u_pick, u),
-  // with its error bound, unit normal, radiance there (textures, alpha), the density of
-  // the point per unit area, and whether the light emits from both sides. False where the
-  // point carries nothing.
-  struct AreaPoint {
-    Vec3 q, err, n;
-    Rgb radiance;
-    float area_pdf = 0;
-    bool two_sided = false;
-  };
-  bool area_point(size_t i, float u_pick, Vec2 u, AreaPoint* out) const;
-
   // Radiance of the infinite lights along an escaped ray direction, and each one's pdf.
   bool has_infinite() const { return !infinite_.empty(); }
   const std::vector<size_t>& infinite_lights() const { return infinite_; }
@@ -86,7 +74,10 @@ class LightSet {
   float infinite_pdf(size_t i, Vec3 dir) const;
 
  private:
-  bool mesh_point(size_t i, float u_pick, Vec2 u, AreaPoint* out) const;
+  // The point of area light i (rect, mesh, sphere) that sample() takes for (u_pick, u).
+  // False where the point carries nothing (masked out, a degenerate triangle).
+  bool area_point(size_t i, float u_pick, Vec2 u, LightPoint* out) const;
+  bool mesh_point(size_t i, float u_pick, Vec2 u, LightPoint* out) const;
   struct MeshLightData {
     std::vector<float> cdf;  // cumulative triangle areas, normalised to end at 1
     float area = 0;

@@ -16,13 +16,11 @@ float one_minus_cos(float r, float d) {
   return x / (1 + std::sqrt(1 - x));
 }
 
-DeltaTargets::Target bound(const Bounds& b) {
-  const Vec3 c = b.center();
-  const float r = 0.5f * length(b.diagonal());
-  // A margin for the rounding of positions, centres and the cone test.
-  const float margin = r * 1e-4f + 1e-6f * (max_component(abs(c)) + r);
-  return {c, r + margin};
-}
+// A target of centre c and radius r, with a margin for the rounding of positions, centres
+// and the cone test.
+DeltaTargets::Target around(Vec3 c, float r) { return {c, r * (1 + 1e-4f) + 1e-6f * (max_component(abs(c)) + r)}; }
+
+DeltaTargets::Target bound(const Bounds& b) { return around(b.center(), 0.5f * length(b.diagonal())); }
 
 }  // namespace
 
@@ -40,22 +38,24 @@ bool has_delta_lobe(const Material& m) {
 }
 
 DeltaTargets::DeltaTargets(const Scene& scene) {
-  std::vector<Bounds> shapes;
-  std::vector<Target> spheres;  // exact: a sphere bounds itself
+  Bounds all;  // every shape together: the one target past kMaxTargets
   for (const Sphere& s : scene.spheres) {
     if (!has_delta_lobe(scene.materials[s.material])) continue;
-    spheres.push_back({s.center, s.radius * (1 + 1e-4f) + 1e-6f * (max_component(abs(s.center)) + s.radius)});
-    Bounds b;
-    b.extend(s.center - Vec3{s.radius, s.radius, s.radius});
-    b.extend(s.center + Vec3{s.radius, s.radius, s.radius});
-    shapes.push_back(b);
+    targets_.push_back(around(s.center, s.radius));  // exact: a sphere bounds itself
+    all.extend(s.center - Vec3{s.radius, s.radius, s.radius});
+    all.extend(s.center + Vec3{s.radius, s.radius, s.radius});
   }
+  auto add = [&](const Bounds& b) {
+    targets_.push_back(bound(b));
+    all.extend(b.lo);
+    all.extend(b.hi);
+  };
   std::vector<Bounds> object(scene.meshes.size());  // each mesh's own, object space
   for (size_t i = 0; i < scene.meshes.size(); ++i) {
     const Mesh& m = scene.meshes[i];
     if (!has_delta_lobe(scene.materials[m.material])) continue;
     for (const uint32_t v : m.indices) object[i].extend(m.positions[v]);
-    if (!m.instanced && !object[i].empty()) shapes.push_back(object[i]);
+    if (!m.instanced && !object[i].empty()) add(object[i]);
   }
   for (const Instance& in : scene.instances) {
     const Bounds& o = object[in.mesh];
@@ -63,21 +63,9 @@ DeltaTargets::DeltaTargets(const Scene& scene) {
     Bounds b;
     for (int k = 0; k < 8; ++k)
       b.extend(in.point(Vec3{k & 1 ? o.hi.x : o.lo.x, k & 2 ? o.hi.y : o.lo.y, k & 4 ? o.hi.z : o.lo.z}));
-    shapes.push_back(b);
+    add(b);
   }
-  if (shapes.size() <= kMaxTargets) {
-    targets_ = spheres;
-    for (size_t i = spheres.size(); i < shapes.size(); ++i) targets_.push_back(bound(shapes[i]));
-    return;
-  }
-  {
-    Bounds all;
-    for (const Bounds& b : shapes) {
-      all.extend(b.lo);
-      all.extend(b.hi);
-    }
-    targets_ = {bound(all)};
-  }
+  if (targets_.size() > kMaxTargets) targets_ = {bound(all)};
 }
 
 Vec3 DeltaTargets::sample(Vec3 p, float u_pick, Vec2 u, float* pdf) const {

@@ -99,7 +99,7 @@ class Integrator {
   // Leaves the caustic paths that end on these lights (a flag per LightSet index) to the
   // light tracer: a path whose first hit scatters by a non-delta lobe and whose last
   // scattering before reaching one of them is a delta lobe adds nothing here. Empty: none.
-  // Only paths with at most `smooth` non-delta vertices (LightTracer::max_smooth()).
+  // Only paths with at most `smooth` non-delta vertices (LightTracer::kMaxSmoothVertices).
   void leave_to_light_tracer(std::vector<uint8_t> lights, int smooth) {
     light_traced_ = std::move(lights);
     light_traced_smooth_ = smooth;

@@ -48,7 +48,6 @@ LightTracer::LightTracer(const Scene& scene, const Accel& accel, const LightSet&
       lights_(lights),
       camera_(camera),
       max_depth_(s.max_depth),
-      max_smooth_(kMaxSmoothVertices),
       width_(s.camera.width),
       height_(s.camera.height),
       targets_(scene) {
@@ -78,17 +77,17 @@ void LightTracer::trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, Splat
   const size_t li =
       std::min(size_t(std::upper_bound(cdf_.begin(), cdf_.end(), u_light) - cdf_.begin()), cdf_.size() - 1);
   if (!(pmf_[li] > 0)) return;
-  EmissionPoint e;
+  LightPoint e;
   if (!lights_.emission_point(li, u_pick, u_pos, &e)) return;
   float pdf_dir = 0;
-  const Vec3 dir = targets_.sample(e.point, u_dir2, u_dir, &pdf_dir);
+  const Vec3 dir = targets_.sample(e.q, u_dir2, u_dir, &pdf_dir);
   if (!(pdf_dir > 0)) return;
   const Light& light = lights_.light(li);
   Rgb beta = lights_.emitted_toward(li, e, dir) / (pmf_[li] * e.area_pdf * pdf_dir);
   if (beta.is_black() || !beta.is_finite()) return;
   const float start = beta.max();
   Ray ray;
-  ray.o = e.normal == Vec3{} ? e.point : offset_point(e.point, e.point_err, e.normal, dir);
+  ray.o = e.n == Vec3{} ? e.q : offset_point(e.q, e.err, e.n, dir);
   ray.d = dir;
   ray.tmin = 0;
   ray.tmax = std::numeric_limits<float>::infinity();
@@ -123,7 +122,7 @@ void LightTracer::trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, Splat
     const Vec3 wo = frame.to_local(w_prev);
     if (coat_ns) textured->coat_normal = frame.to_local(dot(sp.ns, ns) < 0 ? -*coat_ns : *coat_ns);
     // A connection here makes a path with smooth + 1 smooth vertices (this one too).
-    if (depth >= 2 && !m.is_delta() && smooth + 1 <= max_smooth_)
+    if (depth >= 2 && !m.is_delta() && smooth + 1 <= kMaxSmoothVertices)
       connect(sp, m, frame, wo, w_prev, ng, dielectric, beta, sampler, splats, odd, counters);
     if (depth >= max_depth_) return;
 
@@ -133,7 +132,7 @@ void LightTracer::trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, Splat
     if (!bsdf_sample(m, wo, u1, u2, &bs)) return;
     if (depth == 1 && !bs.delta) return;  // camera -> ... -> smooth -> light: the path tracer's
     smooth += !bs.delta;
-    if (smooth + 1 > max_smooth_) return;  // no later connection is the light tracer's
+    if (smooth + 1 > kMaxSmoothVertices) return;  // no later connection is the light tracer's
     const Vec3 wi = frame.to_world(bs.wi);
     if (!dielectric && dot(wi, ng) <= 0) return;
     // The adjoint BSDF's weight: a delta lobe's without the radiance's 1/eta^2; a smooth

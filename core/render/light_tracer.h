@@ -70,9 +70,6 @@ class LightTracer {
               const RenderSettings& settings);
   // Per LightSet index: whether light paths start there (for Integrator::leave_to_light_tracer).
   const std::vector<uint8_t>& traced_lights() const { return traced_; }
-  // Paths with at most this many vertices scattered by a non-delta lobe are the light
-  // tracer's; longer ones stay the path tracer's.
-  int max_smooth() const { return max_smooth_; }
   // The light path of camera sample `sample` of image pixel `pixel_id`: its splats into
   // `splats` (with `odd`, its odd plane too). Thread-safe.
   void trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, SplatFilm& splats, bool odd,
@@ -87,7 +84,6 @@ class LightTracer {
   const LightSet& lights_;
   Camera camera_;  // (a copy: the renderer that owns this may be moved)
   int max_depth_;
-  int max_smooth_;
   int width_, height_;
   std::vector<float> cdf_, pmf_;  // lights picked by emitted power
   std::vector<uint8_t> traced_;

@@ -119,7 +119,7 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
   light_decision_ = tessera::light_tracing_decision(*scene_, *lights_, *camera_, s);
   if (light_decision_.on) {
     light_tracer_.emplace(*scene_, *accel_, *lights_, *camera_, s);
-    integrator_->leave_to_light_tracer(light_tracer_->traced_lights(), light_tracer_->max_smooth());
+    integrator_->leave_to_light_tracer(light_tracer_->traced_lights(), LightTracer::kMaxSmoothVertices);
   }
 }
 

@@ -238,13 +238,13 @@ TEST(LightEmission, SpotsAndPointsEmitAsNextEventEstimationSeesThem) {
   s.lights.push_back(spot);
   const LightSet lights(s);
   for (size_t i = 0; i < 2; ++i) {
-    EmissionPoint e;
+    LightPoint e;
     ASSERT_TRUE(lights.emission_point(i, 0.5f, {0.5f, 0.5f}, &e));
     for (const Vec3 p : {Vec3{0, 0, 0}, Vec3{0.5f, 0, 0.3f}, Vec3{1.5f, 0, 0}}) {
       LightSample ls;
       const bool lit = lights.sample(i, p, 0.5f, {0.5f, 0.5f}, &ls);
-      const Rgb out = lights.emitted_toward(i, e, normalize(p - e.point));
-      const float d = length(p - e.point);
+      const Rgb out = lights.emitted_toward(i, e, normalize(p - e.q));
+      const float d = length(p - e.q);
       EXPECT_NEAR(out.r, lit ? ls.li.r * d * d : 0.0f, 1e-4f * out.r + 1e-6f) << i;
     }
   }
