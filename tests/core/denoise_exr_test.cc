@@ -46,6 +46,15 @@ class DenoiseExr : public ::testing::Test {
     write_exr(path, r.film, {}, false, &r.aovs, s.aovs);
     return path;
   }
+  // An 8x8, 2-spp render of a lone sphere with these AOVs.
+  std::string small_render(uint32_t aovs, const std::string& name) {
+    RenderSettings s;
+    s.camera.width = 8;
+    s.camera.height = 8;
+    s.spp = 2;
+    s.aovs = aovs;
+    return render(testing::lone_sphere(Material{}), s, name);
+  }
   // The noisy render and the reference's relMSE against the reference, before and after.
   void expect_denoising_helps(const Scene& scene, RenderSettings s, int ref_spp, double factor) {
     s.aovs = kAovDenoising;
@@ -119,13 +128,7 @@ TEST_F(DenoiseExr, TheSameBitsEveryTimeWithAnyThreadsAndAgainFromTheNoisyImage) 
 }
 
 TEST_F(DenoiseExr, AnImageWithoutTheLayersIsRefusedNamingThem) {
-  Material m;
-  RenderSettings s;
-  s.camera.width = 8;
-  s.camera.height = 8;
-  s.spp = 2;
-  s.aovs = kAovAlbedo | kAovNormal;  // no depth, no halves
-  const std::string in = render(testing::lone_sphere(m), s, "plain.exr");
+  const std::string in = small_render(kAovAlbedo | kAovNormal, "plain.exr");  // no depth, no halves
   try {
     denoise_exr(in, (dir / "out.exr").string());
     ADD_FAILURE();
@@ -208,13 +211,7 @@ TEST_F(DenoiseExr, ANonFiniteValueIsRefusedNamingItsPixelInTheImage) {
 }
 
 TEST_F(DenoiseExr, AnOutputThatCannotBeWrittenIsNamed) {
-  Material m;
-  RenderSettings s;
-  s.camera.width = 8;
-  s.camera.height = 8;
-  s.spp = 2;
-  s.aovs = kAovDenoising;
-  const std::string noisy = render(testing::lone_sphere(m), s, "noisy.exr");
+  const std::string noisy = small_render(kAovDenoising, "noisy.exr");
   const std::string out = (dir / "no-such-folder" / "out.exr").string();
   try {
     denoise_exr(noisy, out);
