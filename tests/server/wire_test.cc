@@ -245,6 +245,29 @@ TEST(WireSettings, SequenceAndEnvironmentSettingsRoundTrip) {
 }
 
 // validate() is the one range check: each bad value is refused naming its flag.
+// --light-tracer travels (coordinators refuse it for now: submission_test), and a mode the
+// receiver does not know is refused by name, not cast into an enum.
+TEST(WireSettings, LightTracerRoundTripsAndAnUnknownModeIsRefused) {
+  RenderSettings s;
+  for (const auto mode :
+       {RenderSettings::LightTracer::kOff, RenderSettings::LightTracer::kOn, RenderSettings::LightTracer::kAuto}) {
+    s.light_tracer = mode;
+    EXPECT_EQ(from_proto(to_proto(s)).light_tracer, mode);
+  }
+  for (const uint32_t bad : {3u, 0xffffffffu}) {
+    v1::RenderSettings p = to_proto(s);
+    p.set_light_tracer(bad);
+    try {
+      from_proto(p);
+      ADD_FAILURE() << bad;
+    } catch (const WireError& e) {
+      EXPECT_NE(std::string(e.what()).find("light_tracer " + std::to_string(bad) + " is not 0, 1 or 2"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+}
+
 TEST(Settings, EachSettingOutOfRangeIsRefusedByItsFlag) {
   auto refused_as = [](void (*change)(RenderSettings&)) {
     RenderSettings s;
