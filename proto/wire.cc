@@ -354,4 +354,105 @@ std::vector<AovSums> decode_aovs(const std::string& compressed, size_t pixels, u
   return out;
 }
 
+namespace {
+
+constexpr size_t kSplatRecordBytes = 8 + 8 + 4, kSplatEntryBytes = 4 + 4 * 8;
+
+template <typename T>
+void put_le(std::vector<uint8_t>& out, T v) {
+  const size_t at = out.size();
+  out.resize(at + sizeof v);
+  std::memcpy(out.data() + at, &v, sizeof v);
+}
+
+// Reads the decoded records' fields in order; WireError past the end.
+class SplatReader {
+ public:
+  explicit SplatReader(const std::vector<uint8_t>& raw) : raw_(raw) {}
+  template <typename T>
+  T get() {
+    T v;
+    if (raw_.size() - at_ < sizeof v) throw WireError("splats: cut short");
+    std::memcpy(&v, raw_.data() + at_, sizeof v);
+    at_ += sizeof v;
+    return v;
+  }
+  bool done() const { return at_ == raw_.size(); }
+
+ private:
+  const std::vector<uint8_t>& raw_;
+  size_t at_ = 0;
+};
+
+}  // namespace
+
+std::string encode_splats(const std::vector<SplatRecord>& records) {
+  Scratch z;
+  z->raw.clear();
+  put_le(z->raw, uint32_t(records.size()));
+  for (const SplatRecord& r : records) {
+    put_le(z->raw, r.paths);
+    put_le(z->raw, r.odd_paths);
+    put_le(z->raw, uint32_t(r.entries.size()));
+    uint32_t previous = 0;
+    for (const SplatEntry& e : r.entries) {
+      put_le(z->raw, e.index - previous);
+      previous = e.index;
+      for (int64_t v : e.v) put_le(z->raw, v);
+    }
+  }
+  return compress_planes(z);
+}
+
+std::vector<SplatRecord> decode_splats(const std::string& compressed, const SplatLimits& lim) {
+  // The largest honest size, checked before anything is allocated: a few bytes of zstd
+  // can declare gigabytes.
+  const uint64_t per_record =
+      std::min<uint64_t>(lim.area * lim.planes, lim.max_paths * lim.max_splats_per_path * lim.planes);
+  const uint64_t cap = 4 + lim.records * (kSplatRecordBytes + per_record * kSplatEntryBytes);
+  const unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
+  if (declared == ZSTD_CONTENTSIZE_ERROR) throw WireError("splats: not zstd data");
+  if (declared == ZSTD_CONTENTSIZE_UNKNOWN || declared > cap)
+    throw WireError("splats: " + std::to_string(declared) + " bytes declared, at most " + std::to_string(cap) +
+                    " fit the task");
+  Scratch z;
+  z->raw.resize(declared);
+  const size_t n = ZSTD_decompressDCtx(z->d, z->raw.data(), z->raw.size(), compressed.data(), compressed.size());
+  if (ZSTD_isError(n)) throw WireError(std::string("splats: ") + ZSTD_getErrorName(n));
+  if (n != declared) throw WireError("splats: fewer bytes than declared");
+  SplatReader in(z->raw);
+  if (in.get<uint32_t>() != lim.records)
+    throw WireError("splats: not one record per pass of the task (" + std::to_string(lim.records) + ")");
+  std::vector<SplatRecord> out(lim.records);
+  const uint64_t planes_area = lim.area * lim.planes;
+  for (SplatRecord& r : out) {
+    r.paths = in.get<uint64_t>();
+    r.odd_paths = in.get<uint64_t>();
+    const uint32_t entries = in.get<uint32_t>();
+    if (r.paths > lim.max_paths || r.odd_paths > r.paths || (lim.planes < 2 && r.odd_paths))
+      throw WireError("splats: more light paths than the task's samples");
+    if (entries > per_record) throw WireError("splats: more pixels than the task's light paths reach");
+    r.entries.resize(entries);
+    // A splat's channels are at most kMaxSplatValue (2^20 in 2^-24 units: 2^44; squared
+    // luminance 2^52 in 2^-12 units), at most max_splats_per_path of them a path.
+    const uint64_t splats = r.paths * lim.max_splats_per_path;
+    uint64_t previous = 0;
+    for (uint32_t i = 0; i < entries; ++i) {
+      SplatEntry& e = r.entries[i];
+      const uint64_t index = previous + in.get<uint32_t>();
+      if ((i > 0 && index == previous) || index >= planes_area) throw WireError("splats: indices out of order");
+      e.index = uint32_t(index);
+      previous = index;
+      const uint64_t paths_here = e.index >= lim.area ? r.odd_paths * lim.max_splats_per_path : splats;
+      for (int c = 0; c < 4; ++c) {
+        e.v[c] = in.get<int64_t>();
+        if (e.v[c] < 0 || (e.v[c] > 0 && paths_here == 0) || (uint64_t(e.v[c]) >> (c < 3 ? 44 : 52)) > paths_here)
+          throw WireError("splats: sums no light path could give");
+      }
+    }
+  }
+  if (!in.done()) throw WireError("splats: trailing bytes");
+  return out;
+}
+
 }  // namespace tessera

@@ -9,6 +9,7 @@
 #include "core/render/aov.h"
 #include "core/render/film.h"
 #include "core/render/settings.h"
+#include "core/render/splats.h"
 #include "tessera.grpc.pb.h"
 
 namespace tessera {
@@ -80,5 +81,25 @@ inline std::string encode_aovs(const std::vector<AovSums>& sums) { return encode
 // Throws WireError unless the data decodes to exactly `pixels` pixels, each plausible()
 // for at most `max_samples` samples.
 std::vector<AovSums> decode_aovs(const std::string& compressed, size_t pixels, uint32_t max_samples);
+
+// A task's splat records (core/render/splats.h), one per pass, <-> zstd-compressed
+// little-endian bytes: u32 records; per record u64 paths, u64 odd paths, u32 entries, then
+// per entry its index less the previous entry's (u32) and r, g, b, squared luminance (i64).
+std::string encode_splats(const std::vector<SplatRecord>& records);
+// What a task's records may hold: `records` of them (its passes), entries' indices below
+// `planes` x `area` (the frame window's pixels), at most `max_paths` light paths a record
+// (the tile's pixels x the pass's samples), each splatting at most `max_splats_per_path`
+// times (the path's depth) per plane.
+struct SplatLimits {
+  size_t records = 0;
+  uint64_t area = 0;
+  uint32_t planes = 1;
+  uint64_t max_paths = 0;
+  uint64_t max_splats_per_path = 1;
+};
+// Throws WireError unless the data holds exactly limits.records records within the limits,
+// each entry's index above the previous one's, its sums no more than its record's paths
+// could add (kMaxSplatValue per splat), odd-plane entries and paths only with two planes.
+std::vector<SplatRecord> decode_splats(const std::string& compressed, const SplatLimits& limits);
 
 }  // namespace tessera

@@ -25,7 +25,8 @@ constexpr char kMagic[4] = {'T', 'S', 'C', 'K'};
 // whole film as one buffer took 8 times as long per pixel: caches, and page faults for
 // buffers of the film's size). Version 1 is still read.
 // Version 3: band by band (checkpoint.h).
-constexpr uint32_t kVersion2 = 2, kVersion3 = 3;
+// Version 4: version 3 and the splats (checkpoint.h).
+constexpr uint32_t kVersion2 = 2, kVersion3 = 3, kVersion4 = 4;
 constexpr uint32_t kChunkPixels = 1 << 16;
 
 // Little-endian fields, appended and read back in order.
@@ -182,7 +183,7 @@ CheckpointEncoder::CheckpointEncoder(const FramePlan& plan, double elapsed, std:
       halves_(plan.settings().halves()) {
   Writer w;
   w.out.append(kMagic, 4);
-  w.put(kVersion3);
+  w.put(kVersion4);
   const Rect r = plan.settings().effective_window();
   for (int v : {r.x, r.y, r.w, r.h}) w.put(int32_t(v));
   w.put(uint32_t(plan.tiles().size()));
@@ -223,19 +224,59 @@ void CheckpointEncoder::band(const BandCopy& b) {
   emit(std::move(w.out));
 }
 
+namespace {
+
+std::string encode_splat_rows(const std::vector<SplatSums>& rows) {
+  static_assert(sizeof(SplatSums) == 32, "SplatSums: four int64, no padding");
+  std::string out(ZSTD_compressBound(rows.size() * sizeof(SplatSums)), '\0');
+  const size_t n = ZSTD_compress(out.data(), out.size(), rows.data(), rows.size() * sizeof(SplatSums), 1);
+  if (ZSTD_isError(n)) throw std::runtime_error("checkpoint: cannot compress the splats");
+  out.resize(n);
+  return out;
+}
+
+}  // namespace
+
+void CheckpointEncoder::splats(const FrameSplats::Frozen& f) {
+  Writer w;
+  w.put(uint8_t(1));
+  w.put(f.paths);
+  w.put(f.odd_paths);
+  for (uint32_t t : f.frontier) w.put(t);
+  splats_ = true;
+  emit(std::move(w.out));
+}
+
+void CheckpointEncoder::splat_band(const BandCopy& b) {
+  Writer w;
+  w.bytes(encode_splat_rows(b.splats));
+  if (halves_) w.bytes(encode_splat_rows(b.odd_splats));
+  emit(std::move(w.out));
+}
+
 void CheckpointEncoder::finish() {
+  if (!splats_) emit(std::string(1, '\0'));  // no splats
   Writer w;
   w.put(uint64_t(XXH64_digest(hash_->st)));
   out_(w.out);
 }
 
-std::string encode_checkpoint(const FramePlan& plan, double elapsed) {
+std::string encode_checkpoint(const FramePlan& plan, double elapsed, FrameSplats* splats) {
   std::string out;
   CheckpointEncoder enc(plan, elapsed, [&](const std::string& bytes) { out += bytes; });
   BandCopy band;
   for (uint32_t b = 0; b < plan.bands(); ++b) {
     plan.copy_band(b, &band);
     enc.band(band);
+  }
+  if (splats && splats->any()) {
+    enc.splats(splats->freeze());
+    for (uint32_t b = 0; b < plan.bands(); ++b) {
+      plan.copy_band(b, &band);
+      splats->copy_band(&band);
+      enc.splat_band(band);
+    }
+    splats->thaw();
   }
   enc.finish();
   return out;
@@ -278,7 +319,46 @@ class StreamReader {
   XXH64_state_t* hash_;
 };
 
-double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with_film) {
+// The splat section (version 4), after the bands: into `splats` when given (with the film).
+void read_splats(StreamReader& in, const FramePlan& plan, FrameSplats* splats) {
+  const uint8_t has = in.get<uint8_t>();
+  if (has > 1) throw std::runtime_error("checkpoint: bad splat section");
+  if (!has) return;
+  FrameSplats::Frozen f;
+  f.paths = in.get<uint64_t>();
+  f.odd_paths = in.get<uint64_t>();
+  f.frontier.resize(plan.tiles().size());
+  for (uint32_t& t : f.frontier) {
+    t = in.get<uint32_t>();
+    if (t > plan.passes().size()) throw std::runtime_error("checkpoint: a splat frontier past the frame's passes");
+  }
+  if (splats) try {
+      splats->restore(f);
+    } catch (const std::invalid_argument& e) {
+      throw std::runtime_error(std::string("checkpoint: splats: ") + e.what());
+    }
+  const Rect w = plan.settings().effective_window();
+  std::vector<SplatSums> rows;
+  for (uint32_t b = 0; b < plan.bands(); ++b) {
+    const Rect& first = plan.tiles()[size_t(b) * plan.tiles_per_band()];
+    const size_t bytes = size_t(first.h) * size_t(w.w) * sizeof(SplatSums);
+    for (bool odd : {false, true}) {
+      if (odd && !plan.settings().halves()) continue;
+      const std::string z = in.bytes(ZSTD_compressBound(bytes) + 64);
+      if (!splats) continue;
+      rows.resize(bytes / sizeof(SplatSums));
+      const size_t n = ZSTD_decompress(rows.data(), bytes, z.data(), z.size());
+      if (ZSTD_isError(n) || n != bytes) throw std::runtime_error("checkpoint: bad splat rows");
+      for (const SplatSums& s : rows)
+        if (s.rgb[0] < 0 || s.rgb[1] < 0 || s.rgb[2] < 0 || s.lum2 < 0)
+          throw std::runtime_error("checkpoint: negative splat sums");
+      splats->restore_rows(first.y - w.y, first.h, odd, rows.data());
+    }
+  }
+}
+
+double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with_film, uint32_t version,
+               FrameSplats* splats) {
   const double elapsed = in.get<double>();
   BandCopy band;
   std::vector<bool> seen(plan.bands(), false);
@@ -345,18 +425,25 @@ double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with
       throw std::runtime_error(std::string("checkpoint: ") + e.what());
     }
   }
+  if (version >= kVersion4) read_splats(in, plan, with_film ? splats : nullptr);
   const uint64_t digest = XXH64_digest(hash);
   uint64_t sum;
   in.exactly(reinterpret_cast<char*>(&sum), sizeof sum, false);
   if (sum != digest) throw std::runtime_error("checkpoint: checksum mismatch");
   if (!in.at_end()) throw std::runtime_error("checkpoint: trailing bytes");
   plan.restore_finish();
+  // The splats were frozen after the bands were copied: no tile's are behind its film's.
+  if (with_film && splats && splats->any())
+    for (uint32_t t = 0; t < plan.tiles().size(); ++t)
+      if (splats->frontier(t) < plan.progress(t).passes_done)
+        throw std::runtime_error("checkpoint: a tile's splats behind its film");
   return elapsed;
 }
 
 }  // namespace
 
-double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePlan& plan, bool with_film) {
+double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePlan& plan, bool with_film,
+                       FrameSplats* splats) {
   XXH64_state_t* hash = XXH64_createState();
   struct Free {
     XXH64_state_t* h;
@@ -368,7 +455,7 @@ double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePl
   in.exactly(magic, 4);
   if (std::memcmp(magic, kMagic, 4) != 0) throw std::runtime_error("checkpoint: not a checkpoint file");
   const uint32_t version = in.get<uint32_t>();
-  if (version == kVersion3) {
+  if (version == kVersion3 || version == kVersion4) {
     Rect r;
     r.x = in.get<int32_t>();
     r.y = in.get<int32_t>();
@@ -379,7 +466,7 @@ double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePl
     if (!(r == plan.settings().effective_window()) || tiles != plan.tiles().size() || bands != plan.bands() ||
         adaptive != plan.settings().adaptive)
       throw std::runtime_error("checkpoint: it does not fit the job's frame");
-    return read_v3(in, hash, plan, with_film);
+    return read_v3(in, hash, plan, with_film, version, splats);
   }
   if (version != 1 && version != kVersion2)
     throw std::runtime_error("checkpoint: version " + std::to_string(version) + " not supported");
@@ -397,7 +484,7 @@ double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePl
   return c.elapsed;
 }
 
-double read_checkpoint(const std::string& bytes, FramePlan& plan, bool with_film) {
+double read_checkpoint(const std::string& bytes, FramePlan& plan, bool with_film, FrameSplats* splats) {
   size_t at = 0;
   return read_checkpoint(
       [&](char* out, size_t n) {
@@ -406,7 +493,7 @@ double read_checkpoint(const std::string& bytes, FramePlan& plan, bool with_film
         at += k;
         return k;
       },
-      plan, with_film);
+      plan, with_film, splats);
 }
 
 }  // namespace tessera

@@ -1,15 +1,19 @@
 // A job's checkpoint file: its frame plan's progress and its film's sums, checksummed
 // (xxh64). docs/architecture.md has where and when.
 //
-// Version 3 is written band by band (FramePlan::copy_band: a row of tiles, each tile's sums
+// Version 4 is written band by band (FramePlan::copy_band: a row of tiles, each tile's sums
 // with its progress), so a coordinator never holds a second copy of a large film, and read
 // band by band into the plan's own film; every counter of the plan follows from its tiles.
-//   header  "TSCK", u32 3, i32 window x y w h, u32 tiles, u32 bands, u8 adaptive, f64 elapsed
+//   header  "TSCK", u32 4, i32 window x y w h, u32 tiles, u32 bands, u8 adaptive, f64 elapsed
 //   band    u32 band, u32 tiles, per tile (u32 passes, u8 finished, f32 relative error),
-//           u64 samples, [adaptive: u64 mask bytes, bytes zstd(mask)], bytes sums (wire.h)
+//           u64 samples, [adaptive: u64 mask bytes, bytes zstd(mask)], bytes sums (wire.h),
+//           [AOVs: bytes AOV sums], [half-buffers: bytes the second plane's sums]
+//   splats  u8 0, or u8 1, u64 paths, u64 odd paths, per tile u32 frontier, then per band in
+//           order bytes zstd(its rows' SplatSums, 32 bytes each) [half-buffers: the odd
+//           plane's too] (frame_splats.h: frozen after the bands)
 //   end     u64 xxh64 of everything before it
-// (bytes = u64 length + the bytes.) Versions 1 and 2 (the whole PlanState, then the film in
-// one or in 65,536-pixel pieces) are still read.
+// (bytes = u64 length + the bytes.) Version 3 (no splats) and versions 1 and 2 (the whole
+// PlanState, then the film in one or in 65,536-pixel pieces) are still read.
 #pragma once
 
 #include <cstdint>
@@ -17,16 +21,21 @@
 #include <string>
 
 #include "core/render/frame_plan.h"
+#include "server/frame_splats.h"
 
 namespace tessera {
 
-// Version 3, band by band: the header at construction, then band() for every band in
-// order, then finish(); each piece of the file goes to `out` as it is made.
+// Version 4, band by band: the header at construction, then band() for every band in
+// order, then (a frame with splats) splats() and splat_band() for every band in order, then
+// finish(); each piece of the file goes to `out` as it is made.
 class CheckpointEncoder {
  public:
   CheckpointEncoder(const FramePlan& plan, double elapsed, std::function<void(const std::string&)> out);
   ~CheckpointEncoder();
   void band(const BandCopy& band);
+  // The frozen splats' counts and frontier; then each band's splat rows (copy_band's).
+  void splats(const FrameSplats::Frozen& frozen);
+  void splat_band(const BandCopy& band);
   void finish();
 
  private:
@@ -37,18 +46,20 @@ class CheckpointEncoder {
   bool adaptive_;
   bool aovs_;    // the job has AOVs: each band carries their sums after the film's
   bool halves_;  // and half-buffers: then the film's second plane (film.h)
+  bool splats_ = false;
 };
 
-// The whole file for a plan, band by band (tests, and small plans).
-std::string encode_checkpoint(const FramePlan& plan, double elapsed);
+// The whole file for a plan (and its splats, if any), band by band (tests, and small plans).
+std::string encode_checkpoint(const FramePlan& plan, double elapsed, FrameSplats* splats = nullptr);
 
 // Reads a checkpoint of any version from `read` (which fills up to n bytes of its buffer
 // and returns how many, 0 at the end) into `plan`, whose settings it must fit; returns the
 // render seconds it was taken at. Without `with_film` only the progress is restored (an
-// ended job's). Throws std::runtime_error ("checkpoint: ...") when the bytes are damaged,
-// cut short or do not fit the plan; the plan is then unusable.
-double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePlan& plan, bool with_film = true);
-double read_checkpoint(const std::string& bytes, FramePlan& plan, bool with_film = true);
+// ended job's); with it, its splats into `splats` (when given). Throws std::runtime_error ("checkpoint: ...") when the
+// bytes are damaged, cut short or do not fit the plan; the plan is then unusable.
+double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePlan& plan, bool with_film = true,
+                       FrameSplats* splats = nullptr);
+double read_checkpoint(const std::string& bytes, FramePlan& plan, bool with_film = true, FrameSplats* splats = nullptr);
 
 // Versions 1 and 2: the file as one PlanState and film (exposed for tests and the fuzzer).
 struct Checkpoint {

@@ -147,12 +147,19 @@ void Coordinator::write(const std::shared_ptr<Job>& job) {
       plan = snapshotter_.next(*job, clock_->now());
     }
     if (!plan.image && !plan.checkpoint) return changed_.notify_all();  // no writer now: a delete may wait
-    const SnapshotOutcome out = writer_.write(*job, plan, [&](uint32_t band, BandCopy* copy) {
-      MutexLock lock(mu_);                                      // one band at a time: merges go on between them
-      if (!job->plan.has_film() || job->removed) return false;  // (a job being deleted: stop)
-      job->plan.copy_band(band, copy);
-      return true;
-    });
+    const SnapshotOutcome out = writer_.write(
+        *job, plan,
+        [&](uint32_t band, BandCopy* copy) {
+          MutexLock lock(mu_);                                      // one band at a time: merges go on between them
+          if (!job->plan.has_film() || job->removed) return false;  // (a job being deleted: stop)
+          job->plan.copy_band(band, copy);
+          job->splats.copy_band(copy);
+          return true;
+        },
+        [&](const std::function<void()>& step) {
+          MutexLock lock(mu_);
+          step();
+        });
     bool left;
     {
       MutexLock lock(mu_);

@@ -23,6 +23,7 @@ void set_times(v1::JobStatus& s, double submitted, double started, double ended)
 
 void Job::compact() {
   plan.compact();
+  splats.release();
   std::vector<uint64_t>().swap(tile_lease);
   tile_backup.clear();
   for (auto& [worker, tiles] : merged_by) {

@@ -17,6 +17,7 @@
 
 #include "core/render/frame_plan.h"
 #include "server/clock.h"
+#include "server/frame_splats.h"
 #include "server/job_meta.h"
 
 namespace tessera {
@@ -31,7 +32,11 @@ struct TileRange {
 struct Job {
   using State = v1::JobStatus::State;
   Job(JobMeta meta, const RenderSettings& settings, State state = v1::JobStatus::QUEUED)
-      : meta(std::move(meta)), plan(settings), tile_lease(plan.tiles().size(), 0), state_(state) {}
+      : meta(std::move(meta)),
+        plan(settings),
+        splats(settings, uint32_t(plan.tiles().size())),
+        tile_lease(plan.tiles().size(), 0),
+        state_(state) {}
 
   JobMeta meta;
   const std::string& id() const { return meta.id; }
@@ -40,6 +45,10 @@ struct Job {
   std::string sequence;
   uint32_t frame_index = 0;
   FramePlan plan;
+  FrameSplats splats;  // light paths' (frame_splats.h); none unless the frame traces them
+  // Times results were taken back from the film (a liar's: Verifier::quarantine): a
+  // checkpoint written across one is not kept.
+  uint64_t resets = 0;
   std::vector<uint64_t> tile_lease;  // the live task id of each tile, 0 = none
   // Tiles leased a second time at the frame's end (Dispatcher): tile -> that lease's task
   // id. Whichever result comes first is merged and both leases end.

@@ -206,7 +206,7 @@ void load_requeue(JobControl::Requeue& q, JobStore& store, SceneStore& scenes, c
     job->frame_index = old->frame_index;
     std::optional<double> elapsed;
     try {
-      elapsed = store.read_checkpoint(job->id(), job->plan, true);
+      elapsed = store.read_checkpoint(job->id(), job->plan, true, &job->splats);
     } catch (const std::exception& e) {
       spdlog::warn("job {}: {}; its samples are rendered again", job->id(), e.what());
       job = std::make_shared<Job>(old->meta, old->plan.settings());  // the damaged read left its plan unusable

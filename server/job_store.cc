@@ -380,7 +380,8 @@ std::unique_ptr<CheckpointFile> SqliteJobStore::begin_checkpoint(const std::stri
   return std::make_unique<FileCheckpoint>(path.string(), before_checkpoint_rename);
 }
 
-std::optional<double> SqliteJobStore::read_checkpoint(const std::string& id, FramePlan& plan, bool with_film) const {
+std::optional<double> SqliteJobStore::read_checkpoint(const std::string& id, FramePlan& plan, bool with_film,
+                                                      FrameSplats* splats) const {
   const std::string path = checkpoint_path(id);
   std::ifstream in(path, std::ios::binary);
   if (!in) {
@@ -393,7 +394,7 @@ std::optional<double> SqliteJobStore::read_checkpoint(const std::string& id, Fra
         in.read(out, std::streamsize(n));
         return size_t(in.gcount());
       },
-      plan, with_film);
+      plan, with_film, splats);
 }
 
 void SqliteJobStore::discard_partial_writes(const std::string& id) const {

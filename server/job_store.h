@@ -147,9 +147,10 @@ class JobStore {
   virtual std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const = 0;
   // Reads the job's checkpoint into `plan` (checkpoint.h's read_checkpoint) and returns its
   // render seconds; nothing when the job has none. Throws std::runtime_error when it is
-  // damaged or does not fit (the plan is then unusable). Without `with_film`, progress only.
-  virtual std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan,
-                                                bool with_film = true) const = 0;
+  // damaged or does not fit (the plan is then unusable). Without `with_film`, progress only;
+  // with it, the frame's splats into `splats` when given.
+  virtual std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true,
+                                                FrameSplats* splats = nullptr) const = 0;
   // Removes what a crash cut short (temporary files of the job's checkpoint and image).
   virtual void discard_partial_writes(const std::string&) const {}
   // Removes the job's checkpoint (an archived DONE job's: its image holds the film, and it
@@ -197,7 +198,8 @@ class SqliteJobStore : public JobStore {
   std::vector<Event> events(const std::string& job, uint64_t after, size_t limit, bool newest) const override;
   // Written to a temporary file, synced, renamed into place.
   std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
-  std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;
+  std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true,
+                                        FrameSplats* splats = nullptr) const override;
   void discard_partial_writes(const std::string& id) const override;
   void discard_checkpoint(const std::string& id) override;
   std::string checkpoint_path(const std::string& id) const;
@@ -263,7 +265,8 @@ class MemoryJobStore : public JobStore {
   void append_events(std::vector<Event>& events) override;
   std::vector<Event> events(const std::string& job, uint64_t after, size_t limit, bool newest) const override;
   std::unique_ptr<CheckpointFile> begin_checkpoint(const std::string& id) const override;
-  std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true) const override;
+  std::optional<double> read_checkpoint(const std::string& id, FramePlan& plan, bool with_film = true,
+                                        FrameSplats* splats = nullptr) const override;
   void discard_checkpoint(const std::string& id) override { set_checkpoint_bytes(id, std::nullopt); }
   std::optional<std::string> checkpoint_bytes(const std::string& id) const;
   void set_checkpoint_bytes(const std::string& id, std::optional<std::string> bytes);  // nullopt: remove

@@ -18,11 +18,17 @@ namespace tessera {
 
 // What a frame with these settings weighs against --max-live-pixels: its pixels, and with
 // AOVs as many more as their sums' memory is worth in films (72 bytes a pixel: 1.8 films),
-// with half-buffers a film more (the second plane of sums).
+// with half-buffers a film more (the second plane of sums), and where it may trace light
+// paths (--light-tracer on or auto) their splat sums' worth (32 bytes a pixel and plane).
 inline int64_t live_pixels_of(const RenderSettings& s) {
+  const auto films = [](int64_t bytes) {
+    return (bytes + int64_t(sizeof(PixelSums)) - 1) / int64_t(sizeof(PixelSums));
+  };
   const int64_t area = s.effective_window().area() * int64_t(s.sum_planes());
-  const int64_t aov_area = s.effective_window().area() * int64_t(sizeof(AovSums));
-  return s.aovs ? area + (aov_area + int64_t(sizeof(PixelSums)) - 1) / int64_t(sizeof(PixelSums)) : area;
+  int64_t pixels = area;
+  if (s.aovs) pixels += films(s.effective_window().area() * int64_t(sizeof(AovSums)));
+  if (s.light_tracer != RenderSettings::LightTracer::kOff) pixels += films(area * int64_t(sizeof(SplatSums)));
+  return pixels;
 }
 
 // What the live work weighs, counted in one place for admission (one client's share),

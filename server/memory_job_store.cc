@@ -231,10 +231,11 @@ std::unique_ptr<CheckpointFile> MemoryJobStore::begin_checkpoint(const std::stri
   });
 }
 
-std::optional<double> MemoryJobStore::read_checkpoint(const std::string& id, FramePlan& plan, bool with_film) const {
+std::optional<double> MemoryJobStore::read_checkpoint(const std::string& id, FramePlan& plan, bool with_film,
+                                                      FrameSplats* splats) const {
   const std::optional<std::string> bytes = checkpoint_bytes(id);
   if (!bytes) return std::nullopt;
-  return tessera::read_checkpoint(*bytes, plan, with_film);
+  return tessera::read_checkpoint(*bytes, plan, with_film, splats);
 }
 
 std::optional<std::string> MemoryJobStore::checkpoint_bytes(const std::string& id) const {

@@ -120,7 +120,7 @@ void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
   double elapsed = row.elapsed;
   bool checkpointed = false;
   try {
-    if (const std::optional<double> e = p_.store.read_checkpoint(id, shared->plan)) {
+    if (const std::optional<double> e = p_.store.read_checkpoint(id, shared->plan, true, &shared->splats)) {
       checkpointed = true;
       elapsed = *e;
     }
@@ -176,7 +176,7 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
     std::shared_ptr<Job> job = SequenceScheduler::make_frame(s, i);
     try {
       // A frame that started has a checkpoint (or is rendered again from the start).
-      if (!(cp = p_.store.read_checkpoint(id, job->plan, s.live()))) {
+      if (!(cp = p_.store.read_checkpoint(id, job->plan, s.live(), &job->splats))) {
         all_done = false;
         continue;
       }

@@ -16,11 +16,12 @@ Referee local_referee(const SceneStore& scenes) {
     const RenderSettings settings = from_proto(task.settings());
     const std::vector<PixelSums> base = task_base(task, rect, settings.sum_planes());
     std::vector<AovSums> aovs;
+    std::vector<SplatRecord> splats;
+    const TileRenderer renderer(scene, settings);
     std::vector<PixelSums> sums =
-        TileRenderer(scene, settings)
-            .render_passes(rect, task_passes(task, settings), base.empty() ? nullptr : base.data(), mask, &stats,
-                           nullptr, settings.aovs ? &aovs : nullptr);
-    return RefereeRender(std::move(sums), std::move(aovs));
+        renderer.render_passes(rect, task_passes(task, settings), base.empty() ? nullptr : base.data(), mask, &stats,
+                               nullptr, settings.aovs ? &aovs : nullptr, renderer.light_tracing() ? &splats : nullptr);
+    return RefereeRender(std::move(sums), std::move(aovs), std::move(splats));
   };
 }
 

@@ -1,5 +1,6 @@
 #include "server/result_intake.h"
 
+#include <algorithm>
 #include <chrono>
 
 namespace tessera {
@@ -27,6 +28,22 @@ std::optional<Lease> ResultIntake::wanted(const v1::TaskResult& result, v1::Resu
   return *l;
 }
 
+SplatLimits ResultIntake::splat_limits(const RenderSettings& s, const Rect& tile, uint32_t pass_len,
+                                       uint32_t pass_count) {
+  SplatLimits l;
+  l.records = pass_count;
+  l.area = uint64_t(s.effective_window().area());
+  l.planes = s.sum_planes();
+  l.max_paths = uint64_t(tile.area()) * pass_len;
+  l.max_splats_per_path = uint64_t(std::max(1, s.max_depth));
+  return l;
+}
+
+std::vector<SplatRecord> ResultIntake::result_splats(const v1::TaskResult& result, const SplatLimits& limits) {
+  if (result.splats_zstd().empty()) return {};
+  return decode_splats(result.splats_zstd(), limits);
+}
+
 ResultIntake::Batch ResultIntake::screen(const std::vector<const v1::TaskResult*>& results) {
   Batch b;
   b.results = results;
@@ -45,6 +62,9 @@ ResultIntake::Batch ResultIntake::screen(const std::vector<const v1::TaskResult*
                           plan.run_samples(lease->pass, lease->pass_count),
                           plan.settings().aovs != 0,
                           std::nullopt,
+                          {},
+                          splat_limits(plan.settings(), plan.tiles()[lease->tile],
+                                       plan.run_samples(lease->pass, lease->pass_count), lease->pass_count),
                           {}});
   }
   return b;
@@ -57,6 +77,7 @@ void ResultIntake::decode(Batch& b) {
         in.aovs = decode_aovs(r.aovs_zstd(), in.pixels, in.pass_len);
       else if (!r.aovs_zstd().empty())
         throw WireError("AOV sums for a job without AOVs");
+      in.splats = result_splats(r, in.splat_limits);
       in.sums = FramePlan::check(result_sums(r, in.pixels * in.planes), in.pass_len, in.planes);
     } catch (const WireError&) {  // counted as rejected by merge()
       in.sums.reset();
@@ -81,6 +102,10 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
       continue;
     }
     if (in.aovs_wanted) job.plan.add_aovs(lease->tile, in.aovs);  // fits: decoded for this tile's size
+    // Digested before they move into the frame's splats.
+    const uint64_t digest =
+        lease->task ? sums_digest(in.sums->sums(), in.aovs_wanted ? &in.aovs : nullptr, &in.splats) : 0;
+    if (!in.splats.empty()) job.splats.add(lease->tile, lease->pass, std::move(in.splats));
     p_.counters.merge_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     p_.counters.samples_merged += added;
     ++p_.counters.results_merged;
@@ -92,8 +117,7 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
     job.merged_by[result.worker_id()].push_back(lease->tile);
     if (!job.sequence.empty()) ++p_.jobs.find_sequence(job.sequence)->changes;
     if (lease->task)  // picked for verification: another worker renders it again
-      p_.verifier.issue(job, *lease, result.worker_id(),
-                        sums_digest(in.sums->sums(), in.aovs_wanted ? &in.aovs : nullptr), now);
+      p_.verifier.issue(job, *lease, result.worker_id(), digest, now);
     p_.counters.result_bytes += result.sums_zstd().size();
     p_.counters.task_seconds.observe(result.render_seconds());
     p_.workers.record_result(result.worker_id(), result.samples(), result.sums_zstd().size(), result.render_seconds(),

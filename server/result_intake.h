@@ -32,6 +32,13 @@ class ResultIntake {
   };
   explicit ResultIntake(Parts parts) : p_(parts) {}
 
+  // What a task's splats may hold: a record for each of its `pass_count` passes of
+  // `pass_len` samples a pixel at most, on `tile`'s pixels.
+  static SplatLimits splat_limits(const RenderSettings& settings, const Rect& tile, uint32_t pass_len,
+                                  uint32_t pass_count);
+  // A result's splats, decoded within `limits` (none when it has none); WireError otherwise.
+  static std::vector<SplatRecord> result_splats(const v1::TaskResult& result, const SplatLimits& limits);
+
   struct Incoming {
     size_t index = 0;  // in the batch
     size_t pixels = 0;
@@ -40,6 +47,8 @@ class ResultIntake {
     bool aovs_wanted = false;         // the job has AOVs (settings.aovs)
     std::optional<CheckedSums> sums;  // decoded and plausible
     std::vector<AovSums> aovs;        // likewise, when wanted
+    SplatLimits splat_limits;         // what its splats may be (a frame tracing light paths)
+    std::vector<SplatRecord> splats;  // decoded: one per pass, or none
   };
   struct Batch {
     std::vector<const v1::TaskResult*> results;

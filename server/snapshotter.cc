@@ -61,6 +61,7 @@ SnapshotPlan Snapshotter::next(Job& j, double now) const {
   s.image_due = s.checkpoint_due = false;
   p.ended = !j.live();
   p.merges = j.plan.merges();
+  p.resets = j.resets;
   p.checkpoint_on_disk = j.written.checkpoints > 0 && j.written.checkpoint_merges == p.merges;
   if (p.checkpoint) s.checkpoint_merges = p.merges;
   p.elapsed = j.started > 0 ? (j.live() ? now : j.finished_at) - j.started : 0;
@@ -122,8 +123,47 @@ bool SnapshotWriter::record_end(const RowEnd& row, const std::string& scene_hash
   return true;
 }
 
+bool SnapshotWriter::write_splats(Job& job, const SnapshotPlan& plan, CheckpointEncoder& encoder,
+                                  const std::function<void(const std::function<void()>&)>& locked) const {
+  std::optional<FrameSplats::Frozen> frozen;
+  locked([&] {
+    if (job.splats.any() && job.plan.has_film() && !job.removed && job.resets == plan.resets)
+      frozen = job.splats.freeze();
+  });
+  if (!frozen) {
+    bool kept = true;
+    locked([&] { kept = job.resets == plan.resets; });
+    return kept;
+  }
+  // Whatever happens, the splats thaw (the records that came meanwhile are added).
+  struct Thaw {
+    const std::function<void(const std::function<void()>&)>& locked;
+    Job& job;
+    ~Thaw() {
+      locked([this] { job.splats.thaw(); });
+    }
+  } thaw{locked, job};
+  encoder.splats(*frozen);
+  BandCopy band;
+  const uint32_t per_band = job.plan.tiles_per_band();
+  bool kept = true;
+  for (uint32_t b = 0; b < job.plan.bands() && kept; ++b) {
+    locked([&] {
+      if (!(kept = job.plan.has_film() && !job.removed && job.resets == plan.resets)) return;
+      const Rect first = job.plan.tile_rect(b * per_band);
+      band.band = b;
+      band.y0 = first.y - job.plan.settings().effective_window().y;
+      band.rows = first.h;
+      job.splats.copy_band(&band);
+    });
+    if (kept) encoder.splat_band(band);
+  }
+  return kept;
+}
+
 SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
-                                      const std::function<bool(uint32_t, BandCopy*)>& copy_band) const {
+                                      const std::function<bool(uint32_t, BandCopy*)>& copy_band,
+                                      const std::function<void(const std::function<void()>&)>& locked) const {
   SnapshotOutcome out;
   if (!plan.image && !plan.checkpoint) return out;
   if (hooks_.before_image_write) hooks_.before_image_write();
@@ -157,20 +197,28 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
   BandCopy band;
   for (uint32_t b = 0; b < job.plan.bands() && (image || checkpoint); ++b) {
     if (!copy_band(b, &band)) return SnapshotOutcome{};  // the film is gone: nothing to write
+    if (checkpoint) try {  // the film's sums as they are: the splats are written after the bands
+        encoder->band(band);
+      } catch (const std::exception& e) {
+        checkpoint.reset();
+        failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
+      }
     if (image) try {
+        FrameSplats::fold(&band);  // the image's pixels hold the splats
         image->write_rows(band.pixels.data(), band.rows, band.aovs.empty() ? nullptr : band.aovs.data(),
                           band.odd.empty() ? nullptr : band.odd.data());
       } catch (const std::exception& e) {
         image.reset();
         failed("image", e, &out.image, &out.image_why);
       }
-    if (checkpoint) try {
-        encoder->band(band);
-      } catch (const std::exception& e) {
-        checkpoint.reset();
-        failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
-      }
   }
+  if (checkpoint && locked) try {
+      if (!write_splats(job, plan, *encoder, locked))
+        throw std::runtime_error("results were taken back from the film while it was written");
+    } catch (const std::exception& e) {
+      checkpoint.reset();
+      failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
+    }
   if (image) try {
       image->commit();
       out.image = SnapshotOutcome::kWritten;

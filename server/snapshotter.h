@@ -15,6 +15,7 @@
 #include <optional>
 #include <string>
 
+#include "server/checkpoint.h"
 #include "server/counters.h"
 #include "server/image_sink.h"
 #include "server/job.h"
@@ -27,6 +28,7 @@ struct SnapshotPlan {
   bool image = false, checkpoint = false;  // neither: nothing is due, the writer stops
   bool ended = false;                      // the job had ended: its film no longer changes
   uint64_t merges = 0;                     // the film version as it began
+  uint64_t resets = 0;                     // Job::resets as it began
   bool checkpoint_on_disk = false;         // a checkpoint of that version is on disk already
   double elapsed = 0;                      // render seconds
   ImageMetadata meta;
@@ -81,13 +83,19 @@ class SnapshotWriter {
     std::function<void()> before_image_write;                    // a test seam
     std::string data_dir;                                        // named "<data>" in messages
   };
-  SnapshotWriter(ImageSink& sink, JobStore& store, Hooks hooks) : sink_(sink), store_(store), hooks_(std::move(hooks)) {}
+  SnapshotWriter(ImageSink& sink, JobStore& store, Hooks hooks)
+      : sink_(sink), store_(store), hooks_(std::move(hooks)) {}
   // Writes the plan's image and/or checkpoint, band by band through `copy_band` (which
-  // takes the coordinator's lock for one band, and says false once the film is gone).
+  // takes the coordinator's lock for one band, copies its film and splat rows, and says
+  // false once the film is gone). `locked` runs a step under that lock: a checkpoint of a
+  // frame with splats freezes them after the bands (frame_splats.h) and copies their rows
+  // band by band; a checkpoint begun before results were taken back (Job::resets) is not
+  // kept. Without `locked` (tests), no splats are written.
   // Records an ended job's end once durable (a DONE one's once its whole film is in a
   // checkpoint). Never throws: failures are in the outcome (and logged).
   SnapshotOutcome write(Job& job, const SnapshotPlan& plan,
-                        const std::function<bool(uint32_t band, BandCopy* out)>& copy_band) const;
+                        const std::function<bool(uint32_t band, BandCopy* out)>& copy_band,
+                        const std::function<void(const std::function<void()>&)>& locked = {}) const;
   // Records a sequence's end (its frames' are on disk) and drops its use of its scene;
   // false (logged) when the record failed.
   bool record_end(const RowEnd& row, const std::string& scene_hash) const;
@@ -95,6 +103,9 @@ class SnapshotWriter {
  private:
   ImageSink& sink_;
   JobStore& store_;
+  // The checkpoint's splat section (under `locked`'s steps); false when it cannot be kept.
+  bool write_splats(Job& job, const SnapshotPlan& plan, CheckpointEncoder& encoder,
+                    const std::function<void(const std::function<void()>&)>& locked) const;
   Hooks hooks_;
 };
 

@@ -15,10 +15,6 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
   try {
     // A bad scene is refused here, and settings that ask it for what it has not.
     const auto check = [&](const Scene& scene) { TileRenderer::check_settings(scene, a.settings); };
-    if (a.settings.light_tracer != RenderSettings::LightTracer::kOff)
-      throw SettingsError("--light-tracer",
-                          "farm jobs do not carry light paths yet: render with tessera render, or "
-                          "submit with --light-tracer off");
     if (req.upload_id().empty())
       meta.scene_hash = scenes.add(req.main_file(), req.files(), check);
     else if (uploads)

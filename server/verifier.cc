@@ -10,7 +10,8 @@
 
 namespace tessera {
 
-uint64_t sums_digest(const std::vector<PixelSums>& sums, const std::vector<AovSums>* aovs) {
+uint64_t sums_digest(const std::vector<PixelSums>& sums, const std::vector<AovSums>* aovs,
+                     const std::vector<SplatRecord>* splats) {
   XXH3_state_t st;
   XXH3_64bits_reset(&st);
   for (const PixelSums& p : sums) {
@@ -21,6 +22,17 @@ uint64_t sums_digest(const std::vector<PixelSums>& sums, const std::vector<AovSu
   if (aovs) {
     static_assert(sizeof(AovSums) == 72, "AovSums has no padding: its bytes are its value");
     XXH3_64bits_update(&st, aovs->data(), aovs->size() * sizeof(AovSums));
+  }
+  if (splats && !splats->empty()) {
+    static_assert(sizeof(SplatEntry) == 40, "SplatEntry: index, padding (zero), sums");
+    for (const SplatRecord& r : *splats) {
+      const uint64_t counts[3] = {r.paths, r.odd_paths, r.entries.size()};
+      XXH3_64bits_update(&st, counts, sizeof counts);
+      for (const SplatEntry& e : r.entries) {
+        XXH3_64bits_update(&st, &e.index, sizeof e.index);
+        XXH3_64bits_update(&st, e.v, sizeof e.v);
+      }
+    }
   }
   return XXH3_64bits_digest(&st);
 }
@@ -67,11 +79,16 @@ std::optional<Check> Verifier::pending(uint64_t check, uint64_t task_id) const {
 
 std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check) {
   try {
-    const size_t pixels = size_t(from_proto(check.task->tile()).area());
-    const size_t planes = from_proto(check.task->settings()).sum_planes();
-    if (!check.task->settings().aovs()) return sums_digest(result_sums(result, pixels));
+    const Rect tile = from_proto(check.task->tile());
+    const size_t pixels = size_t(tile.area());
+    const RenderSettings settings = from_proto(check.task->settings());
+    const size_t planes = settings.sum_planes();
+    const std::vector<SplatRecord> splats = ResultIntake::result_splats(
+        result, ResultIntake::splat_limits(settings, tile, RenderSettings::kMaxSpp,
+                                           uint32_t(task_passes(*check.task, settings).size())));
+    if (!check.task->settings().aovs()) return sums_digest(result_sums(result, pixels), nullptr, &splats);
     const std::vector<AovSums> aovs = decode_aovs(result.aovs_zstd(), pixels, RenderSettings::kMaxSpp);
-    return sums_digest(result_sums(result, pixels * planes), &aovs);
+    return sums_digest(result_sums(result, pixels * planes), &aovs, &splats);
   } catch (const WireError&) {
     return std::nullopt;
   }
@@ -85,7 +102,7 @@ Verifier::Verdict Verifier::judge(const Check& c, uint64_t digest, uint64_t chec
   // quarantined (both, if all three differ). Rare, so done here, outside the lock.
   try {
     const RefereeRender r = referee(*c.task);
-    const uint64_t ours = sums_digest(r.sums, r.aovs.empty() ? nullptr : &r.aovs);
+    const uint64_t ours = sums_digest(r.sums, r.aovs.empty() ? nullptr : &r.aovs, &r.splats);
     if (ours != c.digest) v.liars.push_back(c.first_worker);
     if (ours != digest) v.liars.push_back(checker);
     v.why = "job " + c.job + " tile " + std::to_string(c.tile) + " pass " + std::to_string(c.pass) +
@@ -179,9 +196,15 @@ void Verifier::quarantine(uint64_t worker, const std::string& why, double now, E
   for (const auto& [id, job] : jobs_.jobs()) {
     auto mine = job->merged_by.find(worker);
     if (mine == job->merged_by.end()) continue;
-    const std::set<uint32_t> tiles(mine->second.begin(), mine->second.end());
+    std::set<uint32_t> tiles(mine->second.begin(), mine->second.end());
     job->merged_by.erase(mine);
     if (job->live()) {
+      ++job->resets;
+      // Its splats landed anywhere in the frame, among everyone's: the whole frame starts over.
+      if (job->splats.any()) {
+        job->splats.reset();
+        for (uint32_t t = 0; t < job->plan.tile_count(); ++t) tiles.insert(t);
+      }
       for (uint32_t t : tiles) {
         leasing_.end_tile(*job, t, now);
         job->plan.reset_tile(t);

@@ -22,15 +22,19 @@ namespace tessera {
 struct RefereeRender {
   std::vector<PixelSums> sums;
   std::vector<AovSums> aovs;
-  RefereeRender(std::vector<PixelSums> s, std::vector<AovSums> a = {})  // NOLINT: a tile's sums are a render
-      : sums(std::move(s)), aovs(std::move(a)) {}
+  std::vector<SplatRecord> splats;  // a frame tracing light paths: one record per pass
+  RefereeRender(std::vector<PixelSums> s, std::vector<AovSums> a = {},  // NOLINT: a tile's sums are a render
+                std::vector<SplatRecord> sp = {})
+      : sums(std::move(s)), aovs(std::move(a)), splats(std::move(sp)) {}
 };
 using Referee = std::function<RefereeRender(const v1::Task&)>;
 
 // Of the sums' values (not their padding or wire encoding, which may differ between two
 // honest workers): equal digests, equal bits.
 // The digest a check compares: a result's sums, and its AOV sums when the job has them.
-uint64_t sums_digest(const std::vector<PixelSums>& sums, const std::vector<AovSums>* aovs = nullptr);
+// With `splats` (a frame tracing light paths), the task's splat records too.
+uint64_t sums_digest(const std::vector<PixelSums>& sums, const std::vector<AovSums>* aovs = nullptr,
+                     const std::vector<SplatRecord>* splats = nullptr);
 // The digest of a check's result (decoded as for merging); nothing when it is malformed.
 std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check);
 
@@ -75,9 +79,9 @@ class Verifier {
   void skip_stale(double now, Effects& fx);
   bool quarantined(uint64_t worker) const { return checks_.quarantined(worker); }
   // A worker found lying (decide() calls it): its leases end, what it merged into live jobs
-  // is rendered again, ended jobs (and sequences whose frames left memory) are flagged.
-  // Archived jobs (archive.h) are flagged in their rows, through fx.flags; an enrolled
-  // worker's credential is quarantined through fx.credentials_quarantined.
+  // is rendered again (a frame with light paths' splats whole: they are not told apart), ended jobs (and sequences
+  // whose frames left memory) are flagged. Archived jobs (archive.h) are flagged in their rows, through fx.flags; an
+  // enrolled worker's credential is quarantined through fx.credentials_quarantined.
   void quarantine(uint64_t worker, const std::string& why, double now, Effects& fx);
   // What an ended job is flagged with when `tiles` of its tiles (a sequence's finished
   // frames': `frames`) hold results of `worker`, quarantined after it ended.

@@ -61,9 +61,6 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
       throw WireError("active mask size");
     if (h->rect.area() <= 0) throw WireError("empty tile");
     h->prepared = scenes_.prepare(h->task);
-    // Coordinators refuse such jobs; one that sends them anyway gets the task back.
-    if (h->prepared->renderer->light_tracing())
-      throw WireError("--light-tracer: light paths' splats do not travel through the farm yet");
     h->passes = task_passes(h->task, h->prepared->renderer->settings());
     h->base = task_base(h->task, h->rect, h->prepared->renderer->settings().sum_planes());
   } catch (const std::exception& e) {
@@ -75,6 +72,7 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
   if (!h->task.active().empty()) h->mask = reinterpret_cast<const uint8_t*>(h->task.active().data());
   h->sums.resize(size_t(h->rect.area()) * h->prepared->renderer->settings().sum_planes());
   if (h->prepared->renderer->settings().aovs) h->aovs.resize(size_t(h->rect.area()));
+  if (h->prepared->renderer->light_tracing()) h->splats.resize(h->passes.size());
   queue_.add(std::move(h));
 }
 

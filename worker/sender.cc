@@ -39,6 +39,10 @@ v1::ResultBatch Sender::encode(const TaskQueue::Batch& batch, double now) const 
       r->set_sums_zstd(encode_sums(h->sums));
     }
     if (!h->aovs.empty()) r->set_aovs_zstd(encode_aovs(h->aovs));
+    if (!h->splats.empty()) {  // finished: no row adds to them any more
+      for (SplatRecord& pass : h->splats) pass.normalize();
+      r->set_splats_zstd(encode_splats(h->splats));
+    }
     r->set_samples(h->stats.samples);
     r->set_rays(h->stats.rays.rays + h->stats.rays.shadow_rays);
     r->set_nan_samples(h->stats.nan_samples);

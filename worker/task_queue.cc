@@ -104,7 +104,7 @@ std::optional<TaskQueue::Row> TaskQueue::next_row() {
 }
 
 void TaskQueue::row_done(const Row& r, const std::vector<PixelSums>& sums, const TileStats& stats, double t0, double t1,
-                         const std::vector<AovSums>* aovs) {
+                         const std::vector<AovSums>* aovs, const std::vector<SplatRecord>* splats) {
   std::lock_guard<std::mutex> lock(mu_);
   Held& h = *r.task;
   busy_thread_seconds_ += t1 - t0;
@@ -115,6 +115,8 @@ void TaskQueue::row_done(const Row& r, const std::vector<PixelSums>& sums, const
   for (size_t plane = 0; plane < sums.size() / w; ++plane)
     std::copy_n(sums.begin() + ptrdiff_t(plane * w), w, h.sums.begin() + ptrdiff_t(plane * area + size_t(r.row) * w));
   if (aovs && !h.aovs.empty()) std::copy(aovs->begin(), aovs->end(), h.aovs.begin() + ptrdiff_t(r.row) * h.rect.w);
+  if (splats && splats->size() == h.splats.size())
+    for (size_t pass = 0; pass < splats->size(); ++pass) h.splats[pass].append((*splats)[pass]);
   h.stats.add(stats);
   if (++h.rows_done == h.rect.h && !h.cancel) {
     if (h.busy > 0) {

@@ -36,6 +36,9 @@ struct Held {
   std::vector<PixelSums> base;                        // a run's sums so far (task_base()); or empty
   std::vector<PixelSums> sums;                        // rect-sized
   std::vector<AovSums> aovs;                          // rect-sized for a job with AOVs; else empty
+  // A frame that traces light paths: the task's splats, a record per pass (its rows'
+  // entries gathered, normalized by the sender); else empty.
+  std::vector<SplatRecord> splats;
   TileStats stats;
   std::atomic<bool> cancel{false};
   double first_row = 0, last_row = 0;  // steady seconds
@@ -73,7 +76,7 @@ class TaskQueue {
   // A row's sums, rendered from t0 to t1 (steady seconds). After a task's last row, the
   // task measures the speed and goes to the sender (unless it was cancelled).
   void row_done(const Row& row, const std::vector<PixelSums>& sums, const TileStats& stats, double t0, double t1,
-                const std::vector<AovSums>* aovs = nullptr);
+                const std::vector<AovSums>* aovs = nullptr, const std::vector<SplatRecord>* splats = nullptr);
 
   // The sender's side.
   struct Batch {

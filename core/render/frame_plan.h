@@ -27,6 +27,7 @@
 #include "core/render/aov.h"
 #include "core/render/film.h"
 #include "core/render/settings.h"
+#include "core/render/splats.h"
 
 namespace tessera {
 
@@ -72,6 +73,10 @@ struct BandCopy {
   uint64_t samples = 0;                // the pixels' samples (n) together
   std::vector<AovSums> aovs;           // rows x width; empty unless the settings ask for AOVs
   std::vector<PixelSums> odd;          // rows x width: the film's second plane; empty without half-buffers
+  // A frame with light paths' splats (server/frame_splats.h): the rows' splat sums (each
+  // plane's) and what a unit of them adds to a mean (SplatFilm::scale); empty otherwise.
+  std::vector<SplatSums> splats, odd_splats;
+  double splat_scale = 0, odd_splat_scale = 0;
 };
 
 // A task's sums found fit for a pass of pass_len samples a pixel (FramePlan::check): the

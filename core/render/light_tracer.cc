@@ -67,7 +67,7 @@ LightTracer::LightTracer(const Scene& scene, const Accel& accel, const LightSet&
   }
 }
 
-void LightTracer::trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, SplatFilm& splats, bool odd,
+void LightTracer::trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, SplatSink& splats, bool odd,
                         RayCounters& counters) const {
   splats.count_path(odd);
   Sampler sampler(seed ^ kLightPathSeed, pixel_id, sample);
@@ -159,7 +159,7 @@ void LightTracer::trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, Splat
 }
 
 void LightTracer::connect(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 w_prev, Vec3 ng,
-                          bool dielectric, Rgb beta, Sampler& sampler, SplatFilm& splats, bool odd,
+                          bool dielectric, Rgb beta, Sampler& sampler, SplatSink& splats, bool odd,
                           RayCounters& counters) const {
   const Vec2 u_lens = camera_.is_thin_lens() ? sampler.next_2d() : Vec2{};
   CameraConnection cc;

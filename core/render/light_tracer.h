@@ -72,12 +72,12 @@ class LightTracer {
   const std::vector<uint8_t>& traced_lights() const { return traced_; }
   // The light path of camera sample `sample` of image pixel `pixel_id`: its splats into
   // `splats` (with `odd`, its odd plane too). Thread-safe.
-  void trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, SplatFilm& splats, bool odd,
+  void trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, SplatSink& splats, bool odd,
              RayCounters& counters) const;
 
  private:
   void connect(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 w_prev, Vec3 ng,
-               bool dielectric, Rgb beta, Sampler& sampler, SplatFilm& splats, bool odd, RayCounters& counters) const;
+               bool dielectric, Rgb beta, Sampler& sampler, SplatSink& splats, bool odd, RayCounters& counters) const;
 
   const Scene& scene_;
   const Accel& accel_;

@@ -34,21 +34,78 @@ struct SplatSums {
   double lum_sq() const { return double(lum2) / kLum2Unit; }
 };
 
-class SplatFilm {
+// Where a light path's splats go: the frame's SplatFilm (one process, shared by its
+// threads) or a task's SplatList (a farm worker: the task's splats, sent with its sums).
+class SplatSink {
  public:
   static constexpr float kMaxSplatValue = float(1 << 20);
+  virtual ~SplatSink() = default;
+  // Adds a splat to image pixel (x, y) (row 0 at the top), and to the odd plane too when
+  // `odd`; outside the frame's window it is not seen. False when the value was dropped.
+  virtual bool add(int x, int y, Rgb value, bool odd) = 0;
+  // One light path traced (whether or not it splatted), for the plane(s) it belongs to.
+  virtual void count_path(bool odd) = 0;
+};
 
+// A splat's value in fixed-point units (r, g, b, squared luminance); false (nothing set)
+// when it is dropped: not finite, negative, or a channel over kMaxSplatValue.
+bool splat_units(Rgb value, int64_t out[4]);
+
+// One pass of a task's splats, sparse: per pixel they landed on, their sums. `index` is
+// plane x window area + the pixel's row-major index in the frame's window (plane 1: the odd
+// samples' light paths, with half-buffers). Entries ascend by index, one per index.
+struct SplatEntry {
+  uint32_t index = 0;
+  int64_t v[4] = {0, 0, 0, 0};  // r, g, b (2^-24 units), squared luminance (2^-12)
+};
+struct SplatRecord {
+  uint64_t paths = 0, odd_paths = 0;  // light paths traced: all, and the odd plane's
+  std::vector<SplatEntry> entries;
+  // Takes in another record's paths and entries (sorted and merged by normalize()).
+  void append(const SplatRecord& other);
+  // Sorts the entries and adds those of one index together (saturating).
+  void normalize();
+  bool operator==(const SplatRecord& o) const;
+};
+
+// A task's splats as they are traced, for one pass: not thread-safe (one per row render).
+class SplatList final : public SplatSink {
+ public:
+  SplatList(Rect window, bool halves) : window_(window), halves_(halves) {}
+  bool add(int x, int y, Rgb value, bool odd) override;
+  void count_path(bool odd) override;
+  // The record, normalized; the list is empty afterwards.
+  SplatRecord take();
+
+ private:
+  Rect window_;
+  bool halves_;
+  SplatRecord record_;
+};
+
+class SplatFilm final : public SplatSink {
+ public:
   // A frame's splats: `window` the pixels rendered (image coordinates), `image_pixels` the
   // camera film's width x height (the estimate's scale), with a second plane for halves.
   SplatFilm(Rect window, int64_t image_pixels, bool halves);
   const Rect& window() const { return window_; }
   bool halves() const { return halves_; }
 
-  // Adds a splat to image pixel (x, y) (row 0 at the top), and to the odd plane too when
-  // `odd`; outside the window it is not seen. Thread-safe. False when the value was dropped.
-  bool add(int x, int y, Rgb value, bool odd);
-  // One light path traced (whether or not it splatted), for the plane(s) it belongs to.
-  void count_path(bool odd);
+  // SplatSink's, thread-safe.
+  bool add(int x, int y, Rgb value, bool odd) override;
+  void count_path(bool odd) override;
+  // A task's record (its entries' indices within this film's planes: checked by the
+  // caller) and its paths. Thread-safe.
+  void add_record(const SplatRecord& record);
+  // Every sum and count back to zero. Not while others add.
+  void clear();
+  // Sets counts and the sums of rows [y0, y0 + rows) of a plane (a checkpoint read back).
+  void set_paths(uint64_t paths, uint64_t odd_paths);
+  void set_rows(int y0, int rows, bool odd, const SplatSums* sums);
+  // Copies rows [y0, y0 + rows) of a plane (window rows) into `out`.
+  void copy_rows(int y0, int rows, bool odd, std::vector<SplatSums>* out) const;
+  // What a pixel's mean gains per unit of splat sum: image pixels / light paths (0 without).
+  double scale(bool odd) const;
   uint64_t paths() const { return paths_[0].load(); }
   uint64_t odd_paths() const { return paths_[1].load(); }
   uint64_t dropped() const { return dropped_.load(); }
@@ -61,6 +118,8 @@ class SplatFilm {
   // independent: a light path's splats on one pixel are rare). A pixel without samples
   // keeps nothing. The film must cover this window.
   Film fold_into(const Film& film) const;
+  // fold_into()'s step for n pixels and their splat sums, `scale` from scale().
+  static void fold(PixelSums* pixels, const SplatSums* splats, size_t n, double scale);
 
  private:
   void add_to(size_t index, const int64_t v[4]);

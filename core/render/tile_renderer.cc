@@ -1,6 +1,7 @@
 #include "core/render/tile_renderer.h"
 
 #include <filesystem>
+#include <stdexcept>
 
 #include "core/light/environment.h"
 #include "core/render/frame_plan.h"
@@ -130,9 +131,8 @@ std::unique_ptr<SplatFilm> TileRenderer::make_splat_film() const {
 
 std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,
                                             TileStats* stats, const std::atomic<bool>* cancel,
-                                            std::vector<AovSums>* aovs, SplatFilm* splats) const {
-  if (light_tracer_ && !splats)
-    throw SettingsError("--light-tracer", "light paths need a splat film: farm tasks do not carry them yet");
+                                            std::vector<AovSums>* aovs, SplatSink* splats) const {
+  if (light_tracer_ && !splats) throw std::logic_error("TileRenderer::render: light tracing without a splat sink");
   const size_t area = size_t(rect.area());
   const bool halves = settings_.halves();
   std::vector<PixelSums> out(area * settings_.sum_planes());
@@ -195,14 +195,26 @@ std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint3
 std::vector<PixelSums> TileRenderer::render_passes(const Rect& rect,
                                                    const std::vector<std::pair<uint32_t, uint32_t>>& passes,
                                                    const PixelSums* base, const uint8_t* active, TileStats* stats,
-                                                   const std::atomic<bool>* cancel, std::vector<AovSums>* aovs) const {
-  if (passes.size() == 1 && !base) return render(rect, passes[0].first, passes[0].second, active, stats, cancel, aovs);
+                                                   const std::atomic<bool>* cancel, std::vector<AovSums>* aovs,
+                                                   std::vector<SplatRecord>* splats) const {
+  if (light_tracer_ && !splats) throw std::logic_error("TileRenderer::render_passes: light tracing without splats");
+  if (splats) splats->clear();
+  std::optional<SplatList> list;
+  if (light_tracer_) list.emplace(settings_.effective_window(), settings_.halves());
+  if (passes.size() == 1 && !base) {
+    std::vector<PixelSums> sums =
+        render(rect, passes[0].first, passes[0].second, active, stats, cancel, aovs, list ? &*list : nullptr);
+    if (list) splats->push_back(list->take());
+    return sums;
+  }
   std::vector<PixelSums> sums(size_t(rect.area()) * settings_.sum_planes());
   if (base) std::copy_n(base, sums.size(), sums.begin());
   if (aovs) aovs->assign(size_t(rect.area()), AovSums{});
   std::vector<AovSums> pass_aovs;
   for (const auto& [s0, s1] : passes) {
-    const std::vector<PixelSums> pass = render(rect, s0, s1, active, stats, cancel, aovs ? &pass_aovs : nullptr);
+    const std::vector<PixelSums> pass =
+        render(rect, s0, s1, active, stats, cancel, aovs ? &pass_aovs : nullptr, list ? &*list : nullptr);
+    if (list) splats->push_back(list->take());
     for (size_t i = 0; i < sums.size(); ++i) sums[i].add(pass[i]);  // Film::add_tile's order
     if (aovs)
       for (size_t i = 0; i < aovs->size(); ++i) (*aovs)[i].add(pass_aovs[i]);

@@ -53,19 +53,21 @@ class TileRenderer {
   // becomes true the render stops between rows and the result must be discarded. With
   // `aovs` (settings().aovs set), the same samples' AOV sums too, rect-sized (aov.h).
   // With light tracing (light_tracing()), each camera sample's light path too, its splats
-  // added to `splats` (which must then be given: SettingsError otherwise).
+  // added to `splats` (which must then be given: std::logic_error otherwise).
   std::vector<PixelSums> render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active, TileStats* stats,
                                 const std::atomic<bool>* cancel = nullptr, std::vector<AovSums>* aovs = nullptr,
-                                SplatFilm* splats = nullptr) const;
+                                SplatSink* splats = nullptr) const;
   // A run of passes (consecutive sample ranges, in pass order), each rendered on its own
   // and added in pass order to `base` (as render() returns; null: zero), as a film adds them: from
   // a tile's sums so far, the film's bits after those passes (FramePlan::take with more
   // than one pass). One range and no base is render()'s result. `aovs`: the passes' AOV
-  // sums together (no base: integer sums add in any grouping).
+  // sums together (no base: integer sums add in any grouping). With light tracing, `splats`
+  // (which must then be given) receives one record per pass (a farm task's: the frame's
+  // splat film is the coordinator's); without, it is left empty.
   std::vector<PixelSums> render_passes(const Rect& rect, const std::vector<std::pair<uint32_t, uint32_t>>& passes,
                                        const PixelSums* base, const uint8_t* active, TileStats* stats,
-                                       const std::atomic<bool>* cancel = nullptr,
-                                       std::vector<AovSums>* aovs = nullptr) const;
+                                       const std::atomic<bool>* cancel = nullptr, std::vector<AovSums>* aovs = nullptr,
+                                       std::vector<SplatRecord>* splats = nullptr) const;
 
   // Throws SettingsError when `settings` ask the scene for what it has not: an animation
   // (--animation) it does not have, an environment map (--env) that cannot be read beside

@@ -77,6 +77,24 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
   for (size_t i = 0; i < aovs.size(); ++i) aovs[i].add_sample(hit, uint32_t(i));
   std::ofstream(fs::path(seeds) / "aovs16", std::ios::binary)
       << char(2) << char(16) << char(0) << tessera::encode_aovs(aovs);
+  // Splat records (a task's, wire.h) and a checkpoint with splats (version 4).
+  std::vector<tessera::SplatRecord> records(2);
+  records[0].paths = 12;
+  records[0].odd_paths = 5;
+  records[0].entries = {{0, {1, 2, 3, 4}}, {9, {1 << 20, 0, 7, 1 << 10}}, {20, {5, 5, 5, 5}}};
+  records[1].paths = 3;
+  records[1].entries = {{15, {0, 1, 0, 0}}};
+  std::ofstream(fs::path(seeds) / "splats", std::ios::binary)
+      << char(6) << char(2) << char(16) << tessera::encode_splats(records);
+  tessera::FramePlan splat_plan(checkpoint_settings());
+  tessera::FrameSplats splats(checkpoint_settings(), uint32_t(splat_plan.tiles().size()));
+  for (int k = 0; k < 5; ++k) {
+    const tessera::TileTask t = *splat_plan.take();
+    splat_plan.merge(t.tile, t.pass, tile(size_t(t.rect.area())));
+    splats.add(t.tile, t.pass, {records[1]});
+  }
+  std::ofstream(fs::path(seeds) / "checkpoint4splats", std::ios::binary)
+      << char(1) << tessera::encode_checkpoint(splat_plan, 2.5, &splats);
   std::exit(0);
 }
 
@@ -85,6 +103,26 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (data[0] % 2 == 0) {  // tile sums: two bytes of pixel count, then the payload
     if (size < 3) return 0;
     const size_t pixels = size_t(data[1]) | size_t(data[2]) << 8;
+    if (data[0] % 8 == 6) {  // splat records: data[1] % 4 of them, for a frame of data[2] + 1 pixels
+      tessera::SplatLimits l;
+      l.records = data[1] % 4;
+      l.area = uint64_t(data[2]) + 1;
+      l.planes = 2;
+      l.max_paths = 1000;
+      l.max_splats_per_path = 8;
+      try {
+        const auto records = tessera::decode_splats(std::string(reinterpret_cast<const char*>(data) + 3, size - 3), l);
+        if (records.size() != l.records) __builtin_trap();
+        tessera::SplatFilm film(tessera::Rect{0, 0, int(l.area), 1}, 64, true);
+        for (const tessera::SplatRecord& r : records) film.add_record(r);  // indices within its planes
+        tessera::Film f(film.window(), true);
+        for (int x = 0; x < film.window().w; ++x) f.at(x, 0) = f.odd_at(x, 0) = {1, 1, 1, 1, 1};
+        for (const tessera::PixelSums& p : film.fold_into(f).pixels())
+          if (!std::isfinite(p.r) || !std::isfinite(p.lum2)) __builtin_trap();
+      } catch (const tessera::WireError&) {
+      }
+      return 0;
+    }
     if (data[0] % 4 == 2) {  // AOV sums
       try {
         const auto aovs =
@@ -118,7 +156,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         tessera::RenderSettings s = checkpoint_settings();
         s.aovs = aov_bits;
         tessera::FramePlan plan(s);
-        tessera::read_checkpoint(bytes, plan);
+        tessera::FrameSplats splats(s, uint32_t(plan.tiles().size()));
+        tessera::read_checkpoint(bytes, plan, true, &splats);
         uint64_t n = 0;
         for (const tessera::PixelSums& p : plan.film().pixels()) n += p.n;
         if (n != plan.samples_merged()) __builtin_trap();

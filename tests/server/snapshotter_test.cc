@@ -11,7 +11,9 @@
 namespace tessera {
 namespace {
 
+using testing::kTiles;
 using testing::merge_passes;
+using testing::plausible_sums;
 using R = SnapshotOutcome::Result;
 
 class SnapshotterTest : public testing::PartsTest {
@@ -319,6 +321,90 @@ TEST_F(SnapshotWriterTest, ALiveJobsImageIsCurrentOnceAnyIsWrittenAnEndedJobsOnl
   EXPECT_FALSE(Snapshotter::image_current(*job, false, merges));  // not the whole film
   write(true, false);
   EXPECT_TRUE(Snapshotter::image_current(*job, false, merges));
+}
+
+// ---- splats (frame_splats.h) ----
+
+// A made-up record for (tile, pass): its own pixel, and one every record shares.
+SplatRecord splat_record(uint32_t tile, uint32_t pass) {
+  SplatRecord r;
+  r.paths = 10 + tile;
+  r.entries.push_back({5, {1, 1, 1, 1}});
+  r.entries.push_back({uint32_t(100 + tile * 7 + pass * 3), {int64_t(tile) + 1, int64_t(pass) + 1, 3, 4}});
+  return r;
+}
+void merge_with_splats(Job& j, uint32_t tile, uint32_t pass) {
+  ASSERT_EQ(j.plan.merge(tile, pass, plausible_sums(j.plan, tile, pass)), FramePlan::Merge::kMerged);
+  j.splats.add(tile, pass, {splat_record(tile, pass)});
+}
+std::vector<SplatSums> all_splats(const FrameSplats& s, const Rect& w) {
+  std::vector<SplatSums> out;
+  if (s.film()) s.film()->copy_rows(0, w.h, false, &out);
+  return out;
+}
+bool same(const std::vector<SplatSums>& a, const std::vector<SplatSums>& b) {
+  return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](const SplatSums& x, const SplatSums& y) {
+           return std::equal(x.rgb, x.rgb + 3, y.rgb) && x.lum2 == y.lum2;
+         });
+}
+
+// The checkpoint's splats are frozen after its bands: a tile merged after its band was
+// copied has its splats in the checkpoint past its film's progress (its frontier), and
+// those merged while the splats are written wait for the thaw. Restored, the tile's passes
+// rendered again bring records the frontier holds already: not added twice, so the frame's
+// splats end as if the coordinator had never stopped.
+TEST_F(SnapshotWriterTest, ACheckpointsSplatsAreNeverBehindItsBandsAndRestoreWithoutDoubles) {
+  for (uint32_t t = 0; t < kTiles; ++t) merge_with_splats(*job, t, 0);
+  snapshotter.request(*job, true, true);
+  const SnapshotPlan p = snapshotter.next(*job, now);
+  int steps = 0;
+  const SnapshotOutcome out = writer.write(
+      *job, p,
+      [&](uint32_t band, BandCopy* copy) {
+        job->plan.copy_band(band, copy);
+        job->splats.copy_band(copy);
+        if (band == 0) merge_with_splats(*job, 0, 1);  // after its band was copied
+        return true;
+      },
+      [&](const std::function<void()>& step) {
+        step();
+        if (++steps == 2) {  // frozen, the first splat band copied: tile 1's pass 1 waits
+          ASSERT_TRUE(job->splats.frozen());
+          merge_with_splats(*job, 1, 1);
+        }
+      });
+  EXPECT_EQ(out.checkpoint, R::kWritten);
+  EXPECT_FALSE(job->splats.frozen());  // thawed, the waiting record added
+  const Rect w = job->plan.settings().effective_window();
+  // The image holds the splats folded in (the bands' scale: 9 paths' worth each pixel).
+  const Film image = sink.film(job->id());
+  EXPECT_NE(image.at(5, 0).r, job->plan.film().at(5, 0).r);
+
+  Job restored(job->meta, job->plan.settings());
+  ASSERT_TRUE(store.read_checkpoint(job->id(), restored.plan, true, &restored.splats));
+  EXPECT_EQ(restored.plan.progress(0).passes_done, 1u);  // band 0 was copied before its pass 1
+  EXPECT_EQ(restored.splats.frontier(0), 2u);            // its splats were not
+  EXPECT_EQ(restored.splats.frontier(1), 1u);            // frozen before tile 1's pass 1
+  merge_with_splats(restored, 0, 1);                     // rendered again: its splats are in already
+  merge_with_splats(restored, 1, 1);
+  EXPECT_TRUE(same(all_splats(restored.splats, w), all_splats(job->splats, w)));
+  EXPECT_EQ(restored.splats.film()->paths(), job->splats.film()->paths());
+  EXPECT_EQ(job->splats.film()->paths(), 9u * 10 + 36 + 10 + 11);
+}
+
+// Results taken back from the film during a write (a liar found: Job::resets) make its
+// checkpoint one not to keep: it fails, and is written again.
+TEST_F(SnapshotWriterTest, ACheckpointWrittenAcrossAResetIsNotKept) {
+  for (uint32_t t = 0; t < kTiles; ++t) merge_with_splats(*job, t, 0);
+  snapshotter.request(*job, false, true);
+  const SnapshotPlan p = snapshotter.next(*job, now);
+  const SnapshotOutcome out = writer.write(*job, p, copier(*job), [&](const std::function<void()>& step) {
+    ++job->resets;
+    step();
+  });
+  EXPECT_EQ(out.checkpoint, R::kFailed);
+  EXPECT_NE(out.checkpoint_why.find("taken back"), std::string::npos) << out.checkpoint_why;
+  EXPECT_FALSE(job->splats.frozen());
 }
 
 TEST(WithoutDir, TheDataFolderIsNamedDataEverywhereInAMessage) {

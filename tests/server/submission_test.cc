@@ -112,16 +112,19 @@ TEST_F(SubmissionTest, SettingsTheSceneCannotHonourAreRefused) {
   EXPECT_EQ(files_kept(), 0u);
 }
 
-// Light paths' splats do not travel yet (docs/light-tracing.md): refused by name, on or auto.
-TEST_F(SubmissionTest, LightTracingIsRefusedUntilTheFarmCarriesSplats) {
-  for (const uint32_t mode : {1u, 2u}) {
+// Light paths' splats travel with tasks' results (docs/light-tracing.md): every mode is
+// admitted and kept in the job's settings.
+TEST_F(SubmissionTest, LightTracingModesAreAdmittedAndKept) {
+  for (const uint32_t mode : {0u, 1u, 2u}) {
     v1::SubmitJobRequest r = request();
     r.mutable_settings()->set_light_tracer(mode);
     EXPECT_EQ(admit(r).settings.light_tracer, RenderSettings::LightTracer(mode));  // the wire carries it
-    const std::string why = refusal([&] { prepare(r); }, Code::kInvalidArgument);
-    EXPECT_TRUE(has(why, "--light-tracer: farm jobs do not carry light paths yet")) << why;
-    EXPECT_TRUE(store.jobs().empty());
-    EXPECT_EQ(files_kept(), 0u);
+    MemoryJobStore fresh;
+    const Submission sub = prepare(r, fresh);
+    ASSERT_NE(sub.job, nullptr);
+    EXPECT_EQ(sub.job->plan.settings().light_tracer, RenderSettings::LightTracer(mode));
+    ASSERT_EQ(fresh.jobs().size(), 1u);
+    EXPECT_EQ(fresh.jobs()[0].meta.settings.light_tracer(), mode);
   }
 }
 

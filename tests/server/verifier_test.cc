@@ -195,6 +195,33 @@ TEST_F(VerifierTest, AWorkerTheRefereeDisagreesWithIsQuarantinedAndItsWorkUndone
   EXPECT_TRUE(fx.changed);
 }
 
+// A frame tracing light paths: a liar's splats landed anywhere, among everyone's, and
+// cannot be told apart, so the whole frame starts over (its splats gone, every tile's
+// passes rendered again) and a checkpoint written across the reset is not kept.
+TEST_F(VerifierTest, ALiarsFrameWithSplatsStartsOverWhole) {
+  const uint64_t t0 = lease_next(*job, a), t1 = lease_next(*job, b);
+  ASSERT_TRUE(submit(result(t0)).accepted());
+  ASSERT_TRUE(submit(result(t1)).accepted());
+  SplatRecord r;
+  r.paths = 7;
+  r.entries.push_back({3, {1, 2, 3, 4}});
+  job->splats.add(0, 0, {r});
+  job->splats.add(1, 0, {r});
+  ASSERT_EQ(job->splats.film()->paths(), 14u);
+  const uint64_t resets = job->resets;
+  fx = {};
+  verifier.quarantine(a, "its sums differ", now, fx);
+  EXPECT_EQ(job->resets, resets + 1);
+  EXPECT_EQ(job->splats.film()->paths(), 0u);
+  EXPECT_EQ(job->splats.film()->at(3, 0).rgb[0], 0);
+  for (uint32_t t = 0; t < kTiles; ++t) {
+    EXPECT_EQ(job->plan.progress(t).passes_done, 0u) << t;
+    EXPECT_EQ(job->splats.frontier(t), 0u) << t;
+  }
+  EXPECT_EQ(job->plan.samples_merged(), 0u);  // the honest worker's tile too
+  EXPECT_EQ(counters.tiles_rendered_again, kTiles);
+}
+
 // BUG (server/verifier.cc, Verifier::quarantine): a sequence's frame that ended DONE with
 // a liar's tiles is flagged with a RowEnd for the frame's own id, but a frame has no row in
 // the job database (its sequence has): store->end() updates nothing, the flag is lost at

@@ -334,5 +334,97 @@ TEST(WireAovs, AovSumsRoundTripAndImplausibleOnesAreRefused) {
   EXPECT_THROW(decode_aovs("not zstd", 1, 4), WireError);
 }
 
+// ---- splats ----
+
+SplatLimits limits(size_t records) {
+  SplatLimits l;
+  l.records = records;
+  l.area = 100;
+  l.planes = 2;
+  l.max_paths = 50;
+  l.max_splats_per_path = 4;
+  return l;
+}
+
+TEST(WireSplats, RecordsRoundTripBitForBit) {
+  std::vector<SplatRecord> records(3);  // the middle pass traced nothing
+  records[0].paths = 20;
+  records[0].odd_paths = 9;
+  records[0].entries = {{0, {1, 2, 3, 4}}, {7, {int64_t(1) << 40, 0, 5, int64_t(1) << 50}}, {150, {9, 9, 9, 9}}};
+  records[2].paths = 1;
+  records[2].entries = {{99, {0, 0, 1, 0}}};
+  EXPECT_EQ(decode_splats(encode_splats(records), limits(3)), records);
+}
+
+TEST(WireSplats, WhatNoTaskCouldSendIsRefusedNamingWhy) {
+  auto refused = [](std::vector<SplatRecord> records, const SplatLimits& l, const std::string& why) {
+    try {
+      decode_splats(encode_splats(records), l);
+      ADD_FAILURE() << "accepted; expected " << why;
+    } catch (const WireError& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  };
+  SplatRecord ok;
+  ok.paths = 10;
+  ok.entries = {{1, {1, 1, 1, 1}}};
+  refused({ok}, limits(2), "not one record per pass");
+  SplatRecord r = ok;
+  r.paths = 51;
+  refused({r}, limits(1), "more light paths");
+  r = ok;
+  r.odd_paths = 11;
+  refused({r}, limits(1), "more light paths");
+  SplatLimits one_plane = limits(1);
+  one_plane.planes = 1;
+  r = ok;
+  r.odd_paths = 1;
+  refused({r}, one_plane, "more light paths");
+  r = ok;
+  r.entries = {{2, {1, 1, 1, 1}}, {2, {1, 1, 1, 1}}};
+  refused({r}, limits(1), "out of order");
+  r.entries = {{200, {1, 1, 1, 1}}};  // past both planes
+  refused({r}, limits(1), "out of order");
+  r.entries = {{2, {-1, 1, 1, 1}}};
+  refused({r}, limits(1), "no light path could give");
+  r.entries = {{2, {int64_t(41) << 44, 1, 1, 1}}};  // 10 paths x 4 splats of at most 2^20
+  refused({r}, limits(1), "no light path could give");
+  r.entries = {{120, {1, 1, 1, 1}}};  // on the odd plane, with no odd paths
+  refused({r}, limits(1), "no light path could give");
+  // More bytes than such a task's records could fill, declared: refused before allocating.
+  SplatLimits tiny = limits(1);
+  tiny.max_paths = 1;
+  tiny.max_splats_per_path = 1;
+  std::vector<SplatRecord> big(1);
+  big[0].paths = 1;
+  for (uint32_t i = 0; i < 3; ++i) big[0].entries.push_back({i, {1, 1, 1, 1}});
+  refused(big, tiny, "bytes declared");
+  EXPECT_THROW(decode_splats("not zstd", limits(1)), WireError);
+}
+
+// A task's splat list: splats outside the frame's window are not seen, odd samples' light
+// paths go to the second plane too, and entries come out sorted, one per index.
+TEST(WireSplats, AListGathersATasksSplatsAsTheFrameWouldSeeThem) {
+  SplatList list(Rect{10, 20, 4, 3}, true);
+  EXPECT_TRUE(list.add(11, 21, Rgb(1, 1, 1), false));
+  EXPECT_TRUE(list.add(10, 20, Rgb(0.5f, 0, 0), true));
+  EXPECT_TRUE(list.add(11, 21, Rgb(1, 1, 1), false));
+  EXPECT_TRUE(list.add(9, 20, Rgb(1, 1, 1), false));                // outside: not seen
+  EXPECT_FALSE(list.add(10, 20, Rgb(2e6f, 0, 0), false));           // over kMaxSplatValue: dropped
+  EXPECT_FALSE(list.add(10, 20, Rgb(std::nanf(""), 0, 0), false));  // not finite: dropped
+  list.count_path(true);
+  list.count_path(false);
+  const SplatRecord r = list.take();
+  EXPECT_EQ(r.paths, 2u);
+  EXPECT_EQ(r.odd_paths, 1u);
+  ASSERT_EQ(r.entries.size(), 3u);
+  EXPECT_EQ(r.entries[0].index, 0u);
+  EXPECT_EQ(r.entries[0].v[0], int64_t(1) << 23);
+  EXPECT_EQ(r.entries[1].index, 5u);               // (1, 1) in the window
+  EXPECT_EQ(r.entries[1].v[1], int64_t(2) << 24);  // two splats of 1
+  EXPECT_EQ(r.entries[2].index, 12u);              // (0, 0) on the odd plane
+  EXPECT_EQ(list.take().entries.size(), 0u);       // taken
+}
+
 }  // namespace
 }  // namespace tessera

@@ -1,0 +1,79 @@
+// Light paths through the farm (issue 28): a task's light paths land anywhere in the frame;
+// their splats travel with its sums as fixed-point records and the coordinator adds them to
+// the frame's splat film, so the farm's EXR is tessera render's bit for bit at every split
+// (runs of passes, half-buffers), and a coordinator killed mid-job keeps them (its
+// checkpoints freeze the splats after the bands: frame_splats.h).
+#include "tests/integration/farm_fixture.h"
+
+namespace tessera {
+namespace {
+
+const std::string kSplatFlags = kFlags + " --light-tracer on";
+
+TEST_F(Farm, SplatsMakeTheLocalImageAtEverySplit) {
+  const std::string local = local_render(kSplatFlags);
+  start_coordinator();
+  start_worker();
+  start_worker(2, {"--passes-per-task", "3"});  // runs of passes: a record per pass
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r = submit_wait(kScene, kSplatFlags, out);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+  // And the light paths made a difference: the same frame without them is another image.
+  const std::string off = (dir / "off.exr").string();
+  ASSERT_EQ(run("render " + kScene + " " + kFlags + " --light-tracer off -q -f " + off, dir).code, 0);
+  const ExrImage a = read_exr(local), b = read_exr(off);
+  EXPECT_NE(a.channels.at("R"), b.channels.at("R"));
+}
+
+TEST_F(Farm, AutoChoosesAsTesseraRenderDoesAndHalvesGetTheirOwnLightPaths) {
+  const std::string flags = kFlags + " --light-tracer auto --aov halves";
+  const std::string local = local_render(flags);
+  start_coordinator();
+  start_worker(2);
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r = submit_wait(kScene, flags, out);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+}
+
+TEST_F(Farm, SplatsSurviveACoordinatorKilledMidJob) {
+  const std::string flags = "-r 96 72 -s 512 --pass-spp 8 -m 6 --seed 5 --light-tracer on --aov halves";
+  const std::string local = local_render(flags);
+  const std::vector<std::string> crashy{"--checkpoint-seconds", "0.2"};
+  start_coordinator("127.0.0.1:0", "2", crashy);
+  const std::string addr = grpc_addr;
+  const std::string out = (dir / "farm.exr").string();
+  std::vector<std::string> args{"submit", kScene};
+  std::istringstream words(flags);
+  for (std::string w; words >> w;) args.push_back(w);
+  for (const std::string& w : {"--coordinator", addr.c_str(), "--wait", "-q", "-f", out.c_str()}) args.push_back(w);
+  Process client(kBin + "/tessera", args, (dir / "client.err").string());
+  start_worker();
+  start_worker(1, {"--passes-per-task", "4"});
+  // Twice: once some of it is merged and checkpointed, killed and started again on its folder.
+  for (int round = 0; round < 2; ++round) {
+    bool merged = false;
+    for (int i = 0; i < 2000 && !merged; ++i) {
+      const nlohmann::json s = get_json("/api/status");
+      merged = s != nullptr && !s["jobs"].empty() &&
+               std::stoull(s["jobs"][0]["samples_done"].get<std::string>()) > uint64_t(round) * 100000;
+      if (!merged) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    ASSERT_TRUE(merged);
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));  // a checkpoint or two
+    coordinator->signal(SIGKILL);
+    ASSERT_EQ(coordinator->wait(10), -SIGKILL);
+    start_coordinator(addr, "2", crashy);
+    ASSERT_EQ(grpc_addr, addr);
+    const nlohmann::json s = get_json("/api/status");  // it went on from its checkpoint
+    ASSERT_NE(s, nullptr);
+    ASSERT_FALSE(s["jobs"].empty());
+    EXPECT_GT(std::stoull(s["jobs"][0]["samples_done"].get<std::string>()), 0u);
+  }
+  ASSERT_EQ(client.wait(180), 0) << slurp((dir / "client.err").string());
+  expect_same_pixels(local, out);
+}
+
+}  // namespace
+}  // namespace tessera
