@@ -6,8 +6,9 @@ and through a local farm (a coordinator on 127.0.0.1 and W workers of T threads,
 for every split of the cores, each farm run beside a local run, REPEAT times. Prints per
 split the median seconds of the whole commands, the median of the farm/local ratios of
 those pairs, the workers' render-thread utilization during
-the job (busy thread-seconds over threads x the job's elapsed time), and whether the farm
-image equals the local one bit for bit. Exits non-zero if an image differs.
+the job (busy thread-seconds over threads x the job's elapsed time), the results' bytes a
+job (compressed sums, and the light paths' splat records: tessera_result_bytes_total and
+tessera_splat_bytes_total), and whether the farm image equals the local one bit for bit. Exits non-zero if an image differs.
 
 Usage: bench/farm_scale.py [--bin DIR] [--scene FILE] [--cores N] [--splits 1x2,2x1]
                            [--repeat R] [--json FILE] [--markdown] [-- RENDER FLAGS...]
@@ -71,6 +72,12 @@ class Farm:
     def status(self):
         with urllib.request.urlopen(f"http://{self.http}/api/status", timeout=10) as r:
             return json.load(r)
+
+    def counter(self, name):
+        """A counter of the coordinator's /metrics (0 when absent)."""
+        with urllib.request.urlopen(f"http://{self.http}/metrics", timeout=10) as r:
+            m = re.search(r"^" + name + r" (\S+)$", r.read().decode(), re.M)
+            return float(m.group(1)) if m else 0.0
 
     def stop(self):
         for p in reversed(self.procs):
@@ -169,30 +176,34 @@ def main():
                     ratios.append(s / local[-1])
                     utils.append(busy / (threads * job["elapsed_seconds"]) if job["elapsed_seconds"] > 0 else 0)
                     same = same and same_images(out, local_exr)
+                sums_bytes = farm.counter("tessera_result_bytes_total") / a.repeat
+                splat_bytes = farm.counter("tessera_splat_bytes_total") / a.repeat
             finally:
                 farm.stop()
             rows.append({"workers": w, "threads": t, "seconds": statistics.median(secs),
                          "farm_over_local": statistics.median(ratios), "utilization": statistics.median(utils),
-                         "identical": same})
+                         "sums_bytes": sums_bytes, "splat_bytes": splat_bytes, "identical": same})
         local_s = statistics.median(local)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
     title = f"{os.path.basename(a.scene)} {' '.join(flags)}, {a.cores} cores, median of {a.repeat}"
     if a.markdown:
-        print(f"{title}\n\n| run | seconds | farm/local | utilization | image |\n|---|---|---|---|---|")
-        print(f"| `tessera render -t {a.cores}` | {local_s:.2f} | 1.000 | | reference |")
+        print(f"{title}\n\n| run | seconds | farm/local | utilization | sums, splats a job (MB) | image |\n"
+              "|---|---|---|---|---|---|")
+        print(f"| `tessera render -t {a.cores}` | {local_s:.2f} | 1.000 | | | reference |")
         for r in rows:
             print(f"| farm, {r['workers']} x {r['threads']} | {r['seconds']:.2f} | {r['farm_over_local']:.3f} | "
-                  f"{100 * r['utilization']:.1f}% | {'identical' if r['identical'] else 'DIFFERS'} |")
+                  f"{100 * r['utilization']:.1f}% | {r['sums_bytes'] / 1e6:.2f}, {r['splat_bytes'] / 1e6:.2f} | "
+                  f"{'identical' if r['identical'] else 'DIFFERS'} |")
     else:
         print(title)
-        print(f"{'run':<24}{'seconds':>9}{'farm/local':>12}{'util':>8}  image")
-        print(f"{'local -t ' + str(a.cores):<24}{local_s:>9.2f}{1:>12.3f}{'':>8}  reference")
+        print(f"{'run':<24}{'seconds':>9}{'farm/local':>12}{'util':>8}{'sums MB':>9}{'splats MB':>10}  image")
+        print(f"{'local -t ' + str(a.cores):<24}{local_s:>9.2f}{1:>12.3f}{'':>8}{'':>9}{'':>10}  reference")
         for r in rows:
             print(f"{'farm ' + str(r['workers']) + ' x ' + str(r['threads']):<24}{r['seconds']:>9.2f}"
-                  f"{r['farm_over_local']:>12.3f}{100 * r['utilization']:>7.1f}%  "
-                  f"{'identical' if r['identical'] else 'DIFFERS'}")
+                  f"{r['farm_over_local']:>12.3f}{100 * r['utilization']:>7.1f}%{r['sums_bytes'] / 1e6:>9.2f}"
+                  f"{r['splat_bytes'] / 1e6:>10.2f}  {'identical' if r['identical'] else 'DIFFERS'}")
     if a.json:
         with open(a.json, "w") as f:
             json.dump({"scene": a.scene, "flags": flags, "cores": a.cores, "local_seconds": local_s,

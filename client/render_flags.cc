@@ -71,7 +71,7 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
                 "Denoise the final image (the noisy one is kept in the EXR as noisy.R/G/B); adds --aov denoising");
   cmd->add_option("--light-tracer", f.light_tracer,
                   "Light paths for caustics (camera -> diffuse -> mirror/glass -> light): on, off, or auto (on where "
-                  "the scene has mirror or glass surfaces and a finite light); tessera render only, for now")
+                  "the scene has mirror or glass surfaces and a finite light)")
       ->capture_default_str()
       ->check(CLI::IsMember({"off", "on", "auto"}));
   cmd->add_flag("--no-nee", f.no_nee, "Benchmarking: no next-event estimation (BSDF sampling only)");

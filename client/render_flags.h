@@ -26,7 +26,7 @@ struct RenderFlags {
   bool no_default_env = false;
   double turntable = 0;              // --turntable FRAMES: one turn in this many frames
   std::string aovs;                  // --aov LIST
-  std::string light_tracer = "off";  // --light-tracer off|on|auto
+  std::string light_tracer = "auto";  // --light-tracer off|on|auto
 };
 
 void add_render_flags(CLI::App* cmd, RenderFlags& f);

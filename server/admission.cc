@@ -35,7 +35,10 @@ Admission admit(const v1::SubmitJobRequest& req) {
     }
   }
   a.pixels = live_pixels_of(a.settings);
-  a.samples = uint64_t(a.pixels) * uint64_t(a.settings.spp) * std::max<uint64_t>(1, a.frames.size());
+  // Samples are the window's pixels' (not the film's weight, which counts AOV sums, half-
+  // buffers and splats as pixels too).
+  a.samples = uint64_t(a.settings.effective_window().area()) * uint64_t(a.settings.spp) *
+              std::max<uint64_t>(1, a.frames.size());
   a.scene_bytes = bundle_bytes(req.files());  // an upload's: SceneUploads::bytes
   return a;
 }

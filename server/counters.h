@@ -16,6 +16,7 @@ struct CoordinatorCounters {
   uint64_t checks_issued = 0, checks_passed = 0, check_mismatches = 0, checks_skipped = 0, workers_quarantined = 0,
            tiles_rendered_again = 0;
   uint64_t result_bytes = 0;   // compressed sums of merged results (the bulk of the workers' traffic)
+  uint64_t splat_bytes = 0;    // compressed splat records of merged results (light paths)
   uint64_t backup_leases = 0;  // tiles leased a second time at a frame's end
   double merge_seconds = 0;
   Histogram task_seconds;  // merged results' render time, as their workers measured it

@@ -48,6 +48,9 @@ std::string prometheus_text(const Coordinator& c) {
             "Compressed sums of merged results, in bytes (over tessera_samples_merged_total: the link's bytes per "
             "sample).",
             k.result_bytes);
+  m.counter("tessera_splat_bytes_total",
+            "Compressed splat records of merged results (--light-tracer: light paths' contributions), in bytes.",
+            k.splat_bytes);
   m.counter("tessera_jobs_submitted_total", "Jobs accepted.", k.jobs_submitted);
   m.counter("tessera_jobs_refused_total", "Jobs refused at submit.", k.jobs_refused);
   m.counter("tessera_jobs_deleted_total", "Jobs deleted (tessera delete, or --keep-ended).", k.jobs_deleted);

@@ -119,8 +119,10 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
     if (lease->task)  // picked for verification: another worker renders it again
       p_.verifier.issue(job, *lease, result.worker_id(), digest, now);
     p_.counters.result_bytes += result.sums_zstd().size();
+    p_.counters.splat_bytes += result.splats_zstd().size();
     p_.counters.task_seconds.observe(result.render_seconds());
-    p_.workers.record_result(result.worker_id(), result.samples(), result.sums_zstd().size(), result.render_seconds(),
+    p_.workers.record_result(result.worker_id(), result.samples(),
+                             result.sums_zstd().size() + result.splats_zstd().size(), result.render_seconds(),
                              result.busy_thread_seconds(), result.thread_seconds(), now);
     if (!p_.lifecycle.finish_if_done(job, now, fx) && p_.snapshots.after_merge(job, now)) fx.writes.push_back(shared);
     b.acks[in.index].set_accepted(true);

@@ -60,11 +60,13 @@ void Sender::send_loop() {
     const v1::ResultBatch results = encode(batch, now_seconds());
     UploadBudget::Call call;  // results are in the batch's order
     for (size_t i = 0; i < batch.tasks.size(); ++i) {
-      const uint64_t bytes = results.results(int(i)).sums_zstd().size();
-      call.bytes += bytes;
+      // A run's sums are one tile's whatever its passes; its splats are a record a pass.
+      const uint64_t sums = results.results(int(i)).sums_zstd().size();
+      const uint64_t splats = results.results(int(i)).splats_zstd().size();
+      call.bytes += sums + splats;
       call.samples += double(batch.tasks[i]->stats.samples);
       call.busy += batch.tasks[i]->busy;
-      call.single_pass_bytes += double(bytes) * double(batch.tasks[i]->passes.size());
+      call.single_pass_bytes += double(sums) * double(batch.tasks[i]->passes.size()) + double(splats);
     }
     bool sent = false;
     for (int attempt = 0; attempt < kAttempts && !sent; ++attempt) {

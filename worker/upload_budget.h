@@ -36,7 +36,7 @@ class UploadBudget {
   // One SubmitResults call: when it began and was answered (steady seconds), the
   // coordinator's time over it, its results' compressed bytes, their samples, the thread-
   // seconds their rendering took, and those samples' bytes had they come a pass a task
-  // (bytes x passes in each result's run).
+  // (sums' bytes x passes in each result's run, plus its splats': a record a pass either way).
   struct Call {
     double start = 0, end = 0, held = 0;
     uint64_t bytes = 0;

@@ -2,8 +2,9 @@
 """Speed against error where path tracing is weakest (issue 28): Tessera without and with its
 light tracer (--light-tracer off / on) against Blender Cycles 3.4, per image region.
 
-For each scene, sample count and seed, alternately: Cycles (cs184_to_cycles.py: caustics on,
-no denoiser, no clamping, no adaptive sampling, 2 threads), Tessera with the light tracer
+For each scene, sample count and seed, alternately: Cycles (cs184_to_cycles.py for a CS184
+.dae, gltf_to_cycles.py for a .gltf or .glb: caustics on, no denoiser, no clamping, no
+adaptive sampling, 2 threads), Tessera with the light tracer
 off, and on (2 threads). Every image is measured against one converged Tessera reference
 (light tracer on, its own seed; cached by bench/error_report.py) over the whole image and
 over each region of regions.json (caustic, walls, mirror and glass spheres, floor): relMSE =
@@ -27,6 +28,19 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 import error_report as er  # noqa: E402
 from compare_cycles import cycles  # noqa: E402
+
+
+def cycles_gltf(scene, out, spp, seed, stats, size):
+    """Cycles' render of a glTF scene as Blender's importer reads it (gltf_to_cycles.py)."""
+    cmd = ["blender", "-b", "--factory-startup", "--python", os.path.join(HERE, "gltf_to_cycles.py"), "--", scene, out,
+           "--spp", str(spp), "--seed", str(seed), "--threads", "2", "--max-bounces", "16", "--width", str(size[0]),
+           "--height", str(size[1]), "--stats", stats]
+    if os.path.exists(out):
+        os.remove(out)
+    er.run(cmd)
+    if not os.path.exists(out):
+        sys.exit("error: blender wrote no image (its Python failed?); run gltf_to_cycles.py by hand to see why")
+    return json.load(open(stats))["seconds"]
 
 SHARED = os.path.join(os.path.dirname(os.path.dirname(HERE)), "..", "shared", "scenes", "cs184")
 
@@ -137,7 +151,9 @@ def main():
             for seed in range(1, a.seeds + 1):
                 runs = [] if a.no_cycles else ["cycles"]
                 for renderer in runs + ["tessera", "tessera+lt"]:
-                    if renderer == "cycles":
+                    if renderer == "cycles" and scene.endswith((".gltf", ".glb")):
+                        secs = cycles_gltf(scene, img, spp, seed, stats, size)
+                    elif renderer == "cycles":
                         secs = cycles(scene, img, spp, seed, stats)
                     else:
                         lt = "on" if renderer == "tessera+lt" else "off"

@@ -106,9 +106,10 @@ struct RenderSettings {
   // light (core/render/light_tracer.h). kAuto turns it on where the scene has a mirror or
   // glass surface and a light it can trace from (TileRenderer decides; --stats-json says).
   // Not with -a or --noise-target (they decide from a pixel's or tile's own sums, and
-  // light paths land anywhere) nor, for now, through the farm.
+  // light paths land anywhere). Through the farm, tasks' splats travel with their sums
+  // (server/frame_splats.h).
   enum class LightTracer : uint8_t { kOff, kOn, kAuto };
-  LightTracer light_tracer = LightTracer::kOff;
+  LightTracer light_tracer = LightTracer::kAuto;
   // --aov: the AOVs written beside the image (aov.h's bits; 0: none, and no work for them).
   uint32_t aovs = 0;
   // --denoise: the final image is denoised (core/denoise/), the noisy one kept beside it in

@@ -24,6 +24,7 @@ TEST(Animation, FramesArePosedAtTheirTimeAndEqualTheFrameRenderedAlone) {
   s.camera.width = 24;
   s.camera.height = 18;
   s.spp = 4;
+  s.light_tracer = RenderSettings::LightTracer::kOff;  // the path tracer's tiles (light paths: light_tracer_test)
   TileRenderer sequence(scene, s);
   const Rect all{0, 0, 24, 18};
   TileStats st;
@@ -58,6 +59,7 @@ TEST(Animation, InstancingTheStaticPartGivesTheImageOfAFullBuild) {
   s.camera.width = 32;
   s.camera.height = 24;
   s.spp = 8;
+  s.light_tracer = RenderSettings::LightTracer::kOff;  // the path tracer's tiles (light paths: light_tracer_test)
   s.frame = 30;
   const TileRenderer instanced(scene, s);
   Scene pose = pose_scene(scene, 0, s.time());

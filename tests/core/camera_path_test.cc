@@ -140,6 +140,7 @@ TEST(CameraPath, AFrameOfAPathRendersAloneAsInItsSequenceAndSharesTheBvh) {
   s.camera.width = 24;
   s.camera.height = 18;
   s.spp = 4;
+  s.light_tracer = RenderSettings::LightTracer::kOff;  // the path tracer's tiles (light paths: light_tracer_test)
   s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(
       R"({"keys": [{"frame": 1, "lens_radius": 0.05, "focal_distance": 3}, {"frame": 3, "focal_distance": 5}],
           "turntable": {"frames": 12}})"));

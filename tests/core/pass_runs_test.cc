@@ -19,6 +19,7 @@ RenderSettings small_frame() {
   s.spp = 14;
   s.pass_spp = 3;  // passes of 3, 3, 3, 3 and 2 samples
   s.max_depth = 4;
+  s.light_tracer = RenderSettings::LightTracer::kOff;  // the path tracer's tiles (light paths: light_tracer_test)
   return s;
 }
 

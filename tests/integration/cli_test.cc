@@ -92,7 +92,9 @@ TEST_F(Cli, LightTracingIsChosenAndReported) {
   const nlohmann::json adaptive = stats(" --light-tracer auto -a 2 0.05");
   EXPECT_FALSE(adaptive.at("light_tracer").get<bool>());
   EXPECT_NE(adaptive.at("light_tracer_why").get<std::string>().find("-a"), std::string::npos) << adaptive.dump();
-  const nlohmann::json off = stats("");  // the default
+  const nlohmann::json by_default = stats("");  // auto
+  EXPECT_TRUE(by_default.at("light_tracer").get<bool>()) << by_default.dump();
+  const nlohmann::json off = stats(" --light-tracer off");
   EXPECT_FALSE(off.at("light_tracer").get<bool>());
   EXPECT_EQ(off.at("light_paths").get<uint64_t>(), 0u);
   const CommandResult refused = run("render " + scene + " -s 4 -r 8 8 -q --light-tracer on -a 2 0.05");

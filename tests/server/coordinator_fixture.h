@@ -114,12 +114,15 @@ class CoordinatorTest : public ::testing::Test {
     const Rect tile = from_proto(task.tile());
     const auto* mask = task.active().empty() ? nullptr : reinterpret_cast<const uint8_t*>(task.active().data());
     TileStats stats;
-    const auto sums = r.render(tile, task.sample_begin(), task.sample_end(), mask, &stats);
+    std::vector<SplatRecord> splats;  // a frame tracing light paths: as a worker sends them
+    const auto sums = r.render_passes(tile, {{task.sample_begin(), task.sample_end()}}, nullptr, mask, &stats, nullptr,
+                                      nullptr, r.light_tracing() ? &splats : nullptr);
     v1::TaskResult res;
     res.set_worker_id(worker_id);
     res.set_task_id(task.task_id());
     res.set_raw_size(uint32_t(sums.size() * kBytesPerPixel));
     res.set_sums_zstd(encode_sums(sums));
+    if (!splats.empty()) res.set_splats_zstd(encode_splats(splats));
     res.set_samples(stats.samples);
     res.set_render_seconds(0.01);
     return res;

@@ -60,7 +60,7 @@ TEST_F(CoordinatorTest, WorkersGetTheirShareOfTheReadyWorkByThreads) {
 TEST_F(CoordinatorTest, LiveJobsPerClientAndLivePixelsAreBounded) {
   CoordinatorOptions o = options();
   o.max_jobs_per_client = 2;
-  o.max_live_pixels = 4 * 48 * 36;  // four of job_settings()'s frames
+  o.max_live_pixels = 4 * live_pixels_of(job_settings());  // four of job_settings()'s frames
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   const std::string a1 = c->submit(request(job_settings()), "alice");
   c->submit(request(job_settings()), "alice");
@@ -86,10 +86,17 @@ TEST_F(CoordinatorTest, LiveJobsPerClientAndLivePixelsAreBounded) {
 }
 
 // A frame with AOVs holds their sums beside its film (72 bytes a pixel more than the 40):
-// it weighs 2.8 frames against --max-live-pixels.
+// it weighs 2.8 frames against --max-live-pixels. One that may trace light paths (on, or
+// auto: the coordinator does not judge the scene) holds a splat film too (32 bytes a pixel
+// and plane).
 TEST_F(CoordinatorTest, AFrameWithAovsWeighsItsAovSumsAgainstTheLivePixels) {
   RenderSettings s = job_settings();
   const int64_t area = s.effective_window().area();
+  for (auto mode : {RenderSettings::LightTracer::kOn, RenderSettings::LightTracer::kAuto}) {
+    s.light_tracer = mode;
+    EXPECT_EQ(live_pixels_of(s), area + (area * 32 + 39) / 40);
+  }
+  s.light_tracer = RenderSettings::LightTracer::kOff;
   EXPECT_EQ(live_pixels_of(s), area);
   s.aovs = kAovDenoising;  // half-buffers: a second film's worth of sums
   EXPECT_EQ(live_pixels_of(s), 2 * area + (area * 72 + 39) / 40);

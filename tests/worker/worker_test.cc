@@ -118,17 +118,31 @@ TEST_F(WorkerTest, RegistersAndRendersTasksBitForBitAsTileRendererDoes) {
   EXPECT_EQ(fake->unregisters, 1);
   EXPECT_TRUE(fake->releases.empty());
 
-  // The sums are those of the local renderer, bit for bit.
+  // The sums are those of the local renderer, bit for bit, and so are the light paths'
+  // splat records (the scene has glass and mirror spheres: traced by default), gathered
+  // from the task's rows on two threads.
   const Scene scene = load_scene(kScene);
   const TileRenderer renderer(scene, settings);
+  ASSERT_TRUE(renderer.light_tracing());
   for (const v1::Task& t : tasks) {
     const v1::TaskResult* r = fake->result_for(t.task_id());
     ASSERT_NE(r, nullptr) << t.task_id();
     const Rect rect = from_proto(t.tile());
     TileStats stats;
+    std::vector<SplatRecord> splats;
     const std::vector<PixelSums> local =
-        renderer.render(rect, t.sample_begin(), t.sample_end(),
-                        t.active().empty() ? nullptr : reinterpret_cast<const uint8_t*>(t.active().data()), &stats);
+        renderer.render_passes(rect, {{t.sample_begin(), t.sample_end()}}, nullptr,
+                               t.active().empty() ? nullptr : reinterpret_cast<const uint8_t*>(t.active().data()),
+                               &stats, nullptr, nullptr, &splats);
+    SplatLimits limits;
+    limits.records = 1;
+    limits.area = uint64_t(settings.effective_window().area());
+    limits.planes = settings.sum_planes();
+    limits.max_paths = uint64_t(rect.area()) * settings.spp;
+    limits.max_splats_per_path = uint64_t(settings.max_depth);
+    ASSERT_FALSE(r->splats_zstd().empty());
+    EXPECT_EQ(decode_splats(r->splats_zstd(), limits), splats) << "task " << t.task_id();
+    EXPECT_GT(splats.at(0).paths, 0u);  // (a few tiny tasks: their paths need not land in the frame)
     EXPECT_EQ(r->worker_id(), 1u);
     EXPECT_EQ(r->raw_size(), rect.area() * kBytesPerPixel);
     EXPECT_EQ(r->samples(), stats.samples);

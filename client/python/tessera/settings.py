@@ -21,6 +21,7 @@ with the same flags, bit for bit.
     animation="", fps=24.0, pass_spp=16, tile=32, noise_target=0.0, no_nee=False, no_mis=False
     aov=None            --aov     "albedo,normal,depth,alpha,id,halves", a list of them, "all" or "denoising": EXR layers
     denoise=False       --denoise the coordinator denoises the final image (adds aov "denoising")
+    light_tracer="auto" --light-tracer  "auto", "on" or "off": light paths for caustics
 
 Unknown keywords raise TypeError naming them; values the coordinator refuses come back as
 a TesseraError carrying its message (it checks every setting, as `tessera render` does).
@@ -60,7 +61,9 @@ DEFAULTS = {
     "no_mis": False,
     "aov": None,
     "denoise": False,
+    "light_tracer": "auto",
 }
+LIGHT_TRACER = {"off": 0, "on": 1, "auto": 2}  # RenderSettings.light_tracer
 # --aov's names and their bits (core/render/aov.h).
 AOVS = {"alpha": 1, "albedo": 2, "normal": 4, "depth": 8, "id": 16, "halves": 32}
 ALL_AOVS = 1 | 2 | 4 | 8 | 16  # "all": the compositing passes
@@ -196,6 +199,9 @@ def to_proto(scene, frames=None, **kwargs):
     p.denoise = bool(s["denoise"])
     if p.denoise:
         p.aovs |= DENOISING_AOVS
+    if s["light_tracer"] not in LIGHT_TRACER:
+        raise ValueError(f"light_tracer: '{s['light_tracer']}' is not auto, on or off")
+    p.light_tracer = LIGHT_TRACER[s["light_tracer"]]
     env = os.path.abspath(s["env"]) if s["env"] else None
     return p, env
 
@@ -210,7 +216,7 @@ FLAGS = {
     "no_default_env": ("--no-default-env", 0), "animation": ("--animation", 1), "fps": ("--fps", 1),
     "pass_spp": ("--pass-spp", 1), "tile": ("--tile", 1), "noise_target": ("--noise-target", 1),
     "no_nee": ("--no-nee", 0), "no_mis": ("--no-mis", 0), "aov": ("--aov", 1),
-    "denoise": ("--denoise", 0),
+    "denoise": ("--denoise", 0), "light_tracer": ("--light-tracer", 1),
 }
 
 
