@@ -377,7 +377,6 @@ class SplatReader {
     at_ += sizeof v;
     return v;
   }
-  bool done() const { return at_ == raw_.size(); }
 
  private:
   const std::vector<uint8_t>& raw_;
@@ -390,25 +389,39 @@ std::string encode_splats(const std::vector<SplatRecord>& records) {
   Scratch z;
   z->raw.clear();
   put_le(z->raw, uint32_t(records.size()));
+  size_t total = 0;
   for (const SplatRecord& r : records) {
     put_le(z->raw, r.paths);
     put_le(z->raw, r.odd_paths);
     put_le(z->raw, uint32_t(r.entries.size()));
-    uint32_t previous = 0;
-    for (const SplatEntry& e : r.entries) {
-      put_le(z->raw, e.index - previous);
-      previous = e.index;
-      for (int64_t v : e.v) put_le(z->raw, v);
-    }
+    total += r.entries.size();
   }
+  // The entries of every record in byte planes, field by field (as encode_sums): index
+  // steps are mostly one byte and sums a few, which planes let zstd see.
+  const size_t at = z->raw.size();
+  z->raw.resize(at + total * kSplatEntryBytes);
+  uint8_t* plane = z->raw.data() + at;
+  auto field = [&](int bytes, auto value) {
+    size_t i = 0;
+    for (const SplatRecord& r : records)
+      for (size_t k = 0; k < r.entries.size(); ++k, ++i) {
+        const uint64_t v = value(r, k);
+        for (int b = 0; b < bytes; ++b) plane[size_t(b) * total + i] = uint8_t(v >> (8 * b));
+      }
+    plane += size_t(bytes) * total;
+  };
+  field(4, [](const SplatRecord& r, size_t k) {
+    return uint64_t(r.entries[k].index - (k ? r.entries[k - 1].index : 0));
+  });
+  for (int c = 0; c < 4; ++c) field(8, [c](const SplatRecord& r, size_t k) { return uint64_t(r.entries[k].v[c]); });
   return compress_planes(z);
 }
 
 std::vector<SplatRecord> decode_splats(const std::string& compressed, const SplatLimits& lim) {
   // The largest honest size, checked before anything is allocated: a few bytes of zstd
   // can declare gigabytes.
-  const uint64_t per_record =
-      std::min<uint64_t>(lim.area * lim.planes, lim.max_paths * lim.max_splats_per_path * lim.planes);
+  const uint64_t per_record = std::min<uint64_t>(lim.area * lim.planes,
+                                                 lim.max_paths * lim.max_splats_per_path * lim.planes);
   const uint64_t cap = 4 + lim.records * (kSplatRecordBytes + per_record * kSplatEntryBytes);
   const unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
   if (declared == ZSTD_CONTENTSIZE_ERROR) throw WireError("splats: not zstd data");
@@ -424,7 +437,7 @@ std::vector<SplatRecord> decode_splats(const std::string& compressed, const Spla
   if (in.get<uint32_t>() != lim.records)
     throw WireError("splats: not one record per pass of the task (" + std::to_string(lim.records) + ")");
   std::vector<SplatRecord> out(lim.records);
-  const uint64_t planes_area = lim.area * lim.planes;
+  uint64_t total = 0;
   for (SplatRecord& r : out) {
     r.paths = in.get<uint64_t>();
     r.odd_paths = in.get<uint64_t>();
@@ -433,25 +446,40 @@ std::vector<SplatRecord> decode_splats(const std::string& compressed, const Spla
       throw WireError("splats: more light paths than the task's samples");
     if (entries > per_record) throw WireError("splats: more pixels than the task's light paths reach");
     r.entries.resize(entries);
-    // A splat's channels are at most kMaxSplatValue (2^20 in 2^-24 units: 2^44; squared
-    // luminance 2^52 in 2^-12 units), at most max_splats_per_path of them a path.
-    const uint64_t splats = r.paths * lim.max_splats_per_path;
-    uint64_t previous = 0;
-    for (uint32_t i = 0; i < entries; ++i) {
-      SplatEntry& e = r.entries[i];
-      const uint64_t index = previous + in.get<uint32_t>();
-      if ((i > 0 && index == previous) || index >= planes_area) throw WireError("splats: indices out of order");
-      e.index = uint32_t(index);
-      previous = index;
-      const uint64_t paths_here = e.index >= lim.area ? r.odd_paths * lim.max_splats_per_path : splats;
-      for (int c = 0; c < 4; ++c) {
-        e.v[c] = in.get<int64_t>();
+    total += entries;
+  }
+  const size_t at = 4 + lim.records * kSplatRecordBytes;
+  if (z->raw.size() != at + total * kSplatEntryBytes) throw WireError("splats: not the entries' size");
+  const uint8_t* plane = z->raw.data() + at;
+  auto field = [&](int bytes, auto store) {
+    size_t i = 0;
+    for (SplatRecord& r : out)
+      for (size_t k = 0; k < r.entries.size(); ++k, ++i) {
+        uint64_t v = 0;
+        for (int b = 0; b < bytes; ++b) v |= uint64_t(plane[size_t(b) * total + i]) << (8 * b);
+        store(r, k, v);
+      }
+    plane += size_t(bytes) * total;
+  };
+  field(4, [](SplatRecord& r, size_t k, uint64_t step) {
+    const uint64_t index = (k ? uint64_t(r.entries[k - 1].index) : 0) + step;
+    if ((k > 0 && step == 0) || index > 0xffffffffu) throw WireError("splats: indices out of order");
+    r.entries[k].index = uint32_t(index);
+  });
+  for (int c = 0; c < 4; ++c)
+    field(8, [c](SplatRecord& r, size_t k, uint64_t v) { r.entries[k].v[c] = int64_t(v); });
+  // Each entry against its record: within the frame's planes, and no more than its light
+  // paths could add (a splat's channels are at most kMaxSplatValue: 2^44 in 2^-24 units,
+  // squared luminance 2^52 in 2^-12 units; at most max_splats_per_path splats a path).
+  const uint64_t planes_area = lim.area * lim.planes;
+  for (const SplatRecord& r : out)
+    for (const SplatEntry& e : r.entries) {
+      if (e.index >= planes_area) throw WireError("splats: indices out of order");
+      const uint64_t paths_here = (e.index >= lim.area ? r.odd_paths : r.paths) * lim.max_splats_per_path;
+      for (int c = 0; c < 4; ++c)
         if (e.v[c] < 0 || (e.v[c] > 0 && paths_here == 0) || (uint64_t(e.v[c]) >> (c < 3 ? 44 : 52)) > paths_here)
           throw WireError("splats: sums no light path could give");
-      }
     }
-  }
-  if (!in.done()) throw WireError("splats: trailing bytes");
   return out;
 }
 

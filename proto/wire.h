@@ -83,8 +83,9 @@ inline std::string encode_aovs(const std::vector<AovSums>& sums) { return encode
 std::vector<AovSums> decode_aovs(const std::string& compressed, size_t pixels, uint32_t max_samples);
 
 // A task's splat records (core/render/splats.h), one per pass, <-> zstd-compressed
-// little-endian bytes: u32 records; per record u64 paths, u64 odd paths, u32 entries, then
-// per entry its index less the previous entry's (u32) and r, g, b, squared luminance (i64).
+// little-endian bytes: u32 records; per record u64 paths, u64 odd paths, u32 entries; then
+// every record's entries in byte planes, field by field (as encode_sums): each index less
+// the previous entry's of its record (u32), then r, g, b, squared luminance (i64).
 std::string encode_splats(const std::vector<SplatRecord>& records);
 // What a task's records may hold: `records` of them (its passes), entries' indices below
 // `planes` x `area` (the frame window's pixels), at most `max_paths` light paths a record
