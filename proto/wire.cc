@@ -357,6 +357,9 @@ std::vector<AovSums> decode_aovs(const std::string& compressed, size_t pixels, u
 namespace {
 
 constexpr size_t kSplatRecordBytes = 8 + 8 + 4, kSplatEntryBytes = 4 + 4 * 8;
+// A result's splats at most, decoded (whatever its task): far above an honest task's (a
+// 64 x 64 tile's pass of 64 samples: 65,536 light paths, a few splats each, under 10 MB).
+constexpr uint64_t kMaxSplatBytes = uint64_t(256) << 20;
 
 template <typename T>
 void put_le(std::vector<uint8_t>& out, T v) {
@@ -410,9 +413,8 @@ std::string encode_splats(const std::vector<SplatRecord>& records) {
       }
     plane += size_t(bytes) * total;
   };
-  field(4, [](const SplatRecord& r, size_t k) {
-    return uint64_t(r.entries[k].index - (k ? r.entries[k - 1].index : 0));
-  });
+  field(4,
+        [](const SplatRecord& r, size_t k) { return uint64_t(r.entries[k].index - (k ? r.entries[k - 1].index : 0)); });
   for (int c = 0; c < 4; ++c) field(8, [c](const SplatRecord& r, size_t k) { return uint64_t(r.entries[k].v[c]); });
   return compress_planes(z);
 }
@@ -420,9 +422,10 @@ std::string encode_splats(const std::vector<SplatRecord>& records) {
 std::vector<SplatRecord> decode_splats(const std::string& compressed, const SplatLimits& lim) {
   // The largest honest size, checked before anything is allocated: a few bytes of zstd
   // can declare gigabytes.
-  const uint64_t per_record = std::min<uint64_t>(lim.area * lim.planes,
-                                                 lim.max_paths * lim.max_splats_per_path * lim.planes);
-  const uint64_t cap = 4 + lim.records * (kSplatRecordBytes + per_record * kSplatEntryBytes);
+  const uint64_t per_record =
+      std::min<uint64_t>(lim.area * lim.planes, lim.max_paths * lim.max_splats_per_path * lim.planes);
+  const uint64_t cap =
+      std::min<uint64_t>(kMaxSplatBytes, 4 + lim.records * (kSplatRecordBytes + per_record * kSplatEntryBytes));
   const unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
   if (declared == ZSTD_CONTENTSIZE_ERROR) throw WireError("splats: not zstd data");
   if (declared == ZSTD_CONTENTSIZE_UNKNOWN || declared > cap)
@@ -436,20 +439,24 @@ std::vector<SplatRecord> decode_splats(const std::string& compressed, const Spla
   SplatReader in(z->raw);
   if (in.get<uint32_t>() != lim.records)
     throw WireError("splats: not one record per pass of the task (" + std::to_string(lim.records) + ")");
+  // Every header first: the entries they claim must be what the bytes hold before any is
+  // allocated.
   std::vector<SplatRecord> out(lim.records);
+  std::vector<uint32_t> counts(lim.records);
   uint64_t total = 0;
-  for (SplatRecord& r : out) {
+  for (size_t i = 0; i < out.size(); ++i) {
+    SplatRecord& r = out[i];
     r.paths = in.get<uint64_t>();
     r.odd_paths = in.get<uint64_t>();
-    const uint32_t entries = in.get<uint32_t>();
+    counts[i] = in.get<uint32_t>();
     if (r.paths > lim.max_paths || r.odd_paths > r.paths || (lim.planes < 2 && r.odd_paths))
       throw WireError("splats: more light paths than the task's samples");
-    if (entries > per_record) throw WireError("splats: more pixels than the task's light paths reach");
-    r.entries.resize(entries);
-    total += entries;
+    if (counts[i] > per_record) throw WireError("splats: more pixels than the task's light paths reach");
+    total += counts[i];
   }
   const size_t at = 4 + lim.records * kSplatRecordBytes;
   if (z->raw.size() != at + total * kSplatEntryBytes) throw WireError("splats: not the entries' size");
+  for (size_t i = 0; i < out.size(); ++i) out[i].entries.resize(counts[i]);
   const uint8_t* plane = z->raw.data() + at;
   auto field = [&](int bytes, auto store) {
     size_t i = 0;
@@ -466,8 +473,7 @@ std::vector<SplatRecord> decode_splats(const std::string& compressed, const Spla
     if ((k > 0 && step == 0) || index > 0xffffffffu) throw WireError("splats: indices out of order");
     r.entries[k].index = uint32_t(index);
   });
-  for (int c = 0; c < 4; ++c)
-    field(8, [c](SplatRecord& r, size_t k, uint64_t v) { r.entries[k].v[c] = int64_t(v); });
+  for (int c = 0; c < 4; ++c) field(8, [c](SplatRecord& r, size_t k, uint64_t v) { r.entries[k].v[c] = int64_t(v); });
   // Each entry against its record: within the frame's planes, and no more than its light
   // paths could add (a splat's channels are at most kMaxSplatValue: 2^44 in 2^-24 units,
   // squared luminance 2^52 in 2^-12 units; at most max_splats_per_path splats a path).

@@ -89,8 +89,8 @@ std::vector<AovSums> decode_aovs(const std::string& compressed, size_t pixels, u
 std::string encode_splats(const std::vector<SplatRecord>& records);
 // What a task's records may hold: `records` of them (its passes), entries' indices below
 // `planes` x `area` (the frame window's pixels), at most `max_paths` light paths a record
-// (the tile's pixels x the pass's samples), each splatting at most `max_splats_per_path`
-// times (the path's depth) per plane.
+// (the tile's pixels x its longest pass's light paths a pixel), each splatting at most
+// `max_splats_per_path` times (the path's depth) per plane; and 256 MB decoded in all.
 struct SplatLimits {
   size_t records = 0;
   uint64_t area = 0;

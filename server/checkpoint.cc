@@ -270,13 +270,17 @@ std::string encode_checkpoint(const FramePlan& plan, double elapsed, FrameSplats
     enc.band(band);
   }
   if (splats && splats->any()) {
-    enc.splats(splats->freeze());
+    const FrameSplats::Frozen frozen = splats->freeze();
+    struct Thaw {
+      FrameSplats* s;
+      ~Thaw() { s->thaw(); }
+    } thaw{splats};
+    enc.splats(frozen);
     for (uint32_t b = 0; b < plan.bands(); ++b) {
       plan.copy_band(b, &band);
       splats->copy_band(&band);
       enc.splat_band(band);
     }
-    splats->thaw();
   }
   enc.finish();
   return out;

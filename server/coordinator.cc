@@ -153,7 +153,7 @@ void Coordinator::write(const std::shared_ptr<Job>& job) {
           MutexLock lock(mu_);                                      // one band at a time: merges go on between them
           if (!job->plan.has_film() || job->removed) return false;  // (a job being deleted: stop)
           job->plan.copy_band(band, copy);
-          job->splats.copy_band(copy);
+          if (plan.image) job->splats.copy_band(copy);  // (a checkpoint's splats: after the bands)
           return true;
         },
         [&](const std::function<void()>& step) {

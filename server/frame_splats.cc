@@ -56,8 +56,9 @@ void FrameSplats::fold(BandCopy* band) {
 
 FrameSplats::Frozen FrameSplats::freeze() {
   if (!film_) throw std::logic_error("FrameSplats::freeze: no splats");
+  Frozen f{film_->paths(), film_->odd_paths(), frontier_};  // (a copy that may throw: before the flag)
   frozen_ = true;
-  return {film_->paths(), film_->odd_paths(), frontier_};
+  return f;
 }
 
 void FrameSplats::thaw() {

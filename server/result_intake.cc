@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 
+#include "core/render/light_tracer.h"
+
 namespace tessera {
 
 std::vector<PixelSums> result_sums(const v1::TaskResult& result, size_t pixels) {
@@ -28,19 +30,29 @@ std::optional<Lease> ResultIntake::wanted(const v1::TaskResult& result, v1::Resu
   return *l;
 }
 
-SplatLimits ResultIntake::splat_limits(const RenderSettings& s, const Rect& tile, uint32_t pass_len,
-                                       uint32_t pass_count) {
+SplatLimits ResultIntake::splat_limits(const RenderSettings& s, const Rect& tile,
+                                       const std::vector<std::pair<uint32_t, uint32_t>>& passes) {
   SplatLimits l;
-  l.records = pass_count;
+  l.records = passes.size();
   l.area = uint64_t(s.effective_window().area());
   l.planes = s.sum_planes();
-  l.max_paths = uint64_t(tile.area()) * pass_len;
+  uint32_t longest = 0;
+  for (const auto& [s0, s1] : passes) longest = std::max(longest, s1 - s0);
+  // A pixel traces a light path for one sample in LightTracer::kSamplesPerLightPath.
+  l.max_paths =
+      uint64_t(tile.area()) * ((longest + LightTracer::kSamplesPerLightPath - 1) / LightTracer::kSamplesPerLightPath);
   l.max_splats_per_path = uint64_t(std::max(1, s.max_depth));
   return l;
 }
 
-std::vector<SplatRecord> ResultIntake::result_splats(const v1::TaskResult& result, const SplatLimits& limits) {
-  if (result.splats_zstd().empty()) return {};
+std::vector<SplatRecord> ResultIntake::result_splats(const v1::TaskResult& result, RenderSettings::LightTracer mode,
+                                                     const SplatLimits& limits) {
+  using LT = RenderSettings::LightTracer;
+  if (result.splats_zstd().empty()) {
+    if (mode == LT::kOn) throw WireError("splats: none from a frame that traces light paths");
+    return {};
+  }
+  if (mode == LT::kOff) throw WireError("splats: from a frame that traces no light paths");
   return decode_splats(result.splats_zstd(), limits);
 }
 
@@ -64,7 +76,8 @@ ResultIntake::Batch ResultIntake::screen(const std::vector<const v1::TaskResult*
                           std::nullopt,
                           {},
                           splat_limits(plan.settings(), plan.tiles()[lease->tile],
-                                       plan.run_samples(lease->pass, lease->pass_count), lease->pass_count),
+                                       pass_run(plan.settings(), lease->pass, lease->pass_count)),
+                          plan.settings().light_tracer,
                           {}});
   }
   return b;
@@ -77,7 +90,7 @@ void ResultIntake::decode(Batch& b) {
         in.aovs = decode_aovs(r.aovs_zstd(), in.pixels, in.pass_len);
       else if (!r.aovs_zstd().empty())
         throw WireError("AOV sums for a job without AOVs");
-      in.splats = result_splats(r, in.splat_limits);
+      in.splats = result_splats(r, in.light_tracer, in.splat_limits);
       in.sums = FramePlan::check(result_sums(r, in.pixels * in.planes), in.pass_len, in.planes);
     } catch (const WireError&) {  // counted as rejected by merge()
       in.sums.reset();

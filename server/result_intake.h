@@ -32,12 +32,15 @@ class ResultIntake {
   };
   explicit ResultIntake(Parts parts) : p_(parts) {}
 
-  // What a task's splats may hold: a record for each of its `pass_count` passes of
-  // `pass_len` samples a pixel at most, on `tile`'s pixels.
-  static SplatLimits splat_limits(const RenderSettings& settings, const Rect& tile, uint32_t pass_len,
-                                  uint32_t pass_count);
-  // A result's splats, decoded within `limits` (none when it has none); WireError otherwise.
-  static std::vector<SplatRecord> result_splats(const v1::TaskResult& result, const SplatLimits& limits);
+  // What a task's splats may hold: a record for each of its passes (sample ranges), on
+  // `tile`'s pixels.
+  static SplatLimits splat_limits(const RenderSettings& settings, const Rect& tile,
+                                  const std::vector<std::pair<uint32_t, uint32_t>>& passes);
+  // A result's splats, decoded within `limits`. A frame the coordinator found to trace light
+  // paths (settings: light_tracer on, resolved at submit) must send them, any other none;
+  // WireError otherwise.
+  static std::vector<SplatRecord> result_splats(const v1::TaskResult& result, RenderSettings::LightTracer mode,
+                                                const SplatLimits& limits);
 
   struct Incoming {
     size_t index = 0;  // in the batch
@@ -48,7 +51,8 @@ class ResultIntake {
     std::optional<CheckedSums> sums;  // decoded and plausible
     std::vector<AovSums> aovs;        // likewise, when wanted
     SplatLimits splat_limits;         // what its splats may be (a frame tracing light paths)
-    std::vector<SplatRecord> splats;  // decoded: one per pass, or none
+    RenderSettings::LightTracer light_tracer = RenderSettings::LightTracer::kOff;  // the job's
+    std::vector<SplatRecord> splats;                                               // decoded: one per pass, or none
   };
   struct Batch {
     std::vector<const v1::TaskResult*> results;

@@ -126,15 +126,14 @@ bool SnapshotWriter::record_end(const RowEnd& row, const std::string& scene_hash
 bool SnapshotWriter::write_splats(Job& job, const SnapshotPlan& plan, CheckpointEncoder& encoder,
                                   const std::function<void(const std::function<void()>&)>& locked) const {
   std::optional<FrameSplats::Frozen> frozen;
+  bool kept = true;
   locked([&] {
-    if (job.splats.any() && job.plan.has_film() && !job.removed && job.resets == plan.resets)
-      frozen = job.splats.freeze();
+    // Results taken back since the write began, or a film gone (a job being deleted): the
+    // checkpoint would not match the frame. A frame without splats has nothing to freeze.
+    kept = job.resets == plan.resets && (!job.splats.any() || (job.plan.has_film() && !job.removed));
+    if (kept && job.splats.any()) frozen = job.splats.freeze();
   });
-  if (!frozen) {
-    bool kept = true;
-    locked([&] { kept = job.resets == plan.resets; });
-    return kept;
-  }
+  if (!frozen) return kept;
   // Whatever happens, the splats thaw (the records that came meanwhile are added).
   struct Thaw {
     const std::function<void(const std::function<void()>&)>& locked;
@@ -146,7 +145,6 @@ bool SnapshotWriter::write_splats(Job& job, const SnapshotPlan& plan, Checkpoint
   encoder.splats(*frozen);
   BandCopy band;
   const uint32_t per_band = job.plan.tiles_per_band();
-  bool kept = true;
   for (uint32_t b = 0; b < job.plan.bands() && kept; ++b) {
     locked([&] {
       if (!(kept = job.plan.has_film() && !job.removed && job.resets == plan.resets)) return;

@@ -12,9 +12,18 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
                               JobStore& store, const std::string& data_dir, SceneUploads* uploads) {
   const auto refuse = [](const char* what) { return RequestError(RequestError::Code::kInvalidArgument, what); };
   std::string main_file = req.main_file();
+  RenderSettings settings = a.settings;
   try {
-    // A bad scene is refused here, and settings that ask it for what it has not.
-    const auto check = [&](const Scene& scene) { TileRenderer::check_settings(scene, a.settings); };
+    // A bad scene is refused here, and settings that ask it for what it has not. Whether
+    // its frames trace light paths is decided here too (auto: on or off), so that every
+    // result of a frame must carry splats or none (ResultIntake::result_splats). (A scene
+    // whose bytes were checked before is not loaded again: auto then stays auto.)
+    const auto check = [&](const Scene& scene) {
+      TileRenderer::check_settings(scene, a.settings);
+      if (a.settings.light_tracer != RenderSettings::LightTracer::kOff)
+        settings.light_tracer = TileRenderer::traces_light_paths(scene, a.settings) ? RenderSettings::LightTracer::kOn
+                                                                                    : RenderSettings::LightTracer::kOff;
+    };
     if (req.upload_id().empty())
       meta.scene_hash = scenes.add(req.main_file(), req.files(), check);
     else if (uploads)
@@ -33,12 +42,12 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
   meta.priority = req.priority();
   meta.scene_bytes = a.scene_bytes;
   meta.submitted_at = store.wall();
-  meta.settings = to_proto(a.settings);
+  meta.settings = to_proto(settings);
   Submission sub;
   if (a.frames.empty()) {
-    sub.job = std::make_shared<Job>(meta, a.settings);
+    sub.job = std::make_shared<Job>(meta, settings);
   } else {
-    sub.sequence = std::make_shared<Sequence>(meta, a.settings, a.frames);
+    sub.sequence = std::make_shared<Sequence>(meta, settings, a.frames);
     sub.sequence->prepared = SequenceScheduler::make_frame(*sub.sequence, 0);
   }
   StoredJob row;

@@ -84,8 +84,7 @@ std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check&
     const RenderSettings settings = from_proto(check.task->settings());
     const size_t planes = settings.sum_planes();
     const std::vector<SplatRecord> splats = ResultIntake::result_splats(
-        result, ResultIntake::splat_limits(settings, tile, RenderSettings::kMaxSpp,
-                                           uint32_t(task_passes(*check.task, settings).size())));
+        result, settings.light_tracer, ResultIntake::splat_limits(settings, tile, task_passes(*check.task, settings)));
     if (!check.task->settings().aovs()) return sums_digest(result_sums(result, pixels), nullptr, &splats);
     const std::vector<AovSums> aovs = decode_aovs(result.aovs_zstd(), pixels, RenderSettings::kMaxSpp);
     return sums_digest(result_sums(result, pixels * planes), &aovs, &splats);
@@ -215,7 +214,9 @@ void Verifier::quarantine(uint64_t worker, const std::string& why, double now, E
         if (c.job == id && tiles.count(c.tile)) moot.push_back(check);
       for (uint64_t check : moot) drop(check, false, now);
     } else if (job->state() == v1::JobStatus::DONE) {
-      flag_ended(*job, ended_flag(uint32_t(tiles.size()), name, false), fx);
+      // Its splats (a frame tracing light paths) landed anywhere: every tile holds them.
+      const bool splats = job->plan.settings().light_tracer != RenderSettings::LightTracer::kOff;
+      flag_ended(*job, ended_flag(splats ? job->plan.tile_count() : uint32_t(tiles.size()), name, false), fx);
       flagged.insert(job->sequence.empty() ? id : job->sequence);
     }
   }

@@ -45,6 +45,13 @@ void TileRenderer::check_settings(const Scene& scene, const RenderSettings& sett
   (void)Camera(scene, settings.at_frame().camera);  // a file camera the framing needs but cannot use
 }
 
+bool TileRenderer::traces_light_paths(const Scene& scene, const RenderSettings& settings) {
+  // (Environment lights are infinite: they carry no light paths, so the scene's own lights
+  // decide, as in set_up_frame. A pose moves lights and surfaces, never what they are.)
+  const RenderSettings s = settings.at_frame();
+  return tessera::light_tracing_decision(scene, LightSet(scene), Camera(scene, s.camera), s).on;
+}
+
 void TileRenderer::check_animation(const Scene& scene, const RenderSettings& settings) {
   if (settings.animation.empty()) return;
   if (!scene.animation) throw SettingsError("--animation", "the scene has no animations");

@@ -74,6 +74,11 @@ class TileRenderer {
   // it, the file's camera (--camera file) when the file's is unusable. The coordinator
   // checks a job with it at submit.
   static void check_settings(const Scene& scene, const RenderSettings& settings);
+  // Whether a renderer of the scene with these settings traces light paths (light_tracing()),
+  // decided as the renderer decides, without building anything: the coordinator resolves a
+  // job's --light-tracer auto at submit with it, so a frame's results must all carry splats
+  // or none.
+  static bool traces_light_paths(const Scene& scene, const RenderSettings& settings);
   // The --env image, its path relative to the scene file's folder unless absolute; null
   // without one. Throws SettingsError("--env") naming the file and the problem.
   static std::shared_ptr<const EnvironmentMap> load_environment(const Scene& scene, const RenderSettings& settings);

@@ -93,6 +93,37 @@ TEST_F(ResultIntakeTest, SumsOfTheWrongSizeAreRejected) {
   EXPECT_TRUE(submit(result(t)).accepted());  // the lease still waits for a good one
 }
 
+// A frame's results carry splats exactly when it traces light paths (its --light-tracer,
+// resolved at submit): splats for a frame without, or none for a frame with, are refused.
+TEST_F(ResultIntakeTest, SplatsComeExactlyFromFramesThatTraceLightPaths) {
+  SplatRecord record;
+  record.paths = 4;
+  record.entries.push_back({7, {1, 2, 3, 4}});
+  const uint64_t t = lease_next(*job, a);
+  v1::TaskResult r = result(t);
+  r.set_splats_zstd(encode_splats({record}));
+  EXPECT_TRUE(rejected(submit(r)));  // this frame traces none
+  EXPECT_FALSE(job->splats.any());
+  EXPECT_TRUE(submit(result(t)).accepted());
+
+  RenderSettings on = testing::small_settings();
+  on.light_tracer = RenderSettings::LightTracer::kOn;
+  const std::shared_ptr<Job> traced = add_still(on);
+  const uint64_t u = lease_next(*traced, a);
+  EXPECT_TRUE(rejected(submit(result(u))));  // no splats
+  v1::TaskResult two = result(u);
+  two.set_splats_zstd(encode_splats({record, record}));  // a record too many for one pass
+  EXPECT_TRUE(rejected(submit(two)));
+  EXPECT_EQ(counters.results_rejected, 3u);
+  v1::TaskResult good = result(u);
+  good.set_splats_zstd(encode_splats({record}));
+  EXPECT_TRUE(submit(good).accepted());
+  ASSERT_TRUE(traced->splats.any());
+  EXPECT_EQ(traced->splats.film()->paths(), 4u);
+  EXPECT_EQ(traced->splats.film()->at(7, 0).rgb[1], 2);
+  EXPECT_EQ(traced->splats.frontier(traced->plan.tiles().size() - 1), 0u);  // only the leased tile moved
+}
+
 TEST_F(ResultIntakeTest, SumsThatAreNotZstdAreRejected) {
   v1::TaskResult r = result(lease_next(*job, a));
   r.set_sums_zstd("not zstd at all");

@@ -113,18 +113,22 @@ TEST_F(SubmissionTest, SettingsTheSceneCannotHonourAreRefused) {
 }
 
 // Light paths' splats travel with tasks' results (docs/light-tracing.md): every mode is
-// admitted and kept in the job's settings.
-TEST_F(SubmissionTest, LightTracingModesAreAdmittedAndKept) {
-  for (const uint32_t mode : {0u, 1u, 2u}) {
+// admitted. Auto is decided when the scene is loaded at submit (here: on, for the glass and
+// mirror spheres), so that every result of its frames must carry splats; a scene whose
+// bytes were checked before is not loaded again, and auto then stays auto (results are
+// taken with splats or without).
+TEST_F(SubmissionTest, LightTracingModesAreAdmittedAndAutoIsDecidedFromTheScene) {
+  const std::pair<uint32_t, uint32_t> modes[] = {{2, 1}, {1, 1}, {0, 0}, {2, 2}};  // asked, kept
+  for (const auto& [mode, kept] : modes) {
     v1::SubmitJobRequest r = request();
     r.mutable_settings()->set_light_tracer(mode);
     EXPECT_EQ(admit(r).settings.light_tracer, RenderSettings::LightTracer(mode));  // the wire carries it
     MemoryJobStore fresh;
     const Submission sub = prepare(r, fresh);
     ASSERT_NE(sub.job, nullptr);
-    EXPECT_EQ(sub.job->plan.settings().light_tracer, RenderSettings::LightTracer(mode));
+    EXPECT_EQ(sub.job->plan.settings().light_tracer, RenderSettings::LightTracer(kept)) << mode;
     ASSERT_EQ(fresh.jobs().size(), 1u);
-    EXPECT_EQ(fresh.jobs()[0].meta.settings.light_tracer(), mode);
+    EXPECT_EQ(fresh.jobs()[0].meta.settings.light_tracer(), kept) << mode;
   }
 }
 

@@ -2,6 +2,7 @@
 #include "wire.h"
 
 #include <gtest/gtest.h>
+#include <zstd.h>
 
 #include <cstddef>
 #include <filesystem>
@@ -400,6 +401,21 @@ TEST(WireSplats, WhatNoTaskCouldSendIsRefusedNamingWhy) {
   for (uint32_t i = 0; i < 3; ++i) big[0].entries.push_back({i, {1, 1, 1, 1}});
   refused(big, tiny, "bytes declared");
   EXPECT_THROW(decode_splats("not zstd", limits(1)), WireError);
+  // Headers that claim entries the bytes do not hold: refused before they are allocated.
+  std::string raw(4 + 20, '\0');
+  const uint32_t one = 1, claimed = 50;
+  const uint64_t paths = 50;
+  std::memcpy(&raw[0], &one, 4);
+  std::memcpy(&raw[4], &paths, 8);
+  std::memcpy(&raw[20], &claimed, 4);
+  std::string z(ZSTD_compressBound(raw.size()), '\0');
+  z.resize(ZSTD_compress(z.data(), z.size(), raw.data(), raw.size(), 1));
+  try {
+    decode_splats(z, limits(1));
+    ADD_FAILURE() << "accepted entries that are not there";
+  } catch (const WireError& e) {
+    EXPECT_NE(std::string(e.what()).find("not the entries' size"), std::string::npos) << e.what();
+  }
 }
 
 // A task's splat list: splats outside the frame's window are not seen, odd samples' light
