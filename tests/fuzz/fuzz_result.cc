@@ -117,7 +117,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         for (const tessera::SplatRecord& r : records) film.add_record(r);  // indices within its planes
         tessera::Film f(film.window(), true);
         for (int x = 0; x < film.window().w; ++x) f.at(x, 0) = f.odd_at(x, 0) = {1, 1, 1, 1, 1};
-        for (const tessera::PixelSums& p : film.fold_into(f).pixels())
+        const tessera::Film folded = film.fold_into(f);  // (kept: a loop over a temporary's pixels would dangle)
+        for (const tessera::PixelSums& p : folded.pixels())
           if (!std::isfinite(p.r) || !std::isfinite(p.lum2)) __builtin_trap();
       } catch (const tessera::WireError&) {
       }
