@@ -241,6 +241,12 @@ class Units(unittest.TestCase):
         self.assertEqual(p.framing, p.FILE)
         self.assertTrue(p.adaptive)
         self.assertEqual(settings.to_proto("x.dae")[0].framing, p.CS184)
+        # --light-tracer: auto by default (2 on the wire, as the CLI sends it), a flag otherwise.
+        self.assertEqual(settings.to_proto("x.dae")[0].light_tracer, 2)
+        self.assertEqual(settings.to_proto("x.dae", light_tracer="off")[0].light_tracer, 0)
+        self.assertEqual(settings.cli_flags(light_tracer="on"), ["--light-tracer", "on"])
+        with self.assertRaisesRegex(ValueError, "light_tracer: 'maybe' is not auto, on or off"):
+            settings.to_proto("x.dae", light_tracer="maybe")
 
     def test_a_bundle_names_what_a_gltf_needs_and_refuses_paths_outside(self):
         from tessera.bundle import Bundle, SceneError, scene_files
