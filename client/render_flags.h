@@ -24,8 +24,8 @@ struct RenderFlags {
   std::vector<float> env_color;
   std::string env;  // --env FILE  // --env-color R G B
   bool no_default_env = false;
-  double turntable = 0;              // --turntable FRAMES: one turn in this many frames
-  std::string aovs;                  // --aov LIST
+  double turntable = 0;               // --turntable FRAMES: one turn in this many frames
+  std::string aovs;                   // --aov LIST
   std::string light_tracer = "auto";  // --light-tracer off|on|auto
 };
 

@@ -91,12 +91,49 @@ class Farm : public ::testing::Test {
     if (!res || res->status != 200) return nullptr;
     return nlohmann::json::parse(res->body);
   }
+  // The samples the first job of a status has merged; nothing when it lists no job.
+  static std::optional<uint64_t> first_job_samples(const nlohmann::json& status) {
+    if (status == nullptr || status["jobs"].empty()) return std::nullopt;
+    return std::stoull(status["jobs"][0]["samples_done"].get<std::string>());
+  }
+  // `tessera submit kScene FLAGS --coordinator (this one) --wait -q -f OUT`, left running
+  // (its errors in client.err).
+  std::unique_ptr<Process> submit_in_background(const std::string& flags, const std::string& out) {
+    std::vector<std::string> args{"submit", kScene};
+    std::istringstream words(flags);
+    for (std::string w; words >> w;) args.push_back(w);
+    for (const std::string& w :
+         {std::string("--coordinator"), grpc_addr, std::string("--wait"), std::string("-q"), std::string("-f"), out})
+      args.push_back(w);
+    return std::make_unique<Process>(kBin + "/tessera", args, (dir / "client.err").string());
+  }
+  // Once the first job has merged more than `above` samples, and a moment later (a
+  // checkpoint or two at --checkpoint-seconds 0.2), SIGKILLs the coordinator and starts it
+  // again on its address and folder with `extra`; it must go on from its checkpoint.
+  void crash_coordinator_mid_job(uint64_t above, const std::vector<std::string>& extra) {
+    bool merged = false;
+    for (int i = 0; i < 2000 && !merged; ++i) {
+      const std::optional<uint64_t> n = first_job_samples(get_json("/api/status"));
+      merged = n && *n > above;
+      if (!merged) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    ASSERT_TRUE(merged);
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    const std::string addr = grpc_addr;
+    coordinator->signal(SIGKILL);
+    ASSERT_EQ(coordinator->wait(10), -SIGKILL);
+    start_coordinator(addr, "2", extra);
+    ASSERT_EQ(grpc_addr, addr);
+    const std::optional<uint64_t> restored = first_job_samples(get_json("/api/status"));
+    ASSERT_TRUE(restored);
+    EXPECT_GT(*restored, 0u);
+  }
   // Kills worker w0 (`victim`) with SIGKILL while it holds a lease, once the first job has
   // merged some work; polls the status endpoint up to `tries` times, 5 ms apart.
   bool kill_while_it_renders(Process& victim, int tries) {
     for (int i = 0; i < tries; ++i) {
       const nlohmann::json s = get_json("/api/status");
-      if (s != nullptr && !s["jobs"].empty() && std::stoull(s["jobs"][0]["samples_done"].get<std::string>()) > 0)
+      if (first_job_samples(s).value_or(0) > 0)
         for (const auto& w : s["workers"])
           if (w["name"] == "w0" && w["active"].get<bool>()) {
             victim.signal(SIGKILL);
