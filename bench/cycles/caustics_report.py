@@ -28,19 +28,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(HERE))
 import error_report as er  # noqa: E402
 from compare_cycles import cycles  # noqa: E402
-
-
-def cycles_gltf(scene, out, spp, seed, stats, size):
-    """Cycles' render of a glTF scene as Blender's importer reads it (gltf_to_cycles.py)."""
-    cmd = ["blender", "-b", "--factory-startup", "--python", os.path.join(HERE, "gltf_to_cycles.py"), "--", scene, out,
-           "--spp", str(spp), "--seed", str(seed), "--threads", "2", "--max-bounces", "16", "--width", str(size[0]),
-           "--height", str(size[1]), "--stats", stats]
-    if os.path.exists(out):
-        os.remove(out)
-    er.run(cmd)
-    if not os.path.exists(out):
-        sys.exit("error: blender wrote no image (its Python failed?); run gltf_to_cycles.py by hand to see why")
-    return json.load(open(stats))["seconds"]
+from compare_gltf import cycles_gltf  # noqa: E402
 
 SHARED = os.path.join(os.path.dirname(os.path.dirname(HERE)), "..", "shared", "scenes", "cs184")
 
@@ -152,7 +140,7 @@ def main():
                 runs = [] if a.no_cycles else ["cycles"]
                 for renderer in runs + ["tessera", "tessera+lt"]:
                     if renderer == "cycles" and scene.endswith((".gltf", ".glb")):
-                        secs = cycles_gltf(scene, img, spp, seed, stats, size)
+                        secs = cycles_gltf(scene, img, spp, stats, size[0], size[1], seed=seed)
                     elif renderer == "cycles":
                         secs = cycles(scene, img, spp, seed, stats)
                     else:

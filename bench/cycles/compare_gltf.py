@@ -57,6 +57,21 @@ def run(cmd):
     return p.stdout
 
 
+def cycles_gltf(scene, out, spp, stats, width, height, threads=2, seed=None, env=()):
+    """Cycles' render of a glTF scene as Blender's importer reads it (gltf_to_cycles.py), to
+    `out`; its render seconds. `env`: gltf_to_cycles.py's --env arguments."""
+    if os.path.exists(out):
+        os.remove(out)
+    run(["blender", "-b", "--factory-startup", "--python", os.path.join(HERE, "gltf_to_cycles.py"), "--", scene, out] +
+        list(env) + ["--spp", str(spp)] + (["--seed", str(seed)] if seed is not None else []) +
+        ["--threads", str(threads), "--max-bounces", "16", "--width", str(width), "--height", str(height),
+         "--stats", stats])
+    if not os.path.exists(out):
+        sys.exit("error: blender wrote no image (its Python failed?); run gltf_to_cycles.py by hand to see why")
+    with open(stats) as f:
+        return json.load(f)["seconds"]
+
+
 def quat_rotate(q, v):
     """v rotated by the unit quaternion q = (x, y, z, w)."""
     x, y, z, w = q
@@ -141,14 +156,7 @@ def main():
     run([os.path.join(BIN, "tessera"), "render", a.scene] + env + ["-s", str(a.spp), "-m", "16", "-r", str(a.width),
         str(a.height), "-t", str(a.threads), "-q", "-f", ours, "--stats-json", stats])
     t_ours = json.load(open(stats))["seconds"]
-    if os.path.exists(theirs):
-        os.remove(theirs)
-    run(["blender", "-b", "--factory-startup", "--python", os.path.join(HERE, "gltf_to_cycles.py"), "--", a.scene,
-         theirs] + env + ["--spp", str(a.spp), "--threads", str(a.threads), "--max-bounces", "16",
-                          "--width", str(a.width), "--height", str(a.height), "--stats", stats])
-    if not os.path.exists(theirs):
-        sys.exit("error: blender wrote no image (its Python failed?); run gltf_to_cycles.py by hand to see why")
-    t_theirs = json.load(open(stats))["seconds"]
+    t_theirs = cycles_gltf(a.scene, theirs, a.spp, stats, a.width, a.height, a.threads, env=env)
     regions = regions_of(a.scene, a.width, a.height)
     rfile = os.path.join(a.out, name + "-regions.json")
     json.dump({k: v[0] for k, v in regions.items()}, open(rfile, "w"))
