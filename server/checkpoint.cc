@@ -277,7 +277,7 @@ std::string encode_checkpoint(const FramePlan& plan, double elapsed, FrameSplats
     } thaw{splats};
     enc.splats(frozen);
     for (uint32_t b = 0; b < plan.bands(); ++b) {
-      plan.copy_band(b, &band);
+      plan.band_shape(b, &band);
       splats->copy_band(&band);
       enc.splat_band(band);
     }
@@ -341,11 +341,11 @@ void read_splats(StreamReader& in, const FramePlan& plan, FrameSplats* splats) {
     } catch (const std::invalid_argument& e) {
       throw std::runtime_error(std::string("checkpoint: splats: ") + e.what());
     }
-  const Rect w = plan.settings().effective_window();
+  BandCopy band;
   std::vector<SplatSums> rows;
   for (uint32_t b = 0; b < plan.bands(); ++b) {
-    const Rect& first = plan.tiles()[size_t(b) * plan.tiles_per_band()];
-    const size_t bytes = size_t(first.h) * size_t(w.w) * sizeof(SplatSums);
+    plan.band_shape(b, &band);
+    const size_t bytes = size_t(band.rows) * size_t(band.width) * sizeof(SplatSums);
     for (bool odd : {false, true}) {
       if (odd && !plan.settings().halves()) continue;
       const std::string z = in.bytes(ZSTD_compressBound(bytes) + 64);
@@ -356,7 +356,7 @@ void read_splats(StreamReader& in, const FramePlan& plan, FrameSplats* splats) {
       for (const SplatSums& s : rows)
         if (s.rgb[0] < 0 || s.rgb[1] < 0 || s.rgb[2] < 0 || s.lum2 < 0)
           throw std::runtime_error("checkpoint: negative splat sums");
-      splats->restore_rows(first.y - w.y, first.h, odd, rows.data());
+      splats->restore_rows(band.y0, band.rows, odd, rows.data());
     }
   }
 }
@@ -366,7 +366,6 @@ double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with
   const double elapsed = in.get<double>();
   BandCopy band;
   std::vector<bool> seen(plan.bands(), false);
-  const Rect w = plan.settings().effective_window();
   for (uint32_t k = 0; k < plan.bands(); ++k) {
     band.band = in.get<uint32_t>();
     if (band.band >= plan.bands() || seen[band.band]) throw std::runtime_error("checkpoint: bands out of order");
@@ -380,10 +379,7 @@ double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with
       t.relative_error = in.get<float>();
     }
     band.samples = in.get<uint64_t>();
-    const Rect& first = plan.tiles()[size_t(band.band) * plan.tiles_per_band()];
-    band.y0 = first.y - w.y;
-    band.rows = first.h;
-    band.width = w.w;
+    plan.band_shape(band.band, &band);
     const size_t pixels = size_t(band.rows) * size_t(band.width);
     band.active.clear();
     if (plan.settings().adaptive) {

@@ -144,14 +144,10 @@ bool SnapshotWriter::write_splats(Job& job, const SnapshotPlan& plan, Checkpoint
   } thaw{locked, job};
   encoder.splats(*frozen);
   BandCopy band;
-  const uint32_t per_band = job.plan.tiles_per_band();
   for (uint32_t b = 0; b < job.plan.bands() && kept; ++b) {
     locked([&] {
       if (!(kept = job.plan.has_film() && !job.removed && job.resets == plan.resets)) return;
-      const Rect first = job.plan.tile_rect(b * per_band);
-      band.band = b;
-      band.y0 = first.y - job.plan.settings().effective_window().y;
-      band.rows = first.h;
+      job.plan.band_shape(b, &band);
       job.splats.copy_band(&band);
     });
     if (kept) encoder.splat_band(band);

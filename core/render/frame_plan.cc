@@ -271,13 +271,18 @@ void FramePlan::reset_tile(uint32_t tile) {
   advance_frame_passes();
 }
 
-void FramePlan::copy_band(uint32_t band, BandCopy* out) const {
-  const Rect& w = film_.window();
-  const Rect& first = tiles_[size_t(band) * tiles_per_band_];
+void FramePlan::band_shape(uint32_t band, BandCopy* out) const {
+  const Rect w = settings_.effective_window();
+  const Rect first = tile_rect(band * tiles_per_band_);
   out->band = band;
   out->y0 = first.y - w.y;
   out->rows = first.h;
   out->width = w.w;
+}
+
+void FramePlan::copy_band(uint32_t band, BandCopy* out) const {
+  const Rect& w = film_.window();
+  band_shape(band, out);
   const size_t n = size_t(out->rows) * size_t(w.w), at = size_t(out->y0) * size_t(w.w);
   out->pixels.assign(film_.pixels().begin() + ptrdiff_t(at), film_.pixels().begin() + ptrdiff_t(at + n));
   out->progress.assign(progress_.begin() + ptrdiff_t(size_t(band) * tiles_per_band_),

@@ -178,6 +178,8 @@ class FramePlan {
   uint32_t tiles_per_band() const { return tiles_per_band_; }
   // Copies band `band` into `out`, reusing its buffers.
   void copy_band(uint32_t band, BandCopy* out) const;
+  // Band `band`'s place alone (out's band, y0, rows, width; also after compact()).
+  void band_shape(uint32_t band, BandCopy* out) const;
   // Restoring band by band (a checkpoint read piece by piece, into this plan's own film):
   // restore_band() for every band once, in any order, then restore_finish(), which derives
   // the counters (samples, work, film version) from the tiles and rebuilds the ready set. A
