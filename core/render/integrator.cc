@@ -224,69 +224,109 @@ void record_first_hit(const Material& m, const SurfacePoint& sp, const Ray& ray,
 
 }  // namespace
 
+[[gnu::always_inline]] inline bool Integrator::scatter(const SurfacePoint& sp, const Material& m, const Frame& frame,
+                                                       Vec3 wo, Vec3 ng, bool dielectric, PathState& s,
+                                                       Sampler& sampler, Ray* ray) const {
+  const float u1 = sampler.next_1d();
+  const Vec2 u2 = sampler.next_2d();
+  BsdfSample bs;
+  if (!bsdf_sample(m, wo, u1, u2, &bs)) return false;
+  const Vec3 wi = frame.to_world(bs.wi);
+  // A shading normal can send a reflection below the true surface: drop it.
+  if (!dielectric && dot(wi, ng) <= 0) return false;
+  s.beta *= bs.weight;
+  if (s.beta.is_black() || !s.beta.is_finite()) return false;
+  s.specular = bs.delta;
+  if (s.depth == 0) s.first_smooth = !bs.delta;
+  s.smooth_vertices += !bs.delta;
+  s.prev_pdf = bs.pdf;
+  s.prev = sp;
+  s.eta_scale *= bs.etap * bs.etap;
+
+  if (s.depth >= 2) {  // Russian roulette on the throughput, undoing the eta^2 scaling
+    // A weight window: paths carrying at least kRouletteFloor of the camera's weight go
+    // on; below it a path survives with probability throughput / kRouletteFloor, so a
+    // survivor's weight is raised back to the floor and never above it. The textbook
+    // survival = throughput (floor 1) raises weak paths up to weight 1: on the CS184
+    // boxes that doubled the relMSE at 16 spp for 25% less time (docs/performance.md).
+    const float rr = (s.beta * s.eta_scale).max() / kRouletteFloor;
+    if (rr < 1) {
+      const float q = std::max(0.0f, 1 - rr);
+      if (sampler.next_1d() < q) return false;
+      s.beta = s.beta / (1 - q);
+    }
+  }
+  ray->o = offset_ray_origin(sp, wi);
+  ray->d = wi;
+  ray->tmin = 0;
+  ray->tmax = std::numeric_limits<float>::infinity();
+  return true;
+}
+
 Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters, FirstHit* first) const {
-  Rgb L(0), beta(1.0f);
-  bool specular = true;       // the previous vertex was the camera or a delta lobe
-  bool first_smooth = false;  // the first hit scattered by a non-delta lobe
-  int smooth_vertices = 0;    // vertices so far that scattered by a non-delta lobe
-  float prev_pdf = 0, eta_scale = 1;
-  SurfacePoint prev;
-  Hit prev_hit;
+  return splits_ > 1 ? walk<true>(ray, PathState{}, sampler, counters, first)
+                     : walk<false>(ray, PathState{}, sampler, counters, first);
+}
+
+template <bool kSplit>
+Rgb Integrator::walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counters, FirstHit* first) const {
+  Rgb L(0);
   const float n_light = float(light_samples_);
   // A textured or vertex-coloured hit's material (a copy), empty at every other hit. Outside
   // the loop: g++ 12 zero-fills an optional<Material>'s 600 bytes where it is constructed,
   // which inside the loop was 4% of the kernel's instructions on the CS184 boxes.
   std::optional<Material> textured;
-  for (int depth = 0;; ++depth) {
+  for (;; ++s.depth) {
     Hit hit;
     ++counters.rays;
     if (!accel_.intersect(ray, &hit)) {
       for (size_t i : lights_.infinite_lights()) {
         const Rgb le = lights_.infinite_le(i, ray.d);
         if (le.is_black()) continue;
-        const float w = specular || !nee_ ? 1
-                        : mis_            ? power_heuristic(1, prev_pdf, n_light, lights_.infinite_pdf(i, ray.d))
-                                          : 0;  // light sampling alone accounts for it
-        L += beta * le * w;
+        const float w = s.specular || !nee_ ? 1
+                        : mis_              ? power_heuristic(1, s.prev_pdf, n_light, lights_.infinite_pdf(i, ray.d))
+                                            : 0;  // light sampling alone accounts for it
+        L += s.beta * le * w;
       }
       break;
     }
     // A ray leaving a flat triangle can never meet that triangle again: if it does, the
     // origin offset failed (acne). Counted so the stability tests can assert zero.
     // Likewise a ray that left a sphere outward (it is convex).
-    if (depth > 0 && hit.is_sphere == prev_hit.is_sphere && hit.shape == prev_hit.shape &&
-        hit.instance == prev_hit.instance && (hit.is_sphere ? dot(ray.d, prev.ng) > 0 : hit.prim == prev_hit.prim))
+    if (s.depth > 0 && hit.is_sphere == s.prev_hit.is_sphere && hit.shape == s.prev_hit.shape &&
+        hit.instance == s.prev_hit.instance &&
+        (hit.is_sphere ? dot(ray.d, s.prev.ng) > 0 : hit.prim == s.prev_hit.prim))
       ++counters.self_hits;
-    prev_hit = hit;
+    s.prev_hit = hit;
     SurfacePoint sp = make_surface_point(scene_, ray, hit);
     std::optional<Vec3> coat_ns;
     const Material& m = material_at(scene_, hit, &sp, &textured, &coat_ns);
-    if (first && depth == 0) record_first_hit(m, sp, ray, first);
+    if (first && s.depth == 0) record_first_hit(m, sp, ray, first);
     const Vec3 wo_world = -ray.d;
     // Beer-Lambert absorption of a solid glTF volume: the segment just travelled was inside
     // if it leaves through the surface's back (its outward normal faces along the ray).
     if (m.kind == Material::Kind::kPbr && !m.absorption.is_black() && dot(sp.ng, ray.d) > 0) {
       const float t = hit.t;
-      beta *= Rgb(std::exp(-m.absorption.r * t), std::exp(-m.absorption.g * t), std::exp(-m.absorption.b * t));
+      s.beta *= Rgb(std::exp(-m.absorption.r * t), std::exp(-m.absorption.g * t), std::exp(-m.absorption.b * t));
     }
     // Emission: an emitter's (the path ends there: it does not reflect) or a glTF surface's
     // own, which adds to its reflection. Only lamps are lights (sp.light), weighted by MIS.
     if (m.emits() || m.kind == Material::Kind::kEmission) {
       if (m.two_sided_emission || dot(sp.ng, wo_world) > 0) {
         float w = 1;
-        if (!specular && sp.light >= 0 && nee_)
-          w = mis_ ? power_heuristic(1, prev_pdf, n_light,
-                                     lights_.pdf_area_hit(size_t(sp.light), prev.p, sp.p, sp.ng, hit.t))
+        if (!s.specular && sp.light >= 0 && nee_)
+          w = mis_ ? power_heuristic(1, s.prev_pdf, n_light,
+                                     lights_.pdf_area_hit(size_t(sp.light), s.prev.p, sp.p, sp.ng, hit.t))
                    : 0;  // light sampling alone accounts for it
         // A path camera -> smooth -> ... -> delta -> a light the light tracer starts from is
         // the light tracer's (light_tracer.h): nothing is counted twice.
-        if (!(specular && first_smooth && smooth_vertices <= light_traced_smooth_ && !light_traced_.empty() &&
+        if (!(s.specular && s.first_smooth && s.smooth_vertices <= light_traced_smooth_ && !light_traced_.empty() &&
               sp.light >= 0 && light_traced_[size_t(sp.light)]))
-          L += beta * m.radiance * w;
+          L += s.beta * m.radiance * w;
       }
       if (m.kind == Material::Kind::kEmission) break;
     }
-    if (depth >= max_depth_) break;
+    if (s.depth >= max_depth_) break;
 
     // Reflection-only surfaces are two-sided: shade on the side the ray came from.
     // Dielectrics keep the outward normal to know whether the path is inside.
@@ -300,41 +340,30 @@ Rgb Integrator::radiance(Ray ray, Sampler& sampler, RayCounters& counters, First
     const Vec3 wo = frame.to_local(wo_world);
     if (coat_ns)  // (m is *textured here) the coat's normal in the base's frame, turned with it
       textured->coat_normal = frame.to_local(dot(sp.ns, ns) < 0 ? -*coat_ns : *coat_ns);
-    if (nee_ && !m.is_delta()) L += beta * direct(sp, m, frame, wo, ng, sampler, counters);
-
-    const float u1 = sampler.next_1d();
-    const Vec2 u2 = sampler.next_2d();
-    BsdfSample bs;
-    if (!bsdf_sample(m, wo, u1, u2, &bs)) break;
-    const Vec3 wi = frame.to_world(bs.wi);
-    // A shading normal can send a reflection below the true surface: drop it.
-    if (!dielectric && dot(wi, ng) <= 0) break;
-    beta *= bs.weight;
-    if (beta.is_black() || !beta.is_finite()) break;
-    specular = bs.delta;
-    if (depth == 0) first_smooth = !bs.delta;
-    smooth_vertices += !bs.delta;
-    prev_pdf = bs.pdf;
-    prev = sp;
-    eta_scale *= bs.etap * bs.etap;
-
-    if (depth >= 2) {  // Russian roulette on the throughput, undoing the eta^2 scaling
-      // A weight window: paths carrying at least kRouletteFloor of the camera's weight go
-      // on; below it a path survives with probability throughput / kRouletteFloor, so a
-      // survivor's weight is raised back to the floor and never above it. The textbook
-      // survival = throughput (floor 1) raises weak paths up to weight 1: on the CS184
-      // boxes that doubled the relMSE at 16 spp for 25% less time (docs/performance.md).
-      const float rr = (beta * eta_scale).max() / kRouletteFloor;
-      if (rr < 1) {
-        const float q = std::max(0.0f, 1 - rr);
-        if (sampler.next_1d() < q) break;
-        beta = beta / (1 - q);
+    // The first smooth vertex of a path seen through mirrors or glass: the light tracer
+    // cannot reach these pixels (no connection through a delta lobe), so they get
+    // splits_ independent continuations, averaged (see set_specular_splits).
+    if (kSplit && s.depth > 0 && s.smooth_vertices == 0 && !m.is_delta()) {
+      const uint32_t d0 = sampler.dimension();
+      Rgb sum(0);
+      for (int b = 0; b < splits_; ++b) {
+        sampler.set_dimension(d0 + uint32_t(b) * kSplitDimensions);
+        PathState c = s;
+        Rgb Lb(0);
+        if (nee_) Lb += c.beta * direct(sp, m, frame, wo, ng, sampler, counters);
+        Ray next;
+        if (scatter(sp, m, frame, wo, ng, dielectric, c, sampler, &next)) {
+          ++c.depth;
+          Lb += walk<false>(next, c, sampler, counters, nullptr);
+        }
+        sum += Lb;
       }
+      sampler.set_dimension(d0 + uint32_t(splits_) * kSplitDimensions);
+      L += sum / float(splits_);
+      break;
     }
-    ray.o = offset_ray_origin(sp, wi);
-    ray.d = wi;
-    ray.tmin = 0;
-    ray.tmax = std::numeric_limits<float>::infinity();
+    if (nee_ && !m.is_delta()) L += s.beta * direct(sp, m, frame, wo, ng, sampler, counters);
+    if (!scatter(sp, m, frame, wo, ng, dielectric, s, sampler, &ray)) break;
   }
   return L;
 }

@@ -6,6 +6,7 @@
 // emitter).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -55,8 +56,9 @@ Vec3 mapped_normal(const Scene& scene, const TextureRef& ref, float scale, const
 // and the coat's own mapped normal, world space, in *coat_ns). Shared by the path and
 // light tracers so that both see the same surface.
 // (Inline: in the bounce loop, where it was written before the light tracer shared it.)
-inline const Material& material_at(const Scene& scene, const Hit& hit, SurfacePoint* sp,
-                                   std::optional<Material>* textured, std::optional<Vec3>* coat_ns) {
+[[gnu::always_inline]] inline const Material& material_at(const Scene& scene, const Hit& hit, SurfacePoint* sp,
+                                                          std::optional<Material>* textured,
+                                                          std::optional<Vec3>* coat_ns) {
   const Material* mp = &scene.materials[sp->material];
   // Only textured or vertex-coloured materials pay for a copy.
   textured->reset();
@@ -104,8 +106,35 @@ class Integrator {
     light_traced_ = std::move(lights);
     light_traced_smooth_ = smooth;
   }
+  // Paths seen through mirrors and glass (camera -> delta ... -> smooth): `n` independent
+  // continuations from their first smooth vertex, averaged, each with its own sampler
+  // dimensions. With the light tracer on, those pixels are the only ones it cannot help
+  // (a light path cannot reach the camera through a delta lobe) and the rest of the image
+  // is much less noisy than they are (docs/light-tracing.md). 1: none.
+  void set_specular_splits(int n) { splits_ = std::max(1, n); }
 
  private:
+  // A path's state between vertices.
+  struct PathState {
+    Rgb beta{1.0f};
+    bool specular = true;       // the previous vertex was the camera or a delta lobe
+    bool first_smooth = false;  // the first hit scattered by a non-delta lobe
+    int smooth_vertices = 0;    // vertices so far that scattered by a non-delta lobe
+    int depth = 0;
+    float prev_pdf = 0, eta_scale = 1;
+    SurfacePoint prev;
+    Hit prev_hit;
+  };
+  // Sampler dimensions apart between split continuations (a path uses far fewer).
+  static constexpr uint32_t kSplitDimensions = 1u << 20;
+  // The path from `ray` on, its state in s; with kSplit, splits at its first smooth vertex
+  // behind a delta one (a template: the path tracer without splits runs no split code).
+  template <bool kSplit>
+  Rgb walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counters, FirstHit* first) const;
+  // BSDF sampling at sp, then Russian roulette: the next ray in *ray, or false where the
+  // path ends.
+  bool scatter(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng, bool dielectric,
+               PathState& s, Sampler& sampler, Ray* ray) const;
   Rgb direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng, Sampler& sampler,
              RayCounters& counters) const;
 
@@ -117,6 +146,7 @@ class Integrator {
   bool nee_ = true, mis_ = true;
   std::vector<uint8_t> light_traced_;
   int light_traced_smooth_ = 0;
+  int splits_ = 1;
 };
 
 }  // namespace tessera

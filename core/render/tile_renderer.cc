@@ -128,6 +128,7 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
   if (light_decision_.on) {
     light_tracer_.emplace(*scene_, *accel_, *lights_, *camera_, s);
     integrator_->leave_to_light_tracer(light_tracer_->traced_lights(), LightTracer::kMaxSmoothVertices);
+    integrator_->set_specular_splits(LightTracer::kSpecularSplits);
   }
 }
 

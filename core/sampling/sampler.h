@@ -128,6 +128,8 @@ class Sampler {
   }
 
   uint32_t dimension() const { return dim_; }
+  // The next draw uses dimension d + 1 (dimensions are independent: any order is fine).
+  void set_dimension(uint32_t d) { dim_ = d; }
 
  private:
   // 64 well-mixed bits per (pixel key, dimension): the scrambling seeds.

@@ -7,10 +7,12 @@
 
 #include <cmath>
 #include <cstring>
+#include <tuple>
 
 #include "core/camera/camera.h"
 #include "core/light/lights.h"
 #include "core/render/delta_targets.h"
+#include "core/render/integrator.h"
 #include "core/sampling/sampler.h"
 #include "tests/core/chi2.h"
 #include "tests/core/render_helpers.h"
@@ -267,6 +269,60 @@ TEST(LightTracer, AgreesWithThePathTracerAlone) {
                    (lens ? ", thin lens" : ""));
       expect_same_image(a.film, b.film);
     }
+}
+
+// Paths seen through a mirror or glass split at their first smooth vertex
+// (Integrator::set_specular_splits): the same mean, less noise, on the pixels that see the
+// sphere; a pixel that sees the floor directly is not split and keeps its bits.
+TEST(LightTracer, SplitsBehindMirrorsAndGlassKeepTheMeanAndCutTheNoise) {
+  for (const Material& caster : {glass(), mirror()}) {
+    SCOPED_TRACE(caster.kind == Material::Kind::kGlass ? "glass" : "mirror");
+    const Scene scene = caustic_scene(caster);
+    const RenderSettings s = caustic_settings(LT::kOn, 1);
+    const Accel accel(scene);
+    const LightSet lights(scene);
+    const Camera camera(scene, s.camera);
+    const LightTracer tracer(scene, accel, lights, camera, s);
+    Integrator one(scene, accel, lights, s), split(scene, accel, lights, s);
+    one.leave_to_light_tracer(tracer.traced_lights(), LightTracer::kMaxSmoothVertices);
+    split.leave_to_light_tracer(tracer.traced_lights(), LightTracer::kMaxSmoothVertices);
+    split.set_specular_splits(4);
+    struct Moments {
+      double sum = 0, sum2 = 0;
+      int n = 0;
+      double mean() const { return sum / n; }
+      double var() const { return sum2 / n - mean() * mean(); }
+    };
+    // On the sphere, seeing the floor through it or in it (where the glass's own Fresnel
+    // choice, made before the split, is not most of the noise); (16, 21): the floor itself.
+    const int sphere_row = caster.kind == Material::Kind::kGlass ? 9 : 12;
+    for (const auto& [px, py, on_sphere] : {std::tuple{16, sphere_row, true}, std::tuple{16, 21, false}}) {
+      Moments a, b;
+      bool same = true;
+      for (uint32_t i = 0; i < 40000; ++i) {
+        const uint64_t pixel = uint64_t(py) * 32 + px;
+        Sampler sa(7, pixel, i), sb(7, pixel, i);
+        const Vec2 ja = sa.next_2d(), jb = sb.next_2d();
+        const Ray ray = camera.generate(px + ja.x, 23 - py + ja.y, {});
+        RayCounters ca, cb;
+        const Rgb la = one.radiance(ray, sa, ca),
+                  lb = split.radiance(camera.generate(px + jb.x, 23 - py + jb.y, {}), sb, cb);
+        ASSERT_TRUE(la.is_finite() && lb.is_finite());
+        same = same && la.r == lb.r && la.g == lb.g && la.b == lb.b;
+        a.sum += la.luminance(), a.sum2 += la.luminance() * la.luminance(), ++a.n;
+        b.sum += lb.luminance(), b.sum2 += lb.luminance() * lb.luminance(), ++b.n;
+      }
+      SCOPED_TRACE(on_sphere ? "on the sphere" : "on the floor");
+      EXPECT_GT(a.mean(), 0.01);
+      EXPECT_LT(std::fabs(a.mean() - b.mean()), 4.5 * std::sqrt((a.var() + b.var()) / a.n))
+          << a.mean() << " against " << b.mean();
+      if (on_sphere) {
+        EXPECT_LT(b.var(), 0.6 * a.var()) << "variance " << b.var() << " against " << a.var();
+      } else {
+        EXPECT_TRUE(same);
+      }
+    }
+  }
 }
 
 // glTF's materials: a smooth solid glass and a smooth metal casting onto a rough glTF
