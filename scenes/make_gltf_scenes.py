@@ -15,6 +15,10 @@
   cornell-animated.gltf the Cornell box with its spheres moving (the glass one LINEAR, the
                         mirror one hopping along a CUBICSPLINE path) and the camera turning
                         (rotation slerp) and dollying in, over 2 s: 48 frames at 24 fps.
+  cornell-shapes.gltf   the glTF Cornell box with caustic casters of other shapes than spheres:
+                        a glass cube (flat faces, turned 30 degrees) and a mirror torus
+                        standing on its rim, as meshes; for the light tracer's figures
+                        (bench/cycles/caustics_report.py) beside the spheres.
   skinned-bar.gltf      a square bar on two joints that bends 90 degrees over 2 s (a skin,
                         the weights blended across the middle), over a floor whose corner
                         rises by an animated morph target; lit by the default environment.
@@ -126,7 +130,46 @@ def uv_sphere(radius, seg=96, rings=48):
     return pos, nrm, idx
 
 
-def cornell(animated=False):
+def cube(size):
+    """An axis-aligned cube centred on the origin, each face its own four vertices (flat normals)."""
+    pos, nrm, idx = [], [], []
+    h = size / 2
+    for axis in range(3):
+        for sign in (1, -1):
+            n = [0, 0, 0]
+            n[axis] = sign
+            u, v = [0, 0, 0], [0, 0, 0]
+            u[(axis + 1) % 3], v[(axis + 2) % 3] = 1, 1
+            base = len(pos) // 3
+            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                pos += [h * (n[k] + a * u[k] + b * v[k]) for k in range(3)]
+                nrm += n
+            # counter-clockwise seen from outside: u x v = n for sign +1
+            idx += [base, base + 1, base + 2, base, base + 2, base + 3] if sign > 0 else \
+                   [base, base + 2, base + 1, base, base + 3, base + 2]
+    return pos, nrm, idx
+
+
+def torus(major, minor, seg=96, rings=32):
+    """A torus about +Z (its hole faces the camera), smooth normals."""
+    pos, nrm, idx = [], [], []
+    for i in range(seg + 1):
+        a = 2 * math.pi * i / seg
+        ca, sa = math.cos(a), math.sin(a)
+        for j in range(rings + 1):
+            b = 2 * math.pi * j / rings
+            cb, sb = math.cos(b), math.sin(b)
+            n = (ca * cb, sa * cb, sb)
+            nrm += n
+            pos += [(major + minor * cb) * ca, (major + minor * cb) * sa, minor * sb]
+    for i in range(seg):
+        for j in range(rings):
+            a, b = i * (rings + 1) + j, (i + 1) * (rings + 1) + j
+            idx += [a, b, b + 1, a, b + 1, a + 1]
+    return pos, nrm, idx
+
+
+def cornell(animated=False, shapes=False):
     b = Builder()
     # ior 1: a glTF dielectric without its specular coat, i.e. exactly the .dae's Lambertian walls.
     lam = lambda name, c: b.material({"name": name, "pbrMetallicRoughness": {"baseColorFactor": c + [1], "metallicFactor": 0,
@@ -153,9 +196,18 @@ def cornell(animated=False):
     glass = b.material({"name": "glass", "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0, "roughnessFactor": 0},
                         "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1.5},
                                        "KHR_materials_volume": {"thicknessFactor": 0.6}}})  # a solid sphere
-    pos, nrm, idx = uv_sphere(0.3) if not animated else uv_sphere(0.3, 64, 32)
-    mirror_node = b.mesh("mirrorSphere", pos, idx, mirror, nrm, translation=[-0.42, -0.449, -0.3])
-    glass_node = b.mesh("glassSphere", pos, idx, glass, nrm, translation=[0.42, -0.449, 0.3])
+    if shapes:
+        # A glass cube of side 0.4 just above the floor, turned 30 degrees about +Y, and a mirror
+        # torus (radii 0.22 and 0.07) standing on its rim, its hole facing the camera.
+        pos, nrm, idx = cube(0.4)
+        node = b.mesh("glassCube", pos, idx, glass, nrm, translation=[0.4, -h + 0.201, 0.25])  # (not coplanar with the floor)
+        b.g["nodes"][node]["rotation"] = [0, math.sin(math.radians(15)), 0, math.cos(math.radians(15))]
+        pos, nrm, idx = torus(0.22, 0.07)
+        b.mesh("mirrorTorus", pos, idx, mirror, nrm, translation=[-0.4, -h + 0.29, -0.3])
+    else:
+        pos, nrm, idx = uv_sphere(0.3) if not animated else uv_sphere(0.3, 64, 32)
+        mirror_node = b.mesh("mirrorSphere", pos, idx, mirror, nrm, translation=[-0.42, -0.449, -0.3])
+        glass_node = b.mesh("glassSphere", pos, idx, glass, nrm, translation=[0.42, -0.449, 0.3])
     # CS184 framing of the .dae at 480x360: eye 1.5 box diagonals from the centre, and the
     # 800x600 view's pixel pitch (tan(vfov/2) = 360 / (2 * 875)).
     d = 1.5 * math.sqrt(4 + 2.25 + 4)
@@ -165,7 +217,7 @@ def cornell(animated=False):
     b.g["extensionsUsed"] = ["KHR_materials_emissive_strength", "KHR_materials_transmission", "KHR_materials_ior",
                              "KHR_materials_volume"]
     if not animated:
-        b.write(os.path.join(HERE, "cornell-spheres.gltf"))
+        b.write(os.path.join(HERE, "cornell-shapes.gltf" if shapes else "cornell-spheres.gltf"))
         return
     # The glass sphere rolls to the back left (LINEAR), the mirror sphere hops forward and
     # right (CUBICSPLINE: zero tangents at the ends, an upward out-tangent for the hop), and
@@ -323,5 +375,6 @@ if __name__ == "__main__":
     material_spheres()
     cornell()
     cornell(animated=True)
+    cornell(shapes=True)
     dof_row()
     skinned_bar()

@@ -14,8 +14,10 @@
 #include "core/render/delta_targets.h"
 #include "core/render/integrator.h"
 #include "core/sampling/sampler.h"
+#include "core/scene/load.h"
 #include "tests/core/chi2.h"
 #include "tests/core/render_helpers.h"
+#include "tests/core/test_paths.h"
 
 namespace tessera {
 namespace {
@@ -390,6 +392,27 @@ TEST(LightTracer, SameBitsAtAnyThreadCountAndTiling) {
     odd += a.film.odd()[i].lum_sum() / a.film.odd()[i].n;
   }
   EXPECT_NEAR(odd / all, 1, 0.05);
+}
+
+// scenes/cornell-shapes.gltf: caustic casters that are meshes of other shapes (a glass cube,
+// a mirror torus) turn light tracing on, and it agrees with the path tracer alone.
+TEST(LightTracer, TheShapesSceneAgreesWithThePathTracerAlone) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-shapes.gltf"));
+  RenderSettings off;
+  off.camera.framing = Framing::kFile;
+  off.camera.width = 48;
+  off.camera.height = 36;
+  off.spp = 512;
+  off.light_tracer = LT::kOff;
+  RenderSettings on = off;
+  on.spp = 128;
+  on.light_tracer = LT::kAuto;
+  const RenderResult a = render(scene, off), b = render(scene, on);
+  ASSERT_TRUE(b.light_tracing.on) << b.light_tracing.why;
+  EXPECT_GT(b.stats.rays.splats, 1000u);
+  EXPECT_EQ(b.stats.nan_samples, 0u);
+  EXPECT_EQ(b.dropped_splats, 0u);
+  expect_agree(film_estimate(a.film), film_estimate(b.film), "frame");
 }
 
 // Auto: on where a mirror or glass surface can carry a finite light's flux; a scene
