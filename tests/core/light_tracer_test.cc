@@ -345,6 +345,35 @@ TEST(LightTracer, AgreesWithThePathTracerAloneOnGltfMaterials) {
   }
 }
 
+// The white furnace with glass and finite light: inside a sphere whose inner surface is
+// Lambertian (albedo 1/2) and glows with radiance 1 (a sphere light), radiance is 2
+// everywhere, through a lossless glass sphere too. The walls seen through the glass are
+// the path tracer's (split), the glass seen from the walls the light tracer's: together
+// they must give exactly that, pixel block by pixel block.
+TEST(LightTracer, WhiteFurnaceWithGlassIsUniform) {
+  Material wall = testing::pbr_material(0, 1);
+  wall.reflectance = Rgb(0.5f);
+  wall.ior = 1.0f;  // no specular coat: Lambertian
+  wall.radiance = Rgb(1.0f);
+  Scene scene = testing::furnace_with({Sphere{"glass", {0, 0, 0}, 1, 0, -1}}, glass(), 6, 3, 60);
+  scene.materials[1] = wall;
+  scene.finalize();
+  RenderSettings s = testing::furnace_settings();
+  s.spp = 256;
+  s.light_tracer = LT::kOn;
+  const RenderResult r = render(scene, s);
+  ASSERT_TRUE(r.light_tracing.on) << r.light_tracing.why;
+  EXPECT_GT(r.stats.rays.splats, 1000u);
+  EXPECT_EQ(r.stats.nan_samples, 0u);
+  const testing::Estimate two{2.0, 0.0};
+  expect_agree(film_estimate(r.film), two, "frame");
+  for (int by = 0; by < 24; by += 8)
+    for (int bx = 0; bx < 24; bx += 8) {
+      SCOPED_TRACE("block at " + std::to_string(bx) + ", " + std::to_string(by));
+      expect_agree(block(r.film, bx, by, 8, 8), two, "block");
+    }
+}
+
 // A point light at the centre of a glass sphere: every ray leaves radially and, Fresnel
 // reflections included, all of its flux gets out (lossless glass), so the floor is lit as if
 // the sphere were not there. The path tracer alone sees none of it (a delta light behind
