@@ -171,7 +171,7 @@ Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& l
       nee_(s.nee),
       mis_(s.mis) {}
 
-Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng,
+[[gnu::always_inline]] inline Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng,
                        Sampler& sampler, RayCounters& counters) const {
   Rgb sum(0);
   for (size_t i = 0; i < lights_.size(); ++i) {
