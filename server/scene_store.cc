@@ -57,13 +57,7 @@ std::string SceneStore::add(const std::string& main_file, const SceneFiles& file
     info->set_size(f.content().size());
   }
   check_manifest(m);  // throws WireError: an unsafe path, the main file missing
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (auto it = scenes_.find(m.scene_hash()); it != scenes_.end()) {  // the same bytes were checked before
-      ++it->second.uses;
-      return m.scene_hash();
-    }
-  }
+  if (use_kept(m.scene_hash(), check)) return m.scene_hash();  // the same bytes are kept
   const std::string staged = staging_folder(m.scene_hash());
   try {
     for (const v1::SceneFile& f : files) {
@@ -84,13 +78,7 @@ std::string SceneStore::add(const std::string& main_file, const SceneFiles& file
 std::string SceneStore::keep(const std::string& staged, const v1::SceneManifest& m, const Check& check) {
   const RemoveAll cleanup{staged};
   const std::string& hash = m.scene_hash();
-  {
-    std::lock_guard<std::mutex> lock(mu_);
-    if (auto it = scenes_.find(hash); it != scenes_.end()) {
-      ++it->second.uses;
-      return hash;
-    }
-  }
+  if (use_kept(hash, check)) return hash;
   try {
     const Scene scene = load_scene((fs::path(staged) / "files" / m.main_file()).string());  // outside the lock: slow
     if (check) check(scene);
@@ -112,6 +100,30 @@ std::string SceneStore::keep(const std::string& staged, const v1::SceneManifest&
   if (ec) throw std::runtime_error("cannot keep the scene on the coordinator's disk: " + ec.message());
   scenes_[hash] = Kept{m, 1};
   return hash;
+}
+
+bool SceneStore::use_kept(const std::string& hash, const Check& check) {
+  std::string main;
+  {
+    std::lock_guard<std::mutex> lock(mu_);
+    auto it = scenes_.find(hash);
+    if (it == scenes_.end()) return false;
+    ++it->second.uses;
+    main = it->second.manifest.main_file();
+  }
+  if (!check) return true;
+  // Another job's settings were checked against these bytes, not this one's: load the kept
+  // copy (outside the lock: slow) and check again; a refusal gives the use back.
+  try {
+    check(load_scene((fs::path(dir_) / hash / "files" / main).string()));
+  } catch (const SceneError& e) {
+    release(hash);
+    throw SceneError(main, e.element(), e.reason());
+  } catch (...) {
+    release(hash);
+    throw;
+  }
+  return true;
 }
 
 uint64_t SceneStore::restore(const std::string& hash) {

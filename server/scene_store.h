@@ -37,8 +37,9 @@ class SceneStore {
   std::string add(const std::string& main_file, const SceneFiles& files, const Check& check = nullptr);
   // The scene whose files are in <staged>/files (a staging_folder(), its bytes already
   // hashed to m.scene_hash()): loaded as a worker will, so a bad scene is refused here and
-  // never reaches a worker, then renamed into place. Skips the check when the same bytes are
-  // kept already. Returns the content hash; the caller holds one use of the scene until it
+  // never reaches a worker, then renamed into place. When the same bytes are kept already,
+  // those are loaded and checked instead (`check` is a job's settings: each job's own).
+  // Returns the content hash; the caller holds one use of the scene until it
   // calls release(). Throws SceneError naming the main file as the user knows it (not by its
   // path here), what `check` throws, or std::runtime_error (the disk). `staged` is gone
   // afterwards whatever happened. Thread-safe, as is everything here.
@@ -75,6 +76,9 @@ class SceneStore {
     int uses = 0;
   };
   SceneSource source(const std::string& hash, const v1::SceneManifest& m) const;  // its files on disk
+  // One more use of the scene `hash` if it is kept (false: not kept), `check` run on the
+  // kept copy; a refusal gives the use back and throws as keep() does.
+  bool use_kept(const std::string& hash, const Check& check);
 
   std::string dir_;
   mutable std::mutex mu_;

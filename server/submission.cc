@@ -16,8 +16,8 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
   try {
     // A bad scene is refused here, and settings that ask it for what it has not. Whether
     // its frames trace light paths is decided here too (auto: on or off), so that every
-    // result of a frame must carry splats or none (ResultIntake::result_splats). (A scene
-    // whose bytes were checked before is not loaded again: auto then stays auto.)
+    // result of a frame must carry splats or none (ResultIntake::result_splats). A scene
+    // whose bytes are kept already is loaded from the coordinator's copy for this check.
     const auto check = [&](const Scene& scene) {
       TileRenderer::check_settings(scene, a.settings);
       if (a.settings.light_tracer != RenderSettings::LightTracer::kOff)

@@ -112,13 +112,32 @@ TEST_F(SubmissionTest, SettingsTheSceneCannotHonourAreRefused) {
   EXPECT_EQ(files_kept(), 0u);
 }
 
+// The same bytes submitted again are not stored twice, but each job's settings are checked
+// against them: a second job asking for an animation the scene lacks is refused, and the
+// first job's use of the scene stays.
+TEST_F(SubmissionTest, SettingsAreCheckedAgainstAKeptSceneToo) {
+  const v1::SubmitJobRequest good = request();
+  prepare(good);
+  const size_t kept = files_kept();
+  v1::SubmitJobRequest bad = request();
+  bad.mutable_settings()->set_animation("walk");
+  const std::string why = refusal([&] { prepare(bad); }, Code::kInvalidArgument);
+  EXPECT_EQ(why, "--animation: the scene has no animations");
+  EXPECT_EQ(store.jobs().size(), 1u);
+  EXPECT_EQ(files_kept(), kept);
+  const std::string hash = bundle_hash(good.main_file(), good.files());
+  EXPECT_NO_THROW(scenes.manifest(hash));
+  scenes.release(hash);  // the first job's use, the only one: the refused job's was given back
+  EXPECT_THROW(scenes.manifest(hash), std::out_of_range);
+}
+
 // Light paths' splats travel with tasks' results (docs/light-tracing.md): every mode is
 // admitted. Auto is decided when the scene is loaded at submit (here: on, for the glass and
 // mirror spheres), so that every result of its frames must carry splats; a scene whose
-// bytes were checked before is not loaded again, and auto then stays auto (results are
-// taken with splats or without).
+// bytes are kept already (every submit here after the first) is checked and decided from
+// the kept copy.
 TEST_F(SubmissionTest, LightTracingModesAreAdmittedAndAutoIsDecidedFromTheScene) {
-  const std::pair<uint32_t, uint32_t> modes[] = {{2, 1}, {1, 1}, {0, 0}, {2, 2}};  // asked, kept
+  const std::pair<uint32_t, uint32_t> modes[] = {{2, 1}, {1, 1}, {0, 0}, {2, 1}};  // asked, kept
   for (const auto& [mode, kept] : modes) {
     v1::SubmitJobRequest r = request();
     r.mutable_settings()->set_light_tracer(mode);
