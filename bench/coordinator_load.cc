@@ -129,6 +129,9 @@ int main(int argc, char** argv) {
   s.camera.height = height;
   s.spp = 1000;
   s.pass_spp = 1;
+  // The simulated results carry sums only: no light paths (a scene with mirror or glass
+  // would otherwise be decided `on`, and its results must carry splats).
+  s.light_tracer = RenderSettings::LightTracer::kOff;
   v1::SubmitJobRequest req;
   req.set_version(kProtocolVersion);
   std::string main;
