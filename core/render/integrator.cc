@@ -171,8 +171,8 @@ Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& l
       nee_(s.nee),
       mis_(s.mis) {}
 
-[[gnu::always_inline]] inline Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng,
-                       Sampler& sampler, RayCounters& counters) const {
+[[gnu::always_inline]] inline Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& frame,
+                                                     Vec3 wo, Vec3 ng, Sampler& sampler, RayCounters& counters) const {
   Rgb sum(0);
   for (size_t i = 0; i < lights_.size(); ++i) {
     const Light& light = lights_.light(i);
@@ -240,7 +240,8 @@ void record_first_hit(const Material& m, const SurfacePoint& sp, const Ray& ray,
   if (s.depth == 0) s.first_smooth = !bs.delta;
   s.smooth_vertices += !bs.delta;
   s.prev_pdf = bs.pdf;
-  s.prev = sp;
+  s.prev_p = sp.p;
+  s.prev_ng = sp.ng;
   s.eta_scale *= bs.etap * bs.etap;
 
   if (s.depth >= 2) {  // Russian roulette on the throughput, undoing the eta^2 scaling
@@ -295,7 +296,7 @@ Rgb Integrator::walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counte
     // Likewise a ray that left a sphere outward (it is convex).
     if (s.depth > 0 && hit.is_sphere == s.prev_hit.is_sphere && hit.shape == s.prev_hit.shape &&
         hit.instance == s.prev_hit.instance &&
-        (hit.is_sphere ? dot(ray.d, s.prev.ng) > 0 : hit.prim == s.prev_hit.prim))
+        (hit.is_sphere ? dot(ray.d, s.prev_ng) > 0 : hit.prim == s.prev_hit.prim))
       ++counters.self_hits;
     s.prev_hit = hit;
     SurfacePoint sp = make_surface_point(scene_, ray, hit);
@@ -316,7 +317,7 @@ Rgb Integrator::walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counte
         float w = 1;
         if (!s.specular && sp.light >= 0 && nee_)
           w = mis_ ? power_heuristic(1, s.prev_pdf, n_light,
-                                     lights_.pdf_area_hit(size_t(sp.light), s.prev.p, sp.p, sp.ng, hit.t))
+                                     lights_.pdf_area_hit(size_t(sp.light), s.prev_p, sp.p, sp.ng, hit.t))
                    : 0;  // light sampling alone accounts for it
         // A path camera -> smooth -> ... -> delta -> a light the light tracer starts from is
         // the light tracer's (light_tracer.h): nothing is counted twice.

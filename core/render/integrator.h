@@ -122,7 +122,7 @@ class Integrator {
     int smooth_vertices = 0;    // vertices so far that scattered by a non-delta lobe
     int depth = 0;
     float prev_pdf = 0, eta_scale = 1;
-    SurfacePoint prev;
+    Vec3 prev_p, prev_ng;  // the previous vertex's point (MIS) and geometric normal
     Hit prev_hit;
   };
   // Sampler dimensions apart between split continuations (a path uses far fewer).
