@@ -126,6 +126,7 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
                      {"light_tracer_why", r.light_tracing.why},
                      {"light_paths", r.light_paths},
                      {"splats", r.stats.rays.splats},
+                     {"split_paths", r.stats.rays.split_paths},
                      {"dropped_splats", r.dropped_splats}};
     const std::string path = s.frame ? frame_path(a.stats_json, *s.frame) : a.stats_json;  // one per frame with ####
     std::ofstream f(path);

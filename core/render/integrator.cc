@@ -346,6 +346,7 @@ Rgb Integrator::walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counte
     // splits_ independent continuations, averaged (see set_specular_splits).
     if (kSplit && s.depth > 0 && s.smooth_vertices == 0 && !m.is_delta()) {
       const uint32_t d0 = sampler.dimension();
+      ++counters.split_paths;
       Rgb sum(0);
       for (int b = 0; b < splits_; ++b) {
         sampler.set_dimension(d0 + uint32_t(b) * kSplitDimensions);

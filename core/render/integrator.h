@@ -26,6 +26,7 @@ struct RayCounters {
   uint64_t shadow_rays = 0;  // occlusion queries
   uint64_t self_hits = 0;    // continuation rays that hit their own primitive at t ~ 0
   uint64_t splats = 0;       // light paths' connections to the camera added to the frame
+  uint64_t split_paths = 0;  // camera paths split behind mirrors or glass (set_specular_splits)
 };
 
 // A ray-surface intersection prepared for shading.

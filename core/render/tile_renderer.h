@@ -31,6 +31,7 @@ struct TileStats {
     rays.shadow_rays += o.rays.shadow_rays;
     rays.self_hits += o.rays.self_hits;
     rays.splats += o.rays.splats;
+    rays.split_paths += o.rays.split_paths;
   }
 };
 

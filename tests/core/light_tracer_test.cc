@@ -301,6 +301,7 @@ TEST(LightTracer, SplitsBehindMirrorsAndGlassKeepTheMeanAndCutTheNoise) {
     for (const auto& [px, py, on_sphere] : {std::tuple{16, sphere_row, true}, std::tuple{16, 21, false}}) {
       Moments a, b;
       bool same = true;
+      uint64_t split_paths = 0;
       for (uint32_t i = 0; i < 40000; ++i) {
         const uint64_t pixel = uint64_t(py) * 32 + px;
         Sampler sa(7, pixel, i), sb(7, pixel, i);
@@ -310,11 +311,14 @@ TEST(LightTracer, SplitsBehindMirrorsAndGlassKeepTheMeanAndCutTheNoise) {
         const Rgb la = one.radiance(ray, sa, ca),
                   lb = split.radiance(camera.generate(px + jb.x, 23 - py + jb.y, {}), sb, cb);
         ASSERT_TRUE(la.is_finite() && lb.is_finite());
+        EXPECT_EQ(ca.split_paths, 0u);
+        split_paths += cb.split_paths;
         same = same && la.r == lb.r && la.g == lb.g && la.b == lb.b;
         a.sum += la.luminance(), a.sum2 += la.luminance() * la.luminance(), ++a.n;
         b.sum += lb.luminance(), b.sum2 += lb.luminance() * lb.luminance(), ++b.n;
       }
       SCOPED_TRACE(on_sphere ? "on the sphere" : "on the floor");
+      EXPECT_EQ(split_paths > 0, on_sphere);
       EXPECT_GT(a.mean(), 0.01);
       EXPECT_LT(std::fabs(a.mean() - b.mean()), 4.5 * std::sqrt((a.var() + b.var()) / a.n))
           << a.mean() << " against " << b.mean();
