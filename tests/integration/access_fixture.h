@@ -6,6 +6,7 @@
 #include <httplib.h>
 #include <unistd.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <memory>
 #include <regex>
@@ -54,7 +55,7 @@ class Access : public ::testing::Test {
   void TearDown() override {
     workers.clear();
     coordinator.reset();
-    fs::remove_all(dir);
+    if (!std::getenv("TESSERA_KEEP_TEST_DIR")) fs::remove_all(dir);  // (as farm_fixture.h)
   }
   std::string token_file(const char* token) {
     const std::string path = (dir / (std::string(token).substr(0, 5) + ".token")).string();

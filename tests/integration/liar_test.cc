@@ -14,6 +14,22 @@ namespace {
 
 const std::string kLiarFlags = "-r 96 72 -s 32 --pass-spp 8 -m 4 --seed 3 --tile 16";  // 120 tasks
 
+// The lines of `text` holding any of `words`.
+std::string grep_lines(const std::string& text, const std::vector<std::string>& words) {
+  std::string out, line;
+  for (size_t at = 0; at < text.size();) {
+    const size_t end = std::min(text.find('\n', at), text.size());
+    line = text.substr(at, end - at);
+    for (const std::string& w : words)
+      if (line.find(w) != std::string::npos) {
+        out += line + "\n";
+        break;
+      }
+    at = end + 1;
+  }
+  return out;
+}
+
 class Liar : public Access {
  protected:
   // Waits until the status page lists `n` workers (so no task goes out before they are all
@@ -39,6 +55,12 @@ class Liar : public Access {
     ASSERT_EQ(r.code, 0) << r.err;
     if (!fs::exists(local))
       ASSERT_EQ(std::system((kBin + "/tessera render " + kScene + " " + kLiarFlags + " -q -f " + local).c_str()), 0);
+    // On a difference, what the client and the coordinator said (was the liar caught after
+    // the job ended, say: a flag on the job) and the folder's name (TESSERA_KEEP_TEST_DIR=1
+    // keeps it).
+    SCOPED_TRACE("submit said: " + r.out + r.err + "\nin " + dir.string() +
+                 "; coordinator's quarantines and checks:\n" +
+                 grep_lines(slurp((dir / "coordinator.err").string()), {"quarantin", "check", "reset", "again"}));
     expect_same_pixels(local, out);
   }
 };
