@@ -115,7 +115,7 @@ bool SceneStore::use_kept(const std::string& hash, const Check& check) {
   // Another job's settings were checked against these bytes, not this one's: load the kept
   // copy (outside the lock: slow) and check again; a refusal gives the use back.
   try {
-    check(load_scene((fs::path(dir_) / hash / "files" / main).string()));
+    check(load_scene(main_path(hash)));  // (kept while this use holds it)
   } catch (const SceneError& e) {
     release(hash);
     throw SceneError(main, e.element(), e.reason());
