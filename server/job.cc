@@ -25,6 +25,7 @@ void Job::compact() {
   plan.compact();
   splats.release();
   std::vector<uint64_t>().swap(tile_lease);
+  std::vector<uint32_t>().swap(tile_resets);
   tile_backup.clear();
   for (auto& [worker, tiles] : merged_by) {
     std::sort(tiles.begin(), tiles.end());

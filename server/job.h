@@ -36,6 +36,7 @@ struct Job {
         plan(settings),
         splats(settings, uint32_t(plan.tiles().size())),
         tile_lease(plan.tiles().size(), 0),
+        tile_resets(plan.tiles().size(), 0),
         state_(state) {}
 
   JobMeta meta;
@@ -50,6 +51,10 @@ struct Job {
   // checkpoint written across one is not kept.
   uint64_t resets = 0;
   std::vector<uint64_t> tile_lease;  // the live task id of each tile, 0 = none
+  // Times each tile was taken back (as `resets`). A lease records its tile's count: a result
+  // leased before the tile was taken back is refused, since it may build on what was taken
+  // back (a run's base sums, an adaptive pass's mask from them).
+  std::vector<uint32_t> tile_resets;
   // Tiles leased a second time at the frame's end (Dispatcher): tile -> that lease's task
   // id. Whichever result comes first is merged and both leases end.
   std::map<uint32_t, uint64_t> tile_backup;

@@ -30,6 +30,7 @@ struct Lease {
   // probation if the lease ends without its result merged (another lease of the tile won,
   // or it expired), so a registration's first merged results are the checked ones.
   bool probation = false;
+  uint32_t tile_resets = 0;  // its tile's Job::tile_resets when granted
 };
 
 class LeaseTable {

@@ -13,9 +13,14 @@ void note_given(WorkerInfo& worker, const Job& job, const TileTask& task, bool b
 }
 }  // namespace
 
+Lease Leasing::lease_of(const Job& job, const TileTask& task, const WorkerInfo& worker, double now) const {
+  Lease l{job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now, task.pass_count};
+  l.tile_resets = job.tile_resets[task.tile];
+  return l;
+}
+
 uint64_t Leasing::grant(Job& job, const TileTask& task, WorkerInfo& worker, double now) {
-  const uint64_t id = leases_.grant(
-      {job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now, task.pass_count});
+  const uint64_t id = leases_.grant(lease_of(job, task, worker, now));
   job.tile_lease[task.tile] = id;
   note_given(worker, job, task, false);
   ++worker.leases;
@@ -26,8 +31,7 @@ uint64_t Leasing::grant(Job& job, const TileTask& task, WorkerInfo& worker, doub
 uint64_t Leasing::grant_backup(Job& job, const TileTask& task, WorkerInfo& worker, double now) {
   TESSERA_INVARIANT(job.tile_lease[task.tile] != 0 && !job.tile_backup.count(task.tile),
                     "a backup of tile " + std::to_string(task.tile) + " that is not leased once");
-  const uint64_t id = leases_.grant(
-      {job.id(), task.tile, task.pass, worker.id, now + lease_seconds_, nullptr, 0, now, task.pass_count});
+  const uint64_t id = leases_.grant(lease_of(job, task, worker, now));
   job.tile_backup[task.tile] = id;
   note_given(worker, job, task, true);
   ++worker.leases;

@@ -46,6 +46,8 @@ class Leasing {
   void end_job(Job& job, double now);
 
  private:
+  // A task's lease for the worker, from now (its tile's resets recorded).
+  Lease lease_of(const Job& job, const TileTask& task, const WorkerInfo& worker, double now) const;
   void ended(uint64_t id, const Lease& lease, bool requeue, double now);
 
   LeaseTable& leases_;

@@ -34,7 +34,9 @@ std::string prometheus_text(const Coordinator& c) {
   m.out += "tessera_build_info{version=\"" + metric_label(version()) + "\"} 1\n";
   m.counter("tessera_tasks_dispatched_total", "Tasks handed to workers.", k.tasks_dispatched);
   m.counter("tessera_results_merged_total", "Tile results merged into films.", k.results_merged);
-  m.counter("tessera_results_duplicate_total", "Results dropped because their tile pass was already merged.",
+  m.counter("tessera_results_duplicate_total",
+            "Results dropped because their tile pass was already merged (or the tile was started over since they were "
+            "leased).",
             k.results_duplicate);
   m.counter("tessera_results_rejected_total", "Results refused as unknown or malformed.", k.results_rejected);
   m.counter("tessera_leases_expired_total", "Leases that expired without a result.", k.leases_expired);

@@ -22,7 +22,9 @@ std::optional<Lease> ResultIntake::wanted(const v1::TaskResult& result, v1::Resu
   if (l->check) return *l;  // the Verifier's
   const Job* job = p_.jobs.find_job(l->job);
   if (!job || !job->live()) return std::nullopt;
-  if (!job->plan.wants(l->tile, l->pass)) {
+  // Not wanted either: leased before its tile was taken back (a liar's work undone), it may
+  // build on what was taken back (a run's base, an adaptive pass's mask).
+  if (!job->plan.wants(l->tile, l->pass) || l->tile_resets != job->tile_resets[l->tile]) {
     ++p_.counters.results_duplicate;
     ack.set_duplicate(true);
     return std::nullopt;

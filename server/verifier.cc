@@ -207,6 +207,7 @@ void Verifier::quarantine(uint64_t worker, const std::string& why, double now, E
       for (uint32_t t : tiles) {
         leasing_.end_tile(*job, t, now);
         job->plan.reset_tile(t);
+        ++job->tile_resets[t];  // its results leased before now are refused
         ++counters_.tiles_rendered_again;
       }
       std::vector<uint64_t> moot;  // checks of those tiles

@@ -48,6 +48,28 @@ class VerifierTest : public testing::PartsTest {
   uint64_t digest(uint32_t tile, uint32_t pass, double value) const {
     return sums_digest(plausible_sums(job->plan, tile, pass, value));
   }
+  // A run's result (passes 1 and 2 of a tile after its first): its sums grown to 10 samples
+  // a pixel from plausible_sums' first pass, at the same luminance.
+  v1::TaskResult run_result(uint64_t task) const {
+    const Lease* l = leases.known(task);
+    std::vector<PixelSums> sums = plausible_sums(job->plan, l->tile, 0);
+    for (PixelSums& p : sums) {
+      const double v = p.r / p.n;
+      p = PixelSums{10 * v, 10 * v, 10 * v, 10 * v * v, 10};
+    }
+    v1::TaskResult r = result(task);
+    r.set_sums_zstd(encode_sums(sums));
+    r.set_samples(r.samples() / 4 * 6);
+    return r;
+  }
+  // Pass `pass` of every tile leased to the worker and merged.
+  void render_pass(uint32_t pass, uint64_t w) {
+    for (uint32_t t = 0; t < kTiles; ++t) {
+      const uint64_t id = lease_next(*job, w);
+      ASSERT_EQ(leases.known(id)->pass, pass);
+      ASSERT_TRUE(submit(result(id)).accepted());
+    }
+  }
   // A referee that renders (tile 0, pass 0) as a worker sending `value` does.
   Referee renders(double value) const {
     const std::vector<PixelSums> sums = plausible_sums(job->plan, 0, 0, value);
@@ -220,6 +242,31 @@ TEST_F(VerifierTest, ALiarsFrameWithSplatsStartsOverWhole) {
   }
   EXPECT_EQ(job->plan.samples_merged(), 0u);  // the honest worker's tile too
   EXPECT_EQ(counters.tiles_rendered_again, kTiles);
+}
+
+// A run of passes carries its tile's sums so far (its base) and returns them grown. One
+// leased on a liar's sums and returned after the liar was caught and the tile rendered again
+// would put the lie back: a result leased before its tile was taken back is refused.
+TEST_F(VerifierTest, AResultLeasedBeforeItsTileWasTakenBackIsRefused) {
+  render_pass(0, a);  // every tile's first pass, by the liar
+  const std::optional<TileTask> run = job->plan.take(2);
+  ASSERT_TRUE(run && run->tile == 0 && run->pass == 1 && run->pass_count == 2 && !run->base.empty());
+  const uint64_t late = leasing.grant(*job, *run, worker(b), now);
+  fx = {};
+  verifier.quarantine(a, "its sums differ", now, fx);
+  EXPECT_EQ(leases.live(late), nullptr);
+  ASSERT_TRUE(submit(result(lease_next(*job, b))).accepted());  // tile 0's first pass again
+  ASSERT_TRUE(job->plan.wants(0, 1));
+  const v1::ResultAck ack = submit(run_result(late));
+  EXPECT_FALSE(ack.accepted());
+  EXPECT_TRUE(ack.duplicate());
+  EXPECT_EQ(job->plan.progress(0).passes_done, 1u);
+  // The same run leased now (after the other tiles' first passes) is merged.
+  for (uint32_t t = 1; t < kTiles; ++t) ASSERT_TRUE(submit(result(lease_next(*job, b))).accepted());
+  const std::optional<TileTask> again = job->plan.take(2);
+  ASSERT_TRUE(again && again->tile == 0 && again->pass == 1);
+  EXPECT_TRUE(submit(run_result(leasing.grant(*job, *again, worker(b), now))).accepted());
+  EXPECT_EQ(job->plan.progress(0).passes_done, 3u);
 }
 
 // BUG (server/verifier.cc, Verifier::quarantine): a sequence's frame that ended DONE with
