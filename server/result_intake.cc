@@ -12,6 +12,17 @@ std::vector<PixelSums> result_sums(const v1::TaskResult& result, size_t pixels) 
   return decode_sums(result.sums_zstd(), pixels);
 }
 
+namespace {
+// Whether a result shows any light: a sum besides the sample counts, or a splat.
+bool shows_light(const std::vector<PixelSums>& sums, const std::vector<SplatRecord>& splats) {
+  for (const SplatRecord& r : splats)
+    if (!r.entries.empty()) return true;
+  for (const PixelSums& p : sums)
+    if (p.r != 0 || p.g != 0 || p.b != 0 || p.lum2 != 0) return true;
+  return false;
+}
+}  // namespace
+
 std::optional<Lease> ResultIntake::wanted(const v1::TaskResult& result, v1::ResultAck& ack) {
   const Lease* l = p_.leases.known(result.task_id());
   // Never issued, or issued to another worker: only the lease's holder may answer it.
@@ -117,9 +128,10 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
       continue;
     }
     if (in.aovs_wanted) job.plan.add_aovs(lease->tile, in.aovs);  // fits: decoded for this tile's size
-    // Digested before they move into the frame's splats.
+    // Digested (and looked at) before they move into the frame's splats.
     const uint64_t digest =
         lease->task ? sums_digest(in.sums->sums(), in.aovs_wanted ? &in.aovs : nullptr, &in.splats) : 0;
+    const bool lit = !lease->probation || shows_light(in.sums->sums(), in.splats);
     if (!in.splats.empty()) job.splats.add(lease->tile, lease->pass, std::move(in.splats));
     p_.counters.merge_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     p_.counters.samples_merged += added;
@@ -127,7 +139,9 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
     // Whichever copy of the task arrived first won; every lease on this (tile, pass) ends
     // (kept known, so a repeat of this result is recognised as a duplicate).
     // (A live lease of this (tile, pass) is the tile's first lease or its backup.)
-    if (Lease* merged = p_.leases.live(result.task_id())) merged->probation = false;  // it served
+    // A probation task served, unless its result was black: a wrong scale of zero is zero, so
+    // it proves nothing of its worker; its lease's end then gives the probation back.
+    if (Lease* merged = p_.leases.live(result.task_id())) merged->probation = merged->probation && !lit;
     p_.leasing.end_tile(job, lease->tile, now);
     job.merged_by[result.worker_id()].push_back(lease->tile);
     if (!job.sequence.empty()) ++p_.jobs.find_sequence(job.sequence)->changes;

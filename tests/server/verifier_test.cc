@@ -366,5 +366,51 @@ TEST_F(VerifierTest, ALeasedCheckIsNeverSkipped) {
   EXPECT_NE(checks.find(check), nullptr);
 }
 
+// Probation counts results that show light. A black tile's sums are zeros whatever scale a
+// liar applies, so such a result passes its check and proves nothing: it is checked, and
+// the worker's probation gets the task back (a liar whose first tasks were all black would
+// otherwise pass probation and be caught only by the fraction, maybe after its job ended).
+class ProbationTest : public testing::PartsTest {
+ protected:
+  ProbationTest() : PartsTest(rarely_checked()) {}
+  static CoordinatorOptions rarely_checked() {
+    CoordinatorOptions o = testing::parts_options();
+    o.verify_fraction = 1e-12;  // only probation picks
+    return o;
+  }
+  std::shared_ptr<Job> job = add_still();
+  uint64_t fresh = add_worker(1, "fresh"), other = add_worker(1, "other");
+  // The worker's next task as GetTask hands it out, returned black or lit; whether a check
+  // was issued for it.
+  bool returned(bool black) {
+    const v1::GetTaskResponse r = dispatcher.get_task(fresh, 1, 0, now, fx);
+    EXPECT_EQ(r.tasks_size(), 1);
+    v1::TaskResult res = result(r.tasks(0).task_id());
+    if (black) {
+      const Lease* l = leases.known(r.tasks(0).task_id());
+      std::vector<PixelSums> sums = plausible_sums(job->plan, l->tile, l->pass);
+      for (PixelSums& p : sums) p = PixelSums{0, 0, 0, 0, p.n};
+      res.set_sums_zstd(encode_sums(sums));
+    }
+    const size_t before = checks.all().size();
+    EXPECT_TRUE(submit(res).accepted());
+    return checks.all().size() == before + 1;
+  }
+};
+
+TEST_F(ProbationTest, ABlackResultIsCheckedButDoesNotCountTowardProbation) {
+  worker(fresh).probation = 2;
+  EXPECT_TRUE(returned(true));
+  EXPECT_EQ(worker(fresh).probation, 2u);  // given back
+  EXPECT_TRUE(returned(false));
+  EXPECT_EQ(worker(fresh).probation, 1u);
+  EXPECT_TRUE(returned(true));
+  EXPECT_EQ(worker(fresh).probation, 1u);
+  EXPECT_TRUE(returned(false));
+  EXPECT_EQ(worker(fresh).probation, 0u);
+  EXPECT_FALSE(returned(false));  // past probation: the fraction decides
+  EXPECT_EQ(counters.checks_issued, 4u);
+}
+
 }  // namespace
 }  // namespace tessera
