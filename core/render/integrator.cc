@@ -273,10 +273,13 @@ template <bool kSplit>
 Rgb Integrator::walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counters, FirstHit* first) const {
   Rgb L(0);
   const float n_light = float(light_samples_);
-  // A textured or vertex-coloured hit's material (a copy), empty at every other hit. Outside
-  // the loop: g++ 12 zero-fills an optional<Material>'s 600 bytes where it is constructed,
-  // which inside the loop was 4% of the kernel's instructions on the CS184 boxes.
-  std::optional<Material> textured;
+  // A textured or vertex-coloured hit's material (a copy), empty at every other hit. Made
+  // once a thread: g++ 12 zero-fills an optional<Material>'s 616 bytes where it is
+  // constructed (4% of the kernel's instructions inside the loop; once a walk, a `rep stos`
+  // that was 1.3% of the time). Each instantiation has its own: walk<true> calls
+  // walk<false> while its own may be in use.
+  thread_local std::optional<Material> textured;
+  textured.reset();
   for (;; ++s.depth) {
     Hit hit;
     ++counters.rays;

@@ -91,7 +91,8 @@ void LightTracer::trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, Splat
   ray.d = dir;
   ray.tmin = 0;
   ray.tmax = std::numeric_limits<float>::infinity();
-  std::optional<Material> textured;
+  thread_local std::optional<Material> textured;  // made once a thread (as in Integrator::walk)
+  textured.reset();
   int smooth = 0;                  // vertices before this one that scattered by a non-delta lobe
   for (int depth = 1;; ++depth) {  // the path's vertex y_depth, counted from the light
     Hit hit;
