@@ -379,7 +379,7 @@ class ProbationTest : public testing::PartsTest {
     return o;
   }
   std::shared_ptr<Job> job = add_still();
-  uint64_t fresh = add_worker(1, "fresh"), other = add_worker(1, "other");
+  uint64_t fresh = add_worker(1, "fresh"), other = add_worker(1, "other");  // (checks need another worker)
   // The worker's next task as GetTask hands it out, returned black or lit; whether a check
   // was issued for it.
   bool returned(bool black) {
