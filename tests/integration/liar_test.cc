@@ -77,8 +77,9 @@ class Liar : public Access {
 TEST_F(Liar, ALiarAmongEnrolledWorkersIsCaughtOnProbationAndOnlyItsIdentityIsRefused) {
   start_coordinator();
   start_enrolled("honest-1");
-  start_enrolled("honest-2");
-  start_enrolled("honest-3");
+  // Runs of passes carry the tile's sums so far (maybe the liar's) and return them grown.
+  start_enrolled("honest-2", {"--passes-per-task", "2"});
+  start_enrolled("honest-3", {"--passes-per-task", "4"});
   Process& liar = start_enrolled("liar", {"--test-lie"});
   ASSERT_TRUE(wait_for_workers(4));
   render_and_compare("first");
