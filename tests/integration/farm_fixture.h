@@ -107,8 +107,18 @@ class Farm : public ::testing::Test {
       args.push_back(w);
     return std::make_unique<Process>(kBin + "/tessera", args, (dir / "client.err").string());
   }
-  // Once the first job has merged more than `above` samples, and a moment later (a
-  // checkpoint or two at --checkpoint-seconds 0.2), SIGKILLs the coordinator and starts it
+  // The coordinator's tessera_checkpoints_written_total (0 if it cannot say).
+  uint64_t checkpoints_written() {
+    httplib::Client cli("127.0.0.1", http_port);
+    auto res = cli.Get("/metrics");
+    const std::string key = "\ntessera_checkpoints_written_total ";
+    const size_t at = res && res->status == 200 ? res->body.find(key) : std::string::npos;
+    return at == std::string::npos ? 0 : std::stoull(res->body.substr(at + key.size()));
+  }
+  // Once the first job has merged more than `above` samples and two checkpoints have been
+  // written since (one at a time: the second began after it had merged; --checkpoint-seconds
+  // 0.2, waited for, not slept on: under load they once took more than the half second
+  // slept before), SIGKILLs the coordinator and starts it
   // again on its address and folder with `extra`; it must go on from its checkpoint.
   void crash_coordinator_mid_job(uint64_t above, const std::vector<std::string>& extra) {
     bool merged = false;
@@ -118,7 +128,9 @@ class Farm : public ::testing::Test {
       if (!merged) std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
     ASSERT_TRUE(merged);
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    const uint64_t before = checkpoints_written();
+    for (int i = 0; i < 3000 && checkpoints_written() <= before + 1; ++i)  // the second began after `merged`
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
     const std::string addr = grpc_addr;
     coordinator->signal(SIGKILL);
     ASSERT_EQ(coordinator->wait(10), -SIGKILL);
