@@ -29,6 +29,14 @@ struct AccelOptions {
   // it; the watertightness tests and tessera_bench also build without it, to measure what
   // it buys and costs (docs/ray-offsets.md).
   bool robust = true;
+  // The widest of the CPU's vector instruction sets Embree may use (its "max_isa"). Its AVX2
+  // and AVX-512 kernels fuse multiplies and adds, so their hits differ from the SSE and AVX
+  // kernels' in the last bits, and from each other's: an image would depend on the CPU that
+  // rendered it (and a farm of mixed machines would not give tessera render's bits). The
+  // SSE2, SSE4.2 and AVX kernels agree (accel_isa_test.cc), so capped at AVX every x86-64
+  // machine computes the same image. On an AVX2 machine the cap costs nothing measurable
+  // (docs/performance.md).
+  const char* max_isa = "avx";
 };
 
 class Accel {

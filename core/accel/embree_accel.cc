@@ -251,8 +251,9 @@ struct Accel::Impl {
 };
 
 namespace {
-RTCDevice new_device() {
-  RTCDevice d = rtcNewDevice(nullptr);
+RTCDevice new_device(const AccelOptions& options) {
+  const std::string config = std::string("max_isa=") + options.max_isa;
+  RTCDevice d = rtcNewDevice(config.c_str());
   if (!d)
     throw std::runtime_error("cannot create Embree device (error " + std::to_string(int(rtcGetDeviceError(nullptr))) +
                              ")");
@@ -265,7 +266,7 @@ Accel::Accel(const Scene& scene, AccelOptions options) : Accel(scene, std::vecto
 Accel::Accel(const Scene& scene, const std::vector<bool>& skip, AccelOptions options)
     : impl_(std::make_unique<Impl>()) {
   impl_->robust = options.robust;
-  RTCDevice d = new_device();
+  RTCDevice d = new_device(options);
   impl_->new_scene(d);
   rtcReleaseDevice(d);  // the Impl holds it
   for (size_t i = 0; i < scene.meshes.size(); ++i)
