@@ -42,7 +42,10 @@ uint32_t parse_aovs(const std::string& list) {
 std::string aov_names(uint32_t aovs) {
   std::string out;
   for (const auto& [name, bit] : kNames)
-    if (aovs & bit) out += (out.empty() ? "" : ",") + std::string(name);
+    if (aovs & bit) {
+      if (!out.empty()) out += ',';
+      out += name;
+    }
   return out;
 }
 

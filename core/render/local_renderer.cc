@@ -4,6 +4,7 @@
 #include <condition_variable>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <stdexcept>
 
 #include "core/util/thread_pool.h"
@@ -18,7 +19,8 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
   TileStats stats;
   const bool with_aovs = renderer.settings().aovs != 0;
   int running = pool.size();
-  // Light paths' splats (light_tracer.h): integers added as they come, in any order.
+  // Light paths' splats (light_tracer.h): integers added in any order, each thread's a
+  // batch at a time (SplatBuffer).
   std::unique_ptr<SplatFilm> splats;
   if (renderer.light_tracing()) splats = renderer.make_splat_film();
   const auto start = std::chrono::steady_clock::now();
@@ -27,6 +29,8 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
   for (int i = 0; i < pool.size(); ++i)
     pool.run([&] {
       TileStats mine;
+      std::optional<SplatBuffer> splat_buffer;
+      if (splats) splat_buffer.emplace(*splats);
       std::unique_lock<std::mutex> lock(mu);
       while (!plan.done()) {
         std::optional<TileTask> task = plan.take();
@@ -36,9 +40,10 @@ RenderResult render_image(const TileRenderer& renderer, int threads, const Progr
         }
         lock.unlock();
         std::vector<AovSums> tile_aovs;
-        const std::vector<PixelSums> sums = renderer.render(task->rect, task->sample_begin, task->sample_end,
-                                                            task->active.empty() ? nullptr : task->active.data(), &mine,
-                                                            nullptr, with_aovs ? &tile_aovs : nullptr, splats.get());
+        const std::vector<PixelSums> sums = renderer.render(
+            task->rect, task->sample_begin, task->sample_end, task->active.empty() ? nullptr : task->active.data(),
+            &mine, nullptr, with_aovs ? &tile_aovs : nullptr, splat_buffer ? &*splat_buffer : nullptr);
+        if (splat_buffer) splat_buffer->flush();
         lock.lock();
         // Our own sums always fit: anything else is a broken invariant, and stopping loudly
         // beats waiting forever for a tile that never advances.

@@ -12,15 +12,6 @@ int64_t saturating_sum(int64_t a, int64_t b) {
   return a > std::numeric_limits<int64_t>::max() - b ? std::numeric_limits<int64_t>::max() : a + b;
 }
 
-// a + b for b >= 0, at most INT64_MAX.
-void saturating_add(std::atomic<int64_t>& a, int64_t b) {
-  int64_t cur = a.load(std::memory_order_relaxed);
-  for (;;) {
-    const int64_t next = cur > std::numeric_limits<int64_t>::max() - b ? std::numeric_limits<int64_t>::max() : cur + b;
-    if (a.compare_exchange_weak(cur, next, std::memory_order_relaxed)) return;
-  }
-}
-
 // (n samples, sums, the mean variance they imply) -> the squared-luminance sum that gives
 // `mean_variance` with these sums (PixelSums::mean_variance inverted).
 double lum2_for(const PixelSums& p, double mean_variance) {
@@ -31,15 +22,27 @@ double lum2_for(const PixelSums& p, double mean_variance) {
 
 }  // namespace
 
+namespace {
+
+// std::llround's result (halves away from zero) for 0 <= x < 2^62, inline (llround is a
+// libm call): x - trunc(x) is exact, so comparing it with 1/2 decides as llround does.
+int64_t round_nonnegative(double x) {
+  const int64_t t = int64_t(x);
+  return t + (x - double(t) >= 0.5);
+}
+
+}  // namespace
+
 bool splat_units(Rgb value, int64_t out[4]) {
   if (!(value.is_finite() && std::min(value.r, std::min(value.g, value.b)) >= 0 &&
         value.max() <= SplatSink::kMaxSplatValue))
     return false;
+  // At most 2^44 (channels) and 2^52 (squared luminance) units: round_nonnegative's range.
   const double lum = value.luminance();
-  out[0] = std::llround(value.r * SplatSums::kUnit);
-  out[1] = std::llround(value.g * SplatSums::kUnit);
-  out[2] = std::llround(value.b * SplatSums::kUnit);
-  out[3] = std::llround(lum * lum * SplatSums::kLum2Unit);
+  out[0] = round_nonnegative(value.r * SplatSums::kUnit);
+  out[1] = round_nonnegative(value.g * SplatSums::kUnit);
+  out[2] = round_nonnegative(value.b * SplatSums::kUnit);
+  out[3] = round_nonnegative(lum * lum * SplatSums::kLum2Unit);
   return true;
 }
 
@@ -72,7 +75,10 @@ bool SplatRecord::operator==(const SplatRecord& o) const {
 
 bool SplatList::add(int x, int y, Rgb value, bool odd) {
   SplatEntry e;
-  if (!splat_units(value, e.v)) return false;
+  if (!splat_units(value, e.v)) {
+    ++dropped_;
+    return false;
+  }
   x -= window_.x;
   y -= window_.y;
   if (x < 0 || y < 0 || x >= window_.w || y >= window_.h) return true;
@@ -93,8 +99,28 @@ void SplatList::count_path(bool odd) {
 SplatRecord SplatList::take() {
   SplatRecord r = std::move(record_);
   record_ = SplatRecord{};
+  dropped_ = 0;
   r.normalize();
   return r;
+}
+
+void SplatList::clear() {
+  record_.entries.clear();  // (keeps its capacity)
+  record_.paths = record_.odd_paths = 0;
+  dropped_ = 0;
+}
+
+bool SplatBuffer::add(int x, int y, Rgb value, bool odd) {
+  const bool kept = list_.add(x, y, value, odd);
+  if (list_.pending().entries.size() >= kBatchEntries) flush();
+  return kept;
+}
+
+void SplatBuffer::flush() {
+  const SplatRecord& r = list_.pending();
+  if (r.entries.empty() && r.paths == 0 && list_.dropped() == 0) return;
+  film_.add_record(r, list_.dropped());
+  list_.clear();
 }
 
 void SplatFilm::fold(PixelSums* pixels, const SplatSums* splats, size_t n, double scale) {
@@ -117,14 +143,16 @@ SplatFilm::SplatFilm(Rect window, int64_t image_pixels, bool halves)
       sums_(size_t(window.area()) * 4 * (halves ? 2 : 1)) {}
 
 void SplatFilm::add_to(size_t index, const int64_t v[4]) {
-  for (int c = 0; c < 4; ++c)
-    if (v[c]) saturating_add(sums_[index * 4 + c], v[c]);
+  int64_t* sums = &sums_[index * 4];
+  for (int c = 0; c < 4; ++c) sums[c] = saturating_sum(sums[c], v[c]);
 }
 
 bool SplatFilm::add(int x, int y, Rgb value, bool odd) {
   int64_t v[4];
-  if (!splat_units(value, v)) {
-    dropped_.fetch_add(1, std::memory_order_relaxed);
+  const bool kept = splat_units(value, v);
+  std::lock_guard<std::mutex> lock(mu_);
+  if (!kept) {
+    ++dropped_;
     return false;
   }
   x -= window_.x;
@@ -137,39 +165,61 @@ bool SplatFilm::add(int x, int y, Rgb value, bool odd) {
 }
 
 void SplatFilm::count_path(bool odd) {
-  paths_[0].fetch_add(1, std::memory_order_relaxed);
-  if (odd) paths_[1].fetch_add(1, std::memory_order_relaxed);
+  std::lock_guard<std::mutex> lock(mu_);
+  ++paths_[0];
+  if (odd) ++paths_[1];
 }
 
-void SplatFilm::add_record(const SplatRecord& record) {
+void SplatFilm::add_record(const SplatRecord& record, uint64_t dropped) {
+  std::lock_guard<std::mutex> lock(mu_);
   for (const SplatEntry& e : record.entries) add_to(e.index, e.v);
-  paths_[0].fetch_add(record.paths, std::memory_order_relaxed);
-  paths_[1].fetch_add(record.odd_paths, std::memory_order_relaxed);
+  paths_[0] += record.paths;
+  paths_[1] += record.odd_paths;
+  dropped_ += dropped;
 }
 
 void SplatFilm::clear() {
-  for (std::atomic<int64_t>& v : sums_) v.store(0, std::memory_order_relaxed);
-  set_paths(0, 0);
-  dropped_.store(0);
+  std::lock_guard<std::mutex> lock(mu_);
+  std::fill(sums_.begin(), sums_.end(), 0);
+  paths_[0] = paths_[1] = 0;
+  dropped_ = 0;
 }
 
 void SplatFilm::set_paths(uint64_t paths, uint64_t odd_paths) {
-  paths_[0].store(paths);
-  paths_[1].store(odd_paths);
+  std::lock_guard<std::mutex> lock(mu_);
+  paths_[0] = paths;
+  paths_[1] = odd_paths;
 }
 
 void SplatFilm::set_rows(int y0, int rows, bool odd, const SplatSums* sums) {
+  std::lock_guard<std::mutex> lock(mu_);
   const size_t at = (odd ? size_t(window_.area()) : 0) + size_t(y0) * size_t(window_.w);
   for (size_t i = 0; i < size_t(rows) * size_t(window_.w); ++i) {
-    for (int c = 0; c < 3; ++c) sums_[(at + i) * 4 + c].store(sums[i].rgb[c], std::memory_order_relaxed);
-    sums_[(at + i) * 4 + 3].store(sums[i].lum2, std::memory_order_relaxed);
+    for (int c = 0; c < 3; ++c) sums_[(at + i) * 4 + c] = sums[i].rgb[c];
+    sums_[(at + i) * 4 + 3] = sums[i].lum2;
   }
 }
 
 void SplatFilm::copy_rows(int y0, int rows, bool odd, std::vector<SplatSums>* out) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  const size_t at = (odd ? size_t(window_.area()) : 0) + size_t(y0) * size_t(window_.w);
   out->resize(size_t(rows) * size_t(window_.w));
-  for (int y = 0; y < rows; ++y)
-    for (int x = 0; x < window_.w; ++x) (*out)[size_t(y) * size_t(window_.w) + size_t(x)] = at(x, y0 + y, odd);
+  for (size_t i = 0; i < out->size(); ++i) (*out)[i] = sums_at(at + i);
+}
+
+uint64_t SplatFilm::paths() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return paths_[0];
+}
+
+uint64_t SplatFilm::odd_paths() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return paths_[1];
+}
+
+uint64_t SplatFilm::dropped() const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return dropped_;
 }
 
 double SplatFilm::scale(bool odd) const {
@@ -177,12 +227,16 @@ double SplatFilm::scale(bool odd) const {
   return n ? double(image_pixels_) / double(n) : 0;
 }
 
-SplatSums SplatFilm::at(int x, int y, bool odd) const {
-  const size_t k = (odd ? size_t(window_.area()) : 0) + size_t(y) * size_t(window_.w) + size_t(x);
+SplatSums SplatFilm::sums_at(size_t k) const {
   SplatSums s;
-  for (int c = 0; c < 3; ++c) s.rgb[c] = sums_[k * 4 + c].load(std::memory_order_relaxed);
-  s.lum2 = sums_[k * 4 + 3].load(std::memory_order_relaxed);
+  for (int c = 0; c < 3; ++c) s.rgb[c] = sums_[k * 4 + c];
+  s.lum2 = sums_[k * 4 + 3];
   return s;
+}
+
+SplatSums SplatFilm::at(int x, int y, bool odd) const {
+  std::lock_guard<std::mutex> lock(mu_);
+  return sums_at((odd ? size_t(window_.area()) : 0) + size_t(y) * size_t(window_.w) + size_t(x));
 }
 
 Film SplatFilm::fold_into(const Film& film) const {
