@@ -4,7 +4,10 @@
 // directions uniform on the sphere), pre-generated, traced closest-hit through Accel (a
 // direct rtcIntersect1 call) with no shading; (2) "render": `tessera render` at 480x360 with
 // the given flags. Both use all threads. The ratio render/raw rays per second is the
-// fraction of the tracing limit the renderer reaches.
+// fraction of the tracing limit the renderer reaches; each side is the best of 3 runs (the
+// machines are shared and noisy). Raw is measured twice: through the
+// renderer's Accel (Embree capped at its AVX kernels, accel.h) and with Embree free to use
+// the CPU's best kernels; the ratio is against the faster of the two.
 //
 // Usage: tessera_bench [--spp N] [--threads N] [--json FILE] SCENE...
 #include <atomic>
@@ -29,8 +32,10 @@ namespace {
 
 double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
 
-double raw_rays_per_second(const Scene& scene, int threads) {
-  const Accel accel(scene);
+double raw_rays_per_second(const Scene& scene, int threads, const char* max_isa) {
+  AccelOptions options;
+  options.max_isa = max_isa;
+  const Accel accel(scene, options);
   const Bounds b = scene.object_bounds();
   const size_t n = 1 << 21;
   std::vector<Ray> rays(n);
@@ -96,21 +101,28 @@ int main(int argc, char** argv) {
     return 2;
   }
   nlohmann::json out = nlohmann::json::array();
-  std::printf("%-28s %8s %12s %12s %14s %8s\n", "scene (480x360)", "spp", "samples/s", "rays/s", "raw Embree/s",
-              "ratio");
+  std::printf("%-28s %8s %12s %12s %14s %14s %8s\n", "scene (480x360)", "spp", "samples/s", "rays/s", "raw (avx)/s",
+              "raw (best)/s", "ratio");
   for (const std::string& path : scenes) {
     const Scene scene = load_scene(path);
-    const double raw = raw_rays_per_second(scene, threads);
+    const double raw_capped = raw_rays_per_second(scene, threads, AccelOptions{}.max_isa);
+    const double raw_best = raw_rays_per_second(scene, threads, "avx512");
+    const double raw = std::max(raw_capped, raw_best);
     RenderSettings s;
     s.spp = spp;
     s.max_depth = 16;
     const TileRenderer renderer(scene, s);
-    const RenderResult r = render_image(renderer, threads);
+    // Best of 3 as the raw rays are: the same estimator on both sides of the ratio.
+    RenderResult r = render_image(renderer, threads);
+    for (int rep = 1; rep < 3; ++rep) {
+      RenderResult again = render_image(renderer, threads);
+      if (again.seconds < r.seconds) r = std::move(again);
+    }
     const double rays = double(r.stats.rays.rays + r.stats.rays.shadow_rays);
     const double sps = r.stats.samples / r.seconds, rps = rays / r.seconds;
     const std::string name = path.substr(path.find_last_of('/') + 1);
-    std::printf("%-28s %8d %11.2fM %11.2fM %13.2fM %7.0f%%\n", name.c_str(), spp, sps / 1e6, rps / 1e6, raw / 1e6,
-                100 * rps / raw);
+    std::printf("%-28s %8d %11.2fM %11.2fM %13.2fM %13.2fM %7.0f%%\n", name.c_str(), spp, sps / 1e6, rps / 1e6,
+                raw_capped / 1e6, raw_best / 1e6, 100 * rps / raw);
     out.push_back({{"scene", name},
                    {"spp", spp},
                    {"threads", threads},
@@ -118,6 +130,8 @@ int main(int argc, char** argv) {
                    {"samples_per_second", sps},
                    {"rays_per_second", rps},
                    {"raw_embree_rays_per_second", raw},
+                   {"raw_embree_capped_rays_per_second", raw_capped},
+                   {"raw_embree_best_isa_rays_per_second", raw_best},
                    {"ratio", rps / raw},
                    {"rays_per_sample", rays / r.stats.samples}});
   }
