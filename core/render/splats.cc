@@ -150,7 +150,7 @@ void SplatFilm::add_to(size_t index, const int64_t v[4]) {
 bool SplatFilm::add(int x, int y, Rgb value, bool odd) {
   int64_t v[4];
   const bool kept = splat_units(value, v);
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   if (!kept) {
     ++dropped_;
     return false;
@@ -165,13 +165,13 @@ bool SplatFilm::add(int x, int y, Rgb value, bool odd) {
 }
 
 void SplatFilm::count_path(bool odd) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   ++paths_[0];
   if (odd) ++paths_[1];
 }
 
 void SplatFilm::add_record(const SplatRecord& record, uint64_t dropped) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   for (const SplatEntry& e : record.entries) add_to(e.index, e.v);
   paths_[0] += record.paths;
   paths_[1] += record.odd_paths;
@@ -179,20 +179,20 @@ void SplatFilm::add_record(const SplatRecord& record, uint64_t dropped) {
 }
 
 void SplatFilm::clear() {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   std::fill(sums_.begin(), sums_.end(), 0);
   paths_[0] = paths_[1] = 0;
   dropped_ = 0;
 }
 
 void SplatFilm::set_paths(uint64_t paths, uint64_t odd_paths) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   paths_[0] = paths;
   paths_[1] = odd_paths;
 }
 
 void SplatFilm::set_rows(int y0, int rows, bool odd, const SplatSums* sums) {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   const size_t at = (odd ? size_t(window_.area()) : 0) + size_t(y0) * size_t(window_.w);
   for (size_t i = 0; i < size_t(rows) * size_t(window_.w); ++i) {
     for (int c = 0; c < 3; ++c) sums_[(at + i) * 4 + c] = sums[i].rgb[c];
@@ -201,24 +201,24 @@ void SplatFilm::set_rows(int y0, int rows, bool odd, const SplatSums* sums) {
 }
 
 void SplatFilm::copy_rows(int y0, int rows, bool odd, std::vector<SplatSums>* out) const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   const size_t at = (odd ? size_t(window_.area()) : 0) + size_t(y0) * size_t(window_.w);
   out->resize(size_t(rows) * size_t(window_.w));
   for (size_t i = 0; i < out->size(); ++i) (*out)[i] = sums_at(at + i);
 }
 
 uint64_t SplatFilm::paths() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return paths_[0];
 }
 
 uint64_t SplatFilm::odd_paths() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return paths_[1];
 }
 
 uint64_t SplatFilm::dropped() const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return dropped_;
 }
 
@@ -235,7 +235,7 @@ SplatSums SplatFilm::sums_at(size_t k) const {
 }
 
 SplatSums SplatFilm::at(int x, int y, bool odd) const {
-  std::lock_guard<std::mutex> lock(mu_);
+  MutexLock lock(mu_);
   return sums_at((odd ? size_t(window_.area()) : 0) + size_t(y) * size_t(window_.w) + size_t(x));
 }
 

@@ -14,12 +14,12 @@
 #pragma once
 
 #include <cstdint>
-#include <mutex>
 #include <vector>
 
 #include "core/math/rect.h"
 #include "core/math/vec.h"
 #include "core/render/film.h"
+#include "core/util/mutex.h"
 
 namespace tessera {
 
@@ -129,16 +129,15 @@ class SplatFilm final : public SplatSink {
   static void fold(PixelSums* pixels, const SplatSums* splats, size_t n, double scale);
 
  private:
-  // (Under mu_.)
-  void add_to(size_t index, const int64_t v[4]);
-  SplatSums sums_at(size_t k) const;
+  void add_to(size_t index, const int64_t v[4]) TESSERA_REQUIRES(mu_);
+  SplatSums sums_at(size_t k) const TESSERA_REQUIRES(mu_);
   Rect window_;
   int64_t image_pixels_;
   bool halves_;
-  mutable std::mutex mu_;
-  std::vector<int64_t> sums_;  // per plane, per pixel: r, g, b, lum2
-  uint64_t paths_[2] = {0, 0};
-  uint64_t dropped_ = 0;
+  mutable Mutex mu_;
+  std::vector<int64_t> sums_ TESSERA_GUARDED_BY(mu_);  // per plane, per pixel: r, g, b, lum2
+  uint64_t paths_[2] TESSERA_GUARDED_BY(mu_) = {0, 0};
+  uint64_t dropped_ TESSERA_GUARDED_BY(mu_) = 0;
 };
 
 // One thread's splats on their way into a SplatFilm: gathered in a bounded list and added
