@@ -56,6 +56,9 @@ from docs_parse import (check_flags, check_paths, check_render_reference, check_
                         shrink_python)
 from docs_tables import ALLOW, FAKE_SBATCH, FAKE_SRUN, FIXTURES, PLACEHOLDERS, PRELUDE
 
+# Commands whose default scenes are the CS184 ones under ../shared (no path on the line).
+SHARED_BY_DEFAULT = (r"bench/cycles/caustics_report\.py",)
+
 # ---- running ----------------------------------------------------------------------------
 
 def start_farm(bin_dir, scratch):
@@ -247,7 +250,8 @@ def main():
                         if f == rel and scope == "line" and re.search(pat, line):
                             why = reason
                             used_allow.add(i)
-                    if why is None and "../shared" in line and not have_shared:
+                    if why is None and not have_shared and \
+                            ("../shared" in line or any(re.search(p, line) for p in SHARED_BY_DEFAULT)):
                         why = f"needs the CS184 scenes in {shared}, absent here"
                     if why is None and re.search(r"(^|[\s;&|])(blender|bench/blender/)", line) \
                             and not shutil.which("blender"):
