@@ -54,8 +54,9 @@ class Liar : public Access {
     const std::string out = (dir / (tag + ".exr")).string(), local = (dir / "local.exr").string();
     const CommandResult r = tessera("submit " + kScene + " " + kLiarFlags + " --wait -q -f " + out, kAlice);
     ASSERT_EQ(r.code, 0) << r.err;
-    if (!fs::exists(local))
+    if (!fs::exists(local)) {
       ASSERT_EQ(std::system((kBin + "/tessera render " + kScene + " " + kLiarFlags + " -q -f " + local).c_str()), 0);
+    }
     // On a difference, what the client and the coordinator said (was the liar caught after
     // the job ended, say: a flag on the job) and the folder's name (TESSERA_KEEP_TEST_DIR=1
     // keeps it).
