@@ -5,7 +5,8 @@
 // one pixel fails here. They depend on the compiler's floating-point code generation, so a
 // compiler upgrade may change them all at once; then re-derive them from a build of the
 // commit above, never from the code under test. They depend on Embree's kernels too: taken
-// first on a machine whose Embree ran its AVX-512 ones, they were re-derived (2026-11-27)
+// first on a machine whose Embree ran neither its AVX2 nor its capped kernels (AVX-512, by
+// inference), they were re-derived (2026-11-27)
 // when Accel capped Embree at AVX (accel.h: the same bits on every x86-64 CPU), from the
 // commit before the cap with only the cap added (and equal with SSE2, SSE4.2 and AVX).
 #include <gtest/gtest.h>
