@@ -25,7 +25,7 @@ struct RenderResult {
   TileStats stats;
   double seconds = 0;
   // Light tracing (light_tracer.h): whether it ran and why; the light paths traced and the
-  // splats dropped (over SplatFilm::kMaxSplatValue or not finite). With it, `film` holds the
+  // splats dropped (over SplatSink::kMaxSplatValue or not finite). With it, `film` holds the
   // splats folded in (SplatFilm::fold_into).
   LightTracingDecision light_tracing;
   uint64_t light_paths = 0, dropped_splats = 0;

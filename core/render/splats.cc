@@ -20,10 +20,6 @@ double lum2_for(const PixelSums& p, double mean_variance) {
   return s1 * s1 / p.n + mean_variance * double(p.n) * double(p.n - 1);
 }
 
-}  // namespace
-
-namespace {
-
 // std::llround's result (halves away from zero) for 0 <= x < 2^62, inline (llround is a
 // libm call): x - trunc(x) is exact, so comparing it with 1/2 decides as llround does.
 int64_t round_nonnegative(double x) {
@@ -145,29 +141,6 @@ SplatFilm::SplatFilm(Rect window, int64_t image_pixels, bool halves)
 void SplatFilm::add_to(size_t index, const int64_t v[4]) {
   int64_t* sums = &sums_[index * 4];
   for (int c = 0; c < 4; ++c) sums[c] = saturating_sum(sums[c], v[c]);
-}
-
-bool SplatFilm::add(int x, int y, Rgb value, bool odd) {
-  int64_t v[4];
-  const bool kept = splat_units(value, v);
-  MutexLock lock(mu_);
-  if (!kept) {
-    ++dropped_;
-    return false;
-  }
-  x -= window_.x;
-  y -= window_.y;
-  if (x < 0 || y < 0 || x >= window_.w || y >= window_.h) return true;
-  const size_t k = size_t(y) * size_t(window_.w) + size_t(x);
-  add_to(k, v);
-  if (halves_ && odd) add_to(size_t(window_.area()) + k, v);
-  return true;
-}
-
-void SplatFilm::count_path(bool odd) {
-  MutexLock lock(mu_);
-  ++paths_[0];
-  if (odd) ++paths_[1];
 }
 
 void SplatFilm::add_record(const SplatRecord& record, uint64_t dropped) {

@@ -89,9 +89,9 @@ class SplatList final : public SplatSink {
   uint64_t dropped_ = 0;
 };
 
-// Every member is thread-safe (one lock): a thread adding splat by splat takes it each
-// time, so render threads add theirs through a SplatBuffer.
-class SplatFilm final : public SplatSink {
+// Every member is thread-safe (one lock). Splats come in as records: a farm task's
+// SplatList, or a render thread's SplatBuffer, a batch at a time.
+class SplatFilm {
  public:
   // A frame's splats: `window` the pixels rendered (image coordinates), `image_pixels` the
   // camera film's width x height (the estimate's scale), with a second plane for halves.
@@ -99,8 +99,6 @@ class SplatFilm final : public SplatSink {
   const Rect& window() const { return window_; }
   bool halves() const { return halves_; }
 
-  bool add(int x, int y, Rgb value, bool odd) override;
-  void count_path(bool odd) override;
   // A task's record (its entries' indices within this film's planes: checked by the
   // caller; in any order) and its paths, and `dropped` splats to count.
   void add_record(const SplatRecord& record, uint64_t dropped = 0);

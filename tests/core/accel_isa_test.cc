@@ -50,11 +50,9 @@ Traced trace(const Scene& scene, const std::vector<Ray>& rays, const char* isa) 
   const Accel accel(scene, options);
   Traced t;
   t.hits.resize(rays.size());
-  for (const Ray& r : rays) {
-    Hit h;
-    t.found.push_back(accel.intersect(r, &h));
-    t.hits[t.found.size() - 1] = h;
-    t.occluded.push_back(accel.occluded(r));
+  for (size_t i = 0; i < rays.size(); ++i) {
+    t.found.push_back(accel.intersect(rays[i], &t.hits[i]));
+    t.occluded.push_back(accel.occluded(rays[i]));
   }
   return t;
 }
@@ -82,8 +80,12 @@ void expect_same_on_every_isa(const std::string& path) {
   for (bool f : reference.found) hits += f;
   ASSERT_GT(hits, rays.size() / 4) << path << ": the rays should mostly hit";
   __builtin_cpu_init();
-  if (__builtin_cpu_supports("sse4.2")) EXPECT_EQ(differences(reference, trace(scene, rays, "sse4.2")), 0u) << path;
-  if (__builtin_cpu_supports("avx")) EXPECT_EQ(differences(reference, trace(scene, rays, "avx")), 0u) << path;
+  if (__builtin_cpu_supports("sse4.2")) {
+    EXPECT_EQ(differences(reference, trace(scene, rays, "sse4.2")), 0u) << path;
+  }
+  if (__builtin_cpu_supports("avx")) {
+    EXPECT_EQ(differences(reference, trace(scene, rays, "avx")), 0u) << path;
+  }
   AccelOptions defaults;
   EXPECT_EQ(std::string(defaults.max_isa), "avx");
   if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
