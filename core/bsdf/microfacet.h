@@ -9,6 +9,7 @@
 #include <cmath>
 #include <limits>
 
+#include "core/math/float_math.h"
 #include "core/math/vec.h"
 
 namespace tessera {
@@ -23,7 +24,7 @@ class Beckmann {
     if (cos2 <= 0) return 0;
     const float tan2 = (1 - cos2) / cos2;
     const float a2 = alpha_ * alpha_;
-    return std::exp(-tan2 / a2) / (kPi * a2 * cos2 * cos2);
+    return fm::exp(-tan2 / a2) / (kPi * a2 * cos2 * cos2);
   }
 
   float lambda(Vec3 w) const {
@@ -31,7 +32,7 @@ class Beckmann {
     const float sin2 = std::max(0.0f, 1 - cos2);
     if (sin2 == 0) return 0;
     const float a = std::sqrt(cos2 / sin2) / alpha_;  // 1 / (alpha tan theta)
-    return 0.5f * (std::erf(a) - 1 + std::exp(-a * a) / (a * std::sqrt(kPi)));
+    return 0.5f * (std::erf(a) - 1 + fm::exp(-a * a) / (a * std::sqrt(kPi)));
   }
 
   float g(Vec3 wo, Vec3 wi) const { return 1 / (1 + lambda(wo) + lambda(wi)); }
@@ -42,7 +43,7 @@ class Beckmann {
     const float cos_t = 1 / std::sqrt(1 + tan2);
     const float sin_t = std::sqrt(std::max(0.0f, 1 - cos_t * cos_t));
     const float phi = 2 * kPi * u.y;
-    return {sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t};
+    return {sin_t * fm::cos(phi), sin_t * fm::sin(phi), cos_t};
   }
 
   float pdf_h(Vec3 h) const { return d(h) * std::fabs(h.z); }
@@ -90,9 +91,9 @@ class Ggx {
     const Vec3 t1 = len2 > 0 ? Vec3{-vh.y, vh.x, 0} / std::sqrt(len2) : Vec3{1, 0, 0};
     const Vec3 t2 = cross(vh, t1);
     const float r = std::sqrt(u.x), phi = 2 * kPi * u.y;
-    const float p1 = r * std::cos(phi);
+    const float p1 = r * fm::cos(phi);
     const float s = 0.5f * (1 + vh.z);
-    const float p2 = (1 - s) * std::sqrt(std::max(0.0f, 1 - p1 * p1)) + s * r * std::sin(phi);
+    const float p2 = (1 - s) * std::sqrt(std::max(0.0f, 1 - p1 * p1)) + s * r * fm::sin(phi);
     const Vec3 nh = t1 * p1 + t2 * p2 + vh * std::sqrt(std::max(0.0f, 1 - p1 * p1 - p2 * p2));
     return normalize(Vec3{alpha_ * nh.x, alpha_ * nh.y, std::max(1e-6f, nh.z)});
   }

@@ -3,6 +3,8 @@
 #include <array>
 #include <cmath>
 
+#include "core/math/float_math.h"
+
 namespace tessera {
 namespace {
 
@@ -13,12 +15,12 @@ float charlie_l(float x, float alpha) {
   auto mix = [t](float at1, float at0) { return at1 + (at0 - at1) * t; };
   const float a = mix(21.5473f, 25.3245f), b = mix(3.82987f, 3.32435f), c = mix(0.19823f, 0.16801f),
               d = mix(-1.97760f, -1.27393f), e = mix(-4.32054f, -4.85967f);
-  return a / (1 + b * std::pow(x, c)) + d * x + e;
+  return a / (1 + b * fm::pow(x, c)) + d * x + e;
 }
 
 float charlie_lambda(float cos_theta, float alpha) {
   const float c = std::fabs(cos_theta);
-  return c < 0.5f ? std::exp(charlie_l(c, alpha)) : std::exp(2 * charlie_l(0.5f, alpha) - charlie_l(1 - c, alpha));
+  return c < 0.5f ? fm::exp(charlie_l(c, alpha)) : fm::exp(2 * charlie_l(0.5f, alpha) - charlie_l(1 - c, alpha));
 }
 
 // E(mu, alpha) on a grid: mu_i = i / (kN - 1), alpha_j = kSheenMinAlpha .. 1.
@@ -38,7 +40,7 @@ struct AlbedoTable {
           const float ci = (a + 0.5f) / kCos, si = std::sqrt(1 - ci * ci);
           for (int b = 0; b < kPhi; ++b) {
             const float phi = (b + 0.5f) * kPi / kPhi;
-            sum += double(sheen_f(alpha, wo, Vec3{si * std::cos(phi), si * std::sin(phi), ci})) * ci;
+            sum += double(sheen_f(alpha, wo, Vec3{si * fm::cos(phi), si * fm::sin(phi), ci})) * ci;
           }
         }
         e[size_t(j * kN + i)] = float(sum * (1.0 / kCos) * (2 * kPi / kPhi));
@@ -51,7 +53,7 @@ struct AlbedoTable {
 
 float sheen_d(float alpha, float cos_h) {
   const float sin2 = std::max(0.0f, 1 - cos_h * cos_h), inv = 1 / alpha;
-  return (2 + inv) * std::pow(sin2, 0.5f * inv) * (0.5f * kInvPi);
+  return (2 + inv) * fm::pow(sin2, 0.5f * inv) * (0.5f * kInvPi);
 }
 
 float sheen_f(float alpha, Vec3 wo, Vec3 wi) {

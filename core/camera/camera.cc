@@ -3,6 +3,7 @@
 #include <cmath>
 #include <optional>
 
+#include "core/math/float_math.h"
 #include "core/render/settings.h"
 #include "core/sampling/warp.h"
 
@@ -72,7 +73,7 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
       const Vec3 center = p.orbit_center ? *p.orbit_center : *objects_center;
       // Rodrigues' rotation about the unit axis k by the angle.
       const Vec3 k = p.orbit_axis;
-      const float cs = std::cos(p.orbit_angle), sn = std::sin(p.orbit_angle);
+      const float cs = fm::cos(p.orbit_angle), sn = fm::sin(p.orbit_angle);
       auto rotate = [&](Vec3 v) { return v * cs + cross(k, v) * sn + k * (dot(k, v) * (1 - cs)); };
       eye = center + rotate(eye - center);
       forward = rotate(forward);

@@ -9,6 +9,7 @@
 
 #include "core/io/exr_writer.h"
 #include "core/io/files.h"
+#include "core/math/float_math.h"
 
 namespace tessera {
 namespace {
@@ -25,7 +26,7 @@ bool ends_with(const std::string& s, const std::string& suffix) {
 uint8_t srgb_byte(float v) {
   if (!(v > 0)) return 0;
   if (v >= 1) return 255;
-  const float s = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1 / 2.4f) - 0.055f;
+  const float s = v <= 0.0031308f ? 12.92f * v : 1.055f * fm::pow(v, 1 / 2.4f) - 0.055f;
   return uint8_t(std::lround(s * 255));
 }
 
@@ -66,7 +67,7 @@ float exposure_scale(const ImageMetadata& metadata) {
     size_t used = 0;
     const float ev = std::stof(it->second, &used);
     if (used != it->second.size() || !std::isfinite(ev) || std::fabs(ev) > 64) return 1;
-    return std::exp2(ev);
+    return fm::pow(2.0f, ev);  // exact for whole EVs
   } catch (const std::exception&) {
     return 1;
   }

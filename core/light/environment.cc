@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/math/float_math.h"
+
 namespace tessera {
 namespace {
 
@@ -113,10 +115,10 @@ bool EnvironmentMap::sample(Vec2 u, Vec3* w, float* pdf) const {
   const float dv = std::clamp((u.y - col_cdf_[o + x]) / cp, 0.0f, 1.0f);
   const float uu = (float(x) + dv) / float(W), vv = (float(y) + du) / float(H);
   const float theta = vv * kPi, phi = uu * 2 * kPi - kPi;
-  const float st = std::sin(theta);
+  const float st = fm::sin(theta);
   if (!(st > 0)) return false;
   // Inverse of to_uv: l = (sin t cos phi', cos t, -sin t sin phi') with phi' = phi, then rotate.
-  const Vec3 l{st * std::cos(phi), std::cos(theta), -st * std::sin(phi)};
+  const Vec3 l{st * fm::cos(phi), fm::cos(theta), -st * fm::sin(phi)};
   *w = Vec3{cos_r_ * l.x + sin_r_ * l.z, l.y, -sin_r_ * l.x + cos_r_ * l.z};
   *pdf = cell_p_[y * size_t(W) + x] * float(W) * float(H) / (2 * kPi * kPi * st);
   return *pdf > 0 && std::isfinite(*pdf);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 
+#include "core/math/float_math.h"
 #include "core/sampling/warp.h"
 
 namespace tessera {
@@ -85,7 +86,7 @@ Vec3 DeltaTargets::sample(Vec3 p, float u_pick, Vec2 u, float* pdf) const {
     const float cos_t = 1 - u.x * omc;
     const float sin_t = std::sqrt(std::max(0.0f, u.x * omc * (2 - u.x * omc)));  // sqrt(1 - cos^2), no cancellation
     const float phi = 2 * kPi * u.y;
-    dir = normalize(Frame(to / d).to_world(Vec3{sin_t * std::cos(phi), sin_t * std::sin(phi), cos_t}));
+    dir = normalize(Frame(to / d).to_world(Vec3{sin_t * fm::cos(phi), sin_t * fm::sin(phi), cos_t}));
   }
   *pdf = pdf_with(p, dir, k);
   return dir;

@@ -7,6 +7,7 @@
 #include <optional>
 
 #include "core/bsdf/bsdf.h"
+#include "core/math/float_math.h"
 #include "core/sampling/warp.h"
 
 namespace tessera {
@@ -311,7 +312,7 @@ Rgb Integrator::walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counte
     // if it leaves through the surface's back (its outward normal faces along the ray).
     if (m.kind == Material::Kind::kPbr && !m.absorption.is_black() && dot(sp.ng, ray.d) > 0) {
       const float t = hit.t;
-      s.beta *= Rgb(std::exp(-m.absorption.r * t), std::exp(-m.absorption.g * t), std::exp(-m.absorption.b * t));
+      s.beta *= Rgb(fm::exp(-m.absorption.r * t), fm::exp(-m.absorption.g * t), fm::exp(-m.absorption.b * t));
     }
     // Emission: an emitter's (the path ends there: it does not reflect) or a glTF surface's
     // own, which adds to its reflection. Only lamps are lights (sp.light), weighted by MIS.

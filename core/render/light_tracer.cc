@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "core/bsdf/bsdf.h"
+#include "core/math/float_math.h"
 
 namespace tessera {
 namespace {
@@ -109,7 +110,7 @@ void LightTracer::trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, Splat
     const Material& m = material_at(scene_, hit, &sp, &textured, &coat_ns);
     if (m.kind == Material::Kind::kPbr && !m.absorption.is_black() && dot(sp.ng, ray.d) > 0) {  // as the path tracer
       const float t = hit.t;
-      beta *= Rgb(std::exp(-m.absorption.r * t), std::exp(-m.absorption.g * t), std::exp(-m.absorption.b * t));
+      beta *= Rgb(fm::exp(-m.absorption.r * t), fm::exp(-m.absorption.g * t), fm::exp(-m.absorption.b * t));
     }
     if (m.kind == Material::Kind::kEmission) return;  // emitters do not reflect
     const Vec3 w_prev = -ray.d;

@@ -4,6 +4,7 @@
 
 #include <cmath>
 
+#include "core/math/float_math.h"
 #include "core/math/vec.h"
 
 namespace tessera {
@@ -21,7 +22,7 @@ inline Vec2 square_to_concentric_disk(Vec2 u) {
     r = oy;
     theta = (kPi / 2) - (kPi / 4) * (ox / oy);
   }
-  return {r * std::cos(theta), r * std::sin(theta)};
+  return {r * fm::cos(theta), r * fm::sin(theta)};
 }
 
 // Cosine-weighted hemisphere about +z (Malley's method). pdf = cos(theta) / pi.
@@ -37,7 +38,7 @@ inline Vec3 square_to_uniform_hemisphere(Vec2 u) {
   const float z = u.x;
   const float r = std::sqrt(std::max(0.0f, 1 - z * z));
   const float phi = 2 * kPi * u.y;
-  return {r * std::cos(phi), r * std::sin(phi), z};
+  return {r * fm::cos(phi), r * fm::sin(phi), z};
 }
 constexpr float kUniformHemispherePdf = 0.5f * kInvPi;
 
@@ -47,7 +48,7 @@ inline Vec3 square_to_uniform_sphere(Vec2 u) {
   const float z = 1 - 2 * u.x;
   const float r = std::sqrt(std::max(0.0f, 1 - z * z));
   const float phi = 2 * kPi * u.y;
-  return {r * std::cos(phi), r * std::sin(phi), z};
+  return {r * fm::cos(phi), r * fm::sin(phi), z};
 }
 
 // Uniform barycentrics on a triangle (Heitz 2019 low-distortion map): returns (b1, b2).

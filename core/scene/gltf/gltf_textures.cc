@@ -9,6 +9,7 @@
 #include <cstring>
 #include <utility>
 
+#include "core/math/float_math.h"
 #include "core/scene/gltf/gltf_extensions.h"
 #include "core/util/cancel.h"
 
@@ -18,7 +19,7 @@ namespace {
 constexpr uint64_t kMaxImagePixels = uint64_t(1) << 26;  // 64 M texels
 constexpr int kEncoded = -1;                             // tinygltf::Image::component of bytes not yet decoded
 
-float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f); }
+float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : fm::pow((c + 0.055f) / 1.055f, 2.4f); }
 
 // An image's size from its header, refused over kMaxImagePixels before anything is allocated.
 void check_size(const GltfContext& ctx, int w, int h, const std::string& el) {
