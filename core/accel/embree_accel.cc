@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "core/accel/accel.h"
+#include "core/math/hash.h"
 
 namespace tessera {
 
@@ -92,13 +93,6 @@ struct AlphaData {
   const Scene* scene;
   uint32_t mesh;
 };
-
-// SplitMix64's finaliser: every input bit flips about half the output bits.
-uint64_t mix64(uint64_t h) {
-  h = (h ^ (h >> 30)) * 0xbf58476d1ce4e5b9ull;
-  h = (h ^ (h >> 27)) * 0x94d049bb133111ebull;
-  return h ^ (h >> 31);
-}
 
 // A uniform number in [0, 1) from the ray and the triangle: the same for a ray's intersect
 // and occluded queries and on every machine (its bits only), and independent between

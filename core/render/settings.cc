@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/math/hash.h"
 #include "core/render/aov.h"
 
 namespace tessera {
@@ -20,10 +21,7 @@ std::string range(int64_t lo, int64_t hi) { return "must be in " + std::to_strin
 uint64_t RenderSettings::sample_seed() const {
   if (!frame) return seed;
   // splitmix64 of the seed and the frame: neighbouring frames get unrelated sequences.
-  uint64_t z = seed ^ (0x9E3779B97F4A7C15ull * (uint64_t(uint32_t(*frame)) + 1));
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
+  return mix64(seed ^ (0x9E3779B97F4A7C15ull * (uint64_t(uint32_t(*frame)) + 1)));
 }
 
 void RenderSettings::validate() const {

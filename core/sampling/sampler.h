@@ -11,6 +11,7 @@
 
 #include <cstdint>
 
+#include "core/math/hash.h"
 #include "core/math/vec.h"
 
 namespace tessera {
@@ -20,13 +21,6 @@ constexpr uint32_t reverse_bits(uint32_t x) {
   x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
   x = ((x >> 4) & 0x0F0F0F0Fu) | ((x & 0x0F0F0F0Fu) << 4);
   return __builtin_bswap32(x);  // (each byte is reversed: reverse their order)
-}
-
-// 64-bit finaliser (splitmix64): a well-mixed hash of its input.
-inline uint64_t mix64(uint64_t z) {
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-  return z ^ (z >> 31);
 }
 
 // Laine-Karras style permutation: bit i of the result depends only on bits <= i of x.

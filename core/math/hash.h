@@ -1,0 +1,16 @@
+// 64-bit finaliser of SplitMix64 (Steele, Lea and Flood 2014): every input bit flips about
+// half the output bits. The sampler's keys, the frame seeds and the alpha test's ray
+// numbers all hash with it.
+#pragma once
+
+#include <cstdint>
+
+namespace tessera {
+
+inline uint64_t mix64(uint64_t z) {
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+
+}  // namespace tessera
