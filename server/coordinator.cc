@@ -24,9 +24,12 @@ std::unique_ptr<JobStore> sqlite_store(const CoordinatorOptions& o) {
 // What a submit's event says: the job's name, size, samples and frames.
 std::string submitted_detail(const v1::SubmitJobRequest& req) {
   const v1::RenderSettings& s = req.settings();
-  std::string d = (req.name().empty() ? "" : "'" + req.name().substr(0, 256) + "', ") + std::to_string(s.width()) +
-                  "x" + std::to_string(s.height()) + ", " + std::to_string(s.spp()) + " spp";
-  if (req.frames_size() > 0) d += ", " + std::to_string(req.frames_size()) + " frames";
+  // Appends, not `+` chains: g++ 12 warns falsely (-Wrestrict) on `"'" + str` here.
+  std::string d;
+  if (!req.name().empty()) d.append("'").append(req.name().substr(0, 256)).append("', ");
+  d.append(std::to_string(s.width())).append("x").append(std::to_string(s.height()));
+  d.append(", ").append(std::to_string(s.spp())).append(" spp");
+  if (req.frames_size() > 0) d.append(", ").append(std::to_string(req.frames_size())).append(" frames");
   return d;
 }
 

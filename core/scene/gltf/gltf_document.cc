@@ -172,9 +172,15 @@ namespace {
 // tinygltf names files by absolute path: the scene's folder goes, so that an error names
 // files as the scene does (and a farm's never shows a server's path).
 std::string relative_to(std::string s, const std::string& folder) {
-  for (const std::string& f : {folder + "/", folder})
-    for (size_t at; !f.empty() && (at = s.find(f)) != std::string::npos;)
-      s.replace(at, f.size(), f == folder ? "." : "");
+  for (const std::string& f : {folder + "/", folder}) {
+    if (f.empty()) continue;
+    // Rebuilt by appends: g++ 12 warns falsely (-Wrestrict) on std::string::replace here.
+    std::string out;
+    size_t from = 0;
+    for (size_t at; (at = s.find(f, from)) != std::string::npos; from = at + f.size())
+      out.append(s, from, at - from).append(f == folder ? "." : "");
+    s = out.append(s, from, std::string::npos);
+  }
   return s;
 }
 
