@@ -127,68 +127,81 @@ PbrLobes pbr_lobes(const Material& m, Vec3 wo) {
   return p;
 }
 
-// The non-delta part of f(wo, wi).
-Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
+// The non-delta part of f(wo, wi) (kF) and the density of pbr_sample's non-delta lobes
+// drawing wi (kPdf), in one pass: where both are wanted the half vector, D(h) and
+// Lambda(wo) are computed once (Lambda is even in w, so Lambda(wo) = Lambda(wo_up)).
+// `lobes`: pbr_lobes(m, wo) where the caller has it, else null (computed for kPdf).
+template <bool kF, bool kPdf>
+void pbr_eval(const Material& m, const PbrLobes* lobes, Vec3 wo, Vec3 wi, Rgb* f_out, float* pdf_out) {
+  if constexpr (kF) *f_out = Rgb(0);
+  if constexpr (kPdf) *pdf_out = 0;
   const float co = wo.z, ci = wi.z;
-  if (co == 0 || ci == 0) return Rgb(0);
+  if (co == 0 || ci == 0) return;
+  PbrLobes p;
+  if constexpr (kPdf) p = lobes ? *lobes : pbr_lobes(m, wo);
   const PbrWeights w = pbr_weights(m);
-  const bool smooth = pbr_smooth(m);
-  const Ggx g(m.alpha);
-  if (co * ci > 0) {
-    Vec3 h;
-    if (!reflection_half(wo, wi, &h)) return Rgb(0);
-    const float oh = dot(wo, h);  // negative inside
-    const DielectricF fc = dielectric_f(m, fresnel_dielectric(std::fabs(oh), m.ior));
-    Rgb f(0.0f);
-    if (w.coat > 0) f += m.reflectance * (w.coat * fc.keep * kInvPi);
-    if (smooth) return f;
-    const float spec = g.d(h) * g.g2(wo, wi) / (4 * std::fabs(co * ci));
-    if (w.metal > 0) f += schlick(m.reflectance, std::fabs(oh)) * (w.metal * spec);
-    return f + (fc.reflect * w.coat + dielectric_f(m, glass_fresnel(m, oh)).reflect * w.glass) * spec;
-  }
-  if (w.glass <= 0 || smooth) return Rgb(0);
-  if (m.thin) {  // the reflection lobe mirrored through the surface
-    const Vec3 wr{wi.x, wi.y, -wi.z};
-    Vec3 h;
-    if (!reflection_half(wo, wr, &h)) return Rgb(0);
-    const float spec = g.d(h) * g.g2(wo, wr) / (4 * std::fabs(co * ci));
-    return m.reflectance * (w.glass * dielectric_f(m, glass_fresnel(m, dot(wo, h))).keep * spec);
-  }
-  Vec3 h;
-  float etap;
-  if (!refraction_half(m, wo, wi, &h, &etap)) return Rgb(0);
-  const float oh = dot(wo, h), ih = dot(wi, h);
-  const float denom = (ih + oh / etap) * (ih + oh / etap) * ci * co;
-  const float ft = g.d(h) * dielectric_f(m, glass_fresnel(m, oh)).keep * g.g2(wo, wi) * std::fabs(ih * oh / denom);
-  return m.reflectance * (w.glass * ft / (etap * etap));  // radiance scaled by 1/eta^2, as glass
-}
-
-// Density of pbr_sample's non-delta lobes drawing wi.
-float pbr_pdf(const Material& m, Vec3 wo, Vec3 wi) {
-  const float co = wo.z, ci = wi.z;
-  if (co == 0 || ci == 0) return 0;
-  const PbrLobes p = pbr_lobes(m, wo);
   const bool smooth = pbr_smooth(m);
   const Ggx g(m.alpha);
   const Vec3 wo_up = co > 0 ? wo : -wo;
   if (co * ci > 0) {
-    float pdf = p.diffuse * std::fabs(ci) * kInvPi;
     Vec3 h;
-    if (!smooth && reflection_half(wo, wi, &h)) pdf += p.spec * g.pdf_visible(wo_up, h) / (4 * std::fabs(dot(wo, h)));
-    return pdf;
+    const bool has_h = reflection_half(wo, wi, &h);
+    if constexpr (kPdf) *pdf_out = p.diffuse * std::fabs(ci) * kInvPi;
+    if (!has_h) return;           // (f is then 0, its diffuse part too)
+    const float oh = dot(wo, h);  // negative inside
+    DielectricF fc{};
+    if constexpr (kF) {
+      fc = dielectric_f(m, fresnel_dielectric(std::fabs(oh), m.ior));
+      if (w.coat > 0) *f_out += m.reflectance * (w.coat * fc.keep * kInvPi);
+    }
+    if (smooth) return;
+    const float d = g.d(h), lambda_o = g.lambda(wo);
+    if constexpr (kF) {
+      const float spec = d * g.g2(lambda_o, wi) / (4 * std::fabs(co * ci));
+      if (w.metal > 0) *f_out += schlick(m.reflectance, std::fabs(oh)) * (w.metal * spec);
+      *f_out = *f_out + (fc.reflect * w.coat + dielectric_f(m, glass_fresnel(m, oh)).reflect * w.glass) * spec;
+    }
+    if constexpr (kPdf) *pdf_out += p.spec * g.pdf_visible(wo_up, h, lambda_o, d) / (4 * std::fabs(oh));
+    return;
   }
-  if (p.trans <= 0 || smooth) return 0;
-  if (m.thin) {
+  const bool want_f = kF && w.glass > 0, want_pdf = kPdf && p.trans > 0;
+  if (smooth || !(want_f || want_pdf)) return;
+  if (m.thin) {  // the reflection lobe mirrored through the surface
     const Vec3 wr{wi.x, wi.y, -wi.z};
     Vec3 h;
-    if (!reflection_half(wo, wr, &h)) return 0;
-    return p.trans * g.pdf_visible(wo_up, h) / (4 * std::fabs(dot(wo, h)));
+    if (!reflection_half(wo, wr, &h)) return;
+    const float d = g.d(h), lambda_o = g.lambda(wo), oh = dot(wo, h);
+    if (want_f) {
+      const float spec = d * g.g2(lambda_o, wr) / (4 * std::fabs(co * ci));
+      *f_out = m.reflectance * (w.glass * dielectric_f(m, glass_fresnel(m, oh)).keep * spec);
+    }
+    if (want_pdf) *pdf_out = p.trans * g.pdf_visible(wo_up, h, lambda_o, d) / (4 * std::fabs(oh));
+    return;
   }
   Vec3 h;
   float etap;
-  if (!refraction_half(m, wo, wi, &h, &etap)) return 0;
+  if (!refraction_half(m, wo, wi, &h, &etap)) return;
   const float oh = dot(wo, h), ih = dot(wi, h);
-  return p.trans * g.pdf_visible(wo_up, h) * std::fabs(ih) / ((ih + oh / etap) * (ih + oh / etap));
+  const float d = g.d(h), lambda_o = g.lambda(wo);
+  if (want_f) {
+    const float denom = (ih + oh / etap) * (ih + oh / etap) * ci * co;
+    const float ft = d * dielectric_f(m, glass_fresnel(m, oh)).keep * g.g2(lambda_o, wi) * std::fabs(ih * oh / denom);
+    *f_out = m.reflectance * (w.glass * ft / (etap * etap));  // radiance scaled by 1/eta^2, as glass
+  }
+  if (want_pdf)
+    *pdf_out = p.trans * g.pdf_visible(wo_up, h, lambda_o, d) * std::fabs(ih) / ((ih + oh / etap) * (ih + oh / etap));
+}
+
+Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
+  Rgb f;
+  pbr_eval<true, false>(m, nullptr, wo, wi, &f, nullptr);
+  return f;
+}
+
+float pbr_pdf(const Material& m, Vec3 wo, Vec3 wi) {
+  float pdf;
+  pbr_eval<false, true>(m, nullptr, wo, wi, nullptr, &pdf);
+  return pdf;
 }
 
 bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
@@ -236,9 +249,10 @@ bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) 
     }
     if (reflect ? out->wi.z * co <= 0 : out->wi.z * co >= 0) return false;  // on the wrong side
   }
-  out->pdf = pbr_pdf(m, wo, out->wi);
+  Rgb f;
+  pbr_eval<true, true>(m, &p, wo, out->wi, &f, &out->pdf);
   if (!(out->pdf > 0)) return false;
-  out->weight = pbr_f(m, wo, out->wi) * (std::fabs(out->wi.z) / out->pdf);
+  out->weight = f * (std::fabs(out->wi.z) / out->pdf);
   return true;
 }
 
