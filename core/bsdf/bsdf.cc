@@ -101,15 +101,12 @@ DielectricF dielectric_f(const Material& m, float f) {
 }
 
 // Lobe probabilities for wo: specular reflection, diffuse, transmission (sum 1).
-struct PbrLobes {
-  float spec = 0, diffuse = 0, trans = 0;
-};
-PbrLobes pbr_lobes(const Material& m, Vec3 wo) {
+BsdfLobes pbr_lobes(const Material& m, Vec3 wo) {
   const PbrWeights w = pbr_weights(m);
   const float c = std::fabs(wo.z);
   const DielectricF fc = dielectric_f(m, fresnel_dielectric(c, m.ior)), fg = dielectric_f(m, glass_fresnel(m, wo.z));
   const float base = m.reflectance.luminance();
-  PbrLobes p;
+  BsdfLobes p;
   p.spec = w.metal * schlick(m.reflectance, c).luminance() + w.coat * fc.lum + w.glass * fg.lum;
   p.trans = w.glass > 0 ? w.glass * fg.keep * base : 0;
   // Floors keep every rough lobe that can be non-zero samplable (an unbiased mixture needs
@@ -120,7 +117,7 @@ PbrLobes pbr_lobes(const Material& m, Vec3 wo) {
   }
   if (w.coat > 0 && base > 0) p.diffuse = std::max(w.coat * fc.keep * base, 0.02f);
   const float sum = p.spec + p.diffuse + p.trans;
-  if (!(sum > 0)) return PbrLobes{};
+  if (!(sum > 0)) return BsdfLobes{};
   p.spec /= sum;
   p.diffuse /= sum;
   p.trans /= sum;
@@ -130,15 +127,15 @@ PbrLobes pbr_lobes(const Material& m, Vec3 wo) {
 // The non-delta part of f(wo, wi) (kF) and the density of pbr_sample's non-delta lobes
 // drawing wi (kPdf), in one pass: where both are wanted the half vector, D(h) and
 // Lambda(wo) are computed once (Lambda is even in w, so Lambda(wo) = Lambda(wo_up)).
-// `lobes`: pbr_lobes(m, wo) where the caller has it, else null (computed for kPdf).
+// `lobes`: pbr_lobes(m, wo), for kPdf (null otherwise).
 template <bool kF, bool kPdf>
-void pbr_eval(const Material& m, const PbrLobes* lobes, Vec3 wo, Vec3 wi, Rgb* f_out, float* pdf_out) {
+void pbr_eval(const Material& m, const BsdfLobes* lobes, Vec3 wo, Vec3 wi, Rgb* f_out, float* pdf_out) {
   if constexpr (kF) *f_out = Rgb(0);
   if constexpr (kPdf) *pdf_out = 0;
   const float co = wo.z, ci = wi.z;
   if (co == 0 || ci == 0) return;
-  PbrLobes p;
-  if constexpr (kPdf) p = lobes ? *lobes : pbr_lobes(m, wo);
+  BsdfLobes p;
+  if constexpr (kPdf) p = *lobes;
   const PbrWeights w = pbr_weights(m);
   const bool smooth = pbr_smooth(m);
   const Ggx g(m.alpha);
@@ -198,16 +195,15 @@ Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
   return f;
 }
 
-float pbr_pdf(const Material& m, Vec3 wo, Vec3 wi) {
+float pbr_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi) {
   float pdf;
-  pbr_eval<false, true>(m, nullptr, wo, wi, nullptr, &pdf);
+  pbr_eval<false, true>(m, &lobes, wo, wi, nullptr, &pdf);
   return pdf;
 }
 
-bool pbr_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
+bool pbr_sample(const Material& m, const BsdfLobes& p, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
   const float co = wo.z;
   if (co == 0) return false;
-  const PbrLobes p = pbr_lobes(m, wo);
   if (p.spec + p.diffuse + p.trans <= 0) return false;  // black: nothing scatters
   const PbrWeights w = pbr_weights(m);
   const bool smooth = pbr_smooth(m);
@@ -268,8 +264,7 @@ float sheen_scale(const Material& m, float alpha, Vec3 wo, Vec3 wi) {
   const float c = m.sheen_color.max();
   return std::min(1 - c * sheen_albedo(wo.z, alpha), 1 - c * sheen_albedo(wi.z, alpha));
 }
-float sheen_probability(const Material& m, float alpha, Vec3 wo) {
-  const PbrLobes base = pbr_lobes(m, wo);
+float sheen_probability(const Material& m, const BsdfLobes& base, float alpha, Vec3 wo) {
   if (base.spec + base.diffuse + base.trans <= 0) return 1;
   return std::clamp(m.sheen_color.max() * sheen_albedo(wo.z, alpha), 0.1f, 0.9f);
 }
@@ -286,30 +281,30 @@ Rgb sheened_f(const Material& m, Vec3 wo, Vec3 wi) {
   return m.sheen_color * sheen_lobe_f(alpha, wo, wi) + base * sheen_scale(m, alpha, wo, wi);
 }
 
-float sheened_pdf(const Material& m, Vec3 wo, Vec3 wi) {
-  if (!has_sheen(m)) return pbr_pdf(m, wo, wi);
-  const float ps = sheen_probability(m, sheen_alpha(m.sheen_roughness), wo);
+float sheened_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi) {
+  if (!has_sheen(m)) return pbr_pdf(m, lobes, wo, wi);
+  const float ps = sheen_probability(m, lobes, sheen_alpha(m.sheen_roughness), wo);
   const float cosine = wo.z * wi.z > 0 ? std::fabs(wi.z) * kInvPi : 0;
-  return ps * cosine + (ps < 1 ? (1 - ps) * pbr_pdf(m, wo, wi) : 0);
+  return ps * cosine + (ps < 1 ? (1 - ps) * pbr_pdf(m, lobes, wo, wi) : 0);
 }
 
-bool sheened_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
-  if (!has_sheen(m)) return pbr_sample(m, wo, u1, u2, out);
+bool sheened_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
+  if (!has_sheen(m)) return pbr_sample(m, lobes, wo, u1, u2, out);
   if (wo.z == 0) return false;
-  const float alpha = sheen_alpha(m.sheen_roughness), ps = sheen_probability(m, alpha, wo);
+  const float alpha = sheen_alpha(m.sheen_roughness), ps = sheen_probability(m, lobes, alpha, wo);
   if (u1 < ps) {  // the sheen: a cosine direction on wo's side
     const Vec3 d = square_to_cosine_hemisphere(u2);
     out->wi = wo.z > 0 ? d : Vec3{d.x, d.y, -d.z};
     out->delta = false;
     out->etap = 1;
   } else {  // the base, its own choice of lobe from the rest of u1
-    if (!pbr_sample(m, wo, std::min((u1 - ps) / (1 - ps), 0x1.fffffep-1f), u2, out)) return false;
+    if (!pbr_sample(m, lobes, wo, std::min((u1 - ps) / (1 - ps), 0x1.fffffep-1f), u2, out)) return false;
     if (out->delta) {  // a delta lobe of the base, scaled under the sheen
       out->weight = out->weight * (sheen_scale(m, alpha, wo, out->wi) / (1 - ps));
       return true;
     }
   }
-  out->pdf = sheened_pdf(m, wo, out->wi);
+  out->pdf = sheened_pdf(m, lobes, wo, out->wi);
   if (!(out->pdf > 0)) return false;
   out->weight = sheened_f(m, wo, out->wi) * (std::fabs(out->wi.z) / out->pdf);
   return true;
@@ -371,16 +366,16 @@ Rgb coated_f(const Material& m, Vec3 wo, Vec3 wi) {
   return base * (1 - fc) + Rgb(fc * coat_f(m, co, ci) * cos_ratio);
 }
 
-float coated_pdf(const Material& m, Vec3 wo, Vec3 wi) {
-  if (m.clearcoat <= 0) return sheened_pdf(m, wo, wi);
+float coated_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi) {
+  if (m.clearcoat <= 0) return sheened_pdf(m, lobes, wo, wi);
   const CoatFrame c(m);
   const Vec3 co = c.in(wo);
   const float pc = coat_probability(m, co);
-  return (1 - pc) * sheened_pdf(m, wo, wi) + pc * coat_pdf(m, co, c.in(wi));  // (densities turn unchanged)
+  return (1 - pc) * sheened_pdf(m, lobes, wo, wi) + pc * coat_pdf(m, co, c.in(wi));  // (densities turn unchanged)
 }
 
-bool coated_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
-  if (m.clearcoat <= 0) return sheened_sample(m, wo, u1, u2, out);
+bool coated_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
+  if (m.clearcoat <= 0) return sheened_sample(m, lobes, wo, u1, u2, out);
   if (wo.z == 0) return false;
   const CoatFrame c(m);
   const Vec3 co = c.in(wo);
@@ -402,13 +397,13 @@ bool coated_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* ou
     out->wi = c.out(wi);
     out->delta = false;
   } else {  // the base, its own choice of lobe from the rest of u1
-    if (!sheened_sample(m, wo, std::min((u1 - pc) / (1 - pc), 0x1.fffffep-1f), u2, out)) return false;
+    if (!sheened_sample(m, lobes, wo, std::min((u1 - pc) / (1 - pc), 0x1.fffffep-1f), u2, out)) return false;
     if (out->delta) {  // a delta lobe of the base: its weight, under the coat
       out->weight = out->weight * ((1 - fc) / (1 - pc));
       return true;
     }
   }
-  out->pdf = coated_pdf(m, wo, out->wi);
+  out->pdf = coated_pdf(m, lobes, wo, out->wi);
   if (!(out->pdf > 0)) return false;
   out->weight = coated_f(m, wo, out->wi) * (std::fabs(out->wi.z) / out->pdf);
   return true;
@@ -429,20 +424,30 @@ Rgb bsdf_eval(const Material& m, Vec3 wo, Vec3 wi) {
   }
 }
 
-float bsdf_pdf(const Material& m, Vec3 wo, Vec3 wi) {
+BsdfLobes bsdf_lobes(const Material& m, Vec3 wo) {
+  return m.kind == Material::Kind::kPbr ? pbr_lobes(m, wo) : BsdfLobes{};
+}
+
+float bsdf_pdf(const Material& m, Vec3 wo, Vec3 wi) { return bsdf_pdf(m, bsdf_lobes(m, wo), wo, wi); }
+
+float bsdf_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi) {
   switch (m.kind) {
     case Material::Kind::kDiffuse:
       return (wo.z > 0) ? cosine_hemisphere_pdf(wi.z) : 0;
     case Material::Kind::kMicrofacet:
       return microfacet_pdf(m, wo, wi);
     case Material::Kind::kPbr:
-      return coated_pdf(m, wo, wi);
+      return coated_pdf(m, lobes, wo, wi);
     default:
       return 0;
   }
 }
 
 bool bsdf_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
+  return bsdf_sample(m, bsdf_lobes(m, wo), wo, u1, u2, out);
+}
+
+bool bsdf_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
   switch (m.kind) {
     case Material::Kind::kDiffuse: {
       if (wo.z <= 0) return false;
@@ -501,7 +506,7 @@ bool bsdf_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out)
       return true;
     }
     case Material::Kind::kPbr:
-      return coated_sample(m, wo, u1, u2, out);
+      return coated_sample(m, lobes, wo, u1, u2, out);
     case Material::Kind::kEmission:
       return false;
   }

@@ -20,13 +20,24 @@ struct BsdfSample {
   bool delta = false;
 };
 
+// What the BSDF decides from wo alone: glTF PBR's lobe selection probabilities (specular
+// reflection, diffuse, transmission; zero for other kinds). A vertex computes them once
+// (bsdf_lobes) for its light samples' densities and its own sample; the forms without
+// them compute them per call.
+struct BsdfLobes {
+  float spec = 0, diffuse = 0, trans = 0;
+};
+BsdfLobes bsdf_lobes(const Material& m, Vec3 wo);
+
 // f(wo, wi) for non-delta kinds (zero for delta kinds).
 Rgb bsdf_eval(const Material& m, Vec3 wo, Vec3 wi);
 // Solid-angle density of bsdf_sample choosing wi, for non-delta kinds.
 float bsdf_pdf(const Material& m, Vec3 wo, Vec3 wi);
+float bsdf_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi);  // lobes = bsdf_lobes(m, wo)
 // Draws wi. u1 picks between reflection and transmission; u2 the direction. Returns false
 // if the path ends here (black material, total internal reflection of a refraction-only
 // surface, a direction below the surface).
 bool bsdf_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out);
+bool bsdf_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1, Vec2 u2, BsdfSample* out);
 
 }  // namespace tessera

@@ -172,8 +172,9 @@ Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& l
       nee_(s.nee),
       mis_(s.mis) {}
 
-[[gnu::always_inline]] inline Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const Frame& frame,
-                                                     Vec3 wo, Vec3 ng, Sampler& sampler, RayCounters& counters) const {
+[[gnu::always_inline]] inline Rgb Integrator::direct(const SurfacePoint& sp, const Material& m, const BsdfLobes& lobes,
+                                                     const Frame& frame, Vec3 wo, Vec3 ng, Sampler& sampler,
+                                                     RayCounters& counters) const {
   Rgb sum(0);
   for (size_t i = 0; i < lights_.size(); ++i) {
     const Light& light = lights_.light(i);
@@ -203,7 +204,7 @@ Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& l
       ++counters.shadow_rays;
       if (accel_.occluded(shadow)) continue;
       Rgb c = f * ls.li * (std::fabs(wi.z) / ls.pdf);
-      if (!light.is_delta() && mis_) c *= power_heuristic(float(n), ls.pdf, 1, bsdf_pdf(m, wo, wi));
+      if (!light.is_delta() && mis_) c *= power_heuristic(float(n), ls.pdf, 1, bsdf_pdf(m, lobes, wo, wi));
       acc += c;
     }
     sum += acc / float(n);
@@ -225,13 +226,14 @@ void record_first_hit(const Material& m, const SurfacePoint& sp, const Ray& ray,
 
 }  // namespace
 
-[[gnu::always_inline]] inline bool Integrator::scatter(const SurfacePoint& sp, const Material& m, const Frame& frame,
-                                                       Vec3 wo, Vec3 ng, bool dielectric, PathState& s,
-                                                       Sampler& sampler, Ray* ray) const {
+[[gnu::always_inline]] inline bool Integrator::scatter(const SurfacePoint& sp, const Material& m,
+                                                       const BsdfLobes& lobes, const Frame& frame, Vec3 wo, Vec3 ng,
+                                                       bool dielectric, PathState& s, Sampler& sampler,
+                                                       Ray* ray) const {
   const float u1 = sampler.next_1d();
   const Vec2 u2 = sampler.next_2d();
   BsdfSample bs;
-  if (!bsdf_sample(m, wo, u1, u2, &bs)) return false;
+  if (!bsdf_sample(m, lobes, wo, u1, u2, &bs)) return false;
   const Vec3 wi = frame.to_world(bs.wi);
   // A shading normal can send a reflection below the true surface: drop it.
   if (!dielectric && dot(wi, ng) <= 0) return false;
@@ -345,6 +347,7 @@ Rgb Integrator::walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counte
     const Vec3 wo = frame.to_local(wo_world);
     if (coat_ns)  // (m is *textured here) the coat's normal in the base's frame, turned with it
       textured->coat_normal = frame.to_local(dot(sp.ns, ns) < 0 ? -*coat_ns : *coat_ns);
+    const BsdfLobes lobes = bsdf_lobes(m, wo);  // once for the vertex's NEE and its sample
     // The first smooth vertex of a path seen through mirrors or glass: the light tracer
     // cannot reach these pixels (no connection through a delta lobe), so they get
     // splits_ independent continuations, averaged (see set_specular_splits).
@@ -356,9 +359,9 @@ Rgb Integrator::walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counte
         sampler.set_dimension(d0 + uint32_t(b) * kSplitDimensions);
         PathState c = s;
         Rgb Lb(0);
-        if (nee_) Lb += c.beta * direct(sp, m, frame, wo, ng, sampler, counters);
+        if (nee_) Lb += c.beta * direct(sp, m, lobes, frame, wo, ng, sampler, counters);
         Ray next;
-        if (scatter(sp, m, frame, wo, ng, dielectric, c, sampler, &next)) {
+        if (scatter(sp, m, lobes, frame, wo, ng, dielectric, c, sampler, &next)) {
           ++c.depth;
           Lb += walk<false>(next, c, sampler, counters, nullptr);
         }
@@ -368,8 +371,8 @@ Rgb Integrator::walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counte
       L += sum / float(splits_);
       break;
     }
-    if (nee_ && !m.is_delta()) L += s.beta * direct(sp, m, frame, wo, ng, sampler, counters);
-    if (!scatter(sp, m, frame, wo, ng, dielectric, s, sampler, &ray)) break;
+    if (nee_ && !m.is_delta()) L += s.beta * direct(sp, m, lobes, frame, wo, ng, sampler, counters);
+    if (!scatter(sp, m, lobes, frame, wo, ng, dielectric, s, sampler, &ray)) break;
   }
   return L;
 }

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/accel/accel.h"
+#include "core/bsdf/bsdf.h"
 #include "core/light/lights.h"
 #include "core/math/ulp.h"
 #include "core/render/aov.h"
@@ -134,10 +135,11 @@ class Integrator {
   Rgb walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counters, FirstHit* first) const;
   // BSDF sampling at sp, then Russian roulette: the next ray in *ray, or false where the
   // path ends.
-  bool scatter(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng, bool dielectric,
-               PathState& s, Sampler& sampler, Ray* ray) const;
-  Rgb direct(const SurfacePoint& sp, const Material& m, const Frame& frame, Vec3 wo, Vec3 ng, Sampler& sampler,
-             RayCounters& counters) const;
+  // lobes: bsdf_lobes(m, wo), computed once a vertex.
+  bool scatter(const SurfacePoint& sp, const Material& m, const BsdfLobes& lobes, const Frame& frame, Vec3 wo, Vec3 ng,
+               bool dielectric, PathState& s, Sampler& sampler, Ray* ray) const;
+  Rgb direct(const SurfacePoint& sp, const Material& m, const BsdfLobes& lobes, const Frame& frame, Vec3 wo, Vec3 ng,
+             Sampler& sampler, RayCounters& counters) const;
 
   const Scene& scene_;
   const Accel& accel_;
