@@ -75,17 +75,14 @@ class Ggx {
     const float x = a2_ * (w.x * w.x + w.y * w.y) / cos2;
     return 0.5f * x / (std::sqrt(1 + x) + 1);
   }
-  float g1(Vec3 w) const { return 1 / (1 + lambda(w)); }
   float g2(Vec3 wo, Vec3 wi) const { return g2(lambda(wo), wi); }
   // With Lambda(wo) already at hand (an evaluation that wants the density too).
   float g2(float lambda_wo, Vec3 wi) const { return 1 / (1 + lambda_wo + lambda(wi)); }
 
-  // Density of sample_visible(wo) drawing h, over solid angle of h; wo.z > 0.
-  float pdf_visible(Vec3 wo, Vec3 h) const {
-    const float c = dot(wo, h);
-    return c > 0 && wo.z > 0 ? g1(wo) * c * d(h) / wo.z : 0;
-  }
-  // The same from Lambda(wo) and D(h) already at hand (the same bits).
+  // Density of sample_visible(wo) drawing h, over solid angle of h; wo.z > 0: G1(wo)
+  // max(0, wo.h) D(h) / wo.z, with G1 = 1 / (1 + Lambda). The second form takes Lambda(wo)
+  // and D(h) from an evaluation that has them already.
+  float pdf_visible(Vec3 wo, Vec3 h) const { return pdf_visible(wo, h, lambda(wo), d(h)); }
   float pdf_visible(Vec3 wo, Vec3 h, float lambda_wo, float d_h) const {
     const float c = dot(wo, h);
     return c > 0 && wo.z > 0 ? 1 / (1 + lambda_wo) * c * d_h / wo.z : 0;

@@ -32,14 +32,7 @@ float pow_special(float x, float y) {
     ix &= 0x7fffffff;
     ix -= 23 << 23;
   }
-  const double ylogx = double(y) * log2_inline(ix);
-  const float sign = sign_bias ? -1.0f : 1.0f;
-  if ((std::bit_cast<uint64_t>(ylogx) >> 47 & 0xffff) >= std::bit_cast<uint64_t>(126.0) >> 47) {
-    if (ylogx <= -150.0) return sign * 0.0f;
-    if (ylogx > 0x1.fffffffd1d571p+6) return sign * INFINITY;
-    if (ylogx > 0x1.fffffffa3aae2p+6) return sign * 0x1.fffffep127f;
-  }
-  return exp2_inline(ylogx, sign_bias);
+  return pow_from_log2(double(y) * log2_inline(ix), sign_bias);
 }
 
 }  // namespace tessera::fm::detail

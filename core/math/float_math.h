@@ -112,19 +112,24 @@ inline constexpr uint64_t kExp2Table[32] = {
     0x3fefa4afa2a490da, 0x3fefd0765b6e4540};
 inline constexpr double kExp2Poly[3] = {0x1.c6af84b912394p-5, 0x1.ebfce50fac4f3p-3, 0x1.62e42ff0c52d6p-1};
 
+// 2^(k/32) 2^r' rounded to float, where 2^r' ~ poly(r) (exp and pow scale r and the
+// polynomial differently); sign_bias (1 << 16) negates.
+inline float exp2_scaled(uint64_t ki, double r, const double (&poly)[3], uint64_t sign_bias) {
+  const uint64_t t = kExp2Table[ki % 32] + ((ki + sign_bias) << 47);
+  const double s = std::bit_cast<double>(t);
+  const double z = poly[0] * r + poly[1], r2 = r * r;
+  double y = poly[2] * r + 1;
+  y = z * r2 + y;
+  return float(y * s);
+}
+
 // 2^x for x in [-1021, 1023] (doubles), rounded to float; sign_bias (1 << 16) negates.
 inline float exp2_inline(double xd, uint64_t sign_bias) {
   constexpr double kShift = 0x1.8p+52 / 32;
   double kd = xd + kShift;  // x = k/32 + r, r in [-1/64, 1/64]
   const uint64_t ki = std::bit_cast<uint64_t>(kd);
   kd -= kShift;
-  const double r = xd - kd;
-  const uint64_t t = kExp2Table[ki % 32] + ((ki + sign_bias) << 47);
-  const double s = std::bit_cast<double>(t);
-  const double z = kExp2Poly[0] * r + kExp2Poly[1], r2 = r * r;
-  double y = kExp2Poly[2] * r + 1;
-  y = z * r2 + y;
-  return float(y * s);
+  return exp2_scaled(ki, xd - kd, kExp2Poly, sign_bias);
 }
 
 struct Log2Entry {
@@ -174,6 +179,17 @@ inline int checkint(uint32_t iy) {
 }
 
 inline bool zeroinfnan(uint32_t ix) { return 2 * ix - 1 >= 2u * 0x7f800000 - 1; }
+
+// x^y from y log2(x): its overflow and underflow, else 2^(y log2 x); sign_bias negates.
+inline float pow_from_log2(double ylogx, uint64_t sign_bias) {
+  if ((std::bit_cast<uint64_t>(ylogx) >> 47 & 0xffff) >= std::bit_cast<uint64_t>(126.0) >> 47) [[unlikely]] {
+    const float sign = sign_bias ? -1.0f : 1.0f;
+    if (ylogx <= -150.0) return sign * 0.0f;
+    if (ylogx > 0x1.fffffffd1d571p+6) return sign * INFINITY;
+    if (ylogx > 0x1.fffffffa3aae2p+6) return sign * 0x1.fffffep127f;  // rounds down to the largest float
+  }
+  return exp2_inline(ylogx, sign_bias);
+}
 
 // pow where x is zero, subnormal, negative, infinite or NaN, or y zero, infinite or NaN.
 float pow_special(float x, float y);  // float_math.cc
@@ -235,18 +251,11 @@ inline float exp(float x) {
   constexpr double kInvLn2N = 0x1.71547652b82fep+0 * 32, kShift = 0x1.8p+52;
   constexpr double kPoly[3] = {0x1.c6af84b912394p-5 / 32 / 32 / 32, 0x1.ebfce50fac4f3p-3 / 32 / 32,
                                0x1.62e42ff0c52d6p-1 / 32};
-  double z = kInvLn2N * double(x);  // x * 32 / ln 2 = k + r, r in [-1/2, 1/2]
+  const double z = kInvLn2N * double(x);  // x * 32 / ln 2 = k + r, r in [-1/2, 1/2]
   double kd = z + kShift;
   const uint64_t ki = std::bit_cast<uint64_t>(kd);
   kd -= kShift;
-  const double r = z - kd;
-  const uint64_t t = kExp2Table[ki % 32] + (ki << 47);
-  const double s = std::bit_cast<double>(t);
-  z = kPoly[0] * r + kPoly[1];
-  const double r2 = r * r;
-  double y = kPoly[2] * r + 1;
-  y = z * r2 + y;
-  return float(y * s);
+  return exp2_scaled(ki, z - kd, kPoly, 0);
 }
 
 // x^y (glibc's powf, 0.82 ulp at worst).
@@ -255,13 +264,7 @@ inline float pow(float x, float y) {
   const uint32_t ix = std::bit_cast<uint32_t>(x), iy = std::bit_cast<uint32_t>(y);
   if (ix - 0x00800000 >= 0x7f800000 - 0x00800000 || zeroinfnan(iy)) [[unlikely]]
     return pow_special(x, y);
-  const double ylogx = double(y) * log2_inline(ix);
-  if ((std::bit_cast<uint64_t>(ylogx) >> 47 & 0xffff) >= std::bit_cast<uint64_t>(126.0) >> 47) [[unlikely]] {
-    if (ylogx <= -150.0) return 0.0f;
-    if (ylogx > 0x1.fffffffd1d571p+6) return INFINITY;
-    if (ylogx > 0x1.fffffffa3aae2p+6) return 0x1.fffffep127f;  // rounds down to the largest float
-  }
-  return exp2_inline(ylogx, 0);
+  return pow_from_log2(double(y) * log2_inline(ix), 0);
 }
 
 }  // namespace tessera::fm
