@@ -104,7 +104,9 @@ DielectricF dielectric_f(const Material& m, float f) {
 BsdfLobes pbr_lobes(const Material& m, Vec3 wo) {
   const PbrWeights w = pbr_weights(m);
   const float c = std::fabs(wo.z);
-  const DielectricF fc = dielectric_f(m, fresnel_dielectric(c, m.ior)), fg = dielectric_f(m, glass_fresnel(m, wo.z));
+  // A component of weight 0 adds +0 (its Fresnel is finite, ior in [1, 10)): skipped.
+  const DielectricF fc = w.coat > 0 ? dielectric_f(m, fresnel_dielectric(c, m.ior)) : DielectricF{};
+  const DielectricF fg = w.glass > 0 ? dielectric_f(m, glass_fresnel(m, wo.z)) : DielectricF{};
   const float base = m.reflectance.luminance();
   BsdfLobes p;
   p.spec = w.metal * schlick(m.reflectance, c).luminance() + w.coat * fc.lum + w.glass * fg.lum;
@@ -146,17 +148,20 @@ void pbr_eval(const Material& m, const BsdfLobes* lobes, Vec3 wo, Vec3 wi, Rgb* 
     if constexpr (kPdf) *pdf_out = p.diffuse * std::fabs(ci) * kInvPi;
     if (!has_h) return;           // (f is then 0, its diffuse part too)
     const float oh = dot(wo, h);  // negative inside
-    DielectricF fc{};
+    DielectricF fc{};             // (a component of weight 0 adds +0: its Fresnel is skipped)
     if constexpr (kF) {
-      fc = dielectric_f(m, fresnel_dielectric(std::fabs(oh), m.ior));
-      if (w.coat > 0) *f_out += m.reflectance * (w.coat * fc.keep * kInvPi);
+      if (w.coat > 0) {
+        fc = dielectric_f(m, fresnel_dielectric(std::fabs(oh), m.ior));
+        *f_out += m.reflectance * (w.coat * fc.keep * kInvPi);
+      }
     }
     if (smooth) return;
     const float d = g.d(h), lambda_o = g.lambda(wo);
     if constexpr (kF) {
       const float spec = d * g.g2(lambda_o, wi) / (4 * std::fabs(co * ci));
       if (w.metal > 0) *f_out += schlick(m.reflectance, std::fabs(oh)) * (w.metal * spec);
-      *f_out = *f_out + (fc.reflect * w.coat + dielectric_f(m, glass_fresnel(m, oh)).reflect * w.glass) * spec;
+      const Rgb glass = w.glass > 0 ? dielectric_f(m, glass_fresnel(m, oh)).reflect * w.glass : Rgb(0);
+      *f_out = *f_out + (fc.reflect * w.coat + glass) * spec;
     }
     if constexpr (kPdf) *pdf_out += p.spec * g.pdf_visible(wo_up, h, lambda_o, d) / (4 * std::fabs(oh));
     return;
@@ -187,18 +192,6 @@ void pbr_eval(const Material& m, const BsdfLobes* lobes, Vec3 wo, Vec3 wi, Rgb* 
   }
   if (want_pdf)
     *pdf_out = p.trans * g.pdf_visible(wo_up, h, lambda_o, d) * std::fabs(ih) / ((ih + oh / etap) * (ih + oh / etap));
-}
-
-Rgb pbr_f(const Material& m, Vec3 wo, Vec3 wi) {
-  Rgb f;
-  pbr_eval<true, false>(m, nullptr, wo, wi, &f, nullptr);
-  return f;
-}
-
-float pbr_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi) {
-  float pdf;
-  pbr_eval<false, true>(m, &lobes, wo, wi, nullptr, &pdf);
-  return pdf;
 }
 
 bool pbr_sample(const Material& m, const BsdfLobes& p, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
@@ -274,18 +267,25 @@ float sheen_lobe_f(float alpha, Vec3 wo, Vec3 wi) {
   return wo.z > 0 ? sheen_f(alpha, wo, wi) : sheen_f(alpha, -wo, -wi);
 }
 
-Rgb sheened_f(const Material& m, Vec3 wo, Vec3 wi) {
-  const Rgb base = pbr_f(m, wo, wi);
-  if (!has_sheen(m)) return base;
+// f (kF) and the density (kPdf; `lobes` = pbr_lobes(m, wo)) of the sheen over the base, in
+// one pass where both are wanted: the base's once (pbr_eval).
+template <bool kF, bool kPdf>
+void sheened_eval(const Material& m, const BsdfLobes* lobes, Vec3 wo, Vec3 wi, Rgb* f_out, float* pdf_out) {
+  if (!has_sheen(m)) return pbr_eval<kF, kPdf>(m, lobes, wo, wi, f_out, pdf_out);
   const float alpha = sheen_alpha(m.sheen_roughness);
-  return m.sheen_color * sheen_lobe_f(alpha, wo, wi) + base * sheen_scale(m, alpha, wo, wi);
-}
-
-float sheened_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi) {
-  if (!has_sheen(m)) return pbr_pdf(m, lobes, wo, wi);
-  const float ps = sheen_probability(m, lobes, sheen_alpha(m.sheen_roughness), wo);
-  const float cosine = wo.z * wi.z > 0 ? std::fabs(wi.z) * kInvPi : 0;
-  return ps * cosine + (ps < 1 ? (1 - ps) * pbr_pdf(m, lobes, wo, wi) : 0);
+  float ps = 1;
+  if constexpr (kPdf) ps = sheen_probability(m, *lobes, alpha, wo);
+  Rgb base(0);
+  float base_pdf = 0;
+  if (kPdf && ps < 1)
+    pbr_eval<kF, true>(m, lobes, wo, wi, &base, &base_pdf);
+  else if constexpr (kF)
+    pbr_eval<true, false>(m, nullptr, wo, wi, &base, nullptr);
+  if constexpr (kF) *f_out = m.sheen_color * sheen_lobe_f(alpha, wo, wi) + base * sheen_scale(m, alpha, wo, wi);
+  if constexpr (kPdf) {
+    const float cosine = wo.z * wi.z > 0 ? std::fabs(wi.z) * kInvPi : 0;
+    *pdf_out = ps * cosine + (ps < 1 ? (1 - ps) * base_pdf : 0);
+  }
 }
 
 bool sheened_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
@@ -304,9 +304,10 @@ bool sheened_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1
       return true;
     }
   }
-  out->pdf = sheened_pdf(m, lobes, wo, out->wi);
+  Rgb f;
+  sheened_eval<true, true>(m, &lobes, wo, out->wi, &f, &out->pdf);
   if (!(out->pdf > 0)) return false;
-  out->weight = sheened_f(m, wo, out->wi) * (std::fabs(out->wi.z) / out->pdf);
+  out->weight = f * (std::fabs(out->wi.z) / out->pdf);
   return true;
 }
 
@@ -354,24 +355,27 @@ float coat_pdf(const Material& m, Vec3 wo, Vec3 wi) {
   return Ggx(m.clearcoat_alpha).pdf_visible(wo_up, h) / (4 * std::fabs(dot(wo, h)));
 }
 
-Rgb coated_f(const Material& m, Vec3 wo, Vec3 wi) {
-  const Rgb base = sheened_f(m, wo, wi);
-  if (m.clearcoat <= 0) return base;
+// f (kF) and the density (kPdf; `lobes` = pbr_lobes(m, wo)) of the coat over the sheened
+// base, in one pass where both are wanted: the base's once (sheened_eval).
+template <bool kF, bool kPdf>
+void coated_eval(const Material& m, const BsdfLobes* lobes, Vec3 wo, Vec3 wi, Rgb* f_out, float* pdf_out) {
+  if (m.clearcoat <= 0) return sheened_eval<kF, kPdf>(m, lobes, wo, wi, f_out, pdf_out);
+  Rgb base(0);
+  float base_pdf = 0;
+  sheened_eval<kF, kPdf>(m, lobes, wo, wi, &base, &base_pdf);
   const CoatFrame c(m);
   const Vec3 co = c.in(wo), ci = c.in(wi);
-  const float fc = coat_fresnel(m, co);
-  // A tilted coat's lobe reflects as it would about its own normal: its cosine, not the
-  // base's, weighs it (f |cos_base| = f_coat |cos_coat|), so it never gains energy.
-  const float cos_ratio = c.tilted ? std::fabs(ci.z) / std::max(std::fabs(wi.z), 1e-7f) : 1;
-  return base * (1 - fc) + Rgb(fc * coat_f(m, co, ci) * cos_ratio);
-}
-
-float coated_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi) {
-  if (m.clearcoat <= 0) return sheened_pdf(m, lobes, wo, wi);
-  const CoatFrame c(m);
-  const Vec3 co = c.in(wo);
-  const float pc = coat_probability(m, co);
-  return (1 - pc) * sheened_pdf(m, lobes, wo, wi) + pc * coat_pdf(m, co, c.in(wi));  // (densities turn unchanged)
+  if constexpr (kF) {
+    const float fc = coat_fresnel(m, co);
+    // A tilted coat's lobe reflects as it would about its own normal: its cosine, not the
+    // base's, weighs it (f |cos_base| = f_coat |cos_coat|), so it never gains energy.
+    const float cos_ratio = c.tilted ? std::fabs(ci.z) / std::max(std::fabs(wi.z), 1e-7f) : 1;
+    *f_out = base * (1 - fc) + Rgb(fc * coat_f(m, co, ci) * cos_ratio);
+  }
+  if constexpr (kPdf) {
+    const float pc = coat_probability(m, co);
+    *pdf_out = (1 - pc) * base_pdf + pc * coat_pdf(m, co, ci);  // (densities turn unchanged)
+  }
 }
 
 bool coated_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
@@ -403,9 +407,10 @@ bool coated_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1,
       return true;
     }
   }
-  out->pdf = coated_pdf(m, lobes, wo, out->wi);
+  Rgb f;
+  coated_eval<true, true>(m, &lobes, wo, out->wi, &f, &out->pdf);
   if (!(out->pdf > 0)) return false;
-  out->weight = coated_f(m, wo, out->wi) * (std::fabs(out->wi.z) / out->pdf);
+  out->weight = f * (std::fabs(out->wi.z) / out->pdf);
   return true;
 }
 
@@ -417,11 +422,24 @@ Rgb bsdf_eval(const Material& m, Vec3 wo, Vec3 wi) {
       return (wo.z > 0 && wi.z > 0) ? m.reflectance * kInvPi : Rgb(0);
     case Material::Kind::kMicrofacet:
       return microfacet_f(m, wo, wi);
-    case Material::Kind::kPbr:
-      return coated_f(m, wo, wi);
+    case Material::Kind::kPbr: {
+      Rgb f;
+      coated_eval<true, false>(m, nullptr, wo, wi, &f, nullptr);
+      return f;
+    }
     default:
       return Rgb(0);
   }
+}
+
+Rgb bsdf_eval_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi, float* pdf) {
+  if (m.kind != Material::Kind::kPbr) {
+    *pdf = bsdf_pdf(m, lobes, wo, wi);
+    return bsdf_eval(m, wo, wi);
+  }
+  Rgb f;
+  coated_eval<true, true>(m, &lobes, wo, wi, &f, pdf);
+  return f;
 }
 
 BsdfLobes bsdf_lobes(const Material& m, Vec3 wo) {
@@ -436,8 +454,11 @@ float bsdf_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi) {
       return (wo.z > 0) ? cosine_hemisphere_pdf(wi.z) : 0;
     case Material::Kind::kMicrofacet:
       return microfacet_pdf(m, wo, wi);
-    case Material::Kind::kPbr:
-      return coated_pdf(m, lobes, wo, wi);
+    case Material::Kind::kPbr: {
+      float pdf;
+      coated_eval<false, true>(m, &lobes, wo, wi, nullptr, &pdf);
+      return pdf;
+    }
     default:
       return 0;
   }

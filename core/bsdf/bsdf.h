@@ -34,6 +34,9 @@ Rgb bsdf_eval(const Material& m, Vec3 wo, Vec3 wi);
 // Solid-angle density of bsdf_sample choosing wi, for non-delta kinds.
 float bsdf_pdf(const Material& m, Vec3 wo, Vec3 wi);
 float bsdf_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi);  // lobes = bsdf_lobes(m, wo)
+// Both at once, the same bits as the two calls: one pass over glTF PBR's lobes and layers
+// (the half vector, D(h) and Lambda(wo) once), what a light sample weighed by MIS wants.
+Rgb bsdf_eval_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi, float* pdf);
 // Draws wi. u1 picks between reflection and transmission; u2 the direction. Returns false
 // if the path ends here (black material, total internal reflection of a refraction-only
 // surface, a direction below the surface).

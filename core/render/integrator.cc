@@ -176,6 +176,7 @@ Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& l
                                                      const Frame& frame, Vec3 wo, Vec3 ng, Sampler& sampler,
                                                      RayCounters& counters) const {
   Rgb sum(0);
+  const bool pbr = m.kind == Material::Kind::kPbr;
   for (size_t i = 0; i < lights_.size(); ++i) {
     const Light& light = lights_.light(i);
     const int n = light.is_delta() ? 1 : light_samples_;
@@ -188,7 +189,10 @@ Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& l
       // Below the geometric surface: no leaks (a dielectric transmits there).
       if (!m.is_dielectric() && dot(ls.wi, ng) <= 0) continue;
       const Vec3 wi = frame.to_local(ls.wi);
-      const Rgb f = bsdf_eval(m, wo, wi);
+      // The density only where MIS weighs the sample, with f in one pass for glTF PBR.
+      const bool weigh = !light.is_delta() && mis_;
+      float bsdf_density = 0;
+      const Rgb f = weigh && pbr ? bsdf_eval_pdf(m, lobes, wo, wi, &bsdf_density) : bsdf_eval(m, wo, wi);
       if (f.is_black()) continue;
       Ray shadow;
       shadow.o = offset_ray_origin(sp, ls.wi);
@@ -204,7 +208,7 @@ Integrator::Integrator(const Scene& scene, const Accel& accel, const LightSet& l
       ++counters.shadow_rays;
       if (accel_.occluded(shadow)) continue;
       Rgb c = f * ls.li * (std::fabs(wi.z) / ls.pdf);
-      if (!light.is_delta() && mis_) c *= power_heuristic(float(n), ls.pdf, 1, bsdf_pdf(m, lobes, wo, wi));
+      if (weigh) c *= power_heuristic(float(n), ls.pdf, 1, pbr ? bsdf_density : bsdf_pdf(m, lobes, wo, wi));
       acc += c;
     }
     sum += acc / float(n);

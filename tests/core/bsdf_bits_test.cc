@@ -7,6 +7,7 @@
 
 #include <bit>
 #include <cstdint>
+#include <cstring>
 
 #include "core/bsdf/bsdf.h"
 #include "core/math/hash.h"
@@ -74,6 +75,24 @@ TEST(BsdfBits, SameAsRecorded) {
   }
   EXPECT_EQ(sampled, 332809u);
   EXPECT_EQ(h.h, 0xc8f0964b108d7e62ull) << std::hex << h.h;
+}
+
+// bsdf_eval_pdf, f and the density in one pass, gives the bits of bsdf_eval and bsdf_pdf.
+TEST(BsdfBits, EvalPdfSameAsTheTwoCalls) {
+  size_t differ = 0, nonzero = 0;
+  for (uint64_t i = 0; i < 200000; ++i) {
+    Sampler s(11, i, 0);
+    const Material m = random_material(i, s);
+    const Vec3 wo = square_to_uniform_sphere(s.next_2d()), wi = square_to_uniform_sphere(s.next_2d());
+    float pdf = -1;
+    const Rgb f = bsdf_eval_pdf(m, bsdf_lobes(m, wo), wo, wi, &pdf);
+    const Rgb f2 = bsdf_eval(m, wo, wi);
+    const float pdf2 = bsdf_pdf(m, wo, wi);
+    differ += std::memcmp(&f, &f2, sizeof f) != 0 || std::memcmp(&pdf, &pdf2, sizeof pdf) != 0;
+    nonzero += !f.is_black() && pdf > 0;
+  }
+  EXPECT_EQ(differ, 0u);
+  EXPECT_GT(nonzero, 50000u);  // (the pairs are not mostly zero)
 }
 
 }  // namespace
