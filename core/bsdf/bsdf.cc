@@ -76,6 +76,17 @@ Rgb schlick(Rgb f0, float c) {
 
 bool pbr_smooth(const Material& m) { return m.alpha < Material::kSmoothAlpha; }
 
+// No specular reflection at all: no metal, and a dielectric of ior 1, whose Fresnel is 0 at
+// every angle (KHR_materials_specular's too: its F0 is then 0 and its curve the exact
+// one's). Our Cornell glTF scenes' walls are such (exactly the CS184 boxes' Lambertian
+// ones): their reflection is the diffuse lobe alone, sampled and evaluated as that.
+bool pbr_no_specular(const Material& m) { return m.metallic <= 0 && m.ior == 1; }
+// A solid of ior 1 bends nothing: its transmission goes straight through, a delta lobe
+// however rough the surface (Walter et al.'s refraction lobe degenerates there: its half
+// vector wi + wo vanishes, and sampling it gave NaN weights). A thin wall's transmission
+// is the reflection lobe mirrored, rough at any ior.
+bool pbr_index_matched(const Material& m) { return !m.thin && m.ior == 1; }
+
 // The glass component's Fresnel at cosine c against the outward normal: a solid's inside
 // sees the inverse index (total internal reflection); a thin wall has air on both sides.
 float glass_fresnel(const Material& m, float c) { return fresnel_dielectric(m.thin ? std::fabs(c) : c, m.ior); }
@@ -112,9 +123,10 @@ BsdfLobes pbr_lobes(const Material& m, Vec3 wo) {
   p.spec = w.metal * schlick(m.reflectance, c).luminance() + w.coat * fc.lum + w.glass * fg.lum;
   p.trans = w.glass > 0 ? w.glass * fg.keep * base : 0;
   // Floors keep every rough lobe that can be non-zero samplable (an unbiased mixture needs
-  // it). A smooth lobe's albedo is exact, so a delta lobe of albedo 0 is never chosen.
+  // it; an identically zero one, pbr_no_specular, needs none). A smooth lobe's albedo is
+  // exact, so a delta lobe of albedo 0 is never chosen.
   if (!pbr_smooth(m)) {
-    p.spec = std::max(p.spec, 0.05f);
+    if (!pbr_no_specular(m)) p.spec = std::max(p.spec, 0.05f);
     if (w.glass > 0 && base > 0) p.trans = std::max(p.trans, 0.02f);
   }
   if (w.coat > 0 && base > 0) p.diffuse = std::max(w.coat * fc.keep * base, 0.02f);
@@ -155,7 +167,7 @@ void pbr_eval(const Material& m, const BsdfLobes* lobes, Vec3 wo, Vec3 wi, Rgb* 
         *f_out += m.reflectance * (w.coat * fc.keep * kInvPi);
       }
     }
-    if (smooth) return;
+    if (smooth || pbr_no_specular(m)) return;
     const float d = g.d(h), lambda_o = g.lambda(wo);
     if constexpr (kF) {
       const float spec = d * g.g2(lambda_o, wi) / (4 * std::fabs(co * ci));
@@ -167,7 +179,7 @@ void pbr_eval(const Material& m, const BsdfLobes* lobes, Vec3 wo, Vec3 wi, Rgb* 
     return;
   }
   const bool want_f = kF && w.glass > 0, want_pdf = kPdf && p.trans > 0;
-  if (smooth || !(want_f || want_pdf)) return;
+  if (smooth || pbr_index_matched(m) || !(want_f || want_pdf)) return;
   if (m.thin) {  // the reflection lobe mirrored through the surface
     const Vec3 wr{wi.x, wi.y, -wi.z};
     Vec3 h;
@@ -225,6 +237,13 @@ bool pbr_sample(const Material& m, const BsdfLobes& p, Vec3 wo, float u1, Vec2 u
     }
     if (!refract(wo, Vec3{0, 0, 1}, m.ior, &out->wi, &out->etap)) return false;
     out->weight = m.reflectance * (t / (out->etap * out->etap));
+    return t > 0;
+  } else if (u1 >= p.diffuse + p.spec && p.trans > 0 && pbr_index_matched(m)) {  // straight through
+    out->delta = true;
+    out->pdf = 1;
+    out->wi = -wo;
+    const float t = w.glass * dielectric_f(m, glass_fresnel(m, co)).keep / p.trans;
+    out->weight = m.reflectance * t;
     return t > 0;
   } else {
     const Ggx g(m.alpha);
