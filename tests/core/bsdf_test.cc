@@ -409,14 +409,13 @@ TEST(Pbr, IndexMatchedSolidTransmitsStraightThrough) {
       c.ior = 1;
       const Material m = pbr(c);
       const Vec3 wo = dir(theta);
-      int straight = 0, n = 0;
+      int straight = 0;
       double albedo = 0;
       for (int i = 0; i < 4000; ++i) {
         Sampler sp(3, 0, uint32_t(i));
         BsdfSample s;
         const float u1 = sp.next_1d();
         if (!bsdf_sample(m, wo, u1, sp.next_2d(), &s)) continue;
-        ++n;
         ASSERT_TRUE(s.weight.is_finite() && std::isfinite(s.pdf)) << "theta " << theta;
         albedo += s.weight.g;
         if (s.delta) {
