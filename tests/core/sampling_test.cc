@@ -1,6 +1,7 @@
 // The sampler and the warps: determinism, range, stratification, and chi-square fits.
 #include <gtest/gtest.h>
 
+#include <cstdio>
 #include <random>
 #include <set>
 
@@ -74,6 +75,77 @@ TEST(Sampler, TableReversalsGiveTheFullReversalsBits) {
       const Vec2 va = a.next_2d(), vb = b.next_2d();
       ASSERT_EQ(va.x, vb.x);
       ASSERT_EQ(va.y, vb.y);
+    }
+  }
+}
+
+// Sobol's second dimension in the reversed domain as the AVX2 batch computes it (a superset
+// transform of the reversed index, no table): equal to the table for every input bit.
+uint32_t superset_xor(uint32_t y) {
+  y ^= (y & 0xAAAAAAAAu) >> 1;
+  y ^= (y & 0xCCCCCCCCu) >> 2;
+  y ^= (y & 0xF0F0F0F0u) >> 4;
+  y ^= (y & 0xFF00FF00u) >> 8;
+  return y ^ (y >> 16);
+}
+
+TEST(Sampler, SupersetTransformIsSobolsSecondDimension) {
+  for (int b = 0; b < 32; ++b) ASSERT_EQ(superset_xor(reverse_bits(1u << b)), sobol_dim1_reversed(1u << b)) << b;
+  std::mt19937 rng(9);
+  for (int k = 0; k < 100000; ++k) {
+    const uint32_t r = rng();
+    ASSERT_EQ(superset_xor(reverse_bits(r)), sobol_dim1_reversed(r)) << r;
+  }
+}
+
+// The batches (scalar and AVX2) give each dimension the bits of computing it alone, at any
+// dimension (the split continuations start 2^20 apart; dimensions wrap at 2^32).
+TEST(Sampler, BatchesGiveTheBitsOfOneDimensionAtATime) {
+  std::mt19937_64 rng(13);
+  float x[sampler_batch::kDimensions], y[sampler_batch::kDimensions];
+  float xa[sampler_batch::kDimensions], ya[sampler_batch::kDimensions];
+  bool avx2 = false;
+  for (int k = 0; k < 200000; ++k) {
+    const uint64_t key = rng();
+    const uint32_t reversed_index = uint32_t(rng());
+    const uint32_t d = k % 7 == 0 ? uint32_t(-int(k % 5)) : k % 3 == 0 ? uint32_t(rng()) : uint32_t(k % 64);
+    sampler_batch::fill_scalar(key, reversed_index, d, x, y);
+    avx2 = sampler_batch::fill_avx2(key, reversed_index, d, xa, ya);
+    for (uint32_t j = 0; j < sampler_batch::kDimensions; ++j) {
+      const Vec2 v = Sampler::value_at(key, reversed_index, d + j);
+      ASSERT_EQ(x[j], v.x) << d << " + " << j;
+      ASSERT_EQ(y[j], v.y) << d << " + " << j;
+      if (avx2) {
+        ASSERT_EQ(xa[j], v.x) << d << " + " << j;
+        ASSERT_EQ(ya[j], v.y) << d << " + " << j;
+      }
+    }
+  }
+  if (!avx2) std::printf("this CPU has no AVX2: only the scalar batch was compared\n");
+}
+
+// Through the Sampler: draws in any mix of 1D and 2D, with jumps of the dimension (as the
+// split continuations make), give the values of each dimension computed alone.
+TEST(Sampler, DrawsThroughTheBatchesEqualTheDefinition) {
+  std::mt19937 rng(17);
+  for (int k = 0; k < 20000; ++k) {
+    const uint64_t seed = rng(), pixel = rng();
+    const uint32_t index = rng() % 100000;
+    Sampler s(seed, pixel, index);
+    FullReversalSampler ref(seed, pixel, index);
+    for (int draw = 0; draw < 24; ++draw) {
+      if (rng() % 8 == 0) {
+        const uint32_t d = rng() % 3 == 0 ? uint32_t(rng()) : s.dimension() + (rng() % 3) * (1u << 20);
+        s.set_dimension(d);
+        ref.dim = d;
+      }
+      if (rng() % 2) {
+        ASSERT_EQ(s.next_1d(), ref.next_1d());
+      } else {
+        const Vec2 a = s.next_2d(), b = ref.next_2d();
+        ASSERT_EQ(a.x, b.x);
+        ASSERT_EQ(a.y, b.y);
+      }
     }
   }
 }
