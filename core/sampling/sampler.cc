@@ -68,8 +68,9 @@ namespace {
 // Sampler::value_at for dimensions d .. d + 3: the four seeds' hashes in 64-bit lanes, then
 // the eight coordinates in 32-bit lanes (x of the four dimensions low, y high).
 [[gnu::target("avx2")]] void fill_avx2_impl(uint64_t key, uint32_t reversed_index, uint32_t d, float* x, float* y) {
-  constexpr uint64_t kC = 0xD1B54A32D192ED03ull;  // Sampler::dimension_hash's multiplier
-  const auto seed = [&](uint32_t k) { return int64_t(key ^ (uint64_t(uint32_t(d + k)) * kC)); };
+  const auto seed = [&](uint32_t k) {
+    return int64_t(key ^ (uint64_t(uint32_t(d + k)) * Sampler::kDimensionMultiplier));
+  };
   const __m256i h = mix64x4(_mm256_setr_epi64x(seed(0), seed(1), seed(2), seed(3)));
   const __m256i h2 = mix64x4(h);
   // Low halves of the 64-bit lanes into the low 128 bits, high halves into the high ones.
