@@ -18,7 +18,7 @@ constexpr int kVertices = 4;  // vertices a sample, each drawing four dimensions
 void BM_DrawsOneAtATime(benchmark::State& state) {
   uint32_t sample = 0;
   for (auto _ : state) {
-    const uint64_t key = mix64(7 * 0x9E3779B97F4A7C15ull + sample);
+    const uint64_t key = Sampler::pixel_key(7, sample);
     const uint32_t reversed = reverse_bits(sample & 1023);
     uint32_t d = 0;
     float acc = 0;
@@ -55,33 +55,26 @@ void BM_DrawsBatched(benchmark::State& state) {
 BENCHMARK(BM_DrawsBatched);
 
 // One batch of four dimensions, each implementation.
-void BM_FillScalar(benchmark::State& state) {
+template <bool kAvx2>
+void BM_Fill(benchmark::State& state) {
   float x[sampler_batch::kDimensions], y[sampler_batch::kDimensions];
-  uint32_t d = 0;
-  for (auto _ : state) {
-    sampler_batch::fill_scalar(0x1234567887654321ull, 0x9abcdef0u, d += 4, x, y);
-    benchmark::DoNotOptimize(x);
-    benchmark::DoNotOptimize(y);
-  }
-  state.SetItemsProcessed(state.iterations() * sampler_batch::kDimensions);
-}
-BENCHMARK(BM_FillScalar);
-
-void BM_FillAvx2(benchmark::State& state) {
-  float x[sampler_batch::kDimensions], y[sampler_batch::kDimensions];
-  uint32_t d = 0;
-  if (!sampler_batch::fill_avx2(0, 0, 0, x, y)) {
+  if (kAvx2 && !sampler_batch::fill_avx2(0, 0, 0, x, y)) {
     state.SkipWithError("this CPU has no AVX2");
     return;
   }
+  uint32_t d = 0;
   for (auto _ : state) {
-    sampler_batch::fill_avx2(0x1234567887654321ull, 0x9abcdef0u, d += 4, x, y);
+    if constexpr (kAvx2)
+      sampler_batch::fill_avx2(0x1234567887654321ull, 0x9abcdef0u, d += 4, x, y);
+    else
+      sampler_batch::fill_scalar(0x1234567887654321ull, 0x9abcdef0u, d += 4, x, y);
     benchmark::DoNotOptimize(x);
     benchmark::DoNotOptimize(y);
   }
   state.SetItemsProcessed(state.iterations() * sampler_batch::kDimensions);
 }
-BENCHMARK(BM_FillAvx2);
+BENCHMARK(BM_Fill<false>)->Name("BM_FillScalar");
+BENCHMARK(BM_Fill<true>)->Name("BM_FillAvx2");
 
 }  // namespace
 

@@ -111,7 +111,9 @@ void fill(uint64_t key, uint32_t reversed_index, uint32_t d, float* x, float* y)
 class Sampler {
  public:
   Sampler(uint64_t seed, uint64_t pixel, uint32_t sample_index)
-      : key_(mix64(seed * 0x9E3779B97F4A7C15ull + pixel)), reversed_index_(reverse_bits(sample_index)) {}
+      : key_(pixel_key(seed, pixel)), reversed_index_(reverse_bits(sample_index)) {}
+  // The key of a pixel's samples (value_at's key).
+  static uint64_t pixel_key(uint64_t seed, uint64_t pixel) { return mix64(seed * 0x9E3779B97F4A7C15ull + pixel); }
 
   // A 1D draw is the first coordinate of its dimension's 2D value.
   float next_1d() { return value(++dim_).x; }
