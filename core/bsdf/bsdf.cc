@@ -272,13 +272,14 @@ bool pbr_sample(const Material& m, const BsdfLobes& p, Vec3 wo, float u1, Vec2 u
 // direction on wo's side, else the base; the density is the mixture's.
 
 bool has_sheen(const Material& m) { return m.sheen_color.max() > 0; }
-float sheen_scale(const Material& m, float alpha, Vec3 wo, Vec3 wi) {
+// e_wo: the lobe's albedo at wo, sheen_albedo(wo.z, alpha) (BsdfLobes::sheen_wo).
+float sheen_scale(const Material& m, float alpha, float e_wo, Vec3 wi) {
   const float c = m.sheen_color.max();
-  return std::min(1 - c * sheen_albedo(wo.z, alpha), 1 - c * sheen_albedo(wi.z, alpha));
+  return std::min(1 - c * e_wo, 1 - c * sheen_albedo(wi.z, alpha));
 }
-float sheen_probability(const Material& m, const BsdfLobes& base, float alpha, Vec3 wo) {
+float sheen_probability(const Material& m, const BsdfLobes& base) {
   if (base.spec + base.diffuse + base.trans <= 0) return 1;
-  return std::clamp(m.sheen_color.max() * sheen_albedo(wo.z, alpha), 0.1f, 0.9f);
+  return std::clamp(m.sheen_color.max() * base.sheen_wo, 0.1f, 0.9f);
 }
 // The lobe with the caller's frame flipped so that wo is up.
 float sheen_lobe_f(float alpha, Vec3 wo, Vec3 wi) {
@@ -293,14 +294,17 @@ void sheened_eval(const Material& m, const BsdfLobes* lobes, Vec3 wo, Vec3 wi, R
   if (!has_sheen(m)) return pbr_eval<kF, kPdf>(m, lobes, wo, wi, f_out, pdf_out);
   const float alpha = sheen_alpha(m.sheen_roughness);
   float ps = 1;
-  if constexpr (kPdf) ps = sheen_probability(m, *lobes, alpha, wo);
+  if constexpr (kPdf) ps = sheen_probability(m, *lobes);
   Rgb base(0);
   float base_pdf = 0;
   if (kPdf && ps < 1)
     pbr_eval<kF, true>(m, lobes, wo, wi, &base, &base_pdf);
   else if constexpr (kF)
     pbr_eval<true, false>(m, nullptr, wo, wi, &base, nullptr);
-  if constexpr (kF) *f_out = m.sheen_color * sheen_lobe_f(alpha, wo, wi) + base * sheen_scale(m, alpha, wo, wi);
+  if constexpr (kF) {
+    const float e_wo = lobes ? lobes->sheen_wo : sheen_albedo(wo.z, alpha);
+    *f_out = m.sheen_color * sheen_lobe_f(alpha, wo, wi) + base * sheen_scale(m, alpha, e_wo, wi);
+  }
   if constexpr (kPdf) {
     const float cosine = wo.z * wi.z > 0 ? std::fabs(wi.z) * kInvPi : 0;
     *pdf_out = ps * cosine + (ps < 1 ? (1 - ps) * base_pdf : 0);
@@ -310,7 +314,7 @@ void sheened_eval(const Material& m, const BsdfLobes* lobes, Vec3 wo, Vec3 wi, R
 bool sheened_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1, Vec2 u2, BsdfSample* out) {
   if (!has_sheen(m)) return pbr_sample(m, lobes, wo, u1, u2, out);
   if (wo.z == 0) return false;
-  const float alpha = sheen_alpha(m.sheen_roughness), ps = sheen_probability(m, lobes, alpha, wo);
+  const float alpha = sheen_alpha(m.sheen_roughness), ps = sheen_probability(m, lobes);
   if (u1 < ps) {  // the sheen: a cosine direction on wo's side
     const Vec3 d = square_to_cosine_hemisphere(u2);
     out->wi = wo.z > 0 ? d : Vec3{d.x, d.y, -d.z};
@@ -319,7 +323,7 @@ bool sheened_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1
   } else {  // the base, its own choice of lobe from the rest of u1
     if (!pbr_sample(m, lobes, wo, std::min((u1 - ps) / (1 - ps), 0x1.fffffep-1f), u2, out)) return false;
     if (out->delta) {  // a delta lobe of the base, scaled under the sheen
-      out->weight = out->weight * (sheen_scale(m, alpha, wo, out->wi) / (1 - ps));
+      out->weight = out->weight * (sheen_scale(m, alpha, lobes.sheen_wo, out->wi) / (1 - ps));
       return true;
     }
   }
@@ -462,7 +466,10 @@ Rgb bsdf_eval_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi, f
 }
 
 BsdfLobes bsdf_lobes(const Material& m, Vec3 wo) {
-  return m.kind == Material::Kind::kPbr ? pbr_lobes(m, wo) : BsdfLobes{};
+  if (m.kind != Material::Kind::kPbr) return BsdfLobes{};
+  BsdfLobes lobes = pbr_lobes(m, wo);
+  if (has_sheen(m)) lobes.sheen_wo = sheen_albedo(wo.z, sheen_alpha(m.sheen_roughness));
+  return lobes;
 }
 
 float bsdf_pdf(const Material& m, Vec3 wo, Vec3 wi) { return bsdf_pdf(m, bsdf_lobes(m, wo), wo, wi); }

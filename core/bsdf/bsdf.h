@@ -21,11 +21,13 @@ struct BsdfSample {
 };
 
 // What the BSDF decides from wo alone: glTF PBR's lobe selection probabilities (specular
-// reflection, diffuse, transmission; zero for other kinds). A vertex computes them once
-// (bsdf_lobes) for its light samples' densities and its own sample; the forms without
-// them compute them per call.
+// reflection, diffuse, transmission; zero for other kinds) and, under a sheen, the sheen
+// lobe's albedo at wo (sheen_albedo, which scales the base and picks the sheen's share). A
+// vertex computes them once (bsdf_lobes) for its light samples' densities and its own
+// sample; the forms without them compute them per call.
 struct BsdfLobes {
   float spec = 0, diffuse = 0, trans = 0;
+  float sheen_wo = 0;
 };
 BsdfLobes bsdf_lobes(const Material& m, Vec3 wo);
 

@@ -23,24 +23,48 @@ float charlie_lambda(float cos_theta, float alpha) {
   return c < 0.5f ? fm::exp(charlie_l(c, alpha)) : fm::exp(2 * charlie_l(0.5f, alpha) - charlie_l(1 - c, alpha));
 }
 
+// sheen_f for wo.z, wi.z > 0 with Lambda(wo) and Lambda(wi) given (the albedo table
+// computes each once for many pairs; the same bits as computing them here).
+float sheen_f_with(float alpha, Vec3 wo, Vec3 wi, float lambda_o, float lambda_i) {
+  const Vec3 sum = wo + wi;
+  const float len = length(sum);
+  if (!(len > 0)) return 0;
+  const float g = 1 / (1 + lambda_o + lambda_i);
+  return sheen_d(alpha, sum.z / len) * g / (4 * wo.z * wi.z);
+}
+
 // E(mu, alpha) on a grid: mu_i = i / (kN - 1), alpha_j = kSheenMinAlpha .. 1.
 constexpr int kN = 32;
 struct AlbedoTable {
   std::array<float, kN * kN> e{};
   AlbedoTable() {
-    // Midpoint rule over (cos theta_i, phi) on a half circle (f is symmetric in phi).
+    // Midpoint rule over (cos theta_i, phi) on a half circle (f is symmetric in phi). The
+    // directions, and Lambda at each angle, once: 2 M evaluations of f at first use.
     constexpr int kCos = 64, kPhi = 32;
+    std::array<float, kCos> cos_i, sin_i, lambda_i;
+    std::array<float, kPhi> cos_phi, sin_phi;
+    for (int a = 0; a < kCos; ++a) {
+      cos_i[a] = (a + 0.5f) / kCos;
+      sin_i[a] = std::sqrt(1 - cos_i[a] * cos_i[a]);
+    }
+    for (int b = 0; b < kPhi; ++b) {
+      const float phi = (b + 0.5f) * kPi / kPhi;
+      cos_phi[b] = fm::cos(phi);
+      sin_phi[b] = fm::sin(phi);
+    }
     for (int j = 0; j < kN; ++j) {
       const float alpha = kSheenMinAlpha + (1 - kSheenMinAlpha) * float(j) / (kN - 1);
+      for (int a = 0; a < kCos; ++a) lambda_i[a] = charlie_lambda(cos_i[a], alpha);
       for (int i = 0; i < kN; ++i) {
         const float mu = std::max(float(i) / (kN - 1), 1e-3f);
         const Vec3 wo{std::sqrt(1 - mu * mu), 0, mu};
+        const float lambda_o = charlie_lambda(wo.z, alpha);
         double sum = 0;
         for (int a = 0; a < kCos; ++a) {
-          const float ci = (a + 0.5f) / kCos, si = std::sqrt(1 - ci * ci);
+          const float ci = cos_i[a], si = sin_i[a];
           for (int b = 0; b < kPhi; ++b) {
-            const float phi = (b + 0.5f) * kPi / kPhi;
-            sum += double(sheen_f(alpha, wo, Vec3{si * fm::cos(phi), si * fm::sin(phi), ci})) * ci;
+            const Vec3 wi{si * cos_phi[b], si * sin_phi[b], ci};
+            sum += double(sheen_f_with(alpha, wo, wi, lambda_o, lambda_i[a])) * ci;
           }
         }
         e[size_t(j * kN + i)] = float(sum * (1.0 / kCos) * (2 * kPi / kPhi));
@@ -58,11 +82,7 @@ float sheen_d(float alpha, float cos_h) {
 
 float sheen_f(float alpha, Vec3 wo, Vec3 wi) {
   if (wo.z <= 0 || wi.z <= 0) return 0;
-  const Vec3 sum = wo + wi;
-  const float len = length(sum);
-  if (!(len > 0)) return 0;
-  const float g = 1 / (1 + charlie_lambda(wo.z, alpha) + charlie_lambda(wi.z, alpha));
-  return sheen_d(alpha, sum.z / len) * g / (4 * wo.z * wi.z);
+  return sheen_f_with(alpha, wo, wi, charlie_lambda(wo.z, alpha), charlie_lambda(wi.z, alpha));
 }
 
 float sheen_albedo(float cos_theta, float alpha) {
