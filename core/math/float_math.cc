@@ -4,13 +4,22 @@
 #include "core/math/float_math.h"
 
 namespace tessera::fm::detail {
+namespace {
+
+// A signalling NaN's bits (glibc's issignalingf_inline): exponent all ones, the quiet bit
+// clear, some other mantissa bit set.
+bool signalling(uint32_t ix) { return 2 * (ix ^ 0x00400000) > 2u * 0x7fc00000; }
+
+}  // namespace
 
 float pow_special(float x, float y) {
   uint32_t ix = std::bit_cast<uint32_t>(x);
   const uint32_t iy = std::bit_cast<uint32_t>(y);
   uint64_t sign_bias = 0;
   if (zeroinfnan(iy)) {
-    if (2 * iy == 0 || ix == 0x3f800000) return 1.0f;  // x^0 and 1^y, NaNs included (as glibc 2.36)
+    // x^0 and 1^y are 1 for a quiet NaN too, a NaN for a signalling one (as glibc 2.36).
+    if (2 * iy == 0) return signalling(ix) ? x + y : 1.0f;
+    if (ix == 0x3f800000) return signalling(iy) ? x + y : 1.0f;
     if (2 * ix > 2u * 0x7f800000 || 2 * iy > 2u * 0x7f800000) return x + y;
     if (2 * ix == 2 * 0x3f800000) return 1.0f;
     if ((2 * ix < 2 * 0x3f800000) == !(iy & 0x80000000)) return 0.0f;  // |x| < 1, y = inf or |x| > 1, y = -inf

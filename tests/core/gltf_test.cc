@@ -159,7 +159,9 @@ TEST_F(Gltf, VertexColoursAreReadPerVertex) {
     EXPECT_FLOAT_EQ(m.colors[2].b, 1);
     // A VEC4's alpha is kept where some vertex is translucent (the third, 128/255).
     ASSERT_EQ(m.color_alpha.size(), vec4 ? 3u : 0u);
-    if (vec4) EXPECT_NEAR(m.color_alpha[2], 128 / 255.0, 1e-6);
+    if (vec4) {
+      EXPECT_NEAR(m.color_alpha[2], 128 / 255.0, 1e-6);
+    }
   }
 }
 

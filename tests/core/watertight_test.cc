@@ -160,7 +160,9 @@ TEST(Watertight, GeodesicSpheresAtSeveralPlacesAndScales) {
         misses += !accel.intersect(Ray{inside[size_t(i) % inside.size()], d, 0, 4 * radius}, &hit);
       }
       std::printf("  %d random rays from inside: %d leaked %s ROBUST\n", n, misses, robust ? "with" : "without");
-      if (robust) EXPECT_EQ(misses, 0);
+      if (robust) {
+        EXPECT_EQ(misses, 0);
+      }
     }
   }
 }
@@ -202,7 +204,9 @@ TEST(Watertight, RaysDownTheDiagonalOfAWallQuad) {
       }
     }
     std::printf("%d rays straight at quad diagonals: %d leaked %s ROBUST\n", rays, misses, robust ? "with" : "without");
-    if (robust) EXPECT_EQ(misses, 0);
+    if (robust) {
+      EXPECT_EQ(misses, 0);
+    }
   }
 }
 
