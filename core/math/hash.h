@@ -7,9 +7,12 @@
 
 namespace tessera {
 
+// Its two multipliers (the AVX2 form in core/sampling/sampler.cc uses them too).
+inline constexpr uint64_t kMix64Multipliers[2] = {0xbf58476d1ce4e5b9ull, 0x94d049bb133111ebull};
+
 inline uint64_t mix64(uint64_t z) {
-  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  z = (z ^ (z >> 30)) * kMix64Multipliers[0];
+  z = (z ^ (z >> 27)) * kMix64Multipliers[1];
   return z ^ (z >> 31);
 }
 

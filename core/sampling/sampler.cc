@@ -25,18 +25,17 @@ namespace {
 
 // mix64 (hash.h) in each 64-bit lane.
 [[gnu::target("avx2")]] inline __m256i mix64x4(__m256i z) {
-  z = mul64(_mm256_xor_si256(z, _mm256_srli_epi64(z, 30)), 0xbf58476d1ce4e5b9ull);
-  z = mul64(_mm256_xor_si256(z, _mm256_srli_epi64(z, 27)), 0x94d049bb133111ebull);
+  z = mul64(_mm256_xor_si256(z, _mm256_srli_epi64(z, 30)), kMix64Multipliers[0]);
+  z = mul64(_mm256_xor_si256(z, _mm256_srli_epi64(z, 27)), kMix64Multipliers[1]);
   return _mm256_xor_si256(z, _mm256_srli_epi64(z, 31));
 }
 
 // laine_karras_permutation in each 32-bit lane.
 [[gnu::target("avx2")]] inline __m256i laine_karras8(__m256i x, __m256i seed) {
   x = _mm256_add_epi32(x, seed);
-  x = _mm256_xor_si256(x, _mm256_mullo_epi32(x, _mm256_set1_epi32(int32_t(0x6c50b47cu))));
-  x = _mm256_xor_si256(x, _mm256_mullo_epi32(x, _mm256_set1_epi32(int32_t(0xb82f1e52u))));
-  x = _mm256_xor_si256(x, _mm256_mullo_epi32(x, _mm256_set1_epi32(int32_t(0xc7afe638u))));
-  return _mm256_xor_si256(x, _mm256_mullo_epi32(x, _mm256_set1_epi32(int32_t(0x8d22f6e6u))));
+  for (const uint32_t m : kLaineKarrasMultipliers)
+    x = _mm256_xor_si256(x, _mm256_mullo_epi32(x, _mm256_set1_epi32(int32_t(m))));
+  return x;
 }
 
 // reverse_bits in each 32-bit lane: the bytes' order by a shuffle, each byte's bits by a

@@ -24,12 +24,12 @@ constexpr uint32_t reverse_bits(uint32_t x) {
 }
 
 // Laine-Karras style permutation: bit i of the result depends only on bits <= i of x.
+// (Its multipliers are shared with the AVX2 form, sampler.cc; all even, so each step
+// keeps the property.)
+inline constexpr uint32_t kLaineKarrasMultipliers[4] = {0x6c50b47cu, 0xb82f1e52u, 0xc7afe638u, 0x8d22f6e6u};
 inline uint32_t laine_karras_permutation(uint32_t x, uint32_t seed) {
   x += seed;
-  x ^= x * 0x6c50b47cu;
-  x ^= x * 0xb82f1e52u;
-  x ^= x * 0xc7afe638u;
-  x ^= x * 0x8d22f6e6u;
+  for (const uint32_t m : kLaineKarrasMultipliers) x ^= x * m;
   return x;
 }
 
