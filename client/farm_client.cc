@@ -17,6 +17,7 @@
 #include "core/render/frames.h"
 #include "core/render/lighting.h"
 #include "core/scene/load.h"
+#include "core/util/text.h"
 #include "rpc.h"
 #include "scene_bundle.h"
 #include "scene_chunks.h"
@@ -427,6 +428,14 @@ int delete_job(v1::Tessera::StubInterface& stub, const std::string& job, const F
 
 namespace {
 
+// A job's name where the user gave none: the scene's path, or its file name where the
+// path is longer than the coordinator keeps (256 bytes, server/admission.h).
+std::string default_job_name(const std::string& scene) {
+  constexpr size_t kMost = 256;
+  if (scene.size() <= kMost) return scene;
+  return utf8_prefix(std::filesystem::path(scene).filename().string(), kMost);
+}
+
 // Sends the scene in pieces (UploadScene) and returns the upload's id, for SubmitJob. The
 // coordinator out of reach (restarting, a network blip) is retried with back-off for up to
 // c.reconnect_seconds: an upload is only bytes until a submit names it, so sending it again
@@ -504,7 +513,7 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
   *req.mutable_settings() = to_proto(settings);
   req.set_upload_id(upload_scene(stub, scene, c));
   req.set_priority(r.priority);
-  req.set_name(r.name.empty() ? r.flags.scene : r.name);
+  req.set_name(r.name.empty() ? default_job_name(r.flags.scene) : r.name);
   v1::JobId id;
   check(stub.SubmitJob(deadline(c, 120).get(), req, &id), c);
   if (!r.wait) {

@@ -85,8 +85,13 @@ uint64_t check_manifest(const v1::SceneManifest& m) {
       throw WireError("scene manifest: unsafe file path " + quoted(f.path()) +
                       " (a path inside the scene's folder, without '..', '.' or empty parts)");
     if (!paths.insert(f.path()).second) throw WireError("scene manifest: file " + quoted(f.path()) + " listed twice");
-    if (f.size() > (uint64_t(1) << 50)) throw WireError("scene manifest: file " + quoted(f.path()) + " too large");
-    bytes += f.path().size() + f.size();
+    if (f.size() > kMaxSceneManifestBytes)
+      throw WireError("scene manifest: file " + quoted(f.path()) + " declares " + std::to_string(f.size()) +
+                      " bytes; at most " + std::to_string(kMaxSceneManifestBytes));
+    bytes += f.path().size() + f.size();  // (each term under 2^51: no wrap before the check)
+    if (bytes > kMaxSceneManifestBytes)
+      throw WireError("scene manifest: its files declare over " + std::to_string(kMaxSceneManifestBytes) +
+                      " bytes together");
   }
   for (const std::string& p : paths)  // "a" and "a/b": one would have to be a file and a folder
     for (size_t slash = p.find('/'); slash != std::string::npos; slash = p.find('/', slash + 1))

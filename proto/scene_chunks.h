@@ -21,6 +21,9 @@ namespace tessera {
 constexpr size_t kSceneChunkBytes = size_t(1) << 20;      // a piece, as senders cut them
 constexpr size_t kMaxSceneChunkBytes = size_t(16) << 20;  // the most a receiver takes in one
 constexpr size_t kMaxSceneFiles = size_t(1) << 16;
+// The most a manifest may declare, each file and all together (1 PiB: far past any
+// owner's limit, so that the limit's check, not a wrapped sum, is what refuses).
+constexpr uint64_t kMaxSceneManifestBytes = uint64_t(1) << 50;
 
 // bundle_hash() a piece at a time: the same digest for the same bundle.
 class BundleHasher {
@@ -41,7 +44,8 @@ class BundleHasher {
 
 // Checks a manifest before anything is written: paths inside the bundle's folder, in
 // normal form, each once, none also a folder of another; the main file among them; at most
-// kMaxSceneFiles files; a hash of 32 hex digits. Throws WireError naming the problem.
+// kMaxSceneFiles files of kMaxSceneManifestBytes at most together; a hash of 32 hex
+// digits. Throws WireError naming the problem.
 // Returns what the scene weighs against its owner's limit (bundle_bytes: paths and sizes).
 uint64_t check_manifest(const v1::SceneManifest& m);
 

@@ -13,6 +13,7 @@
 #include <filesystem>
 
 #include "core/render/frame_plan.h"
+#include "core/util/text.h"
 
 namespace tessera {
 
@@ -81,7 +82,7 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
   s.default_environment = !p.no_default_environment();
   s.environment_map = p.environment_map();
   if (!s.environment_map.empty() && !bundle_relative(s.environment_map))
-    throw WireError("render settings: environment_map '" + s.environment_map.substr(0, 256) +
+    throw WireError("render settings: environment_map '" + utf8_prefix(s.environment_map, 256) +
                     "' must name a file inside the scene bundle (a relative path without ..)");
   if (p.has_environment_strength()) s.environment_strength = p.environment_strength();
   s.environment_rotation = p.environment_rotation();

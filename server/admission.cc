@@ -3,6 +3,7 @@
 #include <set>
 
 #include "core/render/frames.h"
+#include "core/util/saturating.h"
 #include "server/request_error.h"
 #include "server/scene_store.h"
 
@@ -19,6 +20,10 @@ Admission admit(const v1::SubmitJobRequest& req) {
   } catch (const WireError& e) {
     throw refuse(e.what());
   }
+  // (Kept in memory, in the database row and in every status: bounded like a worker's name.)
+  if (req.name().size() > kMaxJobNameBytes)
+    throw refuse("a job name of " + std::to_string(req.name().size()) + " bytes; at most " +
+                 std::to_string(kMaxJobNameBytes));
   if (!req.upload_id().empty() && (req.files_size() > 0 || !req.main_file().empty()))
     throw refuse("a job's scene is its files or an upload (upload_id), not both");
   a.frames.assign(req.frames().begin(), req.frames().end());
@@ -37,9 +42,9 @@ Admission admit(const v1::SubmitJobRequest& req) {
   a.pixels = live_pixels_of(a.settings);
   // Samples are the window's pixels' (not the film's weight, which counts AOV sums, half-
   // buffers and splats as pixels too).
-  a.samples = uint64_t(a.settings.effective_window().area()) * uint64_t(a.settings.spp) *
-              std::max<uint64_t>(1, a.frames.size());
-  a.scene_bytes = bundle_bytes(req.files());  // an upload's: SceneUploads::bytes
+  a.samples = saturating_mul(uint64_t(a.settings.effective_window().area()) * uint64_t(a.settings.spp),
+                             std::max<uint64_t>(1, a.frames.size()));  // (2^27 pixels x 2^24 spp fit)
+  a.scene_bytes = bundle_bytes(req.files());                           // an upload's: SceneUploads::bytes
   return a;
 }
 
@@ -49,7 +54,7 @@ std::string over_limit(const Admission& a, const Load& load, const CoordinatorOp
     return who + "'s live jobs hold " + std::to_string(load.client_scene_bytes) + " scene bytes; this job's " +
            std::to_string(a.scene_bytes) + " would pass the limit of " + std::to_string(o.max_scene_bytes_per_client) +
            " (--max-scene-bytes-per-client)";
-  if (load.client_samples_remaining + a.samples > o.max_queued_samples_per_client)
+  if (saturating_add(load.client_samples_remaining, a.samples) > o.max_queued_samples_per_client)
     return who + " has " + std::to_string(load.client_samples_remaining) + " samples queued; this job's " +
            std::to_string(a.samples) + " would pass the limit of " + std::to_string(o.max_queued_samples_per_client) +
            " (--max-queued-samples-per-client)";

@@ -3,6 +3,7 @@
 #include <filesystem>
 
 #include "core/util/log.h"
+#include "core/util/text.h"
 #include "server/image_stream.h"
 #include "server/recovery.h"
 #include "server/referee.h"
@@ -26,7 +27,7 @@ std::string submitted_detail(const v1::SubmitJobRequest& req) {
   const v1::RenderSettings& s = req.settings();
   // Appends, not `+` chains: g++ 12 warns falsely (-Wrestrict) on `"'" + str` here.
   std::string d;
-  if (!req.name().empty()) d.append("'").append(req.name().substr(0, 256)).append("', ");
+  if (!req.name().empty()) d.append("'").append(utf8_prefix(req.name(), 256)).append("', ");
   d.append(std::to_string(s.width())).append("x").append(std::to_string(s.height()));
   d.append(", ").append(std::to_string(s.spp())).append(" spp");
   if (req.frames_size() > 0) d.append(", ").append(std::to_string(req.frames_size())).append(" frames");
@@ -376,6 +377,13 @@ void Coordinator::scene_chunks(const v1::FetchSceneRequest& req,
 
 std::vector<uint64_t> Coordinator::heartbeat(uint64_t worker_id, const std::vector<uint64_t>& task_ids,
                                              double round_trip) {
+  // A worker holds at most --max-leases-per-worker; twice that leaves room for leases that
+  // ended while it still worked on them. Checked before the lock: each id is a lookup.
+  const uint64_t most = 2 * uint64_t(options_.max_leases_per_worker);
+  if (task_ids.size() > most)
+    throw RequestError(RequestError::Code::kInvalidArgument, "heartbeat: " + std::to_string(task_ids.size()) +
+                                                                 " tasks listed; at most " + std::to_string(most) +
+                                                                 " (twice --max-leases-per-worker)");
   MutexLock lock(mu_);
   return worker_lifecycle_.heartbeat(worker_id, task_ids, round_trip, clock_->now());
 }
@@ -441,8 +449,8 @@ size_t Coordinator::expire_leases() {
     const size_t expired = leasing_.expire(now);
     fx.changed = expired > 0;
     verifier_.skip_stale(now, fx);
-    fx.prepare = sequences_.to_prepare();  // made off every worker's path
-    fx.archive = archive_.due(now);        // ended jobs whole on disk leave memory
+    fx.prepare = sequences_.to_prepare(options_.max_live_pixels);  // made off every worker's path
+    fx.archive = archive_.due(now);                                // ended jobs whole on disk leave memory
     return expired;
   });
 }

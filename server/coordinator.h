@@ -85,8 +85,8 @@ class Coordinator {
   // The jobs in memory (live ones, and those ended lately that are not archived yet), in
   // submission order.
   std::vector<v1::JobStatus> list() const;
-  // A page of every job the database has, in submission order (ListJobsRequest: page_size 0
-  // is every job).
+  // A page of every job the database has, in submission order (ListJobsRequest: at most
+  // kMaxPage jobs, page_size 0 included).
   v1::JobList list(uint32_t page_size, const std::string& page_token) const;
   // The `n` jobs submitted last and every live job before them, in submission order (the
   // status page), and how many jobs there are in each state (metrics).

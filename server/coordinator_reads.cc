@@ -59,7 +59,7 @@ std::vector<v1::JobStatus> Coordinator::statuses(const std::vector<StoredJob>& r
 
 v1::JobList Coordinator::list(uint32_t page_size, const std::string& page_token) const {
   const uint64_t after = page_after(page_token);
-  const size_t n = page_size == 0 ? SIZE_MAX - 1 : std::min(page_size, kMaxPage);
+  const size_t n = page_size == 0 ? kMaxPage : std::min(page_size, kMaxPage);  // (never every row at once)
   v1::JobList out;
   std::vector<StoredJob> rows = with_store([&] {
     out.set_total(store_->count());

@@ -83,7 +83,9 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
     Sequence& sq = *src.sequence;
     while (room() && SequenceScheduler::may_start(sq)) {
       if (live_pixels < 0) live_pixels = p_.jobs.load().live_pixels;
-      const int64_t pixels = live_pixels_of(sq.settings);
+      // A prepared frame's films are counted already (JobTable::load): starting it adds none.
+      const bool prepared = sq.prepared && sq.prepared->frame_index == SequenceScheduler::next_unstarted(sq);
+      const int64_t pixels = prepared ? 0 : live_pixels_of(sq.settings);
       if (sq.live_frames > 0 && live_pixels + pixels > max_live_pixels_) break;
       Job* job = p_.sequences.start_next(sq, now, fx);
       if (!job) break;

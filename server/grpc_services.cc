@@ -188,6 +188,7 @@ grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::Fetch
 grpc::Status ClientService::UploadScene(grpc::ServerContext* ctx, grpc::ServerReader<v1::SceneChunk>* reader,
                                         v1::SceneUpload* out) {
   return as(__func__, auth_, ctx, Action::kSubmit, [&](const Principal& who) {
+    const StreamSlots::Slot slot = streams_.take(stream_peer(who, *ctx));  // a slow upload holds a thread too
     *out = c_.upload_scene([&](v1::SceneChunk* chunk) { return reader->Read(chunk); }, who.name);
   });
 }

@@ -47,7 +47,7 @@ class ClientService final : public v1::Tessera::Service {
  private:
   Coordinator& c_;
   const Authenticator* auth_;
-  StreamSlots streams_;  // WatchJob and FetchImageChunks, per caller
+  StreamSlots streams_;  // WatchJob, FetchImageChunks and UploadScene, per caller
 };
 
 class WorkerService final : public v1::TesseraWorker::Service {

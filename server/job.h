@@ -59,9 +59,9 @@ struct Job {
   // id. Whichever result comes first is merged and both leases end.
   std::map<uint32_t, uint64_t> tile_backup;
   std::string error;
-  std::string image_error;       // the last image write's failure; empty once one succeeds
-  std::string checkpoint_error;  // the same for checkpoints
-  std::set<uint64_t> failed_on;  // workers that could not render one of its tasks
+  std::string image_error;          // the last image write's failure; empty once one succeeds
+  std::string checkpoint_error;     // the same for checkpoints
+  std::set<std::string> failed_on;  // workers (WorkerInfo::identity) that could not render one of its tasks
   // Verification: the tiles each worker's results were merged into (a tile once per
   // pass), to render again if the worker is found lying; checks not yet decided (the job
   // ends only when none is left).

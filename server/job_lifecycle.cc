@@ -1,6 +1,7 @@
 #include "server/job_lifecycle.h"
 
 #include "core/util/invariant.h"
+#include "core/util/text.h"
 #include "server/request_error.h"
 
 namespace tessera {
@@ -97,12 +98,12 @@ void JobLifecycle::cancel(const std::string& id, const std::string& requester, b
   if (snapshots_.final_snapshot(job, now)) fx.writes.push_back(jobs_.shared(id));  // keep what was rendered
 }
 
-void JobLifecycle::task_failed(Job& job, uint64_t worker, const std::string& error, double now, Effects& fx) {
+void JobLifecycle::task_failed(Job& job, const std::string& worker, const std::string& error, double now, Effects& fx) {
   if (!job.live()) return;
   ++counters_.tasks_failed;
   job.failed_on.insert(worker);
   if (job.failed_on.size() < kFailuresToFail) return;  // maybe that worker's trouble: another tries
-  job.error = "tasks failed on " + std::to_string(job.failed_on.size()) + " workers: " + error.substr(0, 1024);
+  job.error = "tasks failed on " + std::to_string(job.failed_on.size()) + " workers: " + utf8_prefix(error, 1024);
   end(job, v1::JobStatus::FAILED, now, fx);
   if (snapshots_.final_snapshot(job, now)) fx.writes.push_back(jobs_.shared(job.id()));  // keep what was rendered
 }

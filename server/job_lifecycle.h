@@ -47,9 +47,10 @@ class JobLifecycle {
   // Cancels a job or a sequence (finished frames stay as they are); only its owner may
   // unless `any`. Throws RequestError. Nothing happens to a job that has ended.
   void cancel(const std::string& id, const std::string& requester, bool any, double now, Effects& fx);
-  // A worker could not render a task of the job: once tasks failed on kFailuresToFail
-  // different workers, the job fails with the error, keeping its image.
-  void task_failed(Job& job, uint64_t worker, const std::string& error, double now, Effects& fx);
+  // A worker (WorkerInfo::identity: an enrolled worker registering again is the same one)
+  // could not render a task of the job: once tasks failed on kFailuresToFail different
+  // workers, the job fails with the error, keeping its image.
+  void task_failed(Job& job, const std::string& worker, const std::string& error, double now, Effects& fx);
 
   // A sequence's end can be recorded when it has ended and, if DONE, every frame's final
   // checkpoint is on disk: then it is marked as being recorded and returned.

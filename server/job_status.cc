@@ -4,6 +4,7 @@
 #include <set>
 #include <string>
 
+#include "core/util/text.h"
 #include "server/request_error.h"
 
 namespace tessera {
@@ -91,7 +92,7 @@ uint64_t page_after(const std::string& page_token) {
     used = 0;
   }
   if (used == 0 || used != page_token.size())
-    throw RequestError(RequestError::Code::kInvalidArgument, "bad page_token '" + page_token.substr(0, 64) + "'");
+    throw RequestError(RequestError::Code::kInvalidArgument, "bad page_token '" + utf8_prefix(page_token, 64) + "'");
   return after;
 }
 

@@ -5,6 +5,7 @@
 #include <tuple>
 
 #include "core/util/invariant.h"
+#include "core/util/saturating.h"
 #include "server/request_error.h"
 
 namespace tessera {
@@ -195,14 +196,16 @@ Load JobTable::load(const std::string& owner) const {
   }
   for (const auto& [id, s] : sequences_) {
     if (!s->live()) continue;
+    // A frame made ahead (at submit, or on the reaper's tick) holds its films already.
+    if (s->prepared) l.live_pixels += live_pixels_of(s->settings);
     // Frames not started: after a restart these need not be the ones past `next`.
-    const uint64_t unstarted = s->frame_samples() * (s->frames.size() - s->frames_started);
-    l.samples_remaining += unstarted;
+    const uint64_t unstarted = saturating_mul(s->frame_samples(), s->frames.size() - s->frames_started);
+    l.samples_remaining = saturating_add(l.samples_remaining, unstarted);
     if (s->next < s->frames.size()) l.tasks_ready += s->frame_tiles();  // the next frame's first pass
     if (s->meta.owner != owner) continue;
     ++l.client_jobs;
     l.client_scene_bytes += s->meta.scene_bytes;
-    l.client_samples_remaining += unstarted;
+    l.client_samples_remaining = saturating_add(l.client_samples_remaining, unstarted);
   }
   return l;
 }

@@ -28,12 +28,22 @@ bool LeaseTable::renew(uint64_t id, uint64_t worker, double deadline) {
   return true;
 }
 
+void LeaseTable::remember_ended(uint64_t id, const Lease& l) {
+  ended_.emplace(id, l);
+  std::deque<uint64_t>& ids = ended_by_pass_[{l.job, l.tile, l.pass}];
+  ids.push_back(id);
+  if (ids.size() > kEndedPerPass) {
+    ended_.erase(ids.front());
+    ids.pop_front();
+  }
+}
+
 std::optional<Lease> LeaseTable::end(uint64_t id) {
   auto it = live_.find(id);
   if (it == live_.end()) return std::nullopt;
   Lease l = it->second;
-  ended_.emplace(id, l);
   live_.erase(it);
+  remember_ended(id, l);
   return l;
 }
 
@@ -45,7 +55,7 @@ std::vector<std::pair<uint64_t, Lease>> LeaseTable::expire(double now) {
       continue;
     }
     out.emplace_back(it->first, it->second);
-    ended_.insert(*it);
+    remember_ended(it->first, it->second);
     it = live_.erase(it);
   }
   return out;
@@ -54,6 +64,8 @@ std::vector<std::pair<uint64_t, Lease>> LeaseTable::expire(double now) {
 void LeaseTable::forget_job(const std::string& job) {
   for (auto* m : {&live_, &ended_})
     for (auto it = m->begin(); it != m->end();) it = it->second.job == job ? m->erase(it) : std::next(it);
+  ended_by_pass_.erase(ended_by_pass_.lower_bound({job, 0, 0}),
+                       ended_by_pass_.upper_bound({job, UINT32_MAX, UINT32_MAX}));
 }
 
 std::vector<uint64_t> LeaseTable::held_by(uint64_t worker) const {

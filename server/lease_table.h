@@ -1,14 +1,18 @@
 // Leases: which worker renders which task, until when. A lease not renewed by heartbeats
 // expires. Ended leases are remembered while their job lives, so that a late result is
-// still recognised (and merged if nobody else's was).
+// still recognised (and merged if nobody else's was): the newest kEndedPerPass of each
+// (job, tile, pass), so that leasing and releasing the same tiles over and over cannot
+// grow the table past a bound of the job's size.
 #pragma once
 
 #include <cstdint>
+#include <deque>
 #include <map>
 #include <memory>
 #include <optional>
 #include <set>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "wire.h"
@@ -35,6 +39,8 @@ struct Lease {
 
 class LeaseTable {
  public:
+  static constexpr size_t kEndedPerPass = 4;
+
   // Task ids count up from `first_id`: a restarted coordinator starts past the last run's,
   // so a result for a task of that run is never taken for one of this run.
   explicit LeaseTable(uint64_t first_id = 1) : next_(first_id) {}
@@ -58,10 +64,16 @@ class LeaseTable {
   // The same over several jobs (a sequence's frames): a worker on two frames counts once.
   uint32_t workers_on(const std::set<std::string>& jobs) const;
   size_t live_count() const { return live_.size(); }
+  size_t ended_count() const { return ended_.size(); }
   const std::map<uint64_t, Lease>& live_leases() const { return live_; }  // oldest (lowest id) first
 
  private:
+  // Keeps an ended lease, forgetting the oldest of its (job, tile, pass) past kEndedPerPass.
+  void remember_ended(uint64_t id, const Lease& l);
+
   std::map<uint64_t, Lease> live_, ended_;
+  // The ended leases' ids by (job, tile, pass), oldest first.
+  std::map<std::tuple<std::string, uint32_t, uint32_t>, std::deque<uint64_t>> ended_by_pass_;
   uint64_t next_ = 1;
 };
 

@@ -5,6 +5,7 @@
 #include <random>
 #include <vector>
 
+#include "core/util/text.h"
 #include "server/request_error.h"
 #include "wire.h"
 
@@ -24,7 +25,7 @@ std::string new_upload_id() {  // 128 bits from the system's entropy: the id is 
 RequestError refuse(const std::string& why) { return RequestError(RequestError::Code::kInvalidArgument, why); }
 
 RequestError no_upload(const std::string& id, double kept_seconds) {
-  return RequestError(RequestError::Code::kNotFound, "no scene upload '" + id.substr(0, 64) +
+  return RequestError(RequestError::Code::kNotFound, "no scene upload '" + utf8_prefix(id, 64) +
                                                          "' (an upload is good for one submit, within " +
                                                          std::to_string(int(kept_seconds)) + " s of its end)");
 }

@@ -36,11 +36,19 @@ Job* SequenceScheduler::start_next(Sequence& s, double now, Effects& fx) {
   return &j;
 }
 
-std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> SequenceScheduler::to_prepare() const {
+std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> SequenceScheduler::to_prepare(int64_t max_live_pixels) const {
   std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> out;
+  int64_t live_pixels = -1;  // counted when first needed
   for (const auto& [id, s] : jobs_.sequences()) {
     const size_t i = next_unstarted(*s);
-    if (s->live() && !s->prepared && i < s->frames.size()) out.emplace_back(s, i);
+    if (!s->live() || s->prepared || i >= s->frames.size()) continue;
+    if (s->live_frames > 0) {
+      if (live_pixels < 0) live_pixels = jobs_.load().live_pixels;
+      const int64_t pixels = live_pixels_of(s->settings);
+      if (live_pixels + pixels > max_live_pixels) continue;
+      live_pixels += pixels;
+    }
+    out.emplace_back(s, i);
   }
   return out;
 }

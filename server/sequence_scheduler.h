@@ -33,8 +33,10 @@ class SequenceScheduler {
   // The first frame from `next` on that has not started (after a restart, frames past
   // `next` may have); frames.size() when every one has.
   static size_t next_unstarted(const Sequence& s);
-  // Sequences whose next frame has no job made yet, and that frame's index.
-  std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> to_prepare() const;
+  // Sequences whose next frame has no job made yet, and that frame's index: those with no
+  // live frame (the one each sequence may always start), and others while the films in
+  // memory, prepared ones included (JobTable::load), stay within `max_live_pixels`.
+  std::vector<std::pair<std::shared_ptr<Sequence>, size_t>> to_prepare(int64_t max_live_pixels) const;
   // A job made by make_frame() for frame `index`: kept unless the sequence moved on.
   void offer(Sequence& s, size_t index, std::shared_ptr<Job> job);
 

@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "core/util/text.h"
 #include "server/live_page.h"
 #include "server/metrics.h"
 #include "server/page_actions.h"
@@ -59,8 +60,10 @@ bool whole_param(const httplib::Request& req, httplib::Response& res, const char
   const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), *value);
   if (ec == std::errc() && end == v.data() + v.size()) return true;
   res.status = 400;
-  res.set_content(nlohmann::json{{"error", std::string(name) + " '" + v + "' is not a whole number"}}.dump(),
-                  "application/json");
+  res.set_content(
+      nlohmann::json{{"error", std::string(name) + " '" + utf8_prefix(v, 64) + "' is not a whole number"}}.dump(
+          -1, ' ', false, nlohmann::json::error_handler_t::replace),
+      "application/json");
   return false;
 }
 
@@ -102,7 +105,9 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
       res.set_content(job_status_json(c_.status(req.matches[1], true, range), range.from), "application/json");
     } catch (const RequestError& e) {
       res.status = 404;
-      res.set_content(nlohmann::json{{"error", e.what()}}.dump(), "application/json");
+      res.set_content(
+          nlohmann::json{{"error", e.what()}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
+          "application/json");
     }
   });
   // Events (events.h), newest last: ?job=ID (that job's), ?after=ID (newer ones), ?limit=N.
@@ -162,6 +167,11 @@ std::string StatusHttp::status_json() const {
   std::string out;
   char buf[8192];  // a worker's name, host and last task: at most 256 characters each, 6 bytes each escaped
   auto num = [](double v) { return std::isfinite(v) ? v : 0.0; };
+  // (Names are cut on character boundaries where they are kept; should one still not be
+  // UTF-8, it is shown with U+FFFD rather than failing the whole answer.)
+  auto text = [](const std::string& v) {
+    return nlohmann::json(v).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  };
   std::snprintf(buf, sizeof buf, "{\"uptime_seconds\":%.17g,\"utilization\":%.17g,\"jobs\":[", num(c_.uptime()),
                 num(c_.utilization()));
   out += buf;
@@ -182,12 +192,11 @@ std::string StatusHttp::status_json() const {
         "\"leases\":%u,\"active\":%s,\"busy_thread_seconds\":%.17g,\"thread_seconds\":%.17g,"
         "\"utilization\":%.17g,\"round_trip_ms\":%.17g,\"result_bytes\":%llu,\"bytes_per_sample\":%.17g,"
         "\"passes_per_task\":%u,\"draining\":%s,\"seen_seconds_ago\":%.17g,\"last_task\":%s}",
-        i ? "," : "", (unsigned long long)w.id, nlohmann::json(w.name).dump().c_str(),
-        nlohmann::json(w.host).dump().c_str(), w.threads, num(w.samples_per_second), (unsigned long long)w.tasks_done,
-        w.leases, w.leases ? "true" : "false", num(w.busy_thread_seconds), num(w.thread_seconds), num(w.utilization),
-        num(w.round_trip * 1e3), (unsigned long long)w.result_bytes,
-        w.result_samples ? double(w.result_bytes) / double(w.result_samples) : 0.0, w.passes_per_task,
-        w.draining ? "true" : "false", num(now - w.last_seen), nlohmann::json(last_task(w)).dump().c_str());
+        i ? "," : "", (unsigned long long)w.id, text(w.name).c_str(), text(w.host).c_str(), w.threads,
+        num(w.samples_per_second), (unsigned long long)w.tasks_done, w.leases, w.leases ? "true" : "false",
+        num(w.busy_thread_seconds), num(w.thread_seconds), num(w.utilization), num(w.round_trip * 1e3),
+        (unsigned long long)w.result_bytes, w.result_samples ? double(w.result_bytes) / double(w.result_samples) : 0.0,
+        w.passes_per_task, w.draining ? "true" : "false", num(now - w.last_seen), text(last_task(w)).c_str());
     out += buf;
   }
   out += "]}";

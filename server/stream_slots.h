@@ -1,4 +1,4 @@
-// Long-lived calls counted per caller. A WatchJob or FetchImageChunks stream holds one of
+// Long-lived calls counted per caller. A WatchJob, FetchImageChunks or UploadScene stream holds one of
 // the gRPC server's threads while it lasts, so a caller opening a thousand of them made a
 // thousand threads. Each caller (its token's name, or without tokens its address) may hold
 // `per_peer` at once; the next is refused with RESOURCE_EXHAUSTED naming the flag.
@@ -37,7 +37,7 @@ class StreamSlots {
     if (n >= per_peer_)
       throw RequestError(RequestError::Code::kResourceExhausted,
                          std::to_string(per_peer_) +
-                             " open streams (job watches, image downloads) per caller at most "
+                             " open streams (job watches, image downloads, scene uploads) per caller at most "
                              "(--max-streams-per-peer)");
     ++n;
     return Slot(this, peer);

@@ -1,5 +1,6 @@
 #include "server/worker_lifecycle.h"
 
+#include "core/util/text.h"
 #include "server/request_error.h"
 
 namespace tessera {
@@ -25,7 +26,7 @@ v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest&
   }
   std::string secret;
   WorkerInfo& w = p_.workers.add(req.name(), req.threads(), now, &secret);
-  w.host = req.host().substr(0, 256);
+  w.host = utf8_prefix(req.host(), 256);
   w.principal = principal;
   w.enrolled = enrolled;
   w.probation = options_.verify_fraction > 0 ? options_.verify_first : 0;
@@ -74,10 +75,11 @@ void WorkerLifecycle::release(uint64_t worker, uint64_t task, const std::string&
   if (error.empty()) return;
   Job* job = p_.jobs.find_job(job_id);
   if (!job) return;
-  if (const WorkerInfo* w = p_.workers.find(worker))
-    fx.events.push_back({0, 0, "task.failed", job->sequence.empty() ? job_id : job->sequence, w->name, w->principal,
-                         error.substr(0, 1024)});
-  p_.lifecycle.task_failed(*job, worker, error, now, fx);
+  const WorkerInfo* w = p_.workers.find(worker);
+  if (!w) return;  // (it called with its secret: registered)
+  fx.events.push_back({0, 0, "task.failed", job->sequence.empty() ? job_id : job->sequence, w->name, w->principal,
+                       utf8_prefix(error, 1024)});
+  p_.lifecycle.task_failed(*job, w->identity(), error, now, fx);
 }
 
 void WorkerLifecycle::unregister(uint64_t worker, double now, Effects& fx) {

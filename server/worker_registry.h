@@ -12,9 +12,12 @@ struct WorkerInfo {
   uint64_t id = 0;
   uint64_t serial = 0;  // registrations count up: a higher serial registered later
   std::string name;
-  std::string host;        // as the worker says (gethostname), else the address it registered from
-  std::string principal;   // the access token's name ("" without tokens)
-  bool enrolled = false;   // principal is the worker's own credential (credentials.h)
+  std::string host;       // as the worker says (gethostname), else the address it registered from
+  std::string principal;  // the access token's name ("" without tokens)
+  bool enrolled = false;  // principal is the worker's own credential (credentials.h)
+  // Who it is across registrations: its own credential where it has one (registering
+  // again does not make it another worker), else this registration.
+  std::string identity() const { return enrolled ? "credential " + principal : "registration " + std::to_string(id); }
   uint32_t probation = 0;  // tasks still to check whatever the fraction (verify_first)
   bool draining = false;   // an operator drained it: no new tasks until resumed
   // What it was given last (the live page): job, tile, pass, and whether as a backup.

@@ -282,6 +282,16 @@ TEST_F(Access, StreamsAreBoundedPerCaller) {
   const grpc::Status refused = third->reader->Finish();
   EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
   EXPECT_NE(refused.error_message().find("--max-streams-per-peer"), std::string::npos) << refused.error_message();
+  {  // A scene upload is a stream too, held as long as its sender likes: the same slots.
+    grpc::ClientContext ctx;
+    ctx.AddMetadata("authorization", std::string("Bearer ") + kAlice);
+    v1::SceneUpload up;
+    auto writer = stub->UploadScene(&ctx, &up);
+    writer->WritesDone();
+    const grpc::Status upload = writer->Finish();
+    EXPECT_EQ(upload.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << upload.error_message();
+    EXPECT_NE(upload.error_message().find("scene uploads"), std::string::npos) << upload.error_message();
+  }
   auto bobs = watch(kBob);
   EXPECT_TRUE(bobs->reader->Read(&s));
   for (auto& w : open) w->ctx.TryCancel();

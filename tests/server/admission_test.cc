@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include "core/render/frames.h"
 #include "tests/server/parts_fixture.h"
 
@@ -67,6 +69,14 @@ TEST(Admit, SettingsOutOfRangeAreRefusedNamingTheSetting) {
   EXPECT_TRUE(has(why, "--tile:")) << why;
 }
 
+TEST(Admit, AJobNameIsAtMost256Bytes) {
+  v1::SubmitJobRequest r = request();
+  r.set_name(std::string(kMaxJobNameBytes, 'n'));
+  EXPECT_NO_THROW(admit(r));
+  r.set_name(std::string(kMaxJobNameBytes + 1, 'n'));
+  EXPECT_EQ(refused(r), "a job name of 257 bytes; at most 256");
+}
+
 TEST(Admit, AFrameGivenTwiceIsRefused) {
   const std::string why = refused(request(small_settings(), {1, 2, 1}));
   EXPECT_EQ(why, "frame 1 given twice");
@@ -96,6 +106,27 @@ TEST(Admit, TooManyFramesAreRefusedBeforeAnyIsLookedAt) {
   std::vector<int> most(kMaxFrames);
   for (size_t i = 0; i < most.size(); ++i) most[i] = int(i);
   EXPECT_EQ(admit(request(small_settings(), most)).samples, kMaxFrames * testing::kSamples);
+}
+// The most pixels, samples and frames together are more samples than 64 bits count: the
+// total stops at the maximum, and the queued-samples limit refuses it (it wrapped to a
+// small number before, and passed).
+TEST(Admit, SamplesPastSixtyFourBitsSaturateAndAreRefused) {
+  RenderSettings s = small_settings();
+  s.camera.width = 16384;
+  s.camera.height = 8192;
+  s.tile_size = 64;
+  s.spp = RenderSettings::kMaxSpp;
+  std::vector<int> frames(kMaxFrames);
+  for (size_t i = 0; i < frames.size(); ++i) frames[i] = int(i);
+  Admission a = admit(request(s, frames));
+  EXPECT_EQ(a.samples, std::numeric_limits<uint64_t>::max());
+  Load load;
+  CoordinatorOptions o;
+  o.max_live_pixels = int64_t(1) << 27;
+  EXPECT_TRUE(has(over_limit(a, load, o, "ann"), "(--max-queued-samples-per-client)"));
+  a.samples = 1000;  // and a sum of queued samples near the top does not wrap either
+  load.client_samples_remaining = std::numeric_limits<uint64_t>::max() - 10;
+  EXPECT_TRUE(has(over_limit(a, load, o, "ann"), "(--max-queued-samples-per-client)"));
 }
 
 // ---- over_limit: each limit refuses one past it, with the numbers, and fits exactly at it.

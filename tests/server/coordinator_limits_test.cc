@@ -242,6 +242,43 @@ TEST_F(CoordinatorTest, RegisteredWorkersAreBounded) {
   EXPECT_EQ(c->workers().size(), 1u);
 }
 
+// A worker's name and host are kept to 256 bytes, cut on a character boundary: a cut
+// through "\xC3\xA9" left a byte that is not UTF-8, which made every /api/status answer
+// (a strict JSON dump) fail while that worker stayed registered.
+TEST_F(CoordinatorTest, AWorkersNameAndHostAreCutOnCharacterBoundaries) {
+  v1::RegisterRequest r;
+  r.set_version(kProtocolVersion);
+  r.set_name(std::string(255, 'a') + "\xC3\xA9");
+  r.set_host(std::string(254, 'h') + "\xE2\x82\xAC");
+  const uint64_t id = c->register_worker(r).worker_id();
+  ASSERT_EQ(c->workers().size(), 1u);
+  EXPECT_EQ(c->workers()[0].id, id);
+  EXPECT_EQ(c->workers()[0].name, std::string(255, 'a'));
+  EXPECT_EQ(c->workers()[0].host, std::string(254, 'h'));
+}
+
+// A heartbeat lists the tasks a worker holds: at most twice --max-leases-per-worker, so
+// that one cannot hold the coordinator's lock for millions of lookups.
+TEST_F(CoordinatorTest, AHeartbeatListsAtMostTwiceTheLeasesAWorkerMayHold) {
+  CoordinatorOptions o = options();
+  o.max_leases_per_worker = 4;
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  const uint64_t w = worker();
+  std::vector<uint64_t> ids(8);
+  for (size_t i = 0; i < ids.size(); ++i) ids[i] = 1000 + i;
+  EXPECT_EQ(c->heartbeat(w, ids, 0).size(), 8u);  // none of them its lease: all refused
+  ids.push_back(2000);
+  try {
+    c->heartbeat(w, ids, 0);
+    ADD_FAILURE();
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kInvalidArgument);
+    EXPECT_NE(std::string(e.what()).find("9 tasks listed; at most 8 (twice --max-leases-per-worker)"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 // Issue 10, row 3: with the data folder full or read-only, the write error went back to
 // the worker as a failed result (so it resent), nothing was logged, and a DONE job could
 // not be fetched. Now results are accepted, the job says why its image is missing without

@@ -88,6 +88,34 @@ TEST_F(SequenceTest, AWorkerWithRoomGetsTheNextFrameBeforeTheLastOneEnds) {
   for (int n : {1, 2, 3, 4}) EXPECT_TRUE(frame_is_local(id, n)) << n;
 }
 
+// A sequence's next frame is made ahead, films and all (at submit, then on the reaper's
+// tick): those films count against --max-live-pixels. They did not, so a client could hold
+// a prepared 8K film per sequence, up to its job limit, past any memory.
+TEST_F(SequenceTest, APreparedFrameCountsAgainstTheLivePixels) {
+  CoordinatorOptions o = options();
+  o.max_live_pixels = live_pixels_of(job_settings());  // one frame's films
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  const std::string id = c->submit(sequence({1, 2}));
+  try {
+    c->submit(sequence({1, 2}));
+    ADD_FAILURE() << "a second prepared frame passed the limit";
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kResourceExhausted);
+    EXPECT_NE(std::string(e.what()).find("(--max-live-pixels)"), std::string::npos) << e.what();
+  }
+  // The first frame starts from its prepared films; the second is neither started nor
+  // made while the first holds the limit, and starts once the first is done.
+  const uint64_t w = worker();
+  const v1::GetTaskResponse r = c->get_task(w, 100);
+  for (const v1::Task& task : r.tasks()) EXPECT_EQ(task.job_id(), id + "-f1");
+  c->expire_leases();  // the reaper's tick: nothing to prepare within the limit
+  EXPECT_EQ(frame_states(id).at(2), v1::JobStatus::QUEUED);
+  for (const v1::Task& task : r.tasks()) ASSERT_TRUE(c->submit_result(render_task(task, w)).accepted());
+  drain(w);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  for (int n : {1, 2}) EXPECT_TRUE(frame_is_local(id, n)) << n;
+}
+
 TEST_F(SequenceTest, CancelKeepsFinishedFrames) {
   const std::string id = c->submit(sequence({1, 2, 3}));
   const uint64_t w = worker();

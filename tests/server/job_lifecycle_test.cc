@@ -182,15 +182,15 @@ TEST_F(JobLifecycleTest, CancellingAnEndedJobChangesNothing) {
 
 TEST_F(JobLifecycleTest, TasksFailingOnTwoDistinctWorkersFailTheJob) {
   const std::shared_ptr<Job> job = add_still();
-  lifecycle.task_failed(*job, a, "no GPU", now, fx);
-  lifecycle.task_failed(*job, a, "no GPU", now, fx);  // the same worker's trouble, twice
+  lifecycle.task_failed(*job, "registration 1", "no GPU", now, fx);
+  lifecycle.task_failed(*job, "registration 1", "no GPU", now, fx);  // the same worker's trouble, twice
   EXPECT_TRUE(job->live());
   EXPECT_EQ(counters.tasks_failed, 2u);
-  lifecycle.task_failed(*job, b, std::string(2000, 'e'), now, fx);
+  lifecycle.task_failed(*job, "credential w2", std::string(2000, 'e'), now, fx);
   EXPECT_EQ(job->state(), FAILED);
   EXPECT_EQ(job->error, "tasks failed on 2 workers: " + std::string(1024, 'e'));  // the error, cut short
   EXPECT_TRUE(contains(fx.writes, job));
-  lifecycle.task_failed(*job, add_worker(), "late", now, fx);  // an ended job counts no more
+  lifecycle.task_failed(*job, "registration 3", "late", now, fx);  // an ended job counts no more
   EXPECT_EQ(counters.tasks_failed, 3u);
 }
 

@@ -55,6 +55,29 @@ TEST_F(LeasingTest, EndedWithRequeueTheTilesPassIsReadyAgain) {
   EXPECT_EQ(job->plan.take()->tile, 0u);
 }
 
+// Leasing and releasing the same tile over and over kept every ended lease until the job
+// ended: now the newest LeaseTable::kEndedPerPass of a (tile, pass) are known.
+TEST_F(LeasingTest, EndedLeasesOfAPassAreBoundedTheNewestKnown) {
+  std::vector<uint64_t> ids;
+  for (int i = 0; i < 10; ++i) {
+    ids.push_back(lease_next(*job, a));
+    ASSERT_EQ(leases.live(ids.back())->tile, 0u);
+    leasing.end(ids.back(), true, now);
+  }
+  EXPECT_EQ(leases.ended_count(), LeaseTable::kEndedPerPass);
+  for (size_t i = 0; i < ids.size(); ++i)
+    EXPECT_EQ(leases.known(ids[i]) != nullptr, i + LeaseTable::kEndedPerPass >= ids.size()) << i;
+  // Another tile's ended lease is kept beside them; the job's end forgets them all.
+  ASSERT_EQ(leases.live(lease_next(*job, a))->tile, 0u);  // (tile 0 again, held)
+  const uint64_t other = lease_next(*job, a);
+  ASSERT_NE(leases.live(other)->tile, 0u);
+  leases.end(other);
+  EXPECT_NE(leases.known(other), nullptr);
+  EXPECT_EQ(leases.ended_count(), LeaseTable::kEndedPerPass + 1);
+  leases.forget_job(job->id());
+  EXPECT_EQ(leases.ended_count(), 0u);
+}
+
 TEST_F(LeasingTest, EndedWithoutRequeueTheTileWaitsForItsResult) {
   const uint64_t id = lease_next(*job, a);
   leasing.end(id, false, now);

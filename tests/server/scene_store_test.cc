@@ -112,6 +112,35 @@ TEST(ChunkProtocol, TheStreamedHashIsTheBundleHash) {
   }
 }
 
+// Sizes a manifest declares are summed without wrapping: 2^16 files of 2^50 bytes would
+// wrap a 64-bit sum to almost nothing and pass the owner's limit.
+TEST(ChunkProtocol, AManifestsDeclaredBytesCannotWrapPastTheLimit) {
+  v1::SceneManifest m;
+  m.set_scene_hash(std::string(32, 'a'));
+  m.set_main_file("f0");
+  for (int i = 0; i < 16384; ++i) {
+    v1::SceneFileInfo* f = m.add_files();
+    f->set_path("f" + std::to_string(i));
+    f->set_size(kMaxSceneManifestBytes);
+  }
+  try {
+    check_manifest(m);
+    FAIL() << "accepted";
+  } catch (const WireError& e) {
+    EXPECT_NE(std::string(e.what()).find("declare over"), std::string::npos) << e.what();
+  }
+  m.mutable_files(0)->set_size(kMaxSceneManifestBytes + 1);
+  try {
+    check_manifest(m);
+    FAIL() << "accepted";
+  } catch (const WireError& e) {
+    EXPECT_NE(std::string(e.what()).find("'f0' declares"), std::string::npos) << e.what();
+  }
+  m.mutable_files()->DeleteSubrange(1, m.files_size() - 1);
+  m.mutable_files(0)->set_size(1000);
+  EXPECT_EQ(check_manifest(m), 1002u);
+}
+
 TEST_F(SceneStoreTest, TheStreamedHashOfFilesOnDiskIsTheirBundleHash) {
   EXPECT_EQ(source().manifest.scene_hash(), bundle_hash("cornell-spheres.dae", whole()));
   EXPECT_EQ(check_manifest(source().manifest), bundle_bytes(whole()));  // what counts against the limit

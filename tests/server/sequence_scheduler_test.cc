@@ -4,10 +4,14 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include "tests/server/parts_fixture.h"
 
 namespace tessera {
 namespace {
+
+constexpr int64_t kNoLimit = std::numeric_limits<int64_t>::max();
 
 bool prepares(const std::vector<std::pair<std::shared_ptr<Sequence>, size_t>>& todo, const Sequence& s, size_t i) {
   for (const auto& [sequence, index] : todo)
@@ -79,7 +83,7 @@ TEST_F(SequenceSchedulerTest, ToPrepareNeverNamesAFrameAlreadyStarted) {
   Sequence& s = add_sequence({0, 1, 2, 3});
   restore_frames(s, {0, 2});
   start_frame(s);  // frame 1
-  const auto todo = sequences.to_prepare();
+  const auto todo = sequences.to_prepare(kNoLimit);
   for (const auto& [sequence, index] : todo) EXPECT_FALSE(sequence->jobs[index]) << "frame " << index << " has started";
   EXPECT_TRUE(prepares(todo, s, 3));
 }
@@ -101,10 +105,31 @@ TEST_F(SequenceSchedulerTest, ToPrepareNamesLiveSequencesNextFramesWithNoJobMade
   lifecycle.cancel(ended.id(), "", true, now, fx);
   Sequence& second = add_sequence({1, 2});
   start_frame(second);
-  const auto todo = sequences.to_prepare();
+  const auto todo = sequences.to_prepare(kNoLimit);
   EXPECT_EQ(todo.size(), 2u);
   EXPECT_TRUE(prepares(todo, waiting, 0));
   EXPECT_TRUE(prepares(todo, second, 1));
+}
+
+// Frames made ahead hold films: one is made for a sequence with a live frame only while
+// every film in memory, prepared ones included, stays within the limit; a sequence with
+// no live frame always gets its next one (the frame it may always start).
+TEST_F(SequenceSchedulerTest, ToPrepareKeepsTheFilmsInMemoryWithinTheLimit) {
+  Sequence& idle = add_sequence({1, 2});
+  Sequence& busy = add_sequence({1, 2});
+  start_frame(busy);
+  const int64_t frame = live_pixels_of(busy.settings);
+  const int64_t live = jobs.load().live_pixels;  // busy's live frame
+  EXPECT_EQ(live, frame);
+  auto todo = sequences.to_prepare(live + frame - 1);  // no room for busy's next frame
+  EXPECT_EQ(todo.size(), 1u);
+  EXPECT_TRUE(prepares(todo, idle, 0));
+  todo = sequences.to_prepare(live + frame);
+  EXPECT_EQ(todo.size(), 2u);
+  EXPECT_TRUE(prepares(todo, busy, 1));
+  // A prepared frame counts as live pixels.
+  idle.prepared = SequenceScheduler::make_frame(idle, 0);
+  EXPECT_EQ(jobs.load().live_pixels, live + frame);
 }
 
 TEST_F(SequenceSchedulerTest, AnOfferIsKeptOnlyForTheNextFrameOfALiveSequence) {

@@ -155,11 +155,27 @@ TEST_F(WorkerLifecycleTest, ATaskGivenBackWithAnErrorCountsAsFailedOnThatWorker)
   const uint64_t a = join("a"), b = join("b");
   worker_lifecycle.release(a, lease_next(*job, a), "out of memory", now, fx);
   EXPECT_EQ(counters.tasks_failed, 1u);
-  EXPECT_EQ(job->failed_on, std::set<uint64_t>{a});
+  EXPECT_EQ(job->failed_on, std::set<std::string>{"registration " + std::to_string(a)});
   EXPECT_TRUE(job->live());
   worker_lifecycle.release(b, lease_next(*job, b), "out of memory", now, fx);
   EXPECT_EQ(job->state(), v1::JobStatus::FAILED);
   EXPECT_EQ(job->error, "tasks failed on 2 workers: out of memory");
+}
+
+// An enrolled worker is its credential: failing a task, registering again and failing
+// another is one worker's trouble, not two (it could fail any job alone before).
+TEST_F(WorkerLifecycleTest, AnEnrolledWorkerRegisteringAgainIsStillOneFailure) {
+  const std::shared_ptr<Job> job = add_still();
+  const uint64_t first = join("render-1", "render-1", true);
+  worker_lifecycle.release(first, lease_next(*job, first), "out of memory", now, fx);
+  const uint64_t second = join("render-1", "render-1", true);
+  worker_lifecycle.release(second, lease_next(*job, second), "out of memory", now, fx);
+  EXPECT_EQ(counters.tasks_failed, 2u);
+  EXPECT_EQ(job->failed_on, std::set<std::string>{"credential render-1"});
+  EXPECT_TRUE(job->live());
+  const uint64_t other = join("render-2", "render-2", true);
+  worker_lifecycle.release(other, lease_next(*job, other), "out of memory", now, fx);
+  EXPECT_EQ(job->state(), v1::JobStatus::FAILED);
 }
 
 TEST_F(WorkerLifecycleTest, AWorkerLeavingGivesItsLeasesBack) {

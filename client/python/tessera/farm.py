@@ -33,6 +33,15 @@ def frame_path(pattern, frame):
     return pattern[:m.start()] + digits + pattern[m.end():]
 
 
+def _default_name(scene):
+    """A job's name where none is given: the scene's path, or its file name where the path
+    is longer than the coordinator keeps (256 bytes), cut on a character boundary."""
+    name = os.fspath(scene)
+    if len(name.encode("utf-8", "surrogateescape")) <= 256:
+        return name
+    return os.path.basename(name).encode("utf-8", "surrogateescape")[:256].decode("utf-8", "ignore")
+
+
 def _read_token(path):
     try:
         with open(path) as f:
@@ -123,7 +132,7 @@ class Farm:
         except grpc.RpcError as e:
             raise rpc_error(e, self.tls) from None
         req = pb.SubmitJobRequest(version=PROTOCOL_VERSION, settings=proto_settings, priority=int(priority),
-                                  name=name if name is not None else os.fspath(scene), upload_id=upload.upload_id,
+                                  name=name if name is not None else _default_name(scene), upload_id=upload.upload_id,
                                   frames=frame_list)
         return Job(self, self._call("SubmitJob", req, timeout=max(self.timeout, 120)).id)
 
