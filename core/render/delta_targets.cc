@@ -39,6 +39,8 @@ bool has_delta_lobe(const Material& m) {
 }
 
 DeltaTargets::DeltaTargets(const Scene& scene) {
+  materials_.resize(scene.materials.size());
+  for (size_t i = 0; i < scene.materials.size(); ++i) materials_[i] = has_delta_lobe(scene.materials[i]);
   Bounds all;  // every shape together: the one target past kMaxTargets
   for (const Sphere& s : scene.spheres) {
     if (!has_delta_lobe(scene.materials[s.material])) continue;

@@ -15,7 +15,10 @@
 namespace tessera {
 
 // Whether material m can scatter by a delta lobe: a mirror, glass, or a glTF material
-// smooth enough (Material::kSmoothAlpha; textured roughness taken at its factor).
+// smooth enough (Material::kSmoothAlpha; textured roughness taken at its factor). A
+// texture can make a surface delta where this says no (roughness factor 1, a texel of
+// 0): such a surface is not a target, and the light tracer and the path tracer both
+// leave its paths to the path tracer (DeltaTargets::aims_at), so nothing is lost.
 bool has_delta_lobe(const Material& m);
 
 class DeltaTargets {
@@ -30,6 +33,11 @@ class DeltaTargets {
 
   explicit DeltaTargets(const Scene& scene);
   const std::vector<Target>& targets() const { return targets_; }
+  // Per material (Scene::materials): whether its shapes are targets. A light path counts
+  // only where its first hit is on one, and the path tracer leaves to it only the paths
+  // whose last scattering before the light is on one: the same paths on both sides.
+  const std::vector<uint8_t>& target_materials() const { return materials_; }
+  bool aims_at(uint32_t material) const { return material < materials_.size() && materials_[material]; }
   bool empty() const { return targets_.empty(); }
 
   // A unit direction from p: a target picked uniformly by u_pick, then uniform in the cone
@@ -43,6 +51,7 @@ class DeltaTargets {
   // The density, counting target `sure` as holding dir whatever rounding says.
   float pdf_with(Vec3 p, Vec3 dir, size_t sure) const;
   std::vector<Target> targets_;
+  std::vector<uint8_t> materials_;
 };
 
 }  // namespace tessera

@@ -246,6 +246,7 @@ void record_first_hit(const Material& m, const SurfacePoint& sp, const Ray& ray,
   s.specular = bs.delta;
   if (s.depth == 0) s.first_smooth = !bs.delta;
   s.smooth_vertices += !bs.delta;
+  s.at_target = !light_traced_materials_.empty() && light_traced_materials_[sp.material];
   s.prev_pdf = bs.pdf;
   s.prev_p = sp.p;
   s.prev_ng = sp.ng;
@@ -331,8 +332,8 @@ Rgb Integrator::walk(Ray ray, PathState s, Sampler& sampler, RayCounters& counte
                    : 0;  // light sampling alone accounts for it
         // A path camera -> smooth -> ... -> delta -> a light the light tracer starts from is
         // the light tracer's (light_tracer.h): nothing is counted twice.
-        if (!(s.specular && s.first_smooth && s.smooth_vertices <= light_traced_smooth_ && !light_traced_.empty() &&
-              sp.light >= 0 && light_traced_[size_t(sp.light)]))
+        if (!(s.specular && s.first_smooth && s.smooth_vertices <= light_traced_smooth_ && s.at_target &&
+              !light_traced_.empty() && sp.light >= 0 && light_traced_[size_t(sp.light)]))
           L += s.beta * m.radiance * w;
       }
       if (m.kind == Material::Kind::kEmission) break;

@@ -103,10 +103,13 @@ class Integrator {
   // Leaves the caustic paths that end on these lights (a flag per LightSet index) to the
   // light tracer: a path whose first hit scatters by a non-delta lobe and whose last
   // scattering before reaching one of them is a delta lobe adds nothing here. Empty: none.
-  // Only paths with at most `smooth` non-delta vertices (LightTracer::kMaxSmoothVertices).
-  void leave_to_light_tracer(std::vector<uint8_t> lights, int smooth) {
+  // Only paths with at most `smooth` non-delta vertices (LightTracer::kMaxSmoothVertices),
+  // and whose last scattering is at a material light paths aim at (`materials`, a flag per
+  // Scene::materials index: LightTracer::target_materials).
+  void leave_to_light_tracer(std::vector<uint8_t> lights, int smooth, std::vector<uint8_t> materials) {
     light_traced_ = std::move(lights);
     light_traced_smooth_ = smooth;
+    light_traced_materials_ = std::move(materials);
   }
   // Paths seen through mirrors and glass (camera -> delta ... -> smooth): `n` independent
   // continuations from their first smooth vertex, averaged, each with its own sampler
@@ -122,6 +125,7 @@ class Integrator {
     bool specular = true;       // the previous vertex was the camera or a delta lobe
     bool first_smooth = false;  // the first hit scattered by a non-delta lobe
     int smooth_vertices = 0;    // vertices so far that scattered by a non-delta lobe
+    bool at_target = false;     // the previous vertex's material is a light tracer's target
     int depth = 0;
     float prev_pdf = 0, eta_scale = 1;
     Vec3 prev_p, prev_ng;  // the previous vertex's point (MIS) and geometric normal
@@ -149,6 +153,7 @@ class Integrator {
   bool nee_ = true, mis_ = true;
   std::vector<uint8_t> light_traced_;
   int light_traced_smooth_ = 0;
+  std::vector<uint8_t> light_traced_materials_;
   int splits_ = 1;
 };
 

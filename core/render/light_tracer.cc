@@ -133,6 +133,9 @@ void LightTracer::trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, Splat
     BsdfSample bs;
     if (!bsdf_sample(m, wo, u1, u2, &bs)) return;
     if (depth == 1 && !bs.delta) return;  // camera -> ... -> smooth -> light: the path tracer's
+    // A delta hit off the targets (a texture made it smooth): only the cones' directions
+    // reach it, so its paths are the path tracer's (Integrator::leave_to_light_tracer).
+    if (depth == 1 && !targets_.aims_at(sp.material)) return;
     smooth += !bs.delta;
     if (smooth + 1 > kMaxSmoothVertices) return;  // no later connection is the light tracer's
     const Vec3 wi = frame.to_world(bs.wi);

@@ -78,6 +78,8 @@ class LightTracer {
               const RenderSettings& settings);
   // Per LightSet index: whether light paths start there (for Integrator::leave_to_light_tracer).
   const std::vector<uint8_t>& traced_lights() const { return traced_; }
+  // Per material: whether light paths aim at its shapes (DeltaTargets::target_materials).
+  const std::vector<uint8_t>& target_materials() const { return targets_.target_materials(); }
   // The light path of camera sample `sample` of image pixel `pixel_id`: its splats into
   // `splats` (with `odd`, its odd plane too). Thread-safe.
   void trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, SplatSink& splats, bool odd,

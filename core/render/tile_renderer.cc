@@ -127,7 +127,8 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
   light_decision_ = tessera::light_tracing_decision(*scene_, *lights_, *camera_, s);
   if (light_decision_.on) {
     light_tracer_.emplace(*scene_, *accel_, *lights_, *camera_, s);
-    integrator_->leave_to_light_tracer(light_tracer_->traced_lights(), LightTracer::kMaxSmoothVertices);
+    integrator_->leave_to_light_tracer(light_tracer_->traced_lights(), LightTracer::kMaxSmoothVertices,
+                                       light_tracer_->target_materials());
     integrator_->set_specular_splits(LightTracer::kSpecularSplits);
   }
 }

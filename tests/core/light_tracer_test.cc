@@ -286,8 +286,8 @@ TEST(LightTracer, SplitsBehindMirrorsAndGlassKeepTheMeanAndCutTheNoise) {
     const Camera camera(scene, s.camera);
     const LightTracer tracer(scene, accel, lights, camera, s);
     Integrator one(scene, accel, lights, s), split(scene, accel, lights, s);
-    one.leave_to_light_tracer(tracer.traced_lights(), LightTracer::kMaxSmoothVertices);
-    split.leave_to_light_tracer(tracer.traced_lights(), LightTracer::kMaxSmoothVertices);
+    one.leave_to_light_tracer(tracer.traced_lights(), LightTracer::kMaxSmoothVertices, tracer.target_materials());
+    split.leave_to_light_tracer(tracer.traced_lights(), LightTracer::kMaxSmoothVertices, tracer.target_materials());
     split.set_specular_splits(4);
     struct Moments {
       double sum = 0, sum2 = 0;
@@ -347,6 +347,30 @@ TEST(LightTracer, AgreesWithThePathTracerAloneOnGltfMaterials) {
                  std::to_string(caster.roughness));
     expect_same_image(a.film, b.film);
   }
+}
+
+// A metal whose roughness texture makes it a mirror (factor 1, texel 0) is not a light
+// tracer's target (has_delta_lobe sees the factor), while a glass sphere elsewhere turns
+// the light tracer on. Light paths reach the metal only through the glass's cone, so its
+// caustic must stay the path tracer's: it was left to the light tracer and lost.
+TEST(LightTracer, ATextureMadeMirrorOffTheTargetsKeepsItsCaustic) {
+  Material metal = testing::pbr_material(1, 1);
+  metal.metal_rough_texture.index = 0;
+  Scene scene = caustic_scene(metal);
+  Texture smooth;
+  smooth.width = smooth.height = 1;
+  smooth.texels = {Rgb(1, 0, 1)};  // roughness x 0, metallic x 1
+  scene.textures.push_back(smooth);
+  const uint32_t target = uint32_t(scene.materials.size());
+  scene.materials.push_back(glass());
+  scene.spheres.push_back(Sphere{"target", {1.5f, 0.25f, -1.5f}, 0.2f, target, -1});
+  scene.finalize();
+  ASSERT_FALSE(has_delta_lobe(scene.materials[1]));
+  ASSERT_TRUE(has_delta_lobe(scene.materials[target]));
+  const RenderResult a = render(scene, caustic_settings(LT::kOff, 1024)),
+                     b = render(scene, caustic_settings(LT::kOn, 128));
+  ASSERT_TRUE(b.light_tracing.on);
+  expect_same_image(a.film, b.film);
 }
 
 // The white furnace with glass and finite light: inside a sphere whose inner surface is
