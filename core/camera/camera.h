@@ -68,6 +68,8 @@ class Camera {
   Vec3 forward() const { return -z_; }
   float tan_half_hfov() const { return tan_h_; }
   float tan_half_vfov() const { return tan_v_; }
+  // The near clip: camera rays start this far from the lens (a file camera's znear; 0 else).
+  float near_clip() const { return tmin_; }
 
  private:
   Vec3 eye_, x_, y_, z_;  // camera-to-world basis; the camera looks along -z_

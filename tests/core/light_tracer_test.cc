@@ -373,6 +373,27 @@ TEST(LightTracer, ATextureMadeMirrorOffTheTargetsKeepsItsCaustic) {
   expect_same_image(a.film, b.film);
 }
 
+// A file camera's near clip: its rays start past it, so a wall nearer the lens is not
+// seen, and must not block the light tracer's connections to the lens either (it did:
+// every splat was lost behind a wall the camera sits in).
+TEST(LightTracer, GeometryInsideTheNearClipBlocksNoConnection) {
+  Scene scene = caustic_scene(glass());
+  scene.camera.znear = 0.5f;
+  const Vec3 c = scene.camera.eye + scene.camera.forward * 0.2f, u{1, 0, 0}, v = normalize(Vec3{0, 1, -1});
+  Mesh wall;
+  wall.name = "wall";
+  wall.positions = {c - u - v, c + u - v, c + u + v, c - u + v};
+  wall.indices = {0, 1, 2, 0, 2, 3};
+  wall.material = 0;
+  scene.meshes.push_back(wall);
+  scene.finalize();
+  const RenderResult a = render(scene, caustic_settings(LT::kOff, 1024)),
+                     b = render(scene, caustic_settings(LT::kOn, 128));
+  ASSERT_TRUE(b.light_tracing.on);
+  EXPECT_GT(b.stats.rays.splats, 1000u);
+  expect_same_image(a.film, b.film);
+}
+
 // The white furnace with glass and finite light: inside a sphere whose inner surface is
 // Lambertian (albedo 1/2) and glows with radiance 1 (a sphere light), radiance is 2
 // everywhere, through a lossless glass sphere too. The walls seen through the glass are
