@@ -429,9 +429,10 @@ std::vector<SplatRecord> decode_splats(const std::string& compressed, const Spla
       std::min<uint64_t>(kMaxSplatBytes, 4 + lim.records * (kSplatRecordBytes + per_record * kSplatEntryBytes));
   const unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
   if (declared == ZSTD_CONTENTSIZE_ERROR) throw WireError("splats: not zstd data");
-  if (declared == ZSTD_CONTENTSIZE_UNKNOWN || declared > cap)
-    throw WireError("splats: " + std::to_string(declared) + " bytes declared, at most " + std::to_string(cap) +
-                    " fit the task");
+  if (declared == ZSTD_CONTENTSIZE_UNKNOWN) throw WireError("splats: no size declared");
+  if (declared > cap)
+    throw SplatsOverCap("splats: " + std::to_string(declared) + " bytes declared, at most " + std::to_string(cap) +
+                        " fit the task");
   Scratch z;
   z->raw.resize(declared);
   const size_t n = ZSTD_decompressDCtx(z->d, z->raw.data(), z->raw.size(), compressed.data(), compressed.size());

@@ -36,6 +36,13 @@ class WireError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+// A result's splats declared past the most its task's size allows (decode_splats). An
+// honest run of many passes of a large tile can meet it: the coordinator then shortens
+// the job's runs (ResultIntake::merge) rather than lease the same run again.
+class SplatsOverCap : public WireError {
+ public:
+  using WireError::WireError;
+};
 
 // QUEUED or RUNNING: the one definition of a job that has not ended.
 inline bool job_live(v1::JobStatus::State s) { return s == v1::JobStatus::QUEUED || s == v1::JobStatus::RUNNING; }

@@ -64,7 +64,7 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
   auto room = [&] { return uint32_t(resp.tasks_size()) < max_tasks && (max_samples == 0 || samples < max_samples); };
   auto take_from = [&](Job& job) {
     while (room()) {
-      std::optional<TileTask> t = job.plan.take(w->passes_per_task);
+      std::optional<TileTask> t = job.plan.take(std::min(w->passes_per_task, job.max_run));
       if (!t) break;
       const uint64_t task_id = p_.leasing.grant(job, *t, *w, now);
       p_.lifecycle.start(job, now, fx);

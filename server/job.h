@@ -55,6 +55,9 @@ struct Job {
   // leased before the tile was taken back is refused, since it may build on what was taken
   // back (a run's base sums, an adaptive pass's mask from them).
   std::vector<uint32_t> tile_resets;
+  // The most passes one task may run (a worker on a slow link asks for runs): halved when a
+  // run's splats passed what a result may carry (ResultIntake::shorten_runs).
+  uint32_t max_run = UINT32_MAX;
   // Tiles leased a second time at the frame's end (Dispatcher): tile -> that lease's task
   // id. Whichever result comes first is merged and both leases end.
   std::map<uint32_t, uint64_t> tile_backup;

@@ -105,15 +105,31 @@ void ResultIntake::decode(Batch& b) {
         throw WireError("AOV sums for a job without AOVs");
       in.splats = result_splats(r, in.light_tracer, in.splat_limits);
       in.sums = FramePlan::check(result_sums(r, in.pixels * in.planes), in.pass_len, in.planes);
+    } catch (const SplatsOverCap&) {  // counted as rejected by merge(), which shortens the job's runs
+      in.sums.reset();
+      in.splats_over_cap = true;
     } catch (const WireError&) {  // counted as rejected by merge()
       in.sums.reset();
     }
+}
+
+void ResultIntake::shorten_runs(const v1::TaskResult& result, double now, Effects& fx) {
+  const Lease* l = p_.leases.live(result.task_id());
+  if (!l || l->worker != result.worker_id() || l->check || l->pass_count <= 1) return;
+  Job* job = p_.jobs.find_job(l->job);
+  if (!job || !job->live()) return;
+  // Half the run that did not fit, for every later task of the job; this run is ready
+  // again now rather than when its lease expires (leased again whole, it would fail again).
+  job->max_run = std::min(job->max_run, std::max<uint32_t>(1, l->pass_count / 2));
+  p_.leasing.end(result.task_id(), true, now);
+  fx.changed = true;
 }
 
 void ResultIntake::merge(Batch& b, double now, Effects& fx) {
   for (Incoming& in : b.incoming) {
     if (!in.sums) {
       ++p_.counters.results_rejected;
+      if (in.splats_over_cap) shorten_runs(*b.results[in.index], now, fx);
       continue;
     }
     const v1::TaskResult& result = *b.results[in.index];

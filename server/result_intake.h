@@ -53,6 +53,7 @@ class ResultIntake {
     SplatLimits splat_limits;         // what its splats may be (a frame tracing light paths)
     RenderSettings::LightTracer light_tracer = RenderSettings::LightTracer::kOff;  // the job's
     std::vector<SplatRecord> splats;                                               // decoded: one per pass, or none
+    bool splats_over_cap = false;  // its splats passed the task's cap (SplatsOverCap): its run was too long
   };
   struct Batch {
     std::vector<const v1::TaskResult*> results;
@@ -68,6 +69,9 @@ class ResultIntake {
   // The result's lease if it is known, from its holder, and still wanted (counting and
   // acknowledging duplicates and strangers' results); nullopt otherwise.
   std::optional<Lease> wanted(const v1::TaskResult& result, v1::ResultAck& ack);
+  // A result whose run of passes carried more splats than a result may (SplatsOverCap):
+  // its job's runs are halved (Job::max_run) and its lease ends with the run ready again.
+  void shorten_runs(const v1::TaskResult& result, double now, Effects& fx);
 
   Parts p_;
 };

@@ -124,6 +124,30 @@ TEST_F(ResultIntakeTest, SplatsComeExactlyFromFramesThatTraceLightPaths) {
   EXPECT_EQ(traced->splats.frontier(traced->plan.tiles().size() - 1), 0u);  // only the leased tile moved
 }
 
+// A run of many passes of a large tile can carry more splats than a result may (the
+// decoder's cap): leased again whole it would fail again, for ever. The job's runs are
+// halved and the run is ready again at once.
+TEST_F(ResultIntakeTest, SplatsPastTheCapShortenTheJobsRuns) {
+  RenderSettings on = testing::small_settings();
+  on.light_tracer = RenderSettings::LightTracer::kOn;
+  const std::shared_ptr<Job> traced = add_still(on);
+  const std::optional<TileTask> run = traced->plan.take(2);
+  ASSERT_TRUE(run);
+  ASSERT_EQ(run->pass_count, 2u);
+  const size_t ready = traced->plan.ready();
+  const uint64_t t = leasing.grant(*traced, *run, worker(a), now);
+  v1::TaskResult r = result(t);
+  // A zstd frame header alone, declaring 2^40 bytes: what a too-long run would declare.
+  std::string header = {'\x28', '\xb5', '\x2f', '\xfd', '\xe0'};
+  for (int i = 0; i < 8; ++i) header += char(i == 5 ? 1 : 0);
+  r.set_splats_zstd(header);
+  EXPECT_TRUE(rejected(submit(r)));
+  EXPECT_EQ(traced->max_run, 1u);
+  EXPECT_EQ(leases.live(t), nullptr);
+  EXPECT_EQ(traced->plan.ready(), ready + 1);  // the run's tile is ready again
+  EXPECT_EQ(traced->plan.take(traced->max_run)->pass_count, 1u);
+}
+
 TEST_F(ResultIntakeTest, SumsThatAreNotZstdAreRejected) {
   v1::TaskResult r = result(lease_next(*job, a));
   r.set_sums_zstd("not zstd at all");
