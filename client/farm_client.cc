@@ -429,11 +429,10 @@ int delete_job(v1::Tessera::StubInterface& stub, const std::string& job, const F
 namespace {
 
 // A job's name where the user gave none: the scene's path, or its file name where the
-// path is longer than the coordinator keeps (256 bytes, server/admission.h).
+// path is longer than the coordinator takes (kMaxJobNameBytes).
 std::string default_job_name(const std::string& scene) {
-  constexpr size_t kMost = 256;
-  if (scene.size() <= kMost) return scene;
-  return utf8_prefix(std::filesystem::path(scene).filename().string(), kMost);
+  if (scene.size() <= kMaxJobNameBytes) return scene;
+  return utf8_prefix(std::filesystem::path(scene).filename().string(), kMaxJobNameBytes);
 }
 
 // Sends the scene in pieces (UploadScene) and returns the upload's id, for SubmitJob. The

@@ -44,6 +44,10 @@ class SplatsOverCap : public WireError {
   using WireError::WireError;
 };
 
+// The longest job name a submit may give (bytes; UTF-8, as every proto string): the
+// coordinator refuses longer ones, clients shorten the default name they send to fit.
+constexpr size_t kMaxJobNameBytes = 256;
+
 // QUEUED or RUNNING: the one definition of a job that has not ended.
 inline bool job_live(v1::JobStatus::State s) { return s == v1::JobStatus::QUEUED || s == v1::JobStatus::RUNNING; }
 

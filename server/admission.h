@@ -13,8 +13,6 @@
 #include "server/options.h"
 
 namespace tessera {
-// The longest job name a submit may give (bytes; UTF-8, as every proto string).
-constexpr size_t kMaxJobNameBytes = 256;
 // What a live pixel costs the coordinator: its film's sums (docs/performance.md).
 constexpr int64_t kFilmBytesPerPixel = int64_t(sizeof(PixelSums));
 // The default --max-live-pixels on a machine with `memory_bytes`: 2^27 (5.4 GB of films), or

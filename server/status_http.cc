@@ -51,6 +51,12 @@ std::string job_status_json(v1::JobStatus status, uint32_t tiles_from) {
 }
 
 namespace {
+// JSON text that never throws: a byte that is not UTF-8 (peer text kept before names were
+// cut on character boundaries) is shown as U+FFFD rather than failing the whole answer.
+std::string lenient_dump(const nlohmann::json& j) {
+  return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
 // The query parameter `name`, when given, as a whole number into `value`; false (and a 400
 // answer naming it) when it is not one.
 template <typename T>
@@ -60,10 +66,8 @@ bool whole_param(const httplib::Request& req, httplib::Response& res, const char
   const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), *value);
   if (ec == std::errc() && end == v.data() + v.size()) return true;
   res.status = 400;
-  res.set_content(
-      nlohmann::json{{"error", std::string(name) + " '" + utf8_prefix(v, 64) + "' is not a whole number"}}.dump(
-          -1, ' ', false, nlohmann::json::error_handler_t::replace),
-      "application/json");
+  res.set_content(lenient_dump({{"error", std::string(name) + " '" + utf8_prefix(v, 64) + "' is not a whole number"}}),
+                  "application/json");
   return false;
 }
 
@@ -105,9 +109,7 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
       res.set_content(job_status_json(c_.status(req.matches[1], true, range), range.from), "application/json");
     } catch (const RequestError& e) {
       res.status = 404;
-      res.set_content(
-          nlohmann::json{{"error", e.what()}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
-          "application/json");
+      res.set_content(lenient_dump({{"error", e.what()}}), "application/json");
     }
   });
   // Events (events.h), newest last: ?job=ID (that job's), ?after=ID (newer ones), ?limit=N.
@@ -167,11 +169,7 @@ std::string StatusHttp::status_json() const {
   std::string out;
   char buf[8192];  // a worker's name, host and last task: at most 256 characters each, 6 bytes each escaped
   auto num = [](double v) { return std::isfinite(v) ? v : 0.0; };
-  // (Names are cut on character boundaries where they are kept; should one still not be
-  // UTF-8, it is shown with U+FFFD rather than failing the whole answer.)
-  auto text = [](const std::string& v) {
-    return nlohmann::json(v).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-  };
+  auto text = [](const std::string& v) { return lenient_dump(v); };
   std::snprintf(buf, sizeof buf, "{\"uptime_seconds\":%.17g,\"utilization\":%.17g,\"jobs\":[", num(c_.uptime()),
                 num(c_.utilization()));
   out += buf;

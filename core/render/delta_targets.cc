@@ -43,7 +43,7 @@ DeltaTargets::DeltaTargets(const Scene& scene) {
   for (size_t i = 0; i < scene.materials.size(); ++i) materials_[i] = has_delta_lobe(scene.materials[i]);
   Bounds all;  // every shape together: the one target past kMaxTargets
   for (const Sphere& s : scene.spheres) {
-    if (!has_delta_lobe(scene.materials[s.material])) continue;
+    if (!aims_at(s.material)) continue;
     targets_.push_back(around(s.center, s.radius));  // exact: a sphere bounds itself
     all.extend(s.center - Vec3{s.radius, s.radius, s.radius});
     all.extend(s.center + Vec3{s.radius, s.radius, s.radius});
@@ -56,7 +56,7 @@ DeltaTargets::DeltaTargets(const Scene& scene) {
   std::vector<Bounds> object(scene.meshes.size());  // each mesh's own, object space
   for (size_t i = 0; i < scene.meshes.size(); ++i) {
     const Mesh& m = scene.meshes[i];
-    if (!has_delta_lobe(scene.materials[m.material])) continue;
+    if (!aims_at(m.material)) continue;
     for (const uint32_t v : m.indices) object[i].extend(m.positions[v]);
     if (!m.instanced && !object[i].empty()) add(object[i]);
   }

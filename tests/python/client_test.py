@@ -229,6 +229,16 @@ class Units(unittest.TestCase):
         self.assertEqual(tessera.frame_path("s.####.exr", -7), "s.-007.exr")
         self.assertEqual(tessera.frame_path("still.exr", 3), "still.exr")
 
+    def test_a_long_scene_path_names_the_job_by_its_file_within_the_bound(self):
+        from tessera.farm import _default_name
+        from tessera._build import MAX_JOB_NAME_BYTES
+        self.assertEqual(MAX_JOB_NAME_BYTES, 256)  # proto/wire.h, read at build time
+        self.assertEqual(_default_name("scenes/a.gltf"), "scenes/a.gltf")
+        self.assertEqual(_default_name("/" + "d" * 300 + "/sc\u00e9ne.gltf"), "sc\u00e9ne.gltf")
+        # A file name past the bound is cut on a character boundary, never inside one.
+        cut = _default_name("/x/" + "a" * 255 + "\u00e9")
+        self.assertEqual(cut, "a" * 255)
+
     def test_cli_flags_round_trip_the_settings(self):
         from tessera import settings
         self.assertEqual(settings.cli_flags(samples=8, resolution=(64, 48), env_color=(0.5, 1, 0.25), no_mis=True,

@@ -15,7 +15,7 @@ from tessera._pb import tessera_pb2_grpc as pb_grpc
 from tessera.bundle import Bundle, SceneError
 from tessera.types import Event, Fetched, JobFailed, JobStatus, TesseraError, rpc_error
 
-from tessera._build import PROTOCOL_VERSION  # proto/wire.h, at build time
+from tessera._build import MAX_JOB_NAME_BYTES, PROTOCOL_VERSION  # proto/wire.h, at build time
 DEFAULT_COORDINATOR = "127.0.0.1:7878"
 _LIST_PAGE = 1000
 _ID_DIGITS = 16  # a job id: 64 random bits in hex
@@ -35,11 +35,12 @@ def frame_path(pattern, frame):
 
 def _default_name(scene):
     """A job's name where none is given: the scene's path, or its file name where the path
-    is longer than the coordinator keeps (256 bytes), cut on a character boundary."""
+    is longer than the coordinator takes (MAX_JOB_NAME_BYTES), cut on a character boundary."""
     name = os.fspath(scene)
-    if len(name.encode("utf-8", "surrogateescape")) <= 256:
+    if len(name.encode("utf-8", "surrogateescape")) <= MAX_JOB_NAME_BYTES:
         return name
-    return os.path.basename(name).encode("utf-8", "surrogateescape")[:256].decode("utf-8", "ignore")
+    cut = os.path.basename(name).encode("utf-8", "surrogateescape")[:MAX_JOB_NAME_BYTES]
+    return cut.decode("utf-8", "ignore")
 
 
 def _read_token(path):
