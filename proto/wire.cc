@@ -478,14 +478,15 @@ std::vector<SplatRecord> decode_splats(const std::string& compressed, const Spla
   for (int c = 0; c < 4; ++c) field(8, [c](SplatRecord& r, size_t k, uint64_t v) { r.entries[k].v[c] = int64_t(v); });
   // Each entry against its record: within the frame's planes, and no more than its light
   // paths could add (a splat's channels are at most kMaxSplatValue: 2^44 in 2^-24 units,
-  // squared luminance 2^52 in 2^-12 units; at most max_splats_per_path splats a path).
+  // squared luminance at most SplatSums::kMaxLum2Units, 2^62; at most max_splats_per_path
+  // splats a path).
   const uint64_t planes_area = lim.area * lim.planes;
   for (const SplatRecord& r : out)
     for (const SplatEntry& e : r.entries) {
       if (e.index >= planes_area) throw WireError("splats: indices out of order");
       const uint64_t paths_here = (e.index >= lim.area ? r.odd_paths : r.paths) * lim.max_splats_per_path;
       for (int c = 0; c < 4; ++c)
-        if (e.v[c] < 0 || (e.v[c] > 0 && paths_here == 0) || (uint64_t(e.v[c]) >> (c < 3 ? 44 : 52)) > paths_here)
+        if (e.v[c] < 0 || (e.v[c] > 0 && paths_here == 0) || (uint64_t(e.v[c]) >> (c < 3 ? 44 : 62)) > paths_here)
           throw WireError("splats: sums no light path could give");
     }
   return out;

@@ -25,7 +25,8 @@ namespace tessera {
 // them: one before it would not, so it is refused at registration).
 // Version 9: half-buffers (the kAovHalves bit of RenderSettings.aovs: a task's sums, its
 // result's and a run's base, are two planes) and RenderSettings.denoise.
-constexpr uint32_t kProtocolVersion = 9;
+// Version 10: splats' squared luminance in 2^-32 units (was 2^-12: core/render/splats.h).
+constexpr uint32_t kProtocolVersion = 10;
 constexpr size_t kBytesPerPixel = 36;  // r, g, b, lum2 (float64) + n (uint32)
 // gRPC message limit, for images and inline scene bundles (scenes of any size stream in
 // pieces: scene_chunks.h).

@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 
 #include "wire.h"
@@ -26,7 +27,10 @@ constexpr char kMagic[4] = {'T', 'S', 'C', 'K'};
 // buffers of the film's size). Version 1 is still read.
 // Version 3: band by band (checkpoint.h).
 // Version 4: version 3 and the splats (checkpoint.h).
-constexpr uint32_t kVersion2 = 2, kVersion3 = 3, kVersion4 = 4;
+// Version 5: version 4 with the splats' squared luminance in 2^-32 units, not 2^-12
+// (SplatSums::kLum2Unit); version 4's are scaled on reading.
+constexpr uint32_t kVersion2 = 2, kVersion3 = 3, kVersion4 = 4, kVersion5 = 5;
+constexpr int kVersion4Lum2Shift = 20;  // 2^-12 units to 2^-32
 constexpr uint32_t kChunkPixels = 1 << 16;
 
 // Little-endian fields, appended and read back in order.
@@ -183,7 +187,7 @@ CheckpointEncoder::CheckpointEncoder(const FramePlan& plan, double elapsed, std:
       halves_(plan.settings().halves()) {
   Writer w;
   w.out.append(kMagic, 4);
-  w.put(kVersion4);
+  w.put(kVersion5);
   const Rect r = plan.settings().effective_window();
   for (int v : {r.x, r.y, r.w, r.h}) w.put(int32_t(v));
   w.put(uint32_t(plan.tiles().size()));
@@ -323,8 +327,8 @@ class StreamReader {
   XXH64_state_t* hash_;
 };
 
-// The splat section (version 4), after the bands: into `splats` when given (with the film).
-void read_splats(StreamReader& in, const FramePlan& plan, FrameSplats* splats) {
+// The splat section (versions 4 and 5), after the bands: into `splats` when given (with the film).
+void read_splats(StreamReader& in, const FramePlan& plan, FrameSplats* splats, uint32_t version) {
   const uint8_t has = in.get<uint8_t>();
   if (has > 1) throw std::runtime_error("checkpoint: bad splat section");
   if (!has) return;
@@ -353,9 +357,14 @@ void read_splats(StreamReader& in, const FramePlan& plan, FrameSplats* splats) {
       rows.resize(bytes / sizeof(SplatSums));
       const size_t n = ZSTD_decompress(rows.data(), bytes, z.data(), z.size());
       if (ZSTD_isError(n) || n != bytes) throw std::runtime_error("checkpoint: bad splat rows");
-      for (const SplatSums& s : rows)
+      for (SplatSums& s : rows) {
         if (s.rgb[0] < 0 || s.rgb[1] < 0 || s.rgb[2] < 0 || s.lum2 < 0)
           throw std::runtime_error("checkpoint: negative splat sums");
+        if (version == kVersion4)  // saturating, as the sums are
+          s.lum2 = s.lum2 > (std::numeric_limits<int64_t>::max() >> kVersion4Lum2Shift)
+                       ? std::numeric_limits<int64_t>::max()
+                       : s.lum2 << kVersion4Lum2Shift;
+      }
       splats->restore_rows(band.y0, band.rows, odd, rows.data());
     }
   }
@@ -425,7 +434,7 @@ double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with
       throw std::runtime_error(std::string("checkpoint: ") + e.what());
     }
   }
-  if (version >= kVersion4) read_splats(in, plan, with_film ? splats : nullptr);
+  if (version >= kVersion4) read_splats(in, plan, with_film ? splats : nullptr, version);
   const uint64_t digest = XXH64_digest(hash);
   uint64_t sum;
   in.exactly(reinterpret_cast<char*>(&sum), sizeof sum, false);
@@ -455,7 +464,7 @@ double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePl
   in.exactly(magic, 4);
   if (std::memcmp(magic, kMagic, 4) != 0) throw std::runtime_error("checkpoint: not a checkpoint file");
   const uint32_t version = in.get<uint32_t>();
-  if (version == kVersion3 || version == kVersion4) {
+  if (version == kVersion3 || version == kVersion4 || version == kVersion5) {
     Rect r;
     r.x = in.get<int32_t>();
     r.y = in.get<int32_t>();

@@ -1,19 +1,21 @@
 // A job's checkpoint file: its frame plan's progress and its film's sums, checksummed
 // (xxh64). docs/architecture.md has where and when.
 //
-// Version 4 is written band by band (FramePlan::copy_band: a row of tiles, each tile's sums
+// Version 5 is written band by band (FramePlan::copy_band: a row of tiles, each tile's sums
 // with its progress), so a coordinator never holds a second copy of a large film, and read
 // band by band into the plan's own film; every counter of the plan follows from its tiles.
-//   header  "TSCK", u32 4, i32 window x y w h, u32 tiles, u32 bands, u8 adaptive, f64 elapsed
+//   header  "TSCK", u32 5, i32 window x y w h, u32 tiles, u32 bands, u8 adaptive, f64 elapsed
 //   band    u32 band, u32 tiles, per tile (u32 passes, u8 finished, f32 relative error),
 //           u64 samples, [adaptive: u64 mask bytes, bytes zstd(mask)], bytes sums (wire.h),
 //           [AOVs: bytes AOV sums], [half-buffers: bytes the second plane's sums]
 //   splats  u8 0, or u8 1, u64 paths, u64 odd paths, per tile u32 frontier, then per band in
 //           order bytes zstd(its rows' SplatSums, 32 bytes each) [half-buffers: the odd
-//           plane's too] (frame_splats.h: frozen after the bands)
+//           plane's too] (frame_splats.h: frozen after the bands); squared luminance in
+//           2^-32 units (version 4, still read: the same in 2^-12 units)
 //   end     u64 xxh64 of everything before it
-// (bytes = u64 length + the bytes.) Version 3 (no splats) and versions 1 and 2 (the whole
-// PlanState, then the film in one or in 65,536-pixel pieces) are still read.
+// (bytes = u64 length + the bytes.) Version 4 (see above), version 3 (no splats) and
+// versions 1 and 2 (the whole PlanState, then the film in one or in 65,536-pixel pieces)
+// are still read.
 #pragma once
 
 #include <cstdint>
@@ -25,7 +27,7 @@
 
 namespace tessera {
 
-// Version 4, band by band: the header at construction, then band() for every band in
+// Version 5, band by band: the header at construction, then band() for every band in
 // order, then (a frame with splats) splats() and splat_band() for every band in order, then
 // finish(); each piece of the file goes to `out` as it is made.
 class CheckpointEncoder {

@@ -33,12 +33,12 @@ bool splat_units(Rgb value, int64_t out[4]) {
   if (!(value.is_finite() && std::min(value.r, std::min(value.g, value.b)) >= 0 &&
         value.max() <= SplatSink::kMaxSplatValue))
     return false;
-  // At most 2^44 (channels) and 2^52 (squared luminance) units: round_nonnegative's range.
+  // At most 2^44 (channels) and 2^62 (squared luminance, capped) units: round_nonnegative's range.
   const double lum = value.luminance();
   out[0] = round_nonnegative(value.r * SplatSums::kUnit);
   out[1] = round_nonnegative(value.g * SplatSums::kUnit);
   out[2] = round_nonnegative(value.b * SplatSums::kUnit);
-  out[3] = round_nonnegative(lum * lum * SplatSums::kLum2Unit);
+  out[3] = round_nonnegative(std::min(lum * lum * SplatSums::kLum2Unit, double(SplatSums::kMaxLum2Units)));
   return true;
 }
 

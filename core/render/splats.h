@@ -4,7 +4,9 @@
 // associative, so any thread count, task order or grouping gives the same bits.
 //
 // Per pixel: the sum of the splats' RGB values (2^-24 units) and of their squared luminance
-// (2^-12 units, for the variance layer). A splat's value is what Camera::connect describes:
+// (2^-32 units, for the variance layer: a splat's value is typically 1e-3 to 1e-1 at
+// 480x360, and scales with the image's pixel count; 2^-12 units, before, rounded three
+// quarters of CBspheres' splats to no variance at all). A splat's value is what Camera::connect describes:
 // a pixel's estimate from N light paths is (width x height / N) x the sum. A splat with a
 // channel above kMaxSplatValue (or not finite) is dropped and counted, as a sample over
 // kMaxSampleValue is; sums saturate rather than wrap.
@@ -25,7 +27,10 @@ namespace tessera {
 
 struct SplatSums {
   static constexpr double kUnit = double(1 << 24);
-  static constexpr double kLum2Unit = double(1 << 12);
+  static constexpr double kLum2Unit = 0x1p32;
+  // The most a single splat adds to lum2 (2^62 units: a luminance of 2^15): brighter ones
+  // add this, so the sum stays within int64 and still reads as a large variance.
+  static constexpr int64_t kMaxLum2Units = int64_t(1) << 62;
   int64_t rgb[3] = {0, 0, 0};
   int64_t lum2 = 0;
   double r() const { return double(rgb[0]) / kUnit; }
@@ -56,7 +61,7 @@ bool splat_units(Rgb value, int64_t out[4]);
 // samples' light paths, with half-buffers). Entries ascend by index, one per index.
 struct SplatEntry {
   uint32_t index = 0;
-  int64_t v[4] = {0, 0, 0, 0};  // r, g, b (2^-24 units), squared luminance (2^-12)
+  int64_t v[4] = {0, 0, 0, 0};  // r, g, b (2^-24 units), squared luminance (2^-32)
 };
 struct SplatRecord {
   uint64_t paths = 0, odd_paths = 0;  // light paths traced: all, and the odd plane's

@@ -77,7 +77,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
   for (size_t i = 0; i < aovs.size(); ++i) aovs[i].add_sample(hit, uint32_t(i));
   std::ofstream(fs::path(seeds) / "aovs16", std::ios::binary)
       << char(2) << char(16) << char(0) << tessera::encode_aovs(aovs);
-  // Splat records (a task's, wire.h) and a checkpoint with splats (version 4).
+  // Splat records (a task's, wire.h) and a checkpoint with splats (version 5).
   std::vector<tessera::SplatRecord> records(2);
   records[0].paths = 12;
   records[0].odd_paths = 5;

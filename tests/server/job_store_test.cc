@@ -4,10 +4,13 @@
 #include <gtest/gtest.h>
 #include <sqlite3.h>
 #include <unistd.h>
+#include <zstd.h>
 
 #include <cstddef>
 #include <cstring>
 #include <filesystem>
+#include <limits>
+#include <vector>
 #define XXH_INLINE_ALL
 #include <xxhash.h>
 
@@ -182,6 +185,62 @@ TEST(JobStore, AVersion2CheckpointStillRestoresAPlan) {
   EXPECT_EQ(read_checkpoint(encode_checkpoint_v2(a.state(), a.film(), 3), b), 3);
   expect_same_film(a.film(), b.film());
   EXPECT_EQ(b.merges(), a.merges());
+}
+
+// Version 4 kept the splats' squared luminance in 2^-12 units (a splat under about 0.011
+// added no variance); version 5 in 2^-32. A version 4 file, what a coordinator from before
+// leaves in its data folder, is read in today's units (saturating, as the sums are).
+TEST(JobStore, AVersion4CheckpointsSplatVarianceIsReadInTodaysUnits) {
+  RenderSettings settings = plan_settings();
+  settings.tile_size = 32;  // one band: one splat row block at the end of the file
+  FramePlan a(settings);
+  FrameSplats splats(settings, uint32_t(a.tiles().size()));
+  SplatRecord r;
+  r.paths = 10;
+  r.entries.push_back({5, {1, 2, 3, 7}});
+  r.entries.push_back({40, {4, 5, 6, 8}});
+  splats.add(0, 0, {r});
+  std::string v5 = encode_checkpoint(a, 2, &splats);
+  // The last band's splat rows: u64 length, zstd bytes, then the u64 checksum.
+  size_t at = v5.size() - 16;
+  for (uint64_t len = 0; at > 0; --at) {
+    std::memcpy(&len, v5.data() + at, 8);
+    if (len == v5.size() - 8 - (at + 8)) break;
+  }
+  ASSERT_GT(at, 0u);
+  const std::string z = v5.substr(at + 8, v5.size() - 8 - (at + 8));
+  std::vector<SplatSums> rows(size_t(settings.camera.width) * settings.camera.height);
+  ASSERT_EQ(ZSTD_decompress(rows.data(), rows.size() * sizeof(SplatSums), z.data(), z.size()),
+            rows.size() * sizeof(SplatSums));
+  ASSERT_EQ(rows[5].lum2, 7);
+  rows[5].lum2 = 3;                  // 3 x 2^-12
+  rows[40].lum2 = int64_t(1) << 50;  // past what 2^-32 units hold: saturates
+  std::string z4(ZSTD_compressBound(rows.size() * sizeof(SplatSums)), '\0');
+  z4.resize(ZSTD_compress(z4.data(), z4.size(), rows.data(), rows.size() * sizeof(SplatSums), 1));
+  std::string v4 = v5.substr(0, at);
+  const uint64_t len = z4.size();
+  v4.append(reinterpret_cast<const char*>(&len), 8);
+  v4 += z4;
+  const uint32_t version = 4;
+  std::memcpy(v4.data() + 4, &version, 4);
+  const uint64_t sum = XXH64(v4.data(), v4.size(), 0);
+  v4.append(reinterpret_cast<const char*>(&sum), 8);
+
+  FramePlan b(settings);
+  FrameSplats restored(settings, uint32_t(b.tiles().size()));
+  EXPECT_EQ(read_checkpoint(v4, b, true, &restored), 2);
+  ASSERT_TRUE(restored.any());
+  const SplatFilm& film = *restored.film();
+  EXPECT_EQ(film.paths(), 10u);
+  EXPECT_EQ(film.at(5, 0).lum2, int64_t(3) << 20);
+  EXPECT_EQ(film.at(5, 0).rgb[2], 3);
+  EXPECT_EQ(film.at(3, 1).lum2, std::numeric_limits<int64_t>::max());
+  // Today's file comes back as written.
+  FramePlan c(settings);
+  FrameSplats same(settings, uint32_t(c.tiles().size()));
+  read_checkpoint(v5, c, true, &same);
+  EXPECT_EQ(same.film()->at(5, 0).lum2, 7);
+  EXPECT_EQ(same.film()->at(3, 1).lum2, 8);
 }
 
 TEST(JobStore, EveryTruncatedOrDamagedVersion3CheckpointIsRefused) {

@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <random>
 
@@ -440,6 +441,27 @@ TEST(WireSplats, AListGathersATasksSplatsAsTheFrameWouldSeeThem) {
   EXPECT_EQ(r.entries[1].v[1], int64_t(2) << 24);  // two splats of 1
   EXPECT_EQ(r.entries[2].index, 12u);              // (0, 0) on the odd plane
   EXPECT_EQ(list.take().entries.size(), 0u);       // taken
+}
+
+// A splat's squared luminance, the variance layer's: most of CBspheres' splats are 2^-9 to
+// 2^-7 at 480x360 (smaller at lower resolutions), and 2^-12 units rounded every splat
+// under about 0.011 to no variance. Now every splat keeps it to half a unit (2^-33), and
+// the brightest (2^20) add the cap rather than wrap.
+TEST(WireSplats, EvenADimSplatAddsItsVariance) {
+  for (const float v : {0x1p-13f, 0.001f, 0.004f, 0.011f, 0.3f, 7.0f}) {
+    int64_t units[4];
+    ASSERT_TRUE(splat_units(Rgb(v, v, v), units));
+    const double lum = Rgb(v).luminance(), lum2 = lum * lum;
+    EXPECT_NEAR(double(units[3]) / SplatSums::kLum2Unit, lum2, 0.5 / SplatSums::kLum2Unit) << v;
+    EXPECT_GT(units[3], 0) << v;
+  }
+  int64_t units[4];
+  ASSERT_TRUE(splat_units(Rgb(SplatSink::kMaxSplatValue), units));
+  EXPECT_EQ(units[3], SplatSums::kMaxLum2Units);
+  SplatList list(Rect{0, 0, 2, 1}, false);
+  for (int i = 0; i < 3; ++i) list.add(0, 0, Rgb(SplatSink::kMaxSplatValue), false);
+  list.count_path(false);
+  EXPECT_EQ(list.take().entries[0].v[3], std::numeric_limits<int64_t>::max());  // saturated
 }
 
 }  // namespace
