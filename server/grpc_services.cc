@@ -33,6 +33,12 @@ std::string peer_address(const std::string& peer) {
 std::string stream_peer(const Principal& who, const grpc::ServerContext& ctx) {
   return who.name.empty() ? peer_address(ctx.peer()) : "token " + who.name;
 }
+// A worker's: its own credential where enrolled; a worker token is often shared by a
+// whole farm (a Slurm or Kubernetes deployment's), so there the token and the address.
+std::string worker_stream_peer(const Principal& who, const grpc::ServerContext& ctx) {
+  if (who.enrolled) return "worker " + who.name;
+  return who.name.empty() ? peer_address(ctx.peer()) : "token " + who.name + " at " + peer_address(ctx.peer());
+}
 
 // Runs f, mapping the coordinator's errors to gRPC status codes.
 template <typename F>
@@ -237,7 +243,8 @@ grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskR
 }
 grpc::Status WorkerService::FetchSceneChunks(grpc::ServerContext* ctx, const v1::FetchSceneRequest* req,
                                              grpc::ServerWriter<v1::SceneChunk>* w) {
-  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal&) {
+  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal& who) {
+    const StreamSlots::Slot slot = scene_streams_.take(worker_stream_peer(who, *ctx));  // a slow reader holds a thread
     c_.scene_chunks(*req, [&](const v1::SceneChunk& chunk) { return !ctx->IsCancelled() && w->Write(chunk); });
   });
 }

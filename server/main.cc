@@ -153,7 +153,9 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
   app.add_option("--max-streams-per-peer", opt.max_streams_per_peer,
-                 "job watches and image downloads one token (or, without tokens, one address) may hold open at once")
+                 "streams one caller may hold open at once: a client's job watches, image downloads and scene "
+                 "uploads (per token, or without tokens per address); a worker's scene downloads (per enrolled "
+                 "worker, or per worker token and address)")
       ->capture_default_str()
       ->check(CLI::Range(1, 100000));
   app.add_option("--max-jobs-per-client", opt.max_jobs_per_client, "live jobs one client token may have at once")

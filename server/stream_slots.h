@@ -1,7 +1,8 @@
-// Long-lived calls counted per caller. A WatchJob, FetchImageChunks or UploadScene stream holds one of
-// the gRPC server's threads while it lasts, so a caller opening a thousand of them made a
-// thousand threads. Each caller (its token's name, or without tokens its address) may hold
-// `per_peer` at once; the next is refused with RESOURCE_EXHAUSTED naming the flag.
+// Long-lived calls counted per caller. A stream (a client's WatchJob, FetchImageChunks or
+// UploadScene; a worker's FetchSceneChunks) holds one of the gRPC server's threads while it
+// lasts, so a caller opening a thousand of them made a thousand threads. Each caller (the
+// services say who that is: grpc_services.cc) may hold `per_peer` at once; the next is
+// refused with RESOURCE_EXHAUSTED naming what is counted and the flag.
 #pragma once
 
 #include <cstddef>
@@ -15,7 +16,8 @@ namespace tessera {
 
 class StreamSlots {
  public:
-  explicit StreamSlots(size_t per_peer) : per_peer_(per_peer) {}
+  // `what`: the streams counted, for the error ("job watches, image downloads").
+  StreamSlots(size_t per_peer, std::string what) : per_peer_(per_peer), what_(std::move(what)) {}
 
   // A stream's place, given back when it is destroyed.
   class Slot {
@@ -35,10 +37,8 @@ class StreamSlots {
     std::lock_guard<std::mutex> lock(mu_);
     size_t& n = held_[peer];
     if (n >= per_peer_)
-      throw RequestError(RequestError::Code::kResourceExhausted,
-                         std::to_string(per_peer_) +
-                             " open streams (job watches, image downloads, scene uploads) per caller at most "
-                             "(--max-streams-per-peer)");
+      throw RequestError(RequestError::Code::kResourceExhausted, std::to_string(per_peer_) + " open streams (" + what_ +
+                                                                     ") per caller at most (--max-streams-per-peer)");
     ++n;
     return Slot(this, peer);
   }
@@ -50,6 +50,7 @@ class StreamSlots {
     if (it != held_.end() && --it->second == 0) held_.erase(it);
   }
   const size_t per_peer_;
+  const std::string what_;
   std::mutex mu_;
   std::map<std::string, size_t> held_;
 };

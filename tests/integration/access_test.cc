@@ -9,6 +9,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <regex>
@@ -308,6 +309,98 @@ TEST_F(Access, StreamsAreBoundedPerCaller) {
     if (!watched) std::this_thread::sleep_for(std::chrono::milliseconds(100));
   }
   EXPECT_TRUE(watched);
+}
+
+// A worker's scene download is a stream too: a reader that never reads holds a server
+// thread. Counted per worker (its token and address here; its own credential where
+// enrolled), apart from the clients' streams, so one worker cannot make a thread per call
+// and a farm sharing a token is not counted as one caller.
+TEST_F(Access, SceneDownloadsAreBoundedPerWorker) {
+  start_coordinator({"--max-streams-per-peer", "2"});
+  // 12 MB of triangles: more than the flow-control windows let through unread.
+  const int triangles = 1 << 18;
+  std::string bin(size_t(triangles) * 36, '\0');
+  for (int t = 0; t < triangles; ++t) {
+    const float x = float(t % 512), y = float(t / 512);
+    const float v[9] = {x, y, 0, x + 1, y, 0, x, y + 1, 0};
+    std::memcpy(&bin[size_t(t) * 36], v, 36);
+  }
+  write_file_atomic((dir / "big.bin").string(), bin);
+  const std::string scene = (dir / "big.gltf").string();
+  write_file_atomic(scene, R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],)"
+                           R"("meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],)"
+                           R"("accessors":[{"bufferView":0,"componentType":5126,"count":)" +
+                               std::to_string(3 * triangles) +
+                               R"(,"type":"VEC3","min":[0,0,0],"max":[512,513,0]}],)"
+                               R"("bufferViews":[{"buffer":0,"byteLength":)" +
+                               std::to_string(bin.size()) + R"(}],"buffers":[{"uri":"big.bin","byteLength":)" +
+                               std::to_string(bin.size()) + "}]}");
+  ASSERT_EQ(tessera("submit " + scene + " " + kFlags, kAlice).code, 0);
+  auto stub = v1::TesseraWorker::NewStub(grpc::CreateChannel(grpc_addr, grpc::InsecureChannelCredentials()));
+  auto call = [](const char* token) {
+    auto c = std::make_unique<grpc::ClientContext>();
+    c->AddMetadata("authorization", std::string("Bearer ") + token);
+    return c;
+  };
+  v1::RegisterRequest reg;
+  reg.set_version(kProtocolVersion);
+  reg.set_name("w");
+  reg.set_threads(1);
+  v1::RegisterResponse me;
+  ASSERT_TRUE(stub->Register(call(kWorker).get(), reg, &me).ok());
+  v1::GetTaskRequest ask;
+  ask.set_worker_id(me.worker_id());
+  ask.set_worker_secret(me.worker_secret());
+  v1::GetTaskResponse tasks;
+  ASSERT_TRUE(stub->GetTask(call(kWorker).get(), ask, &tasks).ok());
+  ASSERT_GT(tasks.tasks_size(), 0);
+  struct Download {
+    std::unique_ptr<grpc::ClientContext> ctx;
+    std::unique_ptr<grpc::ClientReader<v1::SceneChunk>> reader;
+  };
+  v1::FetchSceneRequest req;
+  req.set_scene_hash(tasks.tasks(0).scene_hash());
+  auto download = [&](const char* token) {
+    Download d{call(token), nullptr};
+    d.reader = stub->FetchSceneChunks(d.ctx.get(), req);
+    return d;
+  };
+  v1::SceneChunk chunk;
+  std::vector<Download> open;
+  for (int i = 0; i < 2; ++i) {
+    open.push_back(download(kWorker));
+    ASSERT_TRUE(open.back().reader->Read(&chunk));  // the manifest; the rest waits unread
+  }
+  Download third = download(kWorker);
+  while (third.reader->Read(&chunk)) {
+  }
+  const grpc::Status refused = third.reader->Finish();
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << refused.error_message();
+  EXPECT_NE(refused.error_message().find("scene downloads"), std::string::npos) << refused.error_message();
+  EXPECT_NE(refused.error_message().find("--max-streams-per-peer"), std::string::npos) << refused.error_message();
+  // Another worker's are counted apart.
+  Download other = download(kMallory);
+  EXPECT_TRUE(other.reader->Read(&chunk));
+  other.ctx->TryCancel();
+  while (other.reader->Read(&chunk)) {
+  }
+  other.reader->Finish();
+  for (Download& d : open) {
+    d.ctx->TryCancel();
+    while (d.reader->Read(&chunk)) {
+    }
+    d.reader->Finish();
+  }
+  // Closed streams give their places back (once the server notices): a whole download.
+  bool whole = false;
+  for (int i = 0; i < 30 && !whole; ++i) {
+    Download again = download(kWorker);
+    uint64_t bytes = 0;
+    while (again.reader->Read(&chunk)) bytes += chunk.data().size();
+    whole = again.reader->Finish().ok() && bytes >= bin.size();
+    if (!whole) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_TRUE(whole);
 }
 
 // Issue 23: SIGTERM stops the coordinator within seconds even while it checks a scene
