@@ -4,6 +4,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 
+#include "server/json_text.h"
 #include "server/request_error.h"
 
 namespace tessera {
@@ -11,8 +12,7 @@ namespace {
 
 void error(httplib::Response& res, int status, const std::string& why) {
   res.status = status;
-  res.set_content(nlohmann::json{{"error", why}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace),
-                  "application/json");
+  res.set_content(lenient_dump({{"error", why}}), "application/json");
 }
 
 // Who asks, if the request may act at all (else the answer is written): the caller's

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/util/text.h"
+#include "server/json_text.h"
 #include "server/live_page.h"
 #include "server/metrics.h"
 #include "server/page_actions.h"
@@ -51,11 +52,6 @@ std::string job_status_json(v1::JobStatus status, uint32_t tiles_from) {
 }
 
 namespace {
-// JSON text that never throws: a byte that is not UTF-8 (peer text kept before names were
-// cut on character boundaries) is shown as U+FFFD rather than failing the whole answer.
-std::string lenient_dump(const nlohmann::json& j) {
-  return j.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-}
 
 // The query parameter `name`, when given, as a whole number into `value`; false (and a 400
 // answer naming it) when it is not one.

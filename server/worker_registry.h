@@ -49,6 +49,8 @@ struct WorkerInfo {
 class WorkerRegistry {
  public:
   static constexpr uint32_t kMaxThreads = 4096;  // a worker's claimed threads, at most
+  // A worker's name and host are kept to this many bytes (whole UTF-8 characters).
+  static constexpr size_t kMaxTextBytes = 256;
   // `threads` is clamped to [1, kMaxThreads]: it weighs the worker's share of the work.
   // The id (53 bits) and, into `secret` when given, 128 bits (hex) come from OpenSSL's
   // CSPRNG: neither says anything about another worker's.
