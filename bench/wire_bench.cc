@@ -53,7 +53,7 @@ void Decode(benchmark::State& state) {
 }
 
 // A plan whose film holds render-like sums, as a checkpoint of it is written band by band
-// (version 3) and read back into a plan.
+// (the current version, checkpoint.h) and read back into a plan.
 void CheckpointFilm(benchmark::State& state) {
   RenderSettings s;
   s.camera.width = int(state.range(1));

@@ -11,6 +11,7 @@
 #include <cstddef>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 
 #include "core/render/frame_plan.h"
 #include "core/util/text.h"
@@ -488,6 +489,16 @@ std::vector<SplatRecord> decode_splats(const std::string& compressed, const Spla
       for (int c = 0; c < 4; ++c)
         if (e.v[c] < 0 || (e.v[c] > 0 && paths_here == 0) || (uint64_t(e.v[c]) >> (c < 3 ? 44 : 62)) > paths_here)
           throw WireError("splats: sums no light path could give");
+      // Non-negative splats: their squared luminances sum to at most their luminance sum's
+      // square, give or take each one's rounding (at most paths_here splats; 2^-24 units
+      // for the channels, 2^-32 for the squares). Saturated channels bound nothing.
+      constexpr int64_t kSaturated = std::numeric_limits<int64_t>::max();
+      if (e.v[0] < kSaturated && e.v[1] < kSaturated && e.v[2] < kSaturated) {
+        const double k = double(paths_here);
+        const double lum = 0.2126 * double(e.v[0]) + 0.7152 * double(e.v[1]) + 0.0722 * double(e.v[2]) + 0.5 * k;
+        if (double(e.v[3]) > lum * lum * 0x1p-16 * (1 + 1e-4) + 0.5 * k + 1)
+          throw WireError("splats: a squared luminance no light path could give");
+      }
     }
   return out;
 }

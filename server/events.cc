@@ -6,6 +6,8 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
+#include "server/json_text.h"
+
 namespace tessera {
 namespace {
 
@@ -59,7 +61,7 @@ std::string events_json(const std::vector<Event>& events) {
                     {"worker", e.worker()},
                     {"who", e.who()},
                     {"detail", e.detail()}});
-  return nlohmann::json{{"events", std::move(list)}}.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+  return lenient_dump({{"events", std::move(list)}});
 }
 
 size_t event_limit(uint32_t asked) { return asked == 0 ? 100 : std::min<uint32_t>(asked, 1000); }

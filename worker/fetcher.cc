@@ -63,6 +63,11 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
     h->prepared = scenes_.prepare(h->task);
     h->passes = task_passes(h->task, h->prepared->renderer->settings());
     h->base = task_base(h->task, h->rect, h->prepared->renderer->settings().sum_planes());
+  } catch (const SceneBusy& e) {
+    spdlog::warn("task {}: {} (given back, to take again later)", h->task.task_id(), e.what());
+    link_.release(h->task.task_id(), "");  // not a failure of the task
+    backoff_.wait(&stop);
+    return;
   } catch (const std::exception& e) {
     spdlog::warn("task {}: {}", h->task.task_id(), e.what());
     link_.release(h->task.task_id(), e.what());  // another worker may manage; this one backs off

@@ -85,7 +85,9 @@ std::string SceneCache::fetch(const std::string& hash) {
     });
     if (st.ok()) break;
     failures = at() > before ? 0 : failures + 1;
-    if (!unreachable(st) || failures >= kFetchAttempts)
+    const bool busy = st.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED;
+    if (busy && failures >= kFetchAttempts) throw SceneBusy("fetch scene " + hash + ": " + st.error_message());
+    if (!(unreachable(st) || busy) || failures >= kFetchAttempts)
       throw std::runtime_error("fetch scene " + hash + ": " + st.error_message());
     if (rx) {  // goes on from the first byte it lacks
       req.set_file(rx->next_file());

@@ -9,6 +9,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <stdexcept>
 #include <string>
 
 #include "core/render/tile_renderer.h"
@@ -24,6 +25,14 @@ struct PreparedRenderer {
   std::string base_key;  // scene and settings but the frame: renderers sharing one BVH
 };
 
+// The coordinator refused the scene's download for now (RESOURCE_EXHAUSTED: its bound on
+// one worker's, or one address's, open downloads) through every attempt: not the task's
+// fault, so the task goes back without an error (a failure would count against its job).
+class SceneBusy : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
 class SceneCache {
  public:
   // Streams a scene from the coordinator (FetchSceneChunks) from the request's (file,
@@ -32,14 +41,14 @@ class SceneCache {
   using Piece = std::function<void(const v1::SceneChunk&)>;
   using FetchChunks = std::function<grpc::Status(const v1::FetchSceneRequest& request, const Piece& piece)>;
   static constexpr size_t kKeptRenderers = 8;  // jobs alternate by priority, frames follow each other
-  // Calls in a row that find the coordinator out of reach without bringing a byte.
+  // Calls in a row that find the coordinator out of reach (or busy) without bringing a byte.
   static constexpr int kFetchAttempts = 4;
 
   SceneCache(std::string dir, FetchChunks fetch) : dir_(std::move(dir)), fetch_(std::move(fetch)) {}
 
   // The renderer for a task's scene and settings. Throws WireError (a bad hash, pieces or
   // bytes that do not match it), SceneError and SettingsError (a scene or settings this
-  // worker cannot render), or std::runtime_error saying why the fetch failed.
+  // worker cannot render), SceneBusy, or std::runtime_error saying why the fetch failed.
   std::shared_ptr<const PreparedRenderer> prepare(const v1::Task& task);
 
  private:

@@ -20,7 +20,7 @@ double lum2_for(const PixelSums& p, double mean_variance) {
   return s1 * s1 / p.n + mean_variance * double(p.n) * double(p.n - 1);
 }
 
-// std::llround's result (halves away from zero) for 0 <= x < 2^62, inline (llround is a
+// std::llround's result (halves away from zero) for 0 <= x <= 2^62, inline (llround is a
 // libm call): x - trunc(x) is exact, so comparing it with 1/2 decides as llround does.
 int64_t round_nonnegative(double x) {
   const int64_t t = int64_t(x);

@@ -93,7 +93,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
     splat_plan.merge(t.tile, t.pass, tile(size_t(t.rect.area())));
     splats.add(t.tile, t.pass, {records[1]});
   }
-  std::ofstream(fs::path(seeds) / "checkpoint4splats", std::ios::binary)
+  std::ofstream(fs::path(seeds) / "checkpoint5splats", std::ios::binary)
       << char(1) << tessera::encode_checkpoint(splat_plan, 2.5, &splats);
   std::exit(0);
 }

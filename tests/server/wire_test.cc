@@ -391,6 +391,10 @@ TEST(WireSplats, WhatNoTaskCouldSendIsRefusedNamingWhy) {
   refused({r}, limits(1), "no light path could give");
   r.entries = {{2, {int64_t(41) << 44, 1, 1, 1}}};  // 10 paths x 4 splats of at most 2^20
   refused({r}, limits(1), "no light path could give");
+  r.entries = {{2, {int64_t(1) << 24, int64_t(1) << 24, int64_t(1) << 24, int64_t(1) << 40}}};  // lum 1, lum^2 256
+  refused({r}, limits(1), "a squared luminance no light path could give");
+  r.entries = {{2, {int64_t(1) << 24, int64_t(1) << 24, int64_t(1) << 24, int64_t(1) << 32}}};  // lum 1, lum^2 1: fine
+  EXPECT_NO_THROW(decode_splats(encode_splats({r}), limits(1)));
   r.entries = {{120, {1, 1, 1, 1}}};  // on the odd plane, with no odd paths
   refused({r}, limits(1), "no light path could give");
   // More bytes than such a task's records could fill, declared: refused before allocating.

@@ -35,6 +35,7 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   // each (UNAVAILABLE), as a lost connection would.
   int scene_streams_to_cut = 0;
   int cut_after_pieces = 2;
+  int scene_streams_busy = 0;  // the next ones are refused (RESOURCE_EXHAUSTED), as a busy coordinator does
   bool damage_scenes = false;  // a byte of every piece flipped: bytes that do not hash to the scene's hash
   std::set<uint64_t> refuse;   // Heartbeat refuses these tasks
   grpc::Status unregister_status;
@@ -157,6 +158,12 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
     std::lock_guard<std::mutex> lock(mu);
     ++scene_fetches;
     scene_requests.push_back(req);
+    if (scene_streams_busy > 0) {
+      --scene_streams_busy;
+      return new Stream({},
+                        grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                     "64 open streams (scene downloads) per caller at most (--max-streams-per-peer)"));
+    }
     const auto it = scenes.find(req.scene_hash());
     if (it == scenes.end())
       return new Stream({}, grpc::Status(grpc::StatusCode::NOT_FOUND, "no scene " + req.scene_hash()));

@@ -373,6 +373,23 @@ TEST_F(WorkerTest, ATaskWhoseSceneCannotLoadIsReleasedWithTheError) {
   EXPECT_TRUE(fake->results.empty());
 }
 
+// A coordinator at its bound of open scene downloads (RESOURCE_EXHAUSTED) is busy, not
+// broken: the fetch tries again, and after its attempts gives the task back without an
+// error (an error would count as the task failing, and two fail its job); the next lease
+// of the scene's tasks renders once the downloads are let through.
+TEST_F(WorkerTest, ABusyCoordinatorsSceneDownloadGivesTheTaskBackWithoutAFailure) {
+  fake->scene_streams_busy = worker::SceneCache::kFetchAttempts + 1;
+  fake->task_batches.push_back({task(63, {0, 0, 8, 8}, 0, 1)});
+  fake->task_batches.push_back({task(64, {0, 0, 8, 8}, 0, 1)});
+  start(options());
+  ASSERT_TRUE(fake->wait_until([&] { return fake->result_for(64) != nullptr; }));
+  EXPECT_TRUE(finish());
+  ASSERT_EQ(fake->releases.size(), 1u);
+  EXPECT_EQ(fake->releases[0].task_id(), 63u);
+  EXPECT_EQ(fake->releases[0].error(), "");
+  EXPECT_EQ(fake->scene_fetches, worker::SceneCache::kFetchAttempts + 2);  // 4 refused, then 1 refused and 1 whole
+}
+
 // The fetcher's call (worker/fetcher.cc), made to a fake coordinator.
 worker::SceneCache::FetchChunks fetch_from(FakeCoordinator& fake) {
   return [&fake](const v1::FetchSceneRequest& req, const std::function<void(const v1::SceneChunk&)>& piece) {
