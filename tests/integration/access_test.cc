@@ -25,6 +25,21 @@
 namespace tessera {
 namespace {
 
+// A gRPC call made with a token, and a worker's registration: for the tests that speak to
+// the worker service themselves.
+std::unique_ptr<grpc::ClientContext> call(const char* token) {
+  auto c = std::make_unique<grpc::ClientContext>();
+  c->AddMetadata("authorization", std::string("Bearer ") + token);
+  return c;
+}
+v1::RegisterRequest registration() {
+  v1::RegisterRequest reg;
+  reg.set_version(kProtocolVersion);
+  reg.set_name("w");
+  reg.set_threads(1);
+  return reg;
+}
+
 TEST_F(Access, EveryCallNeedsATokenWhoseRoleAllowsIt) {
   start_coordinator();
   // No token, or an unknown one: refused, saying what is missing.
@@ -88,15 +103,7 @@ TEST_F(Access, EveryCallNeedsATokenWhoseRoleAllowsIt) {
 TEST_F(Access, NoWorkerCanActUnderAnothersId) {
   start_coordinator({"--max-workers-per-token", "3"});
   auto stub = v1::TesseraWorker::NewStub(grpc::CreateChannel(grpc_addr, grpc::InsecureChannelCredentials()));
-  auto call = [](const char* token) {
-    auto c = std::make_unique<grpc::ClientContext>();
-    c->AddMetadata("authorization", std::string("Bearer ") + token);
-    return c;
-  };
-  v1::RegisterRequest reg;
-  reg.set_version(kProtocolVersion);
-  reg.set_name("w");
-  reg.set_threads(1);
+  const v1::RegisterRequest reg = registration();
   v1::RegisterResponse honest, mallory;
   ASSERT_TRUE(stub->Register(call(kWorker).get(), reg, &honest).ok());
   ASSERT_TRUE(stub->Register(call(kMallory).get(), reg, &mallory).ok());
@@ -341,15 +348,7 @@ TEST_F(Access, SceneDownloadsAreBoundedPerWorker) {
   no_probe.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
   auto stub =
       v1::TesseraWorker::NewStub(grpc::CreateCustomChannel(grpc_addr, grpc::InsecureChannelCredentials(), no_probe));
-  auto call = [](const char* token) {
-    auto c = std::make_unique<grpc::ClientContext>();
-    c->AddMetadata("authorization", std::string("Bearer ") + token);
-    return c;
-  };
-  v1::RegisterRequest reg;
-  reg.set_version(kProtocolVersion);
-  reg.set_name("w");
-  reg.set_threads(1);
+  const v1::RegisterRequest reg = registration();
   v1::RegisterResponse me;
   ASSERT_TRUE(stub->Register(call(kWorker).get(), reg, &me).ok());
   v1::GetTaskRequest ask;
