@@ -491,11 +491,12 @@ std::vector<SplatRecord> decode_splats(const std::string& compressed, const Spla
           throw WireError("splats: sums no light path could give");
       // Non-negative splats: their squared luminances sum to at most their luminance sum's
       // square, give or take each one's rounding (at most paths_here splats; 2^-24 units
-      // for the channels, 2^-32 for the squares). Saturated channels bound nothing.
+      // for the channels, 2^-32 for the squares; the luminance in float, well within the
+      // margin). Saturated channels bound nothing.
       constexpr int64_t kSaturated = std::numeric_limits<int64_t>::max();
       if (e.v[0] < kSaturated && e.v[1] < kSaturated && e.v[2] < kSaturated) {
         const double k = double(paths_here);
-        const double lum = 0.2126 * double(e.v[0]) + 0.7152 * double(e.v[1]) + 0.0722 * double(e.v[2]) + 0.5 * k;
+        const double lum = double(Rgb(float(e.v[0]), float(e.v[1]), float(e.v[2])).luminance()) + 0.5 * k;
         if (double(e.v[3]) > lum * lum * 0x1p-16 * (1 + 1e-4) + 0.5 * k + 1)
           throw WireError("splats: a squared luminance no light path could give");
       }

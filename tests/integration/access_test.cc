@@ -369,12 +369,18 @@ TEST_F(Access, SceneDownloadsAreBoundedPerWorker) {
     return d;
   };
   v1::SceneChunk chunk;
+  auto close = [&](Download& d) {  // cancelled, read to its end
+    d.ctx->TryCancel();
+    while (d.reader->Read(&chunk)) {
+    }
+    d.reader->Finish();
+  };
   std::vector<Download> open;
   for (int i = 0; i < 2; ++i) {
     open.push_back(download(kWorker));
     ASSERT_TRUE(open.back().reader->Read(&chunk));  // the manifest; the rest waits unread
   }
-  Download third = download(kWorker);
+  Download third = download(kWorker);  // (read to its end uncancelled: the server's answer)
   while (third.reader->Read(&chunk)) {
   }
   const grpc::Status refused = third.reader->Finish();
@@ -384,16 +390,8 @@ TEST_F(Access, SceneDownloadsAreBoundedPerWorker) {
   // Another worker's are counted apart.
   Download other = download(kMallory);
   EXPECT_TRUE(other.reader->Read(&chunk));
-  other.ctx->TryCancel();
-  while (other.reader->Read(&chunk)) {
-  }
-  other.reader->Finish();
-  for (Download& d : open) {
-    d.ctx->TryCancel();
-    while (d.reader->Read(&chunk)) {
-    }
-    d.reader->Finish();
-  }
+  close(other);
+  for (Download& d : open) close(d);
   // Closed streams give their places back (once the server notices): a whole download.
   bool whole = false;
   for (int i = 0; i < 30 && !whole; ++i) {

@@ -27,6 +27,13 @@ struct Saved {
   Film film{Rect{2, 3, 5, 4}};
 };
 
+// `bytes` with the checksum a checkpoint ends with: older versions made from newer files.
+std::string with_checksum(std::string bytes) {
+  const uint64_t sum = XXH64(bytes.data(), bytes.size(), 0);
+  bytes.append(reinterpret_cast<const char*>(&sum), 8);
+  return bytes;
+}
+
 Saved sample() {
   Saved s;
   s.state.progress = {{2, false, 0.25f}, {3, true, 0.125f}};
@@ -96,9 +103,7 @@ TEST(JobStore, ACheckpointOfTheFirstVersionIsStillRead) {
   std::string v1 = v2.substr(0, chunk_at) + v2.substr(chunk_at + 4, v2.size() - 8 - chunk_at - 4);
   const uint32_t version = 1;
   std::memcpy(v1.data() + 4, &version, 4);
-  const uint64_t sum = XXH64(v1.data(), v1.size(), 0);
-  v1.append(reinterpret_cast<const char*>(&sum), 8);
-  const Checkpoint c = decode_checkpoint(v1);
+  const Checkpoint c = decode_checkpoint(with_checksum(v1));
   EXPECT_EQ(c.elapsed, 7);
   ASSERT_EQ(c.film.window(), s.film.window());
   for (size_t i = 0; i < 20; ++i) EXPECT_EQ(c.film.pixels()[i].r, s.film.pixels()[i].r) << i;
@@ -223,12 +228,10 @@ TEST(JobStore, AVersion4CheckpointsSplatVarianceIsReadInTodaysUnits) {
   v4 += z4;
   const uint32_t version = 4;
   std::memcpy(v4.data() + 4, &version, 4);
-  const uint64_t sum = XXH64(v4.data(), v4.size(), 0);
-  v4.append(reinterpret_cast<const char*>(&sum), 8);
 
   FramePlan b(settings);
   FrameSplats restored(settings, uint32_t(b.tiles().size()));
-  EXPECT_EQ(read_checkpoint(v4, b, true, &restored), 2);
+  EXPECT_EQ(read_checkpoint(with_checksum(v4), b, true, &restored), 2);
   ASSERT_TRUE(restored.any());
   const SplatFilm& film = *restored.film();
   EXPECT_EQ(film.paths(), 10u);
