@@ -23,7 +23,16 @@ if [ ! -d "$work/node_modules/puppeteer-core" ]; then
 fi
 T=$(mktemp -d)
 pids=()
-cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; wait 2>/dev/null || true; rm -rf "$T"; }
+# On a failure the coordinator's and the worker's last words are shown before their folder goes.
+cleanup() {
+  local rc=$?
+  for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done
+  wait 2>/dev/null || true
+  if [ "$rc" -ne 0 ] && [ "$rc" -ne 77 ]; then
+    for f in coord.err worker.err; do [ -f "$T/$f" ] && { echo "--- $f (last 40 lines)"; tail -40 "$T/$f"; }; done
+  fi
+  rm -rf "$T"
+}
 trap cleanup EXIT
 alice=alice-$(openssl rand -hex 12) viewer=viewer-$(openssl rand -hex 12) admin=admin-$(openssl rand -hex 12)
 worker=worker-$(openssl rand -hex 12)
