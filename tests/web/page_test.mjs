@@ -24,7 +24,7 @@ try {
   const res = await page.goto(url, {waitUntil: 'load'});
   check(res.status() === 200, 'the page loads with a viewer token');
   const text = id => page.$eval(id, e => e.textContent);
-  const until = (fn, ...args) => page.waitForFunction(fn, {timeout: 20000}, ...args);
+  const until = (fn, ...args) => page.waitForFunction(fn, {timeout: 45000}, ...args);
   await until(j => document.getElementById('jobs').textContent.includes(j), job);
   check(true, 'the jobs table lists the job');
   await until(() => document.getElementById('workers').rows.length > 1);
@@ -38,8 +38,17 @@ try {
   check((await text('#events')).includes('w<img src=x id=pwned'), 'events show the worker name as text');
 
   const setToken = t => page.$eval('#token', (e, v) => { e.value = v; e.dispatchEvent(new Event('change')); }, t);
-  const click = (kind, id, act) => page.evaluate((k, i, a) =>
-    document.querySelector(`button[data-kind="${k}"][data-id="${CSS.escape(i)}"][data-act="${a}"]`).click(), kind, id, act);
+  // Clicks the button `act` of the job with id `id` (or of the worker named `id`) as soon
+  // as the page shows it. Found and clicked in one synchronous step: the page redraws its
+  // tables every second, and a button a redraw replaced no longer reaches the page's
+  // handler. A worker is found by its name: its id would change if it registered again.
+  const click = (kind, id, act) => until((k, i, a) => {
+    const b = [...document.querySelectorAll(`button[data-kind="${k}"][data-act="${a}"]`)].find(b =>
+      k === 'workers' ? b.closest('tr').cells[1].textContent === i : b.dataset.id === i);
+    if (!b) return false;
+    b.click();
+    return true;
+  }, kind, id, act);
   const state = () => page.evaluate(j => {
     const row = [...document.querySelectorAll('#jobs tr.job')].find(r => r.dataset.id === j);
     return row ? row.cells[4].textContent : null;
@@ -66,7 +75,7 @@ try {
   check(true, 'the owner cancels the job');
 
   // A worker: drain and resume, as an admin.
-  const worker = await page.evaluate(() => document.querySelector('#workers button[data-act]').dataset.id);
+  const worker = await page.evaluate(() => document.querySelector('#workers button[data-act]').closest('tr').cells[1].textContent);
   await click('workers', worker, 'drain');
   await until(() => document.getElementById('error').textContent.includes('only an admin'));
   check(true, 'a client may not drain a worker');
