@@ -63,15 +63,13 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
     h->prepared = scenes_.prepare(h->task);
     h->passes = task_passes(h->task, h->prepared->renderer->settings());
     h->base = task_base(h->task, h->rect, h->prepared->renderer->settings().sum_planes());
-  } catch (const SceneBusy& e) {
-    spdlog::warn("task {}: {} (given back, to take again later)", h->task.task_id(), e.what());
-    link_.release(h->task.task_id(), "");  // not a failure of the task
-    backoff_.wait(&stop);
-    return;
   } catch (const std::exception& e) {
-    spdlog::warn("task {}: {}", h->task.task_id(), e.what());
-    link_.release(h->task.task_id(), e.what());  // another worker may manage; this one backs off
-    backoff_.wait(&stop);
+    // A busy coordinator (SceneBusy) is not a failure of the task: it goes back without an
+    // error, to be taken again later. Any other error: another worker may manage.
+    const bool busy = dynamic_cast<const SceneBusy*>(&e) != nullptr;
+    spdlog::warn("task {}: {}{}", h->task.task_id(), e.what(), busy ? " (given back, to take again later)" : "");
+    link_.release(h->task.task_id(), busy ? "" : e.what());
+    backoff_.wait(&stop);  // either way this one backs off
     return;
   }
   if (!h->task.active().empty()) h->mask = reinterpret_cast<const uint8_t*>(h->task.active().data());
