@@ -75,7 +75,7 @@ try {
   check(true, 'the owner cancels the job');
 
   // A worker: drain and resume, as an admin.
-  const worker = await page.evaluate(() => document.querySelector('#workers button[data-act]').closest('tr').cells[1].textContent);
+  const worker = await (await until(() => document.querySelector('#workers button[data-act]')?.closest('tr').cells[1].textContent)).jsonValue();
   await click('workers', worker, 'drain');
   await until(() => document.getElementById('error').textContent.includes('only an admin'));
   check(true, 'a client may not drain a worker');
