@@ -26,7 +26,9 @@ namespace tessera {
 // Version 9: half-buffers (the kAovHalves bit of RenderSettings.aovs: a task's sums, its
 // result's and a run's base, are two planes) and RenderSettings.denoise.
 // Version 10: splats' squared luminance in 2^-32 units (was 2^-12: core/render/splats.h).
-constexpr uint32_t kProtocolVersion = 10;
+// Version 11: which camera samples trace light paths (LightTracer::traces: every pixel's
+// now reach both half-buffers), so a version-10 worker's splats differ from a local render's.
+constexpr uint32_t kProtocolVersion = 11;
 constexpr size_t kBytesPerPixel = 36;  // r, g, b, lum2 (float64) + n (uint32)
 // gRPC message limit, for images and inline scene bundles (scenes of any size stream in
 // pieces: scene_chunks.h).

@@ -108,6 +108,12 @@ void JobLifecycle::task_failed(Job& job, const std::string& worker, const std::s
   if (snapshots_.final_snapshot(job, now)) fx.writes.push_back(jobs_.shared(job.id()));  // keep what was rendered
 }
 
+void JobLifecycle::task_failed(Job& job, const WorkerInfo& w, const std::string& error, double now, Effects& fx) {
+  fx.events.push_back({0, 0, "task.failed", job.sequence.empty() ? job.id() : job.sequence, w.name, w.principal,
+                       utf8_prefix(error, 1024)});
+  task_failed(job, w.identity(), error, now, fx);
+}
+
 std::optional<RowEnd> JobLifecycle::sequence_end_due(const std::string& id) {
   Sequence* s = jobs_.find_sequence(id);
   if (!s || s->live() || s->end_recorded || s->end_recording || s->removed) return std::nullopt;

@@ -51,6 +51,8 @@ class JobLifecycle {
   // could not render a task of the job: once tasks failed on kFailuresToFail different
   // workers, the job fails with the error, keeping its image.
   void task_failed(Job& job, const std::string& worker, const std::string& error, double now, Effects& fx);
+  // The same for worker `w`, reported as a task.failed event naming it and the error.
+  void task_failed(Job& job, const WorkerInfo& w, const std::string& error, double now, Effects& fx);
 
   // A sequence's end can be recorded when it has ended and, if DONE, every frame's final
   // checkpoint is on disk: then it is marked as being recorded and returned.

@@ -35,6 +35,7 @@ struct Lease {
   // or it expired), so a registration's first merged results are the checked ones.
   bool probation = false;
   uint32_t tile_resets = 0;  // its tile's Job::tile_resets when granted
+  bool refused = false;      // a result of it did not decode (ResultIntake::refuse): counted once
 };
 
 class LeaseTable {

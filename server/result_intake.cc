@@ -49,11 +49,9 @@ SplatLimits ResultIntake::splat_limits(const RenderSettings& s, const Rect& tile
   l.records = passes.size();
   l.area = uint64_t(s.effective_window().area());
   l.planes = s.sum_planes();
-  uint32_t longest = 0;
-  for (const auto& [s0, s1] : passes) longest = std::max(longest, s1 - s0);
-  // A pixel traces a light path for one sample in LightTracer::kSamplesPerLightPath.
-  l.max_paths =
-      uint64_t(tile.area()) * ((longest + LightTracer::kSamplesPerLightPath - 1) / LightTracer::kSamplesPerLightPath);
+  uint64_t most = 0;  // a record is a pass's: the most light paths a pixel traces in one
+  for (const auto& [s0, s1] : passes) most = std::max(most, LightTracer::max_paths_per_pixel(s0, s1));
+  l.max_paths = uint64_t(tile.area()) * most;
   l.max_splats_per_path = uint64_t(std::max(1, s.max_depth));
   return l;
 }
@@ -108,8 +106,9 @@ void ResultIntake::decode(Batch& b) {
     } catch (const SplatsOverCap&) {  // counted as rejected by merge(), which shortens the job's runs
       in.sums.reset();
       in.splats_over_cap = true;
-    } catch (const WireError&) {  // counted as rejected by merge()
+    } catch (const WireError& e) {  // counted as rejected by merge(), which fails the task
       in.sums.reset();
+      in.refused = e.what();
     }
 }
 
@@ -125,11 +124,25 @@ void ResultIntake::shorten_runs(const v1::TaskResult& result, double now, Effect
   fx.changed = true;
 }
 
+void ResultIntake::refuse(const v1::TaskResult& result, const std::string& why, double now, Effects& fx) {
+  Lease* l = p_.leases.live(result.task_id());
+  if (!l || l->worker != result.worker_id() || l->check || l->refused) return;
+  l->refused = true;
+  Job* job = p_.jobs.find_job(l->job);
+  const WorkerInfo* w = p_.workers.find(result.worker_id());
+  if (job && w) p_.lifecycle.task_failed(*job, *w, "result refused: " + why, now, fx);
+}
+
 void ResultIntake::merge(Batch& b, double now, Effects& fx) {
   for (Incoming& in : b.incoming) {
     if (!in.sums) {
       ++p_.counters.results_rejected;
-      if (in.splats_over_cap) shorten_runs(*b.results[in.index], now, fx);
+      if (in.splats_over_cap)
+        shorten_runs(*b.results[in.index], now, fx);
+      else
+        refuse(*b.results[in.index], in.refused, now, fx);
+      b.acks[in.index].set_refused(in.splats_over_cap ? "splats past the most a result may carry"
+                                                      : "result refused: " + in.refused);
       continue;
     }
     const v1::TaskResult& result = *b.results[in.index];

@@ -8,6 +8,7 @@
 #pragma once
 
 #include <optional>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -54,6 +55,7 @@ class ResultIntake {
     RenderSettings::LightTracer light_tracer = RenderSettings::LightTracer::kOff;  // the job's
     std::vector<SplatRecord> splats;                                               // decoded: one per pass, or none
     bool splats_over_cap = false;  // its splats passed the task's cap (SplatsOverCap): its run was too long
+    std::string refused;           // why its sums, AOVs or splats did not decode (WireError), if so
   };
   struct Batch {
     std::vector<const v1::TaskResult*> results;
@@ -72,6 +74,13 @@ class ResultIntake {
   // A result whose run of passes carried more splats than a result may (SplatsOverCap):
   // its job's runs are halved (Job::max_run) and its lease ends with the run ready again.
   void shorten_runs(const v1::TaskResult& result, double now, Effects& fx);
+  // A result its task's holder sent that does not decode (`why`): the task failed on that
+  // worker (JobLifecycle::task_failed: a task.failed event naming why; tasks failed on two
+  // workers fail the job), once a lease. The lease still waits for a good result until it
+  // expires (the tile is not handed straight back to a worker that just failed it). Before,
+  // nothing was said or counted: a job whose every worker sent such results (a version
+  // skew, a bug) went round for ever in silence.
+  void refuse(const v1::TaskResult& result, const std::string& why, double now, Effects& fx);
 
   Parts p_;
 };

@@ -77,9 +77,7 @@ void WorkerLifecycle::release(uint64_t worker, uint64_t task, const std::string&
   if (!job) return;
   const WorkerInfo* w = p_.workers.find(worker);
   if (!w) return;  // (it called with its secret: registered)
-  fx.events.push_back({0, 0, "task.failed", job->sequence.empty() ? job_id : job->sequence, w->name, w->principal,
-                       utf8_prefix(error, 1024)});
-  p_.lifecycle.task_failed(*job, w->identity(), error, now, fx);
+  p_.lifecycle.task_failed(*job, *w, error, now, fx);
 }
 
 void WorkerLifecycle::unregister(uint64_t worker, double now, Effects& fx) {

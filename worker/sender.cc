@@ -77,6 +77,10 @@ void Sender::send_loop() {
       call.held = acks.held_ms() / 1000.0;
       sent = st.ok();
       if (sent) queue_.note_upload(call);
+      for (int k = 0; sent && k < acks.acks_size() && k < results.results_size(); ++k)
+        if (!acks.acks(k).refused().empty())  // (the coordinator counts it as the task failing here)
+          spdlog::warn("the coordinator refused task {}'s result: {}", results.results(k).task_id(),
+                       acks.acks(k).refused());
       if (!sent) {
         spdlog::debug("submit: {}", st.error_message());
         std::this_thread::sleep_for(std::chrono::milliseconds(100 << attempt));

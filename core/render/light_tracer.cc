@@ -42,6 +42,17 @@ LightTracingDecision light_tracing_decision(const Scene& scene, const LightSet& 
   return {true, s.light_tracer == LT::kOn ? "on (--light-tracer on)" : "on: the scene has mirror or glass surfaces"};
 }
 
+uint64_t LightTracer::max_paths_per_pixel(uint32_t s0, uint32_t s1) {
+  constexpr uint32_t kB = kSamplesPerLightPath;
+  // Of samples [0, n), a pixel whose id is r modulo kB traces one in each whole block and
+  // one in the part block n / kB when its pick, (r + n / kB) % kB, lies below n % kB.
+  auto before = [](uint32_t r, uint32_t n) -> uint64_t { return n / kB + ((r + n / kB) % kB < n % kB ? 1 : 0); };
+  uint64_t most = 0;
+  if (s1 <= s0) return 0;
+  for (uint32_t r = 0; r < kB; ++r) most = std::max(most, before(r, s1) - before(r, s0));
+  return most;
+}
+
 LightTracer::LightTracer(const Scene& scene, const Accel& accel, const LightSet& lights, const Camera& camera,
                          const RenderSettings& s)
     : scene_(scene),

@@ -55,11 +55,14 @@ bool scene_has_delta_lobes(const Scene& scene);
 
 class LightTracer {
  public:
-  // One light path for every this many camera samples: camera sample s of image pixel p
-  // traces one when (p + s) is a multiple of it, a quarter of each pixel's samples, spread
-  // evenly over pixels and the half-buffers. On CBspheres (480x360, 64 spp) the light
-  // tracer's error is a small part of the image's once every sample has one: a light path
-  // per 4 samples kept 93% of the error reduction for 25% of the cost (docs/light-tracing.md).
+  // One light path for every this many camera samples: of the samples 4k to 4k + 3 of
+  // image pixel p, the one at (p + k) % 4 traces one (traces()). So a pixel traces one in
+  // each aligned block, on an even and an odd sample in turn: each half-buffer gets light
+  // paths from every pixel, even in a window one pixel wide. (Until protocol 11 it was the
+  // samples with (p + s) % 4 == 0, which gave all of a pixel's to the half of its parity.)
+  // On CBspheres (480x360, 64 spp) the light tracer's error is a small part of the image's
+  // once every sample has one: a light path per 4 samples kept 93% of the error reduction
+  // for 25% of the cost (docs/light-tracing.md).
   static constexpr uint32_t kSamplesPerLightPath = 4;
   // Paths with any number of smooth vertices are the light tracer's (a limit of 1 or 2
   // left the walls' indirect caustics to the path tracer: 2-4x worse there).
@@ -72,7 +75,12 @@ class LightTracer {
   // dragon's own error is mostly its facets' aliasing, which splitting does not touch),
   // cornell-spheres.gltf's 1.23x at 2 and 1.31x at 3 (docs/light-tracing.md).
   static constexpr int kSpecularSplits = 2;
-  static bool traces(uint64_t pixel_id, uint32_t sample) { return (pixel_id + sample) % kSamplesPerLightPath == 0; }
+  static bool traces(uint64_t pixel_id, uint32_t sample) {
+    return sample % kSamplesPerLightPath == (pixel_id + sample / kSamplesPerLightPath) % kSamplesPerLightPath;
+  }
+  // How many of samples [s0, s1) trace a light path for a pixel, at most over all pixels:
+  // one a block of four, two where the window starts and ends in parts of blocks.
+  static uint64_t max_paths_per_pixel(uint32_t s0, uint32_t s1);
 
   LightTracer(const Scene& scene, const Accel& accel, const LightSet& lights, const Camera& camera,
               const RenderSettings& settings);

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <tuple>
@@ -469,6 +470,49 @@ TEST(LightTracer, SameBitsAtAnyThreadCountAndTiling) {
     all += a.film.pixels()[i].lum_sum() / a.film.pixels()[i].n;
     odd += a.film.odd()[i].lum_sum() / a.film.odd()[i].n;
   }
+  EXPECT_NEAR(odd / all, 1, 0.05);
+}
+
+// Every pixel traces a light path in each aligned block of four samples, on an even and an
+// odd one in turn, and the coordinator's bound on a pass's light paths a pixel is exact.
+TEST(LightTracer, EveryPixelsLightPathsReachBothHalves) {
+  for (uint64_t p : {0ull, 1ull, 2ull, 3ull, 4ull, 7ull, 640ull * 480ull - 1, (1ull << 40) + 3}) {
+    for (uint32_t block = 0; block < 64; ++block) {
+      uint32_t traced[2] = {0, 0};  // even, odd samples
+      for (uint32_t s = 8 * block; s < 8 * block + 8; ++s) traced[s & 1] += LightTracer::traces(p, s);
+      EXPECT_EQ(traced[0], 1u) << "pixel " << p << " samples from " << 8 * block;
+      EXPECT_EQ(traced[1], 1u) << "pixel " << p << " samples from " << 8 * block;
+    }
+  }
+  for (uint32_t s0 = 0; s0 < 24; ++s0) {
+    for (uint32_t s1 = s0; s1 < 48; ++s1) {
+      uint64_t most = 0;
+      for (uint64_t p = 0; p < 8; ++p) {
+        uint64_t n = 0;
+        for (uint32_t s = s0; s < s1; ++s) n += LightTracer::traces(p, s);
+        most = std::max(most, n);
+      }
+      EXPECT_EQ(LightTracer::max_paths_per_pixel(s0, s1), most) << "samples " << s0 << " to " << s1;
+    }
+  }
+  EXPECT_EQ(LightTracer::max_paths_per_pixel(4000000000u, 4000000004u), 1u);
+}
+
+// A window one pixel wide of an image of even width: its odd half has light paths of its
+// own, so both halves see the caustic (the old pick gave them all to the even half).
+TEST(LightTracer, AOnePixelWideWindowsHalvesBothHaveLightPaths) {
+  const Scene scene = caustic_scene(glass());
+  RenderSettings s = caustic_settings(LT::kOn, 256);
+  s.aovs = kAovHalves;
+  s.window = Rect{16, 0, 1, 24};
+  const RenderResult r = testing::render(scene, s, 2, 8);
+  ASSERT_TRUE(r.film.halves());
+  double all = 0, odd = 0;
+  for (size_t i = 0; i < r.film.pixels().size(); ++i) {
+    all += r.film.pixels()[i].lum_sum() / r.film.pixels()[i].n;
+    odd += r.film.odd()[i].lum_sum() / r.film.odd()[i].n;
+  }
+  // 0.866 with the old pick (the caustic is 13% of this column's light), 1.004 with this one.
   EXPECT_NEAR(odd / all, 1, 0.05);
 }
 

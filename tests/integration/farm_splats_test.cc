@@ -37,6 +37,22 @@ TEST_F(Farm, AutoChoosesAsTesseraRenderDoesAndHalvesGetTheirOwnLightPaths) {
   expect_same_pixels(local, out);
 }
 
+// Passes of 3 samples in a column one pixel wide: a pixel traces a light path in each
+// aligned block of 4 samples, so a pass that straddles two blocks holds two of some pixels'
+// (here of all of them: every pixel of column 47 of a 96-wide image has the same pick), and
+// LightTracer::max_paths_per_pixel bounds what the coordinator accepts. Each half gets its own.
+TEST_F(Farm, PassesAcrossLightPathBlocksMakeTheLocalImage) {
+  const std::string flags =
+      "-r 96 72 -p 47 0 1 72 -s 24 --pass-spp 3 -m 6 --seed 11 --tile 16 --light-tracer on --aov halves";
+  const std::string local = local_render(flags);
+  start_coordinator();
+  start_worker(2);
+  const std::string out = (dir / "farm.exr").string();
+  const CommandResult r = submit_wait(kScene, flags, out);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+}
+
 TEST_F(Farm, SplatsSurviveACoordinatorKilledMidJob) {
   const std::string flags = "-r 96 72 -s 512 --pass-spp 8 -m 6 --seed 5 --light-tracer on --aov halves";
   const std::string local = local_render(flags);

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <limits>
 
 #include "tests/server/parts_fixture.h"
@@ -93,6 +94,36 @@ TEST_F(ResultIntakeTest, SumsOfTheWrongSizeAreRejected) {
   EXPECT_TRUE(submit(result(t)).accepted());  // the lease still waits for a good one
 }
 
+// A result its task's holder sent that does not decode is that worker's failure of the
+// task, said in the ack and a task.failed event, once a lease; once two workers failed, the
+// job fails naming why (before, a farm whose workers all sent such results, a version skew
+// say, went round for ever in silence).
+TEST_F(ResultIntakeTest, AResultThatDoesNotDecodeFailsTheTaskOnItsWorker) {
+  const uint64_t t = lease_next(*job, a);
+  v1::TaskResult r = result(t);
+  r.set_raw_size(r.raw_size() - uint32_t(kBytesPerPixel));
+  const v1::ResultAck ack = submit(r);
+  EXPECT_TRUE(rejected(ack));
+  EXPECT_EQ(ack.refused(), "result refused: raw size does not match the tile");
+  EXPECT_EQ(counters.tasks_failed, 1u);
+  ASSERT_FALSE(fx.events.empty());
+  EXPECT_EQ(fx.events.back().kind, "task.failed");
+  EXPECT_EQ(fx.events.back().worker, worker(a).name);
+  EXPECT_EQ(fx.events.back().detail, ack.refused());
+  EXPECT_TRUE(job->live());  // maybe that worker's trouble
+  const size_t events = fx.events.size();
+  EXPECT_TRUE(rejected(submit(r)));  // again: one failure, one event a lease
+  EXPECT_EQ(counters.tasks_failed, 1u);
+  EXPECT_EQ(fx.events.size(), events);
+  EXPECT_TRUE(submit(result(t)).accepted());  // the lease still waits for a good one
+
+  const uint64_t u = lease_next(*job, b);
+  v1::TaskResult nan = result(u, std::nan(""));
+  EXPECT_FALSE(submit(nan).refused().empty());
+  EXPECT_FALSE(job->live());
+  EXPECT_NE(job->error.find("tasks failed on 2 workers: result refused: "), std::string::npos) << job->error;
+}
+
 // A frame's results carry splats exactly when it traces light paths (its --light-tracer,
 // resolved at submit): splats for a frame without, or none for a frame with, are refused.
 TEST_F(ResultIntakeTest, SplatsComeExactlyFromFramesThatTraceLightPaths) {
@@ -122,6 +153,19 @@ TEST_F(ResultIntakeTest, SplatsComeExactlyFromFramesThatTraceLightPaths) {
   EXPECT_EQ(traced->splats.film()->paths(), 4u);
   EXPECT_EQ(traced->splats.film()->at(7, 0).rgb[1], 2);
   EXPECT_EQ(traced->splats.frontier(traced->plan.tiles().size() - 1), 0u);  // only the leased tile moved
+}
+
+// The most light paths a task's record may declare: its tile's pixels times the most a
+// pixel traces in the pass, which is two for a pass straddling two blocks of 4 samples.
+TEST_F(ResultIntakeTest, ARecordsLightPathsAreBoundedByItsPass) {
+  RenderSettings s = testing::small_settings();
+  s.light_tracer = RenderSettings::LightTracer::kOn;
+  const Rect tile{0, 0, 3, 5};
+  EXPECT_EQ(ResultIntake::splat_limits(s, tile, {{0, 4}}).max_paths, 15u);
+  EXPECT_EQ(ResultIntake::splat_limits(s, tile, {{3, 5}}).max_paths, 30u);
+  EXPECT_EQ(ResultIntake::splat_limits(s, tile, {{0, 1}}).max_paths, 15u);
+  EXPECT_EQ(ResultIntake::splat_limits(s, tile, {{0, 16}, {16, 19}}).max_paths, 60u);
+  EXPECT_EQ(ResultIntake::splat_limits(s, tile, {{0, 16}, {16, 19}}).records, 2u);
 }
 
 // A run of many passes of a large tile can carry more splats than a result may (the
