@@ -112,37 +112,40 @@ void ResultIntake::decode(Batch& b) {
     }
 }
 
-void ResultIntake::shorten_runs(const v1::TaskResult& result, double now, Effects& fx) {
+bool ResultIntake::shorten_runs(const v1::TaskResult& result, double now, Effects& fx) {
   const Lease* l = p_.leases.live(result.task_id());
-  if (!l || l->worker != result.worker_id() || l->check || l->pass_count <= 1) return;
+  if (!l || l->worker != result.worker_id() || l->check || l->pass_count <= 1) return false;
   Job* job = p_.jobs.find_job(l->job);
-  if (!job || !job->live()) return;
+  if (!job || !job->live()) return false;
   // Half the run that did not fit, for every later task of the job; this run is ready
   // again now rather than when its lease expires (leased again whole, it would fail again).
   job->max_run = std::min(job->max_run, std::max<uint32_t>(1, l->pass_count / 2));
   p_.leasing.end(result.task_id(), true, now);
   fx.changed = true;
+  return true;
 }
 
 void ResultIntake::refuse(const v1::TaskResult& result, const std::string& why, double now, Effects& fx) {
   Lease* l = p_.leases.live(result.task_id());
-  if (!l || l->worker != result.worker_id() || l->check || l->refused) return;
-  l->refused = true;
+  if (!l || l->worker != result.worker_id() || l->check || l->refused || p_.verifier.quarantined(l->worker)) return;
   Job* job = p_.jobs.find_job(l->job);
   const WorkerInfo* w = p_.workers.find(result.worker_id());
-  if (job && w) p_.lifecycle.task_failed(*job, *w, "result refused: " + why, now, fx);
+  // As wanted() asks again at merge: decode ran without the lock.
+  if (!job || !w || !job->live() || !job->plan.wants(l->tile, l->pass) || l->tile_resets != job->tile_resets[l->tile])
+    return;
+  l->refused = true;
+  p_.lifecycle.task_failed(*job, *w, "result refused: " + why, now, fx);
 }
 
 void ResultIntake::merge(Batch& b, double now, Effects& fx) {
   for (Incoming& in : b.incoming) {
     if (!in.sums) {
       ++p_.counters.results_rejected;
-      if (in.splats_over_cap)
-        shorten_runs(*b.results[in.index], now, fx);
-      else
+      // A run too long is shortened; a single pass past the cap is refused like any other.
+      if (in.splats_over_cap) in.refused = "splats past the most a result may carry";
+      if (!in.splats_over_cap || !shorten_runs(*b.results[in.index], now, fx))
         refuse(*b.results[in.index], in.refused, now, fx);
-      b.acks[in.index].set_refused(in.splats_over_cap ? "splats past the most a result may carry"
-                                                      : "result refused: " + in.refused);
+      b.acks[in.index].set_refused("result refused: " + in.refused);
       continue;
     }
     const v1::TaskResult& result = *b.results[in.index];

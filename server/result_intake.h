@@ -73,7 +73,8 @@ class ResultIntake {
   std::optional<Lease> wanted(const v1::TaskResult& result, v1::ResultAck& ack);
   // A result whose run of passes carried more splats than a result may (SplatsOverCap):
   // its job's runs are halved (Job::max_run) and its lease ends with the run ready again.
-  void shorten_runs(const v1::TaskResult& result, double now, Effects& fx);
+  // False (nothing done) for a single pass or a lease no longer its holder's.
+  bool shorten_runs(const v1::TaskResult& result, double now, Effects& fx);
   // A result its task's holder sent that does not decode (`why`): the task failed on that
   // worker (JobLifecycle::task_failed: a task.failed event naming why; tasks failed on two
   // workers fail the job), once a lease. The lease still waits for a good result until it

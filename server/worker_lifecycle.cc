@@ -69,10 +69,11 @@ void WorkerLifecycle::release(uint64_t worker, uint64_t task, const std::string&
   const Lease* l = p_.leases.live(task);
   if (!l || l->worker != worker) return;
   const std::string job_id = l->job;
+  const bool refused = l->refused;  // its failure already counted (ResultIntake::refuse)
   p_.leasing.end(task, true, now);
   ++p_.counters.leases_released;
   fx.changed = true;
-  if (error.empty()) return;
+  if (error.empty() || refused) return;
   Job* job = p_.jobs.find_job(job_id);
   if (!job) return;
   const WorkerInfo* w = p_.workers.find(worker);

@@ -78,7 +78,7 @@ void Sender::send_loop() {
       sent = st.ok();
       if (sent) queue_.note_upload(call);
       for (int k = 0; sent && k < acks.acks_size() && k < results.results_size(); ++k)
-        if (!acks.acks(k).refused().empty())  // (the coordinator counts it as the task failing here)
+        if (!acks.acks(k).refused().empty())  // (counted as this worker failing the task while its lease lived)
           spdlog::warn("the coordinator refused task {}'s result: {}", results.results(k).task_id(),
                        acks.acks(k).refused());
       if (!sent) {

@@ -79,7 +79,7 @@ class LightTracer {
     return sample % kSamplesPerLightPath == (pixel_id + sample / kSamplesPerLightPath) % kSamplesPerLightPath;
   }
   // How many of samples [s0, s1) trace a light path for a pixel, at most over all pixels:
-  // one a block of four, two where the window starts and ends in parts of blocks.
+  // one per whole block of four, plus one for each part block at either end.
   static uint64_t max_paths_per_pixel(uint32_t s0, uint32_t s1);
 
   LightTracer(const Scene& scene, const Accel& accel, const LightSet& lights, const Camera& camera,
