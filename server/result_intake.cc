@@ -23,6 +23,12 @@ bool shows_light(const std::vector<PixelSums>& sums, const std::vector<SplatReco
 }
 }  // namespace
 
+bool ResultIntake::still_wanted(const Lease& l, const Job& job) {
+  // Not wanted: merged already, or leased before its tile was taken back (a liar's work
+  // undone), when it may build on what was taken back (a run's base, an adaptive pass's mask).
+  return job.plan.wants(l.tile, l.pass) && l.tile_resets == job.tile_resets[l.tile];
+}
+
 std::optional<Lease> ResultIntake::wanted(const v1::TaskResult& result, v1::ResultAck& ack) {
   const Lease* l = p_.leases.known(result.task_id());
   // Never issued, or issued to another worker: only the lease's holder may answer it.
@@ -33,9 +39,7 @@ std::optional<Lease> ResultIntake::wanted(const v1::TaskResult& result, v1::Resu
   if (l->check) return *l;  // the Verifier's
   const Job* job = p_.jobs.find_job(l->job);
   if (!job || !job->live()) return std::nullopt;
-  // Not wanted either: leased before its tile was taken back (a liar's work undone), it may
-  // build on what was taken back (a run's base, an adaptive pass's mask).
-  if (!job->plan.wants(l->tile, l->pass) || l->tile_resets != job->tile_resets[l->tile]) {
+  if (!still_wanted(*l, *job)) {
     ++p_.counters.results_duplicate;
     ack.set_duplicate(true);
     return std::nullopt;
@@ -130,9 +134,7 @@ void ResultIntake::refuse(const v1::TaskResult& result, const std::string& why, 
   if (!l || l->worker != result.worker_id() || l->check || l->refused || p_.verifier.quarantined(l->worker)) return;
   Job* job = p_.jobs.find_job(l->job);
   const WorkerInfo* w = p_.workers.find(result.worker_id());
-  // As wanted() asks again at merge: decode ran without the lock.
-  if (!job || !w || !job->live() || !job->plan.wants(l->tile, l->pass) || l->tile_resets != job->tile_resets[l->tile])
-    return;
+  if (!job || !w || !job->live() || !still_wanted(*l, *job)) return;  // (decode ran without the lock)
   l->refused = true;
   p_.lifecycle.task_failed(*job, *w, "result refused: " + why, now, fx);
 }

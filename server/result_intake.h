@@ -71,6 +71,8 @@ class ResultIntake {
   // The result's lease if it is known, from its holder, and still wanted (counting and
   // acknowledging duplicates and strangers' results); nullopt otherwise.
   std::optional<Lease> wanted(const v1::TaskResult& result, v1::ResultAck& ack);
+  // Whether the job still wants the lease's (tile, pass) from it (wanted() and refuse()).
+  static bool still_wanted(const Lease& lease, const Job& job);
   // A result whose run of passes carried more splats than a result may (SplatsOverCap):
   // its job's runs are halved (Job::max_run) and its lease ends with the run ready again.
   // False (nothing done) for a single pass or a lease no longer its holder's.

@@ -47,8 +47,8 @@ uint64_t LightTracer::max_paths_per_pixel(uint32_t s0, uint32_t s1) {
   // Of samples [0, n), a pixel whose id is r modulo kB traces one in each whole block and
   // one in the part block n / kB when its pick, (r + n / kB) % kB, lies below n % kB.
   auto before = [](uint32_t r, uint32_t n) -> uint64_t { return n / kB + ((r + n / kB) % kB < n % kB ? 1 : 0); };
-  uint64_t most = 0;
   if (s1 <= s0) return 0;
+  uint64_t most = 0;
   for (uint32_t r = 0; r < kB; ++r) most = std::max(most, before(r, s1) - before(r, s0));
   return most;
 }

@@ -457,6 +457,17 @@ TEST(LightTracer, DegenerateChainsStayFinite) {
   for (const PixelSums& p : inside.film.pixels()) ASSERT_TRUE(std::isfinite(p.r));
 }
 
+// The odd half's pixel means summed, over the whole film's: 1 in expectation when each half
+// has its own light paths.
+double odd_over_whole(const Film& film) {
+  double all = 0, odd = 0;
+  for (size_t i = 0; i < film.pixels().size(); ++i) {
+    all += film.pixels()[i].lum_sum() / film.pixels()[i].n;
+    odd += film.odd()[i].lum_sum() / film.odd()[i].n;
+  }
+  return odd / all;
+}
+
 TEST(LightTracer, SameBitsAtAnyThreadCountAndTiling) {
   const Scene scene = caustic_scene(glass());
   RenderSettings s = caustic_settings(LT::kOn, 32);
@@ -465,12 +476,7 @@ TEST(LightTracer, SameBitsAtAnyThreadCountAndTiling) {
   EXPECT_TRUE(same_bits(a.film, b.film));
   ASSERT_TRUE(a.film.halves());
   // Each half has its own light paths: both halves' means agree with the whole.
-  double all = 0, odd = 0;
-  for (size_t i = 0; i < a.film.pixels().size(); ++i) {
-    all += a.film.pixels()[i].lum_sum() / a.film.pixels()[i].n;
-    odd += a.film.odd()[i].lum_sum() / a.film.odd()[i].n;
-  }
-  EXPECT_NEAR(odd / all, 1, 0.05);
+  EXPECT_NEAR(odd_over_whole(a.film), 1, 0.05);
 }
 
 // Every pixel traces a light path in each aligned block of four samples, on an even and an
@@ -507,13 +513,8 @@ TEST(LightTracer, AOnePixelWideWindowsHalvesBothHaveLightPaths) {
   s.window = Rect{16, 0, 1, 24};
   const RenderResult r = testing::render(scene, s, 2, 8);
   ASSERT_TRUE(r.film.halves());
-  double all = 0, odd = 0;
-  for (size_t i = 0; i < r.film.pixels().size(); ++i) {
-    all += r.film.pixels()[i].lum_sum() / r.film.pixels()[i].n;
-    odd += r.film.odd()[i].lum_sum() / r.film.odd()[i].n;
-  }
   // 0.866 with the old pick (the caustic is 13% of this column's light), 1.004 with this one.
-  EXPECT_NEAR(odd / all, 1, 0.05);
+  EXPECT_NEAR(odd_over_whole(r.film), 1, 0.05);
 }
 
 // scenes/cornell-shapes.gltf: caustic casters that are meshes of other shapes (a glass cube,

@@ -112,7 +112,7 @@ TEST_F(ResultIntakeTest, AResultThatDoesNotDecodeFailsTheTaskOnItsWorker) {
   EXPECT_EQ(fx.events.back().detail, ack.refused());
   EXPECT_TRUE(job->live());  // maybe that worker's trouble
   const size_t events = fx.events.size();
-  EXPECT_TRUE(rejected(submit(r)));  // again: one failure, one event a lease
+  EXPECT_TRUE(rejected(submit(r)));                                         // again: one failure, one event a lease
   worker_lifecycle.release(a, t, "and given back with an error", now, fx);  // nor by a release
   EXPECT_EQ(counters.tasks_failed, 1u);
   EXPECT_EQ(fx.events.size(), events);
