@@ -405,9 +405,13 @@ v1::ResultAck Coordinator::check_result(const v1::TaskResult& result, const Leas
   const std::optional<Check> check =
       locked([&](Effects&) TESSERA_REQUIRES(mu_) { return verifier_.pending(lease.check, result.task_id()); });
   if (!check) return ack;  // decided, or moot
-  const std::optional<uint64_t> digest = result_digest(result, *check);
-  if (!digest) {
+  std::string why;
+  const std::optional<uint64_t> digest = result_digest(result, *check, &why);
+  if (!digest) {  // its lease stays: it expires, and the check goes to another worker
     locked([&](Effects&) TESSERA_REQUIRES(mu_) { ++counters_.results_rejected; });
+    spdlog::warn("check of job {} tile {} from worker {}: result refused: {}", check->job, check->tile,
+                 result.worker_id(), why);
+    ack.set_refused("result refused: " + why);
     return ack;
   }
   const Verifier::Verdict verdict = Verifier::judge(*check, *digest, result.worker_id(), referee_);

@@ -77,7 +77,7 @@ std::optional<Check> Verifier::pending(uint64_t check, uint64_t task_id) const {
   return it->second;
 }
 
-std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check) {
+std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check, std::string* why) {
   try {
     const Rect tile = from_proto(check.task->tile());
     const size_t pixels = size_t(tile.area());
@@ -88,7 +88,8 @@ std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check&
     if (!check.task->settings().aovs()) return sums_digest(result_sums(result, pixels), nullptr, &splats);
     const std::vector<AovSums> aovs = decode_aovs(result.aovs_zstd(), pixels, RenderSettings::kMaxSpp);
     return sums_digest(result_sums(result, pixels * planes), &aovs, &splats);
-  } catch (const WireError&) {
+  } catch (const WireError& e) {
+    *why = e.what();
     return std::nullopt;
   }
 }

@@ -35,8 +35,9 @@ using Referee = std::function<RefereeRender(const v1::Task&)>;
 // With `splats` (a frame tracing light paths), the task's splat records too.
 uint64_t sums_digest(const std::vector<PixelSums>& sums, const std::vector<AovSums>* aovs = nullptr,
                      const std::vector<SplatRecord>* splats = nullptr);
-// The digest of a check's result (decoded as for merging); nothing when it is malformed.
-std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check);
+// The digest of a check's result (decoded as for merging); nothing when it is malformed,
+// and what is wrong with it in *why.
+std::optional<uint64_t> result_digest(const v1::TaskResult& result, const Check& check, std::string* why);
 
 class Verifier {
  public:

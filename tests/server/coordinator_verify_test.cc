@@ -257,6 +257,35 @@ TEST_F(VerifyTest, AWorkerLyingOnlyAsTheCheckerIsTheOneQuarantined) {
   EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
 }
 
+// A check's result that does not decode is refused, saying why, and decides nothing: its
+// worker may still send the render, which is checked as any other.
+TEST_F(VerifyTest, ACheckResultThatDoesNotDecodeIsRefusedSayingWhy) {
+  start(1.0);
+  const RenderSettings s = job_settings();
+  const uint64_t first = worker_as("first"), checker = worker_as("checker");
+  const std::string id = c->submit(request(s));
+  ASSERT_TRUE(step(first, false));
+  ASSERT_EQ(c->counters().checks_issued, 1u);
+  const v1::GetTaskResponse r = c->get_task(checker, 1);  // checks go first
+  ASSERT_EQ(r.tasks_size(), 1);
+  const v1::TaskResult honest = render_task(r.tasks(0), checker);
+  v1::TaskResult broken = honest;
+  broken.set_sums_zstd("not zstd at all");
+  const v1::ResultAck ack = c->submit_result(broken);
+  EXPECT_FALSE(ack.accepted());
+  EXPECT_NE(ack.refused().find("result refused: "), std::string::npos) << ack.refused();
+  EXPECT_GT(ack.refused().size(), std::string("result refused: ").size()) << ack.refused();
+  EXPECT_EQ(c->counters().results_rejected, 1u);
+  EXPECT_EQ(c->counters().checks_passed, 0u);
+  EXPECT_EQ(c->counters().check_mismatches, 0u);
+  EXPECT_TRUE(c->submit_result(honest).accepted());
+  EXPECT_EQ(c->counters().checks_passed, 1u);
+  EXPECT_EQ(c->counters().workers_quarantined, 0u);
+  run(first, checker, false);
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
 TEST_F(VerifyTest, NoChecksWithOneWorkerOrAZeroFraction) {
   start(0);
   const std::string id = c->submit(request(job_settings()));
