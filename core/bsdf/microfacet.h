@@ -42,8 +42,9 @@ class Beckmann {
     const float tan2 = -alpha_ * alpha_ * std::log1p(-u.x);
     const float cos_t = 1 / std::sqrt(1 + tan2);
     const float sin_t = std::sqrt(std::max(0.0f, 1 - cos_t * cos_t));
-    const float phi = 2 * kPi * u.y;
-    return {sin_t * fm::cos(phi), sin_t * fm::sin(phi), cos_t};
+    float sn, cs;
+    fm::sincos(2 * kPi * u.y, &sn, &cs);
+    return {sin_t * cs, sin_t * sn, cos_t};
   }
 
   float pdf_h(Vec3 h) const { return d(h) * std::fabs(h.z); }
@@ -94,10 +95,12 @@ class Ggx {
     const float len2 = vh.x * vh.x + vh.y * vh.y;
     const Vec3 t1 = len2 > 0 ? Vec3{-vh.y, vh.x, 0} / std::sqrt(len2) : Vec3{1, 0, 0};
     const Vec3 t2 = cross(vh, t1);
-    const float r = std::sqrt(u.x), phi = 2 * kPi * u.y;
-    const float p1 = r * fm::cos(phi);
+    const float r = std::sqrt(u.x);
+    float sn, cs;
+    fm::sincos(2 * kPi * u.y, &sn, &cs);
+    const float p1 = r * cs;
     const float s = 0.5f * (1 + vh.z);
-    const float p2 = (1 - s) * std::sqrt(std::max(0.0f, 1 - p1 * p1)) + s * r * fm::sin(phi);
+    const float p2 = (1 - s) * std::sqrt(std::max(0.0f, 1 - p1 * p1)) + s * r * sn;
     const Vec3 nh = t1 * p1 + t2 * p2 + vh * std::sqrt(std::max(0.0f, 1 - p1 * p1 - p2 * p2));
     return normalize(Vec3{alpha_ * nh.x, alpha_ * nh.y, std::max(1e-6f, nh.z)});
   }

@@ -87,8 +87,9 @@ Vec3 DeltaTargets::sample(Vec3 p, float u_pick, Vec2 u, float* pdf) const {
     const float omc = one_minus_cos(t.radius, d);
     const float cos_t = 1 - u.x * omc;
     const float sin_t = std::sqrt(std::max(0.0f, u.x * omc * (2 - u.x * omc)));  // sqrt(1 - cos^2), no cancellation
-    const float phi = 2 * kPi * u.y;
-    dir = normalize(Frame(to / d).to_world(Vec3{sin_t * fm::cos(phi), sin_t * fm::sin(phi), cos_t}));
+    float sn, cs;
+    fm::sincos(2 * kPi * u.y, &sn, &cs);
+    dir = normalize(Frame(to / d).to_world(Vec3{sin_t * cs, sin_t * sn, cos_t}));
   }
   *pdf = pdf_with(p, dir, k);
   return dir;

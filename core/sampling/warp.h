@@ -22,7 +22,9 @@ inline Vec2 square_to_concentric_disk(Vec2 u) {
     r = oy;
     theta = (kPi / 2) - (kPi / 4) * (ox / oy);
   }
-  return {r * fm::cos(theta), r * fm::sin(theta)};
+  float sn, cs;
+  fm::sincos(theta, &sn, &cs);  // (fm::sin and fm::cos are its two halves: the same bits)
+  return {r * cs, r * sn};
 }
 
 // Cosine-weighted hemisphere about +z (Malley's method). pdf = cos(theta) / pi.
@@ -37,8 +39,9 @@ inline float cosine_hemisphere_pdf(float cos_theta) { return cos_theta > 0 ? cos
 inline Vec3 square_to_uniform_hemisphere(Vec2 u) {
   const float z = u.x;
   const float r = std::sqrt(std::max(0.0f, 1 - z * z));
-  const float phi = 2 * kPi * u.y;
-  return {r * fm::cos(phi), r * fm::sin(phi), z};
+  float sn, cs;
+  fm::sincos(2 * kPi * u.y, &sn, &cs);
+  return {r * cs, r * sn, z};
 }
 constexpr float kUniformHemispherePdf = 0.5f * kInvPi;
 
@@ -47,8 +50,9 @@ constexpr float kUniformSpherePdf = 0.25f * kInvPi;
 inline Vec3 square_to_uniform_sphere(Vec2 u) {
   const float z = 1 - 2 * u.x;
   const float r = std::sqrt(std::max(0.0f, 1 - z * z));
-  const float phi = 2 * kPi * u.y;
-  return {r * fm::cos(phi), r * fm::sin(phi), z};
+  float sn, cs;
+  fm::sincos(2 * kPi * u.y, &sn, &cs);
+  return {r * cs, r * sn, z};
 }
 
 // Uniform barycentrics on a triangle (Heitz 2019 low-distortion map): returns (b1, b2).
