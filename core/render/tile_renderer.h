@@ -51,7 +51,7 @@ class TileRenderer {
   // Samples [s0, s1) of each pixel of `rect` whose `active` flag is set (all when active
   // is null; `active` is rect-sized, row-major). Returns rect-sized sums (two planes of
   // them with half-buffers: settings().sum_planes(), film.h). If `cancel`
-  // becomes true the render stops between rows and the result must be discarded. With
+  // becomes true the render stops between pixels and the result must be discarded. With
   // `aovs` (settings().aovs set), the same samples' AOV sums too, rect-sized (aov.h).
   // With light tracing (light_tracing()), each camera sample's light path too, its splats
   // added to `splats` (which must then be given: std::logic_error otherwise).
