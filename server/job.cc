@@ -47,6 +47,7 @@ v1::JobStatus Job::status(double now, uint32_t workers, bool with_tiles, TileRan
   };
   add("image not written: ", image_error);
   add("checkpoint not written: ", checkpoint_error);
+  if (live()) add("", failure_note);
   s.set_error(e);
   s.set_samples_done(plan.samples_merged());
   s.set_samples_total(plan.samples_total());

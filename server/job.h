@@ -65,6 +65,9 @@ struct Job {
   std::string image_error;          // the last image write's failure; empty once one succeeds
   std::string checkpoint_error;     // the same for checkpoints
   std::set<std::string> failed_on;  // workers (WorkerInfo::identity) that could not render one of its tasks
+  // While the job is live: its latest task failure and what would fail the job, shown in
+  // its status (a farm of one worker waits for another; the user is told why).
+  std::string failure_note;
   // Verification: the tiles each worker's results were merged into (a tile once per
   // pass), to render again if the worker is found lying; checks not yet decided (the job
   // ends only when none is left).

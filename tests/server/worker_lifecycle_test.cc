@@ -157,9 +157,14 @@ TEST_F(WorkerLifecycleTest, ATaskGivenBackWithAnErrorCountsAsFailedOnThatWorker)
   EXPECT_EQ(counters.tasks_failed, 1u);
   EXPECT_EQ(job->failed_on, std::set<std::string>{"registration " + std::to_string(a)});
   EXPECT_TRUE(job->live());
+  // Its status says so while it waits for another worker (a farm of one waits for good).
+  EXPECT_EQ(job->status(now, 1, false).error(), "a task failed on registration " + std::to_string(a) +
+                                                    ": out of memory (the job fails once tasks fail on 2 workers; 1 "
+                                                    "so far)");
   worker_lifecycle.release(b, lease_next(*job, b), "out of memory", now, fx);
   EXPECT_EQ(job->state(), v1::JobStatus::FAILED);
   EXPECT_EQ(job->error, "tasks failed on 2 workers: out of memory");
+  EXPECT_EQ(job->status(now, 0, false).error(), job->error);  // the note only while it is live
 }
 
 // An enrolled worker is its credential: failing a task, registering again and failing
