@@ -409,9 +409,9 @@ v1::ResultAck Coordinator::check_result(const v1::TaskResult& result, const Leas
   const std::optional<uint64_t> digest = result_digest(result, *check, &why);
   if (!digest) {  // its lease stays: it expires, and the check goes to another worker
     locked([&](Effects&) TESSERA_REQUIRES(mu_) { ++counters_.results_rejected; });
-    spdlog::warn("check of job {} tile {} from worker {}: result refused: {}", check->job, check->tile,
-                 result.worker_id(), why);
-    ack.set_refused("result refused: " + why);
+    ack.set_refused(ResultIntake::refusal(why));
+    spdlog::warn("check of job {} tile {} from worker {}: {}", check->job, check->tile, result.worker_id(),
+                 ack.refused());
     return ack;
   }
   const Verifier::Verdict verdict = Verifier::judge(*check, *digest, result.worker_id(), referee_);

@@ -136,7 +136,7 @@ void ResultIntake::refuse(const v1::TaskResult& result, const std::string& why, 
   const WorkerInfo* w = p_.workers.find(result.worker_id());
   if (!job || !w || !job->live() || !still_wanted(*l, *job)) return;  // (decode ran without the lock)
   l->refused = true;
-  p_.lifecycle.task_failed(*job, *w, "result refused: " + why, now, fx);
+  p_.lifecycle.task_failed(*job, *w, refusal(why), now, fx);
 }
 
 void ResultIntake::merge(Batch& b, double now, Effects& fx) {
@@ -147,7 +147,7 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
       if (in.splats_over_cap) in.refused = "splats past the most a result may carry";
       if (!in.splats_over_cap || !shorten_runs(*b.results[in.index], now, fx))
         refuse(*b.results[in.index], in.refused, now, fx);
-      b.acks[in.index].set_refused("result refused: " + in.refused);
+      b.acks[in.index].set_refused(refusal(in.refused));
       continue;
     }
     const v1::TaskResult& result = *b.results[in.index];

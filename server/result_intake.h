@@ -67,6 +67,10 @@ class ResultIntake {
   static void decode(Batch& batch);
   void merge(Batch& batch, double now, Effects& fx);
 
+  // What a refused result's ack, its task.failed event and the log say: "result refused: WHY"
+  // (a task's result here, a check's in Coordinator::check_result).
+  static std::string refusal(const std::string& why) { return "result refused: " + why; }
+
  private:
   // The result's lease if it is known, from its holder, and still wanted (counting and
   // acknowledging duplicates and strangers' results); nullopt otherwise.
