@@ -142,6 +142,7 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
   ProgressBar bar(c.quiet || c.json);
   v1::JobStatus got, last;  // last: every frame, whatever a message left out
   bool any = false;
+  std::string noted;  // the live job's error as last printed (why it is stuck, a write that failed)
   Backoff backoff(Backoff::kClientFirstSeconds);
   auto lost_since = std::chrono::steady_clock::now();
   while (true) {
@@ -165,6 +166,10 @@ v1::JobStatus watch(v1::Tessera::StubInterface& stub, const std::string& id, con
                       s.frame_passes_done(), s.passes_total(), s.tiles_done(), s.tiles_total(), s.active_workers());
       const double fraction =
           ended(s) ? 1.0 : double(s.samples_done()) / double(std::max<uint64_t>(1, s.samples_total()));
+      if (!ended(s) && s.error() != noted) {
+        noted = s.error();
+        if (!noted.empty()) bar.note(c.err, "job " + id + ": " + noted);
+      }
       bar.update(fraction, what, s.elapsed_seconds());
       if (ended(s)) {
         ctx.TryCancel();

@@ -31,6 +31,7 @@ class ProgressBar {
     finished_ = fraction >= 1;
     const double eta = fraction > 0 ? seconds * (1 - fraction) / fraction : -1;
     if (tty_) {
+      drawn_ = !finished_;
       const int width = 30, filled = int(std::lround(fraction * width));
       std::fprintf(stderr, "\r[%s%s] %5.1f%%  %s  %s elapsed  ETA %s   ", std::string(filled, '#').c_str(),
                    std::string(width - filled, '.').c_str(), 100 * fraction, what.c_str(),
@@ -42,9 +43,18 @@ class ProgressBar {
                    format_duration(seconds).c_str(), format_duration(eta).c_str());
     }
   }
+  // A line of its own to `f` (shown with -q too: not progress), below the bar where one is
+  // drawn on the terminal; the next update draws the bar again under it.
+  void note(std::FILE* f, const std::string& text) {
+    if (drawn_ && f == stderr) std::fputc('\n', stderr);
+    drawn_ = false;
+    std::fprintf(f, "note: %s\n", text.c_str());
+    std::fflush(f);
+  }
 
  private:
   bool quiet_, tty_;
+  bool drawn_ = false;  // the bar is on the terminal's current line
   bool finished_ = false;
   double last_ = -1e9;
 };

@@ -9,6 +9,7 @@
 #include <atomic>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <nlohmann/json.hpp>
 #include <regex>
 #include <set>
@@ -415,6 +416,42 @@ TEST_F(FarmClient, SubmitWaitsAndWritesTheLocalImageThenListsStatusAndFetch) {
   EXPECT_TRUE(std::regex_match(ev[0]["time"].get<std::string>(), rfc3339)) << ev[0];
   EXPECT_EQ(ev[0]["kind"], "job.submitted");
   EXPECT_EQ(ev[0]["job_id"], id);
+}
+
+// A live job's error (here why it waits: a task failed on the only worker) is printed by
+// whoever watches it, once a text, with -q too: a farm of one no longer waits in silence.
+TEST_F(FarmClient, AWatchSaysWhyALiveJobWaits) {
+  SubmitRequest r = request({});
+  ASSERT_EQ(submit_job(*stub, r, ctx), 0) << err.text();
+  const std::string id = coordinator->list().at(0).id();
+  const std::string err_path = (dir / "watch.err").string();
+  FarmContext watching = ctx;
+  watching.err = std::fopen(err_path.c_str(), "w");
+  ASSERT_NE(watching.err, nullptr);
+  int rc = -1;
+  std::thread watcher([&] { rc = watch_job(*stub, id, watching); });
+  v1::RegisterRequest reg;
+  reg.set_version(kProtocolVersion);
+  reg.set_name("lonely");
+  reg.set_threads(1);
+  const uint64_t w = coordinator->register_worker(reg).worker_id();
+  coordinator->release(w, coordinator->get_task(w).tasks(0).task_id(), "the scene would not load: no memory");
+  const auto printed = [&] {
+    std::ifstream f(err_path);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+  };
+  for (int i = 0; i < 600 && printed().find("note:") == std::string::npos; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  coordinator->cancel(id);
+  watcher.join();
+  std::fclose(watching.err);
+  EXPECT_EQ(rc, 1);  // (cancelled)
+  const std::string text = printed();
+  EXPECT_NE(text.find("note: job " + id + ": a task failed on registration " + std::to_string(w) +
+                      ": the scene would not load: no memory (the job fails once tasks fail on 2 workers; 1 so far)"),
+            std::string::npos)
+      << text;
+  EXPECT_EQ(text.find("note:"), text.rfind("note:")) << text;  // once
 }
 
 // Issue 22: a scene larger than any one message the coordinator takes or sends (here 64
