@@ -125,8 +125,9 @@ v1::JobStatus Sequence::status(double now, uint32_t workers, bool with_frames) c
     } else if (j) {
       tiles_done += j->plan.tiles_done();
       frames_done += j->reported_state() == v1::JobStatus::DONE;
-      for (const std::string* why : {&j->image_error, &j->checkpoint_error})
-        if (!why->empty()) e += (e.empty() ? "" : "; ") + ("frame " + std::to_string(frames[i]) + ": ") + *why;
+      // (A live frame's failure note too: why the sequence waits, as a still's status says.)
+      for (const std::string* why : {&j->image_error, &j->checkpoint_error, j->live() ? &j->failure_note : nullptr})
+        if (why && !why->empty()) e += (e.empty() ? "" : "; ") + ("frame " + std::to_string(frames[i]) + ": ") + *why;
     }
     if (!with_frames) continue;
     v1::FrameStatus* f = s.add_frames();

@@ -206,6 +206,11 @@ TEST_F(SequenceTest, AFrameFailingOnTwoWorkersFailsTheSequenceAndKeepsTheFinishe
   while (frame_states(id).at(1) != v1::JobStatus::DONE)
     ASSERT_TRUE(c->submit_result(render_task(c->get_task(a).tasks(0), a)).accepted());
   c->release(a, c->get_task(a).tasks(0).task_id(), "scene does not load here");
+  // While it waits for another worker the sequence says why, naming the frame (as a still
+  // does: a watcher prints it).
+  EXPECT_EQ(c->status(id, false).error(), "frame 2: a task failed on registration " + std::to_string(a) +
+                                              ": scene does not load here (the job fails once tasks fail on 2 "
+                                              "workers; 1 so far)");
   c->release(b, c->get_task(b).tasks(0).task_id(), "scene does not load here");
   const v1::JobStatus st = c->status(id, false);
   EXPECT_EQ(st.state(), v1::JobStatus::FAILED);
