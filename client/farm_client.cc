@@ -312,6 +312,8 @@ void apply_watch_update(v1::JobStatus& held, v1::JobStatus update) {
 int watch_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c) {
   const v1::JobStatus s = watch(stub, job, c);
   print_status(s, c);
+  // Why it failed (or what was not written), as submit --wait says it.
+  if (!c.json && !s.error().empty()) std::fprintf(c.err, "tessera: job %s: %s\n", s.id().c_str(), s.error().c_str());
   return s.state() == v1::JobStatus::DONE ? 0 : 1;
 }
 
