@@ -4,10 +4,12 @@
 #include <gtest/gtest.h>
 #include <zstd.h>
 
+#include <array>
 #include <cstddef>
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <random>
 
@@ -445,6 +447,33 @@ TEST(WireSplats, AListGathersATasksSplatsAsTheFrameWouldSeeThem) {
   EXPECT_EQ(r.entries[1].v[1], int64_t(2) << 24);  // two splats of 1
   EXPECT_EQ(r.entries[2].index, 12u);              // (0, 0) on the odd plane
   EXPECT_EQ(list.take().entries.size(), 0u);       // taken
+}
+
+// normalize() sorts a record's entries by pixel and adds those of one pixel together,
+// saturating: the same sums as adding them one by one in any order (here against a map).
+TEST(WireSplats, NormalizeAddsEachPixelsEntriesInAnyOrder) {
+  std::mt19937_64 rng(5);
+  SplatRecord r;
+  std::map<uint32_t, std::array<int64_t, 4>> want;
+  const int64_t big = std::numeric_limits<int64_t>::max() / 3;
+  for (int i = 0; i < 20000; ++i) {
+    SplatEntry e;
+    e.index = uint32_t(rng() % 997);
+    for (int c = 0; c < 4; ++c) e.v[c] = e.index == 7 ? big : int64_t(rng() % 1000000);  // pixel 7 saturates
+    r.entries.push_back(e);
+    auto& w = want[e.index];
+    for (int c = 0; c < 4; ++c)
+      w[c] = w[c] > std::numeric_limits<int64_t>::max() - e.v[c] ? std::numeric_limits<int64_t>::max() : w[c] + e.v[c];
+  }
+  r.normalize();
+  ASSERT_EQ(r.entries.size(), want.size());
+  size_t k = 0;
+  for (const auto& [index, sums] : want) {
+    ASSERT_EQ(r.entries[k].index, index);
+    for (int c = 0; c < 4; ++c) EXPECT_EQ(r.entries[k].v[c], sums[c]) << index;
+    ++k;
+  }
+  EXPECT_EQ(r.entries[7].v[0], std::numeric_limits<int64_t>::max());
 }
 
 // A splat's squared luminance, the variance layer's: most of CBspheres' splats are 2^-9 to
