@@ -133,6 +133,11 @@ void print_status(const v1::JobStatus& s, const FarmContext& c) {
   std::fprintf(c.out, "%s\n", c.json ? cli_json(s).c_str() : describe(s).c_str());
 }
 
+// An ended job's error, if any (why it failed, what was not written), to c.err.
+void print_error(const std::string& id, const v1::JobStatus& s, const FarmContext& c) {
+  if (!s.error().empty()) std::fprintf(c.err, "tessera: job %s: %s\n", id.c_str(), s.error().c_str());
+}
+
 // Streams progress until the job ends; returns its final status. A lost connection (the
 // coordinator restarting, a network blip) is retried with back-off for up to
 // c.reconnect_seconds; only then, or when the coordinator no longer knows the job, is it
@@ -312,8 +317,7 @@ void apply_watch_update(v1::JobStatus& held, v1::JobStatus update) {
 int watch_job(v1::Tessera::StubInterface& stub, const std::string& job, const FarmContext& c) {
   const v1::JobStatus s = watch(stub, job, c);
   print_status(s, c);
-  // Why it failed (or what was not written), as submit --wait says it.
-  if (!c.json && !s.error().empty()) std::fprintf(c.err, "tessera: job %s: %s\n", s.id().c_str(), s.error().c_str());
+  if (!c.json) print_error(s.id(), s, c);  // (as submit --wait ends)
   return s.state() == v1::JobStatus::DONE ? 0 : 1;
 }
 
@@ -485,7 +489,7 @@ int report_submitted(const std::string& id, const v1::JobStatus& final, const st
     for (size_t i = 0; i < outputs.size(); ++i) std::fprintf(c.out, "%s%s", i ? ", " : "", outputs[i].c_str());
     std::fprintf(c.out, "\n");
   }
-  if (!final.error().empty()) std::fprintf(c.err, "tessera: job %s: %s\n", id.c_str(), final.error().c_str());
+  print_error(id, final, c);
   return final.state() == v1::JobStatus::DONE ? 0 : 1;
 }
 

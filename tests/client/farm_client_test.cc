@@ -9,7 +9,6 @@
 #include <atomic>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <nlohmann/json.hpp>
 #include <regex>
 #include <set>
@@ -21,105 +20,12 @@
 #include "core/scene/load.h"
 #include "scene_bundle.h"
 #include "server/grpc_services.h"
+#include "tests/client/farm_client_fixture.h"
 #include "tests/core/test_paths.h"
 #include "worker/worker.h"
 
 namespace tessera {
 namespace {
-
-namespace fs = std::filesystem;
-
-// Captures what a command prints.
-class Output {
- public:
-  Output() : f_(std::tmpfile()) {}
-  ~Output() { std::fclose(f_); }
-  std::FILE* file() { return f_; }
-  std::string text() {
-    std::fflush(f_);
-    std::rewind(f_);
-    std::string s;
-    char buf[4096];
-    for (size_t n; (n = std::fread(buf, 1, sizeof buf, f_)) > 0;) s.append(buf, n);
-    return s;
-  }
-
- private:
-  std::FILE* f_;
-};
-
-class FarmClient : public ::testing::Test {
- protected:
-  fs::path dir = fs::temp_directory_path() / ("tessera_client_" + std::to_string(::getpid()));
-  std::unique_ptr<Coordinator> coordinator;
-  std::unique_ptr<ClientService> client_service;
-  std::unique_ptr<WorkerService> worker_service;
-  std::unique_ptr<grpc::Server> server;
-  std::unique_ptr<v1::Tessera::StubInterface> stub;
-  std::atomic<bool> stop_worker{false};
-  std::thread worker;
-  std::string address;
-  Output out, err;
-  FarmContext ctx;
-  static constexpr size_t kSceneChunk = 16 << 10;  // scenes to workers in pieces of 16 KiB
-  int max_message_bytes = 0;                       // > 0: the server's limit, each way
-
-  void SetUp() override {
-    CoordinatorOptions o;
-    o.data_dir = (dir / "data").string();
-    o.image_interval_seconds = 0;
-    o.image_chunk_bytes = 4096;  // images come in many pieces (FetchImageChunks)
-    o.scene_chunk_bytes = kSceneChunk;
-    coordinator = std::make_unique<Coordinator>(o);
-    client_service = std::make_unique<ClientService>(*coordinator);
-    worker_service = std::make_unique<WorkerService>(*coordinator);
-    const int port = serve(0);
-    ASSERT_GT(port, 0);
-    address = "127.0.0.1:" + std::to_string(port);
-    stub = connect_coordinator(address);
-    ctx.coordinator = address;
-    ctx.quiet = true;
-    ctx.out = out.file();
-    ctx.err = err.file();
-  }
-  // Serves the coordinator on `port` (0: a free one); returns the port.
-  int serve(int port) {
-    grpc::ServerBuilder b;
-    int bound = 0;
-    b.AddListeningPort("127.0.0.1:" + std::to_string(port), grpc::InsecureServerCredentials(), &bound);
-    b.RegisterService(client_service.get());
-    b.RegisterService(worker_service.get());
-    if (max_message_bytes > 0) configure_server(b, max_message_bytes);
-    server = b.BuildAndStart();
-    return bound;
-  }
-  void start_worker() {
-    worker = std::thread([this] {
-      WorkerOptions w;
-      w.coordinator = address;
-      w.threads = 2;
-      w.cache_dir = (dir / "cache").string();
-      Worker(w).run(stop_worker);
-    });
-  }
-  void TearDown() override {
-    stop_worker = true;
-    if (worker.joinable()) worker.join();
-    server->Shutdown();
-    fs::remove_all(dir);
-  }
-  SubmitRequest request(const std::vector<std::string>& outputs) {
-    SubmitRequest r;
-    r.flags.scene = testing::source_path("scenes/cornell-spheres.dae");
-    r.flags.resolution = {40, 30};
-    r.flags.settings.spp = 8;
-    r.flags.settings.pass_spp = 4;
-    r.flags.settings.max_depth = 4;
-    r.flags.settings.tile_size = 16;
-    r.flags.outputs = outputs;
-    return r;
-  }
-};
 
 // A stream of given pieces, as a coordinator would send them.
 class CannedChunks : public grpc::ClientReaderInterface<v1::ImageChunk> {
@@ -416,49 +322,6 @@ TEST_F(FarmClient, SubmitWaitsAndWritesTheLocalImageThenListsStatusAndFetch) {
   EXPECT_TRUE(std::regex_match(ev[0]["time"].get<std::string>(), rfc3339)) << ev[0];
   EXPECT_EQ(ev[0]["kind"], "job.submitted");
   EXPECT_EQ(ev[0]["job_id"], id);
-}
-
-// A live job's error (here why it waits: a task failed on the only worker) is printed by
-// whoever watches it, once a text, with -q too: a farm of one no longer waits in silence;
-// and the watch ends saying why the job failed.
-TEST_F(FarmClient, AWatchSaysWhyALiveJobWaits) {
-  SubmitRequest r = request({});
-  ASSERT_EQ(submit_job(*stub, r, ctx), 0) << err.text();
-  const std::string id = coordinator->list().at(0).id();
-  const std::string err_path = (dir / "watch.err").string();
-  FarmContext watching = ctx;
-  watching.err = std::fopen(err_path.c_str(), "w");
-  ASSERT_NE(watching.err, nullptr);
-  int rc = -1;
-  std::thread watcher([&] { rc = watch_job(*stub, id, watching); });
-  v1::RegisterRequest reg;
-  reg.set_version(kProtocolVersion);
-  reg.set_name("lonely");
-  reg.set_threads(1);
-  const uint64_t w = coordinator->register_worker(reg).worker_id();
-  coordinator->release(w, coordinator->get_task(w).tasks(0).task_id(), "the scene would not load: no memory");
-  const auto printed = [&] {
-    std::ifstream f(err_path);
-    return std::string(std::istreambuf_iterator<char>(f), {});
-  };
-  for (int i = 0; i < 600 && printed().find("note:") == std::string::npos; ++i)
-    std::this_thread::sleep_for(std::chrono::milliseconds(50));
-  // A second worker fails one too: the job fails, and the watch ends saying why.
-  reg.set_name("second");
-  const uint64_t w2 = coordinator->register_worker(reg).worker_id();
-  coordinator->release(w2, coordinator->get_task(w2).tasks(0).task_id(), "the scene would not load: no memory");
-  watcher.join();
-  std::fclose(watching.err);
-  EXPECT_EQ(rc, 1);
-  const std::string text = printed();
-  EXPECT_NE(text.find("tessera: job " + id + ": tasks failed on 2 workers: the scene would not load: no memory\n"),
-            std::string::npos)
-      << text;
-  EXPECT_NE(text.find("note: job " + id + ": a task failed on registration " + std::to_string(w) +
-                      ": the scene would not load: no memory (the job fails once tasks fail on 2 workers; 1 so far)"),
-            std::string::npos)
-      << text;
-  EXPECT_EQ(text.find("note:"), text.rfind("note:")) << text;  // once
 }
 
 // Issue 22: a scene larger than any one message the coordinator takes or sends (here 64
