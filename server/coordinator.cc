@@ -27,7 +27,7 @@ std::string submitted_detail(const v1::SubmitJobRequest& req) {
   const v1::RenderSettings& s = req.settings();
   // Appends, not `+` chains: g++ 12 warns falsely (-Wrestrict) on `"'" + str` here.
   std::string d;
-  if (!req.name().empty()) d.append("'").append(utf8_prefix(req.name(), kMaxJobNameBytes)).append("', ");
+  if (!req.name().empty()) d.append("'").append(peer_text(req.name(), kMaxJobNameBytes)).append("', ");
   d.append(std::to_string(s.width())).append("x").append(std::to_string(s.height()));
   d.append(", ").append(std::to_string(s.spp())).append(" spp");
   if (req.frames_size() > 0) d.append(", ").append(std::to_string(req.frames_size())).append(" frames");

@@ -102,20 +102,21 @@ void JobLifecycle::task_failed(Job& job, const std::string& worker, const std::s
   if (!job.live()) return;
   ++counters_.tasks_failed;
   job.failed_on.insert(worker);
-  if (job.failed_on.size() < kFailuresToFail) {  // maybe that worker's trouble: another tries
-    job.failure_note = "a task failed on " + worker + ": " + utf8_prefix(error, 1024) +
-                       " (the job fails once tasks fail on " + std::to_string(kFailuresToFail) + " workers; " +
-                       std::to_string(job.failed_on.size()) + " so far)";
+  const std::string why = peer_text(error, 1024);  // (a worker's words: shown to users)
+  if (job.failed_on.size() < kFailuresToFail) {    // maybe that worker's trouble: another tries
+    job.failure_note = "a task failed on " + worker + ": " + why + " (the job fails once tasks fail on " +
+                       std::to_string(kFailuresToFail) + " workers; " + std::to_string(job.failed_on.size()) +
+                       " so far)";
     return;
   }
-  job.error = "tasks failed on " + std::to_string(job.failed_on.size()) + " workers: " + utf8_prefix(error, 1024);
+  job.error = "tasks failed on " + std::to_string(job.failed_on.size()) + " workers: " + why;
   end(job, v1::JobStatus::FAILED, now, fx);
   if (snapshots_.final_snapshot(job, now)) fx.writes.push_back(jobs_.shared(job.id()));  // keep what was rendered
 }
 
 void JobLifecycle::task_failed(Job& job, const WorkerInfo& w, const std::string& error, double now, Effects& fx) {
   fx.events.push_back({0, 0, "task.failed", job.sequence.empty() ? job.id() : job.sequence, w.name, w.principal,
-                       utf8_prefix(error, 1024)});
+                       peer_text(error, 1024)});
   task_failed(job, w.identity(), error, now, fx);
 }
 

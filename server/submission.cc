@@ -3,6 +3,7 @@
 #include "core/render/tile_renderer.h"
 #include "core/scene/scene_error.h"
 #include "core/util/log.h"
+#include "core/util/text.h"
 #include "server/request_error.h"
 #include "server/sequence_scheduler.h"
 
@@ -37,7 +38,9 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
   } catch (const SceneError& e) {
     throw refuse(e.what());
   }
-  meta.name = req.name().empty() ? main_file : req.name();
+  // Shown to every user; its length was bounded at admission (a name) or by the upload (a file).
+  const std::string& name = req.name().empty() ? main_file : req.name();
+  meta.name = peer_text(name, name.size());
   meta.main_file = main_file;
   meta.priority = req.priority();
   meta.scene_bytes = a.scene_bytes;

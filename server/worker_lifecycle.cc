@@ -26,7 +26,7 @@ v1::RegisterResponse WorkerLifecycle::register_worker(const v1::RegisterRequest&
   }
   std::string secret;
   WorkerInfo& w = p_.workers.add(req.name(), req.threads(), now, &secret);
-  w.host = utf8_prefix(req.host(), WorkerRegistry::kMaxTextBytes);
+  w.host = peer_text(req.host(), WorkerRegistry::kMaxTextBytes);
   w.principal = principal;
   w.enrolled = enrolled;
   w.probation = options_.verify_fraction > 0 ? options_.verify_first : 0;

@@ -17,7 +17,7 @@ WorkerInfo& WorkerRegistry::add(const std::string& name, uint32_t threads, doubl
   w.secret_digest = sha256(s);
   if (secret) *secret = s;
   w.serial = ++serial_;
-  w.name = utf8_prefix(name, kMaxTextBytes);
+  w.name = peer_text(name, kMaxTextBytes);
   w.threads = std::clamp<uint32_t>(threads, 1, kMaxThreads);
   w.last_seen = now;
   threads_ += w.threads;

@@ -18,4 +18,25 @@ inline std::string utf8_prefix(std::string_view s, size_t max_bytes) {
   return std::string(s.substr(0, n));
 }
 
+// Text a peer sent that others will see (a worker's name or host, why it says a task
+// failed, a job's name), cut as utf8_prefix cuts it and with its control characters (C0,
+// DEL and C1: U+0080 to U+009F) each made '?': shown on a terminal (`tessera jobs`, `watch`,
+// `status`) or in a log, such a character could move the cursor, rewrite what is on the
+// screen or retitle the window: one peer's text could pass for another's, or for ours.
+inline std::string peer_text(std::string_view s, size_t max_bytes) {
+  std::string out = utf8_prefix(s, max_bytes);
+  size_t n = 0;
+  for (size_t i = 0; i < out.size(); ++i) {
+    const unsigned char c = static_cast<unsigned char>(out[i]);
+    if (c == 0xC2 && i + 1 < out.size() && (static_cast<unsigned char>(out[i + 1]) & 0xE0) == 0x80) {
+      out[n++] = '?';  // U+0080..U+009F
+      ++i;
+    } else {
+      out[n++] = c < 0x20 || c == 0x7F ? '?' : out[i];
+    }
+  }
+  out.resize(n);
+  return out;
+}
+
 }  // namespace tessera

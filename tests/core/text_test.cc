@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <limits>
+#include <string>
 
 #include "core/util/saturating.h"
 
@@ -29,6 +30,24 @@ TEST(Utf8Prefix, ACutNeverFallsInsideACharacter) {
   // three bytes earlier: nothing loops or underflows.
   EXPECT_EQ(utf8_prefix(std::string(10, '\x80'), 6).size(), 3u);
   EXPECT_EQ(utf8_prefix(std::string(10, '\x80'), 2).size(), 0u);
+}
+
+// A peer's text loses its control characters (each a '?'), C1 ones in UTF-8 too, and keeps
+// everything else, cut as utf8_prefix cuts it.
+TEST(PeerText, ControlCharactersBecomeQuestionMarks) {
+  EXPECT_EQ(peer_text("\x1b]0;title\x07\x1b[2Jw\r\n\t\x7f", 100), "?]0;title??[2Jw????");
+  EXPECT_EQ(peer_text("a\xc2\x9b"
+                      "31mb\xc2\x80\xc2\x9f",
+                      100),
+            "a?31mb??");  // C1: CSI, U+0080, U+009F
+  EXPECT_EQ(peer_text("caf\xc3\xa9 \xe6\x97\xa5 \xf0\x9f\x8e\xa8 \xc2\xa0", 100),
+            "caf\xc3\xa9 \xe6\x97\xa5 \xf0\x9f\x8e\xa8 \xc2\xa0");  // U+00A0 and up stay
+  EXPECT_EQ(peer_text("ab\x1b"
+                      "cd",
+                      3),
+            "ab?");
+  EXPECT_EQ(peer_text("x\xe6\x97\xa5", 3), "x");  // the cut, as utf8_prefix's
+  EXPECT_EQ(peer_text(std::string("a\0b", 3), 10), "a?b");
 }
 
 TEST(Saturating, SumsAndProductsStopAtTheMaximum) {

@@ -167,6 +167,24 @@ TEST_F(WorkerLifecycleTest, ATaskGivenBackWithAnErrorCountsAsFailedOnThatWorker)
   EXPECT_EQ(job->status(now, 0, false).error(), job->error);  // the note only while it is live
 }
 
+// What a worker says (its name, its host, why a task failed) reaches users' terminals
+// (`tessera jobs`, `watch`, `status`) and the logs without its control characters: a worker
+// cannot move the cursor, clear the screen or retitle a window there.
+TEST_F(WorkerLifecycleTest, AWorkersWordsReachUsersWithoutControlCharacters) {
+  const std::shared_ptr<Job> job = add_still();
+  v1::RegisterRequest r = request("w\x1b[2J\x1b]0;admin\x07");
+  r.set_host("h\r\nost");
+  const uint64_t a = join_as(r, "").worker_id();
+  EXPECT_EQ(worker(a).name, "w?[2J?]0;admin?");
+  EXPECT_EQ(worker(a).host, "h??ost");
+  worker_lifecycle.release(a, lease_next(*job, a), "out of\x1b[1A memory\xc2\x9b", now, fx);
+  EXPECT_EQ(job->status(now, 1, false).error(), "a task failed on registration " + std::to_string(a) +
+                                                    ": out of?[1A memory? (the job fails once tasks fail on 2 "
+                                                    "workers; 1 so far)");
+  ASSERT_FALSE(fx.events.empty());
+  EXPECT_EQ(fx.events.back().detail, "out of?[1A memory?");
+}
+
 // An enrolled worker is its credential: failing a task, registering again and failing
 // another is one worker's trouble, not two (it could fail any job alone before).
 TEST_F(WorkerLifecycleTest, AnEnrolledWorkerRegisteringAgainIsStillOneFailure) {
