@@ -93,6 +93,16 @@ struct Doc {
   void embed() { j["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64(blob); }
 };
 
+// A .glb of `json` (padded with spaces) and `bin` (padded with zeros unless `pad_bin` is
+// false, to make a broken one).
+inline std::string glb_file(std::string json, std::string bin, bool pad_bin = true) {
+  while (json.size() % 4) json += ' ';
+  while (pad_bin && bin.size() % 4) bin += '\0';
+  auto u32 = [](uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
+  return "glTF" + u32(2) + u32(uint32_t(12 + 8 + json.size() + 8 + bin.size())) + u32(uint32_t(json.size())) + "JSON" +
+         json + u32(uint32_t(bin.size())) + "BIN" + std::string(1, '\0') + bin;
+}
+
 class Gltf : public ::testing::Test {
  protected:
   fs::path dir = fs::temp_directory_path() / ("tessera_gltf_" + std::to_string(::getpid()));

@@ -160,15 +160,7 @@ TEST_F(Gltf, MalformedDataNothingUsesIsToleratedAndInUseRefused) {
   // In a .glb too: the JSON chunk is rewritten around the unused accessor.
   Doc glb = d;
   glb.j["buffers"][0].erase("uri");
-  std::string json = glb.j.dump();
-  while (json.size() % 4) json += ' ';
-  std::string bin = glb.blob;
-  while (bin.size() % 4) bin += '\0';
-  auto u32 = [](uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
-  const std::string file = "glTF" + u32(2) + u32(uint32_t(12 + 8 + json.size() + 8 + bin.size())) +
-                           u32(uint32_t(json.size())) + "JSON" + json + u32(uint32_t(bin.size())) + "BIN" +
-                           std::string(1, '\0') + bin;
-  const Scene g = load_gltf_file(write("scene.glb", file));
+  const Scene g = load_gltf_file(write("scene.glb", glb_file(glb.j.dump(), glb.blob)));
   EXPECT_EQ(g.meshes.size(), 1u);
 }
 
@@ -176,14 +168,28 @@ TEST_F(Gltf, MalformedDataNothingUsesIsToleratedAndInUseRefused) {
 TEST_F(Gltf, AnUnpaddedGlbBinChunkIsRefusedInPlainWords) {
   Doc d;
   d.j["buffers"][0].erase("uri");
-  std::string json = d.j.dump();
-  while (json.size() % 4) json += ' ';
-  const std::string bin = d.blob + "xy";  // 90 bytes
-  auto u32 = [](uint32_t v) { return std::string(reinterpret_cast<const char*>(&v), 4); };
-  const std::string file = "glTF" + u32(2) + u32(uint32_t(12 + 8 + json.size() + 8 + bin.size())) +
-                           u32(uint32_t(json.size())) + "JSON" + json + u32(uint32_t(bin.size())) + "BIN" +
-                           std::string(1, '\0') + bin;
-  expect_error(write("scene.glb", file), "the .glb's BIN chunk length is not a multiple of 4 bytes");
+  expect_error(write("scene.glb", glb_file(d.j.dump(), d.blob + "xy", false)),  // 90 bytes
+               "the .glb's BIN chunk length is not a multiple of 4 bytes");
+}
+
+// Found by review: tinygltf's walk of a parsed document recurses once a level, and 20,000
+// nested arrays in a 40 KB file (an upload to a coordinator, which loads it itself) ended
+// the process with a stack overflow. Refused before either parser sees it, .glb too;
+// brackets inside strings do not count, and nesting up to the limit loads.
+TEST_F(Gltf, JsonNestedDeeperThanTheLimitIsRefusedBeforeParsing) {
+  Doc d;
+  d.embed();
+  auto with_extras = [&](size_t depth, const std::string& text) {
+    return "{\"extras\":" + std::string(depth, '[') + text + std::string(depth, ']') + "," + d.j.dump().substr(1);
+  };
+  expect_error(write("scene.gltf", with_extras(20000, "")), "arrays and objects nested deeper than 256 levels");
+  Doc bin = d;
+  bin.j["buffers"][0].erase("uri");
+  const std::string glb_json =
+      "{\"extras\":" + std::string(20000, '[') + std::string(20000, ']') + "," + bin.j.dump().substr(1);
+  expect_error(write("scene.glb", glb_file(glb_json, bin.blob)), "arrays and objects nested deeper than 256 levels");
+  // The root object and 255 arrays: 256 levels, loaded; a string of brackets is text.
+  EXPECT_EQ(load_gltf_file(write("scene.gltf", with_extras(255, "\"[[[[{{{{\\\"\""))).meshes.size(), 1u);
 }
 
 TEST_F(Gltf, BrokenBase64) {

@@ -137,14 +137,46 @@ std::string percent_decode(const std::string& s) {
   return out;
 }
 
+// True when arrays and objects in `text` nest deeper than `limit`. Checked on the text
+// before either parser sees it: nlohmann's parser keeps its own stack, but tinygltf's walk
+// of the tree it builds recurses once a level, and about 15,000 levels of `[[[...]]]` (a
+// 30 KB file) overflowed the stack of the process loading it (the coordinator loads
+// uploaded scenes itself). Brackets inside strings do not count.
+bool nests_deeper_than(const std::string& text, size_t limit) {
+  size_t depth = 0;
+  bool in_string = false, escaped = false;
+  for (const char c : text) {
+    if (in_string) {
+      if (escaped)
+        escaped = false;
+      else if (c == '\\')
+        escaped = true;
+      else if (c == '"')
+        in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > limit) return true;
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;
+    }
+  }
+  return false;
+}
+
 }  // namespace
 
 GltfDocument read_gltf_document(const std::string& path) {
   GltfDocument doc;
   doc.bytes = read_file(path);
   doc.binary = doc.bytes.size() >= 4 && doc.bytes.compare(0, 4, "glTF") == 0;
+  const std::string glb_text = doc.binary ? glb_json(doc.bytes, path) : std::string();
+  const std::string& text = doc.binary ? glb_text : doc.bytes;
+  if (nests_deeper_than(text, kMaxGltfJsonDepth))
+    throw SceneError(path, "JSON",
+                     "arrays and objects nested deeper than " + std::to_string(kMaxGltfJsonDepth) + " levels");
   try {  // the one nlohmann parse of a load (tinygltf's own is in parse_gltf_model)
-    doc.json = nlohmann::json::parse(doc.binary ? glb_json(doc.bytes, path) : doc.bytes);
+    doc.json = nlohmann::json::parse(text);
   } catch (const nlohmann::json::exception& e) {  // parse_error, and out_of_range for numbers like 1e999
     throw SceneError(path, "JSON", first_line(e.what()));
   }

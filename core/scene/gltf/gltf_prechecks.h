@@ -11,6 +11,10 @@ namespace tessera {
 
 // The largest file, and the largest buffer, a glTF load reads.
 constexpr uint64_t kMaxGltfBufferBytes = uint64_t(1) << 30;
+// How deep a glTF's JSON may nest arrays and objects (the format's own structure needs about
+// ten, extensions included; extras may hold more): deeper is refused before parsing
+// (gltf_document.cc).
+constexpr size_t kMaxGltfJsonDepth = 256;
 
 // Refuses (SceneError naming `path`) a top level that is not an object, a required
 // extension we do not read, a buffer without a byteLength or one over 1 GiB. An accessor
