@@ -95,5 +95,78 @@ TEST(GltfAccessors, StrideAndNormalizedIntegers) {
   }
 }
 
+// Found by review: sparse indices were read through floats, so an index past 2^24 moved
+// (16,777,217 became 16,777,216: a triangle through it collapsed, with no warning); a float
+// index type, which the specification forbids, was read too.
+TEST(GltfAccessors, SparseIndicesAreReadAsIntegersAndOnlyUnsigned) {
+  GltfContext ctx("m.gltf");
+  std::string bytes;
+  put<uint32_t>(bytes, {16777217, 3});  // the sparse indices, 8 bytes at 0
+  put<float>(bytes, {5, 7});            // their values, 8 bytes at 8
+  ctx.model.buffers.resize(1);
+  ctx.model.buffers[0].data.assign(bytes.begin(), bytes.end());
+  ctx.model.bufferViews.resize(2);
+  ctx.model.bufferViews[0].buffer = ctx.model.bufferViews[1].buffer = 0;
+  ctx.model.bufferViews[0].byteLength = ctx.model.bufferViews[1].byteLength = 8;
+  ctx.model.bufferViews[1].byteOffset = 8;
+  tinygltf::Accessor a;  // no bufferView: zeros, then the sparse values
+  a.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+  a.count = 16777218;
+  a.type = TINYGLTF_TYPE_SCALAR;
+  a.sparse.isSparse = true;
+  a.sparse.count = 2;
+  a.sparse.indices.bufferView = 0;
+  a.sparse.indices.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+  a.sparse.values.bufferView = 1;
+  a.sparse.indices.byteOffset = a.sparse.values.byteOffset = 0;  // (tinygltf's parse sets them; its constructor not)
+  ctx.model.accessors.push_back(a);
+  const std::vector<float> v = read_accessor_floats(ctx, 0, 1, "test");
+  ASSERT_EQ(v.size(), 16777218u);
+  EXPECT_EQ(v[16777217], 5);
+  EXPECT_EQ(v[16777216], 0);
+  EXPECT_EQ(v[3], 7);
+  ctx.model.accessors[0].sparse.indices.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+  try {
+    read_accessor_floats(ctx, 0, 1, "test");
+    ADD_FAILURE() << "float sparse indices were read";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("sparse indices: must be unsigned byte, short or int"), std::string::npos)
+        << e.what();
+  }
+}
+
+// Found by review: an accessor's array was allocated at its declared count before its view
+// was checked (a 452-byte file declaring 268 M vertices over 36 bytes took 3 GB before its
+// refusal), and the count's bound ignored the components (a MAT4 accessor could ask for
+// 16 GB, refused as std::bad_alloc). Both are refused now, naming the accessor.
+TEST(GltfAccessors, DeclaredCountsAreCheckedBeforeAnythingIsAllocated) {
+  GltfContext ctx("m.gltf");
+  ctx.model.buffers.resize(1);
+  ctx.model.buffers[0].data.assign(36, 0);
+  ctx.model.bufferViews.resize(1);
+  ctx.model.bufferViews[0].buffer = 0;
+  ctx.model.bufferViews[0].byteLength = 36;
+  tinygltf::Accessor a;
+  a.bufferView = 0;
+  a.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+  a.count = 80'000'000;  // 960 MB of floats over a 36-byte view
+  a.type = TINYGLTF_TYPE_VEC3;
+  ctx.model.accessors.push_back(a);
+  a.count = 268'435'455;  // 16 GB as a MAT4
+  a.type = TINYGLTF_TYPE_MAT4;
+  ctx.model.accessors.push_back(a);
+  const std::pair<int, const char*> cases[] = {
+      {0, "accessors[0] (test): byteOffset 0 with 80000000 elements runs past the end of bufferView 0"},
+      {1, "accessors[1] (test): count 268435455 x 16 components is over the limit of 268435456 values"}};
+  for (const auto& [index, reason] : cases) {
+    try {
+      read_accessor_floats(ctx, index, index == 0 ? 3 : 16, "test");
+      ADD_FAILURE() << "accessor " << index << " was read";
+    } catch (const SceneError& e) {
+      EXPECT_NE(std::string(e.what()).find(reason), std::string::npos) << e.what();
+    }
+  }
+}
+
 }  // namespace
 }  // namespace tessera

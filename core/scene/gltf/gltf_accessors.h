@@ -14,6 +14,10 @@
 
 namespace tessera {
 
+// The most values (elements x components) one accessor may hold: 1 GiB of floats. Checked
+// with every view an accessor reads before its array is allocated.
+constexpr uint64_t kMaxAccessorValues = uint64_t(1) << 28;
+
 // accessors[index] as floats, `components` per element. `what` names the use in errors,
 // e.g. "meshes[0].primitives[1] NORMAL".
 std::vector<float> read_accessor_floats(const GltfContext& ctx, int index, int components, const std::string& what);
