@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 
 #include "core/render/light_tracer.h"
 
@@ -93,6 +94,8 @@ ResultIntake::Batch ResultIntake::screen(const std::vector<const v1::TaskResult*
                           splat_limits(plan.settings(), plan.tiles()[lease->tile],
                                        pass_run(plan.settings(), lease->pass, lease->pass_count)),
                           plan.settings().light_tracer,
+                          {},
+                          false,
                           {}});
   }
   return b;
@@ -183,10 +186,12 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
       p_.verifier.issue(job, *lease, result.worker_id(), digest, now);
     p_.counters.result_bytes += result.sums_zstd().size();
     p_.counters.splat_bytes += result.splats_zstd().size();
-    p_.counters.task_seconds.observe(result.render_seconds());
-    p_.workers.record_result(result.worker_id(), result.samples(),
-                             result.sums_zstd().size() + result.splats_zstd().size(), result.render_seconds(),
-                             result.busy_thread_seconds(), result.thread_seconds(), now);
+    // The worker's own time, in the histogram only where it is a time at all; its speed
+    // counts the samples merged, not those it claims.
+    if (std::isfinite(result.render_seconds()) && result.render_seconds() >= 0)
+      p_.counters.task_seconds.observe(result.render_seconds());
+    p_.workers.record_result(result.worker_id(), added, result.sums_zstd().size() + result.splats_zstd().size(),
+                             result.render_seconds(), result.busy_thread_seconds(), result.thread_seconds(), now);
     if (!p_.lifecycle.finish_if_done(job, now, fx) && p_.snapshots.after_merge(job, now)) fx.writes.push_back(shared);
     b.acks[in.index].set_accepted(true);
     fx.changed = true;

@@ -1,6 +1,7 @@
 #include "server/worker_registry.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "core/util/text.h"
 #include "server/secrets.h"
@@ -88,12 +89,16 @@ void WorkerRegistry::record_result(uint64_t id, uint64_t samples, uint64_t bytes
   ++w->tasks_done;
   w->result_bytes += bytes;
   w->result_samples += samples;
-  if (seconds > 0) {
-    const double rate = double(samples) / seconds;
+  // `seconds` is the worker's word: a rate only from a finite time, and never over
+  // `samples` in kMinTaskSeconds (one report of 1e-300 s made this worker's speed, the
+  // farm's thread speed and so the remaining-work signal infinite for good).
+  if (std::isfinite(seconds) && seconds > 0) {
+    const double rate = double(samples) / std::max(seconds, kMinTaskSeconds);
     w->samples_per_second = w->samples_per_second > 0 ? 0.8 * w->samples_per_second + 0.2 * rate : rate;
   }
   // Reports only grow; one that does not (a restarted worker process reusing an id
-  // cannot, ids are never reused) is ignored.
+  // cannot, ids are never reused), or is not finite, is ignored.
+  if (!std::isfinite(thread_seconds) || !std::isfinite(busy_thread_seconds)) return;
   if (!(thread_seconds >= w->thread_seconds) || !(busy_thread_seconds >= w->busy_thread_seconds)) return;
   if (w->window_start == 0 || now - w->window_start > kWindowSeconds) {
     w->window_busy = w->busy_thread_seconds;

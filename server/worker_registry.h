@@ -70,10 +70,13 @@ class WorkerRegistry {
   uint64_t threads() const { return threads_; }  // of every known worker
   // Every worker, its utilization as of `now`.
   std::vector<WorkerInfo> list(double now) const;
-  // A finished task: its render rate feeds the worker's smoothed speed; its thread-time
-  // counters the utilization.
+  // A finished task: its render rate (`samples`, as merged, over the worker's `seconds`)
+  // feeds the worker's smoothed speed; its thread-time counters the utilization.
   void record_result(uint64_t id, uint64_t samples, uint64_t bytes, double seconds, double busy_thread_seconds,
                      double thread_seconds, double now);
+  // The shortest render time a rate is computed over (a worker's report of less counts
+  // as this much).
+  static constexpr double kMinTaskSeconds = 1e-3;
   // Busy over available render-thread time of every worker, over their windows; a worker
   // silent for two windows counts as idle.
   double utilization(double now) const;

@@ -35,6 +35,29 @@ TEST_F(ResultIntakeTest, TheHoldersResultIsMergedAndItsLeaseEnds) {
   EXPECT_TRUE(fx.changed);
 }
 
+// Found by review: a worker's speed was its claimed samples over its claimed seconds, so one
+// result saying UINT64_MAX samples in 1e-300 s made it, the farm's thread speed and the
+// remaining-work signal infinite for good. The speed counts the samples merged, over at
+// least kMinTaskSeconds; a time that is no time feeds neither the speed nor the histogram.
+TEST_F(ResultIntakeTest, AWorkersSpeedIsBoundedByWhatItMerged) {
+  v1::TaskResult r = result(lease_next(*job, a));
+  r.set_samples(std::numeric_limits<uint64_t>::max());
+  r.set_render_seconds(1e-300);
+  ASSERT_TRUE(submit(r).accepted());
+  EXPECT_EQ(worker(a).samples_per_second, testing::kFirstPassSamples / WorkerRegistry::kMinTaskSeconds);
+  EXPECT_TRUE(std::isfinite(workers.thread_speed()));
+  for (const double bad : {std::numeric_limits<double>::infinity(), std::nan(""), -1.0}) {
+    v1::TaskResult next = result(lease_next(*job, a));
+    next.set_render_seconds(bad);
+    next.set_thread_seconds(std::numeric_limits<double>::infinity());
+    ASSERT_TRUE(submit(next).accepted());
+  }
+  EXPECT_EQ(worker(a).samples_per_second, testing::kFirstPassSamples / WorkerRegistry::kMinTaskSeconds);
+  EXPECT_TRUE(std::isfinite(worker(a).thread_seconds));
+  EXPECT_TRUE(std::isfinite(counters.task_seconds.sum));
+  EXPECT_EQ(counters.task_seconds.count, 1u);
+}
+
 TEST_F(ResultIntakeTest, AStrangersResultIsRejectedAndCounted) {
   const uint64_t t = lease_next(*job, a);
   v1::TaskResult r = result(t);
