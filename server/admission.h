@@ -1,7 +1,9 @@
 // What a submit asks for, checked before anything large is allocated or any scene is
 // unpacked: the protocol, the settings, the frame list, and the limits on live work (per
 // client: jobs, scene bytes, samples queued; for everyone: pixels of live films). The
-// limits bound memory and keep clients fair; submits racing each other may pass together.
+// limits bound memory and keep clients fair. An admitted submit holds its place in them
+// while its scene is checked (JobTable::reserve), so racing submits cannot pass together;
+// a requeue passes the same limits.
 #pragma once
 
 #include <algorithm>

@@ -219,8 +219,21 @@ void Coordinator::refused() {
   ++counters_.jobs_refused;
 }
 
+// A request's place in the limits while it works outside the lock (JobTable::reserve),
+// given back however the request ends; an added job counts itself.
+struct Coordinator::Reserved {
+  Coordinator& c;
+  uint64_t token = 0;
+  ~Reserved() {
+    if (!token) return;
+    MutexLock lock(c.mu_);
+    c.jobs_.release(token);
+  }
+};
+
 std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::string& owner) {
   Submission sub;
+  Reserved reserved{*this};
   try {
     Admission a = admit(req);
     if (!req.upload_id().empty()) a.scene_bytes = uploads_.bytes(req.upload_id(), owner);
@@ -232,6 +245,9 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
       if (!over.empty()) throw RequestError(RequestError::Code::kResourceExhausted, over);
       meta.id = jobs_.new_id();
       meta.seq = jobs_.next_seq();
+      // Submits racing this one see it while its scene is checked: they cannot pass the
+      // limits together (32 parallel submits under a limit of 2 were all accepted).
+      reserved.token = jobs_.reserve(owner, a.pixels, a.samples, a.scene_bytes);
     }
     sub = prepare_submission(req, a, std::move(meta), scenes_, *store_, options_.data_dir, &uploads_);
   } catch (const RequestError&) {
@@ -240,6 +256,7 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
   }
   const std::string id = sub.job ? sub.job->id() : sub.sequence->id();
   locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    jobs_.release(std::exchange(reserved.token, 0));  // the job counts itself from here
     const double now = clock_->now();
     ++counters_.jobs_submitted;
     fx.actor = owner;
@@ -297,18 +314,30 @@ v1::JobStatus Coordinator::requeue(const std::string& id, const std::string& req
           return Recovery::load_ended(*row, *store_, clock_->now());
         },
         [&](Effects&) TESSERA_REQUIRES(mu_) { control_.end_archived(id); });
+  Reserved reserved{*this};
   JobControl::Requeue q = locked([&](Effects&) TESSERA_REQUIRES(mu_) {
     if (back) {
       control_.end_archived(id);
       if (!jobs_.knows(id)) Recovery::adopt(jobs_, *back);
     }
     JobControl::Requeue r = control_.begin_requeue(id, requester, any);
+    // Bounded as a submit is, by its owner's limits: requeues of ended jobs made live jobs
+    // and films without limit (and a restart restored them all).
+    std::string owner;
+    const Admission a = JobControl::requeue_admission(r, &owner);
+    const std::string over = over_limit(a, jobs_.load(owner), options_, owner);
+    if (!over.empty()) {
+      control_.requeue_failed(r);
+      throw RequestError(RequestError::Code::kResourceExhausted, over);
+    }
+    reserved.token = jobs_.reserve(owner, a.pixels, a.samples, a.scene_bytes);
     await([&] { return JobControl::quiet(r); });  // (an ended job's writers are done, or nearly)
     return r;
   });
   undo_on_throw([&] { load_requeue(q, *store_, scenes_, options_.data_dir); },  // the scene, the row, the films
                 [&](Effects&) TESSERA_REQUIRES(mu_) { control_.requeue_failed(q); });
   locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
+    jobs_.release(std::exchange(reserved.token, 0));  // the jobs count themselves from here
     fx.actor = requester;
     control_.finish_requeue(q, clock_->now(), fx);
   });

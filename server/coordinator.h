@@ -213,6 +213,7 @@ class Coordinator {
   const CoordinatorOptions& options() const { return options_; }
 
  private:
+  struct Reserved;
   // Carries out what operations under the lock left to do (rule 3). mu_ not held.
   void apply(Effects fx) TESSERA_EXCLUDES(mu_);
   // An operation's events get their place in the order operations held the lock (mu_ held),

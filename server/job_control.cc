@@ -2,6 +2,7 @@
 
 #include "core/util/invariant.h"
 #include "core/util/log.h"
+#include "core/util/saturating.h"
 #include "server/recovery.h"
 #include "server/request_error.h"
 
@@ -130,6 +131,25 @@ JobControl::Requeue JobControl::begin_requeue(const std::string& id, const std::
   q.scene_hash = job->meta.scene_hash;
   q.ended.push_back(job);
   return q;
+}
+
+Admission JobControl::requeue_admission(const Requeue& q, std::string* owner) {
+  Admission a;
+  if (const Sequence* s = q.sequence.get()) {
+    *owner = s->meta.owner;
+    a.pixels = live_pixels_of(s->settings);
+    a.samples =
+        saturating_mul(s->frame_samples(), s->frames.size() - std::min<size_t>(s->frames.size(), s->frames_done));
+    a.scene_bytes = s->meta.scene_bytes;
+    return a;
+  }
+  const Job& j = *q.ended.front();
+  *owner = j.meta.owner;
+  a.pixels = live_pixels_of(j.plan.settings());
+  const uint64_t total = j.plan.samples_total();
+  a.samples = total - std::min(total, j.plan.samples_merged());
+  a.scene_bytes = j.meta.scene_bytes;
+  return a;
 }
 
 void JobControl::refuse_requeue(const std::string& id, v1::JobStatus::State state, bool durable) {

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "server/admission.h"
 #include "server/effects.h"
 #include "server/job_lifecycle.h"
 #include "server/scene_store.h"
@@ -69,6 +70,10 @@ class JobControl {
   // Refuses what cannot be requeued (live, DONE, its end not yet on disk, a frame, being
   // changed) and marks it being changed. Throws RequestError.
   Requeue begin_requeue(const std::string& id, const std::string& requester, bool any);
+  // What the requeue asks of the limits a submit passes (admission.h), and whose they are
+  // (the owner's, whoever asks): a frame's pixels, the samples its unfinished frames or
+  // its plan still need, its scene.
+  static Admission requeue_admission(const Requeue& q, std::string* owner);
   // Throws RequestError (kFailedPrecondition) for a job in `state` that cannot be requeued
   // (`durable`: its end is on disk).
   static void refuse_requeue(const std::string& id, v1::JobStatus::State state, bool durable);

@@ -207,7 +207,21 @@ Load JobTable::load(const std::string& owner) const {
     l.client_scene_bytes += s->meta.scene_bytes;
     l.client_samples_remaining = saturating_add(l.client_samples_remaining, unstarted);
   }
+  for (const auto& [token, r] : reserved_) {
+    l.live_pixels += r.pixels;
+    l.samples_remaining = saturating_add(l.samples_remaining, r.samples);
+    if (r.owner != owner) continue;
+    ++l.client_jobs;
+    l.client_scene_bytes += r.scene_bytes;
+    l.client_samples_remaining = saturating_add(l.client_samples_remaining, r.samples);
+  }
   return l;
+}
+
+uint64_t JobTable::reserve(const std::string& owner, int64_t pixels, uint64_t samples, uint64_t scene_bytes) {
+  const uint64_t token = next_reservation_++;
+  reserved_[token] = {owner, pixels, samples, scene_bytes};
+  return token;
 }
 
 }  // namespace tessera

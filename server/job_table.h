@@ -106,10 +106,24 @@ class JobTable {
   // Whether a job's folder name is a job's, a sequence's, or a frame's of a sequence here.
   bool names(const std::string& folder) const;
 
-  // The whole load, and `owner`'s part of it.
+  // The whole load, and `owner`'s part of it; reservations count as live jobs.
   Load load(const std::string& owner = "") const;
 
+  // Work admitted but not yet in the table (a submit's scene being checked, a requeue's
+  // films being read: outside the lock), counted by load() as one live job of `owner` so
+  // that requests racing each other cannot pass the limits together. Returns a token for
+  // release(), which is called when the job is added or the request fails.
+  uint64_t reserve(const std::string& owner, int64_t pixels, uint64_t samples, uint64_t scene_bytes);
+  void release(uint64_t token) { reserved_.erase(token); }
+
  private:
+  struct Reservation {
+    std::string owner;
+    int64_t pixels = 0;
+    uint64_t samples = 0, scene_bytes = 0;
+  };
+  std::map<uint64_t, Reservation> reserved_;
+  uint64_t next_reservation_ = 1;
   std::map<std::string, std::shared_ptr<Job>> jobs_;  // stills and frames
   std::map<std::string, std::shared_ptr<Sequence>> sequences_;
   std::map<uint64_t, std::string> listed_;  // stills and sequences by submission number

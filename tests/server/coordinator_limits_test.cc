@@ -1,5 +1,8 @@
 // The coordinator's bounds: batched leases, fair shares, live jobs, pixels, scene bytes and
 // samples per client, registered workers, results only from the lease holder.
+#include <atomic>
+#include <thread>
+
 #include "tests/server/coordinator_fixture.h"
 
 namespace tessera {
@@ -83,6 +86,57 @@ TEST_F(CoordinatorTest, LiveJobsPerClientAndLivePixelsAreBounded) {
     EXPECT_NE(std::string(e.what()).find("--max-live-pixels"), std::string::npos) << e.what();
   }
   EXPECT_EQ(c->list().size(), 4u);  // nothing was kept of the refused ones
+}
+
+// Found by review: a submit's limits were checked, then its scene checked outside the lock,
+// then the job added, so submits racing each other all passed (32 parallel ones under a
+// limit of 2 were accepted). Admitted submits now hold their place while they work.
+TEST_F(CoordinatorTest, ParallelSubmitsNeverPassTheLimitsTogether) {
+  CoordinatorOptions o = options();
+  o.max_jobs_per_client = 2;
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  std::atomic<int> accepted{0}, refused{0};
+  std::vector<std::thread> clients;
+  for (int i = 0; i < 12; ++i)
+    clients.emplace_back([&] {
+      try {
+        c->submit(request(job_settings()), "alice");
+        ++accepted;
+      } catch (const RequestError& e) {
+        EXPECT_NE(std::string(e.what()).find("--max-jobs-per-client"), std::string::npos) << e.what();
+        ++refused;
+      }
+    });
+  for (std::thread& th : clients) th.join();
+  EXPECT_EQ(accepted.load(), 2);
+  EXPECT_EQ(refused.load(), 10);
+  EXPECT_EQ(c->list().size(), 2u);
+  c->submit(request(job_settings()), "bob");  // nothing of alice's refused ones is held
+}
+
+// Found by review: a requeue took no limit at all, so a client could cancel and requeue its
+// way to any number of live jobs and films (and a restart restored them all). It is bounded
+// as a submit is, by the owner's limits; refused, the job stays as it was.
+TEST_F(CoordinatorTest, ARequeueIsBoundedLikeASubmit) {
+  CoordinatorOptions o = options();
+  o.max_jobs_per_client = 2;
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  const std::string first = c->submit(request(job_settings()), "alice");
+  c->cancel(first, "alice", false);
+  ASSERT_TRUE(c->wait_for_end(first, 10));
+  const std::string second = c->submit(request(job_settings()), "alice");
+  c->submit(request(job_settings()), "alice");
+  try {
+    c->requeue(first, "admin", true);  // the owner's limits, whoever asks
+    ADD_FAILURE() << "a third live job for alice by a requeue";
+  } catch (const RequestError& e) {
+    EXPECT_EQ(e.code(), RequestError::Code::kResourceExhausted);
+    EXPECT_NE(std::string(e.what()).find("client 'alice' has 2 live jobs"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(c->status(first, false).state(), v1::JobStatus::CANCELLED);
+  c->cancel(second, "alice", false);
+  ASSERT_TRUE(c->wait_for_end(second, 10));
+  EXPECT_EQ(c->requeue(first, "alice", false).state(), v1::JobStatus::QUEUED);  // room again
 }
 
 // A frame with AOVs holds their sums beside its film (72 bytes a pixel more than the 40):
