@@ -2,6 +2,7 @@
 
 #include <xxhash.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <set>
@@ -69,7 +70,20 @@ std::string quoted(const std::string& path) {
   return q;
 }
 
+size_t path_parts(const std::string& p) { return size_t(std::count(p.begin(), p.end(), '/')) + 1; }
+
+uint64_t saturating_sum(uint64_t a, uint64_t b) { return a + b < a ? UINT64_MAX : a + b; }
+
 }  // namespace
+
+void SceneWeight::add(const std::string& path, uint64_t size) {
+  const uint64_t blocks = size == 0 ? 1 : size / kSceneDiskBlock + (size % kSceneDiskBlock != 0);
+  bytes_ = saturating_sum(
+      bytes_,
+      saturating_sum(path.size(), blocks > UINT64_MAX / kSceneDiskBlock ? UINT64_MAX : blocks * kSceneDiskBlock));
+  for (size_t slash = path.find('/'); slash != std::string::npos; slash = path.find('/', slash + 1))
+    if (folders_.insert(path.substr(0, slash)).second) bytes_ = saturating_sum(bytes_, kSceneDiskBlock);
+}
 
 uint64_t check_manifest(const v1::SceneManifest& m) {
   const auto& h = m.scene_hash();
@@ -79,17 +93,20 @@ uint64_t check_manifest(const v1::SceneManifest& m) {
     throw WireError("scene manifest: " + std::to_string(m.files_size()) + " files; at most " +
                     std::to_string(kMaxSceneFiles));
   std::set<std::string> paths;
-  uint64_t bytes = 0;
+  SceneWeight weight;
   for (const v1::SceneFileInfo& f : m.files()) {
     if (!normal_relative(f.path()))
       throw WireError("scene manifest: unsafe file path " + quoted(f.path()) +
                       " (a path inside the scene's folder, without '..', '.' or empty parts)");
+    if (path_parts(f.path()) > kMaxScenePathParts)
+      throw WireError("scene manifest: file path " + quoted(f.path()) + " has " + std::to_string(path_parts(f.path())) +
+                      " parts; at most " + std::to_string(kMaxScenePathParts));
     if (!paths.insert(f.path()).second) throw WireError("scene manifest: file " + quoted(f.path()) + " listed twice");
     if (f.size() > kMaxSceneManifestBytes)
       throw WireError("scene manifest: file " + quoted(f.path()) + " declares " + std::to_string(f.size()) +
                       " bytes; at most " + std::to_string(kMaxSceneManifestBytes));
-    bytes += f.path().size() + f.size();  // (each term under 2^51: no wrap before the check)
-    if (bytes > kMaxSceneManifestBytes)
+    weight.add(f.path(), f.size());
+    if (weight.bytes() > kMaxSceneManifestBytes)
       throw WireError("scene manifest: its files declare over " + std::to_string(kMaxSceneManifestBytes) +
                       " bytes together");
   }
@@ -99,7 +116,7 @@ uint64_t check_manifest(const v1::SceneManifest& m) {
         throw WireError("scene manifest: " + quoted(p.substr(0, slash)) + " is both a file and a folder");
   if (!paths.count(m.main_file()))
     throw WireError("scene manifest: main file " + quoted(m.main_file()) + " is not among its files");
-  return bytes;
+  return weight.bytes();
 }
 
 // ---- sending ----

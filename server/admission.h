@@ -31,7 +31,7 @@ struct Admission {
   std::vector<int> frames;   // empty: a still
   int64_t pixels = 0;        // of one frame
   uint64_t samples = 0;      // of every frame, at most
-  uint64_t scene_bytes = 0;  // paths and contents of the bundle's files
+  uint64_t scene_bytes = 0;  // the bundle's weight on disk (SceneWeight)
 };
 
 // Throws RequestError (kInvalidArgument) naming what is wrong.

@@ -28,9 +28,9 @@ struct RemoveAll {
 }  // namespace
 
 uint64_t bundle_bytes(const SceneFiles& files) {
-  uint64_t n = 0;
-  for (const v1::SceneFile& f : files) n += f.path().size() + f.content().size();
-  return n;
+  SceneWeight weight;
+  for (const v1::SceneFile& f : files) weight.add(f.path(), f.content().size());
+  return weight.bytes();
 }
 
 SceneStore::SceneStore(std::string dir) : dir_(std::move(dir)) { fs::create_directories(dir_); }

@@ -18,7 +18,8 @@
 
 namespace tessera {
 
-// Paths and contents of a bundle's files: what a scene weighs against its owner's limit.
+// What a bundle's files weigh against its owner's limit (SceneWeight: paths, and sizes and
+// folders in disk blocks).
 uint64_t bundle_bytes(const SceneFiles& files);
 
 class SceneStore {

@@ -7,6 +7,7 @@
 #include <limits>
 
 #include "core/render/frames.h"
+#include "scene_chunks.h"
 #include "tests/server/parts_fixture.h"
 
 namespace tessera {
@@ -39,7 +40,7 @@ TEST(Admit, AStillWeighsItsPixelsSamplesAndSceneBytes) {
   EXPECT_TRUE(a.frames.empty());
   EXPECT_EQ(a.pixels, int64_t(testing::kPixels));
   EXPECT_EQ(a.samples, testing::kSamples);
-  EXPECT_EQ(a.scene_bytes, 9u + 100u);  // paths and contents
+  EXPECT_EQ(a.scene_bytes, 9u + kSceneDiskBlock);  // its path, and its 100 bytes as a disk block
   EXPECT_EQ(a.settings.spp, 10);
 }
 

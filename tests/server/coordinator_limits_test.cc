@@ -171,8 +171,7 @@ TEST_F(CoordinatorTest, AFrameWithAovsWeighsItsAovSumsAgainstTheLivePixels) {
 
 TEST_F(CoordinatorTest, SceneBytesAndQueuedSamplesPerClientAreBounded) {
   const v1::SubmitJobRequest one = request(job_settings());
-  uint64_t bytes = 0;
-  for (const v1::SceneFile& f : one.files()) bytes += f.path().size() + f.content().size();
+  const uint64_t bytes = bundle_bytes(one.files());
   CoordinatorOptions o = options();
   o.max_scene_bytes_per_client = 2 * bytes;  // two jobs' scenes
   o.max_queued_samples_per_client = 3 * 48 * 36 * 10;
@@ -202,8 +201,7 @@ TEST_F(CoordinatorTest, SceneBytesAndQueuedSamplesPerClientAreBounded) {
 // client's live jobs and its other uploads: a client cannot fill the coordinator's disk.
 TEST_F(CoordinatorTest, UploadsCountAgainstTheClientsSceneBytes) {
   const v1::SubmitJobRequest one = request(job_settings());
-  uint64_t bytes = 0;
-  for (const v1::SceneFile& f : one.files()) bytes += f.path().size() + f.content().size();
+  const uint64_t bytes = bundle_bytes(one.files());
   CoordinatorOptions o = options();
   o.max_scene_bytes_per_client = 2 * bytes;
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
