@@ -15,13 +15,7 @@ namespace {
 
 // An unexpected failure: its details (which can name files on the coordinator's disk) go
 // to the log only; the caller gets a number to find them by.
-grpc::Status internal_error(const char* what) {
-  static std::atomic<uint64_t> incidents{0};
-  const uint64_t n = ++incidents;
-  spdlog::error("internal error #{}: {}", n, what);
-  return grpc::Status(grpc::StatusCode::INTERNAL,
-                      "internal error #" + std::to_string(n) + " (the coordinator's log has its details)");
-}
+grpc::Status internal_error(const char* what) { return grpc::Status(grpc::StatusCode::INTERNAL, log_incident(what)); }
 
 // The caller's address without its port ("ipv4:127.0.0.1:5000" -> "ipv4:127.0.0.1").
 std::string peer_address(const std::string& peer) {

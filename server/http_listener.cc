@@ -4,10 +4,28 @@
 
 #include <stdexcept>
 
+#include "core/util/log.h"
+
 namespace tessera {
 
 HttpListener::HttpListener(std::unique_ptr<httplib::Server> server, std::string what)
-    : server_(std::move(server)), what_(std::move(what)) {}
+    : server_(std::move(server)), what_(std::move(what)) {
+  // A handler's unexpected exception: cpp-httplib's own answer put its text in an
+  // EXCEPTION_WHAT header (a preview's named the image's path on the coordinator's disk);
+  // the log has it, the caller a number, as on the gRPC side.
+  server_->set_exception_handler(
+      [w = what_](const httplib::Request& req, httplib::Response& res, std::exception_ptr ep) {
+        std::string why = "unknown exception";
+        try {
+          std::rethrow_exception(ep);
+        } catch (const std::exception& e) {
+          why = e.what();
+        } catch (...) {
+        }
+        res.status = 500;
+        res.set_content(log_incident(w + " " + req.method + " " + req.path + ": " + why) + "\n", "text/plain");
+      });
+}
 
 HttpListener::~HttpListener() { stop(); }
 

@@ -17,7 +17,8 @@ namespace tessera {
 
 class HttpListener {
  public:
-  // `what` names the listener in errors ("http", "health").
+  // `what` names the listener in errors ("http", "health"). A handler's unexpected
+  // exception is logged (log_incident) and answered 500 with its incident number only.
   HttpListener(std::unique_ptr<httplib::Server> server, std::string what);
   ~HttpListener();  // stops
   HttpListener(const HttpListener&) = delete;

@@ -15,4 +15,9 @@ namespace tessera {
 // Without it (tests), spdlog's default logger prints the same messages.
 void init_logging(const std::string& program, bool verbose = false);
 
+// An unexpected failure in a server: `what` (which can name files on its disk) goes to the
+// log only, under a number the process counts up; returns the words a caller gets instead,
+// "internal error #N (the coordinator's log has its details)".
+std::string log_incident(const std::string& what);
+
 }  // namespace tessera

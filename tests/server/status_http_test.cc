@@ -3,11 +3,15 @@
 #include "server/status_http.h"
 
 #include <gtest/gtest.h>
+#include <httplib.h>
 
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <thread>
 
+#include "server/http_listener.h"
 #include "wire.h"
 
 namespace tessera {
@@ -56,6 +60,30 @@ TEST(StatusHttp, AJobsTilesReadBackAsProtobufPrintsThem) {
   const nlohmann::json page = nlohmann::json::parse(job_status_json(s, 3));
   EXPECT_EQ(page["tiles_from"], 3);
   EXPECT_EQ(page["tiles_next"], 7);
+}
+
+// Found by review: a handler's unexpected exception reached cpp-httplib's own answer, which
+// put its text in an EXCEPTION_WHAT header (a preview's named the image's path on the
+// coordinator's disk). The log has it; the caller gets a number, as on the gRPC side.
+TEST(HttpListener, AnUnexpectedExceptionIsAnsweredWithAnIncidentNumberOnly) {
+  HttpListener http(std::make_unique<httplib::Server>(), "http");
+  http.server().Get("/boom", [](const httplib::Request&, httplib::Response&) {
+    throw std::runtime_error("/var/lib/tessera/jobs/abc/image.exr: cannot read");
+  });
+  const int port = http.bind("127.0.0.1", 0);
+  http.start();
+  httplib::Client client("127.0.0.1", port);
+  httplib::Result r = client.Get("/boom");
+  for (int i = 0; !r && i < 50; ++i) {  // (the listener's thread may not serve yet)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    r = client.Get("/boom");
+  }
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 500);
+  EXPECT_FALSE(r->has_header("EXCEPTION_WHAT"));
+  EXPECT_EQ(r->body.rfind("internal error #", 0), 0u) << r->body;
+  EXPECT_EQ(r->body.find("/var/lib"), std::string::npos) << r->body;
+  http.stop();
 }
 
 }  // namespace
