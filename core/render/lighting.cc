@@ -67,7 +67,10 @@ std::string describe_lighting(const Scene& scene, const RenderSettings& s) {
   } else if (scene.unlit && s.default_environment) {
     add("the default environment (uniform radiance 1" + std::string(strength) + "), as the scene has no light");
   }
-  if (out.empty()) return "none: the scene has no light and --no-default-env is set, so the image is black";
+  if (out.empty())  // (a glTF scene without lights gets the default environment; a COLLADA one does not)
+    return scene.unlit && !s.default_environment
+               ? "none: the scene has no light and --no-default-env is set, so the image is black"
+               : "none: the scene has no light, so the image is black";
   return out;
 }
 

@@ -89,7 +89,12 @@ TEST(Environment, TheLightingChosenIsDescribed) {
   const Scene unlit = load_scene(testing::source_path("tests/fuzz/seeds/gltf/animated.gltf"));
   EXPECT_NE(describe_lighting(unlit, s).find("the default environment (uniform radiance 1)"), std::string::npos);
   s.default_environment = false;
-  EXPECT_NE(describe_lighting(unlit, s).find("none"), std::string::npos);
+  EXPECT_EQ(describe_lighting(unlit, s),
+            "none: the scene has no light and --no-default-env is set, so the image is black");
+  // A scene without lights that is not glTF gets no default environment: no flag to blame.
+  Scene dark = unlit;
+  dark.unlit = false;
+  EXPECT_EQ(describe_lighting(dark, RenderSettings()), "none: the scene has no light, so the image is black");
   s.environment = Rgb(0.5f);
   s.environment_strength = 2;
   EXPECT_EQ(describe_lighting(unlit, s), "a uniform environment of radiance (0.5, 0.5, 0.5) x strength 2");
