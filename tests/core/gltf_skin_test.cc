@@ -187,11 +187,18 @@ TEST_F(Gltf, GpuInstancesAreEachPlacedUnderTheNode) {
     EXPECT_EQ(sa.meshes.size(), 3u);
     EXPECT_TRUE(sa.instances.empty());
   }
-  {  // A placement scaled to nothing is left out; a non-finite one is refused by name.
+  {  // A placement without an inverse (scaled to zero along an axis) is a copy in world
+     // space, as a plain node with that scale is: a flat mesh in that plane keeps its
+     // surface (it was left out, silently). A non-finite one is refused by name.
     Doc z = d;
-    const int zero = add_accessor(z, bytes<float>({1, 1, 1, 0, 0, 0, 2, 2, 2}), kFloat, 3, "VEC3");
-    z.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]["SCALE"] = zero;
-    EXPECT_EQ(load(z).instances.size(), 2u);
+    const int flat = add_accessor(z, bytes<float>({1, 1, 1, 1, 1, 0, 2, 2, 2}), kFloat, 3, "VEC3");
+    z.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]["SCALE"] = flat;
+    const Scene sz = load(z);
+    EXPECT_EQ(sz.instances.size(), 2u);
+    ASSERT_EQ(sz.meshes.size(), 2u);
+    EXPECT_FALSE(sz.meshes[1].instanced);
+    expect_vec(sz.meshes[1].positions[1], {10, 1, -1});  // instance 1, turned 90 degrees about z
+    EXPECT_EQ(sz.triangle_count(), 3u);
     const int huge = add_accessor(z, bytes<float>({1, 1, 1, 3e38f, 3e38f, 3e38f, 2, 2, 2}), kFloat, 3, "VEC3");
     z.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"]["SCALE"] = huge;
     z.j["nodes"][0]["scale"] = {10, 10, 10};

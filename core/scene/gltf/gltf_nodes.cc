@@ -109,20 +109,39 @@ class NodeWalk {
     // Real instances (Scene::instances: each primitive stored once, in object space), but
     // where a pose moves them (animated files, skins): copies, posed as any mesh.
     if (instances.size() > 1 && !animation_.recording() && n.skin < 0) {
+      // An instance whose transform has no inverse (scaled to zero along an axis: a flat
+      // mesh in that plane keeps its surface) or none in float cannot be placed by Embree's
+      // instancing: it is a copy in world space, as a plain node with that scale is.
+      std::vector<Mat4> copies;
+      std::vector<std::optional<Instance>> placed(instances.size());
+      for (size_t k = 0; k < instances.size(); ++k) {
+        const Mat4 m = world * instances[k];
+        for (int r = 0; r < 3; ++r)
+          for (int c = 0; c < 4; ++c)
+            if (!std::isfinite(float(m(r, c))))  // (as Embree gets it)
+              ctx_.fail(el, "EXT_mesh_gpu_instancing instance " + std::to_string(k) + "'s transform is not finite");
+        placed[k] = Instance::make(0, m);
+        if (!placed[k]) copies.push_back(instances[k]);
+      }
       for (GltfPrimitive& p : read_gltf_mesh(ctx_, materials_, n, Mat4(), el, false)) {
         const uint32_t id = uint32_t(ctx_.scene.meshes.size());
         p.mesh.instanced = true;
-        for (size_t k = 0; k < instances.size(); ++k) {
-          const Mat4 m = world * instances[k];
-          for (int r = 0; r < 3; ++r)
-            for (int c = 0; c < 4; ++c)
-              if (!std::isfinite(float(m(r, c))))  // (as Embree gets it)
-                ctx_.fail(el, "EXT_mesh_gpu_instancing instance " + std::to_string(k) + "'s transform is not finite");
-          // (One scaled to nothing has no surface: left out.)
-          if (std::optional<Instance> in = Instance::make(id, m)) ctx_.scene.instances.push_back(*in);
-        }
+        for (const std::optional<Instance>& in : placed)
+          if (in) {
+            ctx_.scene.instances.push_back(*in);
+            ctx_.scene.instances.back().mesh = id;
+          }
         ctx_.scene.meshes.push_back(std::move(p.mesh));
       }
+      for (const Mat4& inst : copies)
+        for (GltfPrimitive& p : read_gltf_mesh(ctx_, materials_, n, world * inst, el, false)) {
+          instanced_triangles_ += p.mesh.triangle_count();
+          if (instanced_triangles_ > kMaxInstancedTriangles)
+            ctx_.fail(el, "EXT_mesh_gpu_instancing: " + std::to_string(copies.size()) +
+                              " instances without an inverse transform (copied) make more than the 50 M triangle "
+                              "limit");
+          ctx_.scene.meshes.push_back(std::move(p.mesh));
+        }
     } else {
       add_copies(n, instances, world, entry, el);
     }
