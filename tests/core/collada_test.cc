@@ -142,6 +142,37 @@ TEST(ColladaOwn, CornellSpheresUsesStandardTransformsAndFanTriangulation) {
   EXPECT_EQ(spheres_with(s, Material::Kind::kGlass), 1u);
 }
 
+// Found by review: what a node holds beyond the one object CS184's rule takes (a second
+// instance, an <instance_node>), and <lookat> and <skew>, vanished without a word. They
+// are still skipped, as CS184 does, and each kind is said once with a count.
+TEST(ColladaOwn, WhatANodeHoldsBeyondItsOneObjectIsSkippedWithAWarning) {
+  std::string text = read(testing::source_path("scenes/cornell-spheres.dae"));
+  auto insert_after = [&](const std::string& at, const std::string& what) {
+    const size_t p = text.find(at);
+    ASSERT_NE(p, std::string::npos) << at;
+    text.insert(p + at.size(), what);
+  };
+  insert_after("<node id=\"light\" name=\"light\">", "<instance_geometry url=\"#floor-mesh\"/>");
+  insert_after("<node id=\"floor\" name=\"floor\">",
+               "<lookat>0 0 1 0 0 0 0 1 0</lookat><instance_node url=\"#camera\"/>");
+  insert_after("<node id=\"ceiling\" name=\"ceiling\">", "<instance_node url=\"#camera\"/>");
+  const Scene s = load_collada_string(text, "extra.dae");
+  EXPECT_EQ(s.lights.size(), 1u);
+  EXPECT_EQ(s.triangle_count(), 12u);  // nothing added
+  auto warned = [&](const std::string& what) {
+    for (const std::string& w : s.warnings)
+      if (w.find(what) != std::string::npos) return w;
+    return std::string();
+  };
+  EXPECT_NE(warned("<instance_geometry> not used: a node yields one object").find("<instance_geometry> (line 65)"),
+            std::string::npos)
+      << warned("<instance_geometry> not used");
+  EXPECT_NE(warned("<instance_node> not used").find("(and 1 more like it)"), std::string::npos)
+      << warned("<instance_node> not used");
+  EXPECT_NE(warned("<lookat> is not supported"), "");
+  EXPECT_EQ(load_scene(testing::source_path("scenes/cornell-spheres.dae")).warnings.size(), 0u);
+}
+
 // ---- bad input: a one-line error naming the file, the element and the problem --------
 
 class BadCollada : public ::testing::Test {

@@ -7,6 +7,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <map>
 #include <pugixml.hpp>
 #include <sstream>
 #include <unordered_map>
@@ -37,6 +38,10 @@ class ColladaLoader {
     if (!inst) throw SceneError(file_, where(root), "no <scene>/<instance_visual_scene>");
     pugi::xml_node vs = resolve(inst, "url", "visual_scene");
     for (pugi::xml_node node : vs.children("node")) process_node(node, global_, 0);
+    for (const auto& [what, ignored] : ignored_)
+      scene_.warnings.push_back(
+          ignored.first + ": " + what +
+          (ignored.count > 1 ? " (and " + std::to_string(ignored.count - 1) + " more like it)" : ""));
     scene_.finalize();
     return std::move(scene_);
   }
@@ -195,15 +200,40 @@ class ColladaLoader {
     if (depth > 256) fail(node, "node hierarchy deeper than 256 levels");
     const Mat4 world = parent * local_transform(node);
     for (pugi::xml_node child : node.children("node")) process_node(child, world, depth + 1);
+    pugi::xml_node used;
     if (pugi::xml_node c = node.child("instance_camera")) {
       add_camera(resolve(c, "url", "camera"), world);
+      used = c;
     } else if (pugi::xml_node l = node.child("instance_light")) {
       add_light(resolve(l, "url", "light"), world, node);
+      used = l;
     } else if (pugi::xml_node g = node.child("instance_geometry")) {
       add_geometry(resolve(g, "url", "geometry"), g, world, node);
+      used = g;
     }
     // A node without instances is a pure group: legal COLLADA, nothing to add.
+    // What CS184's reader skips is skipped here too, but said (once a kind, with a count).
+    for (pugi::xml_node e : node.children()) {
+      const std::string name = e.name();
+      if (name.rfind("instance_", 0) == 0 && e != used)
+        ignore(e,
+               "<" + name +
+                   "> not used: a node yields one object, its first camera, else light, else geometry (CS184's rule)");
+      else if (name == "lookat" || name == "skew")
+        ignore(e, "<" + name + "> is not supported (ignored, as CS184 ignores it)");
+    }
   }
+
+  // Something of the file skipped: one warning a kind, naming where it was first met.
+  void ignore(pugi::xml_node n, const std::string& what) {
+    Ignored& i = ignored_[what];
+    if (i.count++ == 0) i.first = where(n);
+  }
+  struct Ignored {
+    std::string first;
+    size_t count = 0;
+  };
+  std::map<std::string, Ignored> ignored_;
 
   // ---- cameras -----------------------------------------------------------------------
   void add_camera(pugi::xml_node cam, const Mat4& w) {
