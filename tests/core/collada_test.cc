@@ -173,6 +173,36 @@ TEST(ColladaOwn, WhatANodeHoldsBeyondItsOneObjectIsSkippedWithAWarning) {
   EXPECT_EQ(load_scene(testing::source_path("scenes/cornell-spheres.dae")).warnings.size(), 0u);
 }
 
+// Found by review: each <instance_geometry> parsed its mesh's text again, and nothing
+// bounded the copies (a 611 KB file placing one 100k-triangle mesh 200 times ran past a
+// minute and 2.3 GB). A mesh is parsed once, each placement a copy, and the copies are
+// bounded (100 M triangles, as glTF's; lowered here), the error naming the node.
+TEST(ColladaOwn, AMeshPlacedManyTimesIsParsedOnceAndItsCopiesAreBounded) {
+  std::string text = read(testing::source_path("scenes/cornell-spheres.dae"));
+  const std::string floor = "<node id=\"floor\" name=\"floor\">";
+  const size_t at = text.find(floor);
+  ASSERT_NE(at, std::string::npos);
+  const size_t end = text.find("</node>", at) + 7;
+  std::string copy = text.substr(at, end - at);
+  const std::string named = "id=\"floor\" name=\"floor\"";
+  copy.replace(copy.find(named), named.size(), "id=\"floor2\" name=\"floor2\"");
+  copy.insert(copy.find('>') + 1, "<translate>0 1 0</translate>");
+  text.insert(end, copy);
+  const Scene s = load_collada_string(text, "two.dae", 12);  // (the light's quad is not placed by a node's geometry)
+  ASSERT_EQ(s.meshes.size(), 7u);
+  EXPECT_EQ(s.triangle_count(), 14u);
+  EXPECT_EQ(s.meshes[0].indices, s.meshes[1].indices);
+  for (size_t i = 0; i < s.meshes[0].positions.size(); ++i)
+    EXPECT_EQ(s.meshes[1].positions[i].y, s.meshes[0].positions[i].y + 1) << i;
+  try {
+    load_collada_string(text, "two.dae", 11);
+    ADD_FAILURE() << "placed past the triangle budget";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("<node id=\"rightWall\">"), std::string::npos) << e.what();  // the last
+    EXPECT_NE(std::string(e.what()).find("place more than 11 triangles, the limit"), std::string::npos) << e.what();
+  }
+}
+
 // ---- bad input: a one-line error naming the file, the element and the problem --------
 
 class BadCollada : public ::testing::Test {

@@ -21,7 +21,8 @@ namespace {
 
 class ColladaLoader {
  public:
-  ColladaLoader(const std::string& text, std::string name) : text_(text), file_(std::move(name)) {}
+  ColladaLoader(const std::string& text, std::string name, uint64_t max_triangles)
+      : text_(text), file_(std::move(name)), max_triangles_(max_triangles) {}
 
   Scene load() {
     scene_.source = file_;
@@ -401,7 +402,7 @@ class ColladaLoader {
     const uint32_t material = material_for(instance);
     const std::string name = node.attribute("id").value();
     if (pugi::xml_node mesh = geom.child("mesh")) {
-      add_mesh(mesh, w, material, name);
+      add_mesh(mesh, w, material, node);
       return;
     }
     pugi::xml_node sphere;
@@ -433,23 +434,59 @@ class ColladaLoader {
     return v;
   }
 
-  void add_mesh(pugi::xml_node mesh, const Mat4& w, uint32_t material, const std::string& name) {
+  // A geometry's <mesh> placed by a node: parsed once however many nodes place it (each
+  // placement a copy, in world space), within the scene's triangle budget.
+  void add_mesh(pugi::xml_node mesh, const Mat4& w, uint32_t material, pugi::xml_node node) {
+    const ParsedMesh& m = parsed(mesh);
+    const std::string name = node.attribute("id").value();
+    const uint64_t triangles = m.indices.size() / 3;
+    if (triangles_ + triangles > max_triangles_)
+      fail(node, "the scene's nodes place more than " + std::to_string(max_triangles_) +
+                     " triangles, the limit (each <instance_geometry> is a copy of its mesh)");
+    triangles_ += triangles;
+    Mesh out;
+    out.name = name;
+    out.material = material;
+    out.positions.reserve(m.positions.size() / 3);
+    for (size_t i = 0; i < m.positions.size(); i += 3) {
+      const Vec3 v = w.point(m.positions[i], m.positions[i + 1], m.positions[i + 2]).to_float();
+      if (!is_finite(v)) fail(m.vertices, "vertex " + std::to_string(i / 3) + " is not finite after transform");
+      out.positions.push_back(v);
+    }
+    out.indices = m.indices;
+    scene_.meshes.push_back(std::move(out));
+  }
+
+  // A <mesh> read: its positions in its own space, its polygons fanned into triangles.
+  struct ParsedMesh {
+    pugi::xml_node vertices;
+    std::vector<double> positions;  // 3 a vertex
+    std::vector<uint32_t> indices;  // 3 a triangle
+  };
+  const ParsedMesh& parsed(pugi::xml_node mesh) {
+    auto [it, added] = parsed_.try_emplace(mesh.internal_object());
+    if (added) {
+      try {
+        it->second = parse_mesh(mesh);
+      } catch (...) {
+        parsed_.erase(it);
+        throw;
+      }
+    }
+    return it->second;
+  }
+  ParsedMesh parse_mesh(pugi::xml_node mesh) const {
     pugi::xml_node vertices = mesh.child("vertices");
     if (!vertices) fail(mesh, "mesh has no <vertices>");
     pugi::xml_node pos_input = vertices.find_child_by_attribute("input", "semantic", "POSITION");
     if (!pos_input) fail(vertices, "no POSITION input");
-    const std::vector<double> p = float_array(resolve(pos_input, "source", "source"));
+    ParsedMesh out;
+    out.vertices = vertices;
+    out.positions = float_array(resolve(pos_input, "source", "source"));
+    const std::vector<double>& p = out.positions;
     if (p.size() % 3) fail(vertices, "position count " + std::to_string(p.size()) + " is not a multiple of 3");
-    Mesh out;
-    out.name = name;
-    out.material = material;
-    out.positions.reserve(p.size() / 3);
-    for (size_t i = 0; i < p.size(); i += 3) {
-      const Vec3 v = w.point(p[i], p[i + 1], p[i + 2]).to_float();
-      if (!is_finite(v)) fail(vertices, "vertex " + std::to_string(i / 3) + " is not finite after transform");
-      out.positions.push_back(v);
-    }
-    const uint32_t vertex_count = uint32_t(out.positions.size());
+    if (p.size() / 3 > UINT32_MAX) fail(vertices, "more than 2^32 vertices");
+    const uint32_t vertex_count = uint32_t(p.size() / 3);
     bool any = false;
     for (pugi::xml_node prim : mesh.children()) {
       const std::string kind = prim.name();
@@ -517,7 +554,7 @@ class ColladaLoader {
       }
     }
     if (!any) fail(mesh, "mesh has no <polylist>, <triangles> or <polygons>");
-    scene_.meshes.push_back(std::move(out));
+    return out;
   }
 
   const std::string& text_;
@@ -528,11 +565,16 @@ class ColladaLoader {
   std::optional<uint32_t> default_material_;
   Mat4 global_;
   Scene scene_;
+  std::unordered_map<pugi::xml_node_struct*, ParsedMesh> parsed_;
+  uint64_t max_triangles_;
+  uint64_t triangles_ = 0;  // placed so far
 };
 
 }  // namespace
 
-Scene load_collada_string(const std::string& text, const std::string& name) { return ColladaLoader(text, name).load(); }
+Scene load_collada_string(const std::string& text, const std::string& name, uint64_t max_triangles) {
+  return ColladaLoader(text, name, max_triangles).load();
+}
 
 Scene load_collada_file(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
