@@ -168,5 +168,46 @@ TEST(GltfAccessors, DeclaredCountsAreCheckedBeforeAnythingIsAllocated) {
   }
 }
 
+// Found by review: each texture index held its own decoded copy of its image, so one
+// material naming one 4096^2 image through 13 textures held 13 copies (2.4 GB), and nothing
+// bounded the texels of a scene. Textures of the same image, colour space and sampling
+// share one copy; the texels of all copies are bounded, the error naming the texture.
+TEST(GltfTexturesShared, TheSameImageSampledTheSameWayIsDecodedOnceAndTheTexelsAreBounded) {
+  GltfContext ctx("m.gltf");
+  tinygltf::Image encoded;
+  keep_image_encoded(&encoded, 0, nullptr, nullptr, 0, 0, kRedBluePng, int(sizeof kRedBluePng), nullptr);
+  ctx.model.images = {encoded, encoded};  // two images, the same bytes: two sources
+  tinygltf::Sampler clamp;
+  clamp.wrapS = clamp.wrapT = TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE;
+  ctx.model.samplers = {clamp};
+  auto texture = [](int source, int sampler) {
+    tinygltf::Texture t;
+    t.source = source;
+    t.sampler = sampler;
+    return t;
+  };
+  ctx.model.textures = {texture(0, -1), texture(0, -1), texture(0, 0), texture(1, -1)};
+  GltfTextures textures(ctx);
+  auto ref = [&](int index, bool srgb) {
+    return textures.texture_ref(index, 0, {}, srgb, "materials[0]", "slot").index;
+  };
+  const int a = ref(0, true);
+  EXPECT_EQ(ref(1, true), a);   // another texture, the same image and sampling: shared
+  EXPECT_NE(ref(1, false), a);  // linear: its own copy
+  EXPECT_NE(ref(2, true), a);   // clamped: its own
+  EXPECT_EQ(ctx.scene.textures.size(), 3u);
+  // Each copy's 2 texels count: 6 held; another image's 2 would pass a limit of 7.
+  ctx.max_scene_texels = 7;
+  EXPECT_EQ(ref(0, false), ref(1, false));  // (shared copies cost nothing more)
+  try {
+    ref(3, true);
+    ADD_FAILURE() << "texels past the limit";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("textures[3]: the scene's textures would hold 8 texels, over the limit of 7"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace tessera

@@ -22,6 +22,10 @@
 
 namespace tessera {
 
+// The most texels a glTF scene's textures hold together (each 16 bytes at most, as floats):
+// GltfContext::max_scene_texels, lowered by tests.
+constexpr uint64_t kMaxSceneTexels = uint64_t(1) << 30;
+
 struct GltfContext {
   explicit GltfContext(std::string file) : path(std::move(file)) { scene.source = path; }
 
@@ -37,6 +41,7 @@ struct GltfContext {
   const std::string path;
   tinygltf::Model model;
   Scene scene;
+  uint64_t max_scene_texels = kMaxSceneTexels;
 
  private:
   std::set<std::string> warned_;

@@ -107,7 +107,34 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
     source = it->second.Get("source").GetNumberAsInt();
   if (source < 0 || size_t(source) >= model.images.size())
     ctx_.fail(tel, "image " + std::to_string(source) + " does not exist");
+  Texture::Wrap wrap_s = Texture::Wrap::kRepeat, wrap_t = Texture::Wrap::kRepeat;
+  bool nearest = false;
+  if (t.sampler >= 0) {
+    if (size_t(t.sampler) >= model.samplers.size())
+      ctx_.fail(tel, "sampler " + std::to_string(t.sampler) + " does not exist");
+    auto wrap = [&](int mode) {
+      switch (mode) {
+        case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE:
+          return Texture::Wrap::kClamp;
+        case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT:
+          return Texture::Wrap::kMirror;
+        default:
+          return Texture::Wrap::kRepeat;
+      }
+    };
+    wrap_s = wrap(model.samplers[size_t(t.sampler)].wrapS);
+    wrap_t = wrap(model.samplers[size_t(t.sampler)].wrapT);
+    nearest = model.samplers[size_t(t.sampler)].magFilter == TINYGLTF_TEXTURE_FILTER_NEAREST;
+  }
+  const auto same = std::make_tuple(source, srgb, int(wrap_s), int(wrap_t), nearest);
+  if (auto it = same_.find(same); it != same_.end()) return loaded_[key] = it->second;
   const tinygltf::Image& img = decode_image(source);
+  const uint64_t texels = uint64_t(img.width) * uint64_t(img.height);
+  if (texels_ + texels > ctx_.max_scene_texels)
+    ctx_.fail(tel, "the scene's textures would hold " + std::to_string(texels_ + texels) +
+                       " texels, over the limit of " + std::to_string(ctx_.max_scene_texels) +
+                       " (each image counted once a colour space and sampler)");
+  texels_ += texels;
   Texture tex;
   tex.width = img.width;
   tex.height = img.height;
@@ -124,25 +151,11 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
     tex.alpha.resize(tex.texels.size());
     for (size_t i = 0; i < tex.alpha.size(); ++i) tex.alpha[i] = img.image[4 * i + 3] / 255.0f;
   }
-  if (t.sampler >= 0) {
-    if (size_t(t.sampler) >= model.samplers.size())
-      ctx_.fail(tel, "sampler " + std::to_string(t.sampler) + " does not exist");
-    auto wrap = [&](int mode) {
-      switch (mode) {
-        case TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE:
-          return Texture::Wrap::kClamp;
-        case TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT:
-          return Texture::Wrap::kMirror;
-        default:
-          return Texture::Wrap::kRepeat;
-      }
-    };
-    tex.wrap_s = wrap(model.samplers[size_t(t.sampler)].wrapS);
-    tex.wrap_t = wrap(model.samplers[size_t(t.sampler)].wrapT);
-    tex.nearest = model.samplers[size_t(t.sampler)].magFilter == TINYGLTF_TEXTURE_FILTER_NEAREST;
-  }
+  tex.wrap_s = wrap_s;
+  tex.wrap_t = wrap_t;
+  tex.nearest = nearest;
   ctx_.scene.textures.push_back(std::move(tex));
-  return loaded_[key] = int(ctx_.scene.textures.size() - 1);
+  return loaded_[key] = same_[same] = int(ctx_.scene.textures.size() - 1);
 }
 
 // A WebP image (EXT_texture_webp) through libwebp, to RGBA 8-bit, with the same limit.

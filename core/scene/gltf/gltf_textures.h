@@ -5,8 +5,10 @@
 // refuses nothing, as in viewers.
 #pragma once
 
+#include <cstdint>
 #include <map>
 #include <string>
+#include <tuple>
 
 #include "core/scene/gltf/gltf_context.h"
 
@@ -30,6 +32,11 @@ class GltfTextures {
 
   GltfContext& ctx_;
   std::map<int, int> loaded_;  // 2 x texture index + sRGB -> scene texture
+  // The same image in the same colour space with the same sampling (source, sRGB, wrap s,
+  // wrap t, nearest) -> scene texture: textures that differ only in their index share it
+  // (13 texture slots naming one 4096^2 image held 13 copies, 2.4 GB).
+  std::map<std::tuple<int, bool, int, int, bool>, int> same_;
+  uint64_t texels_ = 0;  // of the scene's textures, against ctx_.max_scene_texels
 };
 
 // tinygltf's image loader (TinyGLTF::SetImageLoader): keeps each image's encoded bytes
