@@ -78,6 +78,13 @@ TEST_F(Gltf, MeshoptCompressedViewsDecodeToTheirTwin) {
   bad = meshopt_twin();
   bad.j["bufferViews"][0]["extensions"]["EXT_meshopt_compression"]["byteLength"] = 1 << 20;
   expect_error(bad, "runs past buffer 0");
+  // A compressed view no accessor reads is not decoded (40 of them sharing 1 MB of
+  // compressed bytes held 2.6 GB): a damaged one refuses nothing.
+  Doc unused = meshopt_twin();
+  json extra = unused.j["bufferViews"][0];
+  extra["extensions"]["EXT_meshopt_compression"]["byteLength"] = 2;  // damaged
+  unused.j["bufferViews"].push_back(extra);
+  EXPECT_EQ(load(unused).meshes.size(), 1u);
 }
 
 // The fixture's triangle Draco-encoded (positions only; indices through the extension).

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <memory>
+#include <set>
 #include <string>
 #include <utility>
 #include <vector>
@@ -14,7 +15,8 @@
 namespace tessera {
 namespace {
 
-constexpr uint64_t kMaxDecodedBytes = uint64_t(1) << 30;  // as a buffer's limit
+constexpr uint64_t kMaxDecodedBytes = uint64_t(1) << 30;       // a view's, as a buffer's limit
+constexpr uint64_t kMaxDecodedTotalBytes = uint64_t(4) << 30;  // every view's together
 constexpr uint64_t kMaxDracoPoints = uint64_t(1) << 28;
 
 // An integer field of an extension object, `fallback` when absent; refused when negative
@@ -44,7 +46,8 @@ int add_buffer(tinygltf::Model& model, std::vector<unsigned char> bytes) {
   return int(model.buffers.size() - 1);
 }
 
-void decode_meshopt_view(GltfContext& ctx, size_t index) {
+// `decoded`: what the views before it decoded to, this one's added.
+void decode_meshopt_view(GltfContext& ctx, size_t index, uint64_t* decoded) {
   tinygltf::BufferView& view = ctx.model.bufferViews[index];
   const tinygltf::Value& ext = view.extensions.at("EXT_meshopt_compression");
   const std::string el = "bufferViews[" + std::to_string(index) + "] EXT_meshopt_compression";
@@ -61,6 +64,9 @@ void decode_meshopt_view(GltfContext& ctx, size_t index) {
   if (stride == 0 || stride > 256 || stride % (mode == "ATTRIBUTES" ? 4 : 1))
     ctx.fail(el, "byteStride " + std::to_string(stride) + " is not allowed for mode " + mode);
   if (count > kMaxDecodedBytes / stride) ctx.fail(el, "decodes to more than the 1 GiB limit");
+  *decoded += count * stride;
+  if (*decoded > kMaxDecodedTotalBytes)
+    ctx.fail(el, "the scene's compressed views decode to more than the 4 GiB limit together");
   std::vector<unsigned char> out(count * stride);
   const unsigned char* in = src.data() + offset;
   int rc = -1;
@@ -177,8 +183,18 @@ void decode_draco_primitive(GltfContext& ctx, tinygltf::Primitive& prim, const s
 }  // namespace
 
 void decode_gltf_compression(GltfContext& ctx) {
+  // Only views an accessor reads are decoded, within a budget for all of them: views
+  // nothing uses were decoded too, and 40 of them sharing 1 MB of compressed bytes held
+  // 2.6 GB.
+  std::set<int> used;
+  for (const tinygltf::Accessor& a : ctx.model.accessors) {
+    used.insert(a.bufferView);
+    if (a.sparse.isSparse) used.insert({a.sparse.indices.bufferView, a.sparse.values.bufferView});
+  }
+  uint64_t decoded = 0;
   for (size_t i = 0; i < ctx.model.bufferViews.size(); ++i)
-    if (ctx.model.bufferViews[i].extensions.count("EXT_meshopt_compression")) decode_meshopt_view(ctx, i);
+    if (ctx.model.bufferViews[i].extensions.count("EXT_meshopt_compression") && used.count(int(i)))
+      decode_meshopt_view(ctx, i, &decoded);
   for (size_t m = 0; m < ctx.model.meshes.size(); ++m)
     for (size_t p = 0; p < ctx.model.meshes[m].primitives.size(); ++p) {
       tinygltf::Primitive& prim = ctx.model.meshes[m].primitives[p];
