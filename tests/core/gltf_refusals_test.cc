@@ -210,6 +210,11 @@ TEST_F(Gltf, TenGigabyteByteLengthIsRefusedBeforeAllocating) {
   Doc d;
   d.j["buffers"][0]["byteLength"] = 10737418240.0;
   expect_error(d, "byteLength 10737418240 is over the 1 GiB limit");
+  // Every buffer is read, used or not (one 100 MB file named by 20 buffers held 2 GB):
+  // together they are bounded too.
+  Doc many;
+  for (int i = 0; i < 3; ++i) many.j["buffers"].push_back({{"uri", "big.bin"}, {"byteLength", 1 << 30}});
+  expect_error(many, "buffers[2]: the buffers up to this one declare 2147483736 bytes together, over the 2 GiB limit");
 }
 
 TEST_F(Gltf, CyclicNodeGraph) {

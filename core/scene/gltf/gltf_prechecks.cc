@@ -82,7 +82,10 @@ bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<
         throw SceneError(path, "extensionsRequired",
                          "required extension '" + e.get<std::string>() + "' is not supported" +
                              image_format_note(e.get<std::string>()));
-  if (j.contains("buffers") && j["buffers"].is_array())
+  if (j.contains("buffers") && j["buffers"].is_array()) {
+    // Each buffer is read whole, used or not, so all of them together are bounded too: one
+    // 100 MB file named by 20 buffers held 2 GB.
+    double total = 0;
     for (size_t i = 0; i < j["buffers"].size(); ++i) {
       const auto& b = j["buffers"][i];
       const std::string el = "buffers[" + std::to_string(i) + "]";
@@ -94,7 +97,13 @@ bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<
         std::snprintf(shown, sizeof shown, "%.0f", len);
         throw SceneError(path, el, std::string("byteLength ") + shown + " is over the 1 GiB limit");
       }
+      total += len;
+      if (total > double(kMaxGltfBuffersBytes))
+        throw SceneError(path, el,
+                         "the buffers up to this one declare " + std::to_string(uint64_t(total)) +
+                             " bytes together, over the 2 GiB limit");
     }
+  }
   bool changed = false;
   // EXT_meshopt_compression's fallback buffers have no data (the views that point into them
   // are decoded from compressed ones): one byte stands in, so the parser has nothing to load.

@@ -9,8 +9,9 @@
 
 namespace tessera {
 
-// The largest file, and the largest buffer, a glTF load reads.
+// The largest file, and the largest buffer, a glTF load reads; and all its buffers together.
 constexpr uint64_t kMaxGltfBufferBytes = uint64_t(1) << 30;
+constexpr uint64_t kMaxGltfBuffersBytes = uint64_t(2) << 30;
 // How deep a glTF's JSON may nest arrays and objects (the format's own structure needs about
 // ten, extensions included; extras may hold more): deeper is refused before parsing
 // (gltf_document.cc).
