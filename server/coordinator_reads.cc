@@ -44,7 +44,7 @@ std::vector<v1::JobStatus> Coordinator::statuses(const std::vector<StoredJob>& r
     MutexLock lock(mu_);  // jobs in memory: one lock for them all
     for (size_t i = 0; i < rows.size(); ++i)
       if (rows[i].summary.empty() && jobs_.knows(rows[i].meta.id))
-        got[i] = job_status(jobs_, leases_, rows[i].meta.id, false, clock_->now());
+        got[i] = job_summary(jobs_, leases_, rows[i].meta.id, clock_->now());
   }
   std::vector<v1::JobStatus> out;
   for (size_t i = 0; i < rows.size(); ++i) {
@@ -52,7 +52,9 @@ std::vector<v1::JobStatus> Coordinator::statuses(const std::vector<StoredJob>& r
       got[i] = archived_status(rows[i]);
     else if (!got[i])
       got[i] = archived(rows[i].meta.id);  // archived since the rows were read (or not yet acknowledged: left out)
-    if (got[i]) out.push_back(std::move(*got[i]));
+    if (!got[i]) continue;
+    got[i]->clear_frames();  // (as job_summary: a list counts a sequence's frames, GetJob lists them)
+    out.push_back(std::move(*got[i]));
   }
   return out;
 }

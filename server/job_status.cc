@@ -9,14 +9,20 @@
 
 namespace tessera {
 
+namespace {
+
+v1::JobStatus sequence_status(const Sequence& s, const LeaseTable& leases, double now, bool with_frames) {
+  std::set<std::string> live;  // its live frames: a worker on several counts once
+  for (const auto& j : s.jobs)
+    if (j && j->live()) live.insert(j->id());
+  return s.status(now, leases.workers_on(live), with_frames);
+}
+
+}  // namespace
+
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
                          double now, TileRange range) {
-  if (const Sequence* s = jobs.find_sequence(id)) {
-    std::set<std::string> live;  // its live frames: a worker on several counts once
-    for (const auto& j : s->jobs)
-      if (j && j->live()) live.insert(j->id());
-    return s->status(now, leases.workers_on(live), true);
-  }
+  if (const Sequence* s = jobs.find_sequence(id)) return sequence_status(*s, leases, now, true);
   if (!jobs.find_job(id))
     if (const auto gone = jobs.left_frame(id)) return left_frame_status(*gone->sequence, gone->index);
   const Job& job = jobs.job(id);
@@ -75,10 +81,14 @@ QueueDepth queue_depth(const JobTable& jobs, const LeaseTable& leases, double th
   return q;
 }
 
+v1::JobStatus job_summary(const JobTable& jobs, const LeaseTable& leases, const std::string& id, double now) {
+  if (const Sequence* s = jobs.find_sequence(id)) return sequence_status(*s, leases, now, false);
+  return job_status(jobs, leases, id, false, now);
+}
+
 std::vector<v1::JobStatus> job_list(const JobTable& jobs, const LeaseTable& leases, double now) {
   std::vector<v1::JobStatus> statuses;  // stills and sequences; frames are in their sequences
-  for (const std::string& id : jobs.page(0, jobs.listed()))
-    statuses.push_back(job_status(jobs, leases, id, false, now));
+  for (const std::string& id : jobs.page(0, jobs.listed())) statuses.push_back(job_summary(jobs, leases, id, now));
   return statuses;
 }
 

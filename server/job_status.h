@@ -43,6 +43,10 @@ void keep_changed_frames(v1::JobStatus& s, std::vector<std::string>& sent);
 // Throws RequestError (kNotFound) for an unknown id.
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
                          double now, TileRange range = {});
+// As a list shows it: no tiles, and a sequence's frames counted (frames_done, frames_total)
+// but not listed (a list of sequences of 100,000 frames each was 12 MB a sequence, and the
+// live page polls it every second; GetJob and WatchJob have them).
+v1::JobStatus job_summary(const JobTable& jobs, const LeaseTable& leases, const std::string& id, double now);
 std::vector<v1::JobStatus> job_list(const JobTable& jobs, const LeaseTable& leases, double now);
 // A page of the list (ListJobsRequest): at most kMaxPage jobs, after the submission number
 // its page_token gives. Throws RequestError (kInvalidArgument) for a token never given.

@@ -113,6 +113,10 @@ TEST_F(ArchiveTest, AnArchivedSequenceAnswersForEveryFrame) {
   EXPECT_EQ(comparable(after).SerializeAsString(), comparable(before).SerializeAsString())
       << after.DebugString() << before.DebugString();
   ASSERT_EQ(after.frames_size(), 3);
+  const v1::JobList listed = c->list(10, "");  // a list counts the frames, the status lists them
+  ASSERT_EQ(listed.jobs_size(), 1);
+  EXPECT_EQ(listed.jobs(0).frames_size(), 0);
+  EXPECT_EQ(listed.jobs(0).frames_total(), 3u);
   EXPECT_EQ(after.frames(0).state(), v1::JobStatus::DONE);
   EXPECT_EQ(after.frames(1).state(), v1::JobStatus::CANCELLED);
   EXPECT_TRUE(after.frames(2).job_id().empty());
