@@ -116,6 +116,7 @@ void configure_server(grpc::ServerBuilder& builder, int max_message_bytes, Conne
 
 grpc::Status ClientService::SubmitJob(grpc::ServerContext* ctx, const v1::SubmitJobRequest* req, v1::JobId* out) {
   return as(__func__, auth_, ctx, Action::kSubmit, [&](const Principal& who) {
+    const StreamSlots::Slot slot = streams_.take(stream_peer(who, *ctx));  // a scene check holds a thread
     // The scene check stops when the client goes away or the coordinator is told to stop.
     const CancelScope scope([ctx] { return ctx->IsCancelled(); });
     out->set_id(c_.submit(*req, who.name));
@@ -178,7 +179,8 @@ grpc::Status ClientService::ListEvents(grpc::ServerContext* ctx, const v1::ListE
   });
 }
 grpc::Status ClientService::FetchImage(grpc::ServerContext* ctx, const v1::FetchImageRequest* req, v1::Image* out) {
-  return as(__func__, auth_, ctx, Action::kRead, [&](const Principal&) {
+  return as(__func__, auth_, ctx, Action::kRead, [&](const Principal& who) {
+    const StreamSlots::Slot slot = streams_.take(stream_peer(who, *ctx));  // the whole image in memory
     const bool any = req->exr() || req->png();  // neither: both, as before the choice existed
     *out = c_.image(req->id(), req->exr() || !any, req->png() || !any,
                     req->has_frame() ? std::optional<int>(req->frame()) : std::nullopt);
@@ -223,6 +225,9 @@ grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskR
   // the moment it is submitted, instead of sleeping through a retry interval.
   return as(__func__, auth_, ctx, Action::kWork, [&](const Principal&) {
     c_.check_worker(req->worker_id(), req->worker_secret());
+    // Each poll holds a thread up to a second: counted per registered worker (its secret
+    // checked), so one cannot hold a thread per call and workers sharing a host are apart.
+    const StreamSlots::Slot slot = polls_.take("worker " + std::to_string(req->worker_id()));
     const auto since = std::chrono::steady_clock::now(), until = since + std::chrono::seconds(1);
     while (true) {
       *out = c_.get_task(req->worker_id(), req->max_tasks(), req->max_samples(), req->max_passes());

@@ -28,7 +28,9 @@ void configure_server(grpc::ServerBuilder& builder, int max_message_bytes = kMax
 class ClientService final : public v1::Tessera::Service {
  public:
   explicit ClientService(Coordinator& c, const Authenticator* auth = nullptr)
-      : c_(c), auth_(auth), streams_(c.options().max_streams_per_peer, "job watches, image downloads, scene uploads") {}
+      : c_(c),
+        auth_(auth),
+        streams_(c.options().max_streams_per_peer, "job watches, image downloads, scene uploads, submits") {}
   grpc::Status SubmitJob(grpc::ServerContext*, const v1::SubmitJobRequest* req, v1::JobId* out) override;
   grpc::Status GetJob(grpc::ServerContext*, const v1::JobId* req, v1::JobStatus* out) override;
   grpc::Status ListJobs(grpc::ServerContext*, const v1::ListJobsRequest*, v1::JobList* out) override;
@@ -47,13 +49,18 @@ class ClientService final : public v1::Tessera::Service {
  private:
   Coordinator& c_;
   const Authenticator* auth_;
-  StreamSlots streams_;  // WatchJob, FetchImageChunks and UploadScene, per caller
+  // WatchJob, FetchImageChunks, UploadScene, and the unary calls that hold a thread long or
+  // much memory (SubmitJob's scene check, FetchImage's whole image), per caller.
+  StreamSlots streams_;
 };
 
 class WorkerService final : public v1::TesseraWorker::Service {
  public:
   explicit WorkerService(Coordinator& c, const Authenticator* auth = nullptr)
-      : c_(c), auth_(auth), scene_streams_(c.options().max_streams_per_peer, "scene downloads") {}
+      : c_(c),
+        auth_(auth),
+        scene_streams_(c.options().max_streams_per_peer, "scene downloads"),
+        polls_(c.options().max_streams_per_peer, "task requests") {}
   grpc::Status Enrol(grpc::ServerContext*, const v1::EnrolRequest* req, v1::EnrolResponse* out) override;
   grpc::Status Register(grpc::ServerContext*, const v1::RegisterRequest* req, v1::RegisterResponse* out) override;
   grpc::Status GetTask(grpc::ServerContext*, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) override;
@@ -68,6 +75,7 @@ class WorkerService final : public v1::TesseraWorker::Service {
   Coordinator& c_;
   const Authenticator* auth_;
   StreamSlots scene_streams_;  // FetchSceneChunks, per worker (worker_stream_peer)
+  StreamSlots polls_;          // GetTask's long polls (a second each), per registered worker
 };
 
 }  // namespace tessera

@@ -9,6 +9,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -264,6 +265,29 @@ TEST_F(Access, OldOptionSpellingsStillWorkAndNameTheNewOne) {
 // another caller's watch is not.
 TEST_F(Access, StreamsAreBoundedPerCaller) {
   start_coordinator({"--max-streams-per-peer", "2"});
+  {  // A worker's long polls (a thread a second each, with no job to hand out): per
+     // registered worker.
+    auto workers = v1::TesseraWorker::NewStub(grpc::CreateChannel(grpc_addr, grpc::InsecureChannelCredentials()));
+    v1::RegisterResponse w;
+    ASSERT_TRUE(workers->Register(call(kWorker).get(), registration(), &w).ok());
+    v1::GetTaskRequest poll;
+    poll.set_worker_id(w.worker_id());
+    poll.set_worker_secret(w.worker_secret());
+    std::vector<std::thread> polling;
+    std::atomic<int> ok{0}, refused_polls{0};
+    for (int i = 0; i < 3; ++i)
+      polling.emplace_back([&] {
+        v1::GetTaskResponse none;
+        const grpc::Status st = workers->GetTask(call(kWorker).get(), poll, &none);
+        (st.ok() ? ok : refused_polls)++;
+        if (!st.ok()) {
+          EXPECT_NE(st.error_message().find("task requests"), std::string::npos) << st.error_message();
+        }
+      });
+    for (std::thread& t : polling) t.join();
+    EXPECT_EQ(ok.load(), 2);  // each waits its second: the third comes while two are held
+    EXPECT_EQ(refused_polls.load(), 1);
+  }
   const std::string id = submit(kAlice);  // no worker: it stays queued, so watches last
   auto stub = v1::Tessera::NewStub(grpc::CreateChannel(grpc_addr, grpc::InsecureChannelCredentials()));
   struct Watch {
@@ -299,6 +323,17 @@ TEST_F(Access, StreamsAreBoundedPerCaller) {
     const grpc::Status upload = writer->Finish();
     EXPECT_EQ(upload.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << upload.error_message();
     EXPECT_NE(upload.error_message().find("scene uploads"), std::string::npos) << upload.error_message();
+  }
+  {  // So are the unary calls that hold a thread long (a submit's scene check) or much memory
+     // (a whole image), found by review uncounted.
+    v1::JobId job;
+    const grpc::Status submit = stub->SubmitJob(call(kAlice).get(), v1::SubmitJobRequest(), &job);
+    EXPECT_EQ(submit.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << submit.error_message();
+    EXPECT_NE(submit.error_message().find("submits) per caller"), std::string::npos) << submit.error_message();
+    v1::FetchImageRequest fetch;
+    fetch.set_id(id);
+    v1::Image image;
+    EXPECT_EQ(stub->FetchImage(call(kAlice).get(), fetch, &image).error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
   }
   auto bobs = watch(kBob);
   EXPECT_TRUE(bobs->reader->Read(&s));
