@@ -156,6 +156,9 @@ TEST(ColladaOwn, WhatANodeHoldsBeyondItsOneObjectIsSkippedWithAWarning) {
   insert_after("<node id=\"floor\" name=\"floor\">",
                "<lookat>0 0 1 0 0 0 0 1 0</lookat><instance_node url=\"#camera\"/>");
   insert_after("<node id=\"ceiling\" name=\"ceiling\">", "<instance_node url=\"#camera\"/>");
+  const size_t tri = text.find("<triangles");
+  ASSERT_NE(tri, std::string::npos);
+  text.insert(tri, "<lines count=\"1\"><input semantic=\"VERTEX\" source=\"#x\" offset=\"0\"/><p>0 1</p></lines>");
   const Scene s = load_collada_string(text, "extra.dae");
   EXPECT_EQ(s.lights.size(), 1u);
   EXPECT_EQ(s.triangle_count(), 12u);  // nothing added
@@ -170,6 +173,7 @@ TEST(ColladaOwn, WhatANodeHoldsBeyondItsOneObjectIsSkippedWithAWarning) {
   EXPECT_NE(warned("<instance_node> not used").find("(and 1 more like it)"), std::string::npos)
       << warned("<instance_node> not used");
   EXPECT_NE(warned("<lookat> is not supported"), "");
+  EXPECT_NE(warned("<lines> is not supported (only <triangles>, <polylist> and <polygons> are read)"), "");
   EXPECT_EQ(load_scene(testing::source_path("scenes/cornell-spheres.dae")).warnings.size(), 0u);
 }
 

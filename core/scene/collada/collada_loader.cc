@@ -475,7 +475,7 @@ class ColladaLoader {
     }
     return it->second;
   }
-  ParsedMesh parse_mesh(pugi::xml_node mesh) const {
+  ParsedMesh parse_mesh(pugi::xml_node mesh) {
     pugi::xml_node vertices = mesh.child("vertices");
     if (!vertices) fail(mesh, "mesh has no <vertices>");
     pugi::xml_node pos_input = vertices.find_child_by_attribute("input", "semantic", "POSITION");
@@ -490,6 +490,8 @@ class ColladaLoader {
     bool any = false;
     for (pugi::xml_node prim : mesh.children()) {
       const std::string kind = prim.name();
+      if (kind == "lines" || kind == "linestrips" || kind == "tristrips" || kind == "trifans")
+        ignore(prim, "<" + kind + "> is not supported (only <triangles>, <polylist> and <polygons> are read)");
       if (kind != "polylist" && kind != "triangles" && kind != "polygons") continue;
       any = true;
       uint32_t stride = 0, vertex_offset = 0;
