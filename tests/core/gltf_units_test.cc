@@ -155,16 +155,32 @@ TEST(GltfAccessors, DeclaredCountsAreCheckedBeforeAnythingIsAllocated) {
   a.count = 268'435'455;  // 16 GB as a MAT4
   a.type = TINYGLTF_TYPE_MAT4;
   ctx.model.accessors.push_back(a);
+  a.count = 0x5555555555555556;  // x 3 wraps to 2 in 64 bits: must not pass as 2 values
+  a.type = TINYGLTF_TYPE_VEC3;
+  ctx.model.accessors.push_back(a);
   const std::pair<int, const char*> cases[] = {
       {0, "accessors[0] (test): byteOffset 0 with 80000000 elements runs past the end of bufferView 0"},
-      {1, "accessors[1] (test): count 268435455 x 16 components is over the limit of 268435456 values"}};
+      {1, "accessors[1] (test): count 268435455 x 16 components is over the limit of 268435456 values"},
+      {2, "accessors[2] (test): count 6148914691236517206 x 3 components is over the limit"}};
   for (const auto& [index, reason] : cases) {
     try {
-      read_accessor_floats(ctx, index, index == 0 ? 3 : 16, "test");
+      read_accessor_floats(ctx, index, index == 1 ? 16 : 3, "test");
       ADD_FAILURE() << "accessor " << index << " was read";
     } catch (const SceneError& e) {
       EXPECT_NE(std::string(e.what()).find(reason), std::string::npos) << e.what();
     }
+  }
+  // Indices have no value limit: their view's check must not wrap either (stride 2 x a
+  // count near 2^63 is 0 in 64 bits).
+  a.type = TINYGLTF_TYPE_SCALAR;
+  a.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT;
+  a.count = (uint64_t(1) << 63) + 1;
+  ctx.model.accessors.push_back(a);
+  try {
+    read_accessor_indices(ctx, 3, 3, "test");
+    ADD_FAILURE() << "indices past their view were read";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("runs past the end of bufferView 0"), std::string::npos) << e.what();
   }
 }
 

@@ -31,7 +31,9 @@ ViewSpan checked_view(const GltfContext& ctx, int view_index, size_t offset, int
   if (uint64_t(v.byteOffset) + v.byteLength > data.size())
     ctx.fail(el, "bufferView " + std::to_string(view_index) + " runs past the end of its buffer (" +
                      std::to_string(v.byteOffset + v.byteLength) + " > " + std::to_string(data.size()) + " bytes)");
-  if (count > 0 && uint64_t(offset) + stride * (count - 1) + elem > v.byteLength)
+  // (Division, not multiplication: a count near 2^64 must not wrap into a small size.)
+  if (count > 0 && (uint64_t(offset) > v.byteLength || elem > v.byteLength - uint64_t(offset) ||
+                    uint64_t(count - 1) > (v.byteLength - uint64_t(offset) - elem) / stride))
     ctx.fail(el, "byteOffset " + std::to_string(offset) + " with " + std::to_string(count) +
                      " elements runs past the end of bufferView " + std::to_string(view_index));
   return {data.data() + v.byteOffset + offset, size_t(stride), csize};
@@ -111,7 +113,7 @@ std::vector<float> read_accessor_floats(const GltfContext& ctx, int index, int w
   const int comps = tinygltf::GetNumComponentsInType(uint32_t(a.type));
   if (comps != want_components)
     ctx.fail(el, "has " + std::to_string(comps) + " components, expected " + std::to_string(want_components));
-  if (uint64_t(a.count) * uint64_t(comps) > kMaxAccessorValues)
+  if (uint64_t(a.count) > kMaxAccessorValues / uint64_t(comps))  // (divided: a huge count must not wrap)
     ctx.fail(el, "count " + std::to_string(a.count) + " x " + std::to_string(comps) +
                      " components is over the limit of " + std::to_string(kMaxAccessorValues) +
                      " values an accessor may hold");
