@@ -70,8 +70,6 @@ std::string quoted(const std::string& path) {
   return q;
 }
 
-size_t path_parts(const std::string& p) { return size_t(std::count(p.begin(), p.end(), '/')) + 1; }
-
 uint64_t saturating_sum(uint64_t a, uint64_t b) { return a + b < a ? UINT64_MAX : a + b; }
 
 }  // namespace
@@ -82,7 +80,8 @@ void SceneWeight::add(const std::string& path, uint64_t size) {
       bytes_,
       saturating_sum(path.size(), blocks > UINT64_MAX / kSceneDiskBlock ? UINT64_MAX : blocks * kSceneDiskBlock));
   for (size_t slash = path.find('/'); slash != std::string::npos; slash = path.find('/', slash + 1))
-    if (folders_.insert(path.substr(0, slash)).second) bytes_ = saturating_sum(bytes_, kSceneDiskBlock);
+    if (folders_.insert(std::string_view(path).substr(0, slash)).second)
+      bytes_ = saturating_sum(bytes_, kSceneDiskBlock);
 }
 
 uint64_t check_manifest(const v1::SceneManifest& m) {
@@ -98,9 +97,6 @@ uint64_t check_manifest(const v1::SceneManifest& m) {
     if (!normal_relative(f.path()))
       throw WireError("scene manifest: unsafe file path " + quoted(f.path()) +
                       " (a path inside the scene's folder, without '..', '.' or empty parts)");
-    if (path_parts(f.path()) > kMaxScenePathParts)
-      throw WireError("scene manifest: file path " + quoted(f.path()) + " has " + std::to_string(path_parts(f.path())) +
-                      " parts; at most " + std::to_string(kMaxScenePathParts));
     if (!paths.insert(f.path()).second) throw WireError("scene manifest: file " + quoted(f.path()) + " listed twice");
     if (f.size() > kMaxSceneManifestBytes)
       throw WireError("scene manifest: file " + quoted(f.path()) + " declares " + std::to_string(f.size()) +

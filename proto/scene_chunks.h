@@ -12,6 +12,7 @@
 #include <memory>
 #include <set>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -26,8 +27,6 @@ constexpr size_t kMaxSceneFiles = size_t(1) << 16;
 // owner's limit, so that the limit's check, not a wrapped sum, is what refuses).
 constexpr uint64_t kMaxSceneManifestBytes = uint64_t(1) << 50;
 
-// The most parts a bundle's file path may have ("a/b/c.png" has 3).
-constexpr size_t kMaxScenePathParts = 32;
 // What a file or folder costs on disk at least: what the weight below charges.
 constexpr uint64_t kSceneDiskBlock = 4096;
 
@@ -35,13 +34,15 @@ constexpr uint64_t kSceneDiskBlock = 4096;
 // rounded up to whole disk blocks (an empty file a block), and a block for each folder the
 // paths make. Charged as the disk is used: 256 empty files a kilobyte deep made 130,000
 // folders and 534 MB on disk when only paths and sizes counted (261 KB). Sums saturate.
+// The folders are kept as views into the paths added, which must outlive the weight (a
+// manifest's or a bundle's: copies of every prefix of 65,536 deep paths were gigabytes).
 class SceneWeight {
  public:
   void add(const std::string& path, uint64_t size);
   uint64_t bytes() const { return bytes_; }
 
  private:
-  std::set<std::string> folders_;
+  std::set<std::string_view> folders_;
   uint64_t bytes_ = 0;
 };
 
@@ -63,10 +64,9 @@ class BundleHasher {
 };
 
 // Checks a manifest before anything is written: paths inside the bundle's folder, in
-// normal form, of at most kMaxScenePathParts parts, each once, none also a folder of
-// another; the main file among them; at most kMaxSceneFiles files of
-// kMaxSceneManifestBytes at most together; a hash of 32 hex digits. Throws WireError
-// naming the problem. Returns what the scene weighs against its owner's limit
+// normal form, each once, none also a folder of another; the main file among them; at
+// most kMaxSceneFiles files of kMaxSceneManifestBytes at most together; a hash of 32 hex
+// digits. Throws WireError naming the problem. Returns what the scene weighs against its owner's limit
 // (SceneWeight).
 uint64_t check_manifest(const v1::SceneManifest& m);
 

@@ -143,7 +143,7 @@ TEST(ChunkProtocol, AManifestsDeclaredBytesCannotWrapPastTheLimit) {
 
 // Found by review: only paths and sizes counted, so 256 empty files a kilobyte deep made
 // 130,000 folders and 534 MB on disk for 261 KB of the client's limit. Sizes count in disk
-// blocks (an empty file one), each folder a block, and a path has at most 32 parts.
+// blocks (an empty file one), each folder a block.
 TEST(ChunkProtocol, FilesAndFoldersWeighWhatTheyTakeOnDisk) {
   v1::SceneManifest m;
   m.set_scene_hash(std::string(32, 'a'));
@@ -157,17 +157,12 @@ TEST(ChunkProtocol, FilesAndFoldersWeighWhatTheyTakeOnDisk) {
   add("t/a/x.png", 0);   // a block, and its folders t and t/a one each
   add("t/b.png", 4096);  // one; t is counted once
   EXPECT_EQ(check_manifest(m), 6u + 9u + 7u + (2 + 1 + 1) * kSceneDiskBlock + 2 * kSceneDiskBlock);
-  std::string deep = "x";
-  for (size_t i = 1; i < kMaxScenePathParts; ++i) deep += "/x";
-  add(deep, 1);  // 32 parts: taken
-  EXPECT_NO_THROW(check_manifest(m));
-  m.mutable_files(3)->set_path(deep + "/x");
-  try {
-    check_manifest(m);
-    FAIL() << "a path of 33 parts was accepted";
-  } catch (const WireError& e) {
-    EXPECT_NE(std::string(e.what()).find("has 33 parts; at most 32"), std::string::npos) << e.what();
-  }
+  // A path of 300 folders weighs its 300 blocks: deep paths pay for what they make.
+  std::string deep = "d";
+  for (int i = 1; i < 300; ++i) deep += "/d";
+  add(deep + "/f", 0);
+  EXPECT_EQ(check_manifest(m), 6u + 9u + 7u + (2 + 1 + 1) * kSceneDiskBlock + 2 * kSceneDiskBlock + deep.size() + 2 +
+                                   kSceneDiskBlock + 300 * kSceneDiskBlock);
 }
 
 TEST_F(SceneStoreTest, TheStreamedHashOfFilesOnDiskIsTheirBundleHash) {
