@@ -76,12 +76,28 @@ uint64_t saturating_sum(uint64_t a, uint64_t b) { return a + b < a ? UINT64_MAX 
 
 void SceneWeight::add(const std::string& path, uint64_t size) {
   const uint64_t blocks = size == 0 ? 1 : size / kSceneDiskBlock + (size % kSceneDiskBlock != 0);
-  bytes_ = saturating_sum(
-      bytes_,
+  files_ = saturating_sum(
+      files_,
       saturating_sum(path.size(), blocks > UINT64_MAX / kSceneDiskBlock ? UINT64_MAX : blocks * kSceneDiskBlock));
-  for (size_t slash = path.find('/'); slash != std::string::npos; slash = path.find('/', slash + 1))
-    if (folders_.insert(std::string_view(path).substr(0, slash)).second)
-      bytes_ = saturating_sum(bytes_, kSceneDiskBlock);
+  paths_.push_back(path);
+}
+
+uint64_t SceneWeight::bytes() const {
+  // The folders, each once, without a set of them (65,536 paths of 500 one-letter parts
+  // make 33 M prefixes): in sorted order the paths under a folder are adjacent, so a
+  // path's folders are new but for those it shares with the path before it.
+  std::vector<std::string_view> sorted = paths_;
+  std::sort(sorted.begin(), sorted.end());
+  uint64_t folders = 0;
+  std::string_view prev;
+  for (const std::string_view p : sorted) {
+    size_t shared = 0;  // folders of p that prev has too: prefixes ending at a '/' both share
+    for (size_t i = 0; i < p.size() && i < prev.size() && p[i] == prev[i]; ++i)
+      if (p[i] == '/') ++shared;
+    folders += uint64_t(std::count(p.begin(), p.end(), '/')) - shared;
+    prev = p;
+  }
+  return saturating_sum(files_, folders * kSceneDiskBlock);
 }
 
 uint64_t check_manifest(const v1::SceneManifest& m) {
@@ -102,7 +118,7 @@ uint64_t check_manifest(const v1::SceneManifest& m) {
       throw WireError("scene manifest: file " + quoted(f.path()) + " declares " + std::to_string(f.size()) +
                       " bytes; at most " + std::to_string(kMaxSceneManifestBytes));
     weight.add(f.path(), f.size());
-    if (weight.bytes() > kMaxSceneManifestBytes)
+    if (weight.file_bytes() > kMaxSceneManifestBytes)
       throw WireError("scene manifest: its files declare over " + std::to_string(kMaxSceneManifestBytes) +
                       " bytes together");
   }

@@ -34,16 +34,18 @@ constexpr uint64_t kSceneDiskBlock = 4096;
 // rounded up to whole disk blocks (an empty file a block), and a block for each folder the
 // paths make. Charged as the disk is used: 256 empty files a kilobyte deep made 130,000
 // folders and 534 MB on disk when only paths and sizes counted (261 KB). Sums saturate.
-// The folders are kept as views into the paths added, which must outlive the weight (a
-// manifest's or a bundle's: copies of every prefix of 65,536 deep paths were gigabytes).
+// The paths are kept as views, so they must outlive the weight (a manifest's or a
+// bundle's); the folders are counted from them sorted, without a copy or a set of every
+// prefix (65,536 deep paths make tens of millions: gigabytes).
 class SceneWeight {
  public:
   void add(const std::string& path, uint64_t size);
-  uint64_t bytes() const { return bytes_; }
+  uint64_t file_bytes() const { return files_; }  // the paths and blocks of the files alone
+  uint64_t bytes() const;                         // and the folders'
 
  private:
-  std::set<std::string_view> folders_;
-  uint64_t bytes_ = 0;
+  std::vector<std::string_view> paths_;
+  uint64_t files_ = 0;
 };
 
 // bundle_hash() a piece at a time: the same digest for the same bundle.
