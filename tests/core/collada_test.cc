@@ -192,18 +192,20 @@ TEST(ColladaOwn, AMeshPlacedManyTimesIsParsedOnceAndItsCopiesAreBounded) {
   copy.replace(copy.find(named), named.size(), "id=\"floor2\" name=\"floor2\"");
   copy.insert(copy.find('>') + 1, "<translate>0 1 0</translate>");
   text.insert(end, copy);
-  const Scene s = load_collada_string(text, "two.dae", 12);  // (the light's quad is not placed by a node's geometry)
+  const Scene s =
+      load_collada_string(text, "two.dae", 24);  // 6 quads: 12 triangles, 24 vertices (the light is not a geometry)
   ASSERT_EQ(s.meshes.size(), 7u);
   EXPECT_EQ(s.triangle_count(), 14u);
   EXPECT_EQ(s.meshes[0].indices, s.meshes[1].indices);
   for (size_t i = 0; i < s.meshes[0].positions.size(); ++i)
     EXPECT_EQ(s.meshes[1].positions[i].y, s.meshes[0].positions[i].y + 1) << i;
   try {
-    load_collada_string(text, "two.dae", 11);
+    load_collada_string(text, "two.dae", 23);
     ADD_FAILURE() << "placed past the triangle budget";
   } catch (const SceneError& e) {
     EXPECT_NE(std::string(e.what()).find("<node id=\"rightWall\">"), std::string::npos) << e.what();  // the last
-    EXPECT_NE(std::string(e.what()).find("place more than 11 triangles, the limit"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("place more than 23 triangles or vertices, the limit"), std::string::npos)
+        << e.what();
   }
 }
 

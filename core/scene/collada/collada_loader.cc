@@ -439,11 +439,14 @@ class ColladaLoader {
   void add_mesh(pugi::xml_node mesh, const Mat4& w, uint32_t material, pugi::xml_node node) {
     const ParsedMesh& m = parsed(mesh);
     const std::string name = node.attribute("id").value();
-    const uint64_t triangles = m.indices.size() / 3;
-    if (triangles_ + triangles > max_triangles_)
+    // Triangles and vertices: a copy holds both (a mesh of a million vertices and one
+    // triangle, placed 100,000 times, would be 10^11 vertices).
+    const uint64_t triangles = m.indices.size() / 3, vertices = m.positions.size() / 3;
+    if (triangles_ + triangles > max_triangles_ || vertices_ + vertices > max_triangles_)
       fail(node, "the scene's nodes place more than " + std::to_string(max_triangles_) +
-                     " triangles, the limit (each <instance_geometry> is a copy of its mesh)");
+                     " triangles or vertices, the limit (each <instance_geometry> is a copy of its mesh)");
     triangles_ += triangles;
+    vertices_ += vertices;
     Mesh out;
     out.name = name;
     out.material = material;
@@ -569,7 +572,7 @@ class ColladaLoader {
   Scene scene_;
   std::unordered_map<pugi::xml_node_struct*, ParsedMesh> parsed_;
   uint64_t max_triangles_;
-  uint64_t triangles_ = 0;  // placed so far
+  uint64_t triangles_ = 0, vertices_ = 0;  // placed so far
 };
 
 }  // namespace

@@ -8,8 +8,9 @@
 
 namespace tessera {
 
-// The most triangles a scene's nodes may place (glTF's budget too): each
-// <instance_geometry> is a copy of its mesh, so a small file could ask for billions.
+// The most triangles, and the most vertices, a scene's nodes may place (glTF's triangle
+// budget too): each <instance_geometry> is a copy of its mesh, so a small file could ask
+// for billions.
 constexpr uint64_t kMaxColladaTriangles = 100'000'000;
 
 // Throws SceneError naming the file, the element (with its line) and the problem.
