@@ -16,6 +16,7 @@
 #include "core/scene/gltf/gltf_document.h"
 #include "core/scene/gltf/gltf_loader.h"
 #include "core/scene/gltf/gltf_prechecks.h"
+#include "core/scene/gltf/gltf_skins.h"
 #include "core/scene/gltf/gltf_textures.h"
 #include "core/scene/load.h"
 #include "core/scene/scene_error.h"

@@ -215,6 +215,13 @@ TEST_F(Gltf, TenGigabyteByteLengthIsRefusedBeforeAllocating) {
   Doc many;
   for (int i = 0; i < 3; ++i) many.j["buffers"].push_back({{"uri", "big.bin"}, {"byteLength", 1 << 30}});
   expect_error(many, "buffers[2]: the buffers up to this one declare 2147483736 bytes together, over the 2 GiB limit");
+  // EXT_meshopt_compression's fallback buffers hold no data: they do not count.
+  Doc fallbacks;
+  for (int i = 0; i < 3; ++i)
+    fallbacks.j["buffers"].push_back(
+        {{"byteLength", 1 << 30}, {"extensions", {{"EXT_meshopt_compression", {{"fallback", true}}}}}});
+  fallbacks.j["extensionsUsed"] = {"EXT_meshopt_compression"};
+  EXPECT_EQ(load(fallbacks).meshes.size(), 1u);
 }
 
 TEST_F(Gltf, CyclicNodeGraph) {

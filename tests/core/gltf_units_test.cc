@@ -225,5 +225,36 @@ TEST(GltfTexturesShared, TheSameImageSampledTheSameWayIsDecodedOnceAndTheTexelsA
   }
 }
 
+// Found by review: morph targets were bounded per primitive, and a scene may hold a million
+// mesh copies. The scene's targets are bounded together, the error naming the target.
+TEST(GltfMorph, TheScenesTargetsAreBoundedTogether) {
+  GltfContext ctx("m.gltf");
+  std::string bytes;
+  put<float>(bytes, {0, 0, 1, 0, 0, 1, 0, 0, 1});
+  ctx.model.buffers.resize(1);
+  ctx.model.buffers[0].data.assign(bytes.begin(), bytes.end());
+  ctx.model.bufferViews.resize(1);
+  ctx.model.bufferViews[0].buffer = 0;
+  ctx.model.bufferViews[0].byteLength = bytes.size();
+  tinygltf::Accessor a;
+  a.bufferView = 0;
+  a.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
+  a.count = 3;
+  a.type = TINYGLTF_TYPE_VEC3;
+  ctx.model.accessors.push_back(a);
+  tinygltf::Primitive prim;
+  prim.targets = {{{"POSITION", 0}}, {}, {{"POSITION", 0}}};  // the empty one costs nothing
+  ctx.max_morph_values = 18;                                  // a target of 3 vertices holds 9
+  ASSERT_EQ(read_gltf_morph(ctx, prim, tinygltf::Mesh(), tinygltf::Node(), 3, "first")->count(), 3u);
+  try {  // another primitive (or another copy of this one) has no room left
+    read_gltf_morph(ctx, prim, tinygltf::Mesh(), tinygltf::Node(), 3, "second");
+    ADD_FAILURE() << "morph targets past the scene's limit";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("second targets[0]: the scene's morph targets would hold more than 18 values"),
+              std::string::npos)
+        << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace tessera

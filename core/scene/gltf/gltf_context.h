@@ -22,9 +22,9 @@
 
 namespace tessera {
 
-// The most texels a glTF scene's textures hold together (each 16 bytes at most, as floats):
-// GltfContext::max_scene_texels, lowered by tests.
-constexpr uint64_t kMaxSceneTexels = uint64_t(1) << 30;
+// The most texels a glTF scene's textures hold together: 2^28, up to 4 GiB as floats (12
+// bytes a texel, 16 with alpha); GltfContext::max_scene_texels, lowered by tests.
+constexpr uint64_t kMaxSceneTexels = uint64_t(1) << 28;
 
 struct GltfContext {
   explicit GltfContext(std::string file) : path(std::move(file)) { scene.source = path; }
@@ -42,6 +42,9 @@ struct GltfContext {
   tinygltf::Model model;
   Scene scene;
   uint64_t max_scene_texels = kMaxSceneTexels;
+  // The values the scene's morph targets hold so far, and at most (gltf_skins.cc; 2^28,
+  // kMaxAccessorValues, lowered by tests).
+  uint64_t morph_values = 0, max_morph_values = uint64_t(1) << 28;
 
  private:
   std::set<std::string> warned_;

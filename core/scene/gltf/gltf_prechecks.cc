@@ -97,7 +97,10 @@ bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<
         std::snprintf(shown, sizeof shown, "%.0f", len);
         throw SceneError(path, el, std::string("byteLength ") + shown + " is over the 1 GiB limit");
       }
-      total += len;
+      // (EXT_meshopt_compression's fallback buffers, without a uri, hold no data: below.)
+      const bool fallback = !b.contains("uri") && b.contains("extensions") && b["extensions"].is_object() &&
+                            b["extensions"].contains("EXT_meshopt_compression");
+      if (!fallback) total += len;
       if (total > double(kMaxGltfBuffersBytes))
         throw SceneError(path, el,
                          "the buffers up to this one declare " + std::to_string(uint64_t(total)) +

@@ -23,25 +23,23 @@ std::vector<Vec3> as_vec3s(const std::vector<float>& f) {
   return v;
 }
 
-std::shared_ptr<const MorphTargets> read_gltf_morph(const GltfContext& ctx, const tinygltf::Primitive& prim,
+std::shared_ptr<const MorphTargets> read_gltf_morph(GltfContext& ctx, const tinygltf::Primitive& prim,
                                                     const tinygltf::Mesh& mesh, const tinygltf::Node& node, size_t nv,
                                                     const std::string& el) {
   if (prim.targets.empty()) return nullptr;
   auto m = std::make_shared<MorphTargets>();
   // A target without POSITION holds nothing (apply_morph reads an empty list as zeros:
-  // 2,000 empty targets of a 100k-vertex mesh held 2.4 GB of them), and a primitive's
-  // targets hold at most kMaxAccessorValues values together, as one accessor may.
-  uint64_t values = 0;
+  // 2,000 empty targets of a 100k-vertex mesh held 2.4 GB of them), and the scene's
+  // targets hold at most ctx.max_morph_values values together (as one accessor may).
   for (size_t t = 0; t < prim.targets.size(); ++t) {
     const std::string tel = el + " targets[" + std::to_string(t) + "]";
     std::vector<Vec3> dp, dn;
     for (const auto& [name, accessor] : prim.targets[t]) {
       if (name != "POSITION" && name != "NORMAL") continue;  // TANGENT: tangents are not read (docs/gltf.md)
-      values += 3 * uint64_t(nv);
-      if (values > kMaxAccessorValues)
-        ctx.fail(el, "its " + std::to_string(prim.targets.size()) + " morph targets hold more than " +
-                         std::to_string(kMaxAccessorValues) +
-                         " values (3 a vertex a target's POSITION or NORMAL), the limit");
+      ctx.morph_values += 3 * uint64_t(nv);
+      if (ctx.morph_values > ctx.max_morph_values)
+        ctx.fail(tel, "the scene's morph targets would hold more than " + std::to_string(ctx.max_morph_values) +
+                          " values (3 a vertex a target's POSITION or NORMAL), the limit");
       std::vector<Vec3> d = as_vec3s(read_accessor_floats(ctx, accessor, 3, tel + " " + name));
       if (d.size() != nv)
         ctx.fail(tel, name + " has " + std::to_string(d.size()) + " elements for " + std::to_string(nv) + " vertices");

@@ -19,7 +19,7 @@ std::vector<Vec3> as_vec3s(const std::vector<float>& f);
 
 // The primitive's morph targets with the weights shown without animation (the node's,
 // else the mesh's); null when it has none. `nv`: its vertex count.
-std::shared_ptr<const MorphTargets> read_gltf_morph(const GltfContext& ctx, const tinygltf::Primitive& prim,
+std::shared_ptr<const MorphTargets> read_gltf_morph(GltfContext& ctx, const tinygltf::Primitive& prim,
                                                     const tinygltf::Mesh& mesh, const tinygltf::Node& node, size_t nv,
                                                     const std::string& el);
 
