@@ -160,7 +160,8 @@ class Farm:
             req.page_token = page.next_page_token
 
     def jobs(self):
-        """Every job the coordinator keeps, in submission order, as JobStatus."""
+        """Every job the coordinator keeps, in submission order, as JobStatus. A sequence's
+        frames are counted (frames_done, frames_total), not listed: job(id).status() lists them."""
         return [JobStatus.from_proto(s) for s in self._list_pages()]
 
     def events(self, job=None, after=0, limit=100, oldest=False):
