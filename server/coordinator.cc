@@ -247,7 +247,8 @@ std::string Coordinator::submit(const v1::SubmitJobRequest& req, const std::stri
       meta.seq = jobs_.next_seq();
       // Submits racing this one see it while its scene is checked: they cannot pass the
       // limits together (32 parallel submits under a limit of 2 were all accepted).
-      reserved.token = jobs_.reserve(owner, a.pixels, a.samples, a.scene_bytes);
+      // (An upload's bytes count as the upload's until the job takes it: not twice.)
+      reserved.token = jobs_.reserve(owner, a.pixels, a.samples, req.upload_id().empty() ? a.scene_bytes : 0);
     }
     sub = prepare_submission(req, a, std::move(meta), scenes_, *store_, options_.data_dir, &uploads_);
   } catch (const RequestError&) {

@@ -2,6 +2,7 @@
 // of every role, workers and `tessera` commands each with its token from a file, on loopback.
 #pragma once
 
+#include <grpcpp/grpcpp.h>
 #include <gtest/gtest.h>
 #include <httplib.h>
 #include <unistd.h>
@@ -14,12 +15,30 @@
 #include <vector>
 
 #include "core/io/files.h"
+#include "tessera.grpc.pb.h"
 #include "tests/integration/farm_helpers.h"
 #include "tests/integration/process.h"
+#include "wire.h"
 
 namespace tessera {
 
 namespace fs = std::filesystem;
+
+// A gRPC call made with a token, and a worker's registration: for the tests that speak to
+// the worker service themselves.
+inline std::unique_ptr<grpc::ClientContext> call(const char* token) {
+  auto c = std::make_unique<grpc::ClientContext>();
+  c->AddMetadata("authorization", std::string("Bearer ") + token);
+  return c;
+}
+inline v1::RegisterRequest registration() {
+  v1::RegisterRequest reg;
+  reg.set_version(kProtocolVersion);
+  reg.set_name("w");
+  reg.set_threads(1);
+  return reg;
+}
+
 using testing::CommandResult;
 using testing::expect_same_pixels;
 using testing::kBin;
