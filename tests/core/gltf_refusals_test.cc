@@ -96,6 +96,17 @@ TEST_F(Gltf, BufferViewPastTheBuffer) {
   Doc d;
   d.j["bufferViews"][1]["byteLength"] = 4000;
   expect_error(d, "runs past the end of its buffer");
+  // Found by review: byteOffset + byteLength could wrap past 2^64 to pass the check, and an
+  // image's view went to the image loader unchecked (tinygltf reads it even where no
+  // material uses the image): both read past the buffer. Every view is checked first.
+  Doc wrap;
+  wrap.j["bufferViews"][1]["byteOffset"] = 1;
+  wrap.j["bufferViews"][1]["byteLength"] = 18446744073709551615ull;
+  expect_error(wrap, "bufferViews[1]: runs past the end of its buffer (byteOffset 1 + byteLength");
+  Doc image;
+  image.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", 80}, {"byteLength", 1000000000}});
+  image.j["images"] = {{{"bufferView", 4}, {"mimeType", "image/png"}}};
+  expect_error(image, "bufferViews[4]: runs past the end of its buffer (byteOffset 80 + byteLength 1000000000 > 88");
 }
 
 TEST_F(Gltf, IndexOutOfRange) {

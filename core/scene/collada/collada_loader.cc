@@ -537,7 +537,10 @@ class ColladaLoader {
       uint64_t need = 0;
       for (uint32_t s : sizes) {
         if (s < 3) fail(prim, "polygon with " + std::to_string(s) + " vertices");
-        need += uint64_t(s) * stride;
+        // Saturating: <vcount>s summing past 2^64 must not wrap to <p>'s size (the fan below
+        // would read past it). (s x stride < 2^39.)
+        const uint64_t more = uint64_t(s) * stride;
+        need = need > UINT64_MAX - more ? UINT64_MAX : need + more;
       }
       if (need != idx.size())
         fail(prim, "expected " + std::to_string(need) + " indices in <p>, found " + std::to_string(idx.size()));

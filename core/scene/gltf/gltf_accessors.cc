@@ -28,7 +28,7 @@ ViewSpan checked_view(const GltfContext& ctx, int view_index, size_t offset, int
   const uint64_t elem = uint64_t(csize) * uint64_t(comps);
   const uint64_t stride = v.byteStride ? v.byteStride : elem;
   if (stride < elem) ctx.fail(el, "byteStride " + std::to_string(v.byteStride) + " is smaller than an element");
-  if (uint64_t(v.byteOffset) + v.byteLength > data.size())
+  if (v.byteOffset > data.size() || v.byteLength > data.size() - v.byteOffset)  // (no sum: it could wrap)
     ctx.fail(el, "bufferView " + std::to_string(view_index) + " runs past the end of its buffer (" +
                      std::to_string(v.byteOffset + v.byteLength) + " > " + std::to_string(data.size()) + " bytes)");
   // (Division, not multiplication: a count near 2^64 must not wrap into a small size.)

@@ -58,7 +58,7 @@ void decode_meshopt_view(GltfContext& ctx, size_t index, uint64_t* decoded) {
   const std::string mode = text(ext, "mode", ""), filter = text(ext, "filter", "NONE");
   if (buffer >= ctx.model.buffers.size()) ctx.fail(el, "buffer " + std::to_string(buffer) + " does not exist");
   const std::vector<unsigned char>& src = ctx.model.buffers[buffer].data;
-  if (offset + length > src.size())
+  if (offset > src.size() || length > src.size() - offset)
     ctx.fail(el, "byteOffset + byteLength (" + std::to_string(offset + length) + ") runs past buffer " +
                      std::to_string(buffer) + " (" + std::to_string(src.size()) + " bytes)");
   if (stride == 0 || stride > 256 || stride % (mode == "ATTRIBUTES" ? 4 : 1))
@@ -135,7 +135,8 @@ void decode_draco_primitive(GltfContext& ctx, tinygltf::Primitive& prim, const s
     ctx.fail(xel, "bufferView " + std::to_string(view_index) + " does not exist");
   const tinygltf::BufferView& view = ctx.model.bufferViews[view_index];
   if (view.buffer < 0 || size_t(view.buffer) >= ctx.model.buffers.size() ||
-      view.byteOffset + view.byteLength > ctx.model.buffers[size_t(view.buffer)].data.size())
+      view.byteOffset > ctx.model.buffers[size_t(view.buffer)].data.size() ||
+      view.byteLength > ctx.model.buffers[size_t(view.buffer)].data.size() - view.byteOffset)
     ctx.fail(xel, "bufferView " + std::to_string(view_index) + " runs past its buffer");
   DracoMesh mesh;
   std::string why;

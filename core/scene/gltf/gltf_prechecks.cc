@@ -1,5 +1,6 @@
 #include "core/scene/gltf/gltf_prechecks.h"
 
+#include <cmath>
 #include <cstdio>
 #include <set>
 
@@ -107,6 +108,31 @@ bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<
                              " bytes together, over the 2 GiB limit");
     }
   }
+  // Every bufferView inside its buffer (the buffer's declared length: tinygltf makes each
+  // buffer's data exactly that long), used or not: tinygltf hands an image's view to the
+  // image loader unchecked, and a view past its buffer (or whose offset and length wrap
+  // past 2^64) was read past the buffer's end.
+  if (j.contains("bufferViews") && j["bufferViews"].is_array() && j.contains("buffers") && j["buffers"].is_array())
+    for (size_t i = 0; i < j["bufferViews"].size(); ++i) {
+      const auto& v = j["bufferViews"][i];
+      if (!v.is_object() || !v.contains("buffer") || !v["buffer"].is_number()) continue;
+      const double bd = v["buffer"].get<double>();  // (tinygltf takes 0.0 for 0 too)
+      if (!(bd >= 0) || bd != std::floor(bd) || bd >= double(j["buffers"].size())) continue;  // (tinygltf refuses it)
+      const size_t b = size_t(bd);
+      const double len = j["buffers"][b]["byteLength"].get<double>();
+      const auto number = [&](const char* key) {
+        return v.contains(key) && v[key].is_number() ? v[key].get<double>() : 0.0;
+      };
+      const double offset = number("byteOffset"), length = number("byteLength");
+      // (Doubles: exact below 2^53, and anything above is past any buffer.)
+      if (offset < 0 || length < 0 || offset > len || length > len - offset) {
+        char shown[160];
+        std::snprintf(shown, sizeof shown,
+                      "runs past the end of its buffer (byteOffset %.0f + byteLength %.0f > %.0f bytes of buffer %llu)",
+                      offset, length, len, static_cast<unsigned long long>(b));
+        throw SceneError(path, "bufferViews[" + std::to_string(i) + "]", shown);
+      }
+    }
   bool changed = false;
   // EXT_meshopt_compression's fallback buffers have no data (the views that point into them
   // are decoded from compressed ones): one byte stands in, so the parser has nothing to load.
