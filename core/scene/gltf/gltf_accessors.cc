@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <optional>
 
 namespace tessera {
 namespace {
@@ -39,9 +40,10 @@ ViewSpan checked_view(const GltfContext& ctx, int view_index, size_t offset, int
   return {data.data() + v.byteOffset + offset, size_t(stride), csize};
 }
 
-void read_view(const GltfContext& ctx, int view_index, size_t offset, int type, bool normalized, size_t count,
-               int comps, const std::string& el, float* out) {
-  const auto [base, stride, csize] = checked_view(ctx, view_index, offset, type, count, comps, el);
+// `count` elements of a view checked_view() gave for them, as floats.
+void read_view(const GltfContext& ctx, const ViewSpan& view, int type, bool normalized, size_t count, int comps,
+               const std::string& el, float* out) {
+  const auto [base, stride, csize] = view;
   for (size_t i = 0; i < count; ++i)
     for (int c = 0; c < comps; ++c) {
       const unsigned char* p = base + i * stride + size_t(c) * size_t(csize);
@@ -84,6 +86,12 @@ void read_view(const GltfContext& ctx, int view_index, size_t offset, int type, 
     }
 }
 
+// glTF's index types: unsigned byte, short or int.
+bool unsigned_index_type(int type) {
+  return type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE || type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
+         type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT;
+}
+
 // `count` unsigned integers of `type` (byte, short or int) from a view, checked as above.
 std::vector<uint32_t> read_unsigned(const GltfContext& ctx, int view_index, size_t offset, int type, size_t count,
                                     const std::string& el) {
@@ -119,17 +127,16 @@ std::vector<float> read_accessor_floats(const GltfContext& ctx, int index, int w
                      " values an accessor may hold");
   // Every view checked before anything is allocated: a 452-byte file declaring 268 M
   // vertices over a 36-byte view made 3 GB before its refusal.
-  if (a.bufferView >= 0) (void)checked_view(ctx, a.bufferView, a.byteOffset, a.componentType, a.count, comps, el);
+  std::optional<ViewSpan> view, sparse_values;
+  if (a.bufferView >= 0) view = checked_view(ctx, a.bufferView, a.byteOffset, a.componentType, a.count, comps, el);
   std::vector<uint32_t> sparse_indices;
   if (a.sparse.isSparse) {
     const auto& sp = a.sparse;
     if (sp.count < 0 || size_t(sp.count) > a.count) ctx.fail(el, "sparse count out of range");
-    if (sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
-        sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
-        sp.indices.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+    if (!unsigned_index_type(sp.indices.componentType))
       ctx.fail(el + " sparse indices", "must be unsigned byte, short or int");
-    (void)checked_view(ctx, sp.values.bufferView, size_t(std::max(0, sp.values.byteOffset)), a.componentType,
-                       size_t(sp.count), comps, el + " sparse values");
+    sparse_values = checked_view(ctx, sp.values.bufferView, size_t(std::max(0, sp.values.byteOffset)), a.componentType,
+                                 size_t(sp.count), comps, el + " sparse values");
     // As integers, not through read_view's floats, which lose precision past 2^24.
     sparse_indices = read_unsigned(ctx, sp.indices.bufferView, size_t(std::max(0, sp.indices.byteOffset)),
                                    sp.indices.componentType, size_t(sp.count), el + " sparse indices");
@@ -137,13 +144,11 @@ std::vector<float> read_accessor_floats(const GltfContext& ctx, int index, int w
       if (i >= a.count) ctx.fail(el, "sparse index " + std::to_string(i) + " out of range");
   }
   std::vector<float> out(a.count * size_t(comps), 0.0f);
-  if (a.bufferView >= 0)
-    read_view(ctx, a.bufferView, a.byteOffset, a.componentType, a.normalized, a.count, comps, el, out.data());
-  if (a.sparse.isSparse) {
-    const auto& sp = a.sparse;
-    std::vector<float> val(size_t(sp.count) * comps);
-    read_view(ctx, sp.values.bufferView, size_t(std::max(0, sp.values.byteOffset)), a.componentType, a.normalized,
-              size_t(sp.count), comps, el + " sparse values", val.data());
+  if (view) read_view(ctx, *view, a.componentType, a.normalized, a.count, comps, el, out.data());
+  if (sparse_values) {
+    std::vector<float> val(sparse_indices.size() * size_t(comps));
+    read_view(ctx, *sparse_values, a.componentType, a.normalized, sparse_indices.size(), comps, el + " sparse values",
+              val.data());
     for (size_t k = 0; k < sparse_indices.size(); ++k)
       std::copy(val.begin() + long(k * comps), val.begin() + long((k + 1) * comps),
                 out.begin() + long(size_t(sparse_indices[k]) * comps));
@@ -157,10 +162,7 @@ std::vector<uint32_t> read_accessor_indices(const GltfContext& ctx, int index, s
                                             const std::string& what) {
   const std::string el = "accessors[" + std::to_string(index) + "] (" + what + ")";
   const tinygltf::Accessor& a = accessor_at(ctx, index, what);
-  if (a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
-      a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
-      a.componentType != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
-    ctx.fail(el, "indices must be unsigned byte, short or int");
+  if (!unsigned_index_type(a.componentType)) ctx.fail(el, "indices must be unsigned byte, short or int");
   if (a.bufferView < 0) ctx.fail(el, "indices need a bufferView");
   // Read as integers, not through read_view's floats, which lose precision past 2^24.
   std::vector<uint32_t> out = read_unsigned(ctx, a.bufferView, a.byteOffset, a.componentType, a.count, el);
