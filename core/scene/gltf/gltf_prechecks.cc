@@ -73,6 +73,15 @@ std::string image_format_note(const std::string& ext) {
          "with PNG or JPEG textures)";
 }
 
+// An EXT_meshopt_compression fallback buffer without a uri: it holds no data (the views
+// into it are decoded from compressed ones), so it is neither read nor counted.
+bool meshopt_fallback(const nlohmann::json& b) {
+  return !b.contains("uri") && b.contains("extensions") && b["extensions"].is_object() &&
+         b["extensions"].contains("EXT_meshopt_compression") &&
+         b["extensions"]["EXT_meshopt_compression"].is_object() &&
+         b["extensions"]["EXT_meshopt_compression"].value("fallback", false) == true;
+}
+
 }  // namespace
 
 bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<std::string>& warnings) {
@@ -98,10 +107,7 @@ bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<
         std::snprintf(shown, sizeof shown, "%.0f", len);
         throw SceneError(path, el, std::string("byteLength ") + shown + " is over the 1 GiB limit");
       }
-      // (EXT_meshopt_compression's fallback buffers, without a uri, hold no data: below.)
-      const bool fallback = !b.contains("uri") && b.contains("extensions") && b["extensions"].is_object() &&
-                            b["extensions"].contains("EXT_meshopt_compression");
-      if (!fallback) total += len;
+      if (!meshopt_fallback(b)) total += len;
       if (total > double(kMaxGltfBuffersBytes))
         throw SceneError(path, el,
                          "the buffers up to this one declare " + std::to_string(uint64_t(total)) +
@@ -138,11 +144,7 @@ bool precheck_gltf_json(nlohmann::json& j, const std::string& path, std::vector<
   // are decoded from compressed ones): one byte stands in, so the parser has nothing to load.
   if (j.contains("buffers") && j["buffers"].is_array())
     for (auto& b : j["buffers"]) {
-      const bool fallback = b.contains("extensions") && b["extensions"].is_object() &&
-                            b["extensions"].contains("EXT_meshopt_compression") &&
-                            b["extensions"]["EXT_meshopt_compression"].is_object() &&
-                            b["extensions"]["EXT_meshopt_compression"].value("fallback", false) == true;
-      if (fallback && !b.contains("uri")) {
+      if (meshopt_fallback(b)) {
         b["uri"] = "data:application/octet-stream;base64,AA==";
         b["byteLength"] = 1;
         changed = true;
