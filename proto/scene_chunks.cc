@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <set>
 
+#include "core/util/saturating.h"
 #include "wire.h"
 
 namespace tessera {
@@ -70,15 +71,11 @@ std::string quoted(const std::string& path) {
   return q;
 }
 
-uint64_t saturating_sum(uint64_t a, uint64_t b) { return a + b < a ? UINT64_MAX : a + b; }
-
 }  // namespace
 
 void SceneWeight::add(const std::string& path, uint64_t size) {
   const uint64_t blocks = size == 0 ? 1 : size / kSceneDiskBlock + (size % kSceneDiskBlock != 0);
-  files_ = saturating_sum(
-      files_,
-      saturating_sum(path.size(), blocks > UINT64_MAX / kSceneDiskBlock ? UINT64_MAX : blocks * kSceneDiskBlock));
+  files_ = saturating_add(files_, saturating_add(path.size(), saturating_mul(blocks, kSceneDiskBlock)));
   paths_.push_back(path);
 }
 
@@ -97,7 +94,7 @@ uint64_t SceneWeight::bytes() const {
     folders += uint64_t(std::count(p.begin(), p.end(), '/')) - shared;
     prev = p;
   }
-  return saturating_sum(files_, folders * kSceneDiskBlock);
+  return saturating_add(files_, saturating_mul(folders, kSceneDiskBlock));
 }
 
 uint64_t check_manifest(const v1::SceneManifest& m) {
