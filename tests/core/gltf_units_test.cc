@@ -4,6 +4,28 @@
 namespace tessera {
 namespace {
 
+// The model's buffer 0 holds `bytes`; view k covers views[k] = (byteOffset, byteLength) of it.
+void set_buffer(GltfContext& ctx, const std::string& bytes, std::vector<std::pair<size_t, size_t>> views) {
+  ctx.model.buffers.resize(1);
+  ctx.model.buffers[0].data.assign(bytes.begin(), bytes.end());
+  ctx.model.bufferViews.resize(views.size());
+  for (size_t k = 0; k < views.size(); ++k) {
+    ctx.model.bufferViews[k].buffer = 0;
+    ctx.model.bufferViews[k].byteOffset = views[k].first;
+    ctx.model.bufferViews[k].byteLength = views[k].second;
+  }
+}
+
+// An accessor of `count` elements of `type` (TINYGLTF_TYPE_*) and `component` over `view`.
+tinygltf::Accessor accessor(int view, int component, size_t count, int type) {
+  tinygltf::Accessor a;
+  a.bufferView = view;
+  a.componentType = component;
+  a.count = count;
+  a.type = type;
+  return a;
+}
+
 // The pre-checks on JSON alone: what tinygltf would refuse is set aside only when nothing
 // uses it, and anything a mesh (attributes, indices, morph targets), an animation or a
 // skin names counts as used.
@@ -70,18 +92,10 @@ TEST(GltfAccessors, StrideAndNormalizedIntegers) {
   GltfContext ctx("m.gltf");
   std::string bytes;
   put<int16_t>(bytes, {-32768, 32767, 7, 0, 0, -32767, 9, 0});  // two VEC2 shorts, 8-byte stride
-  ctx.model.buffers.resize(1);
-  ctx.model.buffers[0].data.assign(bytes.begin(), bytes.end());
-  ctx.model.bufferViews.resize(1);
-  ctx.model.bufferViews[0].buffer = 0;
-  ctx.model.bufferViews[0].byteLength = bytes.size();
+  set_buffer(ctx, bytes, {{0, bytes.size()}});
   ctx.model.bufferViews[0].byteStride = 8;
-  tinygltf::Accessor a;
-  a.bufferView = 0;
-  a.componentType = TINYGLTF_COMPONENT_TYPE_SHORT;
+  tinygltf::Accessor a = accessor(0, TINYGLTF_COMPONENT_TYPE_SHORT, 2, TINYGLTF_TYPE_VEC2);
   a.normalized = true;
-  a.count = 2;
-  a.type = TINYGLTF_TYPE_VEC2;
   ctx.model.accessors.push_back(a);
   EXPECT_EQ(read_accessor_floats(ctx, 0, 2, "test"), (std::vector<float>{-1, 1, 0, -1}));
   ctx.model.bufferViews[0].byteStride = 2;
@@ -103,16 +117,9 @@ TEST(GltfAccessors, SparseIndicesAreReadAsIntegersAndOnlyUnsigned) {
   std::string bytes;
   put<uint32_t>(bytes, {16777217, 3});  // the sparse indices, 8 bytes at 0
   put<float>(bytes, {5, 7});            // their values, 8 bytes at 8
-  ctx.model.buffers.resize(1);
-  ctx.model.buffers[0].data.assign(bytes.begin(), bytes.end());
-  ctx.model.bufferViews.resize(2);
-  ctx.model.bufferViews[0].buffer = ctx.model.bufferViews[1].buffer = 0;
-  ctx.model.bufferViews[0].byteLength = ctx.model.bufferViews[1].byteLength = 8;
-  ctx.model.bufferViews[1].byteOffset = 8;
-  tinygltf::Accessor a;  // no bufferView: zeros, then the sparse values
-  a.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
-  a.count = 16777218;
-  a.type = TINYGLTF_TYPE_SCALAR;
+  set_buffer(ctx, bytes, {{0, 8}, {8, 8}});
+  // No bufferView: zeros, then the sparse values.
+  tinygltf::Accessor a = accessor(-1, TINYGLTF_COMPONENT_TYPE_FLOAT, 16777218, TINYGLTF_TYPE_SCALAR);
   a.sparse.isSparse = true;
   a.sparse.count = 2;
   a.sparse.indices.bufferView = 0;
@@ -141,16 +148,9 @@ TEST(GltfAccessors, SparseIndicesAreReadAsIntegersAndOnlyUnsigned) {
 // 16 GB, refused as std::bad_alloc). Both are refused now, naming the accessor.
 TEST(GltfAccessors, DeclaredCountsAreCheckedBeforeAnythingIsAllocated) {
   GltfContext ctx("m.gltf");
-  ctx.model.buffers.resize(1);
-  ctx.model.buffers[0].data.assign(36, 0);
-  ctx.model.bufferViews.resize(1);
-  ctx.model.bufferViews[0].buffer = 0;
-  ctx.model.bufferViews[0].byteLength = 36;
-  tinygltf::Accessor a;
-  a.bufferView = 0;
-  a.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
-  a.count = 80'000'000;  // 960 MB of floats over a 36-byte view
-  a.type = TINYGLTF_TYPE_VEC3;
+  set_buffer(ctx, std::string(36, '\0'), {{0, 36}});
+  // 960 MB of floats over a 36-byte view:
+  tinygltf::Accessor a = accessor(0, TINYGLTF_COMPONENT_TYPE_FLOAT, 80'000'000, TINYGLTF_TYPE_VEC3);
   ctx.model.accessors.push_back(a);
   a.count = 268'435'455;  // 16 GB as a MAT4
   a.type = TINYGLTF_TYPE_MAT4;
@@ -231,17 +231,8 @@ TEST(GltfMorph, TheScenesTargetsAreBoundedTogether) {
   GltfContext ctx("m.gltf");
   std::string bytes;
   put<float>(bytes, {0, 0, 1, 0, 0, 1, 0, 0, 1});
-  ctx.model.buffers.resize(1);
-  ctx.model.buffers[0].data.assign(bytes.begin(), bytes.end());
-  ctx.model.bufferViews.resize(1);
-  ctx.model.bufferViews[0].buffer = 0;
-  ctx.model.bufferViews[0].byteLength = bytes.size();
-  tinygltf::Accessor a;
-  a.bufferView = 0;
-  a.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
-  a.count = 3;
-  a.type = TINYGLTF_TYPE_VEC3;
-  ctx.model.accessors.push_back(a);
+  set_buffer(ctx, bytes, {{0, bytes.size()}});
+  ctx.model.accessors.push_back(accessor(0, TINYGLTF_COMPONENT_TYPE_FLOAT, 3, TINYGLTF_TYPE_VEC3));
   tinygltf::Primitive prim;
   prim.targets = {{{"POSITION", 0}}, {}, {{"POSITION", 0}}};  // the empty one costs nothing
   ctx.max_morph_values = 18;                                  // a target of 3 vertices holds 9
