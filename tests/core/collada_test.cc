@@ -282,6 +282,15 @@ TEST_F(BadCollada, GarbageBytes) {
   }
 }
 
+// A visual scene that places nothing to render: refused, as glTF's "no triangles", rather
+// than a black image; what was skipped is named.
+TEST_F(BadCollada, NothingToRender) {
+  const std::string empty =
+      "<COLLADA><library_visual_scenes><visual_scene id=\"s\"><node id=\"n\"><lookat>0 0 1 0 0 0 0 1 0</lookat>"
+      "</node></visual_scene></library_visual_scenes><scene><instance_visual_scene url=\"#s\"/></scene></COLLADA>";
+  expect_error(empty, "<visual_scene id=\"s\">", "no meshes or spheres to render; skipped: <lookat> is not supported");
+}
+
 TEST_F(BadCollada, NotCollada) { expect_error("<html><body/></html>", "", "not a COLLADA document"); }
 
 TEST_F(BadCollada, DanglingUrl) {
