@@ -146,8 +146,7 @@ Admission JobControl::requeue_admission(const Requeue& q, std::string* owner) {
   const Job& j = *q.ended.front();
   *owner = j.meta.owner;
   a.pixels = live_pixels_of(j.plan.settings());
-  const uint64_t total = j.plan.samples_total();
-  a.samples = total - std::min(total, j.plan.samples_merged());
+  a.samples = j.plan.samples_left();
   a.scene_bytes = j.meta.scene_bytes;
   return a;
 }

@@ -183,8 +183,7 @@ Load JobTable::load(const std::string& owner) const {
   Load l;
   for (const auto& [id, j] : jobs_) {
     if (!j->live()) continue;
-    const uint64_t total = j->plan.samples_total();
-    const uint64_t left = total - std::min(total, j->plan.samples_merged());
+    const uint64_t left = j->plan.samples_left();
     l.live_pixels += live_pixels_of(j->plan.settings());
     l.tasks_ready += j->plan.ready();
     l.samples_remaining += left;

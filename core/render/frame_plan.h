@@ -18,6 +18,7 @@
 // Not thread-safe: the local renderer and the coordinator each hold it under their lock.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <optional>
 #include <set>
@@ -163,7 +164,9 @@ class FramePlan {
   uint32_t frame_passes_done() const { return frame_passes_; }  // passes every unfinished tile has merged
   uint64_t samples_merged() const { return samples_merged_; }
   uint64_t samples_total() const { return samples_total_; }  // an upper bound (-a, noise target)
-  uint64_t merges() const { return merges_; }                // the film's version
+  // Samples still to merge (an upper bound as samples_total is; 0 once merged passes it).
+  uint64_t samples_left() const { return samples_total_ - std::min(samples_total_, samples_merged_); }
+  uint64_t merges() const { return merges_; }  // the film's version
   // Fraction of the scheduled work done, 1 when done (adaptive sampling may end early).
   double fraction_done() const;
 
