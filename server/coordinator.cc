@@ -481,7 +481,8 @@ size_t Coordinator::expire_leases() {
     const double now = clock_->now();
     worker_lifecycle_.forget_silent(now, fx);  // here, on the reaper's tick, not in every GetTask
     const size_t expired = leasing_.expire(now);
-    fx.changed = expired > 0;
+    const size_t overrun = worker_lifecycle_.end_overrun(now, fx);
+    fx.changed = expired > 0 || overrun > 0;
     verifier_.skip_stale(now, fx);
     fx.prepare = sequences_.to_prepare(options_.max_live_pixels);  // made off every worker's path
     fx.archive = archive_.due(now);                                // ended jobs whole on disk leave memory

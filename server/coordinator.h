@@ -165,7 +165,8 @@ class Coordinator {
   // Waits up to `timeout` seconds for a change that may make work available (a job
   // submitted, a tile pass merged, a lease ended): lets GetTask long-poll.
   void wait_for_work(double timeout) const;
-  // The reaper's tick (every 200 ms): expires overdue leases (get_task does too), forgets
+  // The reaper's tick (every 200 ms): expires overdue leases (get_task does too), ends
+  // leases held past --max-task-seconds (failed tasks of their workers), forgets
   // silent workers, skips checks nobody can take, and makes the next frame of each
   // sequence ready to start. Returns how many leases expired.
   size_t expire_leases();

@@ -61,6 +61,13 @@ std::vector<std::pair<uint64_t, Lease>> LeaseTable::expire(double now) {
   return out;
 }
 
+std::vector<uint64_t> LeaseTable::granted_before(double time) const {
+  std::vector<uint64_t> out;
+  for (const auto& [id, l] : live_)
+    if (l.granted < time) out.push_back(id);
+  return out;
+}
+
 void LeaseTable::forget_job(const std::string& job) {
   for (auto* m : {&live_, &ended_})
     for (auto it = m->begin(); it != m->end();) it = it->second.job == job ? m->erase(it) : std::next(it);

@@ -58,6 +58,8 @@ class LeaseTable {
   std::vector<std::pair<uint64_t, Lease>> expire(double now);
   // Ends every live lease of the job, and forgets all its leases.
   void forget_job(const std::string& job);
+  // The live leases granted before `time` (held past a bound on a task's time).
+  std::vector<uint64_t> granted_before(double time) const;
   // The live leases a worker holds.
   std::vector<uint64_t> held_by(uint64_t worker) const;
   // Live leases of a job: how many distinct workers hold them.

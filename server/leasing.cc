@@ -50,6 +50,7 @@ uint64_t Leasing::grant_check(uint64_t check, WorkerInfo& worker, double now) {
   TESSERA_INVARIANT(c && c->lease == 0, "check " + std::to_string(check) + " is not waiting for a worker");
   Lease l{c->job, c->tile, c->pass, worker.id, now + lease_seconds_, nullptr};
   l.check = check;
+  l.granted = now;
   c->lease = leases_.grant(std::move(l));
   ++worker.leases;
   ++counters_.tasks_dispatched;

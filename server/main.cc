@@ -140,6 +140,11 @@ int main(int argc, char** argv) {
   app.add_option("--lease-seconds", opt.lease_seconds, "lease length; a silent worker's task moves on after it")
       ->capture_default_str()
       ->check(CLI::Range(0.1, 3600.0));
+  app.add_option("--max-task-seconds", opt.max_task_seconds,
+                 "a task's time from its lease to its result, at most: past it the task counts as failed on its "
+                 "worker (the job fails once tasks fail on two workers); 0: no bound")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e7));
   app.add_option("--max-workers", opt.max_workers, "registered workers at most (silent ones are forgotten after 60 s)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));

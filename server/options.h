@@ -23,6 +23,12 @@ struct CoordinatorOptions {
   // Registered workers of one access token at most: a flood under one credential cannot
   // lock the others out (each worker's own credential makes this 1 per worker).
   size_t max_workers_per_token = 1000;
+  // A task's time from its lease to its result, at most: past it the lease ends as a task
+  // that failed on its worker (the job fails once that happens on two workers, as for any
+  // failure), and the worker, told at its next heartbeat, stops rendering it. Scenes within
+  // every load bound can still cost hours a sample (20 M coincident triangles); this keeps
+  // one from holding the farm's workers for good. 0: no bound.
+  double max_task_seconds = 3600;
   // Leases one worker may hold at once. A worker keeps as much work leased as its speed
   // times its round trip asks for (a far worker needs more in flight), up to this; the
   // dispatcher's share by threads still keeps one worker from taking all of a small job.

@@ -1,5 +1,7 @@
 #include "server/worker_lifecycle.h"
 
+#include <cstdio>
+
 #include "core/util/text.h"
 #include "server/request_error.h"
 
@@ -90,6 +92,22 @@ void WorkerLifecycle::unregister(uint64_t worker, double now, Effects& fx) {
          std::to_string(w->tasks_done) + " tasks done, " + std::to_string(held) + " leases given back"});
   p_.workers.remove(worker);
   fx.changed = true;
+}
+
+size_t WorkerLifecycle::end_overrun(double now, Effects& fx) {
+  if (!(options_.max_task_seconds > 0)) return 0;
+  const std::vector<uint64_t> overrun = p_.leases.granted_before(now - options_.max_task_seconds);
+  for (const uint64_t id : overrun) {
+    const Lease& l = *p_.leases.live(id);
+    char bound[32];
+    std::snprintf(bound, sizeof bound, "%g", options_.max_task_seconds);
+    release(l.worker, id,
+            "a task (tile " + std::to_string(l.tile) + ", pass " + std::to_string(l.pass) +
+                ") ran past the coordinator's bound on a task's time, from its lease to its result: " + bound +
+                " s (--max-task-seconds)",
+            now, fx);
+  }
+  return overrun.size();
 }
 
 void WorkerLifecycle::forget_silent(double now, Effects& fx) {

@@ -41,6 +41,9 @@ class WorkerLifecycle {
   void release(uint64_t worker, uint64_t task, const std::string& error, double now, Effects& fx);
   // The worker stops: its leases go back to their jobs and it is forgotten.
   void unregister(uint64_t worker, double now, Effects& fx);
+  // Ends every lease held past --max-task-seconds, each a task failed on its worker.
+  // Returns how many.
+  size_t end_overrun(double now, Effects& fx);
   // Forgets workers silent for longer than the timeout (they register again if they return).
   void forget_silent(double now, Effects& fx);
 

@@ -1,5 +1,7 @@
 // The farm when things fail: workers and the coordinator killed at any moment, workers
 // leaving when idle or when the coordinator is gone, and reconnecting when it is back.
+#include <unistd.h>
+
 #include "tests/integration/farm_fixture.h"
 
 namespace tessera {
@@ -154,6 +156,34 @@ TEST_F(Farm, CoordinatorKilledMidSequenceLosesNoFrame) {
   for (const char* n : {"0001", "0002", "0003"})
     expect_same_pixels((dir / ("local." + std::string(n) + ".exr")).string(),
                        (dir / ("farm." + std::string(n) + ".exr")).string());
+}
+
+// A scene within every load bound can still cost hours a sample. A task held past
+// --max-task-seconds fails on its worker, which is told to stop rendering it; once that
+// happened on two workers the job fails naming the bound, and both workers are idle again.
+TEST_F(Farm, ATaskPastTheTaskBoundFailsTheJobAndItsWorkersStopRenderingIt) {
+  start_coordinator("127.0.0.1:0", "2", {"--max-task-seconds", "0.3"});
+  const Process& a = start_worker();
+  const Process& b = start_worker();
+  // One task of 32 x 32 pixels x 1024 samples: a second or more on one thread.
+  const CommandResult r =
+      submit_wait(kScene, "-r 32 32 --tile 32 -s 1024 --pass-spp 1024", (dir / "slow.exr").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("0.3 s (--max-task-seconds)"), std::string::npos) << r.err;
+  auto cpu_ticks = [](pid_t pid) {  // user + system time (/proc/PID/stat fields 14 and 15)
+    std::istringstream in(slurp("/proc/" + std::to_string(pid) + "/stat"));
+    std::string field;
+    long ticks = 0;
+    for (int i = 1; i <= 15 && in >> field; ++i)
+      if (i >= 14) ticks += std::stol(field);
+    return ticks;
+  };
+  // Told at their next heartbeat (every 2 s here), they stop within a pixel.
+  std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+  const long before = cpu_ticks(a.pid()) + cpu_ticks(b.pid());
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  const long used = cpu_ticks(a.pid()) + cpu_ticks(b.pid()) - before;
+  EXPECT_LT(used, sysconf(_SC_CLK_TCK) / 2) << "ticks of CPU in 1.5 s: still rendering";
 }
 
 // For batch allocations (Slurm): a worker with --exit-when-idle-seconds leaves cleanly once the

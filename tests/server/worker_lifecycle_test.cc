@@ -28,7 +28,7 @@ CoordinatorOptions two_workers_at_most() {
 
 class WorkerLifecycleTest : public testing::PartsTest {
  protected:
-  WorkerLifecycleTest() : PartsTest(two_workers_at_most()) {}
+  explicit WorkerLifecycleTest(CoordinatorOptions o = two_workers_at_most()) : PartsTest(std::move(o)) {}
   static v1::RegisterRequest request(const std::string& name, uint32_t threads = 4) {
     v1::RegisterRequest r;
     r.set_version(kProtocolVersion);
@@ -199,6 +199,60 @@ TEST_F(WorkerLifecycleTest, AnEnrolledWorkerRegisteringAgainIsStillOneFailure) {
   const uint64_t other = join("render-2", "render-2", true);
   worker_lifecycle.release(other, lease_next(*job, other), "out of memory", now, fx);
   EXPECT_EQ(job->state(), v1::JobStatus::FAILED);
+}
+
+// A scene within every load bound can still cost hours a sample (20 M coincident
+// triangles): a lease held past --max-task-seconds (3600 s by default) ends as a task failed
+// on its worker, which is told at its next heartbeat to stop rendering it; on a second
+// worker the job fails, naming the bound. What was merged is kept, as for any failure.
+TEST_F(WorkerLifecycleTest, ALeaseHeldPastTheTaskBoundFailsOnItsWorker) {
+  ASSERT_EQ(options.max_task_seconds, 3600);
+  const std::shared_ptr<Job> job = add_still();
+  const uint64_t a = join("a"), b = join("b");
+  const uint64_t ta = lease_next(*job, a);
+  now += 3599;
+  EXPECT_TRUE(worker_lifecycle.heartbeat(a, {ta}, 0, now).empty());  // renewed: within the bound
+  EXPECT_EQ(worker_lifecycle.end_overrun(now, fx), 0u);
+  now += 2;
+  EXPECT_EQ(worker_lifecycle.end_overrun(now, fx), 1u);
+  EXPECT_EQ(leases.live(ta), nullptr);
+  EXPECT_EQ(worker_lifecycle.heartbeat(a, {ta}, 0, now), std::vector<uint64_t>{ta});  // a stops
+  EXPECT_EQ(counters.tasks_failed, 1u);
+  EXPECT_EQ(job->failed_on, std::set<std::string>{"registration " + std::to_string(a)});
+  EXPECT_TRUE(job->live());
+  EXPECT_EQ(job->plan.ready(), kTiles);  // the tile is ready again
+  const uint64_t tb = lease_next(*job, b);
+  const uint32_t tile = leases.live(tb)->tile;
+  now += 3601;
+  EXPECT_EQ(worker_lifecycle.end_overrun(now, fx), 1u);
+  EXPECT_EQ(job->state(), v1::JobStatus::FAILED);
+  EXPECT_EQ(job->error, "tasks failed on 2 workers: a task (tile " + std::to_string(tile) +
+                            ", pass 0) ran past the coordinator's bound on a task's time, from its lease to its "
+                            "result: 3600 s (--max-task-seconds)");
+  ASSERT_GE(fx.events.size(), 2u);
+  EXPECT_EQ(fx.events[fx.events.size() - 2].kind, "task.failed");
+  EXPECT_TRUE(has(fx.events[fx.events.size() - 2].detail, "--max-task-seconds"));
+  EXPECT_EQ(fx.events.back().kind, "job.failed");
+}
+
+CoordinatorOptions no_task_bound() {
+  CoordinatorOptions o = two_workers_at_most();
+  o.max_task_seconds = 0;
+  return o;
+}
+class NoTaskBoundTest : public WorkerLifecycleTest {
+ protected:
+  NoTaskBoundTest() : WorkerLifecycleTest(no_task_bound()) {}
+};
+
+TEST_F(NoTaskBoundTest, ZeroLeavesLeasesToTheirHeartbeats) {
+  const std::shared_ptr<Job> job = add_still();
+  const uint64_t a = join("a");
+  const uint64_t ta = lease_next(*job, a);
+  now += 1e6;
+  EXPECT_EQ(worker_lifecycle.end_overrun(now, fx), 0u);
+  EXPECT_NE(leases.live(ta), nullptr);
+  EXPECT_EQ(counters.tasks_failed, 0u);
 }
 
 TEST_F(WorkerLifecycleTest, AWorkerLeavingGivesItsLeasesBack) {
