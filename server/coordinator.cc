@@ -43,7 +43,7 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
       sink_(sink ? std::move(sink) : std::make_unique<DiskImageSink>((fs::path(options_.data_dir) / "jobs").string())),
       store_(store ? std::move(store) : sqlite_store(options_)),
       credentials_(*store_),
-      scenes_((fs::path(options_.data_dir) / "scenes").string()),
+      scenes_((fs::path(options_.data_dir) / "scenes").string(), options_.max_scene_loads),
       uploads_(scenes_, *clock_, options_.upload_kept_seconds),
       writer_(
           *sink_, *store_,

@@ -22,6 +22,7 @@
 #include "server/admission.h"
 #include "server/grpc_services.h"
 #include "server/health_http.h"
+#include "server/scene_loads.h"
 #include "server/status_http.h"
 
 namespace {
@@ -145,6 +146,10 @@ int main(int argc, char** argv) {
                  "worker (the job fails once tasks fail on two workers); 0: no bound")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e7));
+  app.add_option("--max-scene-loads", opt.max_scene_loads,
+                 "scenes the coordinator loads at once (to check a submit, requeue or restore, or to render a check), "
+                 "at most; the rest wait their turn (default: one per 8 GiB of memory, 1 to 4)")
+      ->check(CLI::Range(1, 1024));
   app.add_option("--max-workers", opt.max_workers, "registered workers at most (silent ones are forgotten after 60 s)")
       ->capture_default_str()
       ->check(CLI::Range(1, 1000000));
@@ -204,6 +209,9 @@ int main(int argc, char** argv) {
   if (app.count("--max-live-pixels") == 0)  // a frame the machine cannot hold is refused at submit
     opt.max_live_pixels =
         tessera::live_pixel_default(uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGESIZE)));
+  if (app.count("--max-scene-loads") == 0)  // each load may take gigabytes within the loaders' budgets
+    opt.max_scene_loads =
+        tessera::scene_load_default(uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGESIZE)));
   tessera::init_logging("tessera-coordinator");
   if (tls_cert.empty() != tls_key.empty()) {
     spdlog::error("--tls-cert and --tls-key go together");

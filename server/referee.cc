@@ -8,7 +8,7 @@ namespace tessera {
 
 Referee local_referee(const SceneStore& scenes) {
   return [&scenes](const v1::Task& task) {
-    const Scene scene = load_scene(scenes.main_path(task.scene_hash()));
+    const Scene scene = scenes.load(scenes.main_path(task.scene_hash()));
     const Rect rect = from_proto(task.tile());
     if (!task.active().empty() && task.active().size() != size_t(rect.area())) throw WireError("active mask size");
     const auto* mask = task.active().empty() ? nullptr : reinterpret_cast<const uint8_t*>(task.active().data());

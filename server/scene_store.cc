@@ -33,7 +33,9 @@ uint64_t bundle_bytes(const SceneFiles& files) {
   return weight.bytes();
 }
 
-SceneStore::SceneStore(std::string dir) : dir_(std::move(dir)) { fs::create_directories(dir_); }
+SceneStore::SceneStore(std::string dir, size_t loads_at_once) : dir_(std::move(dir)), loads_(loads_at_once) {
+  fs::create_directories(dir_);
+}
 
 std::string SceneStore::staging_folder(const std::string& name) const {
   static std::atomic<uint64_t> seq{0};
@@ -80,7 +82,7 @@ std::string SceneStore::keep(const std::string& staged, const v1::SceneManifest&
   const std::string& hash = m.scene_hash();
   if (use_kept(hash, check)) return hash;
   try {
-    const Scene scene = load_scene((fs::path(staged) / "files" / m.main_file()).string());  // outside the lock: slow
+    const Scene scene = load((fs::path(staged) / "files" / m.main_file()).string());  // outside the lock: slow
     if (check) check(scene);
   } catch (const SceneError& e) {
     throw SceneError(m.main_file(), e.element(), e.reason());
@@ -115,7 +117,7 @@ bool SceneStore::use_kept(const std::string& hash, const Check& check) {
   // Another job's settings were checked against these bytes, not this one's: load the kept
   // copy (outside the lock: slow) and check again; a refusal gives the use back.
   try {
-    check(load_scene(main_path(hash)));  // (kept while this use holds it)
+    check(load(main_path(hash)));  // (kept while this use holds it)
   } catch (const SceneError& e) {
     release(hash);
     throw SceneError(main, e.element(), e.reason());
@@ -159,7 +161,7 @@ uint64_t SceneStore::restore(const std::string& hash) {
     throw std::runtime_error("its scene in the data folder is damaged");
   }
   try {
-    (void)load_scene((dir / "files" / m.main_file()).string());  // as keep() checks it
+    (void)load((dir / "files" / m.main_file()).string());  // as keep() checks it
   } catch (const SceneError& e) {
     throw SceneError(m.main_file(), e.element(), e.reason());
   }

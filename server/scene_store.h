@@ -15,6 +15,7 @@
 #include "core/scene/scene.h"
 #include "scene_bundle.h"
 #include "scene_chunks.h"
+#include "server/scene_loads.h"
 
 namespace tessera {
 
@@ -28,7 +29,10 @@ class SceneStore {
   // and may throw to refuse it.
   using Check = std::function<void(const Scene&)>;
 
-  explicit SceneStore(std::string dir);
+  // At most `loads_at_once` scenes are loaded at once (SceneLoads).
+  explicit SceneStore(std::string dir, size_t loads_at_once = 2);
+  // A kept scene's main file loaded, in turn with every other load here (SceneLoads).
+  Scene load(const std::string& path) const { return loads_.load(path); }
 
   // A folder for a scene arriving, <dir>/<name>.staging-<n> (not made): its files go in
   // <folder>/files, then keep() takes it. Beside the scenes, so that a checked scene is
@@ -82,6 +86,7 @@ class SceneStore {
   bool use_kept(const std::string& hash, const Check& check);
 
   std::string dir_;
+  SceneLoads loads_;
   mutable std::mutex mu_;
   std::map<std::string, Kept> scenes_;
 };

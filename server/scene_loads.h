@@ -1,0 +1,77 @@
+// Scene loads in the coordinator at once, at most (--max-scene-loads). Each can take
+// gigabytes within the loaders' budgets (four 8192 x 8192 textures in 1.1 MB of upload:
+// 5.3 GB for 16 s), so submits in parallel, each within its caller's stream slots, could
+// together exhaust the machine's memory and have the coordinator killed. A load past the
+// bound waits its turn; a submit's wait ends when its client goes away (its CancelScope:
+// core/util/cancel.h), as its load would.
+#pragma once
+
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <mutex>
+#include <string>
+
+#include "core/scene/load.h"
+#include "core/util/cancel.h"
+
+namespace tessera {
+
+// The default --max-scene-loads on a machine with `memory_bytes`: one load per 8 GiB, 1 to 4.
+inline size_t scene_load_default(uint64_t memory_bytes) { return std::clamp<size_t>(size_t(memory_bytes >> 33), 1, 4); }
+
+class SceneLoads {
+ public:
+  explicit SceneLoads(size_t at_once) : at_once_(std::max<size_t>(1, at_once)) {}
+
+  // f() as a load: in its turn.
+  template <class F>
+  auto in_turn(F&& f) const {
+    const Turn turn(*this);
+    return f();
+  }
+  // load_scene(path), once fewer than `at_once` loads are running. Throws what load_scene
+  // throws, or Cancelled while it waits.
+  Scene load(const std::string& path) const {
+    return in_turn([&] { return load_scene(path); });
+  }
+  size_t running() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return running_;
+  }
+
+ private:
+  class Turn {
+   public:
+    explicit Turn(const SceneLoads& loads) : loads_(loads) {
+      std::unique_lock<std::mutex> lock(loads_.mu_);
+      while (loads_.running_ >= loads_.at_once_) {
+        loads_.turn_.wait_for(lock, std::chrono::milliseconds(50));
+        lock.unlock();
+        throw_if_cancelled();  // (not under the lock: it may ask gRPC)
+        lock.lock();
+      }
+      ++loads_.running_;
+    }
+    ~Turn() {
+      {
+        std::lock_guard<std::mutex> lock(loads_.mu_);
+        --loads_.running_;
+      }
+      loads_.turn_.notify_one();
+    }
+    Turn(const Turn&) = delete;
+    Turn& operator=(const Turn&) = delete;
+
+   private:
+    const SceneLoads& loads_;
+  };
+  const size_t at_once_;
+  mutable std::mutex mu_;
+  mutable std::condition_variable turn_;
+  mutable size_t running_ = 0;
+};
+
+}  // namespace tessera

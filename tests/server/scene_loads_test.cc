@@ -1,0 +1,68 @@
+// SceneLoads: the coordinator loads at most --max-scene-loads scenes at once (each can take
+// gigabytes within the loaders' budgets); the rest wait their turn, and a wait ends when
+// its caller goes away.
+#include "server/scene_loads.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <future>
+#include <thread>
+#include <vector>
+
+namespace tessera {
+namespace {
+
+TEST(SceneLoads, AtMostTheBoundRunAtOnceAndTheRestWaitTheirTurn) {
+  const SceneLoads loads(2);
+  std::atomic<int> now{0}, most{0}, done{0};
+  std::vector<std::thread> callers;
+  for (int i = 0; i < 6; ++i)
+    callers.emplace_back([&] {
+      loads.in_turn([&] {
+        const int n = ++now;
+        for (int m = most.load(); n > m && !most.compare_exchange_weak(m, n);) {
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(30));
+        --now;
+        return ++done;
+      });
+    });
+  for (std::thread& t : callers) t.join();
+  EXPECT_EQ(done, 6);
+  EXPECT_EQ(most, 2);
+  EXPECT_EQ(loads.running(), 0u);
+}
+
+TEST(SceneLoads, AWaitEndsWhenItsCallerGoesAway) {
+  const SceneLoads loads(1);
+  std::promise<void> release;
+  std::promise<void> holding;
+  std::thread holder([&] {
+    loads.in_turn([&] {
+      holding.set_value();
+      release.get_future().wait();
+      return 0;
+    });
+  });
+  holding.get_future().wait();
+  {
+    const CancelScope gone([] { return true; });  // its client went away
+    const auto t0 = std::chrono::steady_clock::now();
+    EXPECT_THROW(loads.in_turn([] { return 0; }), Cancelled);
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(5));
+  }
+  EXPECT_EQ(loads.running(), 1u);  // the holder's, not the one that gave up
+  release.set_value();
+  holder.join();
+  EXPECT_EQ(loads.in_turn([] { return 7; }), 7);  // its turn came back
+}
+
+TEST(SceneLoads, TheDefaultIsOneLoadPer8GiBOneToFour) {
+  EXPECT_EQ(scene_load_default(uint64_t(4) << 30), 1u);
+  EXPECT_EQ(scene_load_default(uint64_t(24) << 30), 3u);
+  EXPECT_EQ(scene_load_default(uint64_t(1) << 40), 4u);
+}
+
+}  // namespace
+}  // namespace tessera
