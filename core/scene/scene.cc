@@ -240,27 +240,30 @@ int wrap(int i, int n, Texture::Wrap mode) {
 
 Rgb Texture::mean() const {
   double r = 0, g = 0, b = 0;
-  for (const Rgb& t : texels) {
+  const size_t n = rgba8 ? size() : texels.size();
+  for (size_t i = 0; i < n; ++i) {
+    const Rgb t = texel(i);
     r += t.r;
     g += t.g;
     b += t.b;
   }
-  const double n = texels.empty() ? 1 : double(texels.size());
-  return Rgb(float(r / n), float(g / n), float(b / n));
+  const double d = n == 0 ? 1 : double(n);
+  return Rgb(float(r / d), float(g / d), float(b / d));
 }
 
 namespace {
 
-// Bilinear lookup in a row-major grid of texels, with the texture's wrap modes.
-template <typename T>
-T bilinear(const Texture& tex, const std::vector<T>& texels, Vec2 uv) {
+// Bilinear lookup in a row-major grid of texels (texel(i): the i-th, decoded), with the
+// texture's wrap modes.
+template <typename Texel>
+auto bilinear(const Texture& tex, const Texel& texel, Vec2 uv) {
   // Texel centres at (i + 0.5) / n, as OpenGL samples.
   const float x = uv.x * float(tex.width) - 0.5f, y = uv.y * float(tex.height) - 0.5f;
-  if (!std::isfinite(x) || !std::isfinite(y)) return texels[0];
+  if (!std::isfinite(x) || !std::isfinite(y)) return texel(0);
   // Guard huge coordinates before converting to int.
   auto to_int = [](float f) { return int(std::fmod(double(f), 1 << 24)); };
   auto at = [&](int i, int j) {
-    return texels[size_t(wrap(j, tex.height, tex.wrap_t)) * size_t(tex.width) + size_t(wrap(i, tex.width, tex.wrap_s))];
+    return texel(size_t(wrap(j, tex.height, tex.wrap_t)) * size_t(tex.width) + size_t(wrap(i, tex.width, tex.wrap_s)));
   };
   // magFilter NEAREST: the texel containing uv (centres at (i + 0.5) / n, so round x and y).
   if (tex.nearest) return at(to_int(std::floor(x + 0.5f)), to_int(std::floor(y + 0.5f)));
@@ -275,12 +278,27 @@ T bilinear(const Texture& tex, const std::vector<T>& texels, Vec2 uv) {
 
 Rgb Texture::sample(Vec2 uv) const {
   if (width <= 0 || height <= 0) return Rgb(1);
-  return bilinear(*this, texels, uv);
+  if (rgba8) {
+    const uint8_t* bytes = rgba8->data();
+    const std::array<float, 256>& d = *decode;
+    return bilinear(
+        *this, [bytes, &d](size_t i) { return Rgb(d[bytes[4 * i]], d[bytes[4 * i + 1]], d[bytes[4 * i + 2]]); }, uv);
+  }
+  return bilinear(
+      *this, [this](size_t i) { return texels[i]; }, uv);
 }
 
 float Texture::sample_alpha(Vec2 uv) const {
-  if (width <= 0 || height <= 0 || alpha.size() != texels.size()) return 1;
-  return bilinear(*this, alpha, uv);
+  if (width <= 0 || height <= 0) return 1;
+  if (rgba8) {
+    if (!rgba8_translucent) return 1;
+    const uint8_t* bytes = rgba8->data();
+    return bilinear(
+        *this, [bytes](size_t i) { return bytes[4 * i + 3] / 255.0f; }, uv);
+  }
+  if (alpha.size() != texels.size()) return 1;
+  return bilinear(
+      *this, [this](size_t i) { return alpha[i]; }, uv);
 }
 
 }  // namespace tessera
@@ -320,7 +338,7 @@ float Scene::opacity_at(const Mesh& mesh, size_t tri, float b1, float b2) const 
   const Material& m = materials[mesh.material];
   float a = m.opacity;
   const TextureRef& t = m.texture;
-  if (t.active() && !textures[size_t(t.index)].alpha.empty() && !mesh.uv_set(t.set).empty())
+  if (t.active() && textures[size_t(t.index)].has_alpha() && !mesh.uv_set(t.set).empty())
     a *= textures[size_t(t.index)].sample_alpha(t.map(mesh.uv_at(tri, b1, b2, t.set)));
   if (!mesh.color_alpha.empty()) {
     const uint32_t* i = &mesh.indices[3 * tri];

@@ -3,6 +3,7 @@
 // object space, placed by Scene::instances); no file-format concepts.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -195,12 +196,21 @@ struct Light {
   }
 };
 
-// An RGB texture in linear values, bilinearly filtered, with glTF's wrap modes.
+// An RGB texture in linear values, bilinearly filtered, with glTF's wrap modes. Its texels
+// are floats (`texels`: HDR images, tests) or an 8-bit image's bytes (`rgba8`: glTF's PNG,
+// JPEG and WebP images), decoded as they are looked up: 4 bytes a texel instead of 16, the
+// same values bit for bit as decoding them all first.
 struct Texture {
   enum class Wrap : uint8_t { kRepeat, kClamp, kMirror };
   int width = 0, height = 0;
-  std::vector<Rgb> texels;   // row-major, row 0 at v = 0
+  std::vector<Rgb> texels;   // row-major, row 0 at v = 0 (empty where rgba8 holds them)
   std::vector<float> alpha;  // the image's alpha, as texels, where some texel is not opaque; else empty
+  // An 8-bit image: RGBA, 4 bytes a texel in `texels`' order, shared by every texture made
+  // of the image (its colour spaces and samplers); `decode` maps a colour byte to its
+  // linear value (sRGB or linear data), alpha is always byte / 255. Null: `texels`.
+  std::shared_ptr<const std::vector<uint8_t>> rgba8;
+  std::shared_ptr<const std::array<float, 256>> decode;
+  bool rgba8_translucent = false;  // some texel of rgba8 is not opaque
   Wrap wrap_s = Wrap::kRepeat, wrap_t = Wrap::kRepeat;
   // glTF magFilter NEAREST: the texel the point falls in, not a bilinear blend (pixel art
   // stays sharp, as Blender's importer shows it with Closest). Minification needs no
@@ -209,6 +219,17 @@ struct Texture {
   Rgb sample(Vec2 uv) const;
   float sample_alpha(Vec2 uv) const;  // 1 without an alpha channel
   Rgb mean() const;                   // over all texels
+  bool has_alpha() const { return rgba8 ? rgba8_translucent : !alpha.empty(); }
+  size_t size() const { return size_t(width) * size_t(height); }
+  Rgb texel(size_t i) const {  // row-major index, decoded
+    if (!rgba8) return texels[i];
+    const uint8_t* p = rgba8->data() + 4 * i;
+    return Rgb((*decode)[p[0]], (*decode)[p[1]], (*decode)[p[2]]);
+  }
+  float texel_alpha(size_t i) const {  // 1 without an alpha channel
+    if (rgba8) return rgba8_translucent ? (*rgba8)[4 * i + 3] / 255.0f : 1.0f;
+    return alpha.empty() ? 1.0f : alpha[i];
+  }
 };
 
 struct SceneAnimation;  // core/scene/animation.h

@@ -32,9 +32,10 @@ TEST_F(Gltf, AlphaModesAndCoverageAreRead) {
   EXPECT_FLOAT_EQ(m.alpha_cutoff, 0.25f);
   EXPECT_FLOAT_EQ(m.opacity, 0.75f);
   const Texture& t = s.textures[size_t(m.texture.index)];
-  ASSERT_EQ(t.alpha.size(), 2u);
-  EXPECT_FLOAT_EQ(t.alpha[0], 0);
-  EXPECT_FLOAT_EQ(t.alpha[1], 1);
+  ASSERT_EQ(t.size(), 2u);
+  ASSERT_TRUE(t.has_alpha());
+  EXPECT_FLOAT_EQ(t.texel_alpha(0), 0);
+  EXPECT_FLOAT_EQ(t.texel_alpha(1), 1);
   d.j["materials"][0]["alphaMode"] = "BLEND";
   EXPECT_EQ(load(d).materials[0].alpha_mode, Material::AlphaMode::kBlend);
   d.j["materials"][0].erase("alphaMode");  // OPAQUE by default
@@ -42,7 +43,8 @@ TEST_F(Gltf, AlphaModesAndCoverageAreRead) {
   // An opaque image keeps no alpha.
   d.j["images"][0]["uri"] = red_blue_png_uri();
   s = load(d);
-  EXPECT_TRUE(s.textures[0].alpha.empty());
+  EXPECT_FALSE(s.textures[0].has_alpha());
+  EXPECT_FLOAT_EQ(s.textures[0].texel_alpha(0), 1);
   // Refused, naming the material.
   d.j["materials"][0]["alphaMode"] = "CUTOUT";
   expect_error(d, "materials[0]: alphaMode 'CUTOUT' is not OPAQUE, MASK or BLEND");
@@ -180,11 +182,11 @@ TEST_F(Gltf, WebPTexturesAreDecoded) {
   const Scene s = load(d);
   ASSERT_EQ(s.textures.size(), 1u);
   const Texture& t = s.textures[0];
-  ASSERT_EQ(t.texels.size(), 2u);
-  EXPECT_FLOAT_EQ(t.texels[0].r, 1);  // lossless: exact
-  EXPECT_FLOAT_EQ(t.texels[1].b, 1);
-  ASSERT_EQ(t.alpha.size(), 2u);
-  EXPECT_NEAR(t.alpha[1], 128 / 255.0, 1e-6);
+  ASSERT_EQ(t.size(), 2u);
+  EXPECT_FLOAT_EQ(t.texel(0).r, 1);  // lossless: exact
+  EXPECT_FLOAT_EQ(t.texel(1).b, 1);
+  ASSERT_TRUE(t.has_alpha());
+  EXPECT_NEAR(t.texel_alpha(1), 128 / 255.0, 1e-6);
   for (const std::string& w : s.warnings) EXPECT_EQ(w.find("EXT_texture_webp"), std::string::npos) << w;
   Doc x;  // KHR_xmp_json_ld is metadata: accepted without a warning
   x.j["extensionsUsed"] = {"KHR_xmp_json_ld"};

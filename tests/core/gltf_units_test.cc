@@ -187,7 +187,8 @@ TEST(GltfAccessors, DeclaredCountsAreCheckedBeforeAnythingIsAllocated) {
 // Found by review: each texture index held its own decoded copy of its image, so one
 // material naming one 4096^2 image through 13 textures held 13 copies (2.4 GB), and nothing
 // bounded the texels of a scene. Textures of the same image, colour space and sampling
-// share one copy; the texels of all copies are bounded, the error naming the texture.
+// are one texture, and every texture of an image (its colour spaces and samplers) shares
+// its bytes; the images' texels are bounded together, the error naming the texture.
 TEST(GltfTexturesShared, TheSameImageSampledTheSameWayIsDecodedOnceAndTheTexelsAreBounded) {
   GltfContext ctx("m.gltf");
   tinygltf::Image encoded;
@@ -211,15 +212,21 @@ TEST(GltfTexturesShared, TheSameImageSampledTheSameWayIsDecodedOnceAndTheTexelsA
   EXPECT_EQ(ref(1, true), a);   // another texture, the same image and sampling: shared
   EXPECT_NE(ref(1, false), a);  // linear: its own copy
   EXPECT_NE(ref(2, true), a);   // clamped: its own
-  EXPECT_EQ(ctx.scene.textures.size(), 3u);
-  // Each copy's 2 texels count: 6 held; another image's 2 would pass a limit of 7.
-  ctx.max_scene_texels = 7;
-  EXPECT_EQ(ref(0, false), ref(1, false));  // (shared copies cost nothing more)
+  ASSERT_EQ(ctx.scene.textures.size(), 3u);
+  for (const Texture& t : ctx.scene.textures) {  // one image's bytes, 4 a texel, shared
+    ASSERT_NE(t.rgba8, nullptr);
+    EXPECT_EQ(t.rgba8, ctx.scene.textures[0].rgba8);
+    EXPECT_EQ(t.rgba8->size(), 8u);
+    EXPECT_TRUE(t.texels.empty());
+  }
+  // The image's 2 texels count once; another image's 2 would pass a limit of 3.
+  ctx.max_scene_texels = 3;
+  EXPECT_EQ(ref(0, false), ref(1, false));  // (shared textures cost nothing more)
   try {
     ref(3, true);
     ADD_FAILURE() << "texels past the limit";
   } catch (const SceneError& e) {
-    EXPECT_NE(std::string(e.what()).find("textures[3]: the scene's textures would hold 8 texels, over the limit of 7"),
+    EXPECT_NE(std::string(e.what()).find("textures[3]: the scene's textures would hold 4 texels, over the limit of 3"),
               std::string::npos)
         << e.what();
   }

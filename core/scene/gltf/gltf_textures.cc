@@ -18,6 +18,7 @@ namespace {
 
 constexpr uint64_t kMaxImagePixels = uint64_t(1) << 26;  // 64 M texels
 constexpr int kEncoded = -1;                             // tinygltf::Image::component of bytes not yet decoded
+constexpr int kTaken = -2;                               // ... of pixels GltfTextures holds (image_pixels)
 
 float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : fm::pow((c + 0.055f) / 1.055f, 2.4f); }
 
@@ -128,29 +129,22 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
   }
   const auto same = std::make_tuple(source, srgb, int(wrap_s), int(wrap_t), nearest);
   if (auto it = same_.find(same); it != same_.end()) return loaded_[key] = it->second;
-  const tinygltf::Image& img = decode_image(source);
-  const uint64_t texels = uint64_t(img.width) * uint64_t(img.height);
-  if (texels_ + texels > ctx_.max_scene_texels)
-    ctx_.fail(tel, "the scene's textures would hold " + std::to_string(texels_ + texels) +
-                       " texels, over the limit of " + std::to_string(ctx_.max_scene_texels) +
-                       " (each image counted once a colour space and sampler)");
-  texels_ += texels;
+  const Pixels& pixels = image_pixels(source, tel);
   Texture tex;
-  tex.width = img.width;
-  tex.height = img.height;
-  tex.texels.resize(size_t(img.width) * size_t(img.height));
-  auto decode = [srgb](unsigned char c) { return srgb ? srgb_to_linear(c / 255.0f) : c / 255.0f; };
-  for (size_t i = 0; i < tex.texels.size(); ++i)
-    tex.texels[i] = Rgb(decode(img.image[4 * i]), decode(img.image[4 * i + 1]), decode(img.image[4 * i + 2]));
-  // Alpha (always linear) is kept where some texel is not opaque: the base colour's
-  // coverage for alphaMode MASK and BLEND (Scene::opacity_at), KHR_materials_specular's
-  // specularTexture.
-  bool translucent = false;
-  for (size_t i = 0; i < tex.texels.size() && !translucent; ++i) translucent = img.image[4 * i + 3] != 255;
-  if (translucent) {
-    tex.alpha.resize(tex.texels.size());
-    for (size_t i = 0; i < tex.alpha.size(); ++i) tex.alpha[i] = img.image[4 * i + 3] / 255.0f;
+  tex.width = pixels.width;
+  tex.height = pixels.height;
+  // The bytes themselves, shared, decoded as they are looked up (Texture::rgba8); alpha
+  // (always linear) counts where some texel is not opaque: the base colour's coverage for
+  // alphaMode MASK and BLEND (Scene::opacity_at), KHR_materials_specular's specularTexture.
+  tex.rgba8 = pixels.rgba;
+  tex.rgba8_translucent = pixels.translucent;
+  std::shared_ptr<const std::array<float, 256>>& table = srgb ? srgb_table_ : linear_table_;
+  if (!table) {
+    auto t = std::make_shared<std::array<float, 256>>();
+    for (int c = 0; c < 256; ++c) (*t)[size_t(c)] = srgb ? srgb_to_linear(c / 255.0f) : c / 255.0f;
+    table = std::move(t);
   }
+  tex.decode = table;
   tex.wrap_s = wrap_s;
   tex.wrap_t = wrap_t;
   tex.nearest = nearest;
@@ -158,8 +152,30 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
   return loaded_[key] = same_[same] = int(ctx_.scene.textures.size() - 1);
 }
 
+// images[index]'s pixels, decoded once and then held here (not by the model): every texture
+// made of it shares them, its colour spaces and samplers alike.
+const GltfTextures::Pixels& GltfTextures::image_pixels(int index, const std::string& el) {
+  if (auto it = pixels_.find(index); it != pixels_.end()) return it->second;
+  tinygltf::Image& img = decode_image(index);
+  const uint64_t texels = uint64_t(img.width) * uint64_t(img.height);
+  if (texels_ + texels > ctx_.max_scene_texels)
+    ctx_.fail(el, "the scene's textures would hold " + std::to_string(texels_ + texels) +
+                      " texels, over the limit of " + std::to_string(ctx_.max_scene_texels) +
+                      " (each image counted once)");
+  texels_ += texels;
+  Pixels p;
+  p.width = img.width;
+  p.height = img.height;
+  img.image.resize(size_t(texels) * 4);
+  for (size_t i = 0; i < size_t(texels) && !p.translucent; ++i) p.translucent = img.image[4 * i + 3] != 255;
+  p.rgba = std::make_shared<const std::vector<uint8_t>>(std::move(img.image));
+  img.image = {};
+  img.component = kTaken;
+  return pixels_[index] = std::move(p);
+}
+
 // A WebP image (EXT_texture_webp) through libwebp, to RGBA 8-bit, with the same limit.
-const tinygltf::Image& GltfTextures::decode_webp(tinygltf::Image& img, const std::string& el) {
+tinygltf::Image& GltfTextures::decode_webp(tinygltf::Image& img, const std::string& el) {
   int w = 0, h = 0;
   if (!WebPGetInfo(img.image.data(), img.image.size(), &w, &h))
     ctx_.fail(el, "the WebP image is damaged or cut short and cannot be decoded");
@@ -173,7 +189,7 @@ const tinygltf::Image& GltfTextures::decode_webp(tinygltf::Image& img, const std
 
 // Decodes images[index] (PNG or JPEG, RGBA 8-bit), refusing absurd sizes before
 // allocating; once, whatever number of textures use it.
-const tinygltf::Image& GltfTextures::decode_image(int index) {
+tinygltf::Image& GltfTextures::decode_image(int index) {
   tinygltf::Image& img = ctx_.model.images[size_t(index)];
   // Named by its file where it has one: the user looks for the file.
   const bool file = !img.uri.empty() && img.uri.rfind("data:", 0) != 0;

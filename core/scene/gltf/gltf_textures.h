@@ -5,10 +5,13 @@
 // refuses nothing, as in viewers.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <string>
 #include <tuple>
+#include <vector>
 
 #include "core/scene/gltf/gltf_context.h"
 
@@ -26,9 +29,15 @@ class GltfTextures {
                          const std::string& el, const std::string& what);
 
  private:
+  struct Pixels {
+    int width = 0, height = 0;
+    std::shared_ptr<const std::vector<uint8_t>> rgba;  // 4 bytes a texel
+    bool translucent = false;                          // some alpha byte is not 255
+  };
   int load_texture(int index, const std::string& el, bool srgb);
-  const tinygltf::Image& decode_image(int index);
-  const tinygltf::Image& decode_webp(tinygltf::Image& img, const std::string& el);
+  const Pixels& image_pixels(int index, const std::string& el);
+  tinygltf::Image& decode_image(int index);
+  tinygltf::Image& decode_webp(tinygltf::Image& img, const std::string& el);
 
   GltfContext& ctx_;
   std::map<int, int> loaded_;  // 2 x texture index + sRGB -> scene texture
@@ -36,7 +45,10 @@ class GltfTextures {
   // wrap t, nearest) -> scene texture: textures that differ only in their index share it
   // (13 texture slots naming one 4096^2 image held 13 copies, 2.4 GB).
   std::map<std::tuple<int, bool, int, int, bool>, int> same_;
-  uint64_t texels_ = 0;  // of the scene's textures, against ctx_.max_scene_texels
+  std::map<int, Pixels> pixels_;  // image index -> its pixels
+  // Colour bytes to linear values, sRGB or linear: one table each, shared by the textures.
+  std::shared_ptr<const std::array<float, 256>> srgb_table_, linear_table_;
+  uint64_t texels_ = 0;  // of the scene's images, against ctx_.max_scene_texels
 };
 
 // tinygltf's image loader (TinyGLTF::SetImageLoader): keeps each image's encoded bytes
