@@ -253,6 +253,13 @@ Rgb Texture::mean() const {
 
 namespace {
 
+// byte / 255.0f for every byte: a table lookup instead of a division per texel.
+const std::array<float, 256> kByteFractions = [] {
+  std::array<float, 256> t{};
+  for (int c = 0; c < 256; ++c) t[size_t(c)] = c / 255.0f;
+  return t;
+}();
+
 // Bilinear lookup in a row-major grid of texels (texel(i): the i-th, decoded), with the
 // texture's wrap modes.
 template <typename Texel>
@@ -294,7 +301,7 @@ float Texture::sample_alpha(Vec2 uv) const {
     if (!rgba8_translucent) return 1;
     const uint8_t* bytes = rgba8->data();
     return bilinear(
-        *this, [bytes](size_t i) { return bytes[4 * i + 3] / 255.0f; }, uv);
+        *this, [bytes](size_t i) { return kByteFractions[bytes[4 * i + 3]]; }, uv);
   }
   if (alpha.size() != texels.size()) return 1;
   return bilinear(
