@@ -148,7 +148,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1e7));
   app.add_option("--max-scene-loads", opt.max_scene_loads,
                  "scenes the coordinator loads at once (to check a submit, requeue or restore, or to render a check), "
-                 "at most; the rest wait their turn (default: one per 8 GiB of memory, 1 to 4)")
+                 "at most; the rest wait their turn (default: one per 16 GiB of memory, 1 to 4)")
       ->check(CLI::Range(1, 1024));
   app.add_option("--max-workers", opt.max_workers, "registered workers at most (silent ones are forgotten after 60 s)")
       ->capture_default_str()

@@ -31,7 +31,7 @@ struct CoordinatorOptions {
   double max_task_seconds = 3600;
   // Scene loads (a submit's check, a requeue's, a restore, the referee's render) at once, at
   // most: the rest wait their turn (server/scene_loads.h). tessera-coordinator sets one per
-  // 8 GiB of the machine's memory, 1 to 4 (scene_load_default), unless given.
+  // 16 GiB of the machine's memory, 1 to 4 (scene_load_default), unless given.
   size_t max_scene_loads = 2;
   // Leases one worker may hold at once. A worker keeps as much work leased as its speed
   // times its round trip asks for (a far worker needs more in flight), up to this; the

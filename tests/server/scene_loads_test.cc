@@ -58,9 +58,10 @@ TEST(SceneLoads, AWaitEndsWhenItsCallerGoesAway) {
   EXPECT_EQ(loads.in_turn([] { return 7; }), 7);  // its turn came back
 }
 
-TEST(SceneLoads, TheDefaultIsOneLoadPer8GiBOneToFour) {
+TEST(SceneLoads, TheDefaultIsOneLoadPer16GiBOneToFour) {
   EXPECT_EQ(scene_load_default(uint64_t(4) << 30), 1u);
-  EXPECT_EQ(scene_load_default(uint64_t(24) << 30), 3u);
+  EXPECT_EQ(scene_load_default(uint64_t(24) << 30), 1u);
+  EXPECT_EQ(scene_load_default(uint64_t(128) << 30), 4u);
   EXPECT_EQ(scene_load_default(uint64_t(1) << 40), 4u);
 }
 
