@@ -482,7 +482,7 @@ size_t Coordinator::expire_leases() {
     worker_lifecycle_.forget_silent(now, fx);  // here, on the reaper's tick, not in every GetTask
     const size_t expired = leasing_.expire(now);
     const size_t overrun = worker_lifecycle_.end_overrun(now, fx);
-    fx.changed = expired > 0 || overrun > 0;
+    fx.changed = fx.changed || expired > 0 || overrun > 0;  // (forget_silent may have set it)
     verifier_.skip_stale(now, fx);
     fx.prepare = sequences_.to_prepare(options_.max_live_pixels);  // made off every worker's path
     fx.archive = archive_.due(now);                                // ended jobs whole on disk leave memory

@@ -1,8 +1,10 @@
-// Scene loads in the coordinator at once, at most (--max-scene-loads). Each can take
+// Scenes the coordinator holds loaded at once, at most (--max-scene-loads). Each can take
 // gigabytes within the loaders' budgets (four 8192 x 8192 textures in 1.1 MB of upload:
-// 5.3 GB for 16 s), so submits in parallel, each within its caller's stream slots, could
-// together exhaust the machine's memory and have the coordinator killed. A load past the
-// bound waits its turn; a submit's wait ends when its client goes away (its CancelScope:
+// 5.3 GB for 16 s when textures were floats), so submits in parallel, each within its
+// caller's stream slots, could together exhaust the machine's memory and have the
+// coordinator killed. A turn covers a load and what holds the scene after it (a submit's
+// check of its settings, the referee's render: SceneStore::in_turn). Past the bound a turn
+// waits; a submit's wait ends when its client goes away (its CancelScope:
 // core/util/cancel.h), as its load would.
 #pragma once
 
@@ -12,9 +14,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <mutex>
-#include <string>
 
-#include "core/scene/load.h"
 #include "core/util/cancel.h"
 
 namespace tessera {
@@ -29,16 +29,12 @@ class SceneLoads {
  public:
   explicit SceneLoads(size_t at_once) : at_once_(std::max<size_t>(1, at_once)) {}
 
-  // f() as a load: in its turn.
+  // f(), once fewer than `at_once` turns are running. Throws what f throws, or Cancelled
+  // while it waits.
   template <class F>
   auto in_turn(F&& f) const {
     const Turn turn(*this);
     return f();
-  }
-  // load_scene(path), once fewer than `at_once` loads are running. Throws what load_scene
-  // throws, or Cancelled while it waits.
-  Scene load(const std::string& path) const {
-    return in_turn([&] { return load_scene(path); });
   }
   size_t running() const {
     std::lock_guard<std::mutex> lock(mu_);

@@ -82,8 +82,11 @@ std::string SceneStore::keep(const std::string& staged, const v1::SceneManifest&
   const std::string& hash = m.scene_hash();
   if (use_kept(hash, check)) return hash;
   try {
-    const Scene scene = load((fs::path(staged) / "files" / m.main_file()).string());  // outside the lock: slow
-    if (check) check(scene);
+    in_turn([&] {  // outside the lock: slow
+      const Scene scene = load_scene((fs::path(staged) / "files" / m.main_file()).string());
+      if (check) check(scene);
+      return 0;
+    });
   } catch (const SceneError& e) {
     throw SceneError(m.main_file(), e.element(), e.reason());
   }
@@ -117,7 +120,10 @@ bool SceneStore::use_kept(const std::string& hash, const Check& check) {
   // Another job's settings were checked against these bytes, not this one's: load the kept
   // copy (outside the lock: slow) and check again; a refusal gives the use back.
   try {
-    check(load(main_path(hash)));  // (kept while this use holds it)
+    in_turn([&] {
+      check(load_scene(main_path(hash)));  // (kept while this use holds it)
+      return 0;
+    });
   } catch (const SceneError& e) {
     release(hash);
     throw SceneError(main, e.element(), e.reason());
@@ -161,7 +167,7 @@ uint64_t SceneStore::restore(const std::string& hash) {
     throw std::runtime_error("its scene in the data folder is damaged");
   }
   try {
-    (void)load((dir / "files" / m.main_file()).string());  // as keep() checks it
+    in_turn([&] { return load_scene((dir / "files" / m.main_file()).string()); });  // as keep() checks it
   } catch (const SceneError& e) {
     throw SceneError(m.main_file(), e.element(), e.reason());
   }

@@ -31,8 +31,13 @@ class SceneStore {
 
   // At most `loads_at_once` scenes are loaded at once (SceneLoads).
   explicit SceneStore(std::string dir, size_t loads_at_once = 2);
-  // A kept scene's main file loaded, in turn with every other load here (SceneLoads).
-  Scene load(const std::string& path) const { return loads_.load(path); }
+  // f() in turn with every scene load here (SceneLoads): a load and whatever holds the
+  // scene after it (a check of its settings, a render) count as one, so that the bound
+  // holds the scenes in memory, not only their loading.
+  template <class F>
+  auto in_turn(F&& f) const {
+    return loads_.in_turn(std::forward<F>(f));
+  }
 
   // A folder for a scene arriving, <dir>/<name>.staging-<n> (not made): its files go in
   // <folder>/files, then keep() takes it. Beside the scenes, so that a checked scene is

@@ -96,18 +96,22 @@ void WorkerLifecycle::unregister(uint64_t worker, double now, Effects& fx) {
 
 size_t WorkerLifecycle::end_overrun(double now, Effects& fx) {
   if (!(options_.max_task_seconds > 0)) return 0;
-  const std::vector<uint64_t> overrun = p_.leases.granted_before(now - options_.max_task_seconds);
-  for (const uint64_t id : overrun) {
-    const Lease& l = *p_.leases.live(id);
-    char bound[32];
-    std::snprintf(bound, sizeof bound, "%g", options_.max_task_seconds);
-    release(l.worker, id,
-            "a task (tile " + std::to_string(l.tile) + ", pass " + std::to_string(l.pass) +
-                ") ran past the coordinator's bound on a task's time, from its lease to its result: " + bound +
-                " s (--max-task-seconds)",
-            now, fx);
+  char bound[32];
+  std::snprintf(bound, sizeof bound, "%g", options_.max_task_seconds);
+  size_t ended = 0;
+  for (const uint64_t id : p_.leases.granted_before(now - options_.max_task_seconds)) {
+    // Gone already where an earlier one's failure failed its job (every lease of the job
+    // ends with it; a sequence's other frames are cancelled).
+    const Lease* l = p_.leases.live(id);
+    if (!l) continue;
+    const uint64_t worker = l->worker;
+    const std::string why = "a task (tile " + std::to_string(l->tile) + ", pass " + std::to_string(l->pass) +
+                            ") ran past the coordinator's bound on a task's time, from its lease to its result: " +
+                            bound + " s (--max-task-seconds)";
+    release(worker, id, why, now, fx);
+    ++ended;
   }
-  return overrun.size();
+  return ended;
 }
 
 void WorkerLifecycle::forget_silent(double now, Effects& fx) {

@@ -165,9 +165,9 @@ TEST_F(Farm, ATaskPastTheTaskBoundFailsTheJobAndItsWorkersStopRenderingIt) {
   start_coordinator("127.0.0.1:0", "2", {"--max-task-seconds", "0.3"});
   const Process& a = start_worker();
   const Process& b = start_worker();
-  // One task of 32 x 32 pixels x 1024 samples: a second or more on one thread.
+  // One task of 32 x 32 pixels x 8192 samples: about 12 s on one thread here.
   const CommandResult r =
-      submit_wait(kScene, "-r 32 32 --tile 32 -s 1024 --pass-spp 1024", (dir / "slow.exr").string());
+      submit_wait(kScene, "-r 32 32 --tile 32 -s 8192 --pass-spp 8192", (dir / "slow.exr").string());
   EXPECT_NE(r.code, 0);
   EXPECT_NE(r.err.find("0.3 s (--max-task-seconds)"), std::string::npos) << r.err;
   auto cpu_ticks = [](pid_t pid) {  // user + system time (/proc/PID/stat fields 14 and 15)

@@ -235,6 +235,23 @@ TEST_F(WorkerLifecycleTest, ALeaseHeldPastTheTaskBoundFailsOnItsWorker) {
   EXPECT_EQ(fx.events.back().kind, "job.failed");
 }
 
+// Found by review: the leases past the bound were listed first and then read, but the
+// failure of one can fail its job, which ends every other lease of it: the coordinator
+// read a lease that was gone (SIGSEGV on the reaper's tick). Four leases of one job on two
+// workers, all past the bound in one tick: the third fails the job, the fourth is gone.
+TEST_F(WorkerLifecycleTest, LeasesPastTheBoundTogetherEndOnceTheirJobHasFailed) {
+  const std::shared_ptr<Job> job = add_still();
+  const uint64_t a = join("a"), b = join("b");
+  const uint64_t a1 = lease_next(*job, a), a2 = lease_next(*job, a);
+  const uint64_t b1 = lease_next(*job, b), b2 = lease_next(*job, b);
+  now += 3601;
+  EXPECT_EQ(worker_lifecycle.end_overrun(now, fx), 3u);
+  EXPECT_EQ(job->state(), v1::JobStatus::FAILED);
+  for (const uint64_t t : {a1, a2, b1, b2}) EXPECT_EQ(leases.live(t), nullptr);
+  EXPECT_EQ(counters.tasks_failed, 3u);  // a's two (one worker) and b's first
+  EXPECT_EQ(worker_lifecycle.end_overrun(now, fx), 0u);
+}
+
 CoordinatorOptions no_task_bound() {
   CoordinatorOptions o = two_workers_at_most();
   o.max_task_seconds = 0;
