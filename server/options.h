@@ -30,7 +30,8 @@ struct CoordinatorOptions {
   // one from holding the farm's workers for good. 0: no bound.
   double max_task_seconds = 3600;
   // Scene loads (a submit's check, a requeue's, a restore, the referee's render) at once, at
-  // most: the rest wait their turn (server/scene_loads.h). tessera-coordinator sets one per
+  // most: the rest wait their turn (server/scene_loads.h), for as long as a turn holds its
+  // scene (the referee's render of a disputed task too). tessera-coordinator sets one per
   // 16 GiB of the machine's memory, 1 to 4 (scene_load_default), unless given.
   size_t max_scene_loads = 2;
   // Leases one worker may hold at once. A worker keeps as much work leased as its speed

@@ -79,7 +79,7 @@ void WorkerLifecycle::release(uint64_t worker, uint64_t task, const std::string&
   Job* job = p_.jobs.find_job(job_id);
   if (!job) return;
   const WorkerInfo* w = p_.workers.find(worker);
-  if (!w) return;  // (it called with its secret: registered)
+  if (!w) return;  // (a caller is registered; end_overrun may end a forgotten worker's lease)
   p_.lifecycle.task_failed(*job, *w, error, now, fx);
 }
 
@@ -105,9 +105,10 @@ size_t WorkerLifecycle::end_overrun(double now, Effects& fx) {
     const Lease* l = p_.leases.live(id);
     if (!l) continue;
     const uint64_t worker = l->worker;
-    const std::string why = "a task (tile " + std::to_string(l->tile) + ", pass " + std::to_string(l->pass) +
-                            ") ran past the coordinator's bound on a task's time, from its lease to its result: " +
-                            bound + " s (--max-task-seconds)";
+    const std::string why =
+        "a task (tile " + std::to_string(l->tile) + ", pass " + std::to_string(l->pass) +
+        ") ran past the coordinator's bound on a task's time, from its lease to its result: " + bound +
+        " s (--max-task-seconds)";
     release(worker, id, why, now, fx);
     ++ended;
   }

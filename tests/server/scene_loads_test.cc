@@ -55,6 +55,7 @@ TEST(SceneLoads, AtMostTheBoundRunAtOnceAndTheRestWaitTheirTurn) {
   for (std::thread& t : callers) t.join();
   EXPECT_EQ(done, 6);
   EXPECT_LE(most, 2);
+  EXPECT_EQ(loads.running(), 0u);
 }
 
 TEST(SceneLoads, AWaitEndsWhenItsCallerGoesAway) {
