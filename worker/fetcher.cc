@@ -7,13 +7,15 @@
 
 namespace tessera::worker {
 
-Fetcher::Fetcher(const Link& link, TaskQueue& queue, const std::string& cache_dir, Backoff& backoff)
+Fetcher::Fetcher(const Link& link, TaskQueue& queue, const std::string& cache_dir, Backoff& backoff,
+                 SceneCache::DiskBound bound)
     : link_(link),
       queue_(queue),
       backoff_(backoff),
-      scenes_(cache_dir, [this](const v1::FetchSceneRequest& req, const SceneCache::Piece& piece) {
-        return fetch_scene(req, piece);
-      }) {}
+      scenes_(
+          cache_dir,
+          [this](const v1::FetchSceneRequest& req, const SceneCache::Piece& piece) { return fetch_scene(req, piece); },
+          bound) {}
 
 grpc::Status Fetcher::fetch_scene(const v1::FetchSceneRequest& req, const SceneCache::Piece& piece) const {
   // Each call has two minutes; a larger scene's fetch goes on in the next (SceneCache).

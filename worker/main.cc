@@ -24,6 +24,11 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(0, 1024));
   app.add_option("--cache", opt.cache_dir, "scene cache directory")->capture_default_str();
+  app.add_option("--cache-max-gib", opt.cache_max_gib,
+                 "the scene cache's size on disk at most, in GiB: least recently used scenes are removed after a "
+                 "fetch (never one used in the last hour); 0: no bound")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e9));
   app.add_option("--name", opt.name,
                  "name shown by the coordinator and in /metrics (default host:pid, in a Slurm job host:slurm-JOBID)");
   app.add_option("--lookahead-seconds", opt.lookahead_seconds,

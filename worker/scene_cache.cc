@@ -1,12 +1,16 @@
 #include "worker/scene_cache.h"
 
 #include <signal.h>
+#include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <vector>
 
 #include "core/scene/load.h"
 #include "rpc.h"
@@ -34,8 +38,16 @@ void remove_orphaned_partials(const fs::path& dir, const std::string& hash) {
 
 }  // namespace
 
+size_t SceneCache::scenes_held() const {
+  size_t n = 0;
+  for (const auto& [hash, s] : scenes_) n += !s.expired();
+  return n;
+}
+
 std::shared_ptr<Scene> SceneCache::scene(const std::string& hash) {
-  if (auto it = scenes_.find(hash); it != scenes_.end()) return it->second;
+  if (auto it = scenes_.find(hash); it != scenes_.end())
+    if (std::shared_ptr<Scene> s = it->second.lock()) return s;
+  for (auto it = scenes_.begin(); it != scenes_.end();) it = it->second.expired() ? scenes_.erase(it) : std::next(it);
   if (hash.size() != 32 || hash.find_first_not_of("0123456789abcdef") != std::string::npos)
     throw WireError("bad scene hash '" + hash + "'");
   const fs::path dir = fs::path(dir_) / hash;
@@ -44,10 +56,50 @@ std::shared_ptr<Scene> SceneCache::scene(const std::string& hash) {
   if (std::ifstream in(marker); in) {
     std::getline(in, main);  // cached on disk by an earlier run
     main = (dir / main).string();
+    std::error_code ec;
+    fs::last_write_time(marker, fs::file_time_type::clock::now(), ec);  // used: the disk bound's order
   } else {
     main = fetch(hash);
+    trim(hash);
   }
-  return scenes_[hash] = std::make_shared<Scene>(load_scene(main));
+  auto s = std::make_shared<Scene>(load_scene(main));
+  scenes_[hash] = s;
+  return s;
+}
+
+void SceneCache::trim(const std::string& fetched) {
+  if (bound_.max_disk_bytes == 0) return;
+  struct Kept {
+    fs::file_time_type used;
+    uint64_t bytes = 0;
+    fs::path dir;
+  };
+  std::vector<Kept> kept;
+  uint64_t total = 0;
+  std::error_code ec;
+  for (const fs::directory_entry& e : fs::directory_iterator(dir_, ec)) {
+    const fs::path marker = e.path() / ".main";
+    std::error_code mec;
+    const fs::file_time_type used = fs::last_write_time(marker, mec);
+    if (mec) continue;  // not a whole scene (a partial fetch, something else)
+    Kept k{used, 0, e.path()};
+    for (const fs::directory_entry& f : fs::recursive_directory_iterator(e.path(), mec))
+      if (std::error_code fec; f.is_regular_file(fec)) k.bytes += f.file_size(fec);
+    total += k.bytes;
+    if (e.path().filename() != fetched) kept.push_back(std::move(k));
+  }
+  std::sort(kept.begin(), kept.end(), [](const Kept& a, const Kept& b) { return a.used < b.used; });
+  const auto idle_since =
+      fs::file_time_type::clock::now() -
+      std::chrono::duration_cast<fs::file_time_type::duration>(std::chrono::duration<double>(bound_.min_idle_seconds));
+  for (const Kept& k : kept) {
+    if (total <= bound_.max_disk_bytes || k.used > idle_since) break;
+    fs::remove_all(k.dir, ec);
+    if (ec) continue;
+    total -= k.bytes;
+    spdlog::info("scene cache: removed scene {} ({} bytes, least recently used) to stay within --cache-max-gib",
+                 k.dir.filename().string(), k.bytes);
+  }
 }
 
 std::string SceneCache::fetch(const std::string& hash) {

@@ -5,6 +5,7 @@
 // of one sequence share one acceleration structure.
 #pragma once
 
+#include <cstdint>
 #include <deque>
 #include <functional>
 #include <map>
@@ -33,6 +34,15 @@ class SceneBusy : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// The disk cache's bound: after each fetch, the scene folders least recently used are
+// removed until the folder holds at most `max_disk_bytes` (0: no bound), never the scene
+// just fetched nor one used in the last `min_idle_seconds` (another worker sharing the
+// folder may be loading it: a load marks its scene used first).
+struct SceneDiskBound {
+  uint64_t max_disk_bytes = 0;
+  double min_idle_seconds = 3600;
+};
+
 class SceneCache {
  public:
   // Streams a scene from the coordinator (FetchSceneChunks) from the request's (file,
@@ -44,20 +54,31 @@ class SceneCache {
   // Calls in a row that find the coordinator out of reach (or busy) without bringing a byte.
   static constexpr int kFetchAttempts = 4;
 
-  SceneCache(std::string dir, FetchChunks fetch) : dir_(std::move(dir)), fetch_(std::move(fetch)) {}
+  using DiskBound = SceneDiskBound;
+  SceneCache(std::string dir, FetchChunks fetch, DiskBound bound = {})
+      : dir_(std::move(dir)), fetch_(std::move(fetch)), bound_(bound) {}
 
   // The renderer for a task's scene and settings. Throws WireError (a bad hash, pieces or
   // bytes that do not match it), SceneError and SettingsError (a scene or settings this
   // worker cannot render), SceneBusy, or std::runtime_error saying why the fetch failed.
   std::shared_ptr<const PreparedRenderer> prepare(const v1::Task& task);
+  // Scenes loaded and still held (by a kept renderer or a task in flight).
+  size_t scenes_held() const;
 
  private:
   std::shared_ptr<Scene> scene(const std::string& hash);  // loaded once per content hash
   std::string fetch(const std::string& hash);             // into the disk cache: the main file's path
+  // Removes scene folders, least recently used first, until the cache is within its bound.
+  void trim(const std::string& fetched);
 
   std::string dir_;
   FetchChunks fetch_;
-  std::map<std::string, std::shared_ptr<Scene>> scenes_;  // by content hash
+  DiskBound bound_;
+  // By content hash, while something holds them: a scene goes with the last renderer that
+  // uses it (it held every scene the worker had ever loaded, for good: a farm running for
+  // months grew its workers' memory scene by scene), and is loaded from disk again if a
+  // later task needs it.
+  std::map<std::string, std::weak_ptr<Scene>> scenes_;
   std::map<std::string, std::shared_ptr<const PreparedRenderer>> prepared_;
   std::deque<std::string> prepared_order_;
 };

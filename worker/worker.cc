@@ -62,7 +62,9 @@ Worker::Worker(WorkerOptions options, std::shared_ptr<v1::TesseraWorker::StubInt
       link_(std::make_unique<Link>(std::move(stub), options_.access)),
       queue_(std::make_unique<TaskQueue>(Lookahead{options_.threads, options_.lookahead_seconds},
                                          uint32_t(options_.passes_per_task))),
-      fetcher_(std::make_unique<Fetcher>(*link_, *queue_, options_.cache_dir, backoff_)) {}
+      fetcher_(std::make_unique<Fetcher>(
+          *link_, *queue_, options_.cache_dir, backoff_,
+          worker::SceneCache::DiskBound{uint64_t(options_.cache_max_gib * double(uint64_t(1) << 30))})) {}
 
 Worker::~Worker() = default;
 

@@ -37,6 +37,9 @@ struct WorkerOptions {
   std::string coordinator = "127.0.0.1:7878";
   int threads = 0;  // 0: every core
   std::string cache_dir = "tessera-cache";
+  // The scene cache's bound on disk, in GiB (0: none): least recently used scenes go first
+  // (SceneCache::DiskBound). A farm running for months kept every scene it had ever fetched.
+  double cache_max_gib = 20;
   std::string name;
   bool verbose = false;            // log connection events (main.cc: the log level)
   double lookahead_seconds = 0.3;  // queued work to keep, at the measured speed

@@ -466,6 +466,69 @@ TEST_F(SceneCacheTest, FetchesASceneOnceAndKeepsItOnDisk) {
   EXPECT_THROW(again.prepare(t), WireError);
 }
 
+// A worker held every scene it had ever loaded, for good (a farm running for months grew
+// its workers' memory scene by scene). A scene now goes with the last renderer that uses
+// it, the cache keeping the latest kKeptRenderers, and comes back from the disk cache.
+TEST_F(SceneCacheTest, AScenesMemoryGoesWithItsLastRenderer) {
+  std::string other;
+  const v1::SceneBundle second = bundle_of(testing::source_path("scenes/cornell-spheres.gltf"), &other);
+  fake.scenes[other] = second;
+  auto task = [](const std::string& h, int max_depth) {
+    v1::Task t = scene_task(h);
+    RenderSettings s = from_proto(t.settings());
+    s.max_depth = max_depth;
+    *t.mutable_settings() = to_proto(s);
+    return t;
+  };
+  worker::SceneCache cache(dir.string(), fetch_from(fake));
+  const std::weak_ptr<const Scene> first = cache.prepare(task(hash, 5))->scene;
+  EXPECT_EQ(cache.scenes_held(), 1u);
+  for (int d = 0; d < int(worker::SceneCache::kKeptRenderers); ++d) cache.prepare(task(other, d + 1));
+  EXPECT_TRUE(first.expired());  // its only renderer left the cache
+  EXPECT_EQ(cache.scenes_held(), 1u);
+  EXPECT_NE(cache.prepare(task(hash, 5)), nullptr);  // loaded again from the disk cache
+  EXPECT_EQ(cache.scenes_held(), 2u);
+  EXPECT_EQ(fake.scene_fetches, 2);  // each scene fetched once
+}
+
+// A worker's disk cache kept every scene it had ever fetched. After a fetch, the scenes
+// least recently used go until the folder is within its bound; never the one just fetched,
+// nor one used within min_idle_seconds (another worker sharing the folder may be loading it).
+TEST_F(SceneCacheTest, TheDiskCacheKeepsWithinItsBoundLeastRecentlyUsedFirst) {
+  std::string other;
+  const v1::SceneBundle second = bundle_of(testing::source_path("scenes/cornell-spheres.gltf"), &other);
+  fake.scenes[other] = second;
+  auto folder_bytes = [&](const std::string& h) {
+    uint64_t n = 0;
+    for (const auto& e : fs::recursive_directory_iterator(dir / h))
+      if (e.is_regular_file()) n += e.file_size();
+    return n;
+  };
+  {  // no bound on idle time: each fetch leaves room for itself alone
+    worker::SceneCache cache(dir.string(), fetch_from(fake), {1, 0});
+    cache.prepare(scene_task(hash));
+    EXPECT_TRUE(fs::exists(dir / hash));  // the scene just fetched stays, whatever its size
+    cache.prepare(scene_task(other));
+    EXPECT_FALSE(fs::exists(dir / hash));  // least recently used: gone from the disk
+    EXPECT_TRUE(fs::exists(dir / other));
+    EXPECT_EQ(cache.scenes_held(), 2u);  // (in memory, both still rendering)
+  }
+  EXPECT_EQ(fake.scene_fetches, 2);
+  {  // room for both: nothing goes
+    worker::SceneCache cache(dir.string(), fetch_from(fake), {folder_bytes(other) * 3, 0});
+    cache.prepare(scene_task(hash));
+    EXPECT_TRUE(fs::exists(dir / hash));
+    EXPECT_TRUE(fs::exists(dir / other));
+  }
+  EXPECT_EQ(fake.scene_fetches, 3);  // the first fetched again
+  {                                  // used within the idle time: kept over the bound
+    worker::SceneCache cache(dir.string(), fetch_from(fake), {1, 3600});
+    fs::remove_all(dir / other);
+    cache.prepare(scene_task(other));
+    EXPECT_TRUE(fs::exists(dir / hash));
+  }
+}
+
 // A bundle of three files, 7475 + 5000 + 0 bytes. The connection is lost twice, after 3
 // pieces each time: each fetch goes on from the first byte it lacks, and the files on disk
 // are the bundle's, byte for byte.
