@@ -8,7 +8,7 @@
 namespace tessera::worker {
 
 Fetcher::Fetcher(const Link& link, TaskQueue& queue, const std::string& cache_dir, Backoff& backoff,
-                 SceneCache::DiskBound bound)
+                 SceneCache::Bounds bound)
     : link_(link),
       queue_(queue),
       backoff_(backoff),

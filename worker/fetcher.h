@@ -18,7 +18,7 @@ class Fetcher {
   // Scenes are cached under `cache_dir`, within `bound`; `backoff` is the worker's (reset by
   // a call that gets through, waited on after a task that cannot be rendered).
   Fetcher(const Link& link, TaskQueue& queue, const std::string& cache_dir, Backoff& backoff,
-          SceneCache::DiskBound bound = {});
+          SceneCache::Bounds bound = {});
 
   struct Leased {
     grpc::Status status;  // of GetTask; OK when nothing was asked for

@@ -1,6 +1,7 @@
 // tessera-worker: renders tiles for a coordinator.
 #include <signal.h>
 #include <spdlog/spdlog.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <atomic>
@@ -28,6 +29,10 @@ int main(int argc, char** argv) {
                  "the scene cache's size on disk at most, in GiB: least recently used scenes are removed after a "
                  "fetch (never one used in the last hour); 0: no bound")
       ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e9));
+  app.add_option("--max-memory-gib", opt.max_memory_gib,
+                 "renderers kept for later tasks (and their scenes) are dropped, oldest first, while the worker's "
+                 "resident memory is above this many GiB (default: half the machine's memory; 0: no bound)")
       ->check(CLI::Range(0.0, 1e9));
   app.add_option("--name", opt.name,
                  "name shown by the coordinator and in /metrics (default host:pid, in a Slurm job host:slurm-JOBID)");
@@ -72,6 +77,9 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return tessera::cli_exit(app, e);
   }
+  if (app.count("--max-memory-gib") == 0)  // half the machine's memory
+    opt.max_memory_gib =
+        double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGESIZE)) / 2 / double(uint64_t(1) << 30);
   tessera::init_logging("tessera-worker", opt.verbose);
   try {
     opt.access = tessera::load_access(token_file, tls_ca);

@@ -36,6 +36,14 @@ void remove_orphaned_partials(const fs::path& dir, const std::string& hash) {
   }
 }
 
+// The process's resident memory (/proc/self/statm); 0 where it cannot be read.
+uint64_t resident_bytes() {
+  std::ifstream in("/proc/self/statm");
+  uint64_t size = 0, resident = 0;
+  if (!(in >> size >> resident)) return 0;
+  return resident * uint64_t(sysconf(_SC_PAGESIZE));
+}
+
 }  // namespace
 
 size_t SceneCache::scenes_held() const {
@@ -186,7 +194,8 @@ std::shared_ptr<const PreparedRenderer> SceneCache::prepare(const v1::Task& task
   // Tasks in flight hold their renderers; the cache keeps the latest few.
   prepared_[key] = p;
   prepared_order_.push_back(key);
-  if (prepared_order_.size() > kKeptRenderers) {
+  while (prepared_order_.size() > kKeptRenderers ||
+         (prepared_order_.size() > 1 && bound_.max_memory_bytes && resident_bytes() > bound_.max_memory_bytes)) {
     prepared_.erase(prepared_order_.front());
     prepared_order_.pop_front();
   }

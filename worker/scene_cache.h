@@ -34,13 +34,17 @@ class SceneBusy : public std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
-// The disk cache's bound: after each fetch, the scene folders least recently used are
+// The cache's bounds. On disk: after each fetch, the scene folders least recently used are
 // removed until the folder holds at most `max_disk_bytes` (0: no bound), never the scene
 // just fetched nor one used in the last `min_idle_seconds` (another worker sharing the
-// folder may be loading it: a load marks its scene used first).
-struct SceneDiskBound {
+// folder may be loading it: a load marks its scene used first). In memory: after a
+// renderer is built, the oldest kept ones are dropped while the process's resident memory
+// is above `max_memory_bytes` (0: no bound), the newest always kept (tasks in flight
+// hold their own).
+struct SceneCacheBounds {
   uint64_t max_disk_bytes = 0;
   double min_idle_seconds = 3600;
+  uint64_t max_memory_bytes = 0;
 };
 
 class SceneCache {
@@ -54,8 +58,8 @@ class SceneCache {
   // Calls in a row that find the coordinator out of reach (or busy) without bringing a byte.
   static constexpr int kFetchAttempts = 4;
 
-  using DiskBound = SceneDiskBound;
-  SceneCache(std::string dir, FetchChunks fetch, DiskBound bound = {})
+  using Bounds = SceneCacheBounds;
+  SceneCache(std::string dir, FetchChunks fetch, Bounds bound = {})
       : dir_(std::move(dir)), fetch_(std::move(fetch)), bound_(bound) {}
 
   // The renderer for a task's scene and settings. Throws WireError (a bad hash, pieces or
@@ -64,6 +68,7 @@ class SceneCache {
   std::shared_ptr<const PreparedRenderer> prepare(const v1::Task& task);
   // Scenes loaded and still held (by a kept renderer or a task in flight).
   size_t scenes_held() const;
+  size_t renderers_kept() const { return prepared_.size(); }
 
  private:
   std::shared_ptr<Scene> scene(const std::string& hash);  // loaded once per content hash
@@ -73,7 +78,7 @@ class SceneCache {
 
   std::string dir_;
   FetchChunks fetch_;
-  DiskBound bound_;
+  Bounds bound_;
   // By content hash, while something holds them: a scene goes with the last renderer that
   // uses it (it held every scene the worker had ever loaded, for good: a farm running for
   // months grew its workers' memory scene by scene), and is loaded from disk again if a

@@ -64,7 +64,8 @@ Worker::Worker(WorkerOptions options, std::shared_ptr<v1::TesseraWorker::StubInt
                                          uint32_t(options_.passes_per_task))),
       fetcher_(std::make_unique<Fetcher>(
           *link_, *queue_, options_.cache_dir, backoff_,
-          worker::SceneCache::DiskBound{uint64_t(options_.cache_max_gib * double(uint64_t(1) << 30))})) {}
+          worker::SceneCacheBounds{uint64_t(options_.cache_max_gib * double(uint64_t(1) << 30)), 3600,
+                                   uint64_t(options_.max_memory_gib * double(uint64_t(1) << 30))})) {}
 
 Worker::~Worker() = default;
 

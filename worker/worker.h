@@ -38,8 +38,12 @@ struct WorkerOptions {
   int threads = 0;  // 0: every core
   std::string cache_dir = "tessera-cache";
   // The scene cache's bound on disk, in GiB (0: none): least recently used scenes go first
-  // (SceneCache::DiskBound). A farm running for months kept every scene it had ever fetched.
+  // (SceneCacheBounds). A farm running for months kept every scene it had ever fetched.
   double cache_max_gib = 20;
+  // Kept renderers (and their scenes) are dropped, oldest first, while the process's
+  // resident memory is above this many GiB (0: no bound; tessera-worker sets half the
+  // machine's memory unless given).
+  double max_memory_gib = 0;
   std::string name;
   bool verbose = false;            // log connection events (main.cc: the log level)
   double lookahead_seconds = 0.3;  // queued work to keep, at the measured speed

@@ -266,4 +266,14 @@ class FakeCoordinator : public v1::TesseraWorker::StubInterface {
   }
 };
 
+// A scene file and what it references, as a bundle; its content hash in *hash.
+inline v1::SceneBundle bundle_of(const std::string& path, std::string* hash) {
+  v1::SceneBundle b;
+  std::string main;
+  pack_scene(path, &main, b.mutable_files());
+  b.set_main_file(main);
+  *hash = bundle_hash(b.main_file(), b.files());
+  return b;
+}
+
 }  // namespace tessera::testing
