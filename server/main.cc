@@ -19,6 +19,7 @@
 #include "core/util/cancel.h"
 #include "core/util/cli.h"
 #include "core/util/log.h"
+#include "core/util/memory.h"
 #include "server/admission.h"
 #include "server/grpc_services.h"
 #include "server/health_http.h"
@@ -207,11 +208,9 @@ int main(int argc, char** argv) {
     return tessera::cli_exit(app, e);
   }
   if (app.count("--max-live-pixels") == 0)  // a frame the machine cannot hold is refused at submit
-    opt.max_live_pixels =
-        tessera::live_pixel_default(uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGESIZE)));
+    opt.max_live_pixels = tessera::live_pixel_default(tessera::usable_memory_bytes());
   if (app.count("--max-scene-loads") == 0)  // each load may take gigabytes within the loaders' budgets
-    opt.max_scene_loads =
-        tessera::scene_load_default(uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGESIZE)));
+    opt.max_scene_loads = tessera::scene_load_default(tessera::usable_memory_bytes());
   tessera::init_logging("tessera-coordinator");
   if (tls_cert.empty() != tls_key.empty()) {
     spdlog::error("--tls-cert and --tls-key go together");

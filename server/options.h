@@ -32,7 +32,8 @@ struct CoordinatorOptions {
   // Scene loads (a submit's check, a requeue's, a restore, the referee's render) at once, at
   // most: the rest wait their turn (server/scene_loads.h), for as long as a turn holds its
   // scene (the referee's render of a disputed task too). tessera-coordinator sets one per
-  // 16 GiB of the machine's memory, 1 to 4 (scene_load_default), unless given.
+  // 16 GiB of the memory it may use (usable_memory_bytes: a cgroup's limit where lower), 1
+  // to 4 (scene_load_default), unless given.
   size_t max_scene_loads = 2;
   // Leases one worker may hold at once. A worker keeps as much work leased as its speed
   // times its round trip asks for (a far worker needs more in flight), up to this; the
@@ -45,7 +46,8 @@ struct CoordinatorOptions {
   size_t max_jobs_per_client = 100;
   // Pixels of all live frames together: each costs its film's sums, 40 bytes (a snapshot
   // copies one band at a time), so 2^27 is 5.4 GB. tessera-coordinator lowers it to half
-  // the machine's memory when that is less (live_pixel_default).
+  // the memory it may use when that is less (live_pixel_default of usable_memory_bytes: the
+  // machine's, or a cgroup's limit where lower).
   int64_t max_live_pixels = int64_t(1) << 27;
   // Scene bytes (of live jobs and of scene uploads) and samples still to render of one
   // client's live jobs together.

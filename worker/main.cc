@@ -1,13 +1,13 @@
 // tessera-worker: renders tiles for a coordinator.
 #include <signal.h>
 #include <spdlog/spdlog.h>
-#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 #include <atomic>
 
 #include "core/util/cli.h"
 #include "core/util/log.h"
+#include "core/util/memory.h"
 #include "worker/worker.h"
 
 namespace {
@@ -32,7 +32,7 @@ int main(int argc, char** argv) {
       ->check(CLI::Range(0.0, 1e9));
   app.add_option("--max-memory-gib", opt.max_memory_gib,
                  "renderers kept for later tasks (and their scenes) are dropped, oldest first, while the worker's "
-                 "resident memory is above this many GiB (default: half the machine's memory; 0: no bound)")
+                 "resident memory is above this many GiB (default: half the memory it may use, a container's limit where lower; 0: no bound)")
       ->check(CLI::Range(0.0, 1e9));
   app.add_option("--name", opt.name,
                  "name shown by the coordinator and in /metrics (default host:pid, in a Slurm job host:slurm-JOBID)");
@@ -77,9 +77,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return tessera::cli_exit(app, e);
   }
-  if (app.count("--max-memory-gib") == 0)  // half the machine's memory
-    opt.max_memory_gib =
-        double(sysconf(_SC_PHYS_PAGES)) * double(sysconf(_SC_PAGESIZE)) / 2 / double(uint64_t(1) << 30);
+  if (app.count("--max-memory-gib") == 0)  // half the memory it may use (a container's limit, if lower)
+    opt.max_memory_gib = double(tessera::usable_memory_bytes()) / 2 / double(uint64_t(1) << 30);
   tessera::init_logging("tessera-worker", opt.verbose);
   try {
     opt.access = tessera::load_access(token_file, tls_ca);
