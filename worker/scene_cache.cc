@@ -52,6 +52,11 @@ size_t SceneCache::scenes_held() const {
   return n;
 }
 
+void SceneCache::mark_used(const std::string& hash) const {
+  std::error_code ec;  // (best effort: a read-only cache folder only loses the order)
+  fs::last_write_time(fs::path(dir_) / hash / ".main", fs::file_time_type::clock::now(), ec);
+}
+
 std::shared_ptr<Scene> SceneCache::scene(const std::string& hash) {
   if (auto it = scenes_.find(hash); it != scenes_.end())
     if (std::shared_ptr<Scene> s = it->second.lock()) return s;
@@ -64,8 +69,7 @@ std::shared_ptr<Scene> SceneCache::scene(const std::string& hash) {
   if (std::ifstream in(marker); in) {
     std::getline(in, main);  // cached on disk by an earlier run
     main = (dir / main).string();
-    std::error_code ec;
-    fs::last_write_time(marker, fs::file_time_type::clock::now(), ec);  // used: the disk bound's order
+    mark_used(hash);  // before loading: a worker sharing the folder leaves it alone meanwhile
   } else {
     main = fetch(hash);
     trim(hash);
@@ -77,6 +81,14 @@ std::shared_ptr<Scene> SceneCache::scene(const std::string& hash) {
 
 void SceneCache::trim(const std::string& fetched) {
   if (bound_.max_disk_bytes == 0) return;
+  try {
+    trim_folder(fetched);
+  } catch (const std::exception& e) {  // the disk bound waits for the next fetch; the task goes on
+    spdlog::warn("scene cache: could not keep within --cache-max-gib: {}", e.what());
+  }
+}
+
+void SceneCache::trim_folder(const std::string& fetched) {
   struct Kept {
     fs::file_time_type used;
     uint64_t bytes = 0;
@@ -85,16 +97,20 @@ void SceneCache::trim(const std::string& fetched) {
   std::vector<Kept> kept;
   uint64_t total = 0;
   std::error_code ec;
-  for (const fs::directory_entry& e : fs::directory_iterator(dir_, ec)) {
-    const fs::path marker = e.path() / ".main";
+  const auto skip = fs::directory_options::skip_permission_denied;
+  // (Iterated with error codes: folders come and go as other workers sharing this one work.)
+  for (fs::directory_iterator e(dir_, skip, ec), end; !ec && e != end; e.increment(ec)) {
+    const fs::path marker = e->path() / ".main";
     std::error_code mec;
     const fs::file_time_type used = fs::last_write_time(marker, mec);
     if (mec) continue;  // not a whole scene (a partial fetch, something else)
-    Kept k{used, 0, e.path()};
-    for (const fs::directory_entry& f : fs::recursive_directory_iterator(e.path(), mec))
-      if (std::error_code fec; f.is_regular_file(fec)) k.bytes += f.file_size(fec);
+    Kept k{used, 0, e->path()};
+    for (fs::recursive_directory_iterator f(e->path(), skip, mec), fend; !mec && f != fend; f.increment(mec))
+      if (std::error_code fec; f->is_regular_file(fec)) k.bytes += f->file_size(fec);
     total += k.bytes;
-    if (e.path().filename() != fetched) kept.push_back(std::move(k));
+    const std::string hash = e->path().filename().string();
+    const auto held = scenes_.find(hash);  // in this worker's memory: its files may still be read
+    if (hash != fetched && (held == scenes_.end() || held->second.expired())) kept.push_back(std::move(k));
   }
   std::sort(kept.begin(), kept.end(), [](const Kept& a, const Kept& b) { return a.used < b.used; });
   const auto idle_since =
@@ -102,8 +118,12 @@ void SceneCache::trim(const std::string& fetched) {
       std::chrono::duration_cast<fs::file_time_type::duration>(std::chrono::duration<double>(bound_.min_idle_seconds));
   for (const Kept& k : kept) {
     if (total <= bound_.max_disk_bytes || k.used > idle_since) break;
+    // Looked at again (another worker may have used it since), then its marker first: a
+    // removal cut short leaves a folder that is fetched again, never one that looks whole.
+    std::error_code mec;
+    if (fs::last_write_time(k.dir / ".main", mec) > idle_since || mec || !fs::remove(k.dir / ".main", mec) || mec)
+      continue;
     fs::remove_all(k.dir, ec);
-    if (ec) continue;
     total -= k.bytes;
     spdlog::info("scene cache: removed scene {} ({} bytes, least recently used) to stay within --cache-max-gib",
                  k.dir.filename().string(), k.bytes);
@@ -191,13 +211,30 @@ std::shared_ptr<const PreparedRenderer> SceneCache::prepare(const v1::Task& task
     p->renderer = std::make_unique<TileRenderer>(*p->scene, settings);
   }
   p->base_key = base_key;
+  // Used: the disk bound's order (its files may still be read: an --env map by the next
+  // renderer of other settings; another worker sharing the folder sees the use too).
+  mark_used(task.scene_hash());
   // Tasks in flight hold their renderers; the cache keeps the latest few.
   prepared_[key] = p;
   prepared_order_.push_back(key);
-  while (prepared_order_.size() > kKeptRenderers ||
-         (prepared_order_.size() > 1 && bound_.max_memory_bytes && resident_bytes() > bound_.max_memory_bytes)) {
+  while (prepared_order_.size() > kKeptRenderers) {
     prepared_.erase(prepared_order_.front());
     prepared_order_.pop_front();
+  }
+  // Above the memory bound, the oldest renderers no task holds go, the newest never; once
+  // dropping one frees nothing the process gives back, no more go (the rest of the memory
+  // is elsewhere: dropping more would only rebuild renderers task after task).
+  if (bound_.max_memory_bytes == 0) return p;
+  for (auto it = prepared_order_.begin(); std::next(it) != prepared_order_.end();) {
+    const uint64_t before = resident_bytes();
+    if (before <= bound_.max_memory_bytes) break;
+    if (prepared_[*it].use_count() > 1) {  // a task renders with it
+      ++it;
+      continue;
+    }
+    prepared_.erase(*it);
+    it = prepared_order_.erase(it);
+    if (resident_bytes() >= before) break;
   }
   return p;
 }

@@ -73,8 +73,12 @@ class SceneCache {
  private:
   std::shared_ptr<Scene> scene(const std::string& hash);  // loaded once per content hash
   std::string fetch(const std::string& hash);             // into the disk cache: the main file's path
-  // Removes scene folders, least recently used first, until the cache is within its bound.
+  // Removes scene folders, least recently used first, until the cache is within its bound
+  // (never throws: a filesystem error is logged, and the bound waits for the next fetch).
   void trim(const std::string& fetched);
+  void trim_folder(const std::string& fetched);
+  // Marks the scene used (its marker's time: the disk bound's order, for every worker).
+  void mark_used(const std::string& hash) const;
 
   std::string dir_;
   FetchChunks fetch_;

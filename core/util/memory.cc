@@ -5,7 +5,10 @@
 #include <algorithm>
 #include <cctype>
 #include <fstream>
+#include <functional>
 #include <sstream>
+#include <string>
+#include <vector>
 
 namespace tessera {
 namespace {
@@ -27,12 +30,15 @@ std::string read_text(const std::string& path) {
   return in ? out.str() : std::string();
 }
 
-// This process's cgroup v2 path ("0::/a/b" in /proc/self/cgroup), "" for the root.
-std::string own_v2_group() {
-  std::ifstream in("/proc/self/cgroup");
-  for (std::string line; std::getline(in, line);)
-    if (line.rfind("0::", 0) == 0) return line.substr(3) == "/" ? std::string() : line.substr(3);
-  return "";
+// The groups from `path` up to the hierarchy's root: "/a/b" -> "/a/b", "/a", "".
+std::vector<std::string> up_from(std::string path) {
+  std::vector<std::string> out;
+  while (!path.empty() && path != "/") {
+    out.push_back(path);
+    path = path.substr(0, path.find_last_of('/'));
+  }
+  out.push_back("");
+  return out;
 }
 
 }  // namespace
@@ -44,11 +50,34 @@ uint64_t memory_limit_from(uint64_t physical, const std::string& v2, const std::
   return m;
 }
 
+uint64_t cgroup_memory_limit(uint64_t physical, const std::string& own_groups,
+                             const std::function<std::string(const std::string&)>& read) {
+  uint64_t m = physical;
+  std::istringstream lines(own_groups);
+  for (std::string line; std::getline(lines, line);) {
+    // "0::/path" (v2), or "N:controllers:/path" (v1) with memory among the controllers.
+    const size_t a = line.find(':'), b = a == std::string::npos ? a : line.find(':', a + 1);
+    if (b == std::string::npos) continue;
+    const std::string id = line.substr(0, a), controllers = line.substr(a + 1, b - a - 1), path = line.substr(b + 1);
+    std::string file;
+    if (id == "0" && controllers.empty()) {
+      file = "/sys/fs/cgroup%s/memory.max";
+    } else {
+      std::istringstream names(controllers);
+      for (std::string name; std::getline(names, name, ',');)
+        if (name == "memory") file = "/sys/fs/cgroup/memory%s/memory.limit_in_bytes";
+    }
+    if (file.empty()) continue;
+    const size_t at = file.find("%s");
+    for (const std::string& group : up_from(path))  // a limit is often set on an ancestor
+      m = memory_limit_from(m, read(file.substr(0, at) + group + file.substr(at + 2)), "");
+  }
+  return m;
+}
+
 uint64_t usable_memory_bytes() {
   const uint64_t physical = uint64_t(sysconf(_SC_PHYS_PAGES)) * uint64_t(sysconf(_SC_PAGESIZE));
-  std::string v2 = read_text("/sys/fs/cgroup" + own_v2_group() + "/memory.max");
-  if (v2.empty()) v2 = read_text("/sys/fs/cgroup/memory.max");
-  return memory_limit_from(physical, v2, read_text("/sys/fs/cgroup/memory/memory.limit_in_bytes"));
+  return cgroup_memory_limit(physical, read_text("/proc/self/cgroup"), read_text);
 }
 
 }  // namespace tessera

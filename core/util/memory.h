@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 
 namespace tessera {
@@ -14,7 +15,13 @@ namespace tessera {
 // group says a huge one); empty or unreadable texts limit nothing.
 uint64_t memory_limit_from(uint64_t physical, const std::string& v2, const std::string& v1);
 
-// memory_limit_from with this machine's physical memory and this process's cgroup files.
+// `physical`, or the lowest memory limit of the groups `own_groups` (/proc/self/cgroup's
+// text) names and their ancestors (Slurm and systemd set limits above the process's own
+// group), v2 (memory.max) and v1 (memory.limit_in_bytes), each file's text by `read`.
+uint64_t cgroup_memory_limit(uint64_t physical, const std::string& own_groups,
+                             const std::function<std::string(const std::string&)>& read);
+
+// cgroup_memory_limit with this machine's physical memory and this process's groups.
 uint64_t usable_memory_bytes();
 
 }  // namespace tessera

@@ -4,6 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
+#include <string>
+
 namespace tessera {
 namespace {
 
@@ -22,6 +25,28 @@ TEST(MemoryLimit, NoLimitOrAnUnreadableOneIsTheMachines) {
   EXPECT_EQ(memory_limit_from(24 * kGiB, "-1", "12abc"), 24 * kGiB);
   EXPECT_EQ(memory_limit_from(24 * kGiB, "0", "99999999999999999999999"), 24 * kGiB);
   EXPECT_GT(usable_memory_bytes(), 0u);
+}
+
+// Slurm and systemd set a limit on a group above the process's own (a job above its step's
+// task): every group up to the root counts, cgroup v2 and v1 alike.
+TEST(MemoryLimit, EveryGroupUpToTheRootCounts) {
+  const std::map<std::string, std::string> files = {
+      {"/sys/fs/cgroup/slurm/job_7/step_0/task_0/memory.max", "max\n"},
+      {"/sys/fs/cgroup/slurm/job_7/step_0/memory.max", "max\n"},
+      {"/sys/fs/cgroup/slurm/job_7/memory.max", "6442450944\n"},
+      {"/sys/fs/cgroup/memory.max", "max\n"},
+      {"/sys/fs/cgroup/memory/system.slice/w.service/memory.limit_in_bytes", "9223372036854771712\n"},
+      {"/sys/fs/cgroup/memory/system.slice/memory.limit_in_bytes", "3221225472\n"},
+  };
+  const auto read = [&](const std::string& path) {
+    const auto it = files.find(path);
+    return it == files.end() ? std::string() : it->second;
+  };
+  EXPECT_EQ(cgroup_memory_limit(128 * kGiB, "0::/slurm/job_7/step_0/task_0\n", read), 6 * kGiB);
+  EXPECT_EQ(cgroup_memory_limit(128 * kGiB, "5:cpu,cpuacct:/x\n4:memory:/system.slice/w.service\n", read), 3 * kGiB);
+  EXPECT_EQ(cgroup_memory_limit(128 * kGiB, "0::/\n", read), 128 * kGiB);  // a container's own namespace: its root
+  EXPECT_EQ(cgroup_memory_limit(128 * kGiB, "", read), 128 * kGiB);
+  EXPECT_EQ(cgroup_memory_limit(128 * kGiB, "garbage\n3:pids:/a\n", read), 128 * kGiB);
 }
 
 }  // namespace

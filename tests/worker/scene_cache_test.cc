@@ -131,18 +131,28 @@ TEST_F(SceneCacheTest, AScenesMemoryGoesWithItsLastRenderer) {
 // Kept renderers (and their scenes, BVHs, environment maps) are dropped oldest first while
 // the worker's resident memory is above its bound; the newest is always kept.
 TEST_F(SceneCacheTest, KeptRenderersGoOldestFirstAboveTheMemoryBound) {
+  auto task = [&](int max_depth) {
+    v1::Task t = scene_task(hash);
+    RenderSettings s = from_proto(t.settings());
+    s.max_depth = max_depth;
+    *t.mutable_settings() = to_proto(s);
+    return t;
+  };
   worker::SceneCache cache(dir.string(), fetch_from(fake), {0, 3600, 1});  // 1 byte: always above
-  v1::Task t = scene_task(hash);
-  const auto a = cache.prepare(t);
-  RenderSettings s = from_proto(t.settings());
-  s.max_depth = 3;
-  *t.mutable_settings() = to_proto(s);
-  const auto b = cache.prepare(t);
-  EXPECT_EQ(cache.renderers_kept(), 1u);  // b alone
-  EXPECT_EQ(cache.prepare(t), b);
+  cache.prepare(task(1));
+  {
+    const auto b = cache.prepare(task(2));
+    EXPECT_EQ(cache.renderers_kept(), 1u);  // the newest alone
+    EXPECT_EQ(cache.prepare(task(2)), b);   // (and kept: the same job's next task builds nothing)
+  }
+  // A renderer a task holds stays: dropping it would free nothing.
+  const auto held = cache.prepare(task(3));
+  cache.prepare(task(4));
+  EXPECT_EQ(cache.renderers_kept(), 2u);
+  EXPECT_EQ(cache.prepare(task(3)), held);
   worker::SceneCache roomy(dir.string(), fetch_from(fake), {0, 3600, uint64_t(1) << 50});
-  roomy.prepare(scene_task(hash));
-  roomy.prepare(t);
+  roomy.prepare(task(1));
+  roomy.prepare(task(2));
   EXPECT_EQ(roomy.renderers_kept(), 2u);
 }
 
@@ -164,18 +174,23 @@ TEST_F(SceneCacheTest, TheDiskCacheKeepsWithinItsBoundLeastRecentlyUsedFirst) {
     cache.prepare(scene_task(hash));
     EXPECT_TRUE(fs::exists(dir / hash));  // the scene just fetched stays, whatever its size
     cache.prepare(scene_task(other));
-    EXPECT_FALSE(fs::exists(dir / hash));  // least recently used: gone from the disk
-    EXPECT_TRUE(fs::exists(dir / other));
-    EXPECT_EQ(cache.scenes_held(), 2u);  // (in memory, both still rendering)
+    EXPECT_TRUE(fs::exists(dir / hash));  // in this worker's memory: its files may still be read
   }
-  EXPECT_EQ(fake.scene_fetches, 2);
+  {  // a worker that holds only the second: the first, least recently used, goes
+    worker::SceneCache cache(dir.string(), fetch_from(fake), {1, 0});
+    fs::remove_all(dir / other);
+    cache.prepare(scene_task(other));
+    EXPECT_FALSE(fs::exists(dir / hash));
+    EXPECT_TRUE(fs::exists(dir / other));
+  }
+  EXPECT_EQ(fake.scene_fetches, 3);
   {  // room for both: nothing goes
     worker::SceneCache cache(dir.string(), fetch_from(fake), {folder_bytes(other) * 3, 0});
     cache.prepare(scene_task(hash));
     EXPECT_TRUE(fs::exists(dir / hash));
     EXPECT_TRUE(fs::exists(dir / other));
   }
-  EXPECT_EQ(fake.scene_fetches, 3);  // the first fetched again
+  EXPECT_EQ(fake.scene_fetches, 4);  // the first fetched again
   {                                  // used within the idle time: kept over the bound
     worker::SceneCache cache(dir.string(), fetch_from(fake), {1, 3600});
     fs::remove_all(dir / other);
