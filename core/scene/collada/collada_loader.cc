@@ -39,9 +39,7 @@ class ColladaLoader {
     if (!inst) throw SceneError(file_, where(root), "no <scene>/<instance_visual_scene>");
     pugi::xml_node vs = resolve(inst, "url", "visual_scene");
     for (pugi::xml_node node : vs.children("node")) process_node(node, global_, 0);
-    // As glTF's loader: a scene of lights and cameras alone would render black (the
-    // skipped kinds' warnings say what was there).
-    if (scene_.meshes.empty() && scene_.spheres.empty()) {
+    if (scene_.meshes.empty() && scene_.spheres.empty()) {  // refused, as by glTF's loader, naming what was skipped
       std::string why = "no meshes or spheres to render";
       for (const auto& [what, ignored] : ignored_) why += "; skipped: " + what;
       fail(vs, why);
