@@ -16,6 +16,18 @@ void set_buffer(GltfContext& ctx, const std::string& bytes, std::vector<std::pai
   }
 }
 
+// Runs f, which must refuse with a SceneError whose message holds `reason`; `what` says
+// what would have been done wrongly otherwise.
+template <class F>
+void expect_refused(F&& f, const std::string& reason, const std::string& what) {
+  try {
+    f();
+    ADD_FAILURE() << what;
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find(reason), std::string::npos) << e.what();
+  }
+}
+
 // An accessor of `count` elements of `type` (TINYGLTF_TYPE_*) and `component` over `view`.
 tinygltf::Accessor accessor(int view, int component, size_t count, int type) {
   tinygltf::Accessor a;
@@ -99,14 +111,9 @@ TEST(GltfAccessors, StrideAndNormalizedIntegers) {
   ctx.model.accessors.push_back(a);
   EXPECT_EQ(read_accessor_floats(ctx, 0, 2, "test"), (std::vector<float>{-1, 1, 0, -1}));
   ctx.model.bufferViews[0].byteStride = 2;
-  try {
-    read_accessor_floats(ctx, 0, 2, "test");
-    ADD_FAILURE() << "a stride smaller than an element was read";
-  } catch (const SceneError& e) {
-    EXPECT_NE(std::string(e.what()).find("accessors[0] (test): byteStride 2 is smaller than an element"),
-              std::string::npos)
-        << e.what();
-  }
+  expect_refused([&] { read_accessor_floats(ctx, 0, 2, "test"); },
+                 "accessors[0] (test): byteStride 2 is smaller than an element",
+                 "a stride smaller than an element was read");
 }
 
 // Found by review: sparse indices were read through floats, so an index past 2^24 moved
@@ -133,13 +140,8 @@ TEST(GltfAccessors, SparseIndicesAreReadAsIntegersAndOnlyUnsigned) {
   EXPECT_EQ(v[16777216], 0);
   EXPECT_EQ(v[3], 7);
   ctx.model.accessors[0].sparse.indices.componentType = TINYGLTF_COMPONENT_TYPE_FLOAT;
-  try {
-    read_accessor_floats(ctx, 0, 1, "test");
-    ADD_FAILURE() << "float sparse indices were read";
-  } catch (const SceneError& e) {
-    EXPECT_NE(std::string(e.what()).find("sparse indices: must be unsigned byte, short or int"), std::string::npos)
-        << e.what();
-  }
+  expect_refused([&] { read_accessor_floats(ctx, 0, 1, "test"); },
+                 "sparse indices: must be unsigned byte, short or int", "float sparse indices were read");
 }
 
 // Found by review: an accessor's array was allocated at its declared count before its view
@@ -163,12 +165,8 @@ TEST(GltfAccessors, DeclaredCountsAreCheckedBeforeAnythingIsAllocated) {
       {1, "accessors[1] (test): count 268435455 x 16 components is over the limit of 268435456 values"},
       {2, "accessors[2] (test): count 6148914691236517206 x 3 components is over the limit"}};
   for (const auto& [index, reason] : cases) {
-    try {
-      read_accessor_floats(ctx, index, index == 1 ? 16 : 3, "test");
-      ADD_FAILURE() << "accessor " << index << " was read";
-    } catch (const SceneError& e) {
-      EXPECT_NE(std::string(e.what()).find(reason), std::string::npos) << e.what();
-    }
+    expect_refused([&] { read_accessor_floats(ctx, index, index == 1 ? 16 : 3, "test"); }, reason,
+                   "accessor " + std::to_string(index) + " was read");
   }
   // Indices have no value limit: their view's check must not wrap either (stride 2 x a
   // count near 2^63 is 0 in 64 bits).
@@ -176,12 +174,8 @@ TEST(GltfAccessors, DeclaredCountsAreCheckedBeforeAnythingIsAllocated) {
   a.componentType = TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT;
   a.count = (uint64_t(1) << 63) + 1;
   ctx.model.accessors.push_back(a);
-  try {
-    read_accessor_indices(ctx, 3, 3, "test");
-    ADD_FAILURE() << "indices past their view were read";
-  } catch (const SceneError& e) {
-    EXPECT_NE(std::string(e.what()).find("runs past the end of bufferView 0"), std::string::npos) << e.what();
-  }
+  expect_refused([&] { read_accessor_indices(ctx, 3, 3, "test"); }, "runs past the end of bufferView 0",
+                 "indices past their view were read");
 }
 
 // Found by review: each texture index held its own decoded copy of its image, so one
@@ -222,14 +216,8 @@ TEST(GltfTexturesShared, TheSameImageSampledTheSameWayIsDecodedOnceAndTheTexelsA
   // The image's 2 texels count once; another image's 2 would pass a limit of 3.
   ctx.max_scene_texels = 3;
   EXPECT_EQ(ref(0, false), ref(1, false));  // (shared textures cost nothing more)
-  try {
-    ref(3, true);
-    ADD_FAILURE() << "texels past the limit";
-  } catch (const SceneError& e) {
-    EXPECT_NE(std::string(e.what()).find("textures[3]: the scene's textures would hold 4 texels, over the limit of 3"),
-              std::string::npos)
-        << e.what();
-  }
+  expect_refused([&] { ref(3, true); }, "textures[3]: the scene's textures would hold 4 texels, over the limit of 3",
+                 "texels past the limit");
 }
 
 // Found by review: morph targets were bounded per primitive, and a scene may hold a million
@@ -244,14 +232,10 @@ TEST(GltfMorph, TheScenesTargetsAreBoundedTogether) {
   prim.targets = {{{"POSITION", 0}}, {}, {{"POSITION", 0}}};  // the empty one costs nothing
   ctx.max_morph_values = 18;                                  // a target of 3 vertices holds 9
   ASSERT_EQ(read_gltf_morph(ctx, prim, tinygltf::Mesh(), tinygltf::Node(), 3, "first")->count(), 3u);
-  try {  // another primitive (or another copy of this one) has no room left
-    read_gltf_morph(ctx, prim, tinygltf::Mesh(), tinygltf::Node(), 3, "second");
-    ADD_FAILURE() << "morph targets past the scene's limit";
-  } catch (const SceneError& e) {
-    EXPECT_NE(std::string(e.what()).find("second targets[0]: the scene's morph targets would hold more than 18 values"),
-              std::string::npos)
-        << e.what();
-  }
+  // Another primitive (or another copy of this one) has no room left.
+  expect_refused([&] { read_gltf_morph(ctx, prim, tinygltf::Mesh(), tinygltf::Node(), 3, "second"); },
+                 "second targets[0]: the scene's morph targets would hold more than 18 values",
+                 "morph targets past the scene's limit");
 }
 
 }  // namespace
