@@ -27,12 +27,13 @@ int main(int argc, char** argv) {
   app.add_option("--cache", opt.cache_dir, "scene cache directory")->capture_default_str();
   app.add_option("--cache-max-gib", opt.cache_max_gib,
                  "the scene cache's size on disk at most, in GiB: least recently used scenes are removed after a "
-                 "fetch (never one used in the last hour); 0: no bound")
+                 "fetch (never one in use or used in the last hour); 0: no bound")
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e9));
   app.add_option("--max-memory-gib", opt.max_memory_gib,
                  "renderers kept for later tasks (and their scenes) are dropped, oldest first, while the worker's "
-                 "resident memory is above this many GiB (default: half the memory it may use, a container's limit where lower; 0: no bound)")
+                 "resident memory is above this many GiB (default: half the memory it may use, a container's limit "
+                 "where lower; 0: no bound)")
       ->check(CLI::Range(0.0, 1e9));
   app.add_option("--name", opt.name,
                  "name shown by the coordinator and in /metrics (default host:pid, in a Slurm job host:slurm-JOBID)");
