@@ -85,7 +85,6 @@ std::string SceneStore::keep(const std::string& staged, const v1::SceneManifest&
     in_turn([&] {  // outside the lock: slow
       const Scene scene = load_scene((fs::path(staged) / "files" / m.main_file()).string());
       if (check) check(scene);
-      return 0;
     });
   } catch (const SceneError& e) {
     throw SceneError(m.main_file(), e.element(), e.reason());
@@ -120,10 +119,7 @@ bool SceneStore::use_kept(const std::string& hash, const Check& check) {
   // Another job's settings were checked against these bytes, not this one's: load the kept
   // copy (outside the lock: slow) and check again; a refusal gives the use back.
   try {
-    in_turn([&] {
-      check(load_scene(main_path(hash)));  // (kept while this use holds it)
-      return 0;
-    });
+    in_turn([&] { check(load_scene(main_path(hash))); });  // (kept while this use holds it)
   } catch (const SceneError& e) {
     release(hash);
     throw SceneError(main, e.element(), e.reason());

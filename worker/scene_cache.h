@@ -36,7 +36,8 @@ class SceneBusy : public std::runtime_error {
 
 // The cache's bounds. On disk: after each fetch, the scene folders least recently used are
 // removed until the folder holds at most `max_disk_bytes` (0: no bound), never the scene
-// just fetched nor one used in the last `min_idle_seconds` (another worker sharing the
+// just fetched, one this worker holds in memory (a renderer of other settings may read its
+// files again), nor one used in the last `min_idle_seconds` (another worker sharing the
 // folder may be loading it: a load marks its scene used first). In memory: after a
 // renderer is built, the oldest kept ones are dropped while the process's resident memory
 // is above `max_memory_bytes` (0: no bound), the newest always kept (tasks in flight

@@ -22,7 +22,6 @@ TEST(SceneLoads, AtMostTheBoundRunAtOnceAndTheRestWaitTheirTurn) {
     loads.in_turn([&] {
       ++started;
       released.wait();
-      return 0;
     });
   };
   std::thread first(hold), second(hold);
@@ -66,7 +65,6 @@ TEST(SceneLoads, AWaitEndsWhenItsCallerGoesAway) {
     loads.in_turn([&] {
       holding.set_value();
       release.get_future().wait();
-      return 0;
     });
   });
   holding.get_future().wait();
