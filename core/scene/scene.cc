@@ -238,6 +238,20 @@ int wrap(int i, int n, Texture::Wrap mode) {
 
 }  // namespace
 
+const std::array<float, 256>& byte_fractions() {
+  static const std::array<float, 256> table = [] {
+    std::array<float, 256> t{};
+    for (int c = 0; c < 256; ++c) t[size_t(c)] = c / 255.0f;
+    return t;
+  }();
+  return table;
+}
+
+float Texture::texel_alpha(size_t i) const {
+  if (rgba8) return rgba8_translucent ? byte_fractions()[(*rgba8)[4 * i + 3]] : 1.0f;
+  return alpha.empty() ? 1.0f : alpha[i];
+}
+
 Rgb Texture::mean() const {
   double r = 0, g = 0, b = 0;
   const size_t n = rgba8 ? size() : texels.size();
@@ -252,13 +266,6 @@ Rgb Texture::mean() const {
 }
 
 namespace {
-
-// byte / 255.0f for every byte: a table lookup instead of a division per texel.
-const std::array<float, 256> kByteFractions = [] {
-  std::array<float, 256> t{};
-  for (int c = 0; c < 256; ++c) t[size_t(c)] = c / 255.0f;
-  return t;
-}();
 
 // Bilinear lookup in a row-major grid of texels (texel(i): the i-th, decoded), with the
 // texture's wrap modes.
@@ -300,8 +307,9 @@ float Texture::sample_alpha(Vec2 uv) const {
   if (rgba8) {
     if (!rgba8_translucent) return 1;
     const uint8_t* bytes = rgba8->data();
+    const std::array<float, 256>& d = byte_fractions();
     return bilinear(
-        *this, [bytes](size_t i) { return kByteFractions[bytes[4 * i + 3]]; }, uv);
+        *this, [bytes, &d](size_t i) { return d[bytes[4 * i + 3]]; }, uv);
   }
   if (alpha.size() != texels.size()) return 1;
   return bilinear(

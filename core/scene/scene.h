@@ -206,10 +206,11 @@ struct Texture {
   std::vector<Rgb> texels;   // row-major, row 0 at v = 0 (empty where rgba8 holds them)
   std::vector<float> alpha;  // the image's alpha, as texels, where some texel is not opaque; else empty
   // An 8-bit image: RGBA, 4 bytes a texel in `texels`' order, shared by every texture made
-  // of the image (its colour spaces and samplers); `decode` maps a colour byte to its
-  // linear value (sRGB or linear data), alpha is always byte / 255. Null: `texels`.
+  // of the image (its colour spaces and samplers); `decode` (a table that lives as long as
+  // the process) maps a colour byte to its linear value (sRGB or linear data), alpha is
+  // always byte_fractions(). Null: `texels`.
   std::shared_ptr<const std::vector<uint8_t>> rgba8;
-  std::shared_ptr<const std::array<float, 256>> decode;
+  const std::array<float, 256>* decode = nullptr;
   bool rgba8_translucent = false;  // some texel of rgba8 is not opaque
   Wrap wrap_s = Wrap::kRepeat, wrap_t = Wrap::kRepeat;
   // glTF magFilter NEAREST: the texel the point falls in, not a bilinear blend (pixel art
@@ -226,11 +227,11 @@ struct Texture {
     const uint8_t* p = rgba8->data() + 4 * i;
     return Rgb((*decode)[p[0]], (*decode)[p[1]], (*decode)[p[2]]);
   }
-  float texel_alpha(size_t i) const {  // 1 without an alpha channel
-    if (rgba8) return rgba8_translucent ? (*rgba8)[4 * i + 3] / 255.0f : 1.0f;
-    return alpha.empty() ? 1.0f : alpha[i];
-  }
+  float texel_alpha(size_t i) const;  // 1 without an alpha channel
 };
+
+// byte / 255.0f for every byte: 8-bit data decoded by a lookup instead of a division.
+const std::array<float, 256>& byte_fractions();
 
 struct SceneAnimation;  // core/scene/animation.h
 

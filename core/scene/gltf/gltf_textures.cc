@@ -4,6 +4,7 @@
 #include <webp/decode.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -21,6 +22,16 @@ constexpr int kEncoded = -1;                             // tinygltf::Image::com
 constexpr int kTaken = -2;                               // ... of pixels GltfTextures holds (image_pixels)
 
 float srgb_to_linear(float c) { return c <= 0.04045f ? c / 12.92f : fm::pow((c + 0.055f) / 1.055f, 2.4f); }
+
+// srgb_to_linear(byte / 255) for every byte: sRGB colour textures decoded by a lookup.
+const std::array<float, 256>& srgb_bytes() {
+  static const std::array<float, 256> table = [] {
+    std::array<float, 256> t{};
+    for (int c = 0; c < 256; ++c) t[size_t(c)] = srgb_to_linear(c / 255.0f);
+    return t;
+  }();
+  return table;
+}
 
 // An image's size from its header, refused over kMaxImagePixels before anything is allocated.
 void check_size(const GltfContext& ctx, int w, int h, const std::string& el) {
@@ -138,13 +149,7 @@ int GltfTextures::load_texture(int index, const std::string& el, bool srgb) {
   // alphaMode MASK and BLEND (Scene::opacity_at), KHR_materials_specular's specularTexture.
   tex.rgba8 = pixels.rgba;
   tex.rgba8_translucent = pixels.translucent;
-  std::shared_ptr<const std::array<float, 256>>& table = srgb ? srgb_table_ : linear_table_;
-  if (!table) {
-    auto t = std::make_shared<std::array<float, 256>>();
-    for (int c = 0; c < 256; ++c) (*t)[size_t(c)] = srgb ? srgb_to_linear(c / 255.0f) : c / 255.0f;
-    table = std::move(t);
-  }
-  tex.decode = table;
+  tex.decode = srgb ? &srgb_bytes() : &byte_fractions();
   tex.wrap_s = wrap_s;
   tex.wrap_t = wrap_t;
   tex.nearest = nearest;

@@ -5,7 +5,6 @@
 // refuses nothing, as in viewers.
 #pragma once
 
-#include <array>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -46,9 +45,7 @@ class GltfTextures {
   // (13 texture slots naming one 4096^2 image held 13 copies, 2.4 GB).
   std::map<std::tuple<int, bool, int, int, bool>, int> same_;
   std::map<int, Pixels> pixels_;  // image index -> its pixels
-  // Colour bytes to linear values, sRGB or linear: one table each, shared by the textures.
-  std::shared_ptr<const std::array<float, 256>> srgb_table_, linear_table_;
-  uint64_t texels_ = 0;  // of the scene's images, against ctx_.max_scene_texels
+  uint64_t texels_ = 0;           // of the scene's images, against ctx_.max_scene_texels
 };
 
 // tinygltf's image loader (TinyGLTF::SetImageLoader): keeps each image's encoded bytes
