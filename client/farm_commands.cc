@@ -4,6 +4,7 @@
 
 #include "client/events_command.h"
 #include "client/farm_client.h"
+#include "core/util/cli.h"
 
 namespace tessera {
 
@@ -25,7 +26,7 @@ std::vector<std::function<int()>> add_farm_commands(CLI::App& app) {
     cmd->add_option("--reconnect-seconds", c->reconnect_seconds,
                     "while watching a job, keep reconnecting to a coordinator that went away this long")
         ->capture_default_str()
-        ->check(CLI::Range(0.0, 1e6));
+        ->check(finite_range(0.0, 1e6));
     runs.push_back([cmd, c, run, token_file, tls_ca]() -> int {
       if (!cmd->parsed()) return -1;
       try {

@@ -111,12 +111,12 @@ int main(int argc, char** argv) {
   app.add_option("--checkpoint-seconds", opt.checkpoint_seconds,
                  "save running jobs' films at least this often: what a crash can cost")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 3600.0));
+      ->check(tessera::finite_range(0.0, 3600.0));
   app.add_option("--verify-fraction", opt.verify_fraction,
                  "render this fraction of tasks again on a second worker and compare the bits; a worker that "
                  "differs from the coordinator's own render is quarantined (0 turns it off)")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1.0));
+      ->check(tessera::finite_range(0.0, 1.0));
   app.add_option("--verify-first", opt.verify_first,
                  "check every one of a newly registered worker's first this many tasks (probation), whatever "
                  "--verify-fraction picks")
@@ -126,11 +126,11 @@ int main(int argc, char** argv) {
   app.add_option("--handshake-seconds", connection_limits.handshake_seconds,
                  "close a gRPC connection that has not finished its handshake (TLS included) in this long")
       ->capture_default_str()
-      ->check(CLI::Range(0.1, 3600.0));
+      ->check(tessera::finite_range(0.1, 3600.0));
   app.add_option("--idle-connection-seconds", connection_limits.idle_seconds,
                  "close a gRPC connection with no call for this long (clients reconnect by themselves)")
       ->capture_default_str()
-      ->check(CLI::Range(1.0, 86400.0));
+      ->check(tessera::finite_range(1.0, 86400.0));
   int write_delay_ms = 0, commit_delay_ms = 0;  // for the crash tests: windows in which to kill
   app.add_option("--test-checkpoint-delay-ms", write_delay_ms)->group("")->check(CLI::Range(0, 60000));
   app.add_option("--test-commit-delay-ms", commit_delay_ms)->group("")->check(CLI::Range(0, 60000));
@@ -141,12 +141,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--lease-seconds", opt.lease_seconds, "lease length; a silent worker's task moves on after it")
       ->capture_default_str()
-      ->check(CLI::Range(0.1, 3600.0));
+      ->check(tessera::finite_range(0.1, 3600.0));
   app.add_option("--max-task-seconds", opt.max_task_seconds,
                  "a task's time from its lease to its result, at most: past it the task counts as failed on its "
                  "worker (the job fails once tasks fail on two workers); 0: no bound")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1e7));
+      ->check(tessera::finite_range(0.0, 1e7));
   app.add_option("--max-scene-loads", opt.max_scene_loads,
                  "scenes the coordinator loads at once (to check a submit, requeue or restore, or to render a check), "
                  "at most; the rest wait their turn (default: one per 16 GiB of memory, 1 to 4)")
@@ -186,8 +186,10 @@ int main(int argc, char** argv) {
       ->capture_default_str()
       ->check(CLI::Range(uint64_t(1), uint64_t(1) << 62));
   app.add_option("--image-interval-seconds", opt.image_interval_seconds, "write progressive images at most this often")
-      ->capture_default_str();
-  tessera::add_old_spelling(app, "--image-interval", "--image-interval-seconds", opt.image_interval_seconds);
+      ->capture_default_str()
+      ->check(tessera::finite_range(0.0, 86400.0));
+  tessera::add_old_spelling(app, "--image-interval", "--image-interval-seconds", opt.image_interval_seconds)
+      ->check(tessera::finite_range(0.0, 86400.0));
   std::string tokens_file, tls_cert, tls_key;
   bool insecure = false;
   app.add_option("--tokens-file", tokens_file,

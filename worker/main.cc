@@ -29,20 +29,20 @@ int main(int argc, char** argv) {
                  "the scene cache's size on disk at most, in GiB: least recently used scenes are removed after a "
                  "fetch (never one in use or used in the last hour); 0: no bound")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1e9));
+      ->check(tessera::finite_range(0.0, 1e9));
   app.add_option("--max-memory-gib", opt.max_memory_gib,
                  "renderers kept for later tasks (and their scenes) are dropped, oldest first, while the worker's "
                  "resident memory is above this many GiB (default: half the memory it may use, a container's limit "
                  "where lower; 0: no bound)")
-      ->check(CLI::Range(0.0, 1e9));
+      ->check(tessera::finite_range(0.0, 1e9));
   app.add_option("--name", opt.name,
                  "name shown by the coordinator and in /metrics (default host:pid, in a Slurm job host:slurm-JOBID)");
   app.add_option("--lookahead-seconds", opt.lookahead_seconds,
                  "seconds of work to keep leased beyond what the threads are rendering, at the measured speed")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 60.0));
+      ->check(tessera::finite_range(0.0, 60.0));
   tessera::add_old_spelling(app, "--lookahead", "--lookahead-seconds", opt.lookahead_seconds)
-      ->check(CLI::Range(0.0, 60.0));
+      ->check(tessera::finite_range(0.0, 60.0));
   app.add_option("--max-leases", opt.max_tasks,
                  "leases held at once, at most (0: as the window of work in flight asks, up to the coordinator's "
                  "bound)")
@@ -59,9 +59,9 @@ int main(int argc, char** argv) {
   app.add_option("--exit-when-idle-seconds", opt.exit_when_idle_seconds,
                  "leave after this many seconds without a task (0: never); for batch allocations")
       ->capture_default_str()
-      ->check(CLI::Range(0.0, 1e9));
+      ->check(tessera::finite_range(0.0, 1e9));
   tessera::add_old_spelling(app, "--exit-when-idle", "--exit-when-idle-seconds", opt.exit_when_idle_seconds)
-      ->check(CLI::Range(0.0, 1e9));
+      ->check(tessera::finite_range(0.0, 1e9));
   app.add_flag("--test-lie", opt.lie)->group("");  // verification tests: wrong sums
   std::string token_file, tls_ca;
   app.add_option("--token-file", token_file,

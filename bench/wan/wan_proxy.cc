@@ -32,8 +32,10 @@ int main(int argc, char** argv) {
   double rtt_ms = 0, mbit = 0;
   int port = 0;
   app.add_option("--to", to, "HOST:PORT to relay to")->required();
-  app.add_option("--rtt-ms", rtt_ms, "round-trip delay in milliseconds (half each way)")->check(CLI::Range(0.0, 1e5));
-  app.add_option("--mbit", mbit, "bottleneck rate each way in Mbit/s (0: unlimited)")->check(CLI::Range(0.0, 1e6));
+  app.add_option("--rtt-ms", rtt_ms, "round-trip delay in milliseconds (half each way)")
+      ->check(tessera::finite_range(0.0, 1e5));
+  app.add_option("--mbit", mbit, "bottleneck rate each way in Mbit/s (0: unlimited)")
+      ->check(tessera::finite_range(0.0, 1e6));
   app.add_option("--port", port, "port to listen on, on 127.0.0.1 (0: any)")->check(CLI::Range(0, 65535));
   tessera::add_version_flag(app, "tessera-wan-proxy");
   try {

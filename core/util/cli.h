@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <exception>
 #include <string>
 
 #include "core/util/version.h"
@@ -27,6 +28,27 @@ CLI::Option* add_old_spelling(CLI::App& app, const std::string& old_name, const 
       ->each([old_name, new_name](const std::string&) {
         std::fprintf(stderr, "%s is now spelled %s; the old spelling will go\n", old_name.c_str(), new_name.c_str());
       });
+}
+
+// CLI::Range for a floating-point option that refuses NaN too: CLI11's Range lets "nan"
+// through (every comparison with NaN is false), and a NaN bound or interval turned into
+// an integer is undefined behaviour. Same message as CLI11's Range.
+inline CLI::Validator finite_range(double lo, double hi) {
+  return CLI::Validator(
+      [lo, hi](std::string& text) -> std::string {
+        double v = 0;
+        try {
+          size_t used = 0;
+          v = std::stod(text, &used);
+          if (used != text.size()) return "Value " + text + " is not a number";
+        } catch (const std::exception&) {
+          return "Value " + text + " is not a number";
+        }
+        if (!(v >= lo && v <= hi))
+          return "Value " + text + " not in range " + std::to_string(lo) + " to " + std::to_string(hi);
+        return "";
+      },
+      "FLOAT in [" + std::to_string(lo) + " - " + std::to_string(hi) + "]");
 }
 
 // Prints CLI11's message for a parse error (usage to stdout for --help) and returns the

@@ -186,6 +186,29 @@ TEST_F(Farm, ATaskPastTheTaskBoundFailsTheJobAndItsWorkersStopRenderingIt) {
   EXPECT_LT(used, sysconf(_SC_CLK_TCK) / 2) << "ticks of CPU in 1.5 s: still rendering";
 }
 
+// The daemons' flags refuse values out of their range, naming the flag, before anything
+// starts. Found by rereading: CLI11's Range lets "nan" through (every comparison with NaN
+// is false), so `--lease-seconds nan` started a coordinator whose leases never expired, and
+// a NaN GiB bound was cast to an integer; floating-point flags check tessera::finite_range.
+TEST_F(Farm, TheDaemonsFlagsRefuseValuesOutOfRangeAndNaN) {
+  const std::vector<std::pair<std::string, std::vector<std::string>>> bad = {
+      {"tessera-coordinator", {"--max-task-seconds", "-1"}},
+      {"tessera-coordinator", {"--max-task-seconds", "nan"}},
+      {"tessera-coordinator", {"--lease-seconds", "nan"}},
+      {"tessera-coordinator", {"--image-interval-seconds", "-1"}},
+      {"tessera-coordinator", {"--max-scene-loads", "0"}},
+      {"tessera-worker", {"--coordinator", "127.0.0.1:1", "--cache-max-gib", "-1"}},
+      {"tessera-worker", {"--coordinator", "127.0.0.1:1", "--max-memory-gib", "nan"}},
+      {"tessera-worker", {"--coordinator", "127.0.0.1:1", "--lookahead-seconds", "1e400"}},
+  };
+  for (const auto& [binary, args] : bad) {
+    const std::string err = (dir / "bad.err").string(), flag = args[args.size() - 2];
+    Process p(kBin + "/" + binary, args, err);
+    EXPECT_EQ(p.wait(10), 2) << binary << " " << flag << " " << args.back();
+    EXPECT_NE(slurp(err).find(flag + ": Value " + args.back()), std::string::npos) << slurp(err);
+  }
+}
+
 // For batch allocations (Slurm): a worker with --exit-when-idle-seconds leaves cleanly once the
 // queue has been empty that long, and not while there is work.
 TEST_F(Farm, WorkerWithExitWhenIdleLeavesOnceTheQueueIsEmpty) {
