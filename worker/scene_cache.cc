@@ -1,7 +1,10 @@
 #include "worker/scene_cache.h"
 
+#include <fcntl.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -10,6 +13,7 @@
 #include <chrono>
 #include <filesystem>
 #include <fstream>
+#include <utility>
 #include <vector>
 
 #include "core/scene/load.h"
@@ -35,6 +39,51 @@ void remove_orphaned_partials(const fs::path& dir, const std::string& hash) {
     if (pid > 0 && kill(pid_t(pid), 0) != 0 && errno == ESRCH) fs::remove_all(e.path(), ec);
   }
 }
+
+// A lock on a scene folder's marker (its `.main`), held by every worker that loads or holds
+// the scene (shared) and taken by the disk bound before it removes the folder (exclusive,
+// without waiting: a folder in use is skipped). flock(2) locks belong to an open file, so
+// two workers in one process exclude each other as two processes do.
+class MarkerLock {
+ public:
+  // A shared lock on `marker`, or an empty one where it is gone (never there, or removed
+  // by another worker's disk bound before the lock was had: its folder goes too).
+  static MarkerLock shared(const fs::path& marker) { return take(marker, LOCK_SH); }
+  // An exclusive lock, or an empty one where the marker is gone or another worker holds it.
+  static MarkerLock exclusive(const fs::path& marker) { return take(marker, LOCK_EX | LOCK_NB); }
+  MarkerLock() = default;
+  MarkerLock(MarkerLock&& o) noexcept : fd_(std::exchange(o.fd_, -1)) {}
+  MarkerLock& operator=(MarkerLock&& o) noexcept {
+    std::swap(fd_, o.fd_);
+    return *this;
+  }
+  ~MarkerLock() {
+    if (fd_ >= 0) ::close(fd_);  // (closing the file drops its lock)
+  }
+  explicit operator bool() const { return fd_ >= 0; }
+
+ private:
+  static MarkerLock take(const fs::path& marker, int how) {
+    MarkerLock l;
+    l.fd_ = ::open(marker.c_str(), O_RDONLY | O_CLOEXEC);
+    if (l.fd_ < 0) return l;
+    struct stat st;
+    int rc;
+    while ((rc = ::flock(l.fd_, how)) != 0 && errno == EINTR) {
+    }
+    // Removed between the open and the lock (the remover unlinks it under its lock):
+    // nothing to hold.
+    if (rc != 0 || ::fstat(l.fd_, &st) != 0 || st.st_nlink == 0) return MarkerLock();
+    return l;
+  }
+  int fd_ = -1;
+};
+
+// A loaded scene and the lock on its folder, released with the scene's last holder.
+struct LockedScene {
+  MarkerLock lock;
+  Scene scene;
+};
 
 // The process's resident memory (/proc/self/statm); 0 where it cannot be read.
 uint64_t resident_bytes() {
@@ -64,19 +113,27 @@ std::shared_ptr<Scene> SceneCache::scene(const std::string& hash) {
   if (hash.size() != 32 || hash.find_first_not_of("0123456789abcdef") != std::string::npos)
     throw WireError("bad scene hash '" + hash + "'");
   const fs::path dir = fs::path(dir_) / hash;
-  const fs::path marker = dir / ".main";
-  std::string main;
-  if (std::ifstream in(marker); in) {
-    std::getline(in, main);  // cached on disk by an earlier run
-    main = (dir / main).string();
-    mark_used(hash);  // before loading: a worker sharing the folder leaves it alone meanwhile
-  } else {
-    main = fetch(hash);
-    trim(hash);
+  // Locked before it is read, and held with the scene: another worker's disk bound leaves
+  // the folder alone while this one loads it or may read its files again (an --env map of
+  // a renderer of other settings). A folder removed between looking and locking is
+  // fetched again.
+  for (int fetches = 0;; ++fetches) {
+    if (MarkerLock lock = MarkerLock::shared(dir / ".main")) {
+      std::string main;
+      if (std::ifstream in(dir / ".main"); !std::getline(in, main))
+        throw std::runtime_error("scene cache: cannot read " + (dir / ".main").string());
+      mark_used(hash);
+      if (fetches > 0) trim(hash);
+      auto held = std::make_shared<LockedScene>(LockedScene{std::move(lock), load_scene((dir / main).string())});
+      std::shared_ptr<Scene> s(held, &held->scene);
+      scenes_[hash] = s;
+      return s;
+    }
+    if (fetches == 2)
+      throw std::runtime_error("scene cache: scene " + hash + " was removed from " + dir_ +
+                               " (another worker's --cache-max-gib) each time it was fetched");
+    fetch(hash);
   }
-  auto s = std::make_shared<Scene>(load_scene(main));
-  scenes_[hash] = s;
-  return s;
 }
 
 void SceneCache::trim(const std::string& fetched) {
@@ -120,8 +177,11 @@ void SceneCache::trim_folder(const std::string& fetched) {
     if (total <= bound_.max_disk_bytes || k.used > idle_since) break;
     // Looked at again (another worker may have used it since), then its marker first: a
     // removal cut short leaves a folder that is fetched again, never one that looks whole.
+    // Skipped where another worker holds it (loading it, or with it in memory).
     std::error_code mec;
-    if (fs::last_write_time(k.dir / ".main", mec) > idle_since || mec || !fs::remove(k.dir / ".main", mec) || mec)
+    const MarkerLock lock = MarkerLock::exclusive(k.dir / ".main");
+    if (!lock || fs::last_write_time(k.dir / ".main", mec) > idle_since || mec || !fs::remove(k.dir / ".main", mec) ||
+        mec)
       continue;
     fs::remove_all(k.dir, ec);
     total -= k.bytes;
@@ -130,7 +190,7 @@ void SceneCache::trim_folder(const std::string& fetched) {
   }
 }
 
-std::string SceneCache::fetch(const std::string& hash) {
+void SceneCache::fetch(const std::string& hash) {
   // Into a folder of this process's own, renamed into place once whole and checked: workers
   // that share a cache folder each fetch into their own, and the first in place is used.
   static std::atomic<uint64_t> fetches{0};
@@ -182,12 +242,11 @@ std::string SceneCache::fetch(const std::string& hash) {
   if (!(std::ofstream(part / ".main") << main << "\n")) throw std::runtime_error("cannot write the scene cache");
   std::error_code ec;
   fs::rename(part, dir, ec);
-  if (ec && fs::exists(dir / ".main")) return (dir / main).string();  // another worker's, the same bytes
+  if (ec && fs::exists(dir / ".main")) return;  // another worker's, the same bytes
   if (ec) {
     fs::remove_all(dir);  // an earlier run's, unfinished
     fs::rename(part, dir);
   }
-  return (dir / main).string();
 }
 
 std::shared_ptr<const PreparedRenderer> SceneCache::prepare(const v1::Task& task) {

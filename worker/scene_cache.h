@@ -36,9 +36,9 @@ class SceneBusy : public std::runtime_error {
 
 // The cache's bounds. On disk: after each fetch, the scene folders least recently used are
 // removed until the folder holds at most `max_disk_bytes` (0: no bound), never the scene
-// just fetched, one this worker holds in memory (a renderer of other settings may read its
-// files again), nor one used in the last `min_idle_seconds` (another worker sharing the
-// folder may be loading it: a load marks its scene used first). In memory: after a
+// just fetched, one any worker sharing the folder is loading or holds in memory (a renderer
+// of other settings may read its files again: each holds a lock on the folder's marker),
+// nor one used in the last `min_idle_seconds`. In memory: after a
 // renderer is built, the oldest kept ones are dropped while the process's resident memory
 // is above `max_memory_bytes` (0: no bound), the newest always kept (tasks in flight
 // hold their own).
@@ -73,7 +73,7 @@ class SceneCache {
 
  private:
   std::shared_ptr<Scene> scene(const std::string& hash);  // loaded once per content hash
-  std::string fetch(const std::string& hash);             // into the disk cache: the main file's path
+  void fetch(const std::string& hash);                    // into the disk cache
   // Removes scene folders, least recently used first, until the cache is within its bound
   // (never throws: a filesystem error is logged, and the bound waits for the next fetch).
   void trim(const std::string& fetched);

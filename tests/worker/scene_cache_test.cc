@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <filesystem>
 #include <map>
 #include <memory>
@@ -197,6 +198,37 @@ TEST_F(SceneCacheTest, TheDiskCacheKeepsWithinItsBoundLeastRecentlyUsedFirst) {
     cache.prepare(scene_task(other));
     EXPECT_TRUE(fs::exists(dir / hash));
   }
+}
+
+// Workers sharing a cache folder: one's disk bound removed a scene another had in memory
+// (unused for over min_idle_seconds: a long task), whose renderers of other settings may
+// read its files again, or was loading (between reading its marker and marking it used).
+// A worker now holds a lock on each scene it loads or holds; the bound skips those, and
+// takes them once let go.
+TEST_F(SceneCacheTest, TheDiskBoundLeavesAloneScenesAnotherWorkerHolds) {
+  std::string other;
+  fake.scenes[other] = bundle_of(testing::source_path("scenes/cornell-spheres.gltf"), &other);
+  FakeCoordinator second;
+  second.scenes = fake.scenes;
+  auto holder = std::make_unique<worker::SceneCache>(dir.string(), fetch_from(fake));
+  auto held = holder->prepare(scene_task(hash));
+  const auto long_ago = fs::file_time_type::clock::now() - std::chrono::hours(2);
+  fs::last_write_time(dir / hash / ".main", long_ago);
+  {
+    worker::SceneCache trimmer(dir.string(), fetch_from(second), {1, 0});
+    trimmer.prepare(scene_task(other));
+    EXPECT_TRUE(fs::exists(dir / hash / ".main"));
+    EXPECT_EQ(files_in(dir / hash).size(), 2u);  // the scene and its marker, whole
+  }
+  EXPECT_NE(holder->prepare(scene_task(hash)), nullptr);  // (from memory)
+  held.reset();
+  holder.reset();  // its renderers and the scene with them: the lock goes
+  fs::last_write_time(dir / hash / ".main", long_ago);
+  fs::remove_all(dir / other);
+  worker::SceneCache trimmer(dir.string(), fetch_from(second), {1, 0});
+  trimmer.prepare(scene_task(other));
+  EXPECT_FALSE(fs::exists(dir / hash));
+  EXPECT_EQ(fake.scene_fetches + second.scene_fetches, 3);
 }
 
 // A bundle of three files, 7475 + 5000 + 0 bytes. The connection is lost twice, after 3
