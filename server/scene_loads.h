@@ -4,8 +4,9 @@
 // caller's stream slots, could together exhaust the machine's memory and have the
 // coordinator killed. A turn covers a load and what holds the scene after it (a submit's
 // check of its settings, the referee's render: SceneStore::in_turn). Past the bound a turn
-// waits; a submit's wait ends when its client goes away (its CancelScope:
-// core/util/cancel.h), as its load would.
+// waits, and turns are had in the order they were asked for (a steady stream of submits
+// cannot keep one waiting for good); a submit's wait ends when its client goes away (its
+// CancelScope: core/util/cancel.h), as its load would, and leaves the line.
 #pragma once
 
 #include <algorithm>
@@ -13,6 +14,7 @@
 #include <condition_variable>
 #include <cstddef>
 #include <cstdint>
+#include <deque>
 #include <mutex>
 
 #include "core/util/cancel.h"
@@ -40,26 +42,43 @@ class SceneLoads {
     std::lock_guard<std::mutex> lock(mu_);
     return running_;
   }
+  size_t waiting() const {
+    std::lock_guard<std::mutex> lock(mu_);
+    return line_.size();
+  }
 
  private:
   class Turn {
    public:
     explicit Turn(const SceneLoads& loads) : loads_(loads) {
       std::unique_lock<std::mutex> lock(loads_.mu_);
-      while (loads_.running_ >= loads_.at_once_) {
+      const uint64_t me = loads_.next_ticket_++;
+      loads_.line_.push_back(me);
+      while (loads_.running_ >= loads_.at_once_ || loads_.line_.front() != me) {
         loads_.turn_.wait_for(lock, std::chrono::milliseconds(50));
         lock.unlock();
-        throw_if_cancelled();  // (not under the lock: it may ask gRPC)
+        try {
+          throw_if_cancelled();  // (not under the lock: it may ask gRPC)
+        } catch (...) {
+          lock.lock();
+          loads_.line_.erase(std::find(loads_.line_.begin(), loads_.line_.end(), me));
+          lock.unlock();
+          loads_.turn_.notify_all();  // the next in line may be first now
+          throw;
+        }
         lock.lock();
       }
+      loads_.line_.pop_front();
       ++loads_.running_;
+      lock.unlock();
+      loads_.turn_.notify_all();  // the next in line, where there is room for it too
     }
     ~Turn() {
       {
         std::lock_guard<std::mutex> lock(loads_.mu_);
         --loads_.running_;
       }
-      loads_.turn_.notify_one();
+      loads_.turn_.notify_all();
     }
     Turn(const Turn&) = delete;
     Turn& operator=(const Turn&) = delete;
@@ -71,6 +90,8 @@ class SceneLoads {
   mutable std::mutex mu_;
   mutable std::condition_variable turn_;
   mutable size_t running_ = 0;
+  mutable uint64_t next_ticket_ = 0;
+  mutable std::deque<uint64_t> line_;  // tickets of the turns waiting, in order
 };
 
 }  // namespace tessera

@@ -7,6 +7,7 @@
 
 #include <atomic>
 #include <future>
+#include <mutex>
 #include <thread>
 #include <vector>
 
@@ -78,6 +79,53 @@ TEST(SceneLoads, AWaitEndsWhenItsCallerGoesAway) {
   release.set_value();
   holder.join();
   EXPECT_EQ(loads.in_turn([] { return 7; }), 7);  // its turn came back
+}
+
+// Turns went to whichever waiter woke first: a steady stream of submits could keep one
+// waiting for good. They now go in the order they were asked for; one that gives up
+// leaves the line.
+TEST(SceneLoads, TurnsGoInTheOrderTheyWereAskedFor) {
+  const SceneLoads loads(1);
+  std::promise<void> release;
+  std::promise<void> holding;
+  std::thread holder([&] {
+    loads.in_turn([&] {
+      holding.set_value();
+      release.get_future().wait();
+    });
+  });
+  holding.get_future().wait();
+  std::mutex mu;
+  std::vector<int> order;
+  std::atomic<bool> give_up{false};
+  std::vector<std::thread> waiters;
+  for (int i = 0; i < 6; ++i) {
+    waiters.emplace_back([&, i] {
+      const CancelScope gone([&, i] { return i == 2 && give_up.load(); });
+      try {
+        loads.in_turn([&] {
+          std::lock_guard<std::mutex> lock(mu);
+          order.push_back(i);
+        });
+      } catch (const Cancelled&) {
+        std::lock_guard<std::mutex> lock(mu);
+        order.push_back(-1);
+      }
+    });
+    while (loads.waiting() < size_t(i) + 1) std::this_thread::yield();  // in line before the next asks
+  }
+  give_up = true;
+  for (bool gone = false; !gone; std::this_thread::yield()) {  // the one that gave up has gone
+    std::lock_guard<std::mutex> lock(mu);
+    gone = !order.empty();
+  }
+  EXPECT_EQ(loads.waiting(), 5u);
+  release.set_value();
+  holder.join();
+  for (std::thread& t : waiters) t.join();
+  EXPECT_EQ(order, (std::vector<int>{-1, 0, 1, 3, 4, 5}));
+  EXPECT_EQ(loads.waiting(), 0u);
+  EXPECT_EQ(loads.running(), 0u);
 }
 
 TEST(SceneLoads, TheDefaultIsOneLoadPer16GiBOneToFour) {
