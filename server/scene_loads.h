@@ -24,7 +24,8 @@ namespace tessera {
 // The default --max-scene-loads on a machine with `memory_bytes`: one load per 16 GiB, 1 to
 // 4. Films may take half the memory (live_pixel_default); a load within the loaders'
 // budgets can take several GB (textures 1 GiB, meshopt views 4 GiB, morph targets 1 GiB,
-// the meshes of 100 M triangles), so about 8 GiB a load in the other half.
+// the meshes of 100 M triangles; a glTF load at most 8 GiB together, kMaxGltfLoadBytes),
+// so about 8 GiB a load in the other half.
 inline size_t scene_load_default(uint64_t memory_bytes) { return std::clamp<size_t>(size_t(memory_bytes >> 34), 1, 4); }
 
 class SceneLoads {

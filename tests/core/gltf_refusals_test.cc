@@ -308,6 +308,25 @@ TEST_F(Gltf, TrianglesOverTheBudgetAreRefusedBeforeExpansion) {
   expect_error(d, "nodes: the scene expands to 160000000 triangles");
 }
 
+// Each kind a load holds has a limit of its own, but within all of them a small file could
+// still ask for about 20 GB: here a mesh of 570 (declared) vertices copied 2^19 times by its
+// node graph, 99.6 M triangles (under the 100 M limit) in 524,288 mesh copies (under 2^20),
+// would be 10 GiB of vertex arrays. The load-wide bound refuses it before the expansion,
+// naming what it would hold, kind by kind.
+TEST_F(Gltf, WhatALoadHoldsIsBoundedAllKindsTogether) {
+  Doc d;
+  d.j["accessors"][0]["count"] = 570;  // declared; never read
+  d.j["accessors"][3]["count"] = 570;
+  for (int i = 1; i <= 19; ++i) {
+    const int child = i == 1 ? 0 : int(d.j["nodes"].size()) - 1;
+    d.j["nodes"].push_back({{"children", {child, child}}});
+  }
+  d.j["scenes"][0]["nodes"] = {int(d.j["nodes"].size()) - 1, 1};
+  expect_error(d,
+               "nodes: the scene would take 10.02 GiB to load (buffers 88 bytes, meshes 10.02 GiB), over the 8.00 "
+               "GiB limit of a glTF load, all kinds together");
+}
+
 // EXT_mesh_gpu_instancing: real instances store the mesh once, so 3 instances of a mesh of
 // 40 M (declared) triangles pass the budget (and fail later, on the buffer that does not
 // hold them); in a file with animations they would be copies: 120 M, refused.

@@ -238,5 +238,27 @@ TEST(GltfMorph, TheScenesTargetsAreBoundedTogether) {
                  "morph targets past the scene's limit");
 }
 
+// The load-wide bound (GltfContext::max_load_bytes) counts every kind together: morph
+// targets within their own limit are refused once the load's other kinds hold the rest,
+// the error listing what each kind would hold.
+TEST(GltfLoadBytes, EveryKindCountsTowardOneBound) {
+  GltfContext ctx("m.gltf");
+  std::string bytes;
+  put<float>(bytes, {0, 0, 1, 0, 0, 1, 0, 0, 1});
+  set_buffer(ctx, bytes, {{0, bytes.size()}});
+  ctx.model.accessors.push_back(accessor(0, TINYGLTF_COMPONENT_TYPE_FLOAT, 3, TINYGLTF_TYPE_VEC3));
+  tinygltf::Primitive prim;
+  prim.targets = {{{"POSITION", 0}}};  // 3 vertices: 36 bytes
+  ctx.max_load_bytes = 100;
+  ctx.charge("buffers", "buffers", 36);
+  ctx.charge("images[0]", "textures", 8);
+  ASSERT_NE(read_gltf_morph(ctx, prim, tinygltf::Mesh(), tinygltf::Node(), 3, "first"), nullptr);
+  EXPECT_EQ(ctx.load_bytes(), 80u);
+  expect_refused([&] { read_gltf_morph(ctx, prim, tinygltf::Mesh(), tinygltf::Node(), 3, "second"); },
+                 "second targets[0]: the scene would take 116 bytes to load (buffers 36 bytes, morph targets 72 "
+                 "bytes, textures 8 bytes), over the 100 bytes limit of a glTF load, all kinds together",
+                 "a load past its memory bound");
+}
+
 }  // namespace
 }  // namespace tessera

@@ -15,10 +15,11 @@ std::string count_text(double n) {
 
 class Budget {
  public:
-  explicit Budget(const GltfContext& ctx) : ctx_(ctx), memo_(ctx.model.nodes.size()) {}
+  explicit Budget(GltfContext& ctx) : ctx_(ctx), memo_(ctx.model.nodes.size()) {}
 
   struct Count {
     double visits = 0, triangles = 0, meshes = 0;
+    double bytes = 0;   // the expanded meshes' arrays (Mesh: positions, normals, indices, ...)
     size_t height = 0;  // the longest chain of nodes from this one down, itself included
   };
 
@@ -40,12 +41,14 @@ class Budget {
         const double copies = copied ? instances(n) : 1;
         c.triangles = mesh_triangles(n.mesh) * copies;
         c.meshes = mesh_primitives(n.mesh) * copies;
+        c.bytes = mesh_bytes(n.mesh) * copies;
       }
       for (int child : n.children) {
         const Count k = node(child, depth + 1);
         c.visits += k.visits;
         c.triangles += k.triangles;
         c.meshes += k.meshes;
+        c.bytes += k.bytes;
         c.height = std::max(c.height, k.height);
       }
       ++c.height;
@@ -80,6 +83,25 @@ class Budget {
     }
     return t;
   }
+  // The bytes of a mesh's arrays once read (scene.h's Mesh): per vertex its position and
+  // normal, and the texture coordinates, colours and tangents the file gives; 3 indices a
+  // triangle.
+  double mesh_bytes(int mesh) const {
+    if (size_t(mesh) >= ctx_.model.meshes.size()) return 0;
+    double bytes = 0;
+    for (const tinygltf::Primitive& p : ctx_.model.meshes[size_t(mesh)].primitives) {
+      auto pos = p.attributes.find("POSITION");
+      if (pos == p.attributes.end()) continue;
+      double per_vertex = 2 * sizeof(Vec3);
+      for (const auto& [name, size] : {std::pair<const char*, size_t>{"TEXCOORD_0", sizeof(Vec2)},
+                                       {"TEXCOORD_1", sizeof(Vec2)},
+                                       {"COLOR_0", sizeof(Rgb) + sizeof(float)},
+                                       {"TANGENT", sizeof(Tangent)}})
+        if (p.attributes.count(name)) per_vertex += double(size);
+      bytes += accessor_count(pos->second) * per_vertex;
+    }
+    return bytes + mesh_triangles(mesh) * 3 * sizeof(uint32_t);
+  }
   double mesh_primitives(int mesh) const {
     return size_t(mesh) < ctx_.model.meshes.size() ? double(ctx_.model.meshes[size_t(mesh)].primitives.size()) : 0;
   }
@@ -94,20 +116,21 @@ class Budget {
     return 1;
   }
 
-  const GltfContext& ctx_;
+  GltfContext& ctx_;
   std::vector<Entry> memo_;
 };
 
 }  // namespace
 
-void check_gltf_budget(const GltfContext& ctx, const std::vector<int>& roots) {
+void check_gltf_budget(GltfContext& ctx, const std::vector<int>& roots) {
   Budget budget(ctx);
-  double visits = 0, triangles = 0, meshes = 0;
+  double visits = 0, triangles = 0, meshes = 0, bytes = 0;
   for (int r : roots) {
     const Budget::Count c = budget.node(r, 0);
     visits += c.visits;
     triangles += c.triangles;
     meshes += c.meshes;
+    bytes += c.bytes;
   }
   if (visits > kMaxGltfNodeVisits)
     ctx.fail("nodes", "the scene's node graph expands to " + count_text(visits) +
@@ -121,6 +144,7 @@ void check_gltf_budget(const GltfContext& ctx, const std::vector<int>& roots) {
     ctx.fail("nodes", "the scene expands to " + count_text(triangles) +
                           " triangles (every node visit and instance counted), over the limit of " +
                           count_text(kMaxGltfTriangles));
+  ctx.charge("nodes", "meshes", uint64_t(std::min(bytes, 1e18)));
 }
 
 }  // namespace tessera

@@ -5,7 +5,8 @@
 // meshes and triangles (EXT_mesh_gpu_instancing's instances included where they are copies, in a
 // file with animations or a skinned node; real instances store the mesh once) that the walk from `roots`
 // would make, from the declared accessor counts, and refuses the file naming the limit;
-// cycles and depth are refused here too, before the walk can recurse into them.
+// cycles and depth are refused here too, before the walk can recurse into them. The
+// expanded meshes' arrays are charged to the load's memory bound (GltfContext::charge).
 #pragma once
 
 #include <vector>
@@ -24,6 +25,6 @@ constexpr double kMaxGltfTriangles = 100'000'000;  // triangles of the expanded 
 constexpr double kMaxGltfMeshCopies = 1 << 20;
 constexpr size_t kMaxGltfNodeDepth = 256;
 
-void check_gltf_budget(const GltfContext& ctx, const std::vector<int>& roots);
+void check_gltf_budget(GltfContext& ctx, const std::vector<int>& roots);
 
 }  // namespace tessera

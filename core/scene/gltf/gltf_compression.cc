@@ -67,6 +67,7 @@ void decode_meshopt_view(GltfContext& ctx, size_t index, uint64_t* decoded) {
   *decoded += count * stride;
   if (*decoded > kMaxDecodedTotalBytes)
     ctx.fail(el, "the scene's compressed views decode to more than the 4 GiB limit together");
+  ctx.charge(el, "decoded views", count * stride);
   std::vector<unsigned char> out(count * stride);
   const unsigned char* in = src.data() + offset;
   int rc = -1;
@@ -164,6 +165,7 @@ void decode_draco_primitive(GltfContext& ctx, tinygltf::Primitive& prim, const s
     if (acc.count != mesh.points)
       ctx.fail(xel, name + ": the Draco data has " + std::to_string(mesh.points) + " points, accessors[" +
                         std::to_string(accessor) + "] says " + std::to_string(acc.count));
+    ctx.charge(xel, "decoded views", uint64_t(mesh.points) * uint64_t(comps) * sizeof(float));
     std::vector<float> values(mesh.points * size_t(comps));
     for (size_t p = 0; p < mesh.points; ++p)
       for (int c = 0; c < comps; ++c)
@@ -175,6 +177,7 @@ void decode_draco_primitive(GltfContext& ctx, tinygltf::Primitive& prim, const s
     if (ctx.model.accessors[size_t(prim.indices)].count != mesh.indices.size())
       ctx.fail(xel, "the Draco data has " + std::to_string(mesh.indices.size()) + " indices, the accessor says " +
                         std::to_string(ctx.model.accessors[size_t(prim.indices)].count));
+    ctx.charge(xel, "decoded views", uint64_t(mesh.indices.size()) * sizeof(uint32_t));
     set_accessor(ctx.model, prim.indices, as_bytes(mesh.indices), TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT,
                  mesh.indices.size());
   }

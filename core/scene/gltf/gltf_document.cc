@@ -263,6 +263,10 @@ void parse_gltf_model(GltfDocument doc, GltfContext& ctx) {
   if (!ok)
     throw SceneError(ctx.path, "", plain_words(first_line(relative_to(err.empty() ? "glTF parse error" : err, base))));
   if (!warn.empty()) ctx.scene.warnings.push_back(ctx.path + ": " + first_line(relative_to(warn, base)));
+  // The buffers, held for the whole load (each within gltf_prechecks' limits).
+  uint64_t buffer_bytes = 0;
+  for (const tinygltf::Buffer& b : ctx.model.buffers) buffer_bytes += b.data.size();
+  ctx.charge("buffers", "buffers", buffer_bytes);
   for (const std::string& ext : ctx.model.extensionsUsed) {
     if (const char* format = gltf_undecodable_format(ext))
       ctx.scene.warnings.push_back(ctx.path + ": " + ext + ": " + format +

@@ -40,6 +40,7 @@ std::shared_ptr<const MorphTargets> read_gltf_morph(GltfContext& ctx, const tiny
       if (ctx.morph_values > ctx.max_morph_values)
         ctx.fail(tel, "the scene's morph targets would hold more than " + std::to_string(ctx.max_morph_values) +
                           " values (3 a vertex a target's POSITION or NORMAL), the limit");
+      ctx.charge(tel, "morph targets", 3 * uint64_t(nv) * sizeof(float));
       std::vector<Vec3> d = as_vec3s(read_accessor_floats(ctx, accessor, 3, tel + " " + name));
       if (d.size() != nv)
         ctx.fail(tel, name + " has " + std::to_string(d.size()) + " elements for " + std::to_string(nv) + " vertices");

@@ -168,6 +168,7 @@ const GltfTextures::Pixels& GltfTextures::image_pixels(int index, const std::str
                       " texels, over the limit of " + std::to_string(ctx_.max_scene_texels) +
                       " (each image counted once)");
   texels_ += texels;
+  ctx_.charge(el, "textures", texels * 4);  // (RGBA bytes, shared by the textures made of it)
   Pixels p;
   p.width = img.width;
   p.height = img.height;
