@@ -20,7 +20,7 @@ fi
 targets=${FUZZ_TARGETS:-collada gltf bundle result}
 cmake --build "$B" -j "$(nproc)" --target fuzz_collada fuzz_gltf fuzz_bundle fuzz_result
 corpus="$B/corpus"
-for t in $targets; do mkdir -p "$corpus/$t" "tests/fuzz/regressions/$t"; done
+for t in collada gltf bundle result; do mkdir -p "$corpus/$t" "tests/fuzz/regressions/$t"; done  # (every seed set: FUZZ_TARGETS may name fewer)
 cp scenes/*.dae "$corpus/collada/"
 cp tests/fuzz/seeds/gltf/* "$corpus/gltf/"  # small: scenes/*.gltf carry 0.5 MB of buffers each
 if [ -d ../shared/scenes/cs184 ]; then

@@ -1,5 +1,9 @@
 // The glTF loader refuses hostile and damaged files with a clear error, never a crash or a
 // huge allocation.
+#include "core/scene/gltf/gltf_animation.h"
+#include "core/scene/gltf/gltf_compression.h"
+#include "core/scene/gltf/gltf_materials.h"
+#include "core/scene/gltf/gltf_nodes.h"
 #include "core/util/cancel.h"
 #include "tests/core/gltf_fixture.h"
 
@@ -325,6 +329,39 @@ TEST_F(Gltf, WhatALoadHoldsIsBoundedAllKindsTogether) {
   expect_error(d,
                "nodes: the scene would take 10.02 GiB to load (buffers 88 bytes, meshes 10.02 GiB), over the 8.00 "
                "GiB limit of a glTF load, all kinds together");
+}
+
+// Found by review: instances without an inverse transform (a zero scale) are copies even
+// where the budget counts real instances' mesh once; each copy is charged before it is
+// read. The load below, step by step as load_gltf_file takes it, with its bound lowered:
+// 88 bytes of buffer, the mesh (3 vertices with positions, normals and uvs, 1 triangle:
+// 108 bytes) counted by the budget and then 3 times again, once for each copy.
+TEST_F(Gltf, InstancesCopiedForWantOfAnInverseAreChargedEach) {
+  Doc d;
+  d.j["nodes"][0]["extensions"]["EXT_mesh_gpu_instancing"]["attributes"] = {{"SCALE", 1}};  // (0, 0, 1) x 3
+  d.j["extensionsUsed"] = {"EXT_mesh_gpu_instancing"};
+  const std::string path = write(d);
+  auto load_within = [&](uint64_t max_load_bytes) {
+    GltfContext ctx(path);
+    ctx.max_load_bytes = max_load_bytes;
+    parse_gltf_model(read_gltf_document(path), ctx);
+    decode_gltf_compression(ctx);
+    GltfMaterials materials(ctx);
+    GltfAnimationBuilder animation(false);
+    add_gltf_nodes(ctx, materials, animation);
+    EXPECT_EQ(ctx.scene.meshes.size(), 4u);  // the instanced one, unused, and 3 copies
+    return ctx.load_bytes();
+  };
+  EXPECT_EQ(load_within(kMaxGltfLoadBytes), 88u + 4 * 108);
+  try {
+    load_within(88 + 4 * 108 - 1);
+    ADD_FAILURE() << "loaded";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("nodes[0]: the scene would take 520 bytes to load (buffers 88 bytes, meshes "
+                                         "432 bytes), over the 519 bytes limit"),
+              std::string::npos)
+        << e.what();
+  }
 }
 
 // EXT_mesh_gpu_instancing: real instances store the mesh once, so 3 instances of a mesh of

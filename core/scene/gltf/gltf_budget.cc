@@ -13,6 +13,18 @@ std::string count_text(double n) {
   return buf;
 }
 
+// A primitive's triangles from its declared counts; 0 for points and lines (not read).
+double primitive_triangles(const GltfContext& ctx, const tinygltf::Primitive& p) {
+  const auto count = [&](int a) {
+    return a >= 0 && size_t(a) < ctx.model.accessors.size() ? double(ctx.model.accessors[size_t(a)].count) : 0;
+  };
+  auto pos = p.attributes.find("POSITION");
+  const double n = p.indices >= 0 ? count(p.indices) : pos != p.attributes.end() ? count(pos->second) : 0;
+  if (p.mode == TINYGLTF_MODE_TRIANGLES || p.mode == -1) return std::floor(n / 3);
+  if (p.mode == TINYGLTF_MODE_TRIANGLE_STRIP || p.mode == TINYGLTF_MODE_TRIANGLE_FAN) return std::max(0.0, n - 2);
+  return 0;
+}
+
 class Budget {
  public:
   explicit Budget(GltfContext& ctx) : ctx_(ctx), memo_(ctx.model.nodes.size()) {}
@@ -41,7 +53,7 @@ class Budget {
         const double copies = copied ? instances(n) : 1;
         c.triangles = mesh_triangles(n.mesh) * copies;
         c.meshes = mesh_primitives(n.mesh) * copies;
-        c.bytes = mesh_bytes(n.mesh) * copies;
+        c.bytes = gltf_mesh_bytes(ctx_, n.mesh, !ctx_.model.animations.empty(), n.skin >= 0) * copies;
       }
       for (int child : n.children) {
         const Count k = node(child, depth + 1);
@@ -73,34 +85,8 @@ class Budget {
   double mesh_triangles(int mesh) const {
     if (size_t(mesh) >= ctx_.model.meshes.size()) return 0;
     double t = 0;
-    for (const tinygltf::Primitive& p : ctx_.model.meshes[size_t(mesh)].primitives) {
-      auto pos = p.attributes.find("POSITION");
-      const double n = p.indices >= 0              ? accessor_count(p.indices)
-                       : pos != p.attributes.end() ? accessor_count(pos->second)
-                                                   : 0;
-      if (p.mode == TINYGLTF_MODE_TRIANGLES || p.mode == -1) t += std::floor(n / 3);
-      if (p.mode == TINYGLTF_MODE_TRIANGLE_STRIP || p.mode == TINYGLTF_MODE_TRIANGLE_FAN) t += std::max(0.0, n - 2);
-    }
+    for (const tinygltf::Primitive& p : ctx_.model.meshes[size_t(mesh)].primitives) t += primitive_triangles(ctx_, p);
     return t;
-  }
-  // The bytes of a mesh's arrays once read (scene.h's Mesh): per vertex its position and
-  // normal, and the texture coordinates, colours and tangents the file gives; 3 indices a
-  // triangle.
-  double mesh_bytes(int mesh) const {
-    if (size_t(mesh) >= ctx_.model.meshes.size()) return 0;
-    double bytes = 0;
-    for (const tinygltf::Primitive& p : ctx_.model.meshes[size_t(mesh)].primitives) {
-      auto pos = p.attributes.find("POSITION");
-      if (pos == p.attributes.end()) continue;
-      double per_vertex = 2 * sizeof(Vec3);
-      for (const auto& [name, size] : {std::pair<const char*, size_t>{"TEXCOORD_0", sizeof(Vec2)},
-                                       {"TEXCOORD_1", sizeof(Vec2)},
-                                       {"COLOR_0", sizeof(Rgb) + sizeof(float)},
-                                       {"TANGENT", sizeof(Tangent)}})
-        if (p.attributes.count(name)) per_vertex += double(size);
-      bytes += accessor_count(pos->second) * per_vertex;
-    }
-    return bytes + mesh_triangles(mesh) * 3 * sizeof(uint32_t);
   }
   double mesh_primitives(int mesh) const {
     return size_t(mesh) < ctx_.model.meshes.size() ? double(ctx_.model.meshes[size_t(mesh)].primitives.size()) : 0;
@@ -121,6 +107,31 @@ class Budget {
 };
 
 }  // namespace
+
+double gltf_mesh_bytes(const GltfContext& ctx, int mesh, bool posed, bool skinned) {
+  if (mesh < 0 || size_t(mesh) >= ctx.model.meshes.size()) return 0;
+  double bytes = 0;
+  for (const tinygltf::Primitive& p : ctx.model.meshes[size_t(mesh)].primitives) {
+    auto pos = p.attributes.find("POSITION");
+    const double triangles = primitive_triangles(ctx, p);
+    if (pos == p.attributes.end() || triangles == 0) continue;  // (points and lines are not read)
+    const tinygltf::Accessor* a = pos->second >= 0 && size_t(pos->second) < ctx.model.accessors.size()
+                                      ? &ctx.model.accessors[size_t(pos->second)]
+                                      : nullptr;
+    const double vertices = a ? double(a->count) : 0;
+    double per_vertex = 2 * sizeof(Vec3);  // positions, normals
+    for (const auto& [name, size] : {std::pair<const char*, size_t>{"TEXCOORD_0", sizeof(Vec2)},
+                                     {"TEXCOORD_1", sizeof(Vec2)},
+                                     {"COLOR_0", sizeof(Rgb) + sizeof(float)},
+                                     {"TANGENT", sizeof(Tangent)}})
+      if (p.attributes.count(name)) per_vertex += double(size);
+    const double arrays = vertices * per_vertex + triangles * 3 * sizeof(uint32_t);
+    // A posed mesh keeps its rest arrays beside the scene's (gltf_animation); a skinned one
+    // its object-space positions and normals, and 4 joints and weights a vertex.
+    bytes += arrays * (1 + posed) + (skinned ? arrays + vertices * 8 * sizeof(float) : 0);
+  }
+  return bytes;
+}
 
 void check_gltf_budget(GltfContext& ctx, const std::vector<int>& roots) {
   Budget budget(ctx);

@@ -26,5 +26,10 @@ constexpr double kMaxGltfMeshCopies = 1 << 20;
 constexpr size_t kMaxGltfNodeDepth = 256;
 
 void check_gltf_budget(GltfContext& ctx, const std::vector<int>& roots);
+// The bytes mesh `mesh` holds once read (scene.h's Mesh: per vertex its position and
+// normal and the texture coordinates, colours and tangents the file gives; 3 indices a
+// triangle; points and lines not at all), from its declared counts; `posed`: in a file
+// with animations, `skinned`: at a skinned node, which keep more.
+double gltf_mesh_bytes(const GltfContext& ctx, int mesh, bool posed, bool skinned);
 
 }  // namespace tessera

@@ -133,7 +133,9 @@ class NodeWalk {
           }
         ctx_.scene.meshes.push_back(std::move(p.mesh));
       }
-      for (const Mat4& inst : copies)
+      // The budget counted the mesh once (real instances); each copy is charged before it is read.
+      for (const Mat4& inst : copies) {
+        ctx_.charge(el, "meshes", uint64_t(std::min(gltf_mesh_bytes(ctx_, n.mesh, false, false), 1e18)));
         for (GltfPrimitive& p : read_gltf_mesh(ctx_, materials_, n, world * inst, el, false)) {
           instanced_triangles_ += p.mesh.triangle_count();
           if (instanced_triangles_ > kMaxInstancedTriangles)
@@ -142,6 +144,7 @@ class NodeWalk {
                               "limit");
           ctx_.scene.meshes.push_back(std::move(p.mesh));
         }
+      }
     } else {
       add_copies(n, instances, world, entry, el);
     }
