@@ -11,6 +11,7 @@
 #include <atomic>
 #include <cerrno>
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <utility>
@@ -47,7 +48,8 @@ void remove_orphaned_partials(const fs::path& dir, const std::string& hash) {
 class MarkerLock {
  public:
   // A shared lock on `marker`, or an empty one where it is gone (never there, or removed
-  // by another worker's disk bound before the lock was had: its folder goes too).
+  // by another worker's disk bound before the lock was had: its folder goes too). Throws
+  // where the marker is there but cannot be opened.
   static MarkerLock shared(const fs::path& marker) { return take(marker, LOCK_SH); }
   // An exclusive lock, or an empty one where the marker is gone or another worker holds it.
   static MarkerLock exclusive(const fs::path& marker) { return take(marker, LOCK_EX | LOCK_NB); }
@@ -64,20 +66,50 @@ class MarkerLock {
 
  private:
   static MarkerLock take(const fs::path& marker, int how) {
+    const bool exclusive = how & LOCK_EX;
     MarkerLock l;
-    l.fd_ = ::open(marker.c_str(), O_RDONLY | O_CLOEXEC);
-    if (l.fd_ < 0) return l;
-    struct stat st;
+    // (Read-write for an exclusive lock where it can be: NFS emulates flock by fcntl locks,
+    // whose write lock needs a file open for writing.)
+    if (exclusive) l.fd_ = ::open(marker.c_str(), O_RDWR | O_CLOEXEC);
+    if (l.fd_ < 0) l.fd_ = ::open(marker.c_str(), O_RDONLY | O_CLOEXEC);
+    if (l.fd_ < 0) {
+      if (errno == ENOENT || errno == ENOTDIR || exclusive) return l;  // gone; or not ours to remove
+      throw std::runtime_error("scene cache: cannot open " + marker.string() + ": " + std::strerror(errno));
+    }
     int rc;
     while ((rc = ::flock(l.fd_, how)) != 0 && errno == EINTR) {
     }
+    if (rc != 0 && errno == EWOULDBLOCK) return MarkerLock();  // another worker holds it
+    if (rc != 0) {
+      // A filesystem without locks (ENOLCK): the folder is used unlocked, and the disk
+      // bound goes by the idle time alone, as it did before locks.
+      static std::atomic<bool> warned{false};
+      if (!warned.exchange(true))
+        spdlog::warn(
+            "scene cache: cannot lock {} ({}): workers sharing the folder rely on --cache-max-gib's idle "
+            "time alone",
+            marker.string(), std::strerror(errno));
+    }
     // Removed between the open and the lock (the remover unlinks it under its lock):
     // nothing to hold.
-    if (rc != 0 || ::fstat(l.fd_, &st) != 0 || st.st_nlink == 0) return MarkerLock();
+    struct stat st;
+    if (::fstat(l.fd_, &st) != 0 || st.st_nlink == 0) return MarkerLock();
     return l;
   }
   int fd_ = -1;
 };
+
+// Removes `dir` by first renaming it aside (to a partial folder of this process's, which
+// remove_orphaned_partials clears if this process dies meanwhile): a worker putting a
+// fresh copy in place meanwhile is not removed with it. Never throws.
+void remove_aside(const fs::path& dir) {
+  static std::atomic<uint64_t> removals{0};
+  std::error_code ec;
+  const fs::path aside = dir.parent_path() / (dir.filename().string() + ".partial-" + std::to_string(::getpid()) +
+                                              "-removed-" + std::to_string(removals++));
+  fs::rename(dir, aside, ec);
+  fs::remove_all(ec ? dir : aside, ec);
+}
 
 // A loaded scene and the lock on its folder, released with the scene's last holder.
 struct LockedScene {
@@ -183,7 +215,7 @@ void SceneCache::trim_folder(const std::string& fetched) {
     if (!lock || fs::last_write_time(k.dir / ".main", mec) > idle_since || mec || !fs::remove(k.dir / ".main", mec) ||
         mec)
       continue;
-    fs::remove_all(k.dir, ec);
+    remove_aside(k.dir);
     total -= k.bytes;
     spdlog::info("scene cache: removed scene {} ({} bytes, least recently used) to stay within --cache-max-gib",
                  k.dir.filename().string(), k.bytes);
@@ -244,8 +276,10 @@ void SceneCache::fetch(const std::string& hash) {
   fs::rename(part, dir, ec);
   if (ec && fs::exists(dir / ".main")) return;  // another worker's, the same bytes
   if (ec) {
-    fs::remove_all(dir);  // an earlier run's, unfinished
-    fs::rename(part, dir);
+    remove_aside(dir);  // an earlier run's, unfinished, or one another worker's bound is removing
+    fs::rename(part, dir, ec);
+    if (ec && !fs::exists(dir / ".main"))  // (else another worker's copy came first: the same bytes)
+      throw std::runtime_error("cannot put scene " + hash + " in the scene cache " + dir_ + ": " + ec.message());
   }
 }
 

@@ -228,6 +228,8 @@ TEST_F(SceneCacheTest, TheDiskBoundLeavesAloneScenesAnotherWorkerHolds) {
   worker::SceneCache trimmer(dir.string(), fetch_from(second), {1, 0});
   trimmer.prepare(scene_task(other));
   EXPECT_FALSE(fs::exists(dir / hash));
+  for (const fs::directory_entry& e : fs::directory_iterator(dir))  // (removed by way of a folder aside)
+    EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos) << e.path();
   EXPECT_EQ(fake.scene_fetches + second.scene_fetches, 3);
 }
 
