@@ -10,6 +10,10 @@ namespace tessera {
 
 HttpListener::HttpListener(std::unique_ptr<httplib::Server> server, std::string what)
     : server_(std::move(server)), what_(std::move(what)) {
+  // A request's body is read whole before its handler runs (after the token check): with
+  // cpp-httplib's default bound (none) one caller's POST could take all the memory. The
+  // page's actions send a few bytes; a larger body is answered 413.
+  server_->set_payload_max_length(kMaxBodyBytes);
   // A handler's unexpected exception: cpp-httplib's own answer put its text in an
   // EXCEPTION_WHAT header (a preview's named the image's path on the coordinator's disk);
   // the log has it, the caller a number, as on the gRPC side.

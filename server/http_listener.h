@@ -19,7 +19,9 @@ class HttpListener {
  public:
   // `what` names the listener in errors ("http", "health"). A handler's unexpected
   // exception is logged (log_incident) and answered 500 with its incident number only.
+  // Requests' bodies are held to kMaxBodyBytes (413 past it).
   HttpListener(std::unique_ptr<httplib::Server> server, std::string what);
+  static constexpr size_t kMaxBodyBytes = 64 << 10;
   ~HttpListener();  // stops
   HttpListener(const HttpListener&) = delete;
   HttpListener& operator=(const HttpListener&) = delete;

@@ -86,5 +86,32 @@ TEST(HttpListener, AnUnexpectedExceptionIsAnsweredWithAnIncidentNumberOnly) {
   http.stop();
 }
 
+// Found by audit: a request's body was read whole before its handler (cpp-httplib's
+// default bound is none), so one caller's POST could take all the coordinator's memory.
+// Past kMaxBodyBytes it is answered 413 without being read.
+TEST(HttpListener, ARequestsBodyIsBounded) {
+  HttpListener http(std::make_unique<httplib::Server>(), "http");
+  http.server().Post("/echo", [](const httplib::Request& req, httplib::Response& res) {
+    res.set_content(std::to_string(req.body.size()), "text/plain");
+  });
+  const int port = http.bind("127.0.0.1", 0);
+  http.start();
+  httplib::Client client("127.0.0.1", port);
+  httplib::Result r = client.Post("/echo", "x", "text/plain");
+  for (int i = 0; !r && i < 50; ++i) {  // (the listener's thread may not serve yet)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    r = client.Post("/echo", "x", "text/plain");
+  }
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->body, "1");
+  r = client.Post("/echo", std::string(HttpListener::kMaxBodyBytes, 'x'), "text/plain");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->body, std::to_string(HttpListener::kMaxBodyBytes));
+  r = client.Post("/echo", std::string(HttpListener::kMaxBodyBytes + 1, 'x'), "text/plain");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 413);
+  http.stop();
+}
+
 }  // namespace
 }  // namespace tessera
