@@ -73,6 +73,32 @@ void LeaseTable::forget_job(const std::string& job) {
     for (auto it = m->begin(); it != m->end();) it = it->second.job == job ? m->erase(it) : std::next(it);
   ended_by_pass_.erase(ended_by_pass_.lower_bound({job, 0, 0}),
                        ended_by_pass_.upper_bound({job, UINT32_MAX, UINT32_MAX}));
+  merged_.erase(job);
+}
+
+void LeaseTable::forget_merged(const std::string& job, uint32_t tile, const std::function<bool(const Lease&)>& wanted) {
+  auto it = ended_by_pass_.lower_bound({job, tile, 0});
+  const auto end = ended_by_pass_.upper_bound({job, tile, UINT32_MAX});
+  while (it != end) {
+    std::deque<uint64_t>& ids = it->second;
+    for (auto id = ids.begin(); id != ids.end();) {
+      auto l = ended_.find(*id);
+      if (l == ended_.end() || l->second.check || wanted(l->second)) {
+        ++id;
+        continue;
+      }
+      merged_[job].insert(*id);
+      ended_.erase(l);
+      id = ids.erase(id);
+    }
+    it = ids.empty() ? ended_by_pass_.erase(it) : std::next(it);
+  }
+}
+
+bool LeaseTable::was_merged(uint64_t id) const {
+  for (const auto& [job, ids] : merged_)
+    if (ids.contains(id)) return true;
+  return false;
 }
 
 std::vector<uint64_t> LeaseTable::held_by(uint64_t worker) const {

@@ -2,17 +2,22 @@
 // expires. Ended leases are remembered while their job lives, so that a late result is
 // still recognised (and merged if nobody else's was): the newest kEndedPerPass of each
 // (job, tile, pass), so that leasing and releasing the same tiles over and over cannot
-// grow the table past a bound of the job's size.
+// grow the table past a bound of the job's size. Once their passes are merged, only their
+// ids are kept (a bit each), to tell a late result as a duplicate: a record and a deque
+// per merged (tile, pass), about 0.9 KB, grew a job of 2,000 tiles x 1,000 passes by 2 GB.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <map>
 #include <memory>
 #include <optional>
 #include <set>
 #include <string>
 #include <tuple>
+#include <unordered_map>
 #include <vector>
 
 #include "wire.h"
@@ -58,6 +63,11 @@ class LeaseTable {
   std::vector<std::pair<uint64_t, Lease>> expire(double now);
   // Ends every live lease of the job, and forgets all its leases.
   void forget_job(const std::string& job);
+  // Forgets the ended ordinary (not check) leases of the job's tile that `wanted` says are
+  // no longer wanted (their passes merged), keeping only their ids (was_merged).
+  void forget_merged(const std::string& job, uint32_t tile, const std::function<bool(const Lease&)>& wanted);
+  // A lease forget_merged forgot: a result for it is a duplicate.
+  bool was_merged(uint64_t id) const;
   // The live leases granted before `time` (held past a bound on a task's time).
   std::vector<uint64_t> granted_before(double time) const;
   // The live leases a worker holds.
@@ -77,6 +87,20 @@ class LeaseTable {
   std::map<uint64_t, Lease> live_, ended_;
   // The ended leases' ids by (job, tile, pass), oldest first.
   std::map<std::tuple<std::string, uint32_t, uint32_t>, std::deque<uint64_t>> ended_by_pass_;
+  // Ids, a bit each, in blocks of kIdBlock consecutive ids (only blocks that hold one).
+  class IdSet {
+   public:
+    void insert(uint64_t id) { blocks_[id / kIdBlock][id % kIdBlock / 64] |= uint64_t(1) << (id % 64); }
+    bool contains(uint64_t id) const {
+      auto it = blocks_.find(id / kIdBlock);
+      return it != blocks_.end() && (it->second[id % kIdBlock / 64] >> (id % 64) & 1);
+    }
+
+   private:
+    static constexpr uint64_t kIdBlock = 1024;
+    std::unordered_map<uint64_t, std::array<uint64_t, kIdBlock / 64>> blocks_;
+  };
+  std::map<std::string, IdSet> merged_;  // by job
   uint64_t next_ = 1;
 };
 

@@ -32,6 +32,11 @@ bool ResultIntake::still_wanted(const Lease& l, const Job& job) {
 
 std::optional<Lease> ResultIntake::wanted(const v1::TaskResult& result, v1::ResultAck& ack) {
   const Lease* l = p_.leases.known(result.task_id());
+  if (!l && p_.leases.was_merged(result.task_id())) {  // its passes merged (only the id is kept)
+    ++p_.counters.results_duplicate;
+    ack.set_duplicate(true);
+    return std::nullopt;
+  }
   // Never issued, or issued to another worker: only the lease's holder may answer it.
   if (!l || l->worker != result.worker_id() || p_.verifier.quarantined(l->worker)) {
     ++p_.counters.results_rejected;
@@ -180,6 +185,8 @@ void ResultIntake::merge(Batch& b, double now, Effects& fx) {
     // it proves nothing of its worker; its lease's end then gives the probation back.
     if (Lease* merged = p_.leases.live(result.task_id())) merged->probation = merged->probation && !lit;
     p_.leasing.end_tile(job, lease->tile, now);
+    // The tile's ended leases whose passes are merged now: their ids alone from here on.
+    p_.leases.forget_merged(job.id(), lease->tile, [&](const Lease& l) { return still_wanted(l, job); });
     job.merged_by[result.worker_id()].push_back(lease->tile);
     if (!job.sequence.empty()) ++p_.jobs.find_sequence(job.sequence)->changes;
     if (lease->task)  // picked for verification: another worker renders it again
