@@ -1,5 +1,6 @@
 #include "server/coordinator.h"
 
+#include <charconv>
 #include <filesystem>
 
 #include "core/util/log.h"
@@ -70,7 +71,14 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
   {
     MutexLock lock(mu_);
     const auto restore_scene = [this](const std::string& hash) { return scenes_.restore(hash); };
-    Recovery({*store_, jobs_, lifecycle_, snapshotter_, counters_, restore_scene}).restore(clock_->now(), fx);
+    const auto image_passes = [this](const std::string& job) -> std::optional<uint32_t> {
+      const std::optional<std::string> v = sink_->attribute(job, "tessera/frame_passes");
+      uint32_t n = 0;
+      if (!v || std::from_chars(v->data(), v->data() + v->size(), n).ec != std::errc()) return std::nullopt;
+      return n;
+    };
+    Recovery({*store_, jobs_, lifecycle_, snapshotter_, counters_, restore_scene, image_passes})
+        .restore(clock_->now(), fx);
     for (const auto& [id, s] : jobs_.sequences()) fx.sequence_ends.push_back(id);  // ended, not yet recorded
     size_t taken_up = jobs_.sequences().size();
     for (const auto& [id, job] : jobs_.jobs()) taken_up += job->sequence.empty();

@@ -178,6 +178,10 @@ bool DiskImageSink::intact(const std::string& job) const {
   return true;
 }
 
+std::optional<std::string> DiskImageSink::attribute(const std::string& job, const std::string& name) const {
+  return exr_string_attribute(path(job, "image.exr"), name);
+}
+
 uint64_t DiskImageSink::remove(const std::string& job) {
   forget_preview(job);
   return remove_folder((fs::path(dir_) / job).string());

@@ -6,6 +6,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include "core/io/image_io.h"
@@ -55,6 +56,11 @@ class ImageSink {
   // Whether the job's image file decodes whole (checked before a final image is served:
   // a truncated or damaged file is an error, never a download that exits 0).
   virtual bool intact(const std::string& /*job*/) const { return true; }
+  // The string attribute `name` of the job's image file (its header alone); nothing where
+  // there is none (or the sink keeps no files).
+  virtual std::optional<std::string> attribute(const std::string& /*job*/, const std::string& /*name*/) const {
+    return std::nullopt;
+  }
   // The last image written, as EXR bytes and a PNG preview; empty if none was written.
   virtual std::string exr(const std::string& job) const = 0;
   virtual std::string png(const std::string& job) const = 0;
@@ -82,6 +88,7 @@ class DiskImageSink : public ImageSink {
   std::unique_ptr<Reader> open(const std::string& job) const override;
   // Decodes the file once per version (inode, size, time) and remembers the answer.
   bool intact(const std::string& job) const override;
+  std::optional<std::string> attribute(const std::string& job, const std::string& name) const override;
   // The job's whole folder (<dir>/<job>/: its image, preview and checkpoint).
   uint64_t remove(const std::string& job) override;
   void remove_unknown(const std::function<bool(const std::string& job)>& known) override;

@@ -173,10 +173,23 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
   for (size_t i = 0; i < s.frames.size(); ++i) {
     const std::string id = s.frame_job_id(i);
     std::optional<double> cp;  // its render seconds
-    std::shared_ptr<Job> job = SequenceScheduler::make_frame(s, i);
+    std::shared_ptr<Job> job;
     try {
-      // A frame that started has a checkpoint (or is rendered again from the start).
-      if (!(cp = p_.store.read_checkpoint(id, job->plan, s.live(), &job->splats))) {
+      // A frame that started has a checkpoint (or is rendered again from the start). Its
+      // film only where it is needed: a frame still rendering, or one done whose image on
+      // disk does not hold every pass (written again below). Every done frame's film was
+      // read, and held until its image was written again: a long sequence's restart took
+      // a film per finished frame at once.
+      const auto read = [&](bool film) {
+        job = SequenceScheduler::make_frame(s, i);
+        return cp = p_.store.read_checkpoint(id, job->plan, film, &job->splats);
+      };
+      if (read(false) && s.live()) {
+        const bool done = job->plan.done();
+        const std::optional<uint32_t> image = p_.image_passes ? p_.image_passes(id) : std::nullopt;
+        if (!done || image != job->plan.frame_passes_done()) read(true);
+      }
+      if (!cp) {
         all_done = false;
         continue;
       }

@@ -80,4 +80,13 @@ bool exr_intact(const std::string& exr_path, std::string* why) {
   }
 }
 
+std::optional<std::string> exr_string_attribute(const std::string& exr_path, const std::string& name) {
+  try {
+    const Imf::InputFile in(exr_path.c_str());
+    if (const auto* a = in.header().findTypedAttribute<Imf::StringAttribute>(name)) return a->value();
+  } catch (const std::exception&) {  // (missing, or not an EXR)
+  }
+  return std::nullopt;
+}
+
 }  // namespace tessera

@@ -4,6 +4,7 @@
 // floats, not the image.
 #pragma once
 
+#include <optional>
 #include <string>
 
 namespace tessera {
@@ -15,5 +16,9 @@ std::string preview_png(const std::string& exr_path, int max_width = 1280);
 // damaged block or a checksum that fails stops it), a band of rows at a time. `why` gets
 // OpenEXR's reason otherwise.
 bool exr_intact(const std::string& exr_path, std::string* why = nullptr);
+
+// The string attribute `name` of the EXR at `exr_path`, from its header alone; nothing
+// where the file or the attribute is missing or the header does not read.
+std::optional<std::string> exr_string_attribute(const std::string& exr_path, const std::string& name);
 
 }  // namespace tessera

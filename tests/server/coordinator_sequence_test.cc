@@ -169,6 +169,31 @@ TEST_F(SequenceTest, ARestartedCoordinatorGoesOnWithASequenceBitForBit) {
   EXPECT_FALSE(fs::exists(dir + "/jobs/" + id + "-f1"));
 }
 
+// Found by audit: a restart read every finished frame's film and wrote its image again (in
+// case the crash came between the two), all held at once: a long sequence's restart took a
+// film per finished frame. A finished frame whose image on disk holds every pass (its
+// frame_passes attribute) now leaves memory at once; only one whose image does not is
+// written again, here one removed.
+TEST_F(SequenceTest, ARestartWritesAgainOnlyTheFinishedFramesWhoseImageIsNotWhole) {
+  const std::string id = c->submit(sequence({1, 2, 3}));
+  const uint64_t w = worker();
+  while (frame_states(id).at(2) != v1::JobStatus::DONE)
+    ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::RUNNING);  // frame 3 to go
+  const std::string kept = image_path(id + "-f1", "image.exr"), lost = image_path(id + "-f2", "image.exr");
+  ASSERT_TRUE(fs::exists(kept));
+  const auto written = fs::last_write_time(kept);
+  fs::remove(lost);
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));  // (a file written again would have a later time)
+  restart(c, options(), &t);
+  for (int i = 0; i < 500 && !fs::exists(lost); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  EXPECT_TRUE(fs::exists(lost));
+  EXPECT_EQ(fs::last_write_time(kept), written);
+  drain(worker());
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  for (int n : {1, 2, 3}) EXPECT_TRUE(frame_is_local(id, n)) << n;
+}
+
 // A restart can bring a sequence back with a gap: frames 1 and 3 have checkpoints, frame 2
 // (started, but killed before its first checkpoint) has none. Its load is then the two
 // restored frames' samples left plus one whole frame, not two: the admission limit

@@ -24,13 +24,20 @@ class RecoveryTest : public testing::PartsTest {
   std::string lost;  // non-empty: the scene is gone, for this reason
   int scenes_restored = 0;
 
+  // The frame passes each job's image on disk holds (none: not listed).
+  std::map<std::string, uint32_t> images;
+
   void restore() {
     const auto restore_scene = [this](const std::string&) -> uint64_t {
       if (!lost.empty()) throw std::runtime_error(lost);
       ++scenes_restored;
       return 4321;
     };
-    Recovery({store, jobs, lifecycle, snapshotter, counters, restore_scene}).restore(now, fx);
+    const auto image_passes = [this](const std::string& job) -> std::optional<uint32_t> {
+      if (!images.count(job)) return std::nullopt;
+      return images.at(job);
+    };
+    Recovery({store, jobs, lifecycle, snapshotter, counters, restore_scene, image_passes}).restore(now, fx);
   }
   // A job's row as the earlier run left it.
   StoredJob row(uint64_t seq, v1::JobStatus::State state, const std::vector<int>& frames = {}) {
@@ -183,6 +190,28 @@ TEST_F(RecoveryTest, ASequenceWhoseEveryFrameIsDoneEndsDone) {
   EXPECT_EQ(s.state(), DONE);
   EXPECT_EQ(s.frames_done, 2u);
   EXPECT_EQ(fx.writes.size(), 2u);  // each frame's image written again, in case it was not
+}
+
+// A finished frame whose image on disk holds its every pass is not written again, and its
+// film is not read: a restart held a film per finished frame at once. One whose image
+// holds fewer passes (the crash came between its checkpoint and its image), or has none,
+// is written again from its film.
+TEST_F(RecoveryTest, OnlyFinishedFramesWithoutTheirWholeImageAreWrittenAgain) {
+  const StoredJob r = row(1, RUNNING, {1, 2, 3, 4});
+  for (int f = 1; f <= 3; ++f) checkpoint(r.meta.id + "-f" + std::to_string(f), testing::kPasses, 2, f);
+  FramePlan whole(small_settings());
+  merge_passes(whole, testing::kPasses);
+  images[r.meta.id + "-f1"] = whole.frame_passes_done();
+  images[r.meta.id + "-f2"] = whole.frame_passes_done() - 1;  // an earlier snapshot's
+  restore();
+  Sequence& s = *jobs.find_sequence(r.meta.id);
+  EXPECT_EQ(s.state(), RUNNING);
+  EXPECT_EQ(s.frames_done, 3u);
+  ASSERT_EQ(fx.writes.size(), 2u);
+  std::set<std::string> written;
+  for (const auto& job : fx.writes) written.insert(job->id());
+  EXPECT_EQ(written, (std::set<std::string>{r.meta.id + "-f2", r.meta.id + "-f3"}));
+  EXPECT_EQ(s.jobs[0], nullptr);  // left memory, its film never read
 }
 
 TEST_F(RecoveryTest, AnEndedSequenceComesBackRecorded) {
