@@ -115,8 +115,12 @@ void JobLifecycle::task_failed(Job& job, const std::string& worker, const std::s
 }
 
 void JobLifecycle::task_failed(Job& job, const WorkerInfo& w, const std::string& error, double now, Effects& fx) {
-  fx.events.push_back({0, 0, "task.failed", job.sequence.empty() ? job.id() : job.sequence, w.name, w.principal,
-                       peer_text(error, 1024)});
+  // An event for a worker's first failure on the job (the rest are counted): one worker
+  // failing a job's tasks over and over pushed the farm's whole history (deletes,
+  // quarantines) out of the event log, which keeps the newest kMaxEvents.
+  if (job.live() && !job.failed_on.count(w.identity()))
+    fx.events.push_back({0, 0, "task.failed", job.sequence.empty() ? job.id() : job.sequence, w.name, w.principal,
+                         peer_text(error, 1024)});
   task_failed(job, w.identity(), error, now, fx);
 }
 
