@@ -29,7 +29,7 @@ constexpr char kMagic[4] = {'T', 'S', 'C', 'K'};
 // Version 4: version 3 and the splats (checkpoint.h).
 // Version 5: version 4 with the splats' squared luminance in 2^-32 units, not 2^-12
 // (SplatSums::kLum2Unit); version 4's are scaled on reading.
-constexpr uint32_t kVersion2 = 2, kVersion3 = 3, kVersion4 = 4, kVersion5 = 5;
+constexpr uint32_t kVersion2 = 2, kVersion3 = 3, kVersion4 = 4, kVersion5 = 5, kVersion6 = 6;
 constexpr int kVersion4Lum2Shift = 20;  // 2^-12 units to 2^-32
 constexpr uint32_t kChunkPixels = 1 << 16;
 
@@ -179,20 +179,23 @@ struct CheckpointEncoder::Hash {
   ~Hash() { XXH64_freeState(st); }
 };
 
-CheckpointEncoder::CheckpointEncoder(const FramePlan& plan, double elapsed, std::function<void(const std::string&)> out)
+CheckpointEncoder::CheckpointEncoder(const FramePlan& plan, double elapsed, std::function<void(const std::string&)> out,
+                                     bool film)
     : out_(std::move(out)),
       hash_(std::make_unique<Hash>()),
       adaptive_(plan.settings().adaptive),
       aovs_(plan.settings().aovs != 0),
-      halves_(plan.settings().halves()) {
+      halves_(plan.settings().halves()),
+      film_(film) {
   Writer w;
   w.out.append(kMagic, 4);
-  w.put(kVersion5);
+  w.put(kVersion6);
   const Rect r = plan.settings().effective_window();
   for (int v : {r.x, r.y, r.w, r.h}) w.put(int32_t(v));
   w.put(uint32_t(plan.tiles().size()));
   w.put(plan.bands());
   w.put(uint8_t(adaptive_));
+  w.put(uint8_t(film_));
   w.put(elapsed);
   emit(std::move(w.out));
 }
@@ -214,6 +217,7 @@ void CheckpointEncoder::band(const BandCopy& b) {
     w.put(t.relative_error);
   }
   w.put(b.samples);
+  if (!film_) return emit(std::move(w.out));  // the progress alone
   if (adaptive_) {
     std::string mask(ZSTD_compressBound(b.active.size()), '\0');
     const size_t n = ZSTD_compress(mask.data(), mask.size(), b.active.data(), b.active.size(), 1);
@@ -242,6 +246,7 @@ std::string encode_splat_rows(const std::vector<SplatSums>& rows) {
 }  // namespace
 
 void CheckpointEncoder::splats(const FrameSplats::Frozen& f) {
+  if (!film_) throw std::logic_error("checkpoint: splats in a checkpoint without the film");
   Writer w;
   w.put(uint8_t(1));
   w.put(f.paths);
@@ -372,6 +377,9 @@ void read_splats(StreamReader& in, const FramePlan& plan, FrameSplats* splats, u
 
 double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with_film, uint32_t version,
                FrameSplats* splats) {
+  const bool has_film = version < kVersion6 || in.get<uint8_t>() != 0;
+  if (with_film && !has_film)
+    throw std::runtime_error("checkpoint: it holds no film (a finished frame's, whose image was written)");
   const double elapsed = in.get<double>();
   BandCopy band;
   std::vector<bool> seen(plan.bands(), false);
@@ -391,6 +399,17 @@ double read_v3(StreamReader& in, XXH64_state_t* hash, FramePlan& plan, bool with
     plan.band_shape(band.band, &band);
     const size_t pixels = size_t(band.rows) * size_t(band.width);
     band.active.clear();
+    band.pixels.clear();
+    band.aovs.clear();
+    band.odd.clear();
+    if (!has_film) {
+      try {
+        plan.restore_band(band);
+      } catch (const std::invalid_argument& e) {
+        throw std::runtime_error(std::string("checkpoint: ") + e.what());
+      }
+      continue;
+    }
     if (plan.settings().adaptive) {
       const uint64_t size = in.get<uint64_t>();
       const std::string mask = in.bytes(ZSTD_compressBound(pixels) + 64);
@@ -464,7 +483,7 @@ double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePl
   in.exactly(magic, 4);
   if (std::memcmp(magic, kMagic, 4) != 0) throw std::runtime_error("checkpoint: not a checkpoint file");
   const uint32_t version = in.get<uint32_t>();
-  if (version == kVersion3 || version == kVersion4 || version == kVersion5) {
+  if (version == kVersion3 || version == kVersion4 || version == kVersion5 || version == kVersion6) {
     Rect r;
     r.x = in.get<int32_t>();
     r.y = in.get<int32_t>();

@@ -1,19 +1,23 @@
 // A job's checkpoint file: its frame plan's progress and its film's sums, checksummed
 // (xxh64). docs/architecture.md has where and when.
 //
-// Version 5 is written band by band (FramePlan::copy_band: a row of tiles, each tile's sums
+// Version 6 is written band by band (FramePlan::copy_band: a row of tiles, each tile's sums
 // with its progress), so a coordinator never holds a second copy of a large film, and read
 // band by band into the plan's own film; every counter of the plan follows from its tiles.
-//   header  "TSCK", u32 5, i32 window x y w h, u32 tiles, u32 bands, u8 adaptive, f64 elapsed
+//   header  "TSCK", u32 6, i32 window x y w h, u32 tiles, u32 bands, u8 adaptive, u8 film,
+//           f64 elapsed
 //   band    u32 band, u32 tiles, per tile (u32 passes, u8 finished, f32 relative error),
-//           u64 samples, [adaptive: u64 mask bytes, bytes zstd(mask)], bytes sums (wire.h),
-//           [AOVs: bytes AOV sums], [half-buffers: bytes the second plane's sums]
+//           u64 samples, [film: [adaptive: u64 mask bytes, bytes zstd(mask)], bytes sums
+//           (wire.h), [AOVs: bytes AOV sums], [half-buffers: bytes the second plane's sums]]
 //   splats  u8 0, or u8 1, u64 paths, u64 odd paths, per tile u32 frontier, then per band in
 //           order bytes zstd(its rows' SplatSums, 32 bytes each) [half-buffers: the odd
 //           plane's too] (frame_splats.h: frozen after the bands); squared luminance in
 //           2^-32 units (version 4, still read: the same in 2^-12 units)
 //   end     u64 xxh64 of everything before it
-// (bytes = u64 length + the bytes.) Version 4 (see above), version 3 (no splats) and
+// (bytes = u64 length + the bytes.) Without the film (u8 film 0: a finished frame of a
+// sequence once its image is written, SnapshotWriter) a checkpoint holds the progress
+// alone, a few bytes a tile, and no splats. Version 5 (no film flag: always the film),
+// version 4 (see above), version 3 (no splats) and
 // versions 1 and 2 (the whole PlanState, then the film in one or in 65,536-pixel pieces)
 // are still read.
 #pragma once
@@ -32,7 +36,9 @@ namespace tessera {
 // finish(); each piece of the file goes to `out` as it is made.
 class CheckpointEncoder {
  public:
-  CheckpointEncoder(const FramePlan& plan, double elapsed, std::function<void(const std::string&)> out);
+  // Without `film`, the progress alone (band() writes no sums; splats() may not be called).
+  CheckpointEncoder(const FramePlan& plan, double elapsed, std::function<void(const std::string&)> out,
+                    bool film = true);
   ~CheckpointEncoder();
   void band(const BandCopy& band);
   // The frozen splats' counts and frontier; then each band's splat rows (copy_band's).
@@ -48,6 +54,7 @@ class CheckpointEncoder {
   bool adaptive_;
   bool aovs_;    // the job has AOVs: each band carries their sums after the film's
   bool halves_;  // and half-buffers: then the film's second plane (film.h)
+  bool film_;
   bool splats_ = false;
 };
 
@@ -58,7 +65,8 @@ std::string encode_checkpoint(const FramePlan& plan, double elapsed, FrameSplats
 // and returns how many, 0 at the end) into `plan`, whose settings it must fit; returns the
 // render seconds it was taken at. Without `with_film` only the progress is restored (an
 // ended job's); with it, its splats into `splats` (when given). Throws std::runtime_error ("checkpoint: ...") when the
-// bytes are damaged, cut short or do not fit the plan; the plan is then unusable.
+// bytes are damaged, cut short or do not fit the plan, or `with_film` asks for a film the
+// checkpoint does not hold; the plan is then unusable.
 double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePlan& plan, bool with_film = true,
                        FrameSplats* splats = nullptr);
 double read_checkpoint(const std::string& bytes, FramePlan& plan, bool with_film = true, FrameSplats* splats = nullptr);

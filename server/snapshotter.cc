@@ -169,6 +169,13 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
   };
   // The plan's shape (settings, tiles, bands) never changes: read without the lock.
   const Rect w = job.plan.settings().effective_window();
+  // A finished frame of a sequence: once its image is on disk its checkpoint need not hold
+  // the film (nothing renders it again, and a restart reads only its progress), so it is
+  // written after the image, in a pass of its own, and without the film where the image
+  // was written. A sequence of 10,000 frames kept a film per frame on disk besides its
+  // images (36 bytes a pixel before compression) until it was archived or deleted.
+  const bool after_image =
+      plan.image && plan.checkpoint && plan.ended && plan.state == v1::JobStatus::DONE && !job.sequence.empty();
   std::unique_ptr<ImageSink::Writer> image;
   std::unique_ptr<CheckpointFile> checkpoint;
   std::unique_ptr<CheckpointEncoder> encoder;
@@ -180,52 +187,71 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
     } catch (const std::exception& e) {
       failed("image", e, &out.image, &out.image_why);
     }
-  if (plan.checkpoint) try {
+  const auto begin_checkpoint = [&](bool film) {
+    try {
       checkpoint = store_.begin_checkpoint(job.id());
-      encoder = std::make_unique<CheckpointEncoder>(job.plan, plan.elapsed,
-                                                    [&](const std::string& bytes) { checkpoint->append(bytes); });
+      encoder = std::make_unique<CheckpointEncoder>(
+          job.plan, plan.elapsed, [&](const std::string& bytes) { checkpoint->append(bytes); }, film);
     } catch (const std::exception& e) {
       checkpoint.reset();
       failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
     }
+  };
+  // The bands: into the image and the checkpoint at once, or into one of them.
   BandCopy band;
-  for (uint32_t b = 0; b < job.plan.bands() && (image || checkpoint); ++b) {
-    if (!copy_band(b, &band)) return SnapshotOutcome{};  // the film is gone: nothing to write
-    if (checkpoint) try {  // the film's sums as they are: the splats are written after the bands
-        encoder->band(band);
+  const auto bands = [&] {
+    for (uint32_t b = 0; b < job.plan.bands() && (image || checkpoint); ++b) {
+      if (!copy_band(b, &band)) return false;  // the film is gone: nothing to write
+      if (checkpoint) try {                    // the film's sums as they are: the splats are written after the bands
+          encoder->band(band);
+        } catch (const std::exception& e) {
+          checkpoint.reset();
+          failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
+        }
+      if (image) try {
+          FrameSplats::fold(&band);  // the image's pixels hold the splats
+          image->write_rows(band.pixels.data(), band.rows, band.aovs.empty() ? nullptr : band.aovs.data(),
+                            band.odd.empty() ? nullptr : band.odd.data());
+        } catch (const std::exception& e) {
+          image.reset();
+          failed("image", e, &out.image, &out.image_why);
+        }
+    }
+    return true;
+  };
+  const auto finish_checkpoint = [&](bool film) {
+    if (checkpoint && film && locked) try {
+        if (!write_splats(job, plan, *encoder, locked))
+          throw std::runtime_error("results were taken back from the film while it was written");
       } catch (const std::exception& e) {
         checkpoint.reset();
         failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
       }
-    if (image) try {
-        FrameSplats::fold(&band);  // the image's pixels hold the splats
-        image->write_rows(band.pixels.data(), band.rows, band.aovs.empty() ? nullptr : band.aovs.data(),
-                          band.odd.empty() ? nullptr : band.odd.data());
+    if (checkpoint) try {
+        encoder->finish();
+        checkpoint->commit();
+        out.checkpoint = SnapshotOutcome::kWritten;
       } catch (const std::exception& e) {
-        image.reset();
-        failed("image", e, &out.image, &out.image_why);
+        failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
       }
-  }
-  if (checkpoint && locked) try {
-      if (!write_splats(job, plan, *encoder, locked))
-        throw std::runtime_error("results were taken back from the film while it was written");
-    } catch (const std::exception& e) {
-      checkpoint.reset();
-      failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
-    }
+  };
+  if (plan.checkpoint && !after_image) begin_checkpoint(true);
+  if (!bands()) return SnapshotOutcome{};
+  if (!after_image) finish_checkpoint(true);  // (its splats before the image's commit, as always)
   if (image) try {
       image->commit();
       out.image = SnapshotOutcome::kWritten;
     } catch (const std::exception& e) {
       failed("image", e, &out.image, &out.image_why);
     }
-  if (checkpoint) try {
-      encoder->finish();
-      checkpoint->commit();
-      out.checkpoint = SnapshotOutcome::kWritten;
-    } catch (const std::exception& e) {
-      failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
-    }
+  if (after_image) {
+    // The film only where the image could not be written (a restart writes it from there).
+    const bool film = out.image != SnapshotOutcome::kWritten;
+    image.reset();
+    begin_checkpoint(film);
+    if (!bands()) return SnapshotOutcome{};
+    finish_checkpoint(film);
+  }
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   // A DONE job's end is recorded once a checkpoint holding its whole film is on disk, so
   // that a restart never finds a DONE job with part of a film. A cancelled or failed job's

@@ -192,6 +192,37 @@ TEST(JobStore, AVersion2CheckpointStillRestoresAPlan) {
   EXPECT_EQ(b.merges(), a.merges());
 }
 
+// A finished frame's checkpoint without the film (SnapshotWriter writes it once the frame's
+// image is on disk): its progress comes back as written; a film asked of it is refused,
+// naming why, rather than a black one made up.
+TEST(JobStore, ACheckpointWithoutTheFilmRestoresTheProgressAlone) {
+  const FramePlan a = merged_plan(true);
+  std::string bytes;
+  {
+    CheckpointEncoder enc(
+        a, 3, [&](const std::string& b) { bytes += b; }, false);
+    BandCopy band;
+    for (uint32_t b = 0; b < a.bands(); ++b) {
+      a.copy_band(b, &band);
+      enc.band(band);
+    }
+    enc.finish();
+  }
+  EXPECT_LT(bytes.size() * 4, encode_checkpoint(a, 3).size());
+  FramePlan b(plan_settings(true));
+  EXPECT_EQ(read_checkpoint(bytes, b, false), 3);
+  EXPECT_EQ(b.merges(), a.merges());
+  EXPECT_EQ(b.samples_merged(), a.samples_merged());
+  for (uint32_t t = 0; t < a.tiles().size(); ++t) EXPECT_EQ(b.progress(t).passes_done, a.progress(t).passes_done);
+  FramePlan c(plan_settings(true));
+  try {
+    read_checkpoint(bytes, c, true);
+    ADD_FAILURE() << "a film read from a checkpoint without one";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("it holds no film"), std::string::npos) << e.what();
+  }
+}
+
 // Version 4 kept the splats' squared luminance in 2^-12 units (a splat under about 0.011
 // added no variance); version 5 in 2^-32. A version 4 file, what a coordinator from before
 // leaves in its data folder, is read in today's units (saturating, as the sums are).
@@ -228,6 +259,7 @@ TEST(JobStore, AVersion4CheckpointsSplatVarianceIsReadInTodaysUnits) {
   v4 += z4;
   const uint32_t version = 4;
   std::memcpy(v4.data() + 4, &version, 4);
+  v4.erase(33, 1);  // version 6's film flag (after magic, version, window, tiles, bands, adaptive)
 
   FramePlan b(settings);
   FrameSplats restored(settings, uint32_t(b.tiles().size()));
