@@ -105,6 +105,32 @@ grpc::Status as(const char* method, const Authenticator* auth, grpc::ServerConte
 
 }  // namespace
 
+namespace {
+
+class TokenGate final : public grpc::AuthMetadataProcessor {
+ public:
+  explicit TokenGate(const Authenticator& auth) : auth_(auth) {}
+  bool IsBlocking() const override { return false; }  // a lookup by digest: run it where the call is
+  grpc::Status Process(const InputMetadata& metadata, grpc::AuthContext*, OutputMetadata*, OutputMetadata*) override {
+    const auto it = metadata.find("authorization");
+    const Authenticator::Check c =
+        auth_.check(it == metadata.end() ? std::string_view() : std::string_view(it->second.data(), it->second.size()),
+                    Action::kRead);  // (any known token passes here: the handler checks what it may do)
+    if (c.outcome == Authenticator::Check::kUnauthenticated)
+      return grpc::Status(grpc::StatusCode::UNAUTHENTICATED, c.why + " (--token-file FILE or TESSERA_TOKEN)");
+    return grpc::Status::OK;
+  }
+
+ private:
+  const Authenticator& auth_;
+};
+
+}  // namespace
+
+std::shared_ptr<grpc::AuthMetadataProcessor> token_gate(const Authenticator& auth) {
+  return std::make_shared<TokenGate>(auth);
+}
+
 void configure_server(grpc::ServerBuilder& builder, int max_message_bytes, ConnectionLimits limits) {
   builder.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS, int(limits.handshake_seconds * 1000));
   builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_IDLE_MS, int(limits.idle_seconds * 1000));

@@ -24,6 +24,13 @@ struct ConnectionLimits {
 void configure_server(grpc::ServerBuilder& builder, int max_message_bytes = kMaxMessageBytes,
                       ConnectionLimits limits = {});
 
+// Refuses a call that carries no known token from its metadata alone, before its request is
+// read (a handler checks the token only once the synchronous server has read the request
+// whole, up to the message limit: a stranger's calls could make the coordinator hold that
+// much each). The handler still checks the token's role. gRPC takes it on TLS server
+// credentials only (ServerCredentials::SetAuthMetadataProcessor).
+std::shared_ptr<grpc::AuthMetadataProcessor> token_gate(const Authenticator& auth);
+
 // Without an Authenticator (or with an open one) every caller may do everything.
 class ClientService final : public v1::Tessera::Service {
  public:

@@ -272,6 +272,7 @@ int main(int argc, char** argv) {
       grpc::SslServerCredentialsOptions tls;
       tls.pem_key_cert_pairs.push_back({tessera::read_file_bytes(tls_key), tessera::read_file_bytes(tls_cert)});
       credentials = grpc::SslServerCredentials(tls);
+      if (auth.enabled()) credentials->SetAuthMetadataProcessor(tessera::token_gate(auth));
     }
     const auto sleep_ms = [](int ms) { return [ms] { std::this_thread::sleep_for(std::chrono::milliseconds(ms)); }; };
     if (write_delay_ms > 0) opt.before_checkpoint_rename = sleep_ms(write_delay_ms);

@@ -422,6 +422,31 @@ TEST_F(Access, TlsForGrpcAndHttp) {
   auto res = https.Get("/api/status", httplib::Headers{{"Authorization", std::string("Bearer ") + kViewer}});
   ASSERT_TRUE(res) << httplib::to_string(res.error());
   EXPECT_EQ(res->status, 200);
+  // Found by an audit: a call's token was checked only once the server had read its request
+  // whole, so a stranger's 200 MB submit took 200 MB and more of the coordinator's memory
+  // before it was refused. Over TLS the token is checked from the call's metadata first.
+  const auto peak_kib = [&] {
+    std::ifstream in("/proc/" + std::to_string(coordinator->pid()) + "/status");
+    for (std::string line; std::getline(in, line);)
+      if (line.rfind("VmHWM:", 0) == 0) return std::stol(line.substr(6));
+    return 0L;
+  };
+  grpc::SslCredentialsOptions ca;
+  ca.pem_root_certs = read_file_bytes(cert);
+  auto stub = v1::Tessera::NewStub(grpc::CreateChannel(grpc_addr, grpc::SslCredentials(ca)));
+  v1::SubmitJobRequest big;
+  big.set_main_file("scene.dae");
+  v1::SceneFile* f = big.add_files();
+  f->set_path("scene.dae");
+  f->mutable_content()->assign(200 << 20, 'x');
+  const long before = peak_kib();
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  v1::JobId id;
+  const grpc::Status st = stub->SubmitJob(&ctx, big, &id);
+  EXPECT_EQ(st.error_code(), grpc::StatusCode::UNAUTHENTICATED) << st.error_message();
+  EXPECT_NE(st.error_message().find("--token-file"), std::string::npos) << st.error_message();
+  EXPECT_LT(peak_kib() - before, 64L << 10) << "KiB more at the coordinator's peak";
 }
 
 }  // namespace
