@@ -63,6 +63,7 @@ v1::GetTaskResponse Dispatcher::get_task(uint64_t worker_id, uint32_t max_tasks,
   uint64_t samples = 0;
   auto room = [&] { return uint32_t(resp.tasks_size()) < max_tasks && (max_samples == 0 || samples < max_samples); };
   auto take_from = [&](Job& job) {
+    if (job.resting(w->identity(), now)) return;  // its task failed here lately (JobLifecycle::task_failed)
     while (room()) {
       std::optional<TileTask> t = job.plan.take(std::min(w->passes_per_task, job.max_run));
       if (!t) break;
@@ -131,7 +132,9 @@ void Dispatcher::back_up(WorkerInfo& w, uint32_t max_tasks, uint64_t max_samples
     if (old.size() >= max_tasks || ++looked > kBackupScan) break;
     if (l.check || l.worker == w.id || now - l.granted < kBackupAfterSeconds) continue;
     Job* job = p_.jobs.find_job(l.job);
-    if (!job || !job->live() || job->tile_lease[l.tile] != id || job->tile_backup.count(l.tile)) continue;
+    if (!job || !job->live() || job->tile_lease[l.tile] != id || job->tile_backup.count(l.tile) ||
+        job->resting(w.identity(), now))
+      continue;
     old.push_back({job, l.tile});
   }
   uint64_t samples = 0;

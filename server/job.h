@@ -62,9 +62,19 @@ struct Job {
   // id. Whichever result comes first is merged and both leases end.
   std::map<uint32_t, uint64_t> tile_backup;
   std::string error;
-  std::string image_error;          // the last image write's failure; empty once one succeeds
-  std::string checkpoint_error;     // the same for checkpoints
-  std::set<std::string> failed_on;  // workers (WorkerInfo::identity) that could not render one of its tasks
+  std::string image_error;       // the last image write's failure; empty once one succeeds
+  std::string checkpoint_error;  // the same for checkpoints
+  // Workers (WorkerInfo::identity) that could not render one of its tasks: how often, and
+  // until when they are not given its tasks (JobLifecycle::task_failed).
+  struct Failures {
+    uint32_t count = 0;
+    double until = 0;
+  };
+  std::map<std::string, Failures> failed_on;
+  bool resting(const std::string& worker, double now) const {
+    const auto it = failed_on.find(worker);
+    return it != failed_on.end() && now < it->second.until;
+  }
   // While the job is live: its latest task failure and what would fail the job, shown in
   // its status (a farm of one worker waits for another; the user is told why).
   std::string failure_note;

@@ -1,5 +1,9 @@
 #include "server/job_lifecycle.h"
 
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
 #include "core/util/invariant.h"
 #include "core/util/text.h"
 #include "server/request_error.h"
@@ -101,12 +105,18 @@ void JobLifecycle::cancel(const std::string& id, const std::string& requester, b
 void JobLifecycle::task_failed(Job& job, const std::string& worker, const std::string& error, double now, Effects& fx) {
   if (!job.live()) return;
   ++counters_.tasks_failed;
-  job.failed_on.insert(worker);
+  Job::Failures& f = job.failed_on[worker];
+  ++f.count;
+  const double rest =
+      std::min(kMaxRestSeconds, kFirstRestSeconds * std::exp2(double(std::min<uint32_t>(f.count, 32) - 1)));
+  f.until = now + rest;
   const std::string why = peer_text(error, 1024);  // (a worker's words: shown to users)
   if (job.failed_on.size() < kFailuresToFail) {    // maybe that worker's trouble: another tries
+    char rest_text[32];
+    std::snprintf(rest_text, sizeof rest_text, "%.0f", rest);
     job.failure_note = "a task failed on " + worker + ": " + why + " (the job fails once tasks fail on " +
                        std::to_string(kFailuresToFail) + " workers; " + std::to_string(job.failed_on.size()) +
-                       " so far)";
+                       " so far; that worker is not given its tasks for " + rest_text + " s)";
     return;
   }
   job.error = "tasks failed on " + std::to_string(job.failed_on.size()) + " workers: " + why;

@@ -17,6 +17,10 @@ class JobLifecycle {
  public:
   // Tasks of a job failed on this many different workers: the job fails.
   static constexpr size_t kFailuresToFail = 2;
+  // A worker whose task of a job failed is not given the job's tasks for this long, twice as
+  // long after each further failure, up to kMaxRestSeconds: it failed them over and over (it
+  // waits a second or so after each), the job never failing where it was the only worker.
+  static constexpr double kFirstRestSeconds = 30, kMaxRestSeconds = 3600;
 
   JobLifecycle(JobTable& jobs, Leasing& leasing, const Snapshotter& snapshots, CoordinatorCounters& counters)
       : jobs_(jobs), leasing_(leasing), snapshots_(snapshots), counters_(counters) {}
@@ -49,7 +53,8 @@ class JobLifecycle {
   void cancel(const std::string& id, const std::string& requester, bool any, double now, Effects& fx);
   // A worker (WorkerInfo::identity: an enrolled worker registering again is the same one)
   // could not render a task of the job: once tasks failed on kFailuresToFail different
-  // workers, the job fails with the error, keeping its image.
+  // workers, the job fails with the error, keeping its image; until then the worker rests
+  // from the job's tasks (Job::resting).
   void task_failed(Job& job, const std::string& worker, const std::string& error, double now, Effects& fx);
   // The same for worker `w`, reported as a task.failed event naming it and the error.
   void task_failed(Job& job, const WorkerInfo& w, const std::string& error, double now, Effects& fx);

@@ -46,7 +46,8 @@ TEST_F(FarmClient, AWatchSaysWhyALiveJobWaits) {
             std::string::npos)
       << text;
   EXPECT_NE(text.find("note: job " + id + ": a task failed on registration " + std::to_string(w) +
-                      ": the scene would not load: no memory (the job fails once tasks fail on 2 workers; 1 so far)"),
+                      ": the scene would not load: no memory (the job fails once tasks fail on 2 workers; 1 so far; "
+                      "that worker is not given its tasks for 30 s)"),
             std::string::npos)
       << text;
   EXPECT_EQ(text.find("note:"), text.rfind("note:")) << text;  // once

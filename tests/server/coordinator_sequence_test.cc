@@ -241,7 +241,7 @@ TEST_F(SequenceTest, AFrameFailingOnTwoWorkersFailsTheSequenceAndKeepsTheFinishe
   // does: a watcher prints it).
   EXPECT_EQ(c->status(id, false).error(), "frame 2: a task failed on registration " + std::to_string(a) +
                                               ": scene does not load here (the job fails once tasks fail on 2 "
-                                              "workers; 1 so far)");
+                                              "workers; 1 so far; that worker is not given its tasks for 30 s)");
   c->release(b, c->get_task(b).tasks(0).task_id(), "scene does not load here");
   const v1::JobStatus st = c->status(id, false);
   EXPECT_EQ(st.state(), v1::JobStatus::FAILED);

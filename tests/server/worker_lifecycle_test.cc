@@ -12,6 +12,13 @@
 namespace tessera {
 namespace {
 
+// The workers a job's tasks failed on.
+std::set<std::string> failed_on(const Job& job) {
+  std::set<std::string> out;
+  for (const auto& [worker, f] : job.failed_on) out.insert(worker);
+  return out;
+}
+
 using testing::has;
 using testing::kTiles;
 using testing::refusal;
@@ -155,16 +162,45 @@ TEST_F(WorkerLifecycleTest, ATaskGivenBackWithAnErrorCountsAsFailedOnThatWorker)
   const uint64_t a = join("a"), b = join("b");
   worker_lifecycle.release(a, lease_next(*job, a), "out of memory", now, fx);
   EXPECT_EQ(counters.tasks_failed, 1u);
-  EXPECT_EQ(job->failed_on, std::set<std::string>{"registration " + std::to_string(a)});
+  EXPECT_EQ(failed_on(*job), std::set<std::string>{"registration " + std::to_string(a)});
   EXPECT_TRUE(job->live());
   // Its status says so while it waits for another worker (a farm of one waits for good).
   EXPECT_EQ(job->status(now, 1, false).error(), "a task failed on registration " + std::to_string(a) +
                                                     ": out of memory (the job fails once tasks fail on 2 workers; 1 "
-                                                    "so far)");
+                                                    "so far; that worker is not given its tasks for 30 s)");
   worker_lifecycle.release(b, lease_next(*job, b), "out of memory", now, fx);
   EXPECT_EQ(job->state(), v1::JobStatus::FAILED);
   EXPECT_EQ(job->error, "tasks failed on 2 workers: out of memory");
   EXPECT_EQ(job->status(now, 0, false).error(), job->error);  // the note only while it is live
+}
+
+// A worker whose task of a job failed was given the job's tasks again at once: it failed
+// them over and over (a second or so apart), and where it was the job's only worker the
+// job never failed. It now rests from the job's tasks, 30 s and twice as long after each
+// further failure; other jobs' tasks, and other workers, go on.
+TEST_F(WorkerLifecycleTest, AWorkerWhoseTaskFailedRestsFromTheJob) {
+  const std::shared_ptr<Job> job = add_still(), other = add_still();
+  const uint64_t a = join("a"), b = join("b");
+  const uint64_t first = leasing.grant(*job, *job->plan.take(), worker(a), now);
+  worker_lifecycle.release(a, first, "out of memory", now, fx);
+  const auto jobs_of = [&](const v1::GetTaskResponse& r) {
+    std::set<std::string> out;
+    for (const v1::Task& t : r.tasks()) out.insert(t.job_id());
+    return out;
+  };
+  EXPECT_EQ(jobs_of(dispatcher.get_task(a, 4, 0, now, fx)), std::set<std::string>{other->id()});
+  EXPECT_TRUE(jobs_of(dispatcher.get_task(b, 4, 0, now, fx)).count(job->id()));
+  now += JobLifecycle::kFirstRestSeconds;
+  const v1::GetTaskResponse back = dispatcher.get_task(a, 64, 0, now, fx);
+  ASSERT_TRUE(jobs_of(back).count(job->id()));
+  for (const v1::Task& t : back.tasks())
+    if (t.job_id() == job->id()) {
+      worker_lifecycle.release(a, t.task_id(), "out of memory", now, fx);  // again: twice as long
+      break;
+    }
+  EXPECT_EQ(job->failed_on.at("registration " + std::to_string(a)).count, 2u);
+  EXPECT_EQ(job->failed_on.at("registration " + std::to_string(a)).until, now + 2 * JobLifecycle::kFirstRestSeconds);
+  EXPECT_TRUE(job->live());  // one worker so far
 }
 
 // What a worker says (its name, its host, why a task failed) reaches users' terminals
@@ -180,7 +216,7 @@ TEST_F(WorkerLifecycleTest, AWorkersWordsReachUsersWithoutControlCharacters) {
   worker_lifecycle.release(a, lease_next(*job, a), "out of\x1b[1A memory\xc2\x9b", now, fx);
   EXPECT_EQ(job->status(now, 1, false).error(), "a task failed on registration " + std::to_string(a) +
                                                     ": out of?[1A memory? (the job fails once tasks fail on 2 "
-                                                    "workers; 1 so far)");
+                                                    "workers; 1 so far; that worker is not given its tasks for 30 s)");
   ASSERT_FALSE(fx.events.empty());
   EXPECT_EQ(fx.events.back().detail, "out of?[1A memory?");
 }
@@ -194,7 +230,7 @@ TEST_F(WorkerLifecycleTest, AnEnrolledWorkerRegisteringAgainIsStillOneFailure) {
   const uint64_t second = join("render-1", "render-1", true);
   worker_lifecycle.release(second, lease_next(*job, second), "out of memory", now, fx);
   EXPECT_EQ(counters.tasks_failed, 2u);
-  EXPECT_EQ(job->failed_on, std::set<std::string>{"credential render-1"});
+  EXPECT_EQ(failed_on(*job), std::set<std::string>{"credential render-1"});
   EXPECT_TRUE(job->live());
   const uint64_t other = join("render-2", "render-2", true);
   worker_lifecycle.release(other, lease_next(*job, other), "out of memory", now, fx);
@@ -218,7 +254,7 @@ TEST_F(WorkerLifecycleTest, ALeaseHeldPastTheTaskBoundFailsOnItsWorker) {
   EXPECT_EQ(leases.live(ta), nullptr);
   EXPECT_EQ(worker_lifecycle.heartbeat(a, {ta}, 0, now), std::vector<uint64_t>{ta});  // a stops
   EXPECT_EQ(counters.tasks_failed, 1u);
-  EXPECT_EQ(job->failed_on, std::set<std::string>{"registration " + std::to_string(a)});
+  EXPECT_EQ(failed_on(*job), std::set<std::string>{"registration " + std::to_string(a)});
   EXPECT_TRUE(job->live());
   EXPECT_EQ(job->plan.ready(), kTiles);  // the tile is ready again
   const uint64_t tb = lease_next(*job, b);
