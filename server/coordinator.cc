@@ -72,6 +72,7 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
     MutexLock lock(mu_);
     const auto restore_scene = [this](const std::string& hash) { return scenes_.restore(hash); };
     const auto image_passes = [this](const std::string& job) -> std::optional<uint32_t> {
+      if (sink_->attribute(job, "tessera/final") != "1") return std::nullopt;  // (a job's final image only)
       const std::optional<std::string> v = sink_->attribute(job, "tessera/frame_passes");
       uint32_t n = 0;
       if (!v || std::from_chars(v->data(), v->data() + v->size(), n).ec != std::errc()) return std::nullopt;

@@ -178,6 +178,16 @@ bool DiskImageSink::intact(const std::string& job) const {
   return true;
 }
 
+void DiskImageSink::sync(const std::string& job) {
+  const std::string file = path(job, "image.exr");
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw std::runtime_error(file + ": cannot open to sync: " + std::strerror(errno));
+  const int rc = ::fsync(fd);
+  const int err = errno;
+  ::close(fd);
+  if (rc != 0) throw std::runtime_error(file + ": cannot sync: " + std::strerror(err));
+}
+
 std::optional<std::string> DiskImageSink::attribute(const std::string& job, const std::string& name) const {
   return exr_string_attribute(path(job, "image.exr"), name);
 }

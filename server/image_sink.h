@@ -56,6 +56,9 @@ class ImageSink {
   // Whether the job's image file decodes whole (checked before a final image is served:
   // a truncated or damaged file is an error, never a download that exits 0).
   virtual bool intact(const std::string& /*job*/) const { return true; }
+  // Makes the job's image file's bytes durable (fsync; its folder is synced by the next
+  // durable write there). Throws std::runtime_error.
+  virtual void sync(const std::string& /*job*/) {}
   // The string attribute `name` of the job's image file (its header alone); nothing where
   // there is none (or the sink keeps no files).
   virtual std::optional<std::string> attribute(const std::string& /*job*/, const std::string& /*name*/) const {
@@ -89,6 +92,7 @@ class DiskImageSink : public ImageSink {
   // Decodes the file once per version (inode, size, time) and remembers the answer.
   bool intact(const std::string& job) const override;
   std::optional<std::string> attribute(const std::string& job, const std::string& name) const override;
+  void sync(const std::string& job) override;
   // The job's whole folder (<dir>/<job>/: its image, preview and checkpoint).
   uint64_t remove(const std::string& job) override;
   void remove_unknown(const std::function<bool(const std::string& job)>& known) override;

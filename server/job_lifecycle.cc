@@ -106,7 +106,9 @@ void JobLifecycle::task_failed(Job& job, const std::string& worker, const std::s
   if (!job.live()) return;
   ++counters_.tasks_failed;
   Job::Failures& f = job.failed_on[worker];
-  ++f.count;
+  // Once an incident: a worker's leases of the job all failing for one cause (its scene
+  // does not load) rest it once, not twice as long for each.
+  if (now >= f.until) ++f.count;
   const double rest =
       std::min(kMaxRestSeconds, kFirstRestSeconds * std::exp2(double(std::min<uint32_t>(f.count, 32) - 1)));
   f.until = now + rest;

@@ -30,8 +30,10 @@ class Recovery {
     // Makes a scene kept by the earlier run usable again; returns its bundle's bytes.
     // Throws (naming the problem) when it is missing or damaged.
     std::function<uint64_t(const std::string& hash)> restore_scene;
-    // The frame passes the job's image on disk holds (its "frame_passes" attribute);
-    // nothing where it has none or it cannot be read. Unset: never known (every done frame
+    // The frame passes the job's final image on disk holds (its "frame_passes" attribute,
+    // where its "final" one says it was written at the job's end: a job waiting on its
+    // checks writes an image of every pass before, not denoised); nothing where it has
+    // none or it cannot be read. Unset: never known (every done frame
     // of a live sequence is then written again, its film read for it).
     std::function<std::optional<uint32_t>(const std::string& job)> image_passes = {};
   };

@@ -32,7 +32,8 @@ bool ResultIntake::still_wanted(const Lease& l, const Job& job) {
 
 std::optional<Lease> ResultIntake::wanted(const v1::TaskResult& result, v1::ResultAck& ack) {
   const Lease* l = p_.leases.known(result.task_id());
-  if (!l && p_.leases.was_merged(result.task_id())) {  // its passes merged (only the id is kept)
+  if (!l && !p_.verifier.quarantined(result.worker_id()) &&
+      p_.leases.was_merged(result.task_id())) {  // its passes merged (only the id is kept)
     ++p_.counters.results_duplicate;
     ack.set_duplicate(true);
     return std::nullopt;

@@ -78,6 +78,10 @@ SnapshotPlan Snapshotter::next(Job& j, double now) const {
     p.meta["time"] = std::to_string(st.time());  // seconds: frame / fps
   }
   if (st.exposure != 0) p.meta[kExposureAttribute] = exposure_text(st.exposure);  // (PNGs made of it take it)
+  // The image of an ended DONE job (denoised where asked): a restart leaves it be
+  // (Recovery::Parts::image_passes). An image with every pass merged can be written before
+  // (the job waits on its checks), not denoised.
+  if (p.ended && p.state == v1::JobStatus::DONE) p.meta["final"] = "1";
   return p;
 }
 
@@ -245,8 +249,15 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
       failed("image", e, &out.image, &out.image_why);
     }
   if (after_image) {
-    // The film only where the image could not be written (a restart writes it from there).
-    const bool film = out.image != SnapshotOutcome::kWritten;
+    // The film only where the image could not be written, or made durable (a restart
+    // writes it from there): the checkpoint without it is.
+    bool film = out.image != SnapshotOutcome::kWritten;
+    if (!film) try {
+        sink_.sync(job.id());
+      } catch (const std::exception& e) {
+        spdlog::warn("job {}: image: {} (its checkpoint keeps the film)", job.id(), e.what());
+        film = true;
+      }
     image.reset();
     begin_checkpoint(film);
     if (!bands()) return SnapshotOutcome{};

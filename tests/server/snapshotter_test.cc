@@ -112,6 +112,11 @@ TEST_F(SnapshotterTest, NextDescribesTheWrite) {
   EXPECT_EQ(p.meta.at("job"), job->id());
   EXPECT_EQ(p.meta.at("frame_passes"), "1");
   EXPECT_EQ(p.meta.count("frame"), 0u);  // a still
+  EXPECT_EQ(p.meta.count("final"), 0u);  // (only an ended DONE job's image: what a restart leaves be)
+  const std::shared_ptr<Job> done = add_still();
+  render_all(*done, add_worker());
+  ASSERT_EQ(done->state(), v1::JobStatus::DONE);  // (its final image asked for)
+  EXPECT_EQ(snapshotter.next(*done, now).meta.at("final"), "1");
 }
 
 TEST_F(SnapshotterTest, AFramesImageNamesItsFrameAndTime) {
