@@ -485,6 +485,7 @@ size_t Coordinator::expire_leases() {
   if (const double now = clock_->now(); now - credentials_swept_ >= 60) {  // credentials unused for an hour go
     credentials_swept_ = now;
     credentials_.expire();
+    uploads_.drop_expired();  // and uploads nobody submitted (off the disk: not under mu_)
   }
   return locked([&](Effects& fx) TESSERA_REQUIRES(mu_) {
     const double now = clock_->now();

@@ -46,6 +46,10 @@ class SceneUploads {
                      std::string* main_file);
   // Bytes of `owner`'s uploads here, in flight and finished.
   uint64_t held(const std::string& owner);
+  // Takes finished uploads past their time out of the table and off the disk (each upload
+  // and submit does, and the coordinator's reaper once a minute: an upload nobody submits
+  // left its folder until the next upload or submit, for good if none came).
+  void drop_expired();
 
  private:
   struct Upload {
@@ -55,8 +59,6 @@ class SceneUploads {
     uint64_t bytes = 0;
     double expires = -1;  // < 0: still arriving
   };
-  // Takes finished uploads past their time out of the table and off the disk.
-  void drop_expired();
   void forget(const std::string& id);  // and its folder
   uint64_t held_locked(const std::string& owner) const;
 

@@ -56,6 +56,8 @@ void Verifier::lease_checks(WorkerInfo& worker, uint32_t max, double now, v1::Ge
   for (auto& [id, c] : checks_.all()) {  // few, and a job waits for its checks to end
     if (uint32_t(out.tasks_size()) >= max) break;
     if (c.lease || !may_check(c, worker)) continue;
+    // Nor to a worker resting from the job (its task of it failed lately: a check would too).
+    if (const Job* job = jobs_.find_job(c.job); job && job->resting(worker.identity(), now)) continue;
     v1::Task* task = out.add_tasks();
     *task = *c.task;
     task->set_task_id(leasing_.grant_check(id, worker, now));

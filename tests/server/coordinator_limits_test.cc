@@ -228,6 +228,25 @@ TEST_F(CoordinatorTest, UploadsCountAgainstTheClientsSceneBytes) {
   EXPECT_EQ(c->list().size(), 2u);
 }
 
+// Found by audit: an upload nobody submits was taken off the disk only at the next upload
+// or submit, for good if none came. The reaper takes it off once past its time.
+TEST_F(CoordinatorTest, AnUploadNobodySubmitsLeavesTheDiskOnTheReapersTick) {
+  CoordinatorOptions o = options();
+  o.upload_kept_seconds = 10;
+  c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
+  const auto staged = [&] {
+    size_t n = 0;
+    for (const auto& e : fs::directory_iterator(dir + "/scenes"))
+      n += e.path().filename().string().find(".staging-") != std::string::npos;
+    return n;
+  };
+  upload("alice");
+  EXPECT_EQ(staged(), 1u);
+  t += 61;  // past its time, and the reaper's minute
+  c->expire_leases();
+  EXPECT_EQ(staged(), 0u);
+}
+
 // A worker that stops says so: its leases go back at once and it no longer counts.
 TEST_F(CoordinatorTest, UnregisteredWorkersGiveTheirLeasesBackAndLeave) {
   c->submit(request(job_settings()));

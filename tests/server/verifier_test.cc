@@ -123,6 +123,19 @@ TEST_F(VerifierTest, ChecksGoOnlyWhileWaitingNeverToTheirFirstWorkerAndUpToMax) 
   EXPECT_EQ(checks.waiting(), 0u);
 }
 
+// Found by review: a worker resting from a job (its task of it failed lately:
+// JobLifecycle::task_failed) was still given the job's checks, which would fail there too.
+TEST_F(VerifierTest, NoChecksGoToAWorkerRestingFromTheirJob) {
+  merged_and_picked(*job, a);
+  lifecycle.task_failed(*job, worker(b), "out of memory", now, fx);
+  v1::GetTaskResponse out;
+  verifier.lease_checks(worker(b), 1, now, out);
+  EXPECT_EQ(out.tasks_size(), 0);
+  now += JobLifecycle::kFirstRestSeconds;
+  verifier.lease_checks(worker(b), 1, now, out);
+  EXPECT_EQ(out.tasks_size(), 1);
+}
+
 TEST_F(VerifierTest, EqualDigestsPassAndTheJobEndsOnceItsChecksAreDecided) {
   testing::merge_passes(job->plan, testing::kPasses);
   Lease l{job->id(), 0, 0, a, now + 5, std::make_shared<const v1::Task>()};
