@@ -72,10 +72,12 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
     MutexLock lock(mu_);
     const auto restore_scene = [this](const std::string& hash) { return scenes_.restore(hash); };
     const auto image_passes = [this](const std::string& job) -> std::optional<uint32_t> {
-      if (sink_->attribute(job, "tessera/final") != "1") return std::nullopt;  // (a job's final image only)
-      const std::optional<std::string> v = sink_->attribute(job, "tessera/frame_passes");
+      const std::map<std::string, std::string> a = sink_->attributes(job);  // (one read of its header)
+      const auto final = a.find("tessera/final"), passes = a.find("tessera/frame_passes");
+      if (final == a.end() || final->second != "1" || passes == a.end()) return std::nullopt;  // a final image only
       uint32_t n = 0;
-      if (!v || std::from_chars(v->data(), v->data() + v->size(), n).ec != std::errc()) return std::nullopt;
+      const std::string& v = passes->second;
+      if (std::from_chars(v.data(), v.data() + v.size(), n).ec != std::errc()) return std::nullopt;
       return n;
     };
     Recovery({*store_, jobs_, lifecycle_, snapshotter_, counters_, restore_scene, image_passes})

@@ -188,8 +188,8 @@ void DiskImageSink::sync(const std::string& job) {
   if (rc != 0) throw std::runtime_error(file + ": cannot sync: " + std::strerror(err));
 }
 
-std::optional<std::string> DiskImageSink::attribute(const std::string& job, const std::string& name) const {
-  return exr_string_attribute(path(job, "image.exr"), name);
+std::map<std::string, std::string> DiskImageSink::attributes(const std::string& job) const {
+  return exr_string_attributes(path(job, "image.exr"));
 }
 
 uint64_t DiskImageSink::remove(const std::string& job) {

@@ -6,7 +6,6 @@
 #include <map>
 #include <memory>
 #include <mutex>
-#include <optional>
 #include <string>
 
 #include "core/io/image_io.h"
@@ -59,11 +58,9 @@ class ImageSink {
   // Makes the job's image file's bytes durable (fsync; its folder is synced by the next
   // durable write there). Throws std::runtime_error.
   virtual void sync(const std::string& /*job*/) {}
-  // The string attribute `name` of the job's image file (its header alone); nothing where
-  // there is none (or the sink keeps no files).
-  virtual std::optional<std::string> attribute(const std::string& /*job*/, const std::string& /*name*/) const {
-    return std::nullopt;
-  }
+  // The string attributes of the job's image file by name (its header alone); none where
+  // there is no file (or the sink keeps no files).
+  virtual std::map<std::string, std::string> attributes(const std::string& /*job*/) const { return {}; }
   // The last image written, as EXR bytes and a PNG preview; empty if none was written.
   virtual std::string exr(const std::string& job) const = 0;
   virtual std::string png(const std::string& job) const = 0;
@@ -91,7 +88,7 @@ class DiskImageSink : public ImageSink {
   std::unique_ptr<Reader> open(const std::string& job) const override;
   // Decodes the file once per version (inode, size, time) and remembers the answer.
   bool intact(const std::string& job) const override;
-  std::optional<std::string> attribute(const std::string& job, const std::string& name) const override;
+  std::map<std::string, std::string> attributes(const std::string& job) const override;
   void sync(const std::string& job) override;
   // The job's whole folder (<dir>/<job>/: its image, preview and checkpoint).
   uint64_t remove(const std::string& job) override;

@@ -223,25 +223,19 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
     }
     return true;
   };
-  const auto finish_checkpoint = [&](bool film) {
-    if (checkpoint && film && locked) try {
+  // A checkpoint with the film: the frame's splats, frozen after the bands (under `locked`).
+  const auto checkpoint_splats = [&] {
+    if (checkpoint && locked) try {
         if (!write_splats(job, plan, *encoder, locked))
           throw std::runtime_error("results were taken back from the film while it was written");
       } catch (const std::exception& e) {
         checkpoint.reset();
         failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
       }
-    if (checkpoint) try {
-        encoder->finish();
-        checkpoint->commit();
-        out.checkpoint = SnapshotOutcome::kWritten;
-      } catch (const std::exception& e) {
-        failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
-      }
   };
   if (plan.checkpoint && !after_image) begin_checkpoint(true);
   if (!bands()) return SnapshotOutcome{};
-  if (!after_image) finish_checkpoint(true);  // (its splats before the image's commit, as always)
+  checkpoint_splats();
   if (image) try {
       image->commit();
       out.image = SnapshotOutcome::kWritten;
@@ -261,10 +255,18 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
     image.reset();
     begin_checkpoint(film);
     if (!bands()) return SnapshotOutcome{};
-    finish_checkpoint(film);
+    if (film) checkpoint_splats();
   }
+  if (checkpoint) try {
+      encoder->finish();
+      checkpoint->commit();
+      out.checkpoint = SnapshotOutcome::kWritten;
+    } catch (const std::exception& e) {
+      failed("checkpoint", e, &out.checkpoint, &out.checkpoint_why);
+    }
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  // A DONE job's end is recorded once a checkpoint holding its whole film is on disk, so
+  // A DONE job's end is recorded once a checkpoint holding its whole film is on disk (a
+  // finished frame of a sequence: its progress, its final image made durable first), so
   // that a restart never finds a DONE job with part of a film. A cancelled or failed job's
   // end is recorded at once: nothing more will be rendered for it either way.
   const bool whole = out.checkpoint == SnapshotOutcome::kWritten || plan.checkpoint_on_disk;

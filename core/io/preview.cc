@@ -80,13 +80,16 @@ bool exr_intact(const std::string& exr_path, std::string* why) {
   }
 }
 
-std::optional<std::string> exr_string_attribute(const std::string& exr_path, const std::string& name) {
+std::map<std::string, std::string> exr_string_attributes(const std::string& exr_path) {
+  std::map<std::string, std::string> out;
   try {
     const Imf::InputFile in(exr_path.c_str());
-    if (const auto* a = in.header().findTypedAttribute<Imf::StringAttribute>(name)) return a->value();
+    for (auto it = in.header().begin(); it != in.header().end(); ++it)
+      if (const auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) out[it.name()] = s->value();
   } catch (const std::exception&) {  // (missing, or not an EXR)
+    out.clear();
   }
-  return std::nullopt;
+  return out;
 }
 
 }  // namespace tessera

@@ -4,7 +4,7 @@
 // floats, not the image.
 #pragma once
 
-#include <optional>
+#include <map>
 #include <string>
 
 namespace tessera {
@@ -17,8 +17,8 @@ std::string preview_png(const std::string& exr_path, int max_width = 1280);
 // OpenEXR's reason otherwise.
 bool exr_intact(const std::string& exr_path, std::string* why = nullptr);
 
-// The string attribute `name` of the EXR at `exr_path`, from its header alone; nothing
-// where the file or the attribute is missing or the header does not read.
-std::optional<std::string> exr_string_attribute(const std::string& exr_path, const std::string& name);
+// The string attributes of the EXR at `exr_path` by name, from its header alone; none
+// where the file is missing or its header does not read.
+std::map<std::string, std::string> exr_string_attributes(const std::string& exr_path);
 
 }  // namespace tessera

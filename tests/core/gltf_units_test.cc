@@ -220,14 +220,19 @@ TEST(GltfTexturesShared, TheSameImageSampledTheSameWayIsDecodedOnceAndTheTexelsA
                  "texels past the limit");
 }
 
-// Found by review: morph targets were bounded per primitive, and a scene may hold a million
-// mesh copies. The scene's targets are bounded together, the error naming the target.
-TEST(GltfMorph, TheScenesTargetsAreBoundedTogether) {
-  GltfContext ctx("m.gltf");
+// Accessor 0 of the model: 3 VEC3 floats, (0, 0, 1) each, over buffer 0 (a morph target's).
+void add_three_vec3s(GltfContext& ctx) {
   std::string bytes;
   put<float>(bytes, {0, 0, 1, 0, 0, 1, 0, 0, 1});
   set_buffer(ctx, bytes, {{0, bytes.size()}});
   ctx.model.accessors.push_back(accessor(0, TINYGLTF_COMPONENT_TYPE_FLOAT, 3, TINYGLTF_TYPE_VEC3));
+}
+
+// Found by review: morph targets were bounded per primitive, and a scene may hold a million
+// mesh copies. The scene's targets are bounded together, the error naming the target.
+TEST(GltfMorph, TheScenesTargetsAreBoundedTogether) {
+  GltfContext ctx("m.gltf");
+  add_three_vec3s(ctx);
   tinygltf::Primitive prim;
   prim.targets = {{{"POSITION", 0}}, {}, {{"POSITION", 0}}};  // the empty one costs nothing
   ctx.max_morph_values = 18;                                  // a target of 3 vertices holds 9
@@ -243,10 +248,7 @@ TEST(GltfMorph, TheScenesTargetsAreBoundedTogether) {
 // the error listing what each kind would hold.
 TEST(GltfLoadBytes, EveryKindCountsTowardOneBound) {
   GltfContext ctx("m.gltf");
-  std::string bytes;
-  put<float>(bytes, {0, 0, 1, 0, 0, 1, 0, 0, 1});
-  set_buffer(ctx, bytes, {{0, bytes.size()}});
-  ctx.model.accessors.push_back(accessor(0, TINYGLTF_COMPONENT_TYPE_FLOAT, 3, TINYGLTF_TYPE_VEC3));
+  add_three_vec3s(ctx);
   tinygltf::Primitive prim;
   prim.targets = {{{"POSITION", 0}}};  // 3 vertices: 36 bytes
   ctx.max_load_bytes = 100;

@@ -58,17 +58,33 @@ TEST(SceneLoads, AtMostTheBoundRunAtOnceAndTheRestWaitTheirTurn) {
   EXPECT_EQ(loads.running(), 0u);
 }
 
+// A turn taken on a thread of its own and held until release().
+class HeldTurn {
+ public:
+  explicit HeldTurn(const SceneLoads& loads)
+      : thread_([this, &loads] {
+          loads.in_turn([this] {
+            holding_.set_value();
+            release_.get_future().wait();
+          });
+        }) {
+    holding_.get_future().wait();
+  }
+  ~HeldTurn() { release(); }
+  void release() {
+    if (!thread_.joinable()) return;
+    release_.set_value();
+    thread_.join();
+  }
+
+ private:
+  std::promise<void> release_, holding_;
+  std::thread thread_;
+};
+
 TEST(SceneLoads, AWaitEndsWhenItsCallerGoesAway) {
   const SceneLoads loads(1);
-  std::promise<void> release;
-  std::promise<void> holding;
-  std::thread holder([&] {
-    loads.in_turn([&] {
-      holding.set_value();
-      release.get_future().wait();
-    });
-  });
-  holding.get_future().wait();
+  HeldTurn holder(loads);
   {
     const CancelScope gone([] { return true; });  // its client went away
     const auto t0 = std::chrono::steady_clock::now();
@@ -76,8 +92,7 @@ TEST(SceneLoads, AWaitEndsWhenItsCallerGoesAway) {
     EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(5));
   }
   EXPECT_EQ(loads.running(), 1u);  // the holder's, not the one that gave up
-  release.set_value();
-  holder.join();
+  holder.release();
   EXPECT_EQ(loads.in_turn([] { return 7; }), 7);  // its turn came back
 }
 
@@ -86,15 +101,7 @@ TEST(SceneLoads, AWaitEndsWhenItsCallerGoesAway) {
 // leaves the line.
 TEST(SceneLoads, TurnsGoInTheOrderTheyWereAskedFor) {
   const SceneLoads loads(1);
-  std::promise<void> release;
-  std::promise<void> holding;
-  std::thread holder([&] {
-    loads.in_turn([&] {
-      holding.set_value();
-      release.get_future().wait();
-    });
-  });
-  holding.get_future().wait();
+  HeldTurn holder(loads);
   std::mutex mu;
   std::vector<int> order;
   std::atomic<bool> give_up{false};
@@ -120,8 +127,7 @@ TEST(SceneLoads, TurnsGoInTheOrderTheyWereAskedFor) {
     gone = !order.empty();
   }
   EXPECT_EQ(loads.waiting(), 5u);
-  release.set_value();
-  holder.join();
+  holder.release();
   for (std::thread& t : waiters) t.join();
   EXPECT_EQ(order, (std::vector<int>{-1, 0, 1, 3, 4, 5}));
   EXPECT_EQ(loads.waiting(), 0u);

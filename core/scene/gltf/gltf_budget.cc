@@ -13,13 +13,17 @@ std::string count_text(double n) {
   return buf;
 }
 
+// Accessor `a`'s declared count; 0 where there is no such accessor.
+double accessor_count(const GltfContext& ctx, int a) {
+  return a >= 0 && size_t(a) < ctx.model.accessors.size() ? double(ctx.model.accessors[size_t(a)].count) : 0;
+}
+
 // A primitive's triangles from its declared counts; 0 for points and lines (not read).
 double primitive_triangles(const GltfContext& ctx, const tinygltf::Primitive& p) {
-  const auto count = [&](int a) {
-    return a >= 0 && size_t(a) < ctx.model.accessors.size() ? double(ctx.model.accessors[size_t(a)].count) : 0;
-  };
   auto pos = p.attributes.find("POSITION");
-  const double n = p.indices >= 0 ? count(p.indices) : pos != p.attributes.end() ? count(pos->second) : 0;
+  const double n = p.indices >= 0              ? accessor_count(ctx, p.indices)
+                   : pos != p.attributes.end() ? accessor_count(ctx, pos->second)
+                                               : 0;
   if (p.mode == TINYGLTF_MODE_TRIANGLES || p.mode == -1) return std::floor(n / 3);
   if (p.mode == TINYGLTF_MODE_TRIANGLE_STRIP || p.mode == TINYGLTF_MODE_TRIANGLE_FAN) return std::max(0.0, n - 2);
   return 0;
@@ -78,9 +82,6 @@ class Budget {
     Count count;
   };
 
-  double accessor_count(int a) const {
-    return a >= 0 && size_t(a) < ctx_.model.accessors.size() ? double(ctx_.model.accessors[size_t(a)].count) : 0;
-  }
   // Triangles of a mesh from its primitives' declared counts (the walk checks them later).
   double mesh_triangles(int mesh) const {
     if (size_t(mesh) >= ctx_.model.meshes.size()) return 0;
@@ -98,7 +99,7 @@ class Budget {
     const tinygltf::Value& attrs = ext->second.Get("attributes");
     for (const char* name : {"TRANSLATION", "ROTATION", "SCALE"})
       if (attrs.IsObject() && attrs.Has(name) && attrs.Get(name).IsInt())
-        return std::max(1.0, accessor_count(attrs.Get(name).GetNumberAsInt()));
+        return std::max(1.0, accessor_count(ctx_, attrs.Get(name).GetNumberAsInt()));
     return 1;
   }
 
@@ -115,10 +116,7 @@ double gltf_mesh_bytes(const GltfContext& ctx, int mesh, bool posed, bool skinne
     auto pos = p.attributes.find("POSITION");
     const double triangles = primitive_triangles(ctx, p);
     if (pos == p.attributes.end() || triangles == 0) continue;  // (points and lines are not read)
-    const tinygltf::Accessor* a = pos->second >= 0 && size_t(pos->second) < ctx.model.accessors.size()
-                                      ? &ctx.model.accessors[size_t(pos->second)]
-                                      : nullptr;
-    const double vertices = a ? double(a->count) : 0;
+    const double vertices = accessor_count(ctx, pos->second);
     double per_vertex = 2 * sizeof(Vec3);  // positions, normals
     for (const auto& [name, size] : {std::pair<const char*, size_t>{"TEXCOORD_0", sizeof(Vec2)},
                                      {"TEXCOORD_1", sizeof(Vec2)},
