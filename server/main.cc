@@ -100,6 +100,10 @@ int main(int argc, char** argv) {
   tessera::CoordinatorOptions opt;
   app.add_option("--listen", listen, "gRPC address HOST:PORT (port 0 picks a free port)")->capture_default_str();
   app.add_option("--http", http, "status endpoint HOST:PORT (port 0 picks a free port)")->capture_default_str();
+  std::vector<std::string> allowed_hosts;
+  app.add_option("--http-allowed-host", allowed_hosts,
+                 "without --tokens-file, a host name the status endpoint answers to besides its addresses and "
+                 "localhost (repeat for more; guards against DNS rebinding)");
   std::string health;
   app.add_option("--health", health,
                  "probes' own listener HOST:PORT (/healthz, /readyz on their own threads: answered whatever holds the "
@@ -297,7 +301,7 @@ int main(int argc, char** argv) {
       spdlog::error("cannot listen on {}", listen);
       return 1;
     }
-    tessera::StatusHttp status(coordinator, &auth, tls_cert, tls_key);
+    tessera::StatusHttp status(coordinator, &auth, tls_cert, tls_key, allowed_hosts);
     const int http_bound = status.bind(http_host, http_port);
     status.start();
     std::printf("grpc listening on %s:%d%s\n", grpc_host.c_str(), bound, tls_cert.empty() ? "" : " (TLS)");

@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/util/text.h"
+#include "server/host_guard.h"
 #include "server/json_text.h"
 #include "server/live_page.h"
 #include "server/metrics.h"
@@ -76,10 +77,24 @@ std::unique_ptr<httplib::Server> make_server(const std::string& cert, const std:
 }  // namespace
 
 StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::string& tls_cert,
-                       const std::string& tls_key)
+                       const std::string& tls_key, std::vector<std::string> allowed_hosts)
     : c_(c), http_(make_server(tls_cert, tls_key), "http") {
   httplib::Server& server = http_.server();
-  if (auth && auth->enabled())
+  if (!auth || !auth->enabled())
+    server.set_pre_routing_handler(
+        [allowed = std::move(allowed_hosts)](const httplib::Request& req, httplib::Response& res) {
+          if (req.path == "/healthz" || req.path == "/readyz") return httplib::Server::HandlerResponse::Unhandled;
+          const std::string host = req.get_header_value("Host");
+          if (host_allowed(host, allowed)) return httplib::Server::HandlerResponse::Unhandled;
+          res.status = 403;
+          res.set_content("Host '" + peer_text(host, 256) +
+                              "' refused: without access tokens this server answers only its addresses, localhost and "
+                              "the names --http-allowed-host gives (a web page elsewhere could point such a name here: "
+                              "DNS rebinding)\n",
+                          "text/plain");
+          return httplib::Server::HandlerResponse::Handled;
+        });
+  else
     server.set_pre_routing_handler([auth](const httplib::Request& req, httplib::Response& res) {
       // Probes (kubelet, load balancers) carry no token, and the answers say nothing.
       if (req.path == "/healthz" || req.path == "/readyz") return httplib::Server::HandlerResponse::Unhandled;

@@ -9,10 +9,12 @@
 //                        tiles, frames, settings and events; actions (page_actions.h)
 // With access tokens, every request needs one that may read (viewer, client or admin), as
 // "Authorization: Bearer TOKEN" or HTTP Basic auth with the token as the password (so a
-// browser asks for it).
+// browser asks for it). Without them, only requests to an address, localhost or an
+// allowed name are answered (host_guard.h).
 #pragma once
 
 #include <string>
+#include <vector>
 
 #include "server/auth.h"
 #include "server/coordinator.h"
@@ -35,8 +37,10 @@ class StatusHttp {
   // Tiles in one /api/jobs/<id> answer at most (and by default): about 2 MB of JSON.
   static constexpr uint32_t kMaxTilesPage = 16384;
   // With `tls_cert` and `tls_key` (PEM files) it serves HTTPS. Throws if they do not load.
+  // Without tokens it answers only requests whose Host is an address, localhost or one of
+  // `allowed_hosts` (host_guard.h: DNS rebinding).
   explicit StatusHttp(Coordinator& coordinator, const Authenticator* auth = nullptr, const std::string& tls_cert = "",
-                      const std::string& tls_key = "");
+                      const std::string& tls_key = "", std::vector<std::string> allowed_hosts = {});
   ~StatusHttp();
   // Binds host:port (port 0 picks one) and returns the port; throws on failure.
   int bind(const std::string& host, int port) { return http_.bind(host, port); }

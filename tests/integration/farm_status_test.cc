@@ -129,5 +129,39 @@ TEST_F(Farm, StatusEndpointJsonMetricsPreviewAndPage) {
   EXPECT_GE(markup_lines, 4);
 }
 
+// Found by audit: without tokens every caller may do everything, and the page actions'
+// same-origin checks compare Origin with Host, both of which a page on the attacker's own
+// name carries once that name is re-pointed at this machine (DNS rebinding). Without tokens
+// only addresses, localhost and names given with --http-allowed-host are answered.
+TEST_F(Farm, WithoutTokensOnlyItsAddressesLocalhostAndAllowedNamesAreAnswered) {
+  start_coordinator("127.0.0.1:0", "2", {"--http-allowed-host", "Render.Example."});
+  httplib::Client cli("127.0.0.1", http_port);
+  const std::string port = ":" + std::to_string(http_port);
+  const auto get = [&](const std::string& path, const std::string& host) {
+    return cli.Get(path, httplib::Headers{{"Host", host}});
+  };
+  auto r = get("/api/status", "evil.example" + port);
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 403);
+  EXPECT_NE(r->body.find("Host 'evil.example" + port + "' refused"), std::string::npos) << r->body;
+  EXPECT_NE(r->body.find("--http-allowed-host"), std::string::npos) << r->body;
+  // The actions too, with the Origin a rebound page sends.
+  r = cli.Post(
+      "/api/workers/1/drain",
+      httplib::Headers{
+          {"Host", "evil.example" + port}, {"Origin", "http://evil.example" + port}, {"X-Tessera-Action", "1"}},
+      "", "application/json");
+  ASSERT_TRUE(r);
+  EXPECT_EQ(r->status, 403);
+  EXPECT_EQ(get("/healthz", "evil.example" + port)->status, 200);  // probes say nothing
+  for (const std::string& host :
+       std::vector<std::string>{"127.0.0.1" + port, "localhost" + port, "LOCALHOST", "tessera.localhost" + port,
+                                "[::1]" + port, "10.1.2.3", "render.example" + port, "render.example."})
+    EXPECT_EQ(get("/api/status", host)->status, 200) << host;
+  for (const std::string& host : std::vector<std::string>{"render.example.evil" + port, "127.0.0.1.nip.io" + port,
+                                                          "[::1" + port, "localhost:x", "1.2.3"})
+    EXPECT_EQ(get("/api/status", host)->status, 403) << host;
+}
+
 }  // namespace
 }  // namespace tessera
