@@ -1,6 +1,7 @@
 #include "server/metrics.h"
 
 #include <map>
+#include <set>
 
 #include "core/util/version.h"
 #include "server/histogram.h"
@@ -100,13 +101,16 @@ std::string prometheus_text(const Coordinator& c) {
   m.gauge("tessera_workers_utilization",
           "Busy over available render-thread time of all workers, last seconds (0 when idle).", c.utilization());
   // Per worker, labelled by name (stable across restarts; ids are not). Two live workers of
-  // one name (a restart not yet forgotten) get "#2", "#3" ...
+  // one name and host (a restart not yet forgotten) get "#2", "#3" ..., a suffix no other
+  // series has (a worker may be named "a#2" itself: a series twice breaks the exposition).
   std::vector<std::string> labels;
-  std::map<std::string, int> seen;
+  std::set<std::string> taken;
   for (const WorkerInfo& w : workers) {
-    const int n = ++seen[w.name];
-    labels.push_back("worker=\"" + metric_label(n == 1 ? w.name : w.name + "#" + std::to_string(n)) + "\",host=\"" +
-                     metric_label(w.host) + "\"");
+    const std::string host = ",host=\"" + metric_label(w.host) + "\"";
+    std::string label = "worker=\"" + metric_label(w.name) + "\"" + host;
+    for (int n = 2; !taken.insert(label).second; ++n)
+      label = "worker=\"" + metric_label(w.name + "#" + std::to_string(n)) + "\"" + host;
+    labels.push_back(std::move(label));
   }
   auto per_worker = [&](const char* name, const char* type, const char* help, auto value) {
     m.head(name, type, help);

@@ -110,7 +110,8 @@ void add_page_actions(httplib::Server& server, Coordinator& c, const Authenticat
     if (!who->admin) return error(res, 403, "only an admin may drain or resume a worker");
     uint64_t id = 0;
     const std::string v = req.matches[1];
-    std::from_chars(v.data(), v.data() + v.size(), id);
+    if (std::from_chars(v.data(), v.data() + v.size(), id).ec != std::errc())
+      return error(res, 400, "worker id " + v.substr(0, 32) + " is not a worker id (past 2^64)");
     const bool drain = req.matches[2] == "drain";
     answer(res, [&] {
       c.drain_worker(id, drain, who->name);

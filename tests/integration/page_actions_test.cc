@@ -83,6 +83,9 @@ TEST_F(PageActions, EachActionIsAllowedOnlyToWhoMayAndNeverFromAnotherSite) {
   ASSERT_EQ(act("/api/workers/" + worker + "/resume", kAdmin)->status, 200);
   EXPECT_EQ(get("/api/status")["workers"][0]["draining"], false);
   EXPECT_EQ(act("/api/workers/12345/drain", kAdmin)->status, 404);
+  r = act("/api/workers/99999999999999999999999/drain", kAdmin);  // (was "no worker 0")
+  EXPECT_EQ(r->status, 400);
+  EXPECT_NE(r->body.find("is not a worker id"), std::string::npos) << r->body;
 
   // An admin may delete anyone's job.
   r = act("/api/jobs/" + id + "/delete", kAdmin);

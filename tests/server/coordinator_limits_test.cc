@@ -1,8 +1,11 @@
 // The coordinator's bounds: batched leases, fair shares, live jobs, pixels, scene bytes and
 // samples per client, registered workers, results only from the lease holder.
 #include <atomic>
+#include <set>
+#include <sstream>
 #include <thread>
 
+#include "server/metrics.h"
 #include "tests/server/coordinator_fixture.h"
 
 namespace tessera {
@@ -326,6 +329,27 @@ TEST_F(CoordinatorTest, AWorkersNameAndHostAreCutOnCharacterBoundaries) {
   EXPECT_EQ(c->workers()[0].id, id);
   EXPECT_EQ(c->workers()[0].name, std::string(255, 'a'));
   EXPECT_EQ(c->workers()[0].host, std::string(254, 'h'));
+}
+
+// Found by audit: workers of one name and host were told apart by "#2", "#3" counted per
+// name alone, so workers named "a", "a" and "a#2" gave two series labelled "a#2", which the
+// exposition format forbids (Prometheus drops one; promtool fails the page).
+TEST_F(CoordinatorTest, EachWorkersMetricsSeriesIsLabelledUniquely) {
+  for (const char* name : {"a", "a", "a#2", "a#2"}) {
+    v1::RegisterRequest r;
+    r.set_version(kProtocolVersion);
+    r.set_name(name);
+    r.set_host("h");
+    c->register_worker(r);
+  }
+  const std::string text = prometheus_text(*c);
+  std::set<std::string> series;
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);)
+    if (line.rfind("tessera_worker_tasks_total{", 0) == 0)
+      EXPECT_TRUE(series.insert(line.substr(0, line.find('}'))).second) << line;
+  EXPECT_EQ(series.size(), 4u) << text;
+  EXPECT_TRUE(series.count("tessera_worker_tasks_total{worker=\"a\",host=\"h\"")) << text;
 }
 
 // A heartbeat lists the tasks a worker holds: at most twice --max-leases-per-worker, so
