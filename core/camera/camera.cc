@@ -1,13 +1,27 @@
 #include "core/camera/camera.h"
 
 #include <cmath>
+#include <cstdio>
 #include <optional>
+#include <string>
 
 #include "core/math/float_math.h"
 #include "core/render/settings.h"
 #include "core/sampling/warp.h"
 
 namespace tessera {
+namespace {
+
+std::string short_float(double v) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%g", v);
+  return buf;
+}
+std::string short_vec(Vec3 v) {
+  return "(" + short_float(v.x) + ", " + short_float(v.y) + ", " + short_float(v.z) + ")";
+}
+
+}  // namespace
 
 Camera::Camera(const Scene& scene, const CameraSettings& s)
     : inv_w_(1.0f / float(s.width)),
@@ -28,9 +42,17 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
     const Bounds b = scene.object_bounds();
     const Vec3 target = b.empty() ? Vec3{} : b.center();
     objects_center = target;
-    const float dist = b.empty() ? 1.0f : 1.5f * length(b.diagonal());
+    float dist = b.empty() ? 1.0f : 1.5f * length(b.diagonal());
+    if (!(dist > 0)) dist = 1;  // the objects are one point: framed as an empty scene
     eye_ = target + dir * dist;
     z_ = normalize(eye_ - target);
+    // The eye must differ from the target by about dist: not where float cannot hold the
+    // step at the target's coordinates (a 0.5 sphere at 1e11) or square it (a 1e-25 one).
+    if (!is_finite(z_) || !(length(eye_ - target) > 0.5f * dist))
+      throw SettingsError("--camera", "CS184 framing cannot place the camera: the objects (diagonal " +
+                                          short_float(length(b.diagonal())) + ", centred at " + short_vec(target) +
+                                          ") are too small to frame in float at their position; scale the scene, "
+                                          "or give --camera file");
     x_ = normalize(cross(Vec3{0, 1, 0}, z_));
     y_ = normalize(cross(z_, x_));
     // Fit to an 800x600 screen, then keep the pixel pitch for W x H (doc 2.3).
@@ -90,6 +112,14 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
     tan_v_ = float(std::tan(double(*p.fov) * deg / 2));
     tan_h_ = tan_v_ * float(s.width) / float(s.height);
   }
+  // Whatever the file, the framing and the path gave: finite, or refused here (Embree
+  // aborts the process on a ray that is not).
+  const bool view = ortho_h_ > 0 ? std::isfinite(ortho_h_) && std::isfinite(ortho_w_) && ortho_w_ > 0
+                                 : std::isfinite(tan_h_) && std::isfinite(tan_v_) && tan_h_ > 0 && tan_v_ > 0;
+  if (!is_finite(eye_) || !is_finite(x_) || !is_finite(y_) || !is_finite(z_) || !view)
+    throw SettingsError("--camera", "the camera is degenerate: eye " + short_vec(eye_) + ", looking along " +
+                                        short_vec(-z_) + ", view " + short_float(2 * tan_h_) + " x " +
+                                        short_float(2 * tan_v_) + " at unit distance");
 }
 
 Ray Camera::generate(float fx, float fy, Vec2 u_lens) const {

@@ -18,6 +18,18 @@ struct Dvec3 {
 
 inline Dvec3 operator-(Dvec3 a, Dvec3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
 inline double dlength(Dvec3 a) { return std::sqrt(a.x * a.x + a.y * a.y + a.z * a.z); }
+// v made unit length: normalize(v.to_float()) where float holds its squared length well
+// (the bits every scene had); in double where it may not (a length past about 1e19
+// overflows the square, making the result zero; under about 1e-19 it underflows, making it
+// NaN or inexact). Zero if v is zero or not finite.
+inline Vec3 unit(Dvec3 v) {
+  const Vec3 f = v.to_float();
+  const float len = length(f);
+  if (len > 1e-18f && len < 1e18f) return normalize(f);
+  const double d = dlength(v);
+  if (!(d > 0) || !std::isfinite(d)) return {};
+  return Dvec3{v.x / d, v.y / d, v.z / d}.to_float();
+}
 
 class Mat4 {
  public:

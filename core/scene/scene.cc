@@ -162,7 +162,21 @@ void Scene::finalize() {
         throw SceneError(source, element,
                          "emission " + std::to_string(v) + " must be finite, non-negative and at most 1e20");
   };
-  for (const Light& l : lights) check_emission(l.color, "light '" + l.name + "'");
+  for (const Light& l : lights) {
+    check_emission(l.color, "light '" + l.name + "'");
+    // A point or spot light's falloff divides its colour by c + l d + q d^2: tiny
+    // coefficients (c = 1e-38) passed the bound above and made every sample infinite.
+    if (l.kind == Light::Kind::kPoint || l.kind == Light::Kind::kSpot) {
+      const double at_unit = double(l.color.max()) / (double(l.att_constant) + l.att_linear + l.att_quadratic);
+      if (!(at_unit <= kMaxEmission)) {
+        char v[32];
+        std::snprintf(v, sizeof v, "%g", at_unit);
+        throw SceneError(source, "light '" + l.name + "'",
+                         std::string("emission over attenuation at unit distance, ") + v +
+                             ", must be at most 1e20 (attenuation coefficients too small for its colour)");
+      }
+    }
+  }
   for (const Material& m : materials) check_emission(m.radiance, "material '" + m.name + "'");
   // Rect lights are also geometry: a one-sided emitter that camera rays see and that
   // blocks other rays (format doc 3.3, with the physical radiance `color`).

@@ -259,11 +259,11 @@ TEST_F(BadCollada, MaterialValuesOutOfRange) {
                "<reflectance", "<reflectance> component 1.5 is outside [0, 1]");
   expect_error(replaced("<transmittance>1 1 1</transmittance>", "<transmittance>1 2 1</transmittance>"),
                "<transmittance", "is outside [0, 1]");
-  expect_error(replaced("<ior>1.5</ior>", "<ior>0</ior>"), "<ior", "<ior> 0 is outside (0, 10]");
-  expect_error(replaced("<ior>1.5</ior>", "<ior>1e30</ior>"), "<ior", "<ior> 1e+30 is outside (0, 10]");
+  expect_error(replaced("<ior>1.5</ior>", "<ior>0</ior>"), "<ior", "<ior> 0 is outside (0.001, 10]");
+  expect_error(replaced("<ior>1.5</ior>", "<ior>1e30</ior>"), "<ior", "<ior> 1e+30 is outside (0.001, 10]");
   expect_error(replaced("<mirror><reflectance>0.95 0.95 0.95</reflectance></mirror>",
                         "<microfacet><alpha>0</alpha><eta>1 1 1</eta><k>1 1 1</k></microfacet>"),
-               "<alpha", "<alpha> 0 is outside (0, 10]");
+               "<alpha", "<alpha> 0 is outside (0.0001, 10]");
   expect_error(replaced("<mirror><reflectance>0.95 0.95 0.95</reflectance></mirror>",
                         "<microfacet><alpha>0.2</alpha><eta>1 1 1</eta><k>1 -1 1</k></microfacet>"),
                "<k", "<k> component -1 is outside [0, 100]");

@@ -9,10 +9,12 @@
 #include <fstream>
 #include <map>
 #include <pugixml.hpp>
+#include <set>
 #include <sstream>
 #include <unordered_map>
 
 #include "core/math/transform.h"
+#include "core/scene/collada/xml_text.h"
 #include "core/scene/scene_error.h"
 #include "core/util/cancel.h"
 
@@ -22,13 +24,13 @@ namespace {
 class ColladaLoader {
  public:
   ColladaLoader(const std::string& text, std::string name, uint64_t max_triangles)
-      : text_(text), file_(std::move(name)), max_triangles_(max_triangles) {}
+      : text_(text), xml_(text, std::move(name)), file_(xml_.file()), max_triangles_(max_triangles) {}
 
   Scene load() {
     scene_.source = file_;
     pugi::xml_parse_result res = doc_.load_buffer(text_.data(), text_.size(), pugi::parse_default);
     if (!res)
-      throw SceneError(file_, "line " + std::to_string(line_of(res.offset)),
+      throw SceneError(file_, "line " + std::to_string(xml_.line_of(res.offset)),
                        std::string("XML parse error: ") + res.description());
     pugi::xml_node root = doc_.child("COLLADA");
     if (!root) throw SceneError(file_, "", "not a COLLADA document (no <COLLADA> root element)");
@@ -53,73 +55,14 @@ class ColladaLoader {
   }
 
  private:
-  // ---- diagnostics -------------------------------------------------------------------
-  size_t line_of(ptrdiff_t offset) const {
-    if (offset < 0) return 0;
-    const size_t end = std::min(size_t(offset), text_.size());
-    return 1 + size_t(std::count(text_.begin(), text_.begin() + ptrdiff_t(end), '\n'));
-  }
-  std::string where(pugi::xml_node n) const {
-    // Built by appends: `"<" + std::string(...)` trips GCC 12's false -Wrestrict (PR 105329).
-    std::string s("<");
-    s.append(n.name());
-    if (n.attribute("id")) s.append(" id=\"").append(n.attribute("id").value()).append("\"");
-    s.append("> (line ").append(std::to_string(line_of(n.offset_debug()))).append(")");
-    return s;
-  }
-  [[noreturn]] void fail(pugi::xml_node n, const std::string& reason) const {
-    throw SceneError(file_, where(n), reason);
-  }
+  // ---- diagnostics and numbers (xml_text.h) -----------------------------------------
+  std::string where(pugi::xml_node n) const { return xml_.where(n); }
+  [[noreturn]] void fail(pugi::xml_node n, const std::string& reason) const { xml_.fail(n, reason); }
+  std::vector<double> numbers(pugi::xml_node n) const { return xml_.numbers(n); }
+  std::vector<double> numbers_exact(pugi::xml_node n, size_t want) const { return xml_.numbers_exact(n, want); }
+  std::vector<uint32_t> indices(pugi::xml_node n) const { return xml_.indices(n); }
+  static std::string short_number(double v) { return XmlText::short_number(v); }
 
-  // ---- parsing helpers ---------------------------------------------------------------
-  std::vector<double> numbers(pugi::xml_node n) const {
-    std::vector<double> out;
-    const char* s = n.child_value();
-    while (*s) {
-      while (*s == ' ' || *s == '\n' || *s == '\t' || *s == '\r') ++s;
-      if (!*s) break;
-      char* end = nullptr;
-      errno = 0;
-      const double v = std::strtod(s, &end);
-      if (end == s) {
-        std::string tok(s, std::find_if(s, s + std::strlen(s), [](char c) { return std::isspace(uint8_t(c)); }));
-        fail(n, "'" + tok.substr(0, 32) + "' is not a number");
-      }
-      if (!std::isfinite(v)) fail(n, "non-finite number '" + std::string(s, size_t(end - s)) + "'");
-      out.push_back(v);
-      s = end;
-    }
-    return out;
-  }
-  std::vector<double> numbers_exact(pugi::xml_node n, size_t want) const {
-    std::vector<double> v = numbers(n);
-    if (v.size() < want) fail(n, "expected " + std::to_string(want) + " numbers, found " + std::to_string(v.size()));
-    v.resize(want);
-    return v;
-  }
-  std::vector<uint32_t> indices(pugi::xml_node n) const {
-    std::vector<uint32_t> out;
-    const char* s = n.child_value();
-    while (*s) {
-      while (std::isspace(uint8_t(*s))) ++s;
-      if (!*s) break;
-      char* end = nullptr;
-      errno = 0;
-      const long long v = std::strtoll(s, &end, 10);
-      if (end == s || (*end && !std::isspace(uint8_t(*end))))
-        fail(n, "'" + std::string(s, std::min<size_t>(16, std::strlen(s))) + "' is not an index");
-      if (v < 0 || v > 0xFFFFFFFFll || errno == ERANGE)
-        fail(n, "index " + std::string(s, size_t(end - s)) + " out of range");
-      out.push_back(uint32_t(v));
-      s = end;
-    }
-    return out;
-  }
-  static std::string short_number(double v) {
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%g", v);
-    return buf;
-  }
   // A colour in [0, hi] per channel: reflectances in [0, 1] (above 1 a surface creates
   // energy, and a hostile 3e38 overflowed a pixel's sums). Emitted colours are checked by
   // Scene::finalize (kMaxEmission) for both loaders.
@@ -221,15 +164,17 @@ class ColladaLoader {
     // What CS184's reader skips is skipped here too, but said (once a kind, with a count).
     for (pugi::xml_node e : node.children()) {
       const std::string name = e.name();
-      if (name.rfind("instance_", 0) == 0 && e != used)
-        ignore(e,
-               "<" + name +
-                   "> not used: a node yields one object, its first camera, else light, else geometry (CS184's rule)");
+      if (name.rfind("instance_", 0) == 0 && e != used)  // (other names as one kind: one warning, not one each)
+        ignore(e, "<" + (kInstances.count(name) ? name : std::string("instance_...")) +
+                      "> not used: a node yields one object, its first camera, else light, else geometry (CS184's "
+                      "rule)");
       else if (name == "lookat" || name == "skew")
         ignore(e, "<" + name + "> is not supported (ignored, as CS184 ignores it)");
     }
   }
 
+  inline static const std::set<std::string> kInstances = {"instance_camera", "instance_controller", "instance_geometry",
+                                                          "instance_light", "instance_node"};
   // Something of the file skipped: one warning a kind, naming where it was first met.
   void ignore(pugi::xml_node n, const std::string& what) {
     Ignored& i = ignored_[what];
@@ -257,17 +202,21 @@ class ColladaLoader {
     c.zfar = float(scalar(p, "zfar", 1000.0));
     if (!(c.xfov_deg > 0 && c.xfov_deg < 180)) fail(p, "xfov must be in (0, 180) degrees");
     if (c.yfov_deg && !(*c.yfov_deg > 0 && *c.yfov_deg < 180)) fail(p, "yfov must be in (0, 180) degrees");
-    if (c.aspect_ratio && !(*c.aspect_ratio > 0)) fail(p, "aspect_ratio must be positive");
+    // (A tiny ratio made the view's tangent infinite: NaN rays, which Embree aborts on.)
+    if (c.aspect_ratio && !(*c.aspect_ratio >= 1e-4 && *c.aspect_ratio <= 1e4))
+      fail(p, "aspect_ratio " + short_number(*c.aspect_ratio) + " is outside [0.0001, 10000]");
     if (!c.yfov_deg && !c.aspect_ratio) {
       c.aspect_ratio = 4.0 / 3.0;
-      scene_.warnings.push_back(where(cam) + ": no yfov or aspect_ratio; assuming 4:3");
+      ignore(cam, "no yfov or aspect_ratio; assuming 4:3");
     }
     c.eye = w.point(0, 0, 0).to_float();
-    c.forward = normalize(w.vector(0, 0, -1).to_float());
-    c.up = normalize(w.vector(0, 1, 0).to_float());
+    // Unit directions in double where float's squares overflow (a node scaled by 1e20 gave a
+    // zero direction that passed as finite).
+    c.forward = unit(w.vector(0, 0, -1));
+    c.up = unit(w.vector(0, 1, 0));
     // CS184 treats the point one unit ahead as a direction (format doc 2.2, a w=1 quirk).
-    c.cs184_dir = normalize(w.apply(0, 0, -1, 1).to_float());
-    if (!is_finite(c.cs184_dir)) fail(cam, "camera node transform is degenerate");
+    c.cs184_dir = unit(w.apply(0, 0, -1, 1));
+    if (c.cs184_dir == Vec3{}) fail(cam, "camera node transform is degenerate");
     // The pose and clip planes serve only --camera file; CS184's framing (the default for
     // these files) never reads them, and neither does the course's renderer: a malformed
     // one is a warning here and an error only for a render that uses it.
@@ -275,8 +224,13 @@ class ColladaLoader {
       c.pose_problem = where(p) + ": need 0 <= znear < zfar";
     else if (!is_finite(c.eye) || !is_finite(c.forward) || !is_finite(c.up) || length(cross(c.forward, c.up)) < 1e-6f)
       c.pose_problem = where(cam) + ": camera node transform is degenerate";
-    if (!c.pose_problem.empty())
-      scene_.warnings.push_back(c.pose_problem + "; CS184 framing does not use it (--camera file would)");
+    else if (!(max_component(abs(c.eye)) <= Scene::kMaxCoordinate))
+      c.pose_problem = where(cam) + ": eye outside +-1e12";
+    if (!c.pose_problem.empty()) {
+      c.eye = {};  // (unused: --camera file refuses the pose)
+      ignore(cam, c.pose_problem.substr(c.pose_problem.find(": ") + 2) +
+                      "; CS184 framing does not use it (--camera file would)");
+    }
   }
 
   // ---- lights ------------------------------------------------------------------------
@@ -292,10 +246,7 @@ class ColladaLoader {
     const std::string kind = type.name();
     Light l;
     l.name = node.attribute("id").value();
-    if (kind == "spot") {
-      scene_.warnings.push_back(where(type) + ": spot lights are not supported; ignored");
-      return;
-    }
+    if (kind == "spot") return ignore(type, "spot lights are not supported; ignored");
     l.color = color(type, "color");
     if (kind == "point") {
       l.kind = Light::Kind::kPoint;
@@ -308,7 +259,8 @@ class ColladaLoader {
         fail(type, "attenuation coefficients must be non-negative and not all zero");
     } else if (kind == "directional") {
       l.kind = Light::Kind::kDirectional;
-      l.direction = -normalize(w.vector(0, 0, -1).to_float());
+      l.direction = -unit(w.vector(0, 0, -1));
+      if (l.direction == Vec3{}) fail(node, "directional light's transform is degenerate");
     } else if (kind == "ambient") {
       l.kind = Light::Kind::kAmbient;
     } else if (kind == "area") {
@@ -369,14 +321,14 @@ class ColladaLoader {
           m.kind = Material::Kind::kGlass;
           m.reflectance = color(k, "reflectance", 1);
           m.transmittance = color(k, "transmittance", 1);
-          m.ior = float(scalar_in(k, "ior", 0, 10));
+          m.ior = float(scalar_in(k, "ior", 1e-3, 10));
         } else if (kind == "refraction") {
           m.kind = Material::Kind::kRefraction;
           m.transmittance = color(k, "transmittance", 1);
-          m.ior = float(scalar_in(k, "ior", 0, 10));
+          m.ior = float(scalar_in(k, "ior", 1e-3, 10));
         } else if (kind == "microfacet") {
           m.kind = Material::Kind::kMicrofacet;
-          m.alpha = float(scalar_in(k, "alpha", 0, 10));
+          m.alpha = float(scalar_in(k, "alpha", 1e-4, 10));  // (alpha^2 in float: under about 1e-19 it is 0)
           m.eta = color(k, "eta", 100);
           m.k = color(k, "k", 100);
         } else if (kind == "emission") {
@@ -430,9 +382,7 @@ class ColladaLoader {
   std::vector<double> float_array(pugi::xml_node source) const {
     pugi::xml_node fa = source.child("float_array");
     if (!fa) fail(source, "source has no <float_array>");
-    if (!fa.attribute("count")) fail(fa, "missing count attribute");
-    const long long count = fa.attribute("count").as_llong(-1);
-    if (count < 0) fail(fa, "bad count attribute");
+    const uint64_t count = xml_.whole_attribute(fa, "count", UINT64_MAX);
     std::vector<double> v = numbers(fa);
     if (v.size() != size_t(count))
       fail(fa, "count=\"" + std::to_string(count) + "\" but " + std::to_string(v.size()) + " numbers present");
@@ -505,8 +455,7 @@ class ColladaLoader {
       uint32_t stride = 0, vertex_offset = 0;
       bool has_vertex = false;
       for (pugi::xml_node in : prim.children("input")) {
-        const long long off = in.attribute("offset").as_llong(-1);
-        if (off < 0 || off > 64) fail(in, "bad or missing offset");
+        const uint64_t off = xml_.whole_attribute(in, "offset", 64);
         stride = std::max(stride, uint32_t(off) + 1);
         if (std::string(in.attribute("semantic").value()) == "VERTEX") {
           if (resolve(in, "source", nullptr) != vertices) fail(in, "VERTEX source is not the mesh's <vertices>");
@@ -515,8 +464,7 @@ class ColladaLoader {
         }
       }
       if (!has_vertex) fail(prim, "no VERTEX input");
-      const long long count = prim.attribute("count").as_llong(-1);
-      if (count < 0) fail(prim, "bad or missing count attribute");
+      const uint64_t count = xml_.whole_attribute(prim, "count", UINT64_MAX);
       std::vector<uint32_t> sizes, idx;
       if (kind == "polygons") {
         for (pugi::xml_node pp : prim.children("p")) {
@@ -534,7 +482,7 @@ class ColladaLoader {
           if (!vc) fail(prim, "missing <vcount>");
           sizes = indices(vc);
         } else {
-          sizes.assign(size_t(std::min<long long>(count, idx.size())), 3);
+          sizes.assign(size_t(std::min<uint64_t>(count, idx.size() / (3 * uint64_t(stride)))), 3);
         }
       }
       if (sizes.size() != size_t(count))
@@ -571,7 +519,8 @@ class ColladaLoader {
   }
 
   const std::string& text_;
-  std::string file_;
+  XmlText xml_;
+  const std::string& file_;
   pugi::xml_document doc_;
   std::unordered_map<std::string, pugi::xml_node> ids_;
   std::unordered_map<std::string, uint32_t> materials_;
