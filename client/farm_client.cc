@@ -330,15 +330,20 @@ bool fetch_one(v1::Tessera::StubInterface& stub, const std::string& job, std::op
   if (frame) req.set_frame(*frame);
   const std::vector<std::string> paths = frame_files(outputs, frame);
   // A lost connection (the coordinator restarting just as the job ended) is retried with
-  // back-off for up to c.reconnect_seconds, as watching is, resuming where it was cut.
+  // back-off for up to c.reconnect_seconds since the last piece came, as watching is,
+  // resuming where it was cut (a stream's own 600 s deadline only makes it resume).
   Backoff backoff(Backoff::kClientFirstSeconds);
-  const auto since = std::chrono::steady_clock::now();
+  auto since = std::chrono::steady_clock::now();
   try {
     const ImageDownload got = download_image(
         req, paths, final,
         [&](grpc::ClientContext* ctx, const v1::FetchImageRequest& r) { return stub.FetchImageChunks(ctx, r); },
         [&] { return deadline(c, 600); },
-        [&](const grpc::Status& st) {
+        [&](const grpc::Status& st, bool progressed) {
+          if (progressed) {  // the window counts from the last piece, not the fetch's start
+            since = std::chrono::steady_clock::now();
+            backoff = Backoff(Backoff::kClientFirstSeconds);
+          }
           if (!unreachable(st) ||
               std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count() > c.reconnect_seconds) {
             check(st, c);

@@ -1,5 +1,6 @@
 #include "client/image_download.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -7,6 +8,7 @@
 
 #include "core/io/files.h"
 #include "core/io/image_io.h"
+#include "core/io/preview.h"
 #define XXH_INLINE_ALL  // header only: nothing to link
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Warray-bounds"  // (GCC 12's false positive in xxhash's streaming code)
@@ -34,9 +36,20 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
                              const std::function<std::unique_ptr<grpc::ClientReaderInterface<v1::ImageChunk>>(
                                  grpc::ClientContext*, const v1::FetchImageRequest&)>& stream,
                              const std::function<std::unique_ptr<grpc::ClientContext>()>& context,
-                             const std::function<bool(const grpc::Status&)>& retry) {
+                             const std::function<bool(const grpc::Status&, bool progressed)>& retry) {
   if (paths.empty()) throw std::runtime_error("no output to write the image to");
-  const std::string download = paths[0] + ".download.exr";
+  for (const std::string& p : paths) make_parent_folder(p);  // (a frame's: out/####/a.exr)
+  // Staged beside the first EXR output (renamed into its place: one folder, one file
+  // system), else beside the first output; removed whatever happens.
+  const auto first_exr = std::find_if(paths.begin(), paths.end(), is_exr_path);
+  const std::string download = (first_exr != paths.end() ? *first_exr : paths[0]) + ".download.exr";
+  struct Staged {
+    const std::string& path;
+    ~Staged() {
+      std::error_code ec;
+      fs::remove(path, ec);
+    }
+  } staged{download};
   std::optional<Part> part;
   v1::FetchImageRequest req = request;
   ImageDownload got;
@@ -46,7 +59,7 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
     const std::unique_ptr<grpc::ClientContext> ctx = context();
     auto reader = stream(ctx.get(), req);
     v1::ImageChunk c;
-    bool first = true, done = false, restart = false;
+    bool first = true, done = false, restart = false, progressed = false;
     while (reader->Read(&c)) {
       if (first) {
         first = false;
@@ -63,9 +76,13 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
           break;
         }
       }
+      if (done) throw std::runtime_error("the image stream went on past its last piece");
       if (c.offset() != part->file.size()) throw std::runtime_error("the image came out of order");
+      if (c.data().size() > got.bytes - part->file.size())
+        throw std::runtime_error("the image came longer than its size, " + std::to_string(got.bytes) + " bytes");
       part->file.append(c.data());
       XXH64_update(part->hash, c.data().data(), c.data().size());
+      progressed = progressed || !c.data().empty();
       if (!c.last()) continue;
       if (part->file.size() != got.bytes || XXH64_digest(part->hash) != c.xxh64()) {
         if (++damaged > 2) throw std::runtime_error("the image arrived damaged three times (checksum mismatch)");
@@ -81,7 +98,7 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
     if (need_final && !first && !got.final) return got;  // not final: nothing written
     if (done) break;
     if (restart) continue;
-    if (!retry(st)) throw std::runtime_error(st.ok() ? "the image stream ended early" : st.error_message());
+    if (!retry(st, progressed)) throw std::runtime_error(st.ok() ? "the image stream ended early" : st.error_message());
     if (part) {  // resume where it was cut
       req.set_offset(part->file.size());
       req.set_version(version);
@@ -90,24 +107,22 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
   part->file.commit();
   part.reset();
   // Each output: the EXR as it came (the download itself goes into the first EXR's place),
-  // a PNG made from it here.
+  // a PNG made from it here, from its R, G and B alone.
   std::string at = download;  // where the EXR is
-  std::optional<ExrImage> img;
+  std::optional<std::string> png;
   for (const std::string& p : paths) {
     if (is_exr_path(p)) {
-      if (at == download) {
-        fs::rename(download, p);
+      std::error_code ec;
+      if (at == download && (fs::rename(download, p, ec), !ec)) {
         at = p;
       } else {
         write_file_atomic(p, read_file_bytes(at));
       }
       continue;
     }
-    if (!img) img = read_exr(at);
-    write_file_atomic(p, encode_png(*img));
+    if (!png) png = full_png(at);
+    write_file_atomic(p, *png);
   }
-  if (at == download) fs::remove(download);
   return got;
 }
-
 }  // namespace tessera

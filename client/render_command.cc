@@ -72,6 +72,7 @@ double write_denoised(const RenderResult& r, const ImageMetadata& meta, const Re
 
 int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
                  const std::vector<std::string>& outputs) {
+  for (const std::string& p : outputs) make_parent_folder(p);  // (a frame's: out/####/a.exr)
   ProgressPrinter printer(a.quiet);
   const RenderResult r = render_image(renderer, a.threads, std::ref(printer));
 

@@ -100,4 +100,14 @@ uint64_t remove_folder(const std::string& path) {
   return bytes;
 }
 
+void make_parent_folder(const std::string& path) {
+  const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+  if (dir.empty()) return;
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec || !std::filesystem::is_directory(dir))
+    throw std::runtime_error(path + ": cannot make its folder " + dir.string() + ": " +
+                             (ec ? ec.message() : std::string("not a folder")));
+}
+
 }  // namespace tessera

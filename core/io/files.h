@@ -45,6 +45,10 @@ class AtomicFile {
 // Renames `tmp` to `path`, then (durable) syncs the folder. Throws naming `path`.
 void commit_file(const std::string& tmp, const std::string& path, const AtomicWrite& how = {});
 
+// Makes the folder `path` is in, and its parents (nothing for a bare file name). Throws
+// std::runtime_error naming both.
+void make_parent_folder(const std::string& path);
+
 // Removes a folder and everything in it (nothing if it is absent); returns the bytes its
 // files held. Throws std::runtime_error naming the folder when it cannot be removed.
 uint64_t remove_folder(const std::string& path);

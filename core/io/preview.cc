@@ -14,16 +14,27 @@
 
 namespace tessera {
 
-std::string preview_png(const std::string& exr_path, int max_width) {
+namespace {
+
+// max_width 0: full size, at encode_png's slower, smaller compression (not the preview's).
+std::string png_of(const std::string& exr_path, int max_width) {
   try {
     Imf::InputFile in(exr_path.c_str());
     const Imath::Box2i dw = in.header().dataWindow();
     const int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
-    const int k = std::max(1, (w + max_width - 1) / std::max(1, max_width));  // the box's side
+    const int k = max_width <= 0 ? 1 : std::max(1, (w + max_width - 1) / max_width);  // the box's side
     const int pw = (w + k - 1) / k, ph = (h + k - 1) / k;
     std::vector<float> pr(size_t(pw) * ph), pg(pr.size()), pb(pr.size());
-    std::vector<float> r(size_t(w) * k), g(r.size()), b(r.size());
-    for (int py = 0; py < ph; ++py) {
+    std::vector<float> r(k > 1 ? size_t(w) * k : 0), g(r.size()), b(r.size());
+    if (k == 1) {  // full size: straight into the planes
+      Imf::FrameBuffer fb;
+      for (auto [name, data] : {std::pair{"R", &pr}, std::pair{"G", &pg}, std::pair{"B", &pb}})
+        fb.insert(name,
+                  Imf::Slice::Make(Imf::FLOAT, data->data(), dw.min, w, h, sizeof(float), sizeof(float) * size_t(w)));
+      in.setFrameBuffer(fb);
+      in.readPixels(dw.min.y, dw.max.y);
+    }
+    for (int py = 0; k > 1 && py < ph; ++py) {
       const int y0 = dw.min.y + py * k, rows = std::min(k, dw.max.y + 1 - y0);
       Imf::FrameBuffer fb;
       const Imath::V2i origin(dw.min.x, y0);
@@ -52,11 +63,18 @@ std::string preview_png(const std::string& exr_path, int max_width) {
     ImageMetadata meta;  // (the exposure the render asked for, if any)
     if (const auto* a = in.header().findTypedAttribute<Imf::StringAttribute>(kExposureFileAttribute))
       meta[kExposureAttribute] = a->value();
-    return encode_png(pw, ph, pr.data(), pg.data(), pb.data(), true, exposure_scale(meta));
+    return encode_png(pw, ph, pr.data(), pg.data(), pb.data(), max_width > 0, exposure_scale(meta));
   } catch (const std::exception& e) {
-    throw std::runtime_error(exr_path + ": cannot make a preview: " + e.what());
+    throw std::runtime_error(exr_path + (max_width > 0 ? ": cannot make a preview: " : ": cannot make a PNG: ") +
+                             e.what());
   }
 }
+
+}  // namespace
+
+std::string preview_png(const std::string& exr_path, int max_width) { return png_of(exr_path, std::max(1, max_width)); }
+
+std::string full_png(const std::string& exr_path) { return png_of(exr_path, 0); }
 
 bool exr_intact(const std::string& exr_path, std::string* why) {
   try {

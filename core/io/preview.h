@@ -11,6 +11,10 @@ namespace tessera {
 
 // Throws std::runtime_error naming the path.
 std::string preview_png(const std::string& exr_path, int max_width = 1280);
+// The EXR's R, G, B as a full-size PNG at the exposure it records, as encode_png of the
+// image read whole gives it (the same bytes), reading the three channels only, a row at a
+// time: a farm download's PNG (the EXR's other layers, AOVs or a noisy copy, never loaded).
+std::string full_png(const std::string& exr_path);
 
 // Whether the EXR at `exr_path` decodes whole: every block read (a truncated file, a
 // damaged block or a checksum that fails stops it), a band of rows at a time. `why` gets

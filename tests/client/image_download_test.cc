@@ -53,7 +53,10 @@ class ImageDownloadTest : public ::testing::Test {
     grpc::Status end = grpc::Status::OK;
     bool damage = false;
     bool final = true;
+    uint64_t size = 0;       // the size the stream declares (0: the image's)
+    bool past_last = false;  // a piece more after the last
   };
+  std::vector<bool> progressed;  // what each retry was told
   std::vector<Answer> answers;
 
   void SetUp() override {
@@ -81,7 +84,7 @@ class ImageDownloadTest : public ::testing::Test {
             if (a.damage && at == a.from) data[0] ^= 1;
             c.set_data(data);
             if (at == a.from) {
-              c.set_size(exr.size());
+              c.set_size(a.size ? a.size : exr.size());
               c.set_version("v1");
               c.set_final(a.final);
               c.set_resumed(a.from > 0);
@@ -92,11 +95,13 @@ class ImageDownloadTest : public ::testing::Test {
             }
             chunks.push_back(c);
           }
+          if (a.past_last) chunks.push_back(chunks.back());
           return std::make_unique<Canned>(chunks, a.end);
         },
         [] { return std::make_unique<grpc::ClientContext>(); },
-        [&](const grpc::Status& st) {
+        [&](const grpc::Status& st, bool came) {
           ++*retries;
+          progressed.push_back(came);
           return st.error_code() == grpc::StatusCode::UNAVAILABLE;
         });
   }
@@ -109,6 +114,7 @@ TEST_F(ImageDownloadTest, ACutStreamIsResumedWhereItWasCut) {
   const std::string out = (dir / "out.exr").string();
   const ImageDownload got = download({out}, false, &retries);
   EXPECT_EQ(retries, 2);
+  EXPECT_EQ(progressed, (std::vector<bool>{true, true}));  // (the fetch's window counts from the last piece)
   ASSERT_EQ(requests.size(), 3u);
   EXPECT_EQ(requests[1].offset(), 300u);
   EXPECT_EQ(requests[1].version(), "v1");
@@ -206,6 +212,66 @@ TEST_F(ImageDownloadTest, AFinalErrorIsThrownWithItsMessage) {
   } catch (const std::runtime_error& e) {
     EXPECT_EQ(std::string(e.what()), "no job 'x'");
   }
+}
+
+// Found by audit: the outputs' folders were made only where their names held no '#' (a
+// sequence's out/####/ never was, so no frame was written); the download was staged beside
+// the first output and renamed into the first EXR's place (across file systems: EXDEV);
+// and it was left on disk when anything after it failed.
+TEST_F(ImageDownloadTest, FoldersAreMadeAndNothingOfAFailedDownloadIsLeft) {
+  answers = {{0, exr.size()}};
+  int retries = 0;
+  const std::string png = (dir / "frames" / "0007" / "a.png").string(),
+                    e = (dir / "take#1" / "deep" / "a.exr").string();
+  download({png, e}, false, &retries);
+  EXPECT_EQ(read_file_bytes(e), exr);
+  EXPECT_EQ(read_file_bytes(png), full_png(e));
+  EXPECT_FALSE(fs::exists(png + ".download.exr"));
+  EXPECT_FALSE(fs::exists(e + ".download.exr"));
+  // A PNG that cannot be written (a folder in its place): the error, and no download left.
+  answers = {{0, exr.size()}};
+  const std::string blocked = (dir / "blocked.png").string(), e2 = (dir / "b.exr").string();
+  fs::create_directories(blocked);
+  EXPECT_THROW(download({e2, blocked}, false, &retries), std::runtime_error);
+  for (const auto& f : fs::directory_iterator(dir))
+    EXPECT_EQ(f.path().string().find(".download.exr"), std::string::npos) << f.path();
+}
+
+// A stream that says more than it declared, or goes on after its last piece, is refused
+// (pieces after the last were appended to a checked file; a second "last" left nothing to
+// commit, then committed it).
+TEST_F(ImageDownloadTest, AStreamLongerThanItsSizeOrPastItsLastPieceIsRefused) {
+  int retries = 0;
+  const std::string out = (dir / "out.exr").string();
+  Answer longer{0, exr.size()};
+  longer.size = 200;
+  answers = {longer};
+  try {
+    download({out}, false, &retries);
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), "the image came longer than its size, 200 bytes");
+  }
+  Answer past{0, exr.size()};
+  past.past_last = true;
+  answers = {past};
+  requests.clear();
+  try {
+    download({out}, false, &retries);
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), "the image stream went on past its last piece");
+  }
+  EXPECT_FALSE(fs::exists(out));
+  EXPECT_FALSE(fs::exists(out + ".download.exr"));
+}
+
+// The client's PNG reads the EXR's R, G and B only (an 8K EXR with AOV layers was loaded
+// whole, and one past 2^26 pixels not at all): the same bytes as encode_png of it whole.
+TEST_F(ImageDownloadTest, TheFullSizePngIsEncodePngOfTheExrsColour) {
+  const std::string e = (dir / "source.exr").string();
+  const ExrImage img = read_exr(e);
+  EXPECT_EQ(full_png(e), encode_png(img));
 }
 
 }  // namespace
