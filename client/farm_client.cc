@@ -562,11 +562,15 @@ int submit_job(v1::Tessera::StubInterface& stub, const SubmitRequest& r, const F
     return all;
   };
   v1::JobStatus final;
+  std::string said;  // the last write error shown: each said once, while the frames go on
   do {
     final = watch(stub, id.id(), c, [&](const v1::JobStatus& s) {
       try {
         write_done(s);
-      } catch (const FarmError&) {  // (a coordinator restarting, say) fetched again at the end
+      } catch (const FarmError& e) {  // (a coordinator restarting, say) fetched again at the end
+        if (e.what() != said && !c.json)
+          std::fprintf(c.err, "a finished frame was not written yet (tried again at the end): %s\n", e.what());
+        said = e.what();
       }
     });
   } while (!write_done(final));

@@ -252,7 +252,8 @@ class Job:
 
     def fetch(self, path, frame=None):
         """Writes the job's latest image to `path` (.exr: the whole film, checked against
-        the coordinator's hash; .png: tone-mapped as `tessera fetch` writes it) and returns
+        the coordinator's hash; .png: the coordinator's preview, at most 1280 pixels wide,
+        where `tessera fetch` writes a full-size PNG from the EXR) and returns
         the list of Fetched written. A sequence's: `frame`, or every finished frame with
         `path`'s last run of '#' as its number. Missing folders are made."""
         path = os.fspath(path)
