@@ -81,7 +81,7 @@ class Coordinator {
   // names it.
   v1::SceneUpload upload_scene(const std::function<bool(v1::SceneChunk*)>& next, const std::string& owner = "");
   // A job's status; an archived job's (archive.h) tile map is as a compacted job's.
-  v1::JobStatus status(const std::string& id, bool with_tiles, TileRange range = {}) const;
+  v1::JobStatus status(const std::string& id, bool with_tiles, TileRange range = {}, FrameRange frames = {}) const;
   // The jobs in memory (live ones, and those ended lately that are not archived yet), in
   // submission order.
   std::vector<v1::JobStatus> list() const;

@@ -23,12 +23,14 @@ std::optional<StoredJob> Coordinator::archived_change(const std::string& id, con
   return with_store([&] { return archived_for_change(*store_, id, requester, any, verb); });
 }
 
-v1::JobStatus Coordinator::status(const std::string& id, bool with_tiles, TileRange range) const {
+v1::JobStatus Coordinator::status(const std::string& id, bool with_tiles, TileRange range, FrameRange frames) const {
   return find(
-      id, [&]() TESSERA_REQUIRES(mu_) { return job_status(jobs_, leases_, id, with_tiles, clock_->now(), range); },
+      id,
+      [&]() TESSERA_REQUIRES(mu_) { return job_status(jobs_, leases_, id, with_tiles, clock_->now(), range, frames); },
       [&] {
         std::optional<v1::JobStatus> s = archived(id);
         if (s && with_tiles) add_archived_tiles(*s, range);
+        if (s && s->frames_total() > 0) page_frames(*s, frames);
         return s;
       });
 }

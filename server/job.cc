@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 namespace tessera {
 
@@ -99,7 +100,7 @@ uint64_t Sequence::samples_merged() const {
   return n;
 }
 
-v1::JobStatus Sequence::status(double now, uint32_t workers, bool with_frames) const {
+v1::JobStatus Sequence::status(double now, uint32_t workers, bool with_frames, FrameRange range) const {
   v1::JobStatus s;
   s.set_id(meta.id);
   s.set_name(meta.name);
@@ -112,6 +113,8 @@ v1::JobStatus Sequence::status(double now, uint32_t workers, bool with_frames) c
   uint64_t done = 0, total = 0;
   uint32_t tiles_done = 0, frames_done = 0;
   std::string e = error;
+  const uint32_t first = range.from, end = range.end(uint32_t(frames.size()));
+  std::optional<size_t> rendering, latest;  // (current_frame_job: rendering, else started last)
   for (size_t i = 0; i < frames.size(); ++i) {
     const Job* j = jobs[i].get();
     const bool gone = frame_left(i);  // DONE, its end recorded, out of memory
@@ -129,7 +132,9 @@ v1::JobStatus Sequence::status(double now, uint32_t workers, bool with_frames) c
       for (const std::string* why : {&j->image_error, &j->checkpoint_error, j->live() ? &j->failure_note : nullptr})
         if (why && !why->empty()) e += (e.empty() ? "" : "; ") + ("frame " + std::to_string(frames[i]) + ": ") + *why;
     }
-    if (!with_frames) continue;
+    if (j && j->reported_state() == v1::JobStatus::RUNNING && !rendering) rendering = i;
+    if (j || gone) latest = i;
+    if (!with_frames || i < first || i >= end) continue;
     v1::FrameStatus* f = s.add_frames();
     f->set_frame(frames[i]);
     f->set_state(j        ? j->reported_state()
@@ -142,6 +147,7 @@ v1::JobStatus Sequence::status(double now, uint32_t workers, bool with_frames) c
     f->set_tiles_done(j ? j->plan.tiles_done() : gone ? frame_tiles() : 0);
     if (j || gone) f->set_job_id(frame_job_id(i));
   }
+  if (with_frames && (rendering || latest)) s.set_current_frame_job(frame_job_id(rendering ? *rendering : *latest));
   s.set_error(e);
   s.set_samples_done(done);
   s.set_samples_total(total);

@@ -28,6 +28,8 @@ struct TileRange {
   uint32_t from = 0, count = std::numeric_limits<uint32_t>::max();
   uint32_t end(uint32_t tiles) const { return from >= tiles ? tiles : from + std::min(count, tiles - from); }
 };
+// The same for a sequence's frames (with_frames): /api/jobs/<id> a page at a time.
+using FrameRange = TileRange;
 
 struct Job {
   using State = v1::JobStatus::State;
@@ -190,7 +192,8 @@ struct Sequence {
   bool ended_durably() const { return !live() && end_recorded; }  // as Job's
   State reported_state() const { return live() || end_recorded ? state_ : v1::JobStatus::RUNNING; }
   // `workers`: distinct workers with live leases on any of its frames.
-  v1::JobStatus status(double now, uint32_t workers, bool with_frames) const;
+  // With frames, those in `range` (and current_frame_job, of them all).
+  v1::JobStatus status(double now, uint32_t workers, bool with_frames, FrameRange range = {}) const;
 
  private:
   friend class JobLifecycle;

@@ -11,18 +11,19 @@ namespace tessera {
 
 namespace {
 
-v1::JobStatus sequence_status(const Sequence& s, const LeaseTable& leases, double now, bool with_frames) {
+v1::JobStatus sequence_status(const Sequence& s, const LeaseTable& leases, double now, bool with_frames,
+                              FrameRange range = {}) {
   std::set<std::string> live;  // its live frames: a worker on several counts once
   for (const auto& j : s.jobs)
     if (j && j->live()) live.insert(j->id());
-  return s.status(now, leases.workers_on(live), with_frames);
+  return s.status(now, leases.workers_on(live), with_frames, range);
 }
 
 }  // namespace
 
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
-                         double now, TileRange range) {
-  if (const Sequence* s = jobs.find_sequence(id)) return sequence_status(*s, leases, now, true);
+                         double now, TileRange range, FrameRange frames) {
+  if (const Sequence* s = jobs.find_sequence(id)) return sequence_status(*s, leases, now, true, frames);
   if (!jobs.find_job(id))
     if (const auto gone = jobs.left_frame(id)) return left_frame_status(*gone->sequence, gone->index);
   const Job& job = jobs.job(id);
@@ -47,6 +48,23 @@ v1::JobStatus left_frame_status(const Sequence& s, size_t i) {
   *st.mutable_settings() = to_proto(frame);
   st.set_sequence(s.id());
   return st;
+}
+
+void page_frames(v1::JobStatus& s, FrameRange range) {
+  if (s.current_frame_job().empty()) {
+    const v1::FrameStatus* current = nullptr;
+    for (const v1::FrameStatus& f : s.frames())
+      if (f.state() == v1::JobStatus::RUNNING) {
+        current = &f;
+        break;
+      } else if (!f.job_id().empty()) {
+        current = &f;
+      }
+    if (current) s.set_current_frame_job(current->job_id());
+  }
+  const int end = int(range.end(uint32_t(s.frames_size())));
+  if (end < s.frames_size()) s.mutable_frames()->DeleteSubrange(end, s.frames_size() - end);
+  s.mutable_frames()->DeleteSubrange(0, std::min(int(range.from), s.frames_size()));
 }
 
 void keep_changed_frames(v1::JobStatus& s, std::vector<std::string>& sent) {

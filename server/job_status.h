@@ -40,9 +40,13 @@ QueueDepth queue_depth(const JobTable& jobs, const LeaseTable& leases, double th
 // whose frame count changed.
 void keep_changed_frames(v1::JobStatus& s, std::vector<std::string>& sent);
 
-// Throws RequestError (kNotFound) for an unknown id.
+// Throws RequestError (kNotFound) for an unknown id. A sequence's frames: those in
+// `frames` (every one by default).
 v1::JobStatus job_status(const JobTable& jobs, const LeaseTable& leases, const std::string& id, bool with_tiles,
-                         double now, TileRange range = {});
+                         double now, TileRange range = {}, FrameRange frames = {});
+// A sequence's status with every frame (an archived one's) cut to the frames in `range`,
+// its current_frame_job set from them all first.
+void page_frames(v1::JobStatus& s, FrameRange range);
 // As a list shows it: no tiles, and a sequence's frames counted (frames_done, frames_total)
 // but not listed (a list of sequences of 100,000 frames each was 12 MB a sequence, and the
 // live page polls it every second; GetJob and WatchJob have them).

@@ -100,13 +100,14 @@ async function tick() {
   try { $('job-events').innerHTML = eventRows((await get(jobEvents)).events || []); } catch (e) { say(e.message); }
   // A sequence: every frame by state, and the frame being rendered (else the last one
   // started) in the preview and the tile map.
+  // (The first page of frames: the API's frames_next says more follow.)
   const frames = d.frames || [];
   $('frames').innerHTML = frames.length === 0 ? '' : frames.map(f =>
-    `<span class="frame ${esc(f.state)}" title="${esc(f.state)}">${esc(f.frame)}</span>`).join('');
-  if (frames.length) {
-    const f = frames.find(f=>f.state==='RUNNING') || [...frames].reverse().find(f=>f.job_id);
-    if (!f) return;
-    id = f.job_id;
+    `<span class="frame ${esc(f.state)}" title="${esc(f.state)}">${esc(f.frame)}</span>`).join('') +
+    (d.frames_next == null ? '' : `<span class="frame">${esc('+' + (d.frames_total - frames.length) + ' more')}</span>`);
+  if (d.frames_total) {
+    if (!d.current_frame_job) return;
+    id = d.current_frame_job;
     try { d = await get(tiles(id)); } catch (e) { say(e.message); return; }
   }
   // The preview through fetch (it carries the token), shown from a blob URL.
@@ -128,7 +129,8 @@ async function tick() {
     ctx.fillRect((t.rect.x||0) + 1, (t.rect.y||0) + 1, t.rect.w - 2, t.rect.h - 2);  // 1-px gaps show tiles
   }
 }
-tick(); setInterval(tick, 1000);
+// A tick a second after the last one ended: slow answers never pile up.
+(async function loop() { try { await tick(); } finally { setTimeout(loop, 1000); } })();
 )JS";
 
 }  // namespace tessera

@@ -25,7 +25,7 @@ const char* kContentSecurityPolicy =
 
 }  // namespace
 
-std::string job_status_json(v1::JobStatus status, uint32_t tiles_from) {
+std::string job_status_json(v1::JobStatus status, uint32_t tiles_from, uint32_t frames_from) {
   google::protobuf::RepeatedPtrField<v1::TileProgress> tiles;
   tiles.Swap(status.mutable_tiles());
   std::string out = proto_json(status);  // "{...}": every field printed, so never "{}"
@@ -48,7 +48,13 @@ std::string job_status_json(v1::JobStatus status, uint32_t tiles_from) {
   }
   const uint64_t next = uint64_t(tiles_from) + uint64_t(tiles.size());
   out += "],\"tiles_from\":" + std::to_string(tiles_from) +
-         ",\"tiles_next\":" + (!tiles.empty() && next < status.tiles_total() ? std::to_string(next) : "null") + "}";
+         ",\"tiles_next\":" + (!tiles.empty() && next < status.tiles_total() ? std::to_string(next) : "null");
+  if (status.frames_total() > 0) {
+    const uint64_t frames_next = uint64_t(frames_from) + uint64_t(status.frames_size());
+    out += ",\"frames_from\":" + std::to_string(frames_from) + ",\"frames_next\":" +
+           (status.frames_size() > 0 && frames_next < status.frames_total() ? std::to_string(frames_next) : "null");
+  }
+  out += "}";
   return out;
 }
 
@@ -113,11 +119,15 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
   });
   server.Get(R"(/api/jobs/([A-Za-z0-9-]+))", [this](const httplib::Request& req, httplib::Response& res) {
     TileRange range{0, kMaxTilesPage};
-    if (!whole_param(req, res, "tiles_from", &range.from) || !whole_param(req, res, "tiles_count", &range.count))
+    FrameRange frames{0, kMaxFramesPage};
+    if (!whole_param(req, res, "tiles_from", &range.from) || !whole_param(req, res, "tiles_count", &range.count) ||
+        !whole_param(req, res, "frames_from", &frames.from) || !whole_param(req, res, "frames_count", &frames.count))
       return;
     range.count = std::min(range.count, kMaxTilesPage);
+    frames.count = std::min(frames.count, kMaxFramesPage);
     try {
-      res.set_content(job_status_json(c_.status(req.matches[1], true, range), range.from), "application/json");
+      res.set_content(job_status_json(c_.status(req.matches[1], true, range, frames), range.from, frames.from),
+                      "application/json");
     } catch (const RequestError& e) {
       res.status = 404;
       res.set_content(lenient_dump({{"error", e.what()}}), "application/json");

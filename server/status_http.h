@@ -1,7 +1,8 @@
 // The coordinator's HTTP status endpoint:
 //   /api/status          jobs and workers as JSON
 //   /api/jobs/<id>       one job with per-tile progress, a page of tiles at a time
-//                        (?tiles_from=N&tiles_count=M; kMaxTilesPage at most)
+//                        (?tiles_from=N&tiles_count=M; kMaxTilesPage at most), and a
+//                        sequence's frames likewise (?frames_from=N&frames_count=M)
 //   /metrics             Prometheus text format
 //   /jobs/<id>/preview.png   the latest progressive preview
 //   /api/events          events (events.h), newest last: ?job=ID, ?after=ID, ?limit=N
@@ -27,7 +28,8 @@ namespace tessera {
 // tiles of an 8192 x 8192 frame at tile 16; this takes the string itself. The tiles are
 // those from number `tiles_from` on ("tiles_from"); "tiles_next" is where the next page
 // starts, null after the last.
-std::string job_status_json(v1::JobStatus status, uint32_t tiles_from = 0);
+// A sequence's frames likewise: those from `frames_from` on, and "frames_next".
+std::string job_status_json(v1::JobStatus status, uint32_t tiles_from = 0, uint32_t frames_from = 0);
 
 class StatusHttp {
  public:
@@ -36,6 +38,9 @@ class StatusHttp {
   static constexpr size_t kStatusJobs = 200;
   // Tiles in one /api/jobs/<id> answer at most (and by default): about 2 MB of JSON.
   static constexpr uint32_t kMaxTilesPage = 16384;
+  // A sequence's frames in one answer at most (and by default): a sequence of 100,000 frames
+  // was 12 MB of JSON, printed every second for each open live page.
+  static constexpr uint32_t kMaxFramesPage = 2000;
   // With `tls_cert` and `tls_key` (PEM files) it serves HTTPS. Throws if they do not load.
   // Without tokens it answers only requests whose Host is an address, localhost or one of
   // `allowed_hosts` (host_guard.h: DNS rebinding).

@@ -1,4 +1,7 @@
 // Sequences through the whole coordinator.
+#include <nlohmann/json.hpp>
+
+#include "server/status_http.h"
 #include "tests/server/coordinator_fixture.h"
 
 namespace tessera {
@@ -137,6 +140,39 @@ TEST_F(SequenceTest, CancelKeepsFinishedFrames) {
   EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::CANCELLED);
   EXPECT_EQ(frame_states(id), states);
   EXPECT_TRUE(frame_is_local(id, 1));
+}
+
+// Found by audit: /api/jobs/<id> listed every frame of a sequence (100,000 frames: 12 MB
+// of JSON each second for each open live page). Frames come a page at a time, with the
+// frame a viewer shows (the one rendering, else the last started) named whatever the page.
+TEST_F(SequenceTest, FramesComeAPageAtATimeWithTheFrameBeingRenderedNamed) {
+  const std::string id = c->submit(sequence({1, 2, 3, 4, 5}));
+  const uint64_t w = worker();
+  while (frame_states(id).at(1) != v1::JobStatus::DONE)
+    ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());  // a tile of frame 2
+  v1::JobStatus st = c->status(id, true, {}, FrameRange{2, 2});
+  ASSERT_EQ(st.frames_size(), 2);
+  EXPECT_EQ(st.frames(0).frame(), 3);
+  EXPECT_EQ(st.frames(1).frame(), 4);
+  EXPECT_EQ(st.frames_total(), 5u);
+  EXPECT_EQ(st.current_frame_job(), id + "-f2");  // rendering, though not on the page
+  const nlohmann::json page = nlohmann::json::parse(job_status_json(st, 0, 2));
+  EXPECT_EQ(page["frames_from"], 2);
+  EXPECT_EQ(page["frames_next"], 4);
+  EXPECT_EQ(page["current_frame_job"], id + "-f2");
+  st = c->status(id, true, {}, FrameRange{4, 99});
+  ASSERT_EQ(st.frames_size(), 1);
+  EXPECT_EQ(nlohmann::json::parse(job_status_json(st, 0, 4))["frames_next"], nullptr);
+  // Ended and archived: the same pages from its stored status; the last frame started shown.
+  c->cancel(id);
+  restart(c, options(), &t);
+  st = c->status(id, true, {}, FrameRange{0, 1});
+  ASSERT_EQ(st.frames_size(), 1);
+  EXPECT_EQ(st.frames(0).frame(), 1);
+  EXPECT_EQ(st.current_frame_job(), id + "-f2");
+  EXPECT_EQ(c->status(id, true, {}, FrameRange{7, 1}).frames_size(), 0);
+  EXPECT_EQ(c->status(id, false).frames_size(), 5);  // GetJob: every frame
 }
 
 TEST_F(SequenceTest, ARestartedCoordinatorGoesOnWithASequenceBitForBit) {
