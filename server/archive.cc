@@ -1,6 +1,11 @@
 #include "server/archive.h"
 
+#include <google/protobuf/io/coded_stream.h>
+#include <google/protobuf/io/zero_copy_stream_impl_lite.h>
+#include <google/protobuf/wire_format_lite.h>
+
 #include <algorithm>
+#include <climits>
 
 #include "server/request_error.h"
 
@@ -102,9 +107,36 @@ void Archive::done(const Archival& a, bool archived) {
 
 // ---- reading archived jobs ----
 
-v1::JobStatus archived_status(const StoredJob& row) {
+namespace {
+
+// A serialized message without field `field`'s entries, copied field by field (the others'
+// bytes as they are). Empty if the bytes do not read as a message.
+std::string without_field(const std::string& bytes, int field) {
+  namespace pb = google::protobuf;
+  pb::io::ArrayInputStream raw(bytes.data(), int(bytes.size()));
+  pb::io::CodedInputStream in(&raw);
+  in.SetTotalBytesLimit(INT_MAX);
+  std::string out;
+  {
+    pb::io::StringOutputStream sink(&out);
+    pb::io::CodedOutputStream os(&sink);
+    for (uint32_t tag; (tag = in.ReadTag()) != 0;) {
+      const bool skip = pb::internal::WireFormatLite::GetTagFieldNumber(tag) == field;
+      if (!(skip ? pb::internal::WireFormatLite::SkipField(&in, tag)
+                 : pb::internal::WireFormatLite::SkipField(&in, tag, &os)))
+        return {};
+    }
+  }
+  return out;
+}
+
+}  // namespace
+
+v1::JobStatus archived_status(const StoredJob& row, bool with_frames) {
   v1::JobStatus s;
-  if (!s.ParseFromString(row.summary)) {  // (a damaged row: what the columns say)
+  if (!(with_frames ? s.ParseFromString(row.summary)
+                    : s.ParseFromString(without_field(row.summary, v1::JobStatus::kFramesFieldNumber)))) {
+    // (a damaged row: what the columns say)
     s.Clear();
     s.set_id(row.meta.id);
     s.set_name(row.meta.name);

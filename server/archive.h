@@ -51,7 +51,9 @@ class Archive {
 
 // What clients see of an archived job from its row: the summary, with the row's state,
 // error and priority (a liar's flag or a priority set after it left memory).
-v1::JobStatus archived_status(const StoredJob& row);
+// Without `with_frames` a sequence's frames are skipped unparsed (a list's: they were
+// parsed, 100,000 a row, and dropped).
+v1::JobStatus archived_status(const StoredJob& row, bool with_frames = true);
 // The tile map GetJob shows, for an archived still or frame: as a compacted job's
 // (FramePlan::tile_progress: every tile finished if the job is, else each at the passes the
 // whole frame completed), from its settings.

@@ -51,7 +51,7 @@ std::vector<v1::JobStatus> Coordinator::statuses(const std::vector<StoredJob>& r
   std::vector<v1::JobStatus> out;
   for (size_t i = 0; i < rows.size(); ++i) {
     if (!rows[i].summary.empty())
-      got[i] = archived_status(rows[i]);
+      got[i] = archived_status(rows[i], false);
     else if (!got[i])
       got[i] = archived(rows[i].meta.id);  // archived since the rows were read (or not yet acknowledged: left out)
     if (!got[i]) continue;

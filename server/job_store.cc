@@ -231,8 +231,11 @@ StoredJob read_row(const Statement& q, bool with_summary) {
   return j;
 }
 
-std::string select_rows(const char* where_and_order, bool with_summary) {
-  return std::string("SELECT ") + kRowColumns + (with_summary ? ", summary" : "") + " FROM jobs " + where_and_order;
+// `list`: a sequence's frames not read (page, newest).
+std::string select_rows(const char* where_and_order, bool with_summary, bool list = false) {
+  std::string columns = kRowColumns;
+  if (list) columns.replace(columns.find(", frames,"), 9, ", '' AS frames,");
+  return "SELECT " + columns + (with_summary ? ", summary" : "") + " FROM jobs " + where_and_order;
 }
 
 }  // namespace
@@ -272,7 +275,7 @@ std::optional<StoredJob> SqliteJobStore::job(const std::string& id) const {
 
 std::vector<StoredJob> SqliteJobStore::page(uint64_t after_seq, size_t n) const {
   MutexLock lock(mu_);
-  Statement q(db_, select_rows("WHERE seq > ?1 ORDER BY seq LIMIT ?2", true).c_str());
+  Statement q(db_, select_rows("WHERE seq > ?1 ORDER BY seq LIMIT ?2", true, true).c_str());
   q.integer(1, int64_t(after_seq)).integer(2, int64_t(std::min<size_t>(n, INT64_MAX)));
   std::vector<StoredJob> out;
   while (q.step()) out.push_back(read_row(q, true));
@@ -288,7 +291,7 @@ uint64_t SqliteJobStore::count() const {
 
 std::vector<StoredJob> SqliteJobStore::newest(size_t n) const {
   MutexLock lock(mu_);
-  Statement q(db_, select_rows("ORDER BY seq DESC LIMIT ?1", true).c_str());
+  Statement q(db_, select_rows("ORDER BY seq DESC LIMIT ?1", true, true).c_str());
   q.integer(1, int64_t(std::min<size_t>(n, INT64_MAX)));
   std::vector<StoredJob> out;
   while (q.step()) out.push_back(read_row(q, true));

@@ -99,10 +99,12 @@ class JobStore {
   // One row, with its summary if archived; nothing if there is no such row.
   virtual std::optional<StoredJob> job(const std::string& id) const = 0;
   // Up to `n` rows after submission number `after_seq`, in submission order (summaries of
-  // archived ones included), and how many rows there are.
+  // archived ones included), and how many rows there are. For lists: a sequence's `frames`
+  // may be left empty (its summary counts them; reading 100,000 frames a row for each of a
+  // list's rows was most of a list's time).
   virtual std::vector<StoredJob> page(uint64_t after_seq, size_t n) const = 0;
   virtual uint64_t count() const = 0;
-  // The `n` rows submitted last, in submission order (summaries included).
+  // The `n` rows submitted last, in submission order (summaries included; `frames` as page's).
   virtual std::vector<StoredJob> newest(size_t n) const = 0;
   // Archived jobs' ids and scenes (what a start must keep on disk), and their number by state.
   virtual std::vector<std::pair<std::string, std::string>> archived_names() const = 0;

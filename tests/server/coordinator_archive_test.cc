@@ -117,6 +117,12 @@ TEST_F(ArchiveTest, AnArchivedSequenceAnswersForEveryFrame) {
   ASSERT_EQ(listed.jobs_size(), 1);
   EXPECT_EQ(listed.jobs(0).frames_size(), 0);
   EXPECT_EQ(listed.jobs(0).frames_total(), 3u);
+  EXPECT_EQ(c->recent(10).at(0).frames_size(), 0);  // (the summary's frames skipped unread)
+  EXPECT_EQ(c->recent(10).at(0).frames_done(), 1u);
+  const v1::JobStatus page = c->status(id, true, {}, FrameRange{1, 1});  // /api/jobs/<id>'s pages
+  ASSERT_EQ(page.frames_size(), 1);
+  EXPECT_EQ(page.frames(0).frame(), 5);
+  EXPECT_EQ(page.current_frame_job(), id + "-f5");  // the last started
   EXPECT_EQ(after.frames(0).state(), v1::JobStatus::DONE);
   EXPECT_EQ(after.frames(1).state(), v1::JobStatus::CANCELLED);
   EXPECT_TRUE(after.frames(2).job_id().empty());

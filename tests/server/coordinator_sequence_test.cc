@@ -173,6 +173,13 @@ TEST_F(SequenceTest, FramesComeAPageAtATimeWithTheFrameBeingRenderedNamed) {
   EXPECT_EQ(st.current_frame_job(), id + "-f2");
   EXPECT_EQ(c->status(id, true, {}, FrameRange{7, 1}).frames_size(), 0);
   EXPECT_EQ(c->status(id, false).frames_size(), 5);  // GetJob: every frame
+  // A list (/api/status) counts them from the stored summary without reading them.
+  const std::vector<v1::JobStatus> recent = c->recent(10);
+  ASSERT_EQ(recent.size(), 1u);
+  EXPECT_EQ(recent[0].frames_size(), 0);
+  EXPECT_EQ(recent[0].frames_total(), 5u);
+  EXPECT_EQ(recent[0].frames_done(), 1u);
+  EXPECT_EQ(recent[0].state(), v1::JobStatus::CANCELLED);
 }
 
 TEST_F(SequenceTest, ARestartedCoordinatorGoesOnWithASequenceBitForBit) {
