@@ -52,7 +52,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   try {
-    tessera::wan::WanLink link(to.substr(0, colon), to_port, {rtt_ms / 2000.0, mbit * 1e6 / 8});
+    tessera::wan::WanLink link(to.substr(0, colon), to_port, {rtt_ms / 2000.0, mbit * 1e6 / 8}, port);
     signal(SIGUSR1, on_signal);
     signal(SIGTERM, on_signal);
     signal(SIGINT, on_signal);
