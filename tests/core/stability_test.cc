@@ -241,9 +241,11 @@ TEST(HardCases, SamplesBeyondTheBoundAreDroppedNotFatal) {
   l.kind = Light::Kind::kPoint;
   l.position = {0, 0, 3};
   l.color = Rgb(1e19f);
-  l.att_constant = 1e-15f;  // samples near 1e33: finite floats, past the bound
   s.lights.push_back(l);
   s.finalize();
+  // Samples near 1e33: finite floats, past the bound. (Set after finalize, which refuses a
+  // light this bright for its attenuation: the render must survive what gets past anyway.)
+  s.lights[0].att_constant = 1e-15f;
   RenderSettings settings;
   settings.camera.width = settings.camera.height = 8;
   settings.spp = 2;
