@@ -87,8 +87,10 @@ float sheen_f(float alpha, Vec3 wo, Vec3 wi) {
 
 float sheen_albedo(float cos_theta, float alpha) {
   static const AlbedoTable table;  // thread-safe, first use only
-  const float x = std::clamp(std::fabs(cos_theta), 0.0f, 1.0f) * (kN - 1);
-  const float y = std::clamp((alpha - kSheenMinAlpha) / (1 - kSheenMinAlpha), 0.0f, 1.0f) * (kN - 1);
+  // (NaN as 0: clamp passes it through, and int(NaN) indexed far outside the table.)
+  const auto unit = [](float v) { return v >= 0 ? std::min(v, 1.0f) : 0.0f; };
+  const float x = unit(std::fabs(cos_theta)) * (kN - 1);
+  const float y = unit((alpha - kSheenMinAlpha) / (1 - kSheenMinAlpha)) * (kN - 1);
   const int i = std::min(int(x), kN - 2), j = std::min(int(y), kN - 2);
   const float fx = x - float(i), fy = y - float(j);
   auto at = [&](int a, int b) { return table.e[size_t(b * kN + a)]; };

@@ -137,20 +137,27 @@ Mat4 trs_matrix(const std::array<double, 3>& t, const std::array<double, 4>& q, 
   return Mat4::translate(t[0], t[1], t[2]) * rot * Mat4::scale(s[0], s[1], s[2]);
 }
 
+// (Directions unit in double where float's squares over- or underflow: a node scaled by
+// 1e20 gave a zero direction that passed as finite, a light shining nowhere.)
 void place_camera(CameraDesc& d, const Mat4& w) {
   d.eye = w.point(0, 0, 0).to_float();
-  d.forward = normalize(w.vector(0, 0, -1).to_float());
-  d.up = normalize(w.vector(0, 1, 0).to_float());
+  d.forward = unit(w.vector(0, 0, -1));
+  d.up = unit(w.vector(0, 1, 0));
   d.cs184_dir = -d.forward;
 }
 
 void place_light(Light& l, const Mat4& w) {
   if (l.kind == Light::Kind::kDirectional) {
-    l.direction = -normalize(w.vector(0, 0, -1).to_float());
+    l.direction = -unit(w.vector(0, 0, -1));
     return;
   }
   l.position = w.point(0, 0, 0).to_float();
-  if (l.kind == Light::Kind::kSpot) l.direction = normalize(w.vector(0, 0, -1).to_float());
+  if (l.kind == Light::Kind::kSpot) l.direction = unit(w.vector(0, 0, -1));
+}
+
+bool placed(const Light& l) {
+  const bool aimed = l.kind == Light::Kind::kDirectional || l.kind == Light::Kind::kSpot;
+  return is_finite(l.position) && is_finite(l.direction) && !(aimed && l.direction == Vec3{});
 }
 
 Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
@@ -232,6 +239,10 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
     Light& l = s.lights[b.light];
     place_light(l, w);
     check(l.position, "light '" + l.name + "'");
+    if (!placed(l))  // (a light scaled to zero to hide it: its direction is none)
+      throw SceneError(rest.source, "animations[" + std::to_string(clip_index) + "]",
+                       "at " + std::to_string(time) + " s light '" + l.name +
+                           "' has no direction: its node's transform is degenerate");
   }
   if (a.camera_node >= 0 && moved[size_t(a.camera_node)]) {
     const Mat4& w = world[size_t(a.camera_node)];

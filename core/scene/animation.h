@@ -88,6 +88,9 @@ std::vector<double> sample_weights(const SceneAnimation::Channel& c, double time
 // the loader places them, and so does every pose.
 void place_camera(CameraDesc& d, const Mat4& world);
 void place_light(Light& l, const Mat4& world);
+// Whether place_light gave the light a finite position and, for spot and directional, a
+// direction (a degenerate transform gives none).
+bool placed(const Light& l);
 
 // glTF's local transform T * R * S from a translation, a (normalized) quaternion and a scale.
 Mat4 trs_matrix(const std::array<double, 3>& t, const std::array<double, 4>& r, const std::array<double, 3>& s);

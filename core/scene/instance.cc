@@ -38,8 +38,15 @@ std::optional<Instance> Instance::make(uint32_t mesh, const Mat4& m) {
   }
   for (float f : in.to_world)
     if (!std::isfinite(f)) return std::nullopt;
+  // Embree takes each ray into object space and asserts (aborting the process) on one past
+  // about 1.8e18: an axis scaled below 1e-5 (inverse entries past 1e5, origins within 1e12)
+  // could send one there. Such a mesh is copied into world space instead.
+  for (const double* row : inv)
+    for (int c = 0; c < 3; ++c)
+      if (!(std::fabs(row[c]) <= kMaxInverse)) return std::nullopt;
   for (float f : in.to_object)
-    if (!std::isfinite(f)) return std::nullopt;
+    if (!std::isfinite(f) || !(std::fabs(f) <= float(kMaxInverse * 1e12)))
+      return std::nullopt;  // (1e12: kMaxCoordinate)
   return in;
 }
 

@@ -25,7 +25,9 @@ struct Instance {
   bool mirrored = false;
 
   // `m` as an instance of mesh `mesh`; nothing where m is singular or not finite (a
-  // placement scaled to nothing has no surface to render).
+  // placement scaled to nothing has no surface to render), or its inverse has an entry past
+  // kMaxInverse (an axis scaled below 1e-5: Embree's object-space rays could pass its range).
+  static constexpr double kMaxInverse = 1e5;
   static std::optional<Instance> make(uint32_t mesh, const Mat4& m);
 
   // Each is computed in double and rounded once.

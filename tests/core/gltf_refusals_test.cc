@@ -84,7 +84,7 @@ TEST_F(Gltf, AnOrthographicCameraIsReadAndAnUnusableOneRefused) {
   EXPECT_FLOAT_EQ(s.camera.znear, 0.1f);
   EXPECT_FLOAT_EQ(s.camera.eye.z, 3);
   d.j["cameras"][0]["orthographic"]["ymag"] = 0;
-  expect_error(d, "orthographic xmag and ymag must be finite and not zero");
+  expect_error(d, "orthographic xmag and ymag must be finite, not zero and within +-1e12");
   d.j["cameras"][0]["orthographic"]["ymag"] = 1;
   d.j["cameras"][0]["orthographic"]["zfar"] = 0.05;
   expect_error(d, "orthographic needs 0 <= znear < zfar");

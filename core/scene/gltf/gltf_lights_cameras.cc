@@ -52,7 +52,7 @@ void add_gltf_light(GltfContext& ctx, int index, const Mat4& w, const std::strin
     ctx.fail(el, "unknown light type '" + g.type + "'");
   }
   place_light(l, w);
-  if (!is_finite(l.position) || !is_finite(l.direction)) ctx.fail(node_el, "light transform is degenerate");
+  if (!placed(l)) ctx.fail(node_el, "light transform is degenerate");
   ctx.scene.lights.push_back(l);
 }
 
@@ -64,8 +64,9 @@ void add_gltf_camera(GltfContext& ctx, int index, const Mat4& w, const std::stri
   const std::string el = "cameras[" + std::to_string(index) + "]";
   if (c.type == "orthographic") {
     const tinygltf::OrthographicCamera& o = c.orthographic;
-    if (!(std::isfinite(o.xmag) && std::isfinite(o.ymag) && o.xmag != 0 && o.ymag != 0))
-      ctx.fail(el, "orthographic xmag and ymag must be finite and not zero");
+    if (!(std::isfinite(o.xmag) && std::isfinite(o.ymag) && o.xmag != 0 && o.ymag != 0 &&
+          std::fabs(o.xmag) <= Scene::kMaxCoordinate && std::fabs(o.ymag) <= Scene::kMaxCoordinate))
+      ctx.fail(el, "orthographic xmag and ymag must be finite, not zero and within +-1e12");
     if (!(o.znear >= 0 && o.zfar > o.znear && std::isfinite(o.zfar)))
       ctx.fail(el, "orthographic needs 0 <= znear < zfar");
     CameraDesc& d = ctx.scene.camera;
