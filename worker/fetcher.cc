@@ -50,7 +50,15 @@ Fetcher::Leased Fetcher::lease(const std::atomic<bool>& stop) {
   if (!st.ok()) return {st, 0};
   if (resp.tasks_size() > 0) queue_.note_round_trip(now_seconds() - t0 - resp.held_ms() / 1000.0);
   backoff_.reset();
-  for (const v1::Task& task : resp.tasks()) enqueue(task, stop);
+  for (const v1::Task& task : resp.tasks()) queue_.preparing(task.task_id());  // heartbeaten from now on
+  for (const v1::Task& task : resp.tasks()) {
+    if (stop) {  // stopping: the rest go back unprepared, without an error
+      queue_.not_prepared(task.task_id());
+      link_.release(task.task_id(), "");
+      continue;
+    }
+    enqueue(task, stop);
+  }
   return {st, resp.tasks_size()};
 }
 
@@ -63,22 +71,34 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
       throw WireError("active mask size");
     if (h->rect.area() <= 0) throw WireError("empty tile");
     h->prepared = scenes_.prepare(h->task);
-    h->passes = task_passes(h->task, h->prepared->renderer->settings());
-    h->base = task_base(h->task, h->rect, h->prepared->renderer->settings().sum_planes());
+    const RenderSettings& settings = h->prepared->renderer->settings();
+    // A tile of the frame's window, no larger than its tile size (a 65536-pixel-wide one
+    // would have asked for 160 GiB of sums below).
+    const Rect window = settings.effective_window();
+    const Rect& r = h->rect;
+    if (r.x < window.x || r.y < window.y || r.x + int64_t(r.w) > window.x + int64_t(window.w) ||
+        r.y + int64_t(r.h) > window.y + int64_t(window.h) || r.w > settings.tile_size || r.h > settings.tile_size)
+      throw WireError("tile " + std::to_string(r.w) + "x" + std::to_string(r.h) + " at " + std::to_string(r.x) + "," +
+                      std::to_string(r.y) + " is not a tile of the frame's " + std::to_string(window.w) + "x" +
+                      std::to_string(window.h) + " window at tile size " + std::to_string(settings.tile_size));
+    h->passes = task_passes(h->task, settings);
+    h->base = task_base(h->task, h->rect, settings.sum_planes());
+    if (!h->task.active().empty()) h->mask = reinterpret_cast<const uint8_t*>(h->task.active().data());
+    h->sums.resize(size_t(h->rect.area()) * settings.sum_planes());
+    if (settings.aovs) h->aovs.resize(size_t(h->rect.area()));
+    if (h->prepared->renderer->light_tracing()) h->splats.resize(h->passes.size());
   } catch (const std::exception& e) {
     // A busy coordinator (SceneBusy) is not a failure of the task: it goes back without an
     // error, to be taken again later. Any other error: another worker may manage.
     const bool busy = dynamic_cast<const SceneBusy*>(&e) != nullptr;
     spdlog::warn("task {}: {}{}", h->task.task_id(), e.what(), busy ? " (given back, to take again later)" : "");
+    queue_.not_prepared(h->task.task_id());
     link_.release(h->task.task_id(), busy ? "" : e.what());
     backoff_.wait(&stop);  // either way this one backs off
     return;
   }
-  if (!h->task.active().empty()) h->mask = reinterpret_cast<const uint8_t*>(h->task.active().data());
-  h->sums.resize(size_t(h->rect.area()) * h->prepared->renderer->settings().sum_planes());
-  if (h->prepared->renderer->settings().aovs) h->aovs.resize(size_t(h->rect.area()));
-  if (h->prepared->renderer->light_tracing()) h->splats.resize(h->passes.size());
-  queue_.add(std::move(h));
+  const uint64_t id = h->task.task_id();
+  if (!queue_.add(std::move(h))) spdlog::info("task {}: the coordinator took it back while it was prepared", id);
 }
 
 }  // namespace tessera::worker

@@ -61,8 +61,21 @@ std::optional<LeaseRequest> TaskQueue::wait_for_room(std::chrono::milliseconds t
   return lookahead_.request(load_locked());
 }
 
-void TaskQueue::add(std::shared_ptr<Held> h) {
+void TaskQueue::preparing(uint64_t task_id) {
   std::lock_guard<std::mutex> lock(mu_);
+  preparing_.insert(task_id);
+}
+
+void TaskQueue::not_prepared(uint64_t task_id) {
+  std::lock_guard<std::mutex> lock(mu_);
+  preparing_.erase(task_id);
+  refused_.erase(task_id);
+}
+
+bool TaskQueue::add(std::shared_ptr<Held> h) {
+  std::lock_guard<std::mutex> lock(mu_);
+  preparing_.erase(h->task.task_id());
+  if (refused_.erase(h->task.task_id())) return false;
   held_[h->task.task_id()] = h;
   queued_rows_ += uint64_t(h->rect.h);
   for (int row = 0; row < h->rect.h; ++row) queued_samples_ += h->row_samples(row);
@@ -74,6 +87,7 @@ void TaskQueue::add(std::shared_ptr<Held> h) {
                     [&](const std::shared_ptr<Held>& q) { return q->task.priority() < h->task.priority(); });
   queue_.insert(at, std::move(h));
   work_.notify_all();
+  return true;
 }
 
 bool TaskQueue::holds_tasks() const {
@@ -84,6 +98,8 @@ bool TaskQueue::holds_tasks() const {
 void TaskQueue::drop_all() {
   std::lock_guard<std::mutex> lock(mu_);
   while (!held_.empty()) drop_locked(held_.begin()->first);
+  refused_.insert(preparing_.begin(), preparing_.end());
+  preparing_.clear();
 }
 
 std::optional<TaskQueue::Row> TaskQueue::next_row() {
@@ -159,13 +175,16 @@ std::vector<uint64_t> TaskQueue::held_ids() const {
   std::lock_guard<std::mutex> lock(mu_);
   std::vector<uint64_t> ids;
   for (const auto& [id, h] : held_) ids.push_back(id);
+  ids.insert(ids.end(), preparing_.begin(), preparing_.end());
   return ids;
 }
 
 void TaskQueue::drop_unfinished(const std::vector<uint64_t>& refused) {
   std::lock_guard<std::mutex> lock(mu_);
-  for (uint64_t id : refused)
+  for (uint64_t id : refused) {
     if (auto it = held_.find(id); it != held_.end() && it->second->rows_done < it->second->rect.h) drop_locked(id);
+    if (preparing_.erase(id)) refused_.insert(id);
+  }
 }
 
 void TaskQueue::drop_locked(uint64_t task_id) {
@@ -210,8 +229,11 @@ std::vector<uint64_t> TaskQueue::take_held() {
   std::lock_guard<std::mutex> lock(mu_);
   std::vector<uint64_t> ids;
   for (const auto& [id, h] : held_) ids.push_back(id);
+  ids.insert(ids.end(), preparing_.begin(), preparing_.end());
   held_.clear();
   queue_.clear();
+  refused_.insert(preparing_.begin(), preparing_.end());  // (given back: not to be added after)
+  preparing_.clear();
   return ids;
 }
 

@@ -13,6 +13,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <set>
 #include <vector>
 
 #include "core/math/rect.h"
@@ -60,8 +61,14 @@ class TaskQueue {
   std::optional<LeaseRequest> wait_for_room(std::chrono::milliseconds timeout);
   // Queues a task's rows, behind those of the same or higher priority (Task.priority: the
   // window may hold several jobs' tasks); the task must have its renderer and rect-sized
-  // sums.
-  void add(std::shared_ptr<Held> task);
+  // sums. False (and nothing queued) if a heartbeat found it refused while it was prepared.
+  bool add(std::shared_ptr<Held> task);
+  // Between GetTask and add(): a task leased and being prepared (its scene fetched and
+  // loaded, which can take longer than a lease: it expired, and a failure after that went
+  // uncounted) is heartbeaten from the start, and given back at a stop as a held one is.
+  void preparing(uint64_t task_id);
+  // Its preparation failed or was skipped (it is released): forgotten.
+  void not_prepared(uint64_t task_id);
   bool holds_tasks() const;
   // Cancels and forgets every held task (the coordinator no longer knows its leases).
   void drop_all();
@@ -123,6 +130,7 @@ class TaskQueue {
   mutable std::mutex mu_;  // guards everything below
   std::condition_variable work_, more_, outbox_cv_, stopped_cv_;
   std::map<uint64_t, std::shared_ptr<Held>> held_;  // leased and not yet submitted
+  std::set<uint64_t> preparing_, refused_;          // leased, not yet added; refused meanwhile
   std::deque<std::shared_ptr<Held>> queue_;         // with rows not yet handed out
   std::deque<std::shared_ptr<Held>> outbox_;        // finished, to submit
   uint64_t queued_rows_ = 0;

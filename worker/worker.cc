@@ -115,6 +115,10 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
         queue_->set_max_leases(resp.max_leases() > 0 ? resp.max_leases() : worker::kDefaultMaxLeases,
                                size_t(options_.max_tasks));
         backoff_.reset();
+        if (unreachable_said_ != 0)
+          spdlog::info("coordinator {} reached after {:.0f} s", options_.coordinator,
+                       now_seconds() - unreachable_since_);
+        unreachable_since_ = unreachable_said_ = 0;
         spdlog::debug("registered as {}", resp.worker_id());
         return true;
       }
@@ -131,9 +135,15 @@ bool Worker::register_worker(const std::atomic<bool>& stop) {
       return false;
     }
     const std::string hint = tls_hint(st, !options_.access.tls_ca_pem.empty());
-    if (!hint.empty() && !tls_hinted_) {  // said once; the worker keeps retrying
-      spdlog::warn("coordinator {}: {}{}; retrying", options_.coordinator, st.error_message(), hint);
-      tls_hinted_ = true;
+    // Said at the first failure and then once a minute (a worker pointed at a dead port
+    // said nothing at all), with the TLS hint once.
+    const double t = now_seconds();
+    if (unreachable_since_ == 0) unreachable_since_ = t;
+    if (unreachable_said_ == 0 || t - unreachable_said_ >= 60 || (!hint.empty() && !tls_hinted_)) {
+      spdlog::warn("coordinator {} not reached for {:.0f} s: {}{}; retrying", options_.coordinator,
+                   t - unreachable_since_, st.error_message(), tls_hinted_ ? "" : hint);
+      unreachable_said_ = t;
+      tls_hinted_ = tls_hinted_ || !hint.empty();
     } else {
       spdlog::debug("coordinator {}: {}; retrying", options_.coordinator, st.error_message());
     }
@@ -156,6 +166,7 @@ void Worker::fetch(const std::atomic<bool>& stop) {
     if (got.status.ok()) {
       last_contact_ = now_seconds();
       if (got.tasks > 0) last_work_ = now_seconds();
+      rejoin_.reset();
       continue;
     }
     spdlog::debug("get task: {}", got.status.error_message());
@@ -167,8 +178,11 @@ void Worker::fetch(const std::atomic<bool>& stop) {
       continue;
     }
     // Unknown worker (the coordinator restarted) or unreachable: its leases are gone.
+    if (!unreachable(got.status))
+      spdlog::warn("coordinator {} refused a request for work: {}; registering again", options_.coordinator,
+                   got.status.error_message());
     queue_->drop_all();
-    backoff_.wait(&stop);
+    rejoin_.wait(&stop);
     if (!register_worker(stop)) return;  // stopped, or refused
   }
 }

@@ -100,7 +100,12 @@ class Worker {
   double last_work_ = 0;                      // when it last held or was given a task (--exit-when-idle-seconds)
   bool refused_ = false;                      // registration refused: retrying cannot help
   bool tls_hinted_ = false;                   // the TLS hint (tls_hint) was logged
-  bool enrolled_ = false;                     // holds a credential of its own (enrol_token)
+  // Registering again after a GetTask the coordinator refused: backed off across attempts
+  // until a GetTask gets through (registering resets backoff_; a refusal every time made a
+  // register-refuse loop at 10 a second).
+  Backoff rejoin_{Backoff::kWorkerFirstSeconds};
+  double unreachable_since_ = 0, unreachable_said_ = 0;  // steady seconds; 0: reached
+  bool enrolled_ = false;                                // holds a credential of its own (enrol_token)
 };
 
 }  // namespace tessera

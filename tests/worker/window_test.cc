@@ -3,6 +3,7 @@
 // size it, the bounds on it and the order tasks are rendered in.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <memory>
 #include <vector>
@@ -132,6 +133,38 @@ TEST(TaskQueue, HigherPriorityTasksAreRenderedFirst) {
     if (order.empty() || order.back() != r->task->task.task_id()) order.push_back(r->task->task.task_id());
   }
   EXPECT_EQ(order, (std::vector<uint64_t>{1, 3, 5, 2, 4}));
+  q.stop();
+}
+
+// Found by audit: a task was heartbeaten only once prepared (its scene fetched, loaded and
+// built), so a preparation longer than the lease let it expire, and a failure after that
+// went uncounted. It is heartbeaten from its lease on; one the coordinator refuses
+// meanwhile is not queued; a stop gives it back with the held ones.
+TEST(TaskQueue, ATaskBeingPreparedIsHeartbeatenAndCanBeRefused) {
+  TaskQueue q(Lookahead{1, 0.3});
+  auto task = [](uint64_t id) {
+    auto h = std::make_shared<Held>();
+    h->task.set_task_id(id);
+    h->task.set_sample_end(1);
+    h->rect = {0, 0, 2, 2};
+    h->sums.resize(4);
+    return h;
+  };
+  q.preparing(1);
+  q.preparing(2);
+  q.preparing(3);
+  EXPECT_EQ(q.held_ids(), (std::vector<uint64_t>{1, 2, 3}));
+  EXPECT_TRUE(q.add(task(1)));
+  q.drop_unfinished({2});  // the heartbeat's answer: refused
+  EXPECT_FALSE(q.add(task(2)));
+  EXPECT_EQ(q.held_ids(), (std::vector<uint64_t>{1, 3}));
+  q.not_prepared(3);  // its preparation failed: released
+  EXPECT_EQ(q.held_ids(), (std::vector<uint64_t>{1}));
+  q.preparing(4);
+  std::vector<uint64_t> back = q.take_held();
+  std::sort(back.begin(), back.end());
+  EXPECT_EQ(back, (std::vector<uint64_t>{1, 4}));
+  EXPECT_FALSE(q.add(task(4)));  // given back: not rendered after
   q.stop();
 }
 

@@ -309,7 +309,7 @@ TEST_F(WorkerTest, ItAsksForTwoTasksThenForItsLookaheadOnceItsSpeedIsMeasured) {
 // A dropped connection or a stalled link (UNAVAILABLE) well within the lease time keeps the
 // registration and the work held: the coordinator still holds those leases.
 TEST_F(WorkerTest, ALinkBlipKeepsTheRegistrationAndTheWorkHeld) {
-  fake->task_batches.push_back({task(81, {0, 0, 16, 16}, 0, 4), task(82, {0, 16, 16, 16}, 0, 4)});
+  fake->task_batches.push_back({task(81, {0, 0, 16, 16}, 0, 4), task(82, {0, 16, 16, 8}, 0, 4)});
   fake->hold_submissions = true;  // 81 and 82 stay held while the link blips
   start(options());
   ASSERT_TRUE(fake->wait_until([&] { return fake->handed_out.size() == 2; }));
@@ -363,6 +363,23 @@ TEST_F(WorkerTest, ATaskWhoseSceneCannotLoadIsReleasedWithTheError) {
   EXPECT_EQ(fake->releases[0].worker_id(), 1u);
   EXPECT_EQ(fake->releases[0].worker_secret(), "secret-1");
   EXPECT_TRUE(fake->results.empty());
+}
+
+// Found by audit: a task's tile was taken as sent (a 65536-pixel square asked for 160 GiB of
+// sums, outside the try that releases a task: the worker hung). One outside the frame's
+// window, or larger than its tile size, is released naming the problem.
+TEST_F(WorkerTest, ATileThatIsNotOneOfTheFramesIsReleasedNamingIt) {
+  const Rect window = settings.effective_window();
+  fake->task_batches.push_back({task(71, {window.w - 4, 0, 8, 8}, 0, 1),
+                                task(72, {0, 0, settings.tile_size + 1, 1}, 0, 1), task(73, {0, 0, 8, 8}, 0, 1)});
+  start(options());
+  ASSERT_TRUE(fake->wait_until([&] { return fake->releases.size() == 2 && fake->results.size() == 1; }));
+  EXPECT_TRUE(finish());
+  for (const v1::ReleaseRequest& r : fake->releases)
+    EXPECT_NE(r.error().find("is not a tile of the frame's " + std::to_string(window.w) + "x" +
+                             std::to_string(window.h) + " window"),
+              std::string::npos)
+        << r.error();
 }
 
 // A coordinator at its bound of open scene downloads (RESOURCE_EXHAUSTED) is busy, not
