@@ -3,7 +3,9 @@
 #include <xxhash.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <set>
 
@@ -213,12 +215,21 @@ std::string SceneReceiver::position() const {
   return "file " + quoted(f.path()) + " at byte " + std::to_string(offset_) + " of " + std::to_string(f.size());
 }
 
+void SceneReceiver::cannot_write(const v1::SceneFileInfo& f) const {
+  // errno as the failed call left it: "No space left on device" is what an operator needs.
+  const int e = errno;
+  throw std::runtime_error("cannot write scene file " + quoted(f.path()) + " to " +
+                           (fs::path(dir_) / f.path()).string() +
+                           (e ? std::string(": ") + std::strerror(e) : std::string()));
+}
+
 void SceneReceiver::open(const v1::SceneFileInfo& f) {
   const fs::path p = fs::path(dir_) / f.path();
   std::error_code ec;
   fs::create_directories(p.parent_path(), ec);
+  errno = 0;
   out_ = std::ofstream(p, std::ios::binary | std::ios::trunc);
-  if (!out_) throw std::runtime_error("cannot write scene file " + quoted(f.path()));
+  if (!out_) cannot_write(f);
 }
 
 void SceneReceiver::settle() {
@@ -226,8 +237,9 @@ void SceneReceiver::settle() {
     const v1::SceneFileInfo& f = m_.files(int(file_));
     if (offset_ < f.size()) return;
     if (!out_.is_open()) open(f);  // a file of size 0
+    errno = 0;
     out_.close();
-    if (!out_) throw std::runtime_error("cannot write scene file " + quoted(f.path()));
+    if (!out_) cannot_write(f);
     ++file_;
     offset_ = 0;
     if (!complete()) hasher_.file(m_.files(int(file_)).path(), m_.files(int(file_)).size());
@@ -252,8 +264,8 @@ void SceneReceiver::add(const v1::SceneChunk& piece) {
     throw WireError(what_ + ": a piece of file " + quoted(f.path()) + " at byte " + std::to_string(piece.offset()) +
                     " out of order (expected " + position() + ")");
   if (!out_.is_open()) open(f);
-  if (!out_.write(piece.data().data(), std::streamsize(n)))
-    throw std::runtime_error("cannot write scene file " + quoted(f.path()));
+  errno = 0;
+  if (!out_.write(piece.data().data(), std::streamsize(n))) cannot_write(f);
   hasher_.update(piece.data().data(), n);
   offset_ += n;
   settle();

@@ -112,6 +112,8 @@ class SceneReceiver {
 
  private:
   void open(const v1::SceneFileInfo& f);
+  // Throws naming the file, where it goes on disk and why (errno).
+  [[noreturn]] void cannot_write(const v1::SceneFileInfo& f) const;
   void settle();  // past a file with all its bytes, and files of size 0
 
   std::string dir_;

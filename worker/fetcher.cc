@@ -23,7 +23,10 @@ grpc::Status Fetcher::fetch_scene(const v1::FetchSceneRequest& req, const SceneC
   const auto reader = link_.stub->FetchSceneChunks(ctx.get(), req);
   v1::SceneChunk chunk;
   try {
-    while (reader->Read(&chunk)) piece(chunk);
+    while (reader->Read(&chunk)) {
+      if (stop_ && *stop_) throw Stopped();
+      piece(chunk);
+    }
   } catch (...) {  // a piece refused: the call ends here
     ctx->TryCancel();
     while (reader->Read(&chunk)) {
@@ -35,6 +38,7 @@ grpc::Status Fetcher::fetch_scene(const v1::FetchSceneRequest& req, const SceneC
 }
 
 Fetcher::Leased Fetcher::lease(const std::atomic<bool>& stop) {
+  stop_ = &stop;
   const std::optional<LeaseRequest> size = queue_.wait_for_room(kStopPoll);
   if (!size) return {};
   v1::GetTaskRequest req;
@@ -90,7 +94,7 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
   } catch (const std::exception& e) {
     // A busy coordinator (SceneBusy) is not a failure of the task: it goes back without an
     // error, to be taken again later. Any other error: another worker may manage.
-    const bool busy = dynamic_cast<const SceneBusy*>(&e) != nullptr;
+    const bool busy = dynamic_cast<const SceneBusy*>(&e) != nullptr || dynamic_cast<const Stopped*>(&e) != nullptr;
     spdlog::warn("task {}: {}{}", h->task.task_id(), e.what(), busy ? " (given back, to take again later)" : "");
     queue_.not_prepared(h->task.task_id());
     link_.release(h->task.task_id(), busy ? "" : e.what());

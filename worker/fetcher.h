@@ -4,6 +4,7 @@
 #pragma once
 
 #include <atomic>
+#include <stdexcept>
 #include <string>
 
 #include "rpc.h"
@@ -28,6 +29,10 @@ class Fetcher {
   // long-polls when there is none) and queues each task. A task this worker cannot render
   // (its scene will not load here) is given back with the error, after a back-off.
   Leased lease(const std::atomic<bool>& stop);
+  // Thrown from a download at a stop.
+  struct Stopped : std::runtime_error {
+    Stopped() : std::runtime_error("the worker is stopping") {}
+  };
 
  private:
   void enqueue(const v1::Task& task, const std::atomic<bool>& stop);
@@ -38,6 +43,9 @@ class Fetcher {
   TaskQueue& queue_;
   Backoff& backoff_;
   SceneCache scenes_;
+  // The worker's stop, while lease() runs: a scene's download ends at a stop (SIGTERM waited
+  // for a download of minutes), its task given back without an error.
+  const std::atomic<bool>* stop_ = nullptr;
 };
 
 }  // namespace tessera::worker

@@ -271,7 +271,12 @@ void SceneCache::fetch(const std::string& hash) {
   rx->finish();  // every byte, hashing to `hash`
   const std::string main = rx->manifest().main_file();
   rx.reset();
-  if (!(std::ofstream(part / ".main") << main << "\n")) throw std::runtime_error("cannot write the scene cache");
+  errno = 0;
+  if (!(std::ofstream(part / ".main") << main << "\n")) {
+    const int e = errno;
+    throw std::runtime_error("cannot write the scene cache's marker " + (part / ".main").string() +
+                             (e ? std::string(": ") + std::strerror(e) : std::string()));
+  }
   std::error_code ec;
   fs::rename(part, dir, ec);
   if (ec && fs::exists(dir / ".main")) return;  // another worker's, the same bytes

@@ -53,41 +53,93 @@ v1::ResultBatch Sender::encode(const TaskQueue::Batch& batch, double now) const 
   return results;
 }
 
+CallPlan plan_calls(const std::vector<uint64_t>& sizes, uint64_t max_call, uint64_t max_message) {
+  CallPlan plan;
+  uint64_t bytes = 0;
+  for (size_t i = 0; i < sizes.size(); ++i) {
+    if (sizes[i] > max_message) {
+      plan.too_large.push_back(i);
+      continue;
+    }
+    if (plan.calls.empty() || (bytes + sizes[i] > max_call && !plan.calls.back().empty())) {
+      plan.calls.emplace_back();
+      bytes = 0;
+    }
+    plan.calls.back().push_back(i);
+    bytes += sizes[i];
+  }
+  return plan;
+}
+
 void Sender::send_loop() {
   while (true) {
     const TaskQueue::Batch batch = queue_.take_finished(std::chrono::milliseconds(kLingerMs));
     if (batch.tasks.empty()) return;  // stopped, and everything finished was sent
-    const v1::ResultBatch results = encode(batch, now_seconds());
-    UploadBudget::Call call;  // results are in the batch's order
-    for (size_t i = 0; i < batch.tasks.size(); ++i) {
-      // A run's sums are one tile's whatever its passes; its splats are a record a pass.
-      const uint64_t sums = results.results(int(i)).sums_zstd().size();
-      const uint64_t splats = results.results(int(i)).splats_zstd().size();
-      call.bytes += sums + splats;
-      call.samples += double(batch.tasks[i]->stats.samples);
-      call.busy += batch.tasks[i]->busy;
-      call.single_pass_bytes += double(sums) * double(batch.tasks[i]->passes.size()) + double(splats);
+    v1::ResultBatch all = encode(batch, now_seconds());
+    // In calls of at most kMaxCallBytes (the coordinator reads a call whole, and refuses one
+    // past kMaxMessageBytes: a batch of large tiles was refused, retried and dropped).
+    std::vector<uint64_t> sizes;
+    for (const v1::TaskResult& r : all.results()) sizes.push_back(r.ByteSizeLong());
+    const uint64_t max_message = uint64_t(kMaxMessageBytes) - (1 << 20);  // (room for the call's other fields)
+    const CallPlan plan = plan_calls(sizes, kMaxCallBytes, max_message);
+    for (const size_t i : plan.too_large) {  // no call can carry it
+      const std::string why = "its result is " + std::to_string(sizes[i]) + " bytes, past the " +
+                              std::to_string(max_message) + " a call may carry (a smaller --tile fits)";
+      spdlog::error("task {}: {}", all.results(int(i)).task_id(), why);
+      queue_.sent(TaskQueue::Batch{{batch.tasks[i]}, 0}, false);
+      link_.release(all.results(int(i)).task_id(), why);
     }
-    bool sent = false;
-    for (int attempt = 0; attempt < kAttempts && !sent; ++attempt) {
-      v1::ResultAcks acks;
-      call.start = now_seconds();
-      const grpc::Status st = link_.stub->SubmitResults(link_.context(30).get(), results, &acks);
-      call.end = now_seconds();
-      call.held = acks.held_ms() / 1000.0;
-      sent = st.ok();
-      if (sent) queue_.note_upload(call);
-      for (int k = 0; sent && k < acks.acks_size() && k < results.results_size(); ++k)
-        if (!acks.acks(k).refused().empty())  // (counted as this worker failing the task while its lease lived)
-          spdlog::warn("the coordinator refused task {}'s result: {}", results.results(k).task_id(),
-                       acks.acks(k).refused());
-      if (!sent) {
-        spdlog::debug("submit: {}", st.error_message());
-        std::this_thread::sleep_for(std::chrono::milliseconds(100 << attempt));
+    for (const std::vector<size_t>& call : plan.calls) {
+      TaskQueue::Batch part;
+      part.busy_thread_seconds = batch.busy_thread_seconds;
+      v1::ResultBatch results;
+      results.set_worker_id(all.worker_id());
+      results.set_worker_secret(all.worker_secret());
+      for (const size_t i : call) {
+        part.tasks.push_back(batch.tasks[i]);
+        results.add_results()->Swap(all.mutable_results(int(i)));
       }
+      submit(part, results);
     }
-    queue_.sent(batch, sent);  // unsent: their leases expire and other workers render them
   }
+}
+
+void Sender::submit(const TaskQueue::Batch& batch, const v1::ResultBatch& results) {
+  UploadBudget::Call call;  // results are in the batch's order
+  for (size_t i = 0; i < batch.tasks.size(); ++i) {
+    // A run's sums are one tile's whatever its passes; its splats are a record a pass.
+    const uint64_t sums = results.results(int(i)).sums_zstd().size();
+    const uint64_t splats = results.results(int(i)).splats_zstd().size();
+    call.bytes += sums + splats;
+    call.samples += double(batch.tasks[i]->stats.samples);
+    call.busy += batch.tasks[i]->busy;
+    call.single_pass_bytes += double(sums) * double(batch.tasks[i]->passes.size()) + double(splats);
+  }
+  bool sent = false;
+  grpc::Status st;
+  for (int attempt = 0; attempt < kAttempts && !sent; ++attempt) {
+    v1::ResultAcks acks;
+    call.start = now_seconds();
+    st = link_.stub->SubmitResults(link_.context(30).get(), results, &acks);
+    call.end = now_seconds();
+    call.held = acks.held_ms() / 1000.0;
+    sent = st.ok();
+    if (sent) queue_.note_upload(call);
+    for (int k = 0; sent && k < acks.acks_size() && k < results.results_size(); ++k)
+      if (!acks.acks(k).refused().empty())  // (counted as this worker failing the task while its lease lived)
+        spdlog::warn("the coordinator refused task {}'s result: {}", results.results(k).task_id(),
+                     acks.acks(k).refused());
+    if (!sent) {
+      spdlog::debug("submit: {}", st.error_message());
+      std::this_thread::sleep_for(std::chrono::milliseconds(100 << attempt));
+    }
+  }
+  if (!sent)
+    spdlog::warn(
+        "the results of {} task(s) were not sent after {} attempts ({}): their leases expire and other "
+        "workers render them",
+        batch.tasks.size(), kAttempts, st.error_message());
+  queue_.sent(batch, sent);  // unsent: their leases expire and other workers render them
 }
 
 }  // namespace tessera::worker

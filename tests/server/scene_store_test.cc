@@ -238,6 +238,24 @@ TEST_F(SceneStoreTest, WorkersGetAKeptSceneInPiecesFromAnyByteOn) {
   EXPECT_THROW(scenes.send(req, 1000, collect), std::out_of_range);
 }
 
+// A scene that cannot be written (a worker's full cache disk) says where and why, not only
+// which file (found by audit: "cannot write scene file 'x'" hid "No space left on device").
+TEST_F(SceneStoreTest, AFileThatCannotBeWrittenIsNamedWithWhereAndWhy) {
+  const std::vector<v1::SceneChunk> got = messages(source());
+  const fs::path to = dir / "received";
+  SceneReceiver rx(to.string(), got[0].manifest());
+  fs::create_directories(to / got[0].manifest().files(0).path());  // a folder in its place, whoever runs the test
+  try {
+    for (size_t i = 1; i < got.size(); ++i) rx.add(got[i]);
+    ADD_FAILURE() << "written";
+  } catch (const std::runtime_error& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("cannot write scene file"), std::string::npos) << what;
+    EXPECT_NE(what.find((to / got[0].manifest().files(0).path()).string()), std::string::npos) << what;
+    EXPECT_NE(what.find(": Is a directory"), std::string::npos) << what;
+  }
+}
+
 // Every way an upload can be wrong is refused, naming the problem, before or as it happens,
 // and leaves nothing on disk and nothing counted against its owner.
 TEST_F(SceneStoreTest, HostileUploadsAreRefusedNamingTheProblemAndLeaveNothing) {

@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include "worker/sender.h"
+
 namespace tessera::worker {
 namespace {
 
@@ -65,6 +67,18 @@ TEST(UploadBudget, NeverMoreThanTheBoundAndAFixedCountStays) {
   calls(fixed, 20, 0.36, 2, 3600, 0.15, &t);
   EXPECT_EQ(fixed.passes_per_task(), 3u);
   EXPECT_EQ(UploadBudget(2, 1000).passes_per_task(), UploadBudget::kMaxPasses);
+}
+
+// Found by audit: a batch's results went in one call whatever their size, and the
+// coordinator refuses a call past its message limit: retried, then dropped, the job never
+// finishing. They go in calls of at most max_call bytes (a larger result alone), and one no
+// call can carry is set apart (released with its size).
+TEST(Sender, ResultsGoInCallsOfBoundedSize) {
+  const CallPlan p = plan_calls({10, 20, 30, 100, 5, 600, 1}, 50, 500);
+  EXPECT_EQ(p.calls, (std::vector<std::vector<size_t>>{{0, 1}, {2}, {3}, {4, 6}}));
+  EXPECT_EQ(p.too_large, (std::vector<size_t>{5}));
+  EXPECT_TRUE(plan_calls({}, 50, 500).calls.empty());
+  EXPECT_EQ(plan_calls({60}, 50, 500).calls, (std::vector<std::vector<size_t>>{{0}}));
 }
 
 }  // namespace
