@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <unordered_map>
 
 #include "core/scene/scene.h"
 #include "core/scene/scene_error.h"
@@ -166,22 +167,32 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
   // Each node entry's local transform at this time, then its world transform.
   std::vector<Mat4> world(a.nodes.size());
   std::vector<bool> moved(a.nodes.size(), false);
+  // The clip's transform channels by node, and each animated node's local transform once
+  // however often the node graph visits it (each entry scanned every channel: a graph of a
+  // million entries took seconds a frame).
+  std::unordered_map<uint32_t, std::vector<const SceneAnimation::Channel*>> by_node;
+  for (const SceneAnimation::Channel& c : clip.channels)
+    if (c.path != SceneAnimation::Path::kWeights) by_node[c.gltf_node].push_back(&c);
+  std::unordered_map<uint32_t, Mat4> posed;
   for (size_t i = 0; i < a.nodes.size(); ++i) {
     const SceneAnimation::Node& node = a.nodes[i];
     Mat4 local = node.matrix;
     bool animated = false;
-    if (node.trs) {
-      std::array<double, 3> t = node.translation, s = node.scale;
-      std::array<double, 4> r = node.rotation;
-      for (const SceneAnimation::Channel& c : clip.channels) {
-        if (c.gltf_node != node.gltf_node || c.path == SceneAnimation::Path::kWeights) continue;
-        animated = true;
-        const std::array<double, 4> v = sample_channel(c, time);
-        if (c.path == SceneAnimation::Path::kTranslation) t = {v[0], v[1], v[2]};
-        if (c.path == SceneAnimation::Path::kRotation) r = v;
-        if (c.path == SceneAnimation::Path::kScale) s = {v[0], v[1], v[2]};
+    if (const auto channels = by_node.find(node.gltf_node); node.trs && channels != by_node.end()) {
+      animated = true;
+      const auto [at, fresh] = posed.try_emplace(node.gltf_node);
+      if (fresh) {
+        std::array<double, 3> t = node.translation, s = node.scale;
+        std::array<double, 4> r = node.rotation;
+        for (const SceneAnimation::Channel* c : channels->second) {  // (in the clip's order)
+          const std::array<double, 4> v = sample_channel(*c, time);
+          if (c->path == SceneAnimation::Path::kTranslation) t = {v[0], v[1], v[2]};
+          if (c->path == SceneAnimation::Path::kRotation) r = v;
+          if (c->path == SceneAnimation::Path::kScale) s = {v[0], v[1], v[2]};
+        }
+        at->second = trs_matrix(t, r, s);
       }
-      if (animated) local = trs_matrix(t, r, s);
+      local = at->second;
     }
     const int32_t p = node.parent;
     world[i] = p >= 0 ? world[size_t(p)] * local : local;
