@@ -15,6 +15,7 @@
 #include "core/denoise/denoise_exr.h"
 #include "core/io/files.h"
 #include "core/io/image_io.h"
+#include "core/io/preview.h"
 #include "core/render/frames.h"
 #include "core/render/lighting.h"
 #include "core/render/local_renderer.h"
@@ -56,15 +57,15 @@ double write_denoised(const RenderResult& r, const ImageMetadata& meta, const Re
   DenoiseOptions options;
   options.threads = threads;
   const DenoiseReport d = denoise_exr(exr, exr, options);
-  std::optional<ExrImage> img;
+  std::optional<std::string> png;
   for (const std::string& out : outputs) {
     if (out == exr) continue;
     if (is_exr_path(out)) {
       write_file_atomic(out, read_file_bytes(exr));
       continue;
     }
-    if (!img) img = read_exr(exr);
-    write_file_atomic(out, encode_png(*img));
+    if (!png) png = full_png(exr);  // (the colour alone: not the AOV layers and the noisy copy)
+    write_file_atomic(out, *png);
   }
   if (first_exr == outputs.end()) std::remove(exr.c_str());
   return d.seconds;

@@ -7,14 +7,16 @@
 #include <OpenEXR/ImfStringAttribute.h>
 #include <stb/stb_image.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <stdexcept>
 
 namespace tessera {
 
-ExrImage read_exr(const std::string& path) {
+ExrImage read_exr(const std::string& path, const std::set<std::string>& only) {
   ExrImage img;
   try {
     Imf::InputFile file(path.c_str());
@@ -25,8 +27,17 @@ ExrImage read_exr(const std::string& path) {
                                std::to_string(kMaxEnvironmentTexels) + "-pixel limit");
     img.width = int(w);
     img.height = int(h);
+    uint64_t channels = 0;
+    for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it)
+      channels += only.empty() || only.count(it.name());
+    if (channels * uint64_t(w) * uint64_t(h) * sizeof(float) > kMaxExrReadBytes)
+      throw std::runtime_error(std::to_string(channels) + " channels of " + std::to_string(w) + " x " +
+                               std::to_string(h) + " pixels would take " +
+                               std::to_string((channels * uint64_t(w) * uint64_t(h) * sizeof(float)) >> 20) +
+                               " MiB, over the " + std::to_string(kMaxExrReadBytes >> 20) + " MiB limit");
     Imf::FrameBuffer fb;
     for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it) {
+      if (!only.empty() && !only.count(it.name())) continue;
       std::vector<float>& data = img.channels[it.name()];
       data.resize(size_t(img.width) * img.height);
       char* base = reinterpret_cast<char*>(data.data()) -
@@ -50,7 +61,7 @@ RgbImage read_environment_image(const std::string& path) {
   const std::string ext = std::filesystem::path(path).extension().string();
   RgbImage img;
   if (ext == ".exr" || ext == ".EXR") {
-    ExrImage exr = read_exr(path);
+    ExrImage exr = read_exr(path, {"R", "G", "B", "Y"});
     const bool rgb = exr.channels.count("R") && exr.channels.count("G") && exr.channels.count("B");
     if (!rgb && !exr.channels.count("Y")) throw std::runtime_error(path + ": the EXR has no R, G, B (or Y) channels");
     img.width = exr.width;
@@ -66,8 +77,27 @@ RgbImage read_environment_image(const std::string& path) {
     if (w < 1 || h < 1 || (long long)w * h > kMaxEnvironmentTexels)
       throw std::runtime_error(path + ": " + std::to_string(w) + " x " + std::to_string(h) +
                                " pixels is beyond the limit");
-    std::unique_ptr<float, void (*)(void*)> data(stbi_loadf(path.c_str(), &w, &h, &n, 3), stbi_image_free);
+    // Through callbacks that note a read past the file's end: stb decodes what is not there
+    // as zeros (a file cut short rendered part of its sky black, saying nothing).
+    struct File {
+      std::FILE* f;
+      bool past_end = false;
+    } file{std::fopen(path.c_str(), "rb")};
+    if (!file.f) throw std::runtime_error(path + ": cannot open");
+    const std::unique_ptr<std::FILE, int (*)(std::FILE*)> closer(file.f, std::fclose);
+    const stbi_io_callbacks io{[](void* u, char* data, int size) {
+                                 File& fl = *static_cast<File*>(u);
+                                 const size_t got = std::fread(data, 1, size_t(std::max(size, 0)), fl.f);
+                                 fl.past_end = fl.past_end || (got == 0 && size > 0);
+                                 return int(got);
+                               },
+                               [](void* u, int n) { std::fseek(static_cast<File*>(u)->f, n, SEEK_CUR); },
+                               [](void* u) { return std::feof(static_cast<File*>(u)->f); }};
+    std::unique_ptr<float, void (*)(void*)> data(stbi_loadf_from_callbacks(&io, &file, &w, &h, &n, 3), stbi_image_free);
     if (!data) throw std::runtime_error(path + ": cannot read HDR: " + stbi_failure_reason());
+    if (file.past_end)
+      throw std::runtime_error(path + ": the HDR image is cut short (the file ends before its " + std::to_string(w) +
+                               " x " + std::to_string(h) + " pixels do)");
     img.width = w;
     img.height = h;
     img.texels.resize(size_t(w) * h);

@@ -3,7 +3,9 @@
 // scene data; writing images is core/io's.
 #pragma once
 
+#include <cstdint>
 #include <map>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -17,8 +19,11 @@ struct ExrImage {
   std::map<std::string, std::string> metadata;         // the file's string attributes
 };
 // Throws std::runtime_error naming the path. Images over kMaxEnvironmentTexels are refused
-// from the header, before anything is allocated.
-ExrImage read_exr(const std::string& path);
+// from the header, before anything is allocated, and so are channels to read taking more
+// than kMaxExrReadBytes together (a 1 KB header declaring 40 channels of 2^26 pixels asked
+// for 10 GB). `only`: those channels alone (the others not read), where given.
+constexpr uint64_t kMaxExrReadBytes = uint64_t(4) << 30;
+ExrImage read_exr(const std::string& path, const std::set<std::string>& only = {});
 
 // An RGB image in linear radiance, row 0 at the top.
 struct RgbImage {

@@ -122,6 +122,53 @@ TEST(EnvironmentImage, RefusesWhatIsNotARadianceMapNamingTheProblem) {
   EXPECT_NE(error_of(d / "neg.exr").find("pixel (0, 0)"), std::string::npos);
 }
 
+// Found by audit: a Radiance file cut short was decoded with its missing pixels as zeros
+// (part of the sky black, nothing said); read_exr allocated every channel a header named
+// (40 channels of 2^26 pixels: 10 GB from a 1 KB file).
+TEST(EnvironmentImage, ACutShortHdrAndAnExrTooLargeToReadAreRefused) {
+  const fs::path d = temp_dir();
+  auto error_of = [](const fs::path& p) {
+    try {
+      (void)read_environment_image(p.string());
+    } catch (const std::runtime_error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  std::vector<Rgb> px(64, Rgb(1, 2, 3));
+  write_hdr(d / "whole.hdr", 8, 8, px);
+  EXPECT_EQ(error_of(d / "whole.hdr"), "no error");
+  std::string bytes;
+  {
+    std::ifstream in(d / "whole.hdr", std::ios::binary);
+    bytes.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  std::ofstream(d / "cut.hdr", std::ios::binary) << bytes.substr(0, bytes.size() - 40);
+  EXPECT_NE(error_of(d / "cut.hdr").find("cut.hdr: the HDR image is cut short (the file ends before its 8 x 8"),
+            std::string::npos)
+      << error_of(d / "cut.hdr");
+  std::ofstream(d / "bare.hdr") << "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 64 +X 64\n";  // no pixels at all
+  EXPECT_NE(error_of(d / "bare.hdr").find("cut short"), std::string::npos) << error_of(d / "bare.hdr");
+  {  // a header of 40 channels of 8192 x 8192 pixels, no pixels written
+    Imf::Header header(8192, 8192);
+    for (int c = 0; c < 40; ++c) header.channels().insert("c" + std::to_string(c), Imf::Channel(Imf::FLOAT));
+    Imf::OutputFile file((d / "wide.exr").c_str(), header);
+  }
+  try {
+    (void)read_exr((d / "wide.exr").string());
+    ADD_FAILURE() << "read";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("40 channels of 8192 x 8192 pixels would take 10240 MiB, over the 4096 MiB"),
+              std::string::npos)
+        << e.what();
+  }
+  // Only the channels asked for are read.
+  write_exr(d / "rgb.exr", 2, 1, {Rgb(1, 2, 3), Rgb(4, 5, 6)});
+  const ExrImage only_g = read_exr((d / "rgb.exr").string(), {"G"});
+  ASSERT_EQ(only_g.channels.size(), 1u);
+  EXPECT_EQ(only_g.channels.at("G")[1], 5);
+}
+
 TEST(EnvironmentMap, LooksUpCs184DirectionsAndTurnsAboutY) {
   const int w = 16, h = 8;
   const EnvironmentMap map(one_bright_pixel(w, h, 5, 2, Rgb(3.0f)), 0);

@@ -134,5 +134,18 @@ TEST_F(GltfHostile, ANodesPathAnimatedTwiceIsRefused) {
       << error(j);
 }
 
+// glTF's images are PNG, JPEG and (EXT_texture_webp) WebP. stb decodes more, and its TGA
+// reader rendered a truncated file's missing texels from uninitialised memory, different
+// each run; anything else is refused naming the image.
+TEST_F(GltfHostile, OnlyPngJpegAndWebpTexturesAreDecoded) {
+  json j = base();
+  j["images"] = {
+      {{"uri", "data:image/png;base64,AAACAAAAAAAAAAAAEAAQABgg"}}};  // an 18-byte TGA header, 16 x 16, no texels
+  j["textures"] = {{{"source", 0}}};
+  j["materials"] = {{{"pbrMetallicRoughness", {{"baseColorTexture", {{"index", 0}}}}}}};
+  j["meshes"][0]["primitives"][0]["material"] = 0;
+  EXPECT_NE(error(j).find("images[0]: not a PNG, JPEG or WebP image"), std::string::npos) << error(j);
+}
+
 }  // namespace
 }  // namespace tessera

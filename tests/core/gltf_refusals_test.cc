@@ -158,7 +158,7 @@ TEST_F(Gltf, MalformedDataNothingUsesIsToleratedAndInUseRefused) {
   // The same image used by a material: refused, naming it.
   Doc used = d;
   used.j["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {{"index", 0}};
-  expect_error(used, "images[0]: not a readable PNG, JPEG or WebP image");
+  expect_error(used, "images[0]: not a PNG, JPEG or WebP image");
   // A KTX2 file named as a plain image source (no KHR_texture_basisu): said so, with the way out.
   used.j["images"][0]["uri"] = "data:image/png;base64,q0tUWCAyMLsNChoKAAAAAAAAAAAAAAAAAAAAAAAAAAA=";
   expect_error(used, "images[0]: is a KTX2 image, which Tessera cannot decode");
@@ -360,6 +360,35 @@ TEST_F(Gltf, InstancesCopiedForWantOfAnInverseAreChargedEach) {
     EXPECT_NE(std::string(e.what()).find("nodes[0]: the scene would take 520 bytes to load (buffers 88 bytes, meshes "
                                          "432 bytes), over the 519 bytes limit"),
               std::string::npos)
+        << e.what();
+  }
+}
+
+// Found by audit: each image entry keeps its own copy of its encoded bytes, uncounted, so a
+// small file naming one 20 MB bufferView a hundred times held 2 GB (five hundred: a bare
+// std::bad_alloc). The copies count against the load's bound as they are made.
+TEST_F(Gltf, EncodedImagesCountAgainstTheLoadsBound) {
+  Doc d;
+  for (int i = 0; i < 3; ++i) d.j["images"].push_back({{"bufferView", 0}, {"mimeType", "image/png"}});  // 36 bytes each
+  const std::string path = write(d);
+  auto load_within = [&](uint64_t max_load_bytes) {
+    GltfContext ctx(path);
+    ctx.max_load_bytes = max_load_bytes;
+    parse_gltf_model(read_gltf_document(path), ctx);
+    return ctx.load_bytes();
+  };
+  EXPECT_EQ(load_within(kMaxGltfLoadBytes), 88u + 3 * 36);
+  try {
+    load_within(100);
+    ADD_FAILURE() << "loaded";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("images[2]: the images' encoded bytes pass"), std::string::npos) << e.what();
+  }
+  try {
+    load_within(88 + 3 * 36 - 1);  // each copy within it, the load not
+    ADD_FAILURE() << "loaded";
+  } catch (const SceneError& e) {
+    EXPECT_NE(std::string(e.what()).find("(buffers 88 bytes, encoded images 108 bytes)"), std::string::npos)
         << e.what();
   }
 }

@@ -252,7 +252,8 @@ void parse_gltf_model(GltfDocument doc, GltfContext& ctx) {
   FsGuard guard{fs::weakly_canonical(folder)};
   tinygltf::FsCallbacks cb{guarded_exists, guarded_expand, guarded_read, guarded_write, &guard};
   loader.SetFsCallbacks(cb);
-  loader.SetImageLoader(keep_image_encoded, nullptr);
+  EncodedImages images{0, ctx.max_load_bytes};
+  loader.SetImageLoader(keep_image_encoded, &images);
   std::string err, warn;
   const std::string base = folder.string();
   const bool ok = doc.binary ? loader.LoadBinaryFromMemory(&ctx.model, &err, &warn,
@@ -267,6 +268,7 @@ void parse_gltf_model(GltfDocument doc, GltfContext& ctx) {
   uint64_t buffer_bytes = 0;
   for (const tinygltf::Buffer& b : ctx.model.buffers) buffer_bytes += b.data.size();
   ctx.charge("buffers", "buffers", buffer_bytes);
+  if (images.bytes > 0) ctx.charge("images", "encoded images", images.bytes);
   for (const std::string& ext : ctx.model.extensionsUsed) {
     if (const char* format = gltf_undecodable_format(ext))
       ctx.scene.warnings.push_back(ctx.path + ": " + ext + ": " + format +

@@ -50,8 +50,17 @@ void keep_rgba(tinygltf::Image& img, const unsigned char* rgba, int w, int h) {
 
 }  // namespace
 
-bool keep_image_encoded(tinygltf::Image* image, const int, std::string*, std::string*, int, int,
-                        const unsigned char* bytes, int size, void*) {
+bool keep_image_encoded(tinygltf::Image* image, const int index, std::string* err, std::string*, int, int,
+                        const unsigned char* bytes, int size, void* user) {
+  if (auto* kept = static_cast<EncodedImages*>(user)) {
+    kept->bytes += uint64_t(std::max(size, 0));
+    if (kept->bytes > kept->limit) {
+      if (err)
+        *err += "images[" + std::to_string(index) + "]: the images' encoded bytes pass " +
+                std::to_string(kept->limit >> 20) + " MiB, the limit of a glTF load (each image holds its own copy)";
+      return false;
+    }
+  }
   image->image.assign(bytes, bytes + size);
   image->width = image->height = 0;
   image->component = kEncoded;
@@ -211,7 +220,13 @@ tinygltf::Image& GltfTextures::decode_image(int index) {
     return decode_webp(img, el);
   int w = 0, h = 0, comp = 0;
   const int size = int(std::min<size_t>(img.image.size(), size_t(INT32_MAX)));
-  if (!stbi_info_from_memory(img.image.data(), size, &w, &h, &comp)) {
+  // PNG and JPEG only, by their signatures (glTF's formats; WebP above): stb decodes TGA,
+  // BMP, GIF, PSD, PIC, PNM and HDR too, and its TGA reader rendered a truncated file's
+  // missing texels from uninitialised memory, different each run.
+  static const unsigned char kPng[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'}, kJpeg[3] = {0xFF, 0xD8, 0xFF};
+  const bool png = img.image.size() >= 8 && std::memcmp(img.image.data(), kPng, 8) == 0;
+  const bool jpeg = img.image.size() >= 3 && std::memcmp(img.image.data(), kJpeg, 3) == 0;
+  if (!(png || jpeg) || !stbi_info_from_memory(img.image.data(), size, &w, &h, &comp)) {
     // A KTX2 file named directly (no KHR_texture_basisu, so no fallback) is common enough
     // to name: the user needs a PNG or JPEG version of it.
     static const unsigned char kKtx2[12] = {0xAB, 'K', 'T', 'X', ' ', '2', '0', 0xBB, '\r', '\n', 0x1A, '\n'};
@@ -219,7 +234,8 @@ tinygltf::Image& GltfTextures::decode_image(int index) {
       ctx_.fail(el,
                 "is a KTX2 image, which Tessera cannot decode (no KTX2 library here): give the texture a PNG or "
                 "JPEG source (KHR_texture_basisu's fallback)");
-    ctx_.fail(el, "not a readable PNG, JPEG or WebP image");
+    ctx_.fail(el, png || jpeg ? "not a readable PNG or JPEG image (its header does not read)"
+                              : "not a PNG, JPEG or WebP image (glTF's image formats)");
   }
   check_size(ctx_, w, h, el);
   unsigned char* data = stbi_load_from_memory(img.image.data(), size, &w, &h, &comp, 4);

@@ -49,7 +49,13 @@ class GltfTextures {
 };
 
 // tinygltf's image loader (TinyGLTF::SetImageLoader): keeps each image's encoded bytes
-// for GltfTextures to decode when a material first uses the image.
+// for GltfTextures to decode when a material first uses the image. With an
+// EncodedImages as its user data, it counts what it keeps and refuses (tinygltf's load
+// then fails with the reason) past `limit` (a hundred images of one 20 MB bufferView kept
+// a copy each: 2 GB, then std::bad_alloc).
+struct EncodedImages {
+  uint64_t bytes = 0, limit = UINT64_MAX;
+};
 bool keep_image_encoded(tinygltf::Image* image, int image_index, std::string* err, std::string* warn, int req_width,
                         int req_height, const unsigned char* bytes, int size, void* user);
 
