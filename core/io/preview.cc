@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "core/io/image_io.h"
@@ -16,11 +17,22 @@ namespace tessera {
 
 namespace {
 
+// A data window no image of ours has (RenderSettings' limits: 65536 a side, 2^27 pixels):
+// refused before anything is sized by it (a flipped bit in a header's width, 16 ->
+// 4194319, made the coordinator allocate a gigabyte to check the file, then serve it).
+void check_window(const Imath::Box2i& dw) {
+  const int64_t w = int64_t(dw.max.x) - dw.min.x + 1, h = int64_t(dw.max.y) - dw.min.y + 1;
+  if (w < 1 || h < 1 || w > 65536 || h > 65536 || w * h > (int64_t(1) << 27))
+    throw std::runtime_error("its data window, " + std::to_string(w) + " x " + std::to_string(h) +
+                             ", is no image Tessera writes (a damaged header?)");
+}
+
 // max_width 0: full size, at encode_png's slower, smaller compression (not the preview's).
 std::string png_of(const std::string& exr_path, int max_width) {
   try {
     Imf::InputFile in(exr_path.c_str());
     const Imath::Box2i dw = in.header().dataWindow();
+    check_window(dw);
     const int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
     const int k = max_width <= 0 ? 1 : std::max(1, (w + max_width - 1) / max_width);  // the box's side
     const int pw = (w + k - 1) / k, ph = (h + k - 1) / k;
@@ -82,7 +94,8 @@ bool exr_intact(const std::string& exr_path, std::string* why) {
     const Imath::Box2i dw = in.header().dataWindow();
     const int w = dw.max.x - dw.min.x + 1;
     constexpr int kBand = 64;
-    std::vector<float> r(size_t(w) * kBand);
+    check_window(dw);
+    std::vector<float> r(size_t(w) * size_t(std::min(kBand, dw.max.y - dw.min.y + 1)));
     for (int y0 = dw.min.y; y0 <= dw.max.y; y0 += kBand) {
       const int rows = std::min(kBand, dw.max.y + 1 - y0);
       Imf::FrameBuffer fb;  // one channel is enough: a block decodes whole or not at all

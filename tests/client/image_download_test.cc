@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cstring>
 #include <filesystem>
 
 #include "core/io/files.h"
@@ -272,6 +273,28 @@ TEST_F(ImageDownloadTest, TheFullSizePngIsEncodePngOfTheExrsColour) {
   const std::string e = (dir / "source.exr").string();
   const ExrImage img = read_exr(e);
   EXPECT_EQ(full_png(e), encode_png(img));
+}
+
+// Found by audit: a bit flipped in an EXR's header widened its data window to 4194320 (the
+// blocks still decoded): the coordinator allocated a gigabyte to check the file, found it
+// intact and served it. A window no image of ours has is refused from the header.
+TEST_F(ImageDownloadTest, AnExrWhoseHeaderWasDamagedIsNotIntact) {
+  const std::string e = (dir / "source.exr").string();
+  std::string why;
+  EXPECT_TRUE(exr_intact(e, &why)) << why;
+  std::string bytes = read_file_bytes(e);
+  const std::string key("dataWindow\0box2i\0", 17);
+  const size_t at = bytes.find(key);
+  ASSERT_NE(at, std::string::npos);
+  const size_t max_x = at + key.size() + 4 + 8;  // (its size, then xmin, ymin, xmax, ymax)
+  const int32_t wide = (1 << 22) + 15;
+  std::memcpy(&bytes[max_x], &wide, 4);
+  const std::string damaged = (dir / "damaged.exr").string();
+  write_file_atomic(damaged, bytes);
+  EXPECT_FALSE(exr_intact(damaged, &why));
+  EXPECT_NE(why.find("is no image Tessera writes"), std::string::npos) << why;
+  EXPECT_THROW(full_png(damaged), std::runtime_error);
+  EXPECT_THROW(preview_png(damaged), std::runtime_error);
 }
 
 }  // namespace
