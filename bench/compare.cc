@@ -26,11 +26,14 @@ int main(int argc, char** argv) {
     const ExrImage a = read_exr(argv[1]), r = read_exr(argv[2]);
     if (a.width != r.width || a.height != r.height) throw std::runtime_error("image sizes differ");
     const char* ch[3] = {"R", "G", "B"};
+    for (const char* c : ch)
+      for (const auto& [image, name] : {std::pair{&a, argv[1]}, std::pair{&r, argv[2]}})
+        if (!image->channels.count(c)) throw std::runtime_error(std::string(name) + " has no channel " + c);
     double se = 0, rel = 0, n = 0, nonfinite = 0;
     for (int c = 0; c < 3; ++c) {
       const auto &x = a.channels.at(ch[c]), &y = r.channels.at(ch[c]);
       for (size_t i = 0; i < x.size(); ++i) {
-        if (!std::isfinite(x[i])) {
+        if (!std::isfinite(x[i]) || !std::isfinite(y[i])) {  // (either image's: the other's pixels are compared)
           ++nonfinite;
           continue;
         }
@@ -46,6 +49,7 @@ int main(int argc, char** argv) {
       identical = identical && other != r.channels.end() && values.size() == other->second.size() &&
                   std::memcmp(values.data(), other->second.data(), values.size() * sizeof(float)) == 0;
     }
+    if (n == 0) throw std::runtime_error("no pixel is finite in both images: nothing to compare");
     nlohmann::json out{
         {"rmse", std::sqrt(se / n)}, {"relmse", rel / n}, {"nonfinite", nonfinite}, {"identical", identical}};
     for (int i = 3; i + 1 < argc; ++i) {

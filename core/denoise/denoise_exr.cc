@@ -31,6 +31,7 @@ using Planes = std::map<std::string, std::vector<float>>;
 // (DenoiseExr.BandsOfRowsGiveTheWholeImagesBits fails with one row less).
 constexpr int kHalo = kDenoiseReach;
 constexpr size_t kBandPixels = size_t(1) << 20;
+constexpr uint64_t kMaxBandBytes = uint64_t(1) << 30;  // a band of every channel with its halo, at most
 
 // Interleaves three planes into RGB triples.
 std::vector<float> interleave(const Planes& planes, const std::string& a, const std::string& b, const std::string& c) {
@@ -121,6 +122,15 @@ DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_pat
   for (const std::string& c : out_channels) header.channels().insert(c, Imf::Channel(Imf::FLOAT));
 
   const int band = options.band_rows > 0 ? options.band_rows : int(std::max<size_t>(16, kBandPixels / size_t(width)));
+  // A band of every channel, with its halo, in memory at once: bounded, naming the input
+  // (40 channels 2^20 wide asked for gigabytes and failed as the output's "cannot write").
+  const uint64_t band_bytes =
+      uint64_t(out_channels.size()) * uint64_t(width) * uint64_t(std::min(height, band + 2 * kHalo)) * sizeof(float);
+  if (band_bytes > kMaxBandBytes)
+    throw std::runtime_error(in_path + ": " + std::to_string(channels.size()) + " channels " + std::to_string(width) +
+                             " pixels wide take " + std::to_string(band_bytes >> 20) + " MiB a band of " +
+                             std::to_string(std::min(height, band + 2 * kHalo)) + " rows, over the " +
+                             std::to_string(kMaxBandBytes >> 20) + " MiB the denoiser holds");
   const std::string tmp = out_path + ".tmp";
   // OpenEXR's errors on the output name the output file; those reading or denoising the
   // input name it already (below).

@@ -143,6 +143,30 @@ TEST_F(DenoiseExr, AnImageWithoutTheLayersIsRefusedNamingThem) {
   EXPECT_FALSE(fs::exists(dir / "out.exr"));
 }
 
+// Found by audit: a band of every channel was read at once, unbounded (40 channels 2^18
+// wide: 1.3 GB from a 1 KB header, and at 2^20 a bad_alloc blamed on the output). Bounded,
+// naming the input.
+TEST_F(DenoiseExr, AWideImageOfManyChannelsIsRefusedNamingTheInput) {
+  const std::string in = (dir / "wide.exr").string();
+  {
+    Imf::Header header(1 << 18, 64);
+    for (const char* c : {"R", "G", "B", "albedo.R", "albedo.G", "albedo.B", "normal.X", "normal.Y", "normal.Z",
+                          "depth.Z", "even.R", "even.G", "even.B", "odd.R", "odd.G", "odd.B"})
+      header.channels().insert(c, Imf::Channel(Imf::FLOAT));
+    for (int i = 0; i < 24; ++i) header.channels().insert("extra" + std::to_string(i), Imf::Channel(Imf::FLOAT));
+    Imf::OutputFile file(in.c_str(), header);  // no pixels: the bound comes first
+  }
+  try {
+    denoise_exr(in, (dir / "out.exr").string());
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    const std::string why = e.what();
+    EXPECT_EQ(why.rfind(in + ": 40 channels 262144 pixels wide take", 0), 0u) << why;
+    EXPECT_NE(why.find("over the 1024 MiB the denoiser holds"), std::string::npos) << why;
+  }
+  EXPECT_FALSE(fs::exists(dir / "out.exr"));
+}
+
 TEST_F(DenoiseExr, BandsOfRowsGiveTheWholeImagesBits) {
   // denoise_exr works a band of rows at a time with a halo of the denoiser's reach: any
   // band height, bands that end mid-image and a last band shorter than the rest, gives

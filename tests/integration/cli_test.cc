@@ -1,4 +1,8 @@
 // The `tessera` executable as a user runs it: outputs, metadata, stats, and errors.
+#include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfFrameBuffer.h>
+#include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfOutputFile.h>
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
@@ -257,6 +261,47 @@ TEST_F(Cli, OutputsAreCheckedBeforeTheRender) {
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.err.find("a.tif: unknown image format (use .exr or .png)"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(dir / "a.tif"));
+}
+
+// A sequence's frames go into folders named by their number: made as each is written (the
+// folder's #### kept it from being made, and no frame was written; found by audit).
+TEST_F(Cli, FramesGoIntoFoldersNamedByTheirNumber) {
+  const CommandResult r =
+      run("render " + scene + " -s 1 -r 16 12 -q --frames 1-2 -f " + (dir / "frames" / "####" / "a.png").string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(dir / "frames" / "0001" / "a.png"));
+  EXPECT_TRUE(fs::exists(dir / "frames" / "0002" / "a.png"));
+}
+
+// tessera_compare names what it lacks (it said "map::at") and compares only pixels finite
+// in both images (a NaN in the reference gave null figures and exit 0).
+TEST_F(Cli, CompareNamesAMissingChannelAndSkipsNonFinitePixelsOfEither) {
+  const std::string a = (dir / "a.exr").string(), y = (dir / "y.exr").string(), nan = (dir / "nan.exr").string();
+  tessera::Film film(tessera::Rect{0, 0, 2, 1});
+  film.at(0, 0) = tessera::PixelSums{1, 1, 1, 0, 1};
+  film.at(1, 0) = tessera::PixelSums{2, 2, 2, 0, 1};
+  tessera::write_exr(a, film, {});
+  film.at(1, 0) = tessera::PixelSums{NAN, 2, 2, 0, 1};
+  tessera::write_exr(nan, film, {});
+  {  // grey: Y alone
+    float grey[2] = {1, 2};
+    Imf::Header header(2, 1);
+    header.channels().insert("Y", Imf::Channel(Imf::FLOAT));
+    Imf::FrameBuffer fb;
+    fb.insert("Y", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(grey), sizeof(float), 2 * sizeof(float)));
+    Imf::OutputFile file(y.c_str(), header);
+    file.setFrameBuffer(fb);
+    file.writePixels(1);
+  }
+  const std::string bin = std::string(TESSERA_BIN_DIR) + "/tessera_compare ";
+  CommandResult r = run_line(bin + a + " " + y);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find(y + " has no channel R"), std::string::npos) << r.err;
+  r = run_line(bin + a + " " + nan);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["nonfinite"], 1);
+  EXPECT_EQ(j["rmse"], 0);
 }
 
 }  // namespace
