@@ -56,11 +56,7 @@ Fetcher::Leased Fetcher::lease(const std::atomic<bool>& stop) {
   backoff_.reset();
   for (const v1::Task& task : resp.tasks()) queue_.preparing(task.task_id());  // heartbeaten from now on
   for (const v1::Task& task : resp.tasks()) {
-    if (stop) {  // stopping: the rest go back unprepared, without an error
-      queue_.not_prepared(task.task_id());
-      link_.release(task.task_id(), "");
-      continue;
-    }
+    if (stop) continue;  // stopping: the rest go back unprepared with the held ones (TaskQueue::take_held)
     enqueue(task, stop);
   }
   return {st, resp.tasks_size()};
@@ -94,7 +90,8 @@ void Fetcher::enqueue(const v1::Task& task, const std::atomic<bool>& stop) {
   } catch (const std::exception& e) {
     // A busy coordinator (SceneBusy) is not a failure of the task: it goes back without an
     // error, to be taken again later. Any other error: another worker may manage.
-    const bool busy = dynamic_cast<const SceneBusy*>(&e) != nullptr || dynamic_cast<const Stopped*>(&e) != nullptr;
+    if (dynamic_cast<const Stopped*>(&e)) return;  // given back with the held ones (TaskQueue::take_held)
+    const bool busy = dynamic_cast<const SceneBusy*>(&e) != nullptr;
     spdlog::warn("task {}: {}{}", h->task.task_id(), e.what(), busy ? " (given back, to take again later)" : "");
     queue_.not_prepared(h->task.task_id());
     link_.release(h->task.task_id(), busy ? "" : e.what());

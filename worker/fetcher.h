@@ -44,7 +44,7 @@ class Fetcher {
   Backoff& backoff_;
   SceneCache scenes_;
   // The worker's stop, while lease() runs: a scene's download ends at a stop (SIGTERM waited
-  // for a download of minutes), its task given back without an error.
+  // for a download of minutes), its task given back with the held ones, without an error.
   const std::atomic<bool>* stop_ = nullptr;
 };
 
