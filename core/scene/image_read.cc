@@ -62,7 +62,10 @@ RgbImage read_environment_image(const std::string& path) {
   RgbImage img;
   if (ext == ".exr" || ext == ".EXR") {
     ExrImage exr = read_exr(path, {"R", "G", "B", "Y"});
-    const bool rgb = exr.channels.count("R") && exr.channels.count("G") && exr.channels.count("B");
+    const size_t colours = exr.channels.count("R") + exr.channels.count("G") + exr.channels.count("B");
+    const bool rgb = colours == 3;
+    if (colours == 1 || colours == 2)  // (read as grey from Y, saying nothing, before)
+      throw std::runtime_error(path + ": the EXR has only some of the channels R, G and B");
     if (!rgb && !exr.channels.count("Y")) throw std::runtime_error(path + ": the EXR has no R, G, B (or Y) channels");
     img.width = exr.width;
     img.height = exr.height;

@@ -162,6 +162,20 @@ TEST(EnvironmentImage, ACutShortHdrAndAnExrTooLargeToReadAreRefused) {
               std::string::npos)
         << e.what();
   }
+  {  // R and G, no B
+    float v[2] = {1, 2};
+    Imf::Header header(2, 1);
+    Imf::FrameBuffer fb;
+    for (const char* c : {"R", "G"}) {
+      header.channels().insert(c, Imf::Channel(Imf::FLOAT));
+      fb.insert(c, Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(v), sizeof(float), 2 * sizeof(float)));
+    }
+    Imf::OutputFile file((d / "rg.exr").c_str(), header);
+    file.setFrameBuffer(fb);
+    file.writePixels(1);
+  }
+  EXPECT_NE(error_of(d / "rg.exr").find("only some of the channels R, G and B"), std::string::npos)
+      << error_of(d / "rg.exr");
   // Only the channels asked for are read.
   write_exr(d / "rgb.exr", 2, 1, {Rgb(1, 2, 3), Rgb(4, 5, 6)});
   const ExrImage only_g = read_exr((d / "rgb.exr").string(), {"G"});
