@@ -287,7 +287,10 @@ class Job:
         fd, tmp = tempfile.mkstemp(dir=os.path.dirname(os.path.abspath(path)), prefix=".tessera-fetch-")
         try:
             with os.fdopen(fd, "w+b") as out:
-                for attempt in range(5):  # a cut stream goes on from what was received
+                # A cut stream goes on from what was received, for up to the farm's
+                # reconnect_seconds since the last piece came (as `tessera fetch`).
+                last_piece, delay = time.monotonic(), 0.25
+                while True:
                     header = None
                     try:
                         for c in self.farm._stream("FetchImageChunks", req, timeout=max(self.farm.timeout, 600)):
@@ -296,19 +299,28 @@ class Job:
                                 if not c.resumed:
                                     out.seek(0)
                                     out.truncate()
+                                    req.offset = 0
                                 req.version = c.version
+                            if c.offset != req.offset or c.offset + len(c.data) > header.size:
+                                raise TesseraError(f"job {self.id}: the image came out of order or longer than "
+                                                   f"its size ({header.size} bytes)")
                             out.seek(c.offset)
                             out.write(c.data)
                             req.offset = c.offset + len(c.data)
+                            last_piece, delay = time.monotonic(), 0.25
                             if c.last:
                                 out.flush()
                                 return self._finish_exr(out, tmp, path, frame, header, c)
+                        error = TesseraError(f"job {self.id}: the image stream ended before its last piece",
+                                             "UNAVAILABLE")
                     except grpc.RpcError as e:
-                        if e.code() not in (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.DEADLINE_EXCEEDED) \
-                                or attempt == 4:
+                        if e.code() not in (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.DEADLINE_EXCEEDED):
                             raise rpc_error(e, self.farm.tls) from None
-                    time.sleep(0.5 * (attempt + 1))
-                raise TesseraError(f"job {self.id}: the image stream ended before its last piece", "UNAVAILABLE")
+                        error = rpc_error(e, self.farm.tls)
+                    if time.monotonic() - last_piece > self.farm.reconnect_seconds:
+                        raise error from None
+                    time.sleep(delay)
+                    delay = min(2 * delay, 5.0)
         finally:
             if os.path.exists(tmp):
                 os.unlink(tmp)
