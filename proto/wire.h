@@ -33,6 +33,9 @@ constexpr size_t kBytesPerPixel = 36;  // r, g, b, lum2 (float64) + n (uint32)
 // gRPC message limit, for images and inline scene bundles (scenes of any size stream in
 // pieces: scene_chunks.h).
 constexpr int kMaxMessageBytes = 512 << 20;
+// One task's result at most, raw (its sums and AOV sums before compression): what a worker
+// can send in a call with room to spare (admission refuses tiles past it).
+constexpr uint64_t kMaxResultBytes = uint64_t(kMaxMessageBytes) * 3 / 4;
 
 // Input from the network that does not make sense: handled and reported, never fatal.
 class WireError : public std::runtime_error {

@@ -1,7 +1,9 @@
 #include "server/admission.h"
 
+#include <cmath>
 #include <set>
 
+#include "core/render/aov.h"
 #include "core/render/frames.h"
 #include "core/util/saturating.h"
 #include "server/request_error.h"
@@ -26,6 +28,20 @@ Admission admit(const v1::SubmitJobRequest& req) {
                  std::to_string(kMaxJobNameBytes));
   if (!req.upload_id().empty() && (req.files_size() > 0 || !req.main_file().empty()))
     throw refuse("a job's scene is its files or an upload (upload_id), not both");
+  // A task's result goes to the coordinator in one call: its largest tile's sums (and AOV
+  // sums) must fit a call, or no worker could send them (a 4096-pixel tile's did not: the
+  // job failed only once two workers had rendered and released a task).
+  const Rect window = a.settings.effective_window();
+  const uint64_t tile_area = uint64_t(std::min(a.settings.tile_size, window.w)) *
+                             uint64_t(std::min(a.settings.tile_size, window.h)),
+                 per_pixel = a.settings.sum_planes() * kBytesPerPixel + (a.settings.aovs ? sizeof(AovSums) : 0);
+  if (tile_area * per_pixel > kMaxResultBytes) {
+    const int fits = int(std::sqrt(double(kMaxResultBytes / per_pixel)));
+    throw refuse("--tile " + std::to_string(a.settings.tile_size) + ": a task's sums take up to " +
+                 std::to_string((tile_area * per_pixel) >> 20) + " MiB, over the " +
+                 std::to_string(kMaxResultBytes >> 20) + " MiB a result may carry to the coordinator: give --tile " +
+                 std::to_string(fits) + " or less");
+  }
   a.frames.assign(req.frames().begin(), req.frames().end());
   if (!a.frames.empty()) {
     if (a.settings.frame) throw refuse("a sequence's settings have no frame number: its frames are listed in frames");

@@ -70,6 +70,23 @@ TEST(Admit, SettingsOutOfRangeAreRefusedNamingTheSetting) {
   EXPECT_TRUE(has(why, "--tile:")) << why;
 }
 
+// A task's result goes in one call: a tile whose sums pass what a result may carry is
+// refused at submit, naming the tile size that fits (a worker released such a task, and
+// the job failed only once two had rendered it; found by audit).
+TEST(Admit, ATileWhoseResultNoCallCanCarryIsRefusedNamingOneThatFits) {
+  RenderSettings s = small_settings();
+  s.camera.width = s.camera.height = 4096;
+  s.tile_size = 4096;  // 604 MiB of sums
+  std::string why = refused(request(s));
+  EXPECT_TRUE(has(why, "--tile 4096: a task's sums take up to 576 MiB, over the 384 MiB a result may carry")) << why;
+  EXPECT_TRUE(has(why, "give --tile 3344 or less")) << why;
+  s.tile_size = 3344;
+  EXPECT_NO_THROW(admit(request(s)));
+  s.camera.width = 64;  // a tile no larger than the frame's window counts what it covers
+  s.tile_size = 4096;
+  EXPECT_NO_THROW(admit(request(s)));
+}
+
 TEST(Admit, AJobNameIsAtMost256Bytes) {
   v1::SubmitJobRequest r = request();
   r.set_name(std::string(kMaxJobNameBytes, 'n'));
