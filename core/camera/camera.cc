@@ -114,9 +114,10 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
   }
   // Whatever the file, the framing and the path gave: finite, or refused here (Embree
   // aborts the process on a ray that is not).
-  // Rays start within the traceable range (Scene::kMaxCoordinate): an orthographic view
-  // 1e19 wide put their origins past what Embree takes.
-  constexpr float kRange = float(Scene::kMaxCoordinate);
+  // Rays start well inside what Embree takes (about 1.8e18; an orthographic view 1e19 wide
+  // put their origins past it): 1e15, a thousand times the scene's own range (CS184 framing
+  // of a scene 1e12 across puts its eye beyond 1e12).
+  constexpr float kRange = 1e3f * float(Scene::kMaxCoordinate);
   const bool view = ortho_h_ > 0 ? ortho_h_ <= kRange && ortho_w_ > 0 && ortho_w_ <= kRange
                                  : std::isfinite(tan_h_) && std::isfinite(tan_v_) && tan_h_ > 0 && tan_v_ > 0;
   if (!is_finite(eye_) || !(max_component(abs(eye_)) <= kRange) || !is_finite(x_) || !is_finite(y_) ||
