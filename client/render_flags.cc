@@ -153,13 +153,7 @@ void prepare_outputs(const std::vector<std::string>& outputs) {
     const std::filesystem::path p(out);
     if (p.extension() != ".exr" && p.extension() != ".png")
       throw CLI::ValidationError("-f", out + ": unknown image format (use .exr or .png)");
-    const std::filesystem::path dir = p.parent_path();
-    if (dir.empty() || dir.string().find('#') != std::string::npos) continue;
-    std::error_code ec;
-    std::filesystem::create_directories(dir, ec);
-    if (ec || !std::filesystem::is_directory(dir))
-      throw std::runtime_error(out + ": cannot make its folder " + dir.string() + ": " +
-                               (ec ? ec.message() : std::string("not a folder")));
+    if (p.parent_path().string().find('#') == std::string::npos) make_parent_folder(out);  // (a frame's: when written)
   }
 }
 

@@ -74,6 +74,10 @@ bool whole_param(const httplib::Request& req, httplib::Response& res, const char
   return false;
 }
 
+// /healthz and /readyz: answered to anyone (kubelet, load balancers), with or without a
+// token, whatever the Host; they say nothing else.
+bool is_probe(const std::string& path) { return path == "/healthz" || path == "/readyz"; }
+
 std::unique_ptr<httplib::Server> make_server(const std::string& cert, const std::string& key) {
   if (cert.empty() && key.empty()) return std::make_unique<httplib::Server>();
   auto tls = std::make_unique<httplib::SSLServer>(cert.c_str(), key.c_str());
@@ -89,7 +93,7 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
   if (!auth || !auth->enabled())
     server.set_pre_routing_handler(
         [allowed = std::move(allowed_hosts)](const httplib::Request& req, httplib::Response& res) {
-          if (req.path == "/healthz" || req.path == "/readyz") return httplib::Server::HandlerResponse::Unhandled;
+          if (is_probe(req.path)) return httplib::Server::HandlerResponse::Unhandled;
           const std::string host = req.get_header_value("Host");
           if (host_allowed(host, allowed)) return httplib::Server::HandlerResponse::Unhandled;
           res.status = 403;
@@ -102,8 +106,7 @@ StatusHttp::StatusHttp(Coordinator& c, const Authenticator* auth, const std::str
         });
   else
     server.set_pre_routing_handler([auth](const httplib::Request& req, httplib::Response& res) {
-      // Probes (kubelet, load balancers) carry no token, and the answers say nothing.
-      if (req.path == "/healthz" || req.path == "/readyz") return httplib::Server::HandlerResponse::Unhandled;
+      if (is_probe(req.path)) return httplib::Server::HandlerResponse::Unhandled;
       const Authenticator::Check c = auth->check(req.get_header_value("Authorization"), Action::kRead);
       if (c.outcome == Authenticator::Check::kAllowed) return httplib::Server::HandlerResponse::Unhandled;
       const bool unauthenticated = c.outcome == Authenticator::Check::kUnauthenticated;

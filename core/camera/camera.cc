@@ -120,8 +120,8 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
   constexpr float kRange = 1e3f * float(Scene::kMaxCoordinate);
   const bool view = ortho_h_ > 0 ? ortho_h_ <= kRange && ortho_w_ > 0 && ortho_w_ <= kRange
                                  : std::isfinite(tan_h_) && std::isfinite(tan_v_) && tan_h_ > 0 && tan_v_ > 0;
-  if (!is_finite(eye_) || !(max_component(abs(eye_)) <= kRange) || !is_finite(x_) || !is_finite(y_) ||
-      !is_finite(z_) || !view)
+  if (!is_finite(eye_) || !(max_component(abs(eye_)) <= kRange) || !is_finite(x_) || !is_finite(y_) || !is_finite(z_) ||
+      !view)
     throw SettingsError("--camera", "the camera is degenerate: eye " + short_vec(eye_) + ", looking along " +
                                         short_vec(-z_) + ", view " + short_float(2 * tan_h_) + " x " +
                                         short_float(2 * tan_v_) + " at unit distance");

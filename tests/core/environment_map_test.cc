@@ -81,6 +81,16 @@ RgbImage one_bright_pixel(int w, int h, int x, int y, Rgb c) {
   return img;
 }
 
+// What read_environment_image says of the file, or "no error".
+std::string error_of(const fs::path& p) {
+  try {
+    (void)read_environment_image(p.string());
+  } catch (const std::runtime_error& e) {
+    return e.what();
+  }
+  return "no error";
+}
+
 TEST(EnvironmentImage, ReadsHdrAndExrAlike) {
   const fs::path d = temp_dir();
   std::vector<Rgb> px = {Rgb(1, 2, 3), Rgb(0.5f, 0.25f, 0.125f), Rgb(0.0f), Rgb(100, 50, 25)};
@@ -98,14 +108,6 @@ TEST(EnvironmentImage, ReadsHdrAndExrAlike) {
 
 TEST(EnvironmentImage, RefusesWhatIsNotARadianceMapNamingTheProblem) {
   const fs::path d = temp_dir();
-  auto error_of = [](const fs::path& p) {
-    try {
-      (void)read_environment_image(p.string());
-    } catch (const std::runtime_error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
   EXPECT_NE(error_of(d / "missing.hdr").find("missing.hdr: no such file"), std::string::npos);
   std::ofstream(d / "sky.png") << "not an image";
   EXPECT_NE(error_of(d / "sky.png").find("must be .exr or .hdr"), std::string::npos);
@@ -127,14 +129,6 @@ TEST(EnvironmentImage, RefusesWhatIsNotARadianceMapNamingTheProblem) {
 // (40 channels of 2^26 pixels: 10 GB from a 1 KB file).
 TEST(EnvironmentImage, ACutShortHdrAndAnExrTooLargeToReadAreRefused) {
   const fs::path d = temp_dir();
-  auto error_of = [](const fs::path& p) {
-    try {
-      (void)read_environment_image(p.string());
-    } catch (const std::runtime_error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
   std::vector<Rgb> px(64, Rgb(1, 2, 3));
   write_hdr(d / "whole.hdr", 8, 8, px);
   EXPECT_EQ(error_of(d / "whole.hdr"), "no error");

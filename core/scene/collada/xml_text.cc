@@ -63,21 +63,30 @@ const char* XmlText::value(pugi::xml_node n, std::string* joined) const {
   return joined->c_str();
 }
 
-std::vector<double> XmlText::numbers(pugi::xml_node n) const {
-  std::vector<double> out;
+template <typename Parse, typename Accept>
+auto XmlText::tokens(pugi::xml_node n, const char* what, Parse parse, Accept accept) const {
+  std::vector<decltype(accept(parse(nullptr, nullptr), nullptr))> out;
   std::string joined;
   const char* s = value(n, &joined);
   while (*s) {
     while (space(*s)) ++s;
     if (!*s) break;
     char* end = nullptr;
-    const double v = std::strtod(s, &end);
-    if (end == s || (*end && !space(*end))) fail(n, std::string("'").append(token(s)).append("' is not a number"));
-    if (!std::isfinite(v)) fail(n, std::string("non-finite number '").append(token(s)).append("'"));
-    out.push_back(v);
+    const auto v = parse(s, &end);
+    if (end == s || (*end && !space(*end))) fail(n, std::string("'").append(token(s)).append("' is not ").append(what));
+    out.push_back(accept(v, s));
     s = end;
   }
   return out;
+}
+
+std::vector<double> XmlText::numbers(pugi::xml_node n) const {
+  return tokens(
+      n, "a number", [](const char* s, char** end) { return std::strtod(s, end); },
+      [&](double v, const char* s) {
+        if (!std::isfinite(v)) fail(n, std::string("non-finite number '").append(token(s)).append("'"));
+        return v;
+      });
 }
 
 std::vector<double> XmlText::numbers_exact(pugi::xml_node n, size_t want) const {
@@ -88,22 +97,17 @@ std::vector<double> XmlText::numbers_exact(pugi::xml_node n, size_t want) const 
 }
 
 std::vector<uint32_t> XmlText::indices(pugi::xml_node n) const {
-  std::vector<uint32_t> out;
-  std::string joined;
-  const char* s = value(n, &joined);
-  while (*s) {
-    while (space(*s)) ++s;
-    if (!*s) break;
-    char* end = nullptr;
-    errno = 0;
-    const long long v = std::strtoll(s, &end, 10);
-    if (end == s || (*end && !space(*end))) fail(n, std::string("'").append(token(s)).append("' is not an index"));
-    if (v < 0 || v > 0xFFFFFFFFll || errno == ERANGE)
-      fail(n, std::string("index ").append(token(s)).append(" out of range"));
-    out.push_back(uint32_t(v));
-    s = end;
-  }
-  return out;
+  return tokens(
+      n, "an index",
+      [](const char* s, char** end) {
+        errno = 0;
+        return std::strtoll(s, end, 10);
+      },
+      [&](long long v, const char* s) {
+        if (v < 0 || v > 0xFFFFFFFFll || errno == ERANGE)
+          fail(n, std::string("index ").append(token(s)).append(" out of range"));
+        return uint32_t(v);
+      });
 }
 
 uint64_t XmlText::whole_attribute(pugi::xml_node n, const char* name, uint64_t max, long long fallback) const {

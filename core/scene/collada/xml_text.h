@@ -46,6 +46,11 @@ class XmlText {
   // The element's text: its one text child's in place, or its text and CDATA children's
   // joined into `joined`.
   const char* value(pugi::xml_node n, std::string* joined) const;
+  // The element's text, token by token (white space between): `parse(s, &end)` reads a
+  // value from s; a token it does not read to its end fails naming `what`; `accept(v, s)`
+  // checks its range (fail()) and gives what goes in the list.
+  template <typename Parse, typename Accept>
+  auto tokens(pugi::xml_node n, const char* what, Parse parse, Accept accept) const;
 
   const std::string& text_;
   std::string file_;
