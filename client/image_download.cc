@@ -50,7 +50,8 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
       fs::remove(path, ec);
     }
   } staged{download};
-  std::optional<Part> part;
+  const RemoveOnInterrupt interrupted{download};  // (Ctrl-C: destructors do not run)
+  std::unique_ptr<Part> part;                     // (not an optional: g++ 12 warns falsely of its destructor)
   v1::FetchImageRequest req = request;
   ImageDownload got;
   std::string version;
@@ -65,7 +66,7 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
         first = false;
         if (!c.resumed() || !part) {  // from the start: another version, or nothing yet
           part.reset();
-          part.emplace(download);
+          part = std::make_unique<Part>(download);
         }
         version = c.version();
         got.final = c.final();

@@ -15,6 +15,7 @@
 #include <stdexcept>
 
 #include "core/io/files.h"
+#include "core/io/interrupt_cleanup.h"
 
 namespace tessera {
 
@@ -132,6 +133,7 @@ DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_pat
                              std::to_string(std::min(height, band + 2 * kHalo)) + " rows, over the " +
                              std::to_string(kMaxBandBytes >> 20) + " MiB the denoiser holds");
   const std::string tmp = out_path + ".tmp";
+  const RemoveOnInterrupt interrupted{tmp};
   // OpenEXR's errors on the output name the output file; those reading or denoising the
   // input name it already (below).
   auto writing = [&](auto&& step) {

@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "core/io/interrupt_cleanup.h"
 #include "core/render/aov.h"
 #include "core/render/film.h"
 
@@ -40,6 +41,7 @@ class ExrWriter {
 
  private:
   std::string path_, tmp_;
+  RemoveOnInterrupt cleanup_{tmp_};
   int width_, height_, next_row_ = 0;
   std::unique_ptr<Imf::OutputFile> file_;
   std::vector<float> r_, g_, b_, spp_, var_;

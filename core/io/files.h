@@ -5,6 +5,8 @@
 #include <functional>
 #include <string>
 
+#include "core/io/interrupt_cleanup.h"
+
 namespace tessera {
 
 // Throws std::runtime_error naming the path.
@@ -22,7 +24,8 @@ struct AtomicWrite {
 void write_file_atomic(const std::string& path, const std::string& bytes, const AtomicWrite& how = {});
 
 // The same, written piece by piece: PATH.tmp is filled by append() and renamed into place
-// by commit(); destroyed before commit() (an error, an exception) it removes PATH.tmp.
+// by commit(); destroyed before commit() (an error, an exception) it removes PATH.tmp, and
+// so does a signal that ends a process with install_interrupt_cleanup() (Ctrl-C).
 // Throws std::runtime_error naming the path.
 class AtomicFile {
  public:
@@ -38,6 +41,7 @@ class AtomicFile {
  private:
   [[noreturn]] void fail(const std::string& what);
   std::string path_, tmp_;
+  RemoveOnInterrupt cleanup_{tmp_};
   int fd_ = -1;
   uint64_t size_ = 0;
 };

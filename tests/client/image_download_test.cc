@@ -7,11 +7,13 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <csignal>
 #include <cstring>
 #include <filesystem>
 
 #include "core/io/files.h"
 #include "core/io/image_io.h"
+#include "core/io/interrupt_cleanup.h"
 #include "core/io/preview.h"
 #define XXH_INLINE_ALL
 #include <xxhash.h>
@@ -58,6 +60,7 @@ class ImageDownloadTest : public ::testing::Test {
     bool past_last = false;  // a piece more after the last
   };
   std::vector<bool> progressed;  // what each retry was told
+  std::function<void()> on_retry;
   std::vector<Answer> answers;
 
   void SetUp() override {
@@ -103,6 +106,7 @@ class ImageDownloadTest : public ::testing::Test {
         [&](const grpc::Status& st, bool came) {
           ++*retries;
           progressed.push_back(came);
+          if (on_retry) on_retry();
           return st.error_code() == grpc::StatusCode::UNAVAILABLE;
         });
   }
@@ -295,6 +299,32 @@ TEST_F(ImageDownloadTest, AnExrWhoseHeaderWasDamagedIsNotIntact) {
   EXPECT_NE(why.find("is no image Tessera writes"), std::string::npos) << why;
   EXPECT_THROW(full_png(damaged), std::runtime_error);
   EXPECT_THROW(preview_png(damaged), std::runtime_error);
+}
+
+}  // namespace
+}  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Ctrl-C while the download waits to resume: destructors do not run, the client's cleanup
+// removes the half-downloaded file (it was left beside the output, one per interrupted fetch).
+TEST_F(ImageDownloadTest, CtrlCMidwayLeavesNoHalfDownloadedFile) {
+  const std::string out = (dir / "out.exr").string();
+  const std::string part = out + ".download.exr.tmp";
+  const auto interrupted = [&] {
+    install_interrupt_cleanup();
+    answers = {{0, 300, grpc::Status(grpc::StatusCode::UNAVAILABLE, "connection reset")}};
+    on_retry = [&] {
+      if (!fs::exists(part)) std::_Exit(3);  // (the test would prove nothing)
+      std::raise(SIGINT);
+    };
+    int retries = 0;
+    download({out}, false, &retries);
+  };
+  EXPECT_EXIT(interrupted(), ::testing::KilledBySignal(SIGINT), "");
+  EXPECT_FALSE(fs::exists(part));
+  EXPECT_FALSE(fs::exists(out));
 }
 
 }  // namespace
