@@ -4,9 +4,11 @@
 //   regions  mean RGB of each named rectangle, in both images (--regions FILE.json, a map
 //            of name -> [x, y, w, h] in pixels, row 0 at the top), the relmse over its
 //            pixels, and the standard error of IMAGE's mean luminance there when IMAGE has
-//            a variance channel
+//            a variance channel; pixels not finite in both images are left out (counted
+//            as the region's "nonfinite")
 //   identical  every channel of both images (R, G, B, spp, variance) equal bit for bit
 // Usage: tessera_compare IMAGE.exr REFERENCE.exr [--regions FILE.json]
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -25,6 +27,10 @@ int main(int argc, char** argv) {
   try {
     const ExrImage a = read_exr(argv[1]), r = read_exr(argv[2]);
     if (a.width != r.width || a.height != r.height) throw std::runtime_error("image sizes differ");
+    if (a.x0 != r.x0 || a.y0 != r.y0)  // (the same pixels elsewhere in the frame are not the same image)
+      throw std::runtime_error("the images' data windows start at different pixels: (" + std::to_string(a.x0) + ", " +
+                               std::to_string(a.y0) + ") against (" + std::to_string(r.x0) + ", " +
+                               std::to_string(r.y0) + ")");
     const char* ch[3] = {"R", "G", "B"};
     for (const char* c : ch)
       for (const auto& [image, name] : {std::pair{&a, argv[1]}, std::pair{&r, argv[2]}})
@@ -57,26 +63,43 @@ int main(int argc, char** argv) {
       std::ifstream f(argv[i + 1]);
       const nlohmann::json regions = nlohmann::json::parse(f);
       for (const auto& [name, rect] : regions.items()) {
-        const int x0 = rect[0], y0 = rect[1], w = rect[2], h = rect[3];
-        if (x0 < 0 || y0 < 0 || w < 1 || h < 1 || x0 + w > a.width || y0 + h > a.height)
+        if (!rect.is_array() || rect.size() != 4 ||
+            !std::all_of(rect.begin(), rect.end(), [](const nlohmann::json& v) { return v.is_number_integer(); }))
+          throw std::runtime_error("region '" + name + "' is not [x, y, w, h] in whole pixels");
+        const long long x0 = rect[0], y0 = rect[1], w = rect[2], h = rect[3];
+        if (x0 < 0 || y0 < 0 || w < 1 || h < 1 || x0 + w > a.width || y0 + h > a.height)  // (no overflow: 64 bits)
           throw std::runtime_error("region '" + name + "' is not inside the image");
-        double sa[3] = {}, sr[3] = {}, var = 0, region_rel = 0;
+        // Pixels finite in both images, as over the whole image.
+        double sa[3] = {}, sr[3] = {}, var = 0, region_rel = 0, finite = 0, region_nonfinite = 0;
         const auto v = a.channels.find("variance");
-        for (int y = y0; y < y0 + h; ++y)
-          for (int x = x0; x < x0 + w; ++x) {
+        for (long long y = y0; y < y0 + h; ++y)
+          for (long long x = x0; x < x0 + w; ++x) {
+            const size_t p = size_t(y) * size_t(a.width) + size_t(x);
+            double xi[3], yi[3];
+            bool ok = true;
             for (int c = 0; c < 3; ++c) {
-              const double xi = a.channels.at(ch[c])[size_t(y) * a.width + x];
-              const double yi = r.channels.at(ch[c])[size_t(y) * r.width + x];
-              sa[c] += xi;
-              sr[c] += yi;
-              region_rel += (xi - yi) * (xi - yi) / (yi * yi + 0.01);
+              xi[c] = a.channels.at(ch[c])[p];
+              yi[c] = r.channels.at(ch[c])[p];
+              ok = ok && std::isfinite(xi[c]) && std::isfinite(yi[c]);
             }
-            if (v != a.channels.end()) var += v->second[size_t(y) * a.width + x];
+            if (!ok) {
+              ++region_nonfinite;
+              continue;
+            }
+            for (int c = 0; c < 3; ++c) {
+              sa[c] += xi[c];
+              sr[c] += yi[c];
+              region_rel += (xi[c] - yi[c]) * (xi[c] - yi[c]) / (yi[c] * yi[c] + 0.01);
+            }
+            ++finite;
+            if (v != a.channels.end() && std::isfinite(v->second[p])) var += v->second[p];
           }
-        const double k = double(w) * h;
+        if (finite == 0) throw std::runtime_error("region '" + name + "' has no pixel finite in both images");
+        const double k = finite;
         out["regions"][name] = {{"image", {sa[0] / k, sa[1] / k, sa[2] / k}},
                                 {"reference", {sr[0] / k, sr[1] / k, sr[2] / k}},
-                                {"relmse", region_rel / (3 * k)}};
+                                {"relmse", region_rel / (3 * k)},
+                                {"nonfinite", region_nonfinite}};
         // The standard error of the image's mean luminance over the region, from its
         // per-pixel variance channel (a Tessera EXR), when it has one.
         if (v != a.channels.end()) out["regions"][name]["image_luminance_stderr"] = std::sqrt(var) / k;

@@ -4,12 +4,15 @@
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfInputFile.h>
+#include <OpenEXR/ImfMultiPartInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStringAttribute.h>
+#include <OpenEXR/ImfTestFile.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <map>
 #include <memory>
 #include <stdexcept>
@@ -27,12 +30,13 @@ namespace {
 
 constexpr const char* kDenoiserName = "tessera first-order regression (core/denoise/denoiser.h)";
 using Planes = std::map<std::string, std::vector<float>>;
+namespace fs = std::filesystem;
 
 // A band is denoised with this many rows more on each side: the denoiser's reach, exactly
 // (DenoiseExr.BandsOfRowsGiveTheWholeImagesBits fails with one row less).
 constexpr int kHalo = kDenoiseReach;
-constexpr size_t kBandPixels = size_t(1) << 20;
-constexpr uint64_t kMaxBandBytes = uint64_t(1) << 30;  // a band of every channel with its halo, at most
+constexpr uint64_t kBandBytes = uint64_t(1) << 28;     // a band's memory, about (the bands' bits are the same)
+constexpr uint64_t kMaxBandBytes = uint64_t(1) << 30;  // and at most
 
 // Interleaves three planes into RGB triples.
 std::vector<float> interleave(const Planes& planes, const std::string& a, const std::string& b, const std::string& c) {
@@ -49,10 +53,8 @@ bool check_channels(const std::vector<std::string>& present, const std::string& 
   auto has = [&](const std::string& c) { return std::find(present.begin(), present.end(), c) != present.end(); };
   const bool again = has(kNoisyChannels[0]);  // denoised before: start from the noisy image
   std::vector<std::string> needed = kDenoiseChannels;
-  if (again)
-    needed.insert(needed.end(), std::begin(kNoisyChannels), std::end(kNoisyChannels));
-  else
-    needed.insert(needed.end(), {"R", "G", "B"});
+  needed.insert(needed.end(), {"R", "G", "B"});  // (replaced by the result; once more, read from noisy.*)
+  if (again) needed.insert(needed.end(), std::begin(kNoisyChannels), std::end(kNoisyChannels));
   std::string missing;
   for (const std::string& c : needed)
     if (!has(c)) missing += (missing.empty() ? "" : ", ") + c;
@@ -79,21 +81,39 @@ DenoiseBuffers buffers_of(const Planes& planes, int width, int rows, int first_r
 
 // A slice addressing `plane` (rows of `width` floats) as image rows from `first_row` on,
 // with the image's origin at (x0, y0).
-Imf::Slice slice(std::vector<float>& plane, int width, long long first_row, long long x0, long long y0) {
+// An integer channel (an object id, say) is carried as its bits in the plane's floats.
+Imf::Slice slice(std::vector<float>& plane, int width, long long first_row, long long x0, long long y0,
+                 Imf::PixelType type) {
+  static_assert(sizeof(float) == sizeof(uint32_t));
   char* base =
       reinterpret_cast<char*>(plane.data()) - ptrdiff_t((x0 + (y0 + first_row) * width) * ptrdiff_t(sizeof(float)));
-  return Imf::Slice(Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(width));
+  return Imf::Slice(type == Imf::UINT ? Imf::UINT : Imf::FLOAT, base, sizeof(float), sizeof(float) * size_t(width));
 }
 
 }  // namespace
 
 DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_path, const DenoiseOptions& options) {
+  const std::string tmp = out_path + ".tmp";
+  {
+    // The output is written to OUT.tmp first: were that the input, the input would be
+    // truncated before it was read, then removed as the failed output's.
+    std::error_code ec;
+    if (fs::equivalent(in_path, tmp, ec))
+      throw std::runtime_error(in_path + ": cannot denoise into " + out_path + ": the input is the output's " +
+                               "temporary file (" + tmp + "); name another output");
+  }
   std::unique_ptr<Imf::InputFile> input;
   std::vector<std::string> channels;
-  std::map<std::string, std::string> metadata;
+  std::map<std::string, Imf::PixelType> types;
   int width = 0, height = 0;
   Imath::Box2i dw;
   try {
+    if (Imf::isMultiPartOpenExrFile(in_path.c_str())) {
+      const int parts = Imf::MultiPartInputFile(in_path.c_str()).parts();
+      if (parts > 1)
+        throw std::runtime_error("it has " + std::to_string(parts) +
+                                 " parts; the denoiser reads single-part images (its output would lose the rest)");
+    }
     input = std::make_unique<Imf::InputFile>(in_path.c_str());
     dw = input->header().dataWindow();
     const long long w = (long long)dw.max.x - dw.min.x + 1, h = (long long)dw.max.y - dw.min.y + 1;
@@ -101,38 +121,60 @@ DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_pat
       throw std::runtime_error(std::to_string(w) + " x " + std::to_string(h) + " pixels is beyond the limit");
     width = int(w);
     height = int(h);
-    for (auto it = input->header().channels().begin(); it != input->header().channels().end(); ++it)
+    for (auto it = input->header().channels().begin(); it != input->header().channels().end(); ++it) {
       channels.push_back(it.name());
-    for (auto it = input->header().begin(); it != input->header().end(); ++it)
-      if (const auto* s = dynamic_cast<const Imf::StringAttribute*>(&it.attribute())) metadata[it.name()] = s->value();
+      types[it.name()] = it.channel().type;
+    }
   } catch (const std::exception& e) {
     throw std::runtime_error(in_path + ": cannot read EXR: " + e.what());
   }
   const bool again = check_channels(channels, in_path);
+  for (const auto& [name, type] : types)
+    if (type == Imf::UINT &&
+        (name == "R" || name == "G" || name == "B" ||
+         std::find(kDenoiseChannels.begin(), kDenoiseChannels.end(), name) != kDenoiseChannels.end() ||
+         std::find(std::begin(kNoisyChannels), std::end(kNoisyChannels), name) != std::end(kNoisyChannels)))
+      throw std::runtime_error(in_path + ": cannot denoise: channel " + name + " holds integers, not colours");
   DenoiseReport report;
   report.width = width;
   report.height = height;
 
-  // The output: the input's channels and the noisy image's (noisy.* unless there already).
-  Imf::Header header(width, height);
+  // The output: the input's header (its data and display windows, every attribute), its
+  // channels as they were but R, G and B, which hold the result, and the noisy image's
+  // (noisy.* unless there already), written in scan lines.
+  Imf::Header header = input->header();
+  for (const char* part_only : {"tiles", "type", "name", "chunkCount", "version"})
+    if (header.find(part_only) != header.end()) header.erase(part_only);
   header.compression() = Imf::ZIP_COMPRESSION;
-  metadata["tessera/denoiser"] = kDenoiserName;
-  for (const auto& [key, value] : metadata) header.insert(key, Imf::StringAttribute(value));
+  header.lineOrder() = Imf::INCREASING_Y;
+  header.insert("tessera/denoiser", Imf::StringAttribute(kDenoiserName));
+  header.channels() = Imf::ChannelList();
   std::vector<std::string> out_channels = channels;
   if (!again) out_channels.insert(out_channels.end(), std::begin(kNoisyChannels), std::end(kNoisyChannels));
-  for (const std::string& c : out_channels) header.channels().insert(c, Imf::Channel(Imf::FLOAT));
+  for (const std::string& c : out_channels) {
+    const bool result = c == "R" || c == "G" || c == "B" || !types.count(c);
+    header.channels().insert(c, Imf::Channel(result ? Imf::FLOAT : types[c]));
+  }
 
-  const int band = options.band_rows > 0 ? options.band_rows : int(std::max<size_t>(16, kBandPixels / size_t(width)));
-  // A band of every channel, with its halo, in memory at once: bounded, naming the input
-  // (40 channels 2^20 wide asked for gigabytes and failed as the output's "cannot write").
-  const uint64_t band_bytes =
-      uint64_t(out_channels.size()) * uint64_t(width) * uint64_t(std::min(height, band + 2 * kHalo)) * sizeof(float);
-  if (band_bytes > kMaxBandBytes)
+  // A band of every channel, with its halo, and what the denoiser holds for it, in memory at
+  // once: about kBandBytes, bounded, naming the input (40 channels 2^20 wide asked for
+  // gigabytes and failed as the output's "cannot write"; a 1 x 2^20 image took 6 GB on the
+  // denoiser's padded grid).
+  const auto band_bytes = [&](int rows) {
+    const int r = std::min(height, rows + 2 * kHalo);
+    return denoise_working_bytes(width, r) + uint64_t(out_channels.size()) * uint64_t(width) * uint64_t(r) * 4;
+  };
+  int band = options.band_rows;
+  if (band <= 0) {  // the most rows within kBandBytes, at least 16
+    band = 16;
+    for (int step = 1 << 20; step > 0; step /= 2)
+      if (band + step <= height && band_bytes(band + step) <= kBandBytes) band += step;
+  }
+  if (band_bytes(band) > kMaxBandBytes)
     throw std::runtime_error(in_path + ": " + std::to_string(channels.size()) + " channels " + std::to_string(width) +
-                             " pixels wide take " + std::to_string(band_bytes >> 20) + " MiB a band of " +
+                             " pixels wide take " + std::to_string(band_bytes(band) >> 20) + " MiB a band of " +
                              std::to_string(std::min(height, band + 2 * kHalo)) + " rows, over the " +
                              std::to_string(kMaxBandBytes >> 20) + " MiB the denoiser holds");
-  const std::string tmp = out_path + ".tmp";
   const RemoveOnInterrupt interrupted{tmp};
   // OpenEXR's errors on the output name the output file; those reading or denoising the
   // input name it already (below).
@@ -154,7 +196,7 @@ DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_pat
       for (const std::string& c : channels) {
         std::vector<float>& plane = planes[c];
         plane.resize(size_t(width) * size_t(r1 - r0));
-        in_fb.insert(c, slice(plane, width, r0, dw.min.x, dw.min.y));
+        in_fb.insert(c, slice(plane, width, r0, dw.min.x, dw.min.y, types[c]));
       }
       try {
         input->setFrameBuffer(in_fb);
@@ -178,7 +220,8 @@ DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_pat
         for (size_t i = 0; i < n; ++i) plane[skip + i] = rgb[3 * (skip + i) + size_t(c)];
       }
       Imf::FrameBuffer out_fb;
-      for (const std::string& c : out_channels) out_fb.insert(c, slice(planes[c], width, r0, 0, 0));
+      for (const std::string& c : out_channels)
+        out_fb.insert(c, slice(planes[c], width, r0, dw.min.x, dw.min.y, types.count(c) ? types[c] : Imf::FLOAT));
       writing([&] {
         file->setFrameBuffer(out_fb);
         file->writePixels(b1 - b0);

@@ -163,16 +163,31 @@ std::vector<float> combine(const DenoiseBuffers& in, const GuidePlanes& g, const
           sum[ch] += float(count[b]) * (b < Candidates::kFiltered ? c.color[b][ch][i] : in.color[3 * i + ch]);
       }
       const float area = float((x1 - x0 + 1) * (y1 - y0 + 1));
-      for (size_t ch = 0; ch < 3; ++ch) out[3 * i + ch] = sum[ch] / area;
+      // (Never below zero where the noisy colour is not: a hostile half-buffer, -3e38 at
+      // one pixel, could pull a candidate's fit negative around it.)
+      for (size_t ch = 0; ch < 3; ++ch)
+        out[3 * i + ch] = in.color[3 * i + ch] >= 0 ? std::max(0.f, sum[ch] / area) : sum[ch] / area;
     }
   });
   return out;
 }
 
-}  // namespace
+// The power of two that brings the colours' largest magnitude to at most 2^40, or 1 where
+// it is there already. The filters square differences of colours and sum them over windows:
+// past about 2^63 (a light of 1e20) a variance overflowed float, every weight became 0 and
+// the image was denoised to black. Scaling by a power of two is exact (short of subnormals),
+// and an image within the bound is not touched.
+float range_scale(const DenoiseBuffers& in) {
+  float largest = 0;
+  for (const std::vector<float>* v : {&in.color, &in.even, &in.odd})
+    for (const float x : *v) largest = std::max(largest, std::fabs(x));
+  if (largest <= kMaxDenoisedMagnitude) return 1;
+  int e = 0;
+  std::frexp(largest, &e);  // largest < 2^e
+  return std::ldexp(1.0f, std::ilogb(kMaxDenoisedMagnitude) - e);
+}
 
-std::vector<float> denoise(const DenoiseBuffers& in, const DenoiseOptions& options) {
-  validate(in);
+std::vector<float> denoise_in_range(const DenoiseBuffers& in, const DenoiseOptions& options) {
   const int threads = options.threads > 0 ? options.threads : std::max(1, int(std::thread::hardware_concurrency()));
   const GuidePlanes g = prepare(in, threads);
   bool any_noise = false;
@@ -180,6 +195,29 @@ std::vector<float> denoise(const DenoiseBuffers& in, const DenoiseOptions& optio
     for (int x = 0; x < in.width && !any_noise; ++x) any_noise = !noise_free(g, x, y);
   if (!any_noise) return in.color;
   return combine(in, g, nfor::regress(g, threads, options.wide_lanes), threads);
+}
+
+}  // namespace
+
+std::vector<float> denoise(const DenoiseBuffers& in, const DenoiseOptions& options) {
+  validate(in);
+  const float scale = range_scale(in);
+  if (scale == 1) return denoise_in_range(in, options);
+  DenoiseBuffers scaled = in;
+  for (std::vector<float>* v : {&scaled.color, &scaled.even, &scaled.odd})
+    for (float& x : *v) x *= scale;
+  std::vector<float> out = denoise_in_range(scaled, options);
+  for (float& x : out) x /= scale;  // (exact: a power of two)
+  return out;
+}
+
+uint64_t denoise_working_bytes(int width, int rows) {
+  // The guide planes on their grid (GuidePlanes: 2 x 3 halves, 3 variances, the features,
+  // `inside`), and per pixel the buffers, the candidates, their errors and the temporaries.
+  constexpr uint64_t kGridPlanes = 6 + 3 + nfor::kFeatures + 1,
+                     kPixelFloats = 22;  // (docs/denoise.md: 155 bytes a pixel)
+  const nfor::Grid grid(width, rows);
+  return sizeof(float) * (kGridPlanes * grid.size() + kPixelFloats * uint64_t(width) * uint64_t(rows));
 }
 
 }  // namespace tessera

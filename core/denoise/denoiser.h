@@ -53,6 +53,7 @@
 //    lets the weights at offset -o be read from those at o.
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 namespace tessera {
@@ -82,8 +83,16 @@ struct DenoiseOptions {
 // on each side (a halo) gives its rows the whole image's bits (denoise_exr).
 constexpr int kDenoiseReach = 15;
 
+// Colours past this magnitude are denoised scaled down by a power of two (exact) and the
+// result scaled back: the filters' squares of colour differences overflow float near 2^64.
+constexpr float kMaxDenoisedMagnitude = 0x1p40f;
+
 // The denoised image, RGB, 3 floats a pixel. Throws std::invalid_argument naming the buffer
 // that is missing, of the wrong size or holds a non-finite value, or the size if it is empty.
 std::vector<float> denoise(const DenoiseBuffers& in, const DenoiseOptions& options = {});
+
+// About the most memory denoise() holds for an image of this size, in bytes (its planes on
+// the filters' padded grid and per pixel): denoise_exr sizes its bands by it.
+uint64_t denoise_working_bytes(int width, int rows);
 
 }  // namespace tessera

@@ -27,6 +27,8 @@ ExrImage read_exr(const std::string& path, const std::set<std::string>& only) {
                                std::to_string(kMaxEnvironmentTexels) + "-pixel limit");
     img.width = int(w);
     img.height = int(h);
+    img.x0 = dw.min.x;
+    img.y0 = dw.min.y;
     uint64_t channels = 0;
     for (auto it = file.header().channels().begin(); it != file.header().channels().end(); ++it)
       channels += only.empty() || only.count(it.name());

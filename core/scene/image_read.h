@@ -15,6 +15,7 @@ namespace tessera {
 
 struct ExrImage {
   int width = 0, height = 0;
+  int x0 = 0, y0 = 0;                                  // the data window's first pixel
   std::map<std::string, std::vector<float>> channels;  // row-major, row 0 at the top
   std::map<std::string, std::string> metadata;         // the file's string attributes
 };

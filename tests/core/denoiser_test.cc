@@ -359,3 +359,62 @@ TEST(Denoiser, RefusesMissingMisSizedAndNonFiniteBuffersNamingThem) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: half-buffers differing past about 2^64 (a light of 1e20) overflowed the
+// variance, every weight became 0 and the image was denoised to black. Colours past 2^40
+// are denoised as their image scaled by a power of two.
+TEST(Denoiser, ColoursPastFloatsSquaresAreDenoisedAsTheirScaledImage) {
+  const Scene s = make_scene(64, 48);
+  const DenoiseBuffers b = noisy(s, 0.5f, 7);
+  const std::vector<float> plain = denoise(b);
+  DenoiseBuffers huge = b;
+  const float scale = 0x1p70f;  // 1.2e21
+  for (std::vector<float>* v : {&huge.color, &huge.even, &huge.odd})
+    for (float& x : *v) x *= scale;
+  const std::vector<float> out = denoise(huge);
+  // Exactly the image brought to 2^40 denoised, scaled back.
+  float largest = 0;
+  for (const std::vector<float>* v : {&huge.color, &huge.even, &huge.odd})
+    for (const float x : *v) largest = std::max(largest, std::fabs(x));
+  int e = 0;
+  std::frexp(largest, &e);
+  const float down = std::ldexp(1.0f, 40 - e);
+  DenoiseBuffers in_range = huge;
+  for (std::vector<float>* v : {&in_range.color, &in_range.even, &in_range.odd})
+    for (float& x : *v) x *= down;
+  std::vector<float> want = denoise(in_range);
+  for (float& x : want) x /= down;
+  EXPECT_EQ(out, want);
+  // And it denoises as the image did as it was (not the same bits: the filters' floors
+  // are absolute).
+  std::vector<float> back = out;
+  for (float& x : back) x /= scale;
+  const std::vector<bool> all(s.region.size(), true);
+  const double noisy_error = rel_mse(b.color, s.truth, all), plain_error = rel_mse(plain, s.truth, all);
+  EXPECT_LT(rel_mse(back, s.truth, all), 1.5 * plain_error);
+  EXPECT_LT(plain_error * 4, noisy_error);
+}
+
+// Found by audit: a hostile half-buffer (-3e38 at one pixel) pulled 48 pixels of an image
+// whose colours are all positive below zero.
+TEST(Denoiser, AHostileHalfBufferCannotTurnAPositiveImageNegative) {
+  const Scene s = make_scene(64, 48);
+  DenoiseBuffers b = fireflies(s, 4, 5);
+  b.odd[3 * (20 * 64 + 30) + 1] = -3e38f;
+  const std::vector<float> out = denoise(b);
+  for (const float x : out) ASSERT_TRUE(std::isfinite(x));
+  EXPECT_GE(*std::min_element(out.begin(), out.end()), 0.f);
+}
+
+// The memory the denoiser holds counts its padded grid: a one-pixel-wide band of 2^20 rows
+// takes each plane 80 floats wide (6 GB where the bands were sized by pixels alone).
+TEST(Denoiser, ItsWorkingMemoryCountsThePaddedGrid) {
+  EXPECT_GE(denoise_working_bytes(1, 1 << 20), uint64_t(17) * 80 * (1 << 20) * sizeof(float));
+  EXPECT_LT(denoise_working_bytes(480, 360), uint64_t(64) << 20);
+}
+
+}  // namespace
+}  // namespace tessera

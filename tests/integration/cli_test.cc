@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "core/io/files.h"
 #include "core/io/image_io.h"
 #include "tests/integration/farm_helpers.h"
 
@@ -302,6 +303,53 @@ TEST_F(Cli, CompareNamesAMissingChannelAndSkipsNonFinitePixelsOfEither) {
   const nlohmann::json j = nlohmann::json::parse(r.out);
   EXPECT_EQ(j["nonfinite"], 1);
   EXPECT_EQ(j["rmse"], 0);
+}
+
+// Found by audit: a region's figures took NaN pixels in (null figures, exit 0), a region
+// 2^31 wide passed the bounds check by overflow and crashed, and the same pixels elsewhere
+// in the frame (another data window) compared "identical".
+TEST_F(Cli, CompareRegionsSkipNonFinitePixelsAndRefuseWhatIsNotInTheImage) {
+  const std::string a = (dir / "a.exr").string(), nan = (dir / "nan.exr").string();
+  const std::string moved = (dir / "moved.exr").string(), regions = (dir / "regions.json").string();
+  tessera::Film film(tessera::Rect{0, 0, 2, 1});
+  film.at(0, 0) = tessera::PixelSums{1, 1, 1, 0, 1};
+  film.at(1, 0) = tessera::PixelSums{2, 2, 2, 0, 1};
+  tessera::write_exr(a, film, {});
+  film.at(1, 0) = tessera::PixelSums{NAN, 2, 2, 0, 1};
+  tessera::write_exr(nan, film, {});
+  {
+    float v[2] = {1, 2};
+    Imf::Header header(Imath::Box2i({0, 0}, {200, 100}), Imath::Box2i({100, 50}, {101, 50}));
+    Imf::FrameBuffer fb;
+    for (const char* c : {"R", "G", "B"}) {
+      header.channels().insert(c, Imf::Channel(Imf::FLOAT));
+      // Where pixel (0, 0) would be (OpenEXR addresses the data window's pixels from it).
+      char* origin = reinterpret_cast<char*>(reinterpret_cast<uintptr_t>(v) - (100 + 50 * 2) * sizeof(float));
+      fb.insert(c, Imf::Slice(Imf::FLOAT, origin, sizeof(float), 2 * sizeof(float)));
+    }
+    Imf::OutputFile file(moved.c_str(), header);
+    file.setFrameBuffer(fb);
+    file.writePixels(1);
+  }
+  const std::string bin = std::string(TESSERA_BIN_DIR) + "/tessera_compare ";
+  tessera::write_file_atomic(regions, R"({"all": [0, 0, 2, 1]})");
+  CommandResult r = run_line(bin + a + " " + nan + " --regions " + regions);
+  ASSERT_EQ(r.code, 0) << r.err;
+  const nlohmann::json j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["regions"]["all"]["relmse"], 0);
+  EXPECT_EQ(j["regions"]["all"]["nonfinite"], 1);
+  EXPECT_EQ(j["regions"]["all"]["image"][0], 1);
+  tessera::write_file_atomic(regions, R"({"wide": [10, 0, 2147483647, 1]})");
+  r = run_line(bin + a + " " + a + " --regions " + regions);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("region 'wide' is not inside the image"), std::string::npos) << r.err;
+  tessera::write_file_atomic(regions, R"({"short": [1, 1, 2]})");
+  r = run_line(bin + a + " " + a + " --regions " + regions);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("region 'short' is not [x, y, w, h] in whole pixels"), std::string::npos) << r.err;
+  r = run_line(bin + moved + " " + a);
+  EXPECT_EQ(r.code, 1);
+  EXPECT_NE(r.err.find("data windows start at different pixels: (100, 50) against (0, 0)"), std::string::npos) << r.err;
 }
 
 }  // namespace
