@@ -142,9 +142,13 @@ int run_render(const RenderArgs& a) {
   RenderSettings s = to_settings(a.flags);
   std::vector<std::string> outputs = output_paths(a.flags);
   const std::vector<int> frames = sequence_frames(a.flags);
+  if (frames.size() > 1 && !a.stats_json.empty() && a.stats_json.find('#') == std::string::npos)  // (each overwrote it)
+    throw CLI::ValidationError("--stats-json",
+                               "several frames need a #### in its path, one file a frame (got '" + a.stats_json + "')");
   prepare_outputs(outputs);  // before the render: a typo costs nothing
   const Scene scene = load_scene(a.flags.scene);
   print_scene_notes(scene, s, stderr);
+  TileRenderer::check_settings(scene, s, frames);  // every frame's camera before the first renders
   TileRenderer renderer(scene, s);
   if (frames.empty()) return render_frame(a, renderer, s, outputs);
   for (const int frame : frames) {  // one scene and one acceleration structure for them all

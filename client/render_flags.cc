@@ -1,5 +1,6 @@
 #include "client/render_flags.h"
 
+#include <charconv>
 #include <cmath>
 #include <filesystem>
 
@@ -24,7 +25,14 @@ void add_render_flags(CLI::App* cmd, RenderFlags& f) {
   cmd->add_option("-b", s.camera.lens_radius, "Thin-lens radius (0 = pinhole)")->capture_default_str();
   cmd->add_option("-d", s.camera.focal_distance, "Focal distance along the optical axis")->capture_default_str();
   cmd->add_option("-p", f.window, "Render only the cell X Y W H (lower-left pixel, y from the bottom)")->expected(4);
-  cmd->add_option("--seed", s.seed, "Random seed")->capture_default_str();
+  // (Checked as text: CLI11 saturates, so -1, 2^64 and 1e23 all became 2^64 - 1, one image.)
+  cmd->add_option("--seed", s.seed, "Random seed")->capture_default_str()->check([](const std::string& v) {
+    uint64_t n = 0;
+    const auto [end, ec] = std::from_chars(v.data(), v.data() + v.size(), n);
+    return !v.empty() && ec == std::errc() && end == v.data() + v.size()
+               ? std::string()
+               : "must be a whole number in 0..18446744073709551615 (got '" + v + "')";
+  });
   cmd->add_option("--frame", s.frame, "Frame number of a sequence: its random numbers depend on it (none: a still)");
   cmd->add_option("--frames", f.frames,
                   "A sequence: 1-240, 1-240x2, 1,5,9 (each frame as --frame N alone; -f paths need ####)");
@@ -83,7 +91,11 @@ RenderSettings to_settings(const RenderFlags& f) {
   if (!f.adaptive.empty()) {
     s.adaptive = true;
     // Out-of-range doubles become values validate() refuses, not undefined conversions.
-    s.adaptive_batch = f.adaptive[0] >= 1 && f.adaptive[0] <= RenderSettings::kMaxSpp ? int(f.adaptive[0]) : 0;
+    // A batch is whole samples (2.7 was cut to 2).
+    s.adaptive_batch =
+        f.adaptive[0] >= 1 && f.adaptive[0] <= RenderSettings::kMaxSpp && f.adaptive[0] == std::floor(f.adaptive[0])
+            ? int(f.adaptive[0])
+            : 0;
     s.adaptive_tolerance = float(f.adaptive[1]);
   }
   s.camera.width = f.resolution[0];
@@ -128,7 +140,9 @@ RenderSettings to_settings(const RenderFlags& f) {
         if (!std::isfinite(f.turntable)) throw SettingsError("--turntable", "must be a finite number of frames");
         CameraPath::Turntable t;
         t.frames = f.turntable;
-        if (!f.frames.empty()) t.start = parse_frames(f.frames).front();  // the first frame faces as the still
+        // (Angle 0 at frame 0 whatever --frames says, so that a sequence's frame is the image
+        // --frame N --turntable gives alone: it started at --frames' first, and a frame
+        // rendered again by itself faced elsewhere.)
         path.turntable = t;
       }
       s.camera.path = std::make_shared<const CameraPath>(std::move(path));

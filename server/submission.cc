@@ -20,7 +20,7 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
     // result of a frame must carry splats or none (ResultIntake::result_splats). A scene
     // whose bytes are kept already is loaded from the coordinator's copy for this check.
     const auto check = [&](const Scene& scene) {
-      TileRenderer::check_settings(scene, a.settings);
+      TileRenderer::check_settings(scene, a.settings, a.frames);
       if (a.settings.light_tracer != RenderSettings::LightTracer::kOff)
         settings.light_tracer = TileRenderer::traces_light_paths(scene, a.settings) ? RenderSettings::LightTracer::kOn
                                                                                     : RenderSettings::LightTracer::kOff;

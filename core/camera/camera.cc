@@ -23,7 +23,7 @@ std::string short_vec(Vec3 v) {
 
 }  // namespace
 
-Camera::Camera(const Scene& scene, const CameraSettings& s)
+Camera::Camera(const Scene& scene, const CameraSettings& s, const Bounds* objects)
     : inv_w_(1.0f / float(s.width)),
       inv_h_(1.0f / float(s.height)),
       lens_radius_(s.lens_radius),
@@ -39,7 +39,7 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
     // Eye on the line from the objects' centre along c, 1.5 diagonals away; +Y up.
     Vec3 dir = c.present ? c.cs184_dir : Vec3{0, 0, 1};
     if (std::fabs(dir.y) > 1 - 1e-6f) dir = normalize(Vec3{1e-5f, dir.y, 0});  // phi += 1e-5 (doc 2.2)
-    const Bounds b = scene.object_bounds();
+    const Bounds b = objects ? *objects : scene.object_bounds();
     const Vec3 target = b.empty() ? Vec3{} : b.center();
     objects_center = target;
     float dist = b.empty() ? 1.0f : 1.5f * length(b.diagonal());
@@ -89,7 +89,7 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
     Vec3 up = p.up ? normalize(*p.up) : y_;
     if (p.orbit) {
       if (!p.orbit_center && !objects_center) {
-        const Bounds b = scene.object_bounds();
+        const Bounds b = objects ? *objects : scene.object_bounds();
         objects_center = b.empty() ? Vec3{} : b.center();
       }
       const Vec3 center = p.orbit_center ? *p.orbit_center : *objects_center;
@@ -120,11 +120,17 @@ Camera::Camera(const Scene& scene, const CameraSettings& s)
   constexpr float kRange = 1e3f * float(Scene::kMaxCoordinate);
   const bool view = ortho_h_ > 0 ? ortho_h_ <= kRange && ortho_w_ > 0 && ortho_w_ <= kRange
                                  : std::isfinite(tan_h_) && std::isfinite(tan_v_) && tan_h_ > 0 && tan_v_ > 0;
+  // The lens too: its rays start up to its radius off the eye, and aim through the focal plane.
+  const bool lens = std::isfinite(lens_radius_) && lens_radius_ <= 1e12f && std::isfinite(focal_distance_) &&
+                    (lens_radius_ <= 0 || (focal_distance_ > 0 && focal_distance_ <= 1e12f));
   if (!is_finite(eye_) || !(max_component(abs(eye_)) <= kRange) || !is_finite(x_) || !is_finite(y_) || !is_finite(z_) ||
-      !view)
+      !view || !lens)
     throw SettingsError("--camera", "the camera is degenerate: eye " + short_vec(eye_) + ", looking along " +
                                         short_vec(-z_) + ", view " + short_float(2 * tan_h_) + " x " +
-                                        short_float(2 * tan_v_) + " at unit distance");
+                                        short_float(2 * tan_v_) + " at unit distance" +
+                                        (lens ? ""
+                                              : ", lens radius " + short_float(lens_radius_) + " focused at " +
+                                                    short_float(focal_distance_) + " (each at most 1e12)"));
 }
 
 Ray Camera::generate(float fx, float fy, Vec2 u_lens) const {

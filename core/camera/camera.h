@@ -52,7 +52,9 @@ struct CameraConnection {
 
 class Camera {
  public:
-  Camera(const Scene& scene, const CameraSettings& settings);
+  // `objects`: scene.object_bounds(), where the caller has it (a check of every frame of a
+  // sequence walks the vertices once, not once a frame).
+  Camera(const Scene& scene, const CameraSettings& settings, const Bounds* objects = nullptr);
 
   // A ray through film position (fx, fy) in pixels, y counted from the bottom row;
   // u_lens is used only by the thin lens.

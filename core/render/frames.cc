@@ -70,8 +70,10 @@ std::string frame_path(const std::string& pattern, int frame) {
   size_t start = end;
   while (start > 0 && pattern[start - 1] == '#') --start;
   const int width = int(end - start + 1);
-  char number[32];
-  std::snprintf(number, sizeof number, "%0*d", width, frame);
+  // (Any run: a 32-byte buffer cut a run of 40 to 31 zeros and every frame wrote one file.)
+  std::string number = std::to_string(frame < 0 ? -int64_t(frame) : int64_t(frame));
+  if (int(number.size()) < width - (frame < 0)) number.insert(0, size_t(width - (frame < 0)) - number.size(), '0');
+  if (frame < 0) number.insert(0, 1, '-');
   return pattern.substr(0, start) + number + pattern.substr(end + 1);
 }
 

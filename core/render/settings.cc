@@ -46,6 +46,10 @@ void RenderSettings::validate() const {
   require(environment_map.size() <= kMaxEnvironmentPath, "--env", "a path of at most 4096 bytes");
   require(std::isfinite(environment_strength) && environment_strength >= 0 && environment_strength <= 1e20f,
           "--env-strength", "must be in 0..1e20");
+  if (environment)  // the radiance is their product: bounded as emission is (1e20^2 overflowed float)
+    for (const float c : {environment->r, environment->g, environment->b})
+      require(double(c) * environment_strength <= 1e20, "--env-strength",
+              "times --env-color is radiance, at most 1e20 (" + std::to_string(double(c) * environment_strength) + ")");
   require(std::isfinite(environment_rotation) && std::fabs(environment_rotation) <= 1e6f, "--env-rotate",
           "must be a finite angle in degrees (at most 1e6)");
   require(std::isfinite(exposure) && std::fabs(exposure) <= kMaxExposure, "--exposure",
@@ -56,8 +60,13 @@ void RenderSettings::validate() const {
           "must be in 0..1e9");
   require(camera.width >= 1 && camera.width <= kMaxImageSide && camera.height >= 1 && camera.height <= kMaxImageSide,
           "-r", "width and height " + range(1, kMaxImageSide));
-  require(std::isfinite(camera.lens_radius) && camera.lens_radius >= 0, "-b", "lens radius must be >= 0");
-  require(std::isfinite(camera.focal_distance) && camera.focal_distance > 0, "-d", "focal distance must be > 0");
+  // (As a camera path's keys: a lens of 2e18 put rays where Embree aborts the process, a
+  // focal distance of 1e20 made every ray's direction zero.)
+  require(std::isfinite(camera.lens_radius) && camera.lens_radius >= 0 && camera.lens_radius <= kMaxLensRadius, "-b",
+          "lens radius must be in 0..1e12");
+  require(
+      std::isfinite(camera.focal_distance) && camera.focal_distance > 0 && camera.focal_distance <= kMaxFocalDistance,
+      "-d", "focal distance must be > 0 and at most 1e12");
   if (window.area() > 0)
     require(window.x >= 0 && window.y >= 0 && window.w >= 1 && window.h >= 1 &&
                 int64_t(window.x) + window.w <= camera.width && int64_t(window.y) + window.h <= camera.height,

@@ -55,6 +55,8 @@ struct RenderSettings {
   // that the frames of a sequence are independent and each is the same image whether
   // rendered alone or with the others. A still (none) keeps the seed as it is.
   static constexpr int kMaxFrame = 1000000;
+  // -b and -d, as a camera path's keys bound them (the scene's coordinates' range).
+  static constexpr float kMaxLensRadius = 1e12f, kMaxFocalDistance = 1e12f;
   std::optional<int> frame;
   // The seed the sampler uses: `seed`, mixed with the frame number when there is one.
   uint64_t sample_seed() const;

@@ -39,10 +39,27 @@ std::shared_ptr<const EnvironmentMap> TileRenderer::load_environment(const Scene
   }
 }
 
-void TileRenderer::check_settings(const Scene& scene, const RenderSettings& settings) {
+void TileRenderer::check_settings(const Scene& scene, const RenderSettings& settings, const std::vector<int>& frames) {
   (void)load_environment(scene, settings);
   check_animation(scene, settings);
-  (void)Camera(scene, settings.at_frame().camera);  // a file camera the framing needs but cannot use
+  if (!settings.camera.path || frames.empty()) {
+    (void)Camera(scene, settings.at_frame().camera);  // a file camera the framing needs but cannot use
+    return;
+  }
+  // Each frame's camera, where the path puts it (only frame 0 was checked: a sequence whose
+  // path crossed its target failed midway, on the farm a task at a time for good).
+  const Bounds objects = scene.object_bounds();
+  const char* flag = settings.camera.path->keys.empty() ? "--turntable" : "--camera-path";
+  RenderSettings s = settings;
+  for (const int frame : frames) {
+    s.frame = frame;
+    try {
+      (void)Camera(scene, s.at_frame().camera, &objects);
+    } catch (const SettingsError& e) {
+      throw SettingsError(
+          flag, "at frame " + std::to_string(frame) + ": " + std::string(e.what()).substr(e.flag().size() + 2));
+    }
+  }
 }
 
 bool TileRenderer::traces_light_paths(const Scene& scene, const RenderSettings& settings) {

@@ -74,7 +74,9 @@ class TileRenderer {
   // (--animation) it does not have, an environment map (--env) that cannot be read beside
   // it, the file's camera (--camera file) when the file's is unusable. The coordinator
   // checks a job with it at submit.
-  static void check_settings(const Scene& scene, const RenderSettings& settings);
+  // A camera path or turntable is checked at each of `frames` (a sequence's), else at the
+  // still's frame: refused naming the frame where it fails (a path through the target).
+  static void check_settings(const Scene& scene, const RenderSettings& settings, const std::vector<int>& frames = {});
   // Whether a renderer of the scene with these settings traces light paths (light_tracing()),
   // decided as the renderer decides, without building anything: the coordinator resolves a
   // job's --light-tracer auto at submit with it, so a frame's results must all carry splats

@@ -163,3 +163,43 @@ TEST(CameraPath, AFrameOfAPathRendersAloneAsInItsSequenceAndSharesTheBvh) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: a path was checked at frame 0 alone. One whose eye crossed its target at
+// frame 5 was accepted and failed there (on the farm a task at a time, for good), and one
+// that crosses only at frame 0, which the sequence never renders, was refused.
+TEST(CameraPath, EachFrameOfTheSequenceIsCheckedAndOnlyThose) {
+  const Scene scene = load_scene(testing::source_path("scenes/cornell-spheres.dae"));
+  RenderSettings s;
+  s.camera.framing = Framing::kCs184;
+  s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(
+      R"({"keys": [{"frame": 0, "eye": [0, 0.5, 3], "target": [0, 0.5, 0]},
+                   {"frame": 10, "eye": [0, 0.5, -3], "target": [0, 0.5, 0]}]})"));
+  EXPECT_NO_THROW(TileRenderer::check_settings(scene, s, {1, 2, 3, 4}));
+  try {
+    TileRenderer::check_settings(scene, s, {1, 2, 3, 4, 5, 6});
+    ADD_FAILURE();
+  } catch (const SettingsError& e) {
+    EXPECT_EQ(e.flag(), "--camera-path");
+    EXPECT_NE(std::string(e.what()).find("at frame 5: the camera is degenerate"), std::string::npos) << e.what();
+  }
+  s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(
+      R"({"keys": [{"frame": -10, "eye": [0, 0.5, 3], "target": [0, 0.5, 0]},
+                   {"frame": 10, "eye": [0, 0.5, -3], "target": [0, 0.5, 0]}]})"));
+  EXPECT_THROW(TileRenderer::check_settings(scene, s), SettingsError);  // a still at frame 0
+  EXPECT_NO_THROW(TileRenderer::check_settings(scene, s, {1, 2, 3}));
+  // A turntable whose turn takes 1e-320 frames: its angle is not a number past frame 0.
+  s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(R"({"turntable": {"frames": 1e-320}})"));
+  try {
+    TileRenderer::check_settings(scene, s, {0, 1, 2});
+    ADD_FAILURE();
+  } catch (const SettingsError& e) {
+    EXPECT_EQ(e.flag(), "--turntable");
+    EXPECT_NE(std::string(e.what()).find("at frame 1:"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace tessera

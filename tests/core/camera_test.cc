@@ -116,3 +116,30 @@ TEST(Camera, AnUnusableFilePoseServesCs184FramingAndIsRefusedForFileFraming) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: the camera checked its eye but not its lens, whose rays start up to the
+// radius off the eye (2e18: Embree aborted the process) and aim through the focal plane.
+TEST(Camera, ALensOrFocalDistanceRaysCannotCarryIsRefused) {
+  Scene scene;
+  scene.camera.present = true;
+  CameraSettings cs;
+  cs.framing = Framing::kFile;
+  cs.lens_radius = 2e18f;
+  try {
+    Camera(scene, cs);
+    ADD_FAILURE();
+  } catch (const SettingsError& e) {
+    EXPECT_NE(std::string(e.what()).find("lens radius 2e+18"), std::string::npos) << e.what();
+  }
+  cs.lens_radius = 0.1f;
+  cs.focal_distance = 1e20f;
+  EXPECT_THROW(Camera(scene, cs), SettingsError);
+  cs.focal_distance = 1e12f;
+  EXPECT_NO_THROW(Camera(scene, cs));
+}
+
+}  // namespace
+}  // namespace tessera

@@ -54,6 +54,10 @@ TEST(Frames, PathsFromPatterns) {
   EXPECT_EQ(frame_path("a#b.##.exr", 5), "a#b.05.exr");  // the last run
   EXPECT_EQ(frame_path("shot.###.exr", -7), "shot.-07.exr");
   EXPECT_EQ(frame_path("still.exr", 3), "still.exr");
+  // Found by audit: a run longer than 31 was cut to 31 zeros, the number lost, and every
+  // frame of a sequence wrote the same file.
+  EXPECT_EQ(frame_path("shot." + std::string(40, '#') + ".png", 12), "shot." + std::string(38, '0') + "12.png");
+  EXPECT_EQ(frame_path("s." + std::string(40, '#'), -3), "s.-" + std::string(38, '0') + "3");
 }
 
 }  // namespace

@@ -145,6 +145,35 @@ TEST_F(Cli, ABadCameraPathOrAnimationIsRefusedNamingTheFileKeyAndField) {
   EXPECT_NE(r.err.find("--animation: no animation 'walk' (the scene has 0 'move')"), std::string::npos) << r.err;
 }
 
+// Found by audit: a path whose eye crossed its target at frame 5 wrote frames 1 to 4 and then
+// failed; a seed past 64 bits, a fractional -a batch and a sequence's one --stats-json file
+// were taken silently (the seed saturated, the batch was cut, the file overwritten a frame).
+TEST_F(Cli, ASequenceIsCheckedAtEveryFrameAndNoValueIsTakenForAnother) {
+  const std::string path = (dir / "cross.json").string();
+  std::ofstream(path) << R"({"keys": [{"frame": 0, "eye": [0, 0.5, 3], "target": [0, 0.5, 0]},
+                                     {"frame": 10, "eye": [0, 0.5, -3], "target": [0, 0.5, 0]}]})";
+  CommandResult r = run("render " + scene + " -s 1 -r 8 8 --frames 1-6 --camera-path " + path + " -q -f " +
+                        (dir / "c.####.exr").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("--camera-path: at frame 5: the camera is degenerate"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir / "c.0001.exr"));  // refused before anything is rendered
+  const std::string out = " -q -f " + (dir / "s.exr").string();
+  for (const char* seed : {"-1", "18446744073709551616", "1e23", "x"}) {
+    r = run("render " + scene + " -s 1 -r 8 8 --seed " + seed + out);
+    EXPECT_EQ(r.code, 2) << seed;
+    EXPECT_NE(r.err.find("must be a whole number in 0..18446744073709551615"), std::string::npos) << r.err;
+  }
+  r = run("render " + scene + " -s 1 -r 8 8 --seed 18446744073709551615" + out);
+  EXPECT_EQ(r.code, 0) << r.err;
+  r = run("render " + scene + " -s 4 -r 8 8 -a 2.7 0.1" + out);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("-a"), std::string::npos) << r.err;
+  r = run("render " + scene + " -s 1 -r 8 8 --frames 1-2 --stats-json " + (dir / "st.json").string() + " -q -f " +
+          (dir / "f.####.exr").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--stats-json: several frames need a #### in its path"), std::string::npos) << r.err;
+}
+
 TEST_F(Cli, ABrokenEnvironmentMapIsRefusedNamingTheFile) {
   const std::string bad = (dir / "bad.hdr").string();
   std::ofstream(bad) << "not radiance";

@@ -297,6 +297,16 @@ TEST(Settings, EachSettingOutOfRangeIsRefusedByItsFlag) {
   EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.height = RenderSettings::kMaxImageSide + 1; }), "-r");
   EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.lens_radius = -1; }), "-b");
   EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.focal_distance = 0; }), "-d");
+  // Found by audit: a lens of 2e18 aborted every worker that took the job (Embree's ray
+  // checks), a focal distance of 1e20 gave a black image; bounded as a camera path's keys.
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.lens_radius = 2e18f; }), "-b");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.lens_radius = 1e12f; }), "accepted");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.camera.focal_distance = 1e20f; }), "-d");
+  // --env-color 1e20 times --env-strength 1e20 overflowed float: 254 of 256 samples dropped.
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.environment = Rgb(1e20f), s.environment_strength = 1e20f; }),
+            "--env-strength");
+  EXPECT_EQ(refused_as([](RenderSettings& s) { s.environment = Rgb(1e10f), s.environment_strength = 1e10f; }),
+            "accepted");
   EXPECT_EQ(refused_as([](RenderSettings& s) { s.window = Rect{470, 0, 20, 10}; }), "-p");    // past the right edge
   EXPECT_EQ(refused_as([](RenderSettings& s) { s.window = Rect{0, 0, 0, 0}; }), "accepted");  // the whole image
   // Issue 10, row 9: `-r 2048 2048 --tile 1` made 4 M tiles and 0.83 GB at submit.

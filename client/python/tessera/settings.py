@@ -127,7 +127,7 @@ def parse_frames(spec):
     return frames
 
 
-def _camera_path_json(value, turntable, frames):
+def _camera_path_json(value, turntable):
     path = {}
     if value is not None:
         if isinstance(value, dict):
@@ -138,8 +138,9 @@ def _camera_path_json(value, turntable, frames):
             with open(value) as f:
                 path = json.load(f)
     if turntable is not None:
-        # As the CLI: the first frame faces as the still does.
-        path["turntable"] = {"frames": float(turntable), "start": float(frames[0]) if frames else 0.0}
+        # As the CLI: frame 0 faces as the still, whatever the frames (one rendered again
+        # alone is the sequence's).
+        path["turntable"] = {"frames": float(turntable), "start": 0.0}
     return json.dumps(path) if path else ""
 
 
@@ -165,7 +166,7 @@ def to_proto(scene, frames=None, **kwargs):
     if s["frame"] is not None:
         p.frame = int(s["frame"])
     p.fps = float(s["fps"])
-    p.camera_path = _camera_path_json(s["camera_path"], s["turntable"], frames)
+    p.camera_path = _camera_path_json(s["camera_path"], s["turntable"])
     p.animation = str(s["animation"])
     if s["env_color"] is not None:
         p.environment.extend(float(c) for c in s["env_color"])
