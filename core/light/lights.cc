@@ -5,6 +5,7 @@
 #include <limits>
 
 #include "core/light/environment.h"
+#include "core/math/ulp.h"
 #include "core/sampling/warp.h"
 
 namespace tessera {
@@ -66,7 +67,11 @@ bool finish_area_sample(Vec3 p, Vec3 q, Vec3 q_err, Vec3 n, float area_pdf, Rgb 
 [[gnu::always_inline]] static inline void rect_point(const Light& l, Vec2 u, LightPoint* out) {
   const Vec3 ex = l.edge_x * (u.x - 0.5f), ey = l.edge_y * (u.y - 0.5f);
   out->q = l.position + (ex + ey);
-  out->err = abs(out->q) * gamma(1) + (abs(ex) + abs(ey)) * gamma(3);
+  // (The floor: a light in a plane through the origin started its light paths a denormal
+  // off its own triangles, which Embree's plane test then hit at t = 0: no light paths.)
+  const Vec3 err = abs(out->q) * gamma(1) + (abs(ex) + abs(ey)) * gamma(3);
+  const float floor = underflow_floor(l.area);  // (|Ng| of the rectangle's triangles)
+  out->err = max(err, Vec3{floor, floor, floor});
   out->n = l.normal;
   out->area_pdf = 1 / l.area;
   out->radiance = l.color;
@@ -95,10 +100,11 @@ bool finish_area_sample(Vec3 p, Vec3 q, Vec3 q_err, Vec3 n, float area_pdf, Rgb 
   const Vec2 bc = square_to_triangle(u);
   const Vec3 e1 = (b - a) * bc.x, e2 = (c - a) * bc.y;
   out->q = a + (e1 + e2);  // as make_surface_point: exact edges far from the origin
-  out->err = abs(out->q) * gamma(1) + (abs(e1) + abs(e2)) * gamma(4);
   const Vec3 n = cross(b - a, c - a);
   const float len = length(n);
   if (!(len > 0)) return false;
+  const float floor = underflow_floor(len);  // (as rect_point's)
+  out->err = max(abs(out->q) * gamma(1) + (abs(e1) + abs(e2)) * gamma(4), Vec3{floor, floor, floor});
   Rgb radiance = l.color;
   const Material& mat = scene_.materials[m.material];
   switch (mat.alpha_mode) {  // where the surface is not there, neither is its light

@@ -8,6 +8,7 @@
 
 #include "core/bsdf/bsdf.h"
 #include "core/math/float_math.h"
+#include "core/math/ulp.h"
 #include "core/sampling/warp.h"
 
 namespace tessera {
@@ -15,8 +16,6 @@ namespace {
 
 constexpr float kMachineEps = std::numeric_limits<float>::epsilon() * 0.5f;
 constexpr float gamma(int n) { return (n * kMachineEps) / (1 - n * kMachineEps); }
-// Offsets never below this over |Ng| (clamped to 1): 4 FLT_MIN, see make_surface_point.
-constexpr float kUnderflowFloor = 4 * std::numeric_limits<float>::min();
 // The double-precision sphere test's error in the sign of |o - c|^2 - r^2, relative to r,
 // with a wide margin (2^-40 against about 2^-51).
 constexpr float kSphereTestError = 0x1p-40f;
@@ -99,7 +98,7 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
     // The vertices' rounding into the world, and Embree taking the next ray's origin into
     // object space and its plane test there (the floor below, in object units).
     sp.p_err = sp.p_err + max(max(abs(p0), abs(p1)), abs(p2)) * gamma(1) + in->round_trip_error(sp.p) +
-               in->abs_vector(splat(kUnderflowFloor / std::clamp(obj_len, 1e-20f, 1.0f)));
+               in->abs_vector(splat(underflow_floor(obj_len)));
   }
   // The intersector's absolute error. The bound above is relative (pbrt-v4's model,
   // |fl(x) - x| <= eps |x|), which fails where products underflow: Embree's plane test
@@ -108,7 +107,7 @@ SurfacePoint make_surface_point(const Scene& scene, const Ray& ray, const Hit& h
   // tnear). The floor keeps |Ng| x offset above FLT_MIN (and the offset itself normal, for
   // flush-to-zero), whatever the triangle's size; at any other position the relative
   // bound is larger by orders of magnitude, so nothing else moves (docs/ray-offsets.md).
-  sp.p_err = max(sp.p_err, splat(kUnderflowFloor / std::clamp(len, 1e-20f, 1.0f)));
+  sp.p_err = max(sp.p_err, splat(underflow_floor(len)));
   Vec3 ns = m.normals[i0] * b0 + m.normals[i1] * b1 + m.normals[i2] * b2;
   if (in) ns = in->normal_to_world(ns);
   const float ns_len = length(ns);

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 #include <string>
 
 #include "core/camera/camera.h"
@@ -105,6 +106,25 @@ TEST(ColladaHostile, DirectionsOfHugelyScaledNodesStayUnit) {
   EXPECT_NEAR(s.lights[0].direction.z, 1, 1e-6);
   EXPECT_NEAR(length(s.camera.cs184_dir), 1, 1e-6);
   EXPECT_EQ(camera_error(s), "");
+}
+
+// Found by audit: an area light's area was a float cross product, whose squares overflow
+// past about 1e19 (a scene scaled by 1e11, inside the 1e12 allowed, was refused as "zero
+// area") and underflow below about 1e-19. In double there.
+TEST(ColladaHostile, AreaLightsFloatsSquaresCannotHoldAreMeasuredInDouble) {
+  const std::string area = R"(<library_lights><light id="a"><technique_common><point><color>1 1 1</color></point>
+</technique_common><extra><technique profile="CGL"><area><color>1 1 1</color></area></technique></extra></light>
+</library_lights>)";
+  for (const double k : {1e11, 1e-11}) {
+    std::ostringstream m;
+    m << "<matrix>" << 0.6 * k << " 0 0 0 0 " << 0.8 * k << " 0 " << k << " 0 0 " << k << " 0 0 0 0 1</matrix>";
+    const Scene s = load_collada_string(
+        document(area, "<node id=\"L\">" + m.str() + R"(<instance_light url="#a"/></node>)"), "big.dae");
+    ASSERT_EQ(s.lights.size(), 1u);
+    EXPECT_NEAR(s.lights[0].area / (0.48 * k * k), 1, 1e-6) << k;
+    EXPECT_NEAR(length(s.lights[0].normal), 1, 1e-6) << k;
+    EXPECT_NEAR(std::fabs(s.lights[0].normal.z), 1, 1e-6) << k;
+  }
 }
 
 // Values that fit a double but not the float they are stored in: refused, not rendered NaN.

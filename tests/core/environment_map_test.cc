@@ -285,5 +285,29 @@ TEST(EnvironmentMapRender, AMissingMapIsASettingsErrorNamingTheFile) {
   }
 }
 
+// Found by audit: texels were only finite, so one of 1.6e38 (or a bright one times
+// --env-strength) made 45% of the samples NaN. Its radiance is bounded as emission is.
+TEST(EnvironmentMapRender, AMapBrighterThanEmissionMayBeIsRefusedNamingIt) {
+  const fs::path d = temp_dir();
+  write_exr(d / "hot.exr", 2, 1, {Rgb(1.0f), Rgb(1.6e38f, 0, 0)});
+  write_exr(d / "warm.exr", 2, 1, {Rgb(1.0f), Rgb(1e15f, 0, 0)});
+  Material white;
+  RenderSettings s = testing::furnace_settings();
+  s.environment_map = (d / "hot.exr").string();
+  const Scene scene = sphere_scene(white);
+  try {
+    TileRenderer::check_settings(scene, s);
+    ADD_FAILURE();
+  } catch (const SettingsError& e) {
+    EXPECT_EQ(e.flag(), "--env");
+    EXPECT_NE(std::string(e.what()).find("hot.exr: its brightest texel"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("past 1e20"), std::string::npos) << e.what();
+  }
+  s.environment_map = (d / "warm.exr").string();
+  EXPECT_NO_THROW(TileRenderer::check_settings(scene, s));
+  s.environment_strength = 1e6f;
+  EXPECT_THROW(TileRenderer::check_settings(scene, s), SettingsError);
+}
+
 }  // namespace
 }  // namespace tessera

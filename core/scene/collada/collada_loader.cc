@@ -271,8 +271,15 @@ class ColladaLoader {
       const Vec3 facing = w.vector(0, 0, -1).to_float();
       const Vec3 c = cross(l.edge_x, l.edge_y);
       l.area = length(c);
-      if (!(l.area > 0) || !std::isfinite(l.area)) fail(node, "area light has zero area");
-      l.normal = face_forward(c / l.area, facing);
+      Vec3 n = c / l.area;
+      if (!(l.area > 1e-18f && l.area < 1e18f)) {  // where float's squares overflow or underflow: in double
+        const Dvec3 ex = w.vector(-1, 0, 0), ey = w.vector(0, 1, 0);
+        const Dvec3 cd{ex.y * ey.z - ex.z * ey.y, ex.z * ey.x - ex.x * ey.z, ex.x * ey.y - ex.y * ey.x};
+        l.area = float(dlength(cd));  // (a light 1e11 across was refused as of "zero area")
+        n = unit(cd);
+      }
+      if (!(l.area > 0) || !std::isfinite(l.area) || n == Vec3{}) fail(node, "area light has zero area");
+      l.normal = face_forward(n, facing);
     } else {
       fail(type, "unknown light type <" + kind + ">");
     }
