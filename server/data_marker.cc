@@ -1,5 +1,11 @@
 #include "server/data_marker.h"
 
+#include <fcntl.h>
+#include <sys/file.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -45,6 +51,32 @@ void set_data_marker(const std::string& dir, bool open) {
   write_file_atomic((fs::path(dir) / kMarker).string(),
                     std::string("This folder holds a Tessera coordinator's data (docs/architecture.md).\n") +
                         (open ? kOpen : kClosed) + "\n");
+}
+
+DataFolderLock::DataFolderLock(const std::string& dir) {
+  const std::string path = (fs::path(dir) / "coordinator.lock").string();
+  fd_ = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+  if (fd_ < 0) throw std::runtime_error(path + ": cannot open the data folder's lock: " + std::strerror(errno));
+  if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+    const int err = errno;
+    char holder[32] = {};
+    const ssize_t n = ::pread(fd_, holder, sizeof holder - 1, 0);
+    ::close(fd_);
+    fd_ = -1;
+    if (err == EWOULDBLOCK)
+      throw std::runtime_error("data folder " + dir + " is in use by another coordinator" +
+                               (n > 0 ? " (process " + std::string(holder, size_t(n)) + ")" : std::string()) +
+                               ": one coordinator a data folder (" + path + " is locked)");
+    throw std::runtime_error(path + ": cannot lock the data folder: " + std::strerror(err));
+  }
+  // Who holds it, for the next one's message.
+  const std::string pid = std::to_string(::getpid());
+  if (::ftruncate(fd_, 0) == 0 && ::pwrite(fd_, pid.data(), pid.size(), 0) < 0) {
+  }  // (only a message's detail: nothing to do if it cannot be written)
+}
+
+DataFolderLock::~DataFolderLock() {
+  if (fd_ >= 0) ::close(fd_);  // (the lock goes with the descriptor)
 }
 
 }  // namespace tessera

@@ -16,4 +16,20 @@ void check_data_marker(const std::string& dir);
 // Records the database as open (after opening it) or closed (after a clean close).
 void set_data_marker(const std::string& dir, bool open);
 
+// One coordinator a data folder: an exclusive lock on DIR/coordinator.lock (flock), held
+// while it lives and let go by the kernel if the process dies. Two coordinators on one
+// folder each took up every job, wrote the same checkpoints and images, and each start's
+// clean-up removed the other's uploads. Throws std::runtime_error naming the folder and the
+// process that holds it.
+class DataFolderLock {
+ public:
+  explicit DataFolderLock(const std::string& dir);
+  ~DataFolderLock();
+  DataFolderLock(const DataFolderLock&) = delete;
+  DataFolderLock& operator=(const DataFolderLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
+
 }  // namespace tessera

@@ -134,6 +134,9 @@ std::shared_ptr<grpc::AuthMetadataProcessor> token_gate(const Authenticator& aut
 void configure_server(grpc::ServerBuilder& builder, int max_message_bytes, ConnectionLimits limits) {
   builder.AddChannelArgument(GRPC_ARG_SERVER_HANDSHAKE_TIMEOUT_MS, int(limits.handshake_seconds * 1000));
   builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_IDLE_MS, int(limits.idle_seconds * 1000));
+  // A port another process listens on is refused, not shared (gRPC sets SO_REUSEPORT: a
+  // second coordinator on the same address started silently and took half the calls).
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.SetMaxReceiveMessageSize(max_message_bytes);
   builder.SetMaxSendMessageSize(max_message_bytes);
   const int cores = int(std::max(1u, std::thread::hardware_concurrency()));

@@ -16,8 +16,8 @@ namespace tessera {
 
 namespace fs = std::filesystem;
 
-SqliteJobStore::SqliteJobStore(const std::string& data_dir) : dir_(data_dir) {
-  fs::create_directories(dir_);
+SqliteJobStore::SqliteJobStore(const std::string& data_dir)
+    : dir_((fs::create_directories(data_dir), data_dir)), lock_(dir_) {
   check_data_marker(dir_);  // a lost database is refused, not replaced by an empty one
   const std::string path = (fs::path(dir_) / "coordinator.db").string();
   if (sqlite3_open_v2(path.c_str(), &db_, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX,

@@ -24,6 +24,7 @@
 
 #include "core/util/mutex.h"
 #include "server/checkpoint.h"
+#include "server/data_marker.h"
 #include "server/events.h"
 #include "server/job_meta.h"
 
@@ -233,6 +234,7 @@ class SqliteJobStore : public JobStore {
   }
   void rollback() const;
   std::string dir_;
+  DataFolderLock lock_;  // (before the database is opened; let go after it is closed)
   sqlite3* db_ = nullptr;
   mutable Mutex mu_;  // one statement at a time on db_
 };

@@ -11,7 +11,10 @@ void Recovery::restore(double now, Effects& fx) {
     if (!job_live(row.state)) {  // (ended, not yet archived when the earlier run stopped)
       p_.store.discard_partial_writes(row.meta.id);
       try {
-        adopt(p_.jobs, load_ended(row, p_.store, now));
+        Ended e = load_ended(row, p_.store, now);
+        if (e.job && row.state == v1::JobStatus::DONE) with_final_image(row, e.job, now);
+        adopt(p_.jobs, e);
+        if (e.job && e.job->plan.has_film() && p_.snapshots.final_snapshot(*e.job, now)) fx.writes.push_back(e.job);
         ++p_.counters.jobs_restored;
       } catch (const WireError& e) {  // checked at submit: only a damaged database gets here
         spdlog::error("job {}: stored settings: {}; skipped", row.meta.id, e.what());
@@ -21,6 +24,33 @@ void Recovery::restore(double now, Effects& fx) {
     else
       restore_sequence(row, now, fx);
   }
+}
+
+// A DONE job's end is recorded once its checkpoint holds the whole film, whether or not its
+// final image was written (a full disk at its end: in memory the write is retried on
+// fetch). Where the image on disk is not that final one, its film is read back from the
+// checkpoint and the image written again (final_snapshot, in restore); the job leaves memory
+// once it is. It was taken as written: the first fetch served the unfinished image as final
+// and the archive deleted the checkpoint, the film's only whole copy.
+void Recovery::with_final_image(const StoredJob& row, std::shared_ptr<Job>& job, double now) const {
+  if (!p_.image_passes || p_.image_passes(row.meta.id) == job->plan.frame_passes_done()) return;
+  auto whole = std::make_shared<Job>(row.meta, from_proto(row.meta.settings), row.state);
+  try {
+    const std::optional<double> elapsed = p_.store.read_checkpoint(row.meta.id, whole->plan, true, &whole->splats);
+    if (!elapsed || !whole->plan.done()) return;  // (nothing whole to write it from: the image stays as it is)
+  } catch (const std::exception& e) {
+    spdlog::warn("job {}: its final image is not on disk and its checkpoint cannot be read: {}", row.meta.id, e.what());
+    return;
+  }
+  spdlog::warn("job {}: its final image is not on disk; written again from its checkpoint", row.meta.id);
+  whole->error = row.error;
+  whole->submitted = now;
+  whole->ended_at = row.ended_at;
+  whole->started = now - row.elapsed;
+  whole->finished_at = now;
+  whole->written = {0, 0, 1, whole->plan.merges()};
+  whole->end_recorded = true;
+  job = std::move(whole);
 }
 
 void Recovery::as_ended(Job& job, double now, double elapsed) {

@@ -57,6 +57,7 @@ class Recovery {
 
  private:
   void restore_job(const StoredJob& row, double now, Effects& fx);
+  void with_final_image(const StoredJob& row, std::shared_ptr<Job>& job, double now) const;
   void restore_sequence(const StoredJob& row, double now, Effects& fx);
   // An ended job as it is on disk: image and checkpoint written, end recorded, no film.
   static void as_ended(Job& job, double now, double elapsed);

@@ -155,6 +155,28 @@ TEST_F(Lifecycle, ABadKeepEndedIsRefusedSayingWhatItTakes) {
   }
 }
 
+// Found by audit: a second coordinator on the same data folder took up every job beside the
+// first (both wrote the same checkpoints; each start removed the other's uploads), and one
+// on the same address shared the port (gRPC's SO_REUSEPORT). Both are refused, naming why.
+TEST_F(Lifecycle, ASecondCoordinatorOnTheSameDataFolderOrPortIsRefused) {
+  start_coordinator();
+  const std::string err = (dir / "second.err").string();
+  int status = std::system((kBin + "/tessera-coordinator --listen 127.0.0.1:0 --http 127.0.0.1:0 --data " +
+                            (dir / "data").string() + " >/dev/null 2>" + err)
+                               .c_str());
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) != 0);
+  std::string said = slurp(err);
+  EXPECT_NE(said.find("data folder " + (dir / "data").string() + " is in use by another coordinator (process "),
+            std::string::npos)
+      << said;
+  status = std::system((kBin + "/tessera-coordinator --listen " + grpc_addr + " --http 127.0.0.1:0 --data " +
+                        (dir / "other").string() + " >/dev/null 2>" + err)
+                           .c_str());
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) != 0);
+  said = slurp(err);
+  EXPECT_NE(said.find("cannot listen on " + grpc_addr), std::string::npos) << said;
+}
+
 // A priority set after submit orders the queue; `jobs` pages through every job.
 TEST_F(Lifecycle, PriorityAfterSubmitAndJobsInPages) {
   start_coordinator();

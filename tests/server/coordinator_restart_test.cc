@@ -59,6 +59,32 @@ TEST_F(CoordinatorTest, ARestartedCoordinatorGoesOnWithEveryJobInItsState) {
   EXPECT_EQ(c->list().back().id(), next);  // after the restored ones
 }
 
+// Found by audit: a DONE job whose final image could not be written (a full disk at its
+// end; in memory the write is retried on fetch) came back from a restart as written. The
+// first fetch served what was on disk as final, and the archive deleted the checkpoint,
+// the film's only whole copy. Now its film is read back and the image written again.
+TEST_F(CoordinatorTest, ADoneJobWhoseFinalImageWasNotWrittenGetsItAfterARestart) {
+  const RenderSettings s = job_settings();
+  const std::string id = c->submit(request(s));
+  const std::string blocker = image_path(id, "image.exr.tmp");
+  fs::create_directories(blocker + "/x");  // every image write fails; checkpoints do not
+  drain(worker());
+  v1::JobStatus st = c->status(id, false);
+  ASSERT_EQ(st.state(), v1::JobStatus::DONE);
+  ASSERT_NE(st.error().find("image not written"), std::string::npos) << st.error();
+  fs::remove_all(blocker);
+  restart(c, options(), &t);
+  st = c->status(id, false);
+  EXPECT_EQ(st.state(), v1::JobStatus::DONE);
+  EXPECT_EQ(st.samples_done(), st.samples_total());
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+  const auto fetched = c->image(id, true, false);
+  EXPECT_TRUE(fetched.final());
+  // And once more: now that the image is whole, the job is taken as written.
+  restart(c, options(), &t);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
 // A crash after a job's last merge but before its end is on disk (its final checkpoint
 // not yet renamed into place; here no checkpoint ever is): the restarted coordinator still
 // has the scene and renders what the checkpoints lack. (The scene used to be deleted at

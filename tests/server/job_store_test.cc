@@ -454,3 +454,31 @@ TEST(JobStore, ALostDatabaseIsRefusedNotReplacedByAnEmptyOne) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: two coordinators on one data folder each took up every job. The folder is
+// locked while a store has it open, and let go when it closes.
+TEST(JobStore, OneStoreADataFolder) {
+  const fs::path dir = fs::temp_directory_path() / ("tessera_store_lock_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  {
+    SqliteJobStore first(dir.string());
+    try {
+      SqliteJobStore second(dir.string());
+      ADD_FAILURE();
+    } catch (const std::runtime_error& e) {
+      EXPECT_NE(
+          std::string(e.what()).find("data folder " + dir.string() + " is in use by another coordinator (process " +
+                                     std::to_string(::getpid()) + ")"),
+          std::string::npos)
+          << e.what();
+    }
+  }
+  EXPECT_NO_THROW(SqliteJobStore{dir.string()});  // let go with the first
+  fs::remove_all(dir);
+}
+
+}  // namespace
+}  // namespace tessera
