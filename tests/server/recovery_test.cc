@@ -66,10 +66,18 @@ class RecoveryTest : public testing::PartsTest {
   }
 };
 
+// The frame passes of a plan with every pass merged (what a DONE job's final image holds).
+uint32_t all_frame_passes() {
+  FramePlan plan(small_settings());
+  merge_passes(plan, testing::kPasses);
+  return plan.frame_passes_done();
+}
+
 TEST_F(RecoveryTest, AnEndedJobComesBackAsOnDiskWithoutItsFilm) {
   StoredJob r = row(1, DONE);
   store.end(r.meta.id, DONE, "", 7);
   checkpoint(r.meta.id, testing::kPasses, 7);
+  images[r.meta.id] = all_frame_passes();  // its final image, whole
   restore();
   Job& job = jobs.job(r.meta.id);
   EXPECT_EQ(job.state(), DONE);
@@ -87,6 +95,24 @@ TEST_F(RecoveryTest, AnEndedJobComesBackAsOnDiskWithoutItsFilm) {
   EXPECT_EQ(scenes_restored, 0);  // an ended job needs no scene
   EXPECT_TRUE(fx.writes.empty());
   EXPECT_EQ(counters.jobs_restored, 1u);
+}
+
+// Its end recorded, its final image not written (a full disk): the film is read back from
+// the checkpoint and the image written again; the job stays until it is.
+TEST_F(RecoveryTest, ADoneJobWithoutItsFinalImageIsWrittenAgainFromItsCheckpoint) {
+  StoredJob r = row(1, DONE);
+  store.end(r.meta.id, DONE, "", 7);
+  checkpoint(r.meta.id, testing::kPasses, 7);
+  images[r.meta.id] = all_frame_passes() - 1;  // a progressive image
+  restore();
+  Job& job = jobs.job(r.meta.id);
+  EXPECT_EQ(job.state(), DONE);
+  EXPECT_TRUE(job.plan.has_film());
+  EXPECT_TRUE(job.plan.done());
+  EXPECT_TRUE(job.end_recorded);
+  EXPECT_FALSE(Snapshotter::image_current(job, false, job.plan.merges()));
+  ASSERT_EQ(fx.writes.size(), 1u);
+  EXPECT_EQ(fx.writes[0].get(), &job);
 }
 
 TEST_F(RecoveryTest, ALiveJobWithACheckpointGoesOnRunningWithItsMerges) {
