@@ -115,7 +115,7 @@ std::string encode_checkpoint_v2(const PlanState& state, const Film& film, doubl
   return std::move(w.out);
 }
 
-Checkpoint decode_checkpoint(const std::string& bytes, bool with_film) {
+Checkpoint decode_checkpoint(const std::string& bytes, bool with_film, const Rect* expected) {
   if (bytes.size() < 4 + 8 || std::memcmp(bytes.data(), kMagic, 4) != 0)
     throw std::runtime_error("checkpoint: not a checkpoint file");
   uint64_t sum;
@@ -146,6 +146,7 @@ Checkpoint decode_checkpoint(const std::string& bytes, bool with_film) {
   r.w = in.get<int32_t>();
   r.h = in.get<int32_t>();
   if (r.w < 0 || r.h < 0 || r.area() > (int64_t(1) << 32)) throw std::runtime_error("checkpoint: bad film window");
+  if (expected && !(r == *expected)) throw std::runtime_error("checkpoint: it does not fit the job's frame");
   const uint64_t active_size = in.get<uint64_t>();
   if (active_size != 0 && active_size != uint64_t(r.area())) throw std::runtime_error("checkpoint: bad active mask");
   const std::string active = in.bytes();
@@ -501,9 +502,18 @@ double read_checkpoint(const std::function<size_t(char*, size_t)>& read, FramePl
   // The old formats, whole: as they were written.
   std::string bytes(kMagic, 4);
   bytes.append(reinterpret_cast<const char*>(&version), 4);
+  // Read whole, as they were written: at most what the job's film could make (its sums, raw,
+  // and room for the rest), not whatever the file holds.
+  const Rect window = plan.settings().effective_window();
+  const uint64_t most = uint64_t(window.area()) * (sizeof(PixelSums) + 8) + (uint64_t(1) << 20);
   char buf[1 << 16];
-  for (size_t k; (k = read(buf, sizeof buf)) > 0;) bytes.append(buf, k);
-  Checkpoint c = decode_checkpoint(bytes, with_film);
+  for (size_t k; (k = read(buf, sizeof buf)) > 0;) {
+    bytes.append(buf, k);
+    if (bytes.size() > most)
+      throw std::runtime_error("checkpoint: larger than the job's film could make (" + std::to_string(most) +
+                               " bytes)");
+  }
+  Checkpoint c = decode_checkpoint(bytes, with_film, &window);
   try {
     plan.restore(c.state, std::move(c.film));
   } catch (const std::invalid_argument& e) {

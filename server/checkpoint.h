@@ -78,6 +78,8 @@ struct Checkpoint {
   double elapsed = 0;  // render seconds when it was taken
 };
 std::string encode_checkpoint_v2(const PlanState& state, const Film& film, double elapsed);
-Checkpoint decode_checkpoint(const std::string& bytes, bool with_film = true);
+// `expected`: the job's film window, where known: a checkpoint of another is refused before
+// its film is allocated (a crafted 104-byte file declared 2^32 pixels).
+Checkpoint decode_checkpoint(const std::string& bytes, bool with_film = true, const Rect* expected = nullptr);
 
 }  // namespace tessera

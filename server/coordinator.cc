@@ -80,8 +80,10 @@ Coordinator::Coordinator(CoordinatorOptions options, std::unique_ptr<Clock> cloc
       if (std::from_chars(v.data(), v.data() + v.size(), n).ec != std::errc()) return std::nullopt;
       return n;
     };
-    Recovery({*store_, jobs_, lifecycle_, snapshotter_, counters_, restore_scene, image_passes})
-        .restore(clock_->now(), fx);
+    Recovery recovery({*store_, jobs_, lifecycle_, snapshotter_, counters_, restore_scene, image_passes});
+    recovery.restore(clock_->now(), fx);
+    for (const StoredJob& row : recovery.kept())  // (unreadable rows: their files stay)
+      archived.insert(row.meta.id), scenes.insert(row.meta.scene_hash);
     for (const auto& [id, s] : jobs_.sequences()) fx.sequence_ends.push_back(id);  // ended, not yet recorded
     size_t taken_up = jobs_.sequences().size();
     for (const auto& [id, job] : jobs_.jobs()) taken_up += job->sequence.empty();

@@ -5,6 +5,7 @@
 // (coordinator.db-wal) holds the latest commits, and a missing one means they are lost.
 #pragma once
 
+#include <stdexcept>
 #include <string>
 
 namespace tessera {
@@ -15,6 +16,14 @@ namespace tessera {
 void check_data_marker(const std::string& dir);
 // Records the database as open (after opening it) or closed (after a clean close).
 void set_data_marker(const std::string& dir, bool open);
+
+// A file of the data folder that exists but cannot be read (its permissions, an I/O error):
+// not taken for missing or damaged (a job started over, or failed for good, and its
+// checkpoint was overwritten), but an error that stops the start, naming the file and why.
+class DataFolderError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
 
 // One coordinator a data folder: an exclusive lock on DIR/coordinator.lock (flock), held
 // while it lives and let go by the kernel if the process dies. Two coordinators on one

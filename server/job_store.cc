@@ -3,6 +3,8 @@
 #include <sqlite3.h>
 
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <stdexcept>
@@ -27,6 +29,16 @@ SqliteJobStore::SqliteJobStore(const std::string& data_dir)
     throw std::runtime_error(why);
   }
   sqlite3_busy_timeout(db_, 5000);
+  try {
+    create_tables();
+  } catch (const std::exception& e) {  // (named: "file is not a database" said which only here)
+    sqlite3_close(db_);
+    throw std::runtime_error(path + ": " + e.what());
+  }
+  set_data_marker(dir_, true);
+}
+
+void SqliteJobStore::create_tables() {
   // WAL: a commit is one append, readers never block it; NORMAL: durable across a killed
   // process (the WAL is in the page cache), at most the last commits lost to a power cut.
   exec("PRAGMA journal_mode=WAL");
@@ -66,7 +78,6 @@ SqliteJobStore::SqliteJobStore(const std::string& data_dir)
   exec(R"(CREATE TABLE IF NOT EXISTS events(id INTEGER PRIMARY KEY AUTOINCREMENT, time REAL NOT NULL,
             kind TEXT NOT NULL, job TEXT NOT NULL, worker TEXT NOT NULL, who TEXT NOT NULL, detail TEXT NOT NULL))");
   exec("CREATE INDEX IF NOT EXISTS events_job ON events(job, id)");
-  set_data_marker(dir_, true);
 }
 
 SqliteJobStore::~SqliteJobStore() {
@@ -204,7 +215,9 @@ constexpr const char* kRowColumns =
     "id, seq, name, owner, priority, scene_hash, main_file, settings, state, error, elapsed, frames, ended_at, "
     "submitted_at";
 
-StoredJob read_row(const Statement& q, bool with_summary) {
+// `tolerant`: a row whose settings or frames cannot be read comes back marked (unreadable),
+// not as an error that stops every other row being read.
+StoredJob read_row(const Statement& q, bool with_summary, bool tolerant = false) {
   StoredJob j;
   j.meta.id = q.column_text(0);
   j.meta.seq = uint64_t(q.column_int(1));
@@ -213,8 +226,11 @@ StoredJob read_row(const Statement& q, bool with_summary) {
   j.meta.priority = int32_t(q.column_int(4));
   j.meta.scene_hash = q.column_text(5);
   j.meta.main_file = q.column_text(6);
-  if (!j.meta.settings.ParseFromString(q.column_text(7)))
-    throw std::runtime_error("job database: job " + j.meta.id + ": unreadable settings");
+  const auto damaged = [&](const std::string& what) {
+    if (!tolerant) throw std::runtime_error("job database: job " + j.meta.id + ": " + what);
+    if (j.unreadable.empty()) j.unreadable = what;
+  };
+  if (!j.meta.settings.ParseFromString(q.column_text(7))) damaged("unreadable settings");
   const int64_t state = q.column_int(8);
   j.state = v1::JobStatus::State_IsValid(int(state)) ? v1::JobStatus::State(state) : v1::JobStatus::FAILED;
   j.error = q.column_text(9);
@@ -223,7 +239,7 @@ StoredJob read_row(const Statement& q, bool with_summary) {
     const std::string frames = q.column_text(11);
     if (!frames.empty()) j.frames = parse_frames(frames);
   } catch (const std::exception& e) {
-    throw std::runtime_error("job database: job " + j.meta.id + ": unreadable frames: " + e.what());
+    damaged(std::string("unreadable frames: ") + e.what());
   }
   j.ended_at = q.column_real(12);
   j.meta.submitted_at = q.column_real(13);
@@ -244,7 +260,7 @@ std::vector<StoredJob> SqliteJobStore::jobs() const {
   MutexLock lock(mu_);
   Statement q(db_, select_rows("WHERE summary IS NULL ORDER BY seq", false).c_str());
   std::vector<StoredJob> out;
-  while (q.step()) out.push_back(read_row(q, false));
+  while (q.step()) out.push_back(read_row(q, false, true));
   return out;
 }
 
@@ -388,9 +404,12 @@ std::optional<double> SqliteJobStore::read_checkpoint(const std::string& id, Fra
   const std::string path = checkpoint_path(id);
   std::ifstream in(path, std::ios::binary);
   if (!in) {
+    const int err = errno;
     std::error_code ec;
-    if (!fs::exists(path, ec)) return std::nullopt;
-    throw std::runtime_error(path + ": cannot open file");
+    if (!fs::exists(path, ec) && !ec) return std::nullopt;
+    if (fs::is_directory(path, ec)) throw std::runtime_error(path + ": is a folder, not a checkpoint");
+    throw DataFolderError(path + ": cannot read the checkpoint: " + std::strerror(err) +
+                          " (the coordinator must be able to read its data folder)");
   }
   return tessera::read_checkpoint(
       [&](char* out, size_t n) {

@@ -44,6 +44,9 @@ struct StoredJob {
   // tiles whose state, error and priority the columns above override. Read by job() and
   // page(); empty for a job still in memory.
   std::string summary;
+  // jobs() at a start: why the row's settings or frames could not be read (a damaged
+  // database). Such a job is not taken up; its files and scene are kept (Recovery::kept).
+  std::string unreadable;
 };
 
 // How many tiles of an archived job hold one worker's results: a worker found lying later
@@ -212,6 +215,7 @@ class SqliteJobStore : public JobStore {
   std::function<void()> before_checkpoint_rename, after_row_commit;
 
  private:
+  void create_tables();
   void exec(const char* sql) const;
   // Runs body() as one transaction (BEGIN IMMEDIATE ... COMMIT), rolled back if it throws;
   // returns what body() returns. mu_ held.

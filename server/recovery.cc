@@ -1,6 +1,7 @@
 #include "server/recovery.h"
 
 #include "core/util/log.h"
+#include "server/data_marker.h"
 #include "server/sequence_scheduler.h"
 
 namespace tessera {
@@ -8,6 +9,10 @@ namespace tessera {
 void Recovery::restore(double now, Effects& fx) {
   p_.store.forget_merges();  // worker ids of the earlier run
   for (const StoredJob& row : p_.store.jobs()) {
+    if (!row.unreadable.empty()) {
+      keep(row, row.unreadable, fx);
+      continue;
+    }
     if (!job_live(row.state)) {  // (ended, not yet archived when the earlier run stopped)
       p_.store.discard_partial_writes(row.meta.id);
       try {
@@ -17,7 +22,7 @@ void Recovery::restore(double now, Effects& fx) {
         if (e.job && e.job->plan.has_film() && p_.snapshots.final_snapshot(*e.job, now)) fx.writes.push_back(e.job);
         ++p_.counters.jobs_restored;
       } catch (const WireError& e) {  // checked at submit: only a damaged database gets here
-        spdlog::error("job {}: stored settings: {}; skipped", row.meta.id, e.what());
+        keep(row, std::string("stored settings: ") + e.what(), fx);
       }
     } else if (row.frames.empty())
       restore_job(row, now, fx);
@@ -38,6 +43,8 @@ void Recovery::with_final_image(const StoredJob& row, std::shared_ptr<Job>& job,
   try {
     const std::optional<double> elapsed = p_.store.read_checkpoint(row.meta.id, whole->plan, true, &whole->splats);
     if (!elapsed || !whole->plan.done()) return;  // (nothing whole to write it from: the image stays as it is)
+  } catch (const DataFolderError&) {
+    throw;  // (a start stops on it: nothing is taken for missing or rendered again)
   } catch (const std::exception& e) {
     spdlog::warn("job {}: its final image is not on disk and its checkpoint cannot be read: {}", row.meta.id, e.what());
     return;
@@ -51,6 +58,15 @@ void Recovery::with_final_image(const StoredJob& row, std::shared_ptr<Job>& job,
   whole->written = {0, 0, 1, whole->plan.merges()};
   whole->end_recorded = true;
   job = std::move(whole);
+}
+
+void Recovery::keep(const StoredJob& row, const std::string& why, Effects& fx) {
+  spdlog::error(
+      "job {}: its row in the job database cannot be read ({}); it is not taken up, and its files "
+      "(jobs/{}) and scene are kept until the row is mended or the job deleted",
+      row.meta.id, why, row.meta.id);
+  fx.event("job.unreadable", row.meta.id, "", why);
+  kept_.push_back(row);
 }
 
 void Recovery::as_ended(Job& job, double now, double elapsed) {
@@ -69,6 +85,8 @@ Recovery::Ended Recovery::load_ended(const StoredJob& row, const JobStore& store
     e.job = std::make_shared<Job>(row.meta, settings, row.state);
     try {
       store.read_checkpoint(row.meta.id, e.job->plan, false);  // (its counts: the film stays on disk)
+    } catch (const DataFolderError&) {
+      throw;
     } catch (const std::exception& ex) {
       spdlog::warn("job {}: {}; its counts are lost, its image is kept", row.meta.id, ex.what());
       e.job = std::make_shared<Job>(row.meta, settings, row.state);  // the damaged read left its plan unusable
@@ -89,6 +107,8 @@ Recovery::Ended Recovery::load_ended(const StoredJob& row, const JobStore& store
     std::optional<double> cp;
     try {
       if (!(cp = store.read_checkpoint(job->id(), job->plan, false))) continue;
+    } catch (const DataFolderError&) {
+      throw;
     } catch (const std::exception& ex) {
       spdlog::warn("job {}: {}; taken as never rendered", job->id(), ex.what());
       continue;
@@ -142,7 +162,7 @@ void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
   try {
     settings = from_proto(row.meta.settings);
   } catch (const WireError& e) {  // checked at submit: only a damaged database gets here
-    spdlog::error("job {}: stored settings: {}; skipped", id, e.what());
+    keep(row, std::string("stored settings: ") + e.what(), fx);
     return;
   }
   p_.jobs.saw_seq(row.meta.seq);
@@ -154,6 +174,8 @@ void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
       checkpointed = true;
       elapsed = *e;
     }
+  } catch (const DataFolderError&) {
+    throw;  // (a start stops on it: nothing is taken for missing or rendered again)
   } catch (const std::exception& e) {
     spdlog::warn("job {}: {}; its samples are rendered again", id, e.what());
     shared = std::make_shared<Job>(row.meta, settings, row.state);  // the damaged read left its plan unusable
@@ -166,6 +188,8 @@ void Recovery::restore_job(const StoredJob& row, double now, Effects& fx) {
   std::string lost;  // why it cannot go on
   try {
     j.meta.scene_bytes = p_.restore_scene(j.meta.scene_hash);
+  } catch (const DataFolderError&) {
+    throw;  // (a start stops on it: nothing is taken for missing or rendered again)
   } catch (const std::exception& e) {
     lost = e.what();
   }
@@ -184,7 +208,7 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
   try {
     settings = from_proto(row.meta.settings);
   } catch (const WireError& e) {  // checked at submit: only a damaged database gets here
-    spdlog::error("job {}: stored settings: {}; skipped", row.meta.id, e.what());
+    keep(row, std::string("stored settings: ") + e.what(), fx);
     return;
   }
   p_.jobs.saw_seq(row.meta.seq);
@@ -195,6 +219,8 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
   std::string lost;
   try {
     s.meta.scene_bytes = p_.restore_scene(s.meta.scene_hash);
+  } catch (const DataFolderError&) {
+    throw;  // (a start stops on it: nothing is taken for missing or rendered again)
   } catch (const std::exception& e) {
     lost = e.what();
   }
@@ -223,6 +249,8 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
         all_done = false;
         continue;
       }
+    } catch (const DataFolderError&) {
+      throw;  // (a start stops on it: nothing is taken for missing or rendered again)
     } catch (const std::exception& e) {
       spdlog::warn("job {}: {}; its samples are rendered again", id, e.what());
       all_done = false;

@@ -12,6 +12,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "server/job_lifecycle.h"
 #include "server/job_store.h"
@@ -50,12 +51,16 @@ class Recovery {
     std::shared_ptr<Sequence> sequence;  // or a sequence
   };
   static Ended load_ended(const StoredJob& row, const JobStore& store, double now);
+  // Rows restore() could not take up (settings or frames a damaged database cannot give
+  // back): not in memory, their files and scenes kept (a start's clean-up removed them).
+  const std::vector<StoredJob>& kept() const { return kept_; }
   static void adopt(JobTable& jobs, const Ended& e);  // into the table
   // A job whose plan was read back from its checkpoint goes on (a restart's, a requeue's):
   // live again, RUNNING if it rendered before, its checkpoint counted as on disk.
   static void resume(JobLifecycle& lifecycle, Job& job, double elapsed, bool checkpointed, double now);
 
  private:
+  void keep(const StoredJob& row, const std::string& why, Effects& fx);
   void restore_job(const StoredJob& row, double now, Effects& fx);
   void with_final_image(const StoredJob& row, std::shared_ptr<Job>& job, double now) const;
   void restore_sequence(const StoredJob& row, double now, Effects& fx);
@@ -63,6 +68,7 @@ class Recovery {
   static void as_ended(Job& job, double now, double elapsed);
 
   Parts p_;
+  std::vector<StoredJob> kept_;
 };
 
 }  // namespace tessera

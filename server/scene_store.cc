@@ -1,12 +1,15 @@
 #include "server/scene_store.h"
 
 #include <atomic>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
 #include "core/io/files.h"
 #include "core/scene/load.h"
 #include "core/scene/scene_error.h"
+#include "server/data_marker.h"
 #include "server/request_error.h"
 #include "wire.h"
 
@@ -140,27 +143,36 @@ uint64_t SceneStore::restore(const std::string& hash) {
   }
   const fs::path dir = fs::path(dir_) / hash;
   v1::SceneManifest m;
+  // (Named under the data folder: these reasons end up in job errors users see.)
+  const std::string where = "scenes/" + hash;
   std::ifstream in(dir / "manifest", std::ios::binary);
   if (!in) {
+    const int err = errno;
+    std::error_code ec;
+    if (fs::exists(dir / "manifest", ec) || ec)  // there, unreadable: not "missing" (the job failed for good)
+      throw DataFolderError((dir / "manifest").string() + ": cannot read the scene's manifest: " + std::strerror(err) +
+                            " (the coordinator must be able to read its data folder)");
     // Kept whole by a coordinator before protocol 5: unpacked once, as an add.
     const fs::path bundle = fs::path(dir_) / (hash + ".bundle");
     v1::SceneBundle b;
     std::ifstream old(bundle, std::ios::binary);
-    if (!old || !b.ParseFromIstream(&old)) throw std::runtime_error("its scene is missing from the data folder");
+    if (!old || !b.ParseFromIstream(&old))
+      throw std::runtime_error("its scene is missing from the data folder (" + where + ")");
     if (bundle_hash(b.main_file(), b.files()) != hash)
-      throw std::runtime_error("its scene in the data folder is damaged");
+      throw std::runtime_error("its scene in the data folder is damaged (" + where + ".bundle: other bytes)");
     add(b.main_file(), b.files());
-    std::error_code ec;
     fs::remove(bundle, ec);
     return bundle_bytes(b.files());
   }
   uint64_t bytes = 0;
   try {
-    if (!m.ParseFromIstream(&in) || m.scene_hash() != hash) throw WireError("manifest");
+    if (!m.ParseFromIstream(&in) || m.scene_hash() != hash) throw WireError("its manifest cannot be read");
     bytes = check_manifest(m);
-    if (hash_files(source(hash, m)) != hash) throw WireError("bytes");
-  } catch (const std::exception&) {  // unreadable, or other bytes
-    throw std::runtime_error("its scene in the data folder is damaged");
+    if (hash_files(source(hash, m)) != hash) throw WireError("its files are not the bytes it was given");
+  } catch (const DataFolderError&) {
+    throw;
+  } catch (const std::exception& e) {  // unreadable, or other bytes
+    throw std::runtime_error("its scene in the data folder is damaged (" + where + ": " + e.what() + ")");
   }
   try {
     in_turn([&] { return load_scene((dir / "files" / m.main_file()).string()); });  // as keep() checks it

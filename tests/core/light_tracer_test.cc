@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <set>
 #include <tuple>
 
 #include "core/camera/camera.h"
@@ -170,6 +171,31 @@ TEST(DeltaTargets, DirectionsFollowTheirDensity) {
         [&](Vec3 w) { return double(targets.pdf(from, w)); }, 400000, 20, 40, 48);
     EXPECT_GT(r.p_value, 1e-3) << r.describe();
   }
+}
+
+// Found by audit: for a target seen from more than about 700 radii the cosine test of its
+// cone rounded (1 - omc to 1) and counted another target's density for directions far
+// outside its cone, at random: a distant light's light tracing was 2.9% dark with two.
+TEST(DeltaTargets, ANarrowConeCountsOnlyDirectionsInsideIt) {
+  Scene s = caustic_scene(glass());
+  s.spheres.push_back(Sphere{"second", {0.3f, 1.7f, 3.1f}, 0.5f, 1, -1});
+  const DeltaTargets targets(s);
+  ASSERT_EQ(targets.targets().size(), 2u);
+  // Directions toward the first target alone, from afar (each cone some 1e-5 rad across, the
+  // targets 3e-5 rad apart): the density is the first cone's, the same for every one.
+  int mixed = 0;
+  for (const Vec3 from : {Vec3{1e5f, 0.6f, 0}, Vec3{7.3e4f, 1234.5f, -2345.6f}, Vec3{-3.3e4f, 2.5e4f, 1.1e4f}}) {
+    std::set<float> densities;
+    for (int i = 0; i < 4096; ++i) {
+      Sampler sm(3, 0, uint32_t(i));
+      const float u = sm.next_1d() * 0.5f;  // (picks the first target)
+      float pdf = 0;
+      targets.sample(from, u, sm.next_2d(), &pdf);
+      densities.insert(pdf);
+    }
+    mixed += densities.size() != 1;
+  }
+  EXPECT_EQ(mixed, 0);
 }
 
 TEST(DeltaTargets, BoundEveryDeltaShapeAndNothingElse) {

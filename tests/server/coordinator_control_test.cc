@@ -241,6 +241,7 @@ TEST_F(ControlTest, RetentionNamesJobsEndedLongerAgoThanTheLimit) {
   MemoryJobStore* rows = store.get();
   double wall = 1e9;
   rows->wall = [&wall] { return wall; };
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t), std::make_unique<MemoryImageSink>(),
                                     std::move(store));
   const std::string a = c->submit(request(job_settings()));

@@ -67,6 +67,7 @@ TEST_F(CoordinatorTest, LiveJobsPerClientAndLivePixelsAreBounded) {
   CoordinatorOptions o = options();
   o.max_jobs_per_client = 2;
   o.max_live_pixels = 4 * live_pixels_of(job_settings());  // four of job_settings()'s frames
+  c.reset();                                               // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   const std::string a1 = c->submit(request(job_settings()), "alice");
   c->submit(request(job_settings()), "alice");
@@ -97,6 +98,7 @@ TEST_F(CoordinatorTest, LiveJobsPerClientAndLivePixelsAreBounded) {
 TEST_F(CoordinatorTest, ParallelSubmitsNeverPassTheLimitsTogether) {
   CoordinatorOptions o = options();
   o.max_jobs_per_client = 2;
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   std::atomic<int> accepted{0}, refused{0};
   std::vector<std::thread> clients;
@@ -123,6 +125,7 @@ TEST_F(CoordinatorTest, ParallelSubmitsNeverPassTheLimitsTogether) {
 TEST_F(CoordinatorTest, ARequeueIsBoundedLikeASubmit) {
   CoordinatorOptions o = options();
   o.max_jobs_per_client = 2;
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   const std::string first = c->submit(request(job_settings()), "alice");
   c->cancel(first, "alice", false);
@@ -161,6 +164,7 @@ TEST_F(CoordinatorTest, AFrameWithAovsWeighsItsAovSumsAgainstTheLivePixels) {
   EXPECT_EQ(live_pixels_of(s), area + (area * 72 + 39) / 40);
   CoordinatorOptions o = options();
   o.max_live_pixels = 2 * area;  // two plain frames, but not one with AOVs
+  c.reset();                     // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   try {
     c->submit(request(s), "alice");
@@ -178,6 +182,7 @@ TEST_F(CoordinatorTest, SceneBytesAndQueuedSamplesPerClientAreBounded) {
   CoordinatorOptions o = options();
   o.max_scene_bytes_per_client = 2 * bytes;  // two jobs' scenes
   o.max_queued_samples_per_client = 3 * 48 * 36 * 10;
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   c->submit(one, "alice");
   c->submit(one, "alice");
@@ -207,6 +212,7 @@ TEST_F(CoordinatorTest, UploadsCountAgainstTheClientsSceneBytes) {
   const uint64_t bytes = bundle_bytes(one.files());
   CoordinatorOptions o = options();
   o.max_scene_bytes_per_client = 2 * bytes;
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   c->submit(one, "alice");  // a live job's scene
   const v1::SceneUpload up = upload("alice");
@@ -236,6 +242,7 @@ TEST_F(CoordinatorTest, UploadsCountAgainstTheClientsSceneBytes) {
 TEST_F(CoordinatorTest, AnUploadNobodySubmitsLeavesTheDiskOnTheReapersTick) {
   CoordinatorOptions o = options();
   o.upload_kept_seconds = 10;
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   const auto staged = [&] {
     size_t n = 0;
@@ -298,6 +305,7 @@ TEST_F(CoordinatorTest, ResultsCountOnlyFromTheLeaseHolder) {
 TEST_F(CoordinatorTest, RegisteredWorkersAreBounded) {
   CoordinatorOptions o = options();
   o.max_workers = 3;
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   const uint64_t first = worker();
   worker();
@@ -357,6 +365,7 @@ TEST_F(CoordinatorTest, EachWorkersMetricsSeriesIsLabelledUniquely) {
 TEST_F(CoordinatorTest, AHeartbeatListsAtMostTwiceTheLeasesAWorkerMayHold) {
   CoordinatorOptions o = options();
   o.max_leases_per_worker = 4;
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   const uint64_t w = worker();
   std::vector<uint64_t> ids(8);

@@ -1,4 +1,7 @@
 // The coordinator made again on the same data folder, as after kill -9.
+#include <sqlite3.h>
+
+#include "server/data_marker.h"
 #include "tests/server/coordinator_fixture.h"
 
 namespace tessera {
@@ -83,6 +86,91 @@ TEST_F(CoordinatorTest, ADoneJobWhoseFinalImageWasNotWrittenGetsItAfterARestart)
   // And once more: now that the image is whole, the job is taken as written.
   restart(c, options(), &t);
   EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
+// Found by audit: a row whose settings could not be read stopped the whole start (one row
+// took the farm down), and one whose settings read but were refused was skipped while the
+// same start deleted its checkpoint, image and scene. Neither is taken up now; the start
+// goes on and their files stay.
+TEST_F(CoordinatorTest, AnUnreadableJobRowNeitherStopsTheStartNorLosesItsFiles) {
+  const RenderSettings s = job_settings();
+  const uint64_t w = worker();
+  const std::string garbled = c->submit(request(s)), refused = c->submit(request(s)), fine = c->submit(request(s));
+  const auto checkpointed = [&](const std::string& id) { return fs::exists(dir + "/jobs/" + id + "/checkpoint"); };
+  for (int k = 0; k < 400 && !(checkpointed(garbled) && checkpointed(refused)); ++k) {
+    t += 6;  // past checkpoint_seconds: each merge writes a checkpoint
+    ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  }
+  ASSERT_TRUE(checkpointed(refused));
+  c.reset();
+  ASSERT_TRUE(fs::exists(dir + "/jobs/" + garbled + "/checkpoint"));
+  v1::RenderSettings bad = to_proto(s);
+  bad.set_spp(0);  // a message, but settings validate() refuses
+  sqlite3* db = nullptr;
+  ASSERT_EQ(sqlite3_open((dir + "/coordinator.db").c_str(), &db), SQLITE_OK);
+  const std::string sql = "UPDATE jobs SET settings = x'ffff' WHERE id = '" + garbled + "'";
+  ASSERT_EQ(sqlite3_exec(db, sql.c_str(), nullptr, nullptr, nullptr), SQLITE_OK);
+  sqlite3_stmt* st = nullptr;
+  ASSERT_EQ(sqlite3_prepare_v2(db, "UPDATE jobs SET settings = ?1 WHERE id = ?2", -1, &st, nullptr), SQLITE_OK);
+  const std::string bytes = bad.SerializeAsString();
+  sqlite3_bind_blob(st, 1, bytes.data(), int(bytes.size()), SQLITE_TRANSIENT);
+  sqlite3_bind_text(st, 2, refused.c_str(), -1, SQLITE_TRANSIENT);
+  ASSERT_EQ(sqlite3_step(st), SQLITE_DONE);
+  sqlite3_finalize(st);
+  sqlite3_close(db);
+  ASSERT_NO_THROW(c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t)));
+  std::vector<std::string> listed;
+  for (const v1::JobStatus& j : c->list()) listed.push_back(j.id());
+  EXPECT_EQ(listed, std::vector<std::string>{fine});
+  for (const std::string& id : {garbled, refused}) EXPECT_TRUE(fs::exists(dir + "/jobs/" + id)) << id;
+  EXPECT_FALSE(fs::is_empty(dir + "/scenes"));
+  drain(worker());  // the rest goes on
+  EXPECT_EQ(c->status(fine, false).state(), v1::JobStatus::DONE);
+}
+
+// Found by audit: a checkpoint or scene manifest that exists but cannot be read (its
+// permissions after a restore from backup, an I/O error) was taken as damaged or missing: the
+// job started over (overwriting the checkpoint) or failed for good. The start stops instead,
+// naming the file and why. (A link to itself: unreadable even to root, as CI runs.)
+TEST_F(CoordinatorTest, AnUnreadableCheckpointOrManifestStopsTheStartNamingIt) {
+  const RenderSettings s = job_settings();
+  const uint64_t w = worker();
+  const std::string id = c->submit(request(s));
+  t += 6;
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(c->submit_result(render_task(c->get_task(w).tasks(0), w)).accepted());
+  c.reset();
+  const fs::path checkpoint = dir + "/jobs/" + id + "/checkpoint";
+  ASSERT_TRUE(fs::exists(checkpoint));
+  fs::rename(checkpoint, checkpoint.string() + ".kept");
+  fs::create_symlink(checkpoint, checkpoint);
+  try {
+    c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t));
+    ADD_FAILURE();
+  } catch (const DataFolderError& e) {
+    EXPECT_NE(std::string(e.what()).find(checkpoint.string() + ": cannot read the checkpoint: Too many levels"),
+              std::string::npos)
+        << e.what();
+  }
+  fs::remove(checkpoint);
+  fs::rename(checkpoint.string() + ".kept", checkpoint);
+  fs::path manifest;
+  for (const auto& e : fs::directory_iterator(dir + "/scenes"))
+    if (fs::exists(e.path() / "manifest")) manifest = e.path() / "manifest";
+  ASSERT_FALSE(manifest.empty());
+  fs::rename(manifest, manifest.string() + ".kept");
+  fs::create_symlink(manifest, manifest);
+  try {
+    c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t));
+    ADD_FAILURE();
+  } catch (const DataFolderError& e) {
+    EXPECT_NE(std::string(e.what()).find(manifest.string() + ": cannot read the scene's manifest"), std::string::npos)
+        << e.what();
+  }
+  fs::remove(manifest);
+  fs::rename(manifest.string() + ".kept", manifest);
+  c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t));  // mended: it goes on
+  EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::RUNNING);
+  EXPECT_GT(c->status(id, false).samples_done(), 0u);
 }
 
 // A crash after a job's last merge but before its end is on disk (its final checkpoint

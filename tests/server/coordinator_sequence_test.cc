@@ -97,6 +97,7 @@ TEST_F(SequenceTest, AWorkerWithRoomGetsTheNextFrameBeforeTheLastOneEnds) {
 TEST_F(SequenceTest, APreparedFrameCountsAgainstTheLivePixels) {
   CoordinatorOptions o = options();
   o.max_live_pixels = live_pixels_of(job_settings());  // one frame's films
+  c.reset();                                           // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   const std::string id = c->submit(sequence({1, 2}));
   try {

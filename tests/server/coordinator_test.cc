@@ -209,6 +209,7 @@ TEST_F(CoordinatorTest, ImageFetchedAsSoonAsTheJobEndsHoldsEverySample) {
   o.before_image_write = [&] {
     if (std::this_thread::get_id() == slow.load()) std::this_thread::sleep_for(std::chrono::milliseconds(300));
   };
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   RenderSettings s = job_settings();
   s.spp = 4;
@@ -275,6 +276,7 @@ TEST_F(CoordinatorTest, NoiseTargetStopsConvergedTilesEarlyAndReproducibly) {
 TEST_F(CoordinatorTest, ImagesGoToTheSinkAndHoldTheLocalFilmsExactBits) {
   auto sink = std::make_unique<MemoryImageSink>();
   MemoryImageSink* images = sink.get();
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t), std::move(sink));
   RenderSettings s = job_settings();
   s.adaptive = true;
@@ -372,6 +374,7 @@ TEST_F(CoordinatorTest, ImageWriteFailuresAreReportedAndRetriedNeverBlamedOnWork
   };
   auto owned = std::make_unique<FlakySink>(dir);
   FlakySink* sink = owned.get();
+  c.reset();  // (the old one lets the data folder go first)
   c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t), std::move(owned));
   const RenderSettings s = job_settings();
   const std::string id = c->submit(request(s));

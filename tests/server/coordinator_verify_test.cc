@@ -22,6 +22,7 @@ class VerifyTest : public CoordinatorTest {
   void start(double fraction) {
     CoordinatorOptions o = options();
     o.verify_fraction = fraction;
+    c.reset();  // (the old one lets the data folder go first)
     c = std::make_unique<Coordinator>(o, std::make_unique<FakeClock>(&t));
   }
   // A worker enrolled under `name` (its own credential, as deploy recipes run them).

@@ -192,6 +192,32 @@ TEST(JobStore, AVersion2CheckpointStillRestoresAPlan) {
   EXPECT_EQ(b.merges(), a.merges());
 }
 
+// Found by audit: an old-format checkpoint's film window was allocated as the file declared
+// (a crafted 104-byte file: 4096 x 4096 pixels, 650 MB, up to 160 GiB) before it was held
+// against the job's, and the file read whole however long. Both are bounded by the job's film.
+TEST(JobStore, AnOldCheckpointOfAnotherFrameIsRefusedBeforeItsFilmIsMade) {
+  const FramePlan a = merged_plan(true);
+  PlanState state = a.state();
+  Film wide(Rect{0, 0, 512, 512});  // (a frame not the job's)
+  state.active.clear();
+  FramePlan b(plan_settings(true));
+  try {
+    read_checkpoint(encode_checkpoint_v2(state, wide, 3), b);
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    EXPECT_EQ(std::string(e.what()), "checkpoint: it does not fit the job's frame");
+  }
+  std::string long_file = encode_checkpoint_v2(a.state(), a.film(), 3);
+  long_file.insert(long_file.size() - 8, std::string(64 << 20, '\0'));
+  try {
+    read_checkpoint(long_file, b);
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("checkpoint: larger than the job's film could make"), std::string::npos)
+        << e.what();
+  }
+}
+
 // A finished frame's checkpoint without the film (SnapshotWriter writes it once the frame's
 // image is on disk): its progress comes back as written; a film asked of it is refused,
 // naming why, rather than a black one made up.

@@ -426,7 +426,8 @@ TEST_F(SceneStoreTest, ARestartRestoresScenesFromDisk) {
       restarted.restore(hash);
       ADD_FAILURE() << "restored";
     } catch (const std::runtime_error& e) {
-      EXPECT_EQ(std::string(e.what()), "its scene in the data folder is damaged");
+      EXPECT_EQ(std::string(e.what()), "its scene in the data folder is damaged (scenes/" + hash +
+                                           ": its files are not the bytes it was given)");
     }
   }
   fs::remove_all(dir / "scenes" / hash);
