@@ -5,6 +5,7 @@
 #include <spdlog/spdlog.h>
 #include <sys/file.h>
 #include <sys/stat.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -14,6 +15,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -28,15 +30,17 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// Removes `hash`'s partial downloads left by processes no longer running (a worker killed
-// mid-fetch); another live worker's, sharing the cache folder, is left alone.
+// Removes `hash`'s partial downloads (every scene's, for "") left by processes no longer
+// running (a worker killed mid-fetch); another live worker's, sharing the cache folder, is
+// left alone.
 void remove_orphaned_partials(const fs::path& dir, const std::string& hash) {
   std::error_code ec;
-  const std::string prefix = hash + ".partial-";
+  constexpr std::string_view kPartial = ".partial-";
   for (const fs::directory_entry& e : fs::directory_iterator(dir, ec)) {
     const std::string name = e.path().filename().string();
-    if (name.rfind(prefix, 0) != 0) continue;
-    const long pid = std::strtol(name.c_str() + prefix.size(), nullptr, 10);
+    const size_t at = name.find(kPartial);
+    if (at == std::string::npos || (!hash.empty() && (at != hash.size() || name.compare(0, at, hash) != 0))) continue;
+    const long pid = std::strtol(name.c_str() + at + kPartial.size(), nullptr, 10);
     if (pid > 0 && kill(pid_t(pid), 0) != 0 && errno == ESRCH) fs::remove_all(e.path(), ec);
   }
 }
@@ -138,6 +142,13 @@ void SceneCache::mark_used(const std::string& hash) const {
   fs::last_write_time(fs::path(dir_) / hash / ".main", fs::file_time_type::clock::now(), ec);
 }
 
+SceneCache::SceneCache(std::string dir, FetchChunks fetch, Bounds bound)
+    : dir_(std::move(dir)), fetch_(std::move(fetch)), bound_(bound) {
+  // Every scene's downloads that dead workers left (they went only when the same scene was
+  // fetched again: a farm's worth of scenes never asked for again stayed on the disk).
+  remove_orphaned_partials(dir_, "");
+}
+
 std::shared_ptr<Scene> SceneCache::scene(const std::string& hash) {
   if (auto it = scenes_.find(hash); it != scenes_.end())
     if (std::shared_ptr<Scene> s = it->second.lock()) return s;
@@ -177,7 +188,7 @@ void SceneCache::trim(const std::string& fetched) {
   }
 }
 
-void SceneCache::trim_folder(const std::string& fetched) {
+void SceneCache::trim_folder(const std::string& fetched, uint64_t to_free) {
   struct Kept {
     fs::file_time_type used;
     uint64_t bytes = 0;
@@ -202,11 +213,13 @@ void SceneCache::trim_folder(const std::string& fetched) {
     if (hash != fetched && (held == scenes_.end() || held->second.expired())) kept.push_back(std::move(k));
   }
   std::sort(kept.begin(), kept.end(), [](const Kept& a, const Kept& b) { return a.used < b.used; });
+  const bool room = to_free > 0;  // making room for a fetch: any scene no worker holds
   const auto idle_since =
-      fs::file_time_type::clock::now() -
-      std::chrono::duration_cast<fs::file_time_type::duration>(std::chrono::duration<double>(bound_.min_idle_seconds));
+      fs::file_time_type::clock::now() - std::chrono::duration_cast<fs::file_time_type::duration>(
+                                             std::chrono::duration<double>(room ? 0.0 : bound_.min_idle_seconds));
+  uint64_t freed = 0;
   for (const Kept& k : kept) {
-    if (total <= bound_.max_disk_bytes || k.used > idle_since) break;
+    if (room ? freed >= to_free : total <= bound_.max_disk_bytes || k.used > idle_since) break;
     // Looked at again (another worker may have used it since), then its marker first: a
     // removal cut short leaves a folder that is fetched again, never one that looks whole.
     // Skipped where another worker holds it (loading it, or with it in memory).
@@ -217,9 +230,28 @@ void SceneCache::trim_folder(const std::string& fetched) {
       continue;
     remove_aside(k.dir);
     total -= k.bytes;
-    spdlog::info("scene cache: removed scene {} ({} bytes, least recently used) to stay within --cache-max-gib",
-                 k.dir.filename().string(), k.bytes);
+    freed += k.bytes;
+    spdlog::info("scene cache: removed scene {} ({} bytes, least recently used) {}", k.dir.filename().string(), k.bytes,
+                 room ? "to make room for scene " + fetched : std::string("to stay within --cache-max-gib"));
   }
+}
+
+void SceneCache::make_room(const std::string& hash, uint64_t need) {
+  const auto free_now = [&]() -> std::optional<uint64_t> {
+    if (free_disk_bytes) return free_disk_bytes();
+    struct statvfs v {};
+    if (::statvfs(dir_.c_str(), &v) != 0) return std::nullopt;
+    return uint64_t(v.f_bavail) * uint64_t(v.f_frsize);
+  };
+  const uint64_t want = need + need / 32 + (uint64_t(1) << 20);  // (the file system's own, and the marker)
+  const std::optional<uint64_t> before = free_now();
+  if (!before || *before >= want) return;
+  trim_folder(hash, want - *before);
+  const std::optional<uint64_t> after = free_now();
+  if (after && *after < want)
+    throw std::runtime_error("scene cache " + dir_ + ": scene " + hash + " takes " + std::to_string(need >> 20) +
+                             " MiB, and the disk has " + std::to_string(*after >> 20) +
+                             " MiB free with every scene no worker holds removed");
 }
 
 void SceneCache::fetch(const std::string& hash) {
@@ -250,9 +282,10 @@ void SceneCache::fetch(const std::string& hash) {
       first = false;  // the manifest
       if (!chunk.has_manifest() || chunk.manifest().scene_hash() != hash)
         throw WireError(what + ": the coordinator sent no manifest of it");
-      if (!rx)
+      if (!rx) {
+        make_room(hash, check_manifest(chunk.manifest()));
         rx = std::make_unique<SceneReceiver>(part.string(), chunk.manifest(), what);
-      else if (chunk.manifest().SerializeAsString() != rx->manifest().SerializeAsString())
+      } else if (chunk.manifest().SerializeAsString() != rx->manifest().SerializeAsString())
         throw WireError(what + ": its manifest changed between two fetches");
     });
     if (st.ok()) break;

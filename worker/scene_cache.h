@@ -10,6 +10,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
@@ -60,8 +61,8 @@ class SceneCache {
   static constexpr int kFetchAttempts = 4;
 
   using Bounds = SceneCacheBounds;
-  SceneCache(std::string dir, FetchChunks fetch, Bounds bound = {})
-      : dir_(std::move(dir)), fetch_(std::move(fetch)), bound_(bound) {}
+  // Removes what dead workers' downloads left in `dir`.
+  SceneCache(std::string dir, FetchChunks fetch, Bounds bound = {});
 
   // The renderer for a task's scene and settings. Throws WireError (a bad hash, pieces or
   // bytes that do not match it), SceneError and SettingsError (a scene or settings this
@@ -70,6 +71,8 @@ class SceneCache {
   // Scenes loaded and still held (by a kept renderer or a task in flight).
   size_t scenes_held() const;
   size_t renderers_kept() const { return prepared_.size(); }
+  // The free bytes of the cache's file system (statvfs; a test seam).
+  std::function<std::optional<uint64_t>()> free_disk_bytes;
 
  private:
   std::shared_ptr<Scene> scene(const std::string& hash);  // loaded once per content hash
@@ -77,7 +80,13 @@ class SceneCache {
   // Removes scene folders, least recently used first, until the cache is within its bound
   // (never throws: a filesystem error is logged, and the bound waits for the next fetch).
   void trim(const std::string& fetched);
-  void trim_folder(const std::string& fetched);
+  // `to_free` > 0: removes unused scenes (any idle time, never one a worker holds), least
+  // recently used first, until that many bytes are freed, whatever the bound.
+  void trim_folder(const std::string& fetched, uint64_t to_free = 0);
+  // Before a scene of `need` bytes is written: where the disk has less room, unused scenes
+  // go first; where it still would not fit, the fetch is refused naming the sizes (a full
+  // disk failed the task midway as "cannot write", the cache never making room).
+  void make_room(const std::string& hash, uint64_t need);
   // Marks the scene used (its marker's time: the disk bound's order, for every worker).
   void mark_used(const std::string& hash) const;
 

@@ -204,6 +204,11 @@ CameraPath CameraPath::parse(const std::string& text) {
     }
     path.turntable = tt;
   }
+  // What a farm job carries is this path written out again (1e12 becomes 1000000000000.0):
+  // held to the same bound, so that the coordinator, which reads it back, accepts what the
+  // client did (a 0.96 MB file rendered here and was refused at submit).
+  if (const size_t n = path.to_json().size(); n > kMaxBytes)
+    fail("file", "written out as a job carries it, it takes " + std::to_string(n) + " bytes, over 1 MiB");
   return path;
 }
 

@@ -203,3 +203,26 @@ TEST(CameraPath, EachFrameOfTheSequenceIsCheckedAndOnlyThose) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: a farm job carries the path written out again, longer than the file (1e11
+// becomes 100000000000.0), and the coordinator held that to the file's 1 MiB: a file under
+// it rendered here and was refused at submit. Now both refuse it, saying why.
+TEST(CameraPath, APathThatWrittenOutPassesTheBoundIsRefusedHereToo) {
+  std::string text = R"({"keys": [)";
+  for (int k = 0; k < 26000; ++k)
+    text += (k ? "," : "") + std::string(R"({"frame":)") + std::to_string(k) + R"(,"focal_distance":1e11})";
+  text += "]}";
+  ASSERT_LT(text.size(), CameraPath::kMaxBytes);
+  try {
+    CameraPath::parse(text);
+    ADD_FAILURE();
+  } catch (const SettingsError& e) {
+    EXPECT_NE(std::string(e.what()).find("written out as a job carries it, it takes"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace tessera

@@ -280,6 +280,58 @@ TEST_F(SceneCacheTest, WorkersSharingACacheFolderFetchTheSameSceneAtOnce) {
   EXPECT_TRUE(fs::exists(dir / hash / ".main"));
 }
 
+// A dead worker's downloads of scenes nobody asks for again went only when the same scene
+// was fetched: a long farm's cache filled with them. A cache starts by removing every dead
+// worker's (a live one's stays).
+TEST_F(SceneCacheTest, ACacheStartsByRemovingEveryDeadWorkersDownloads) {
+  const std::string other(32, 'e');
+  for (const std::string& name :
+       {other + ".partial-999999999-0", other + ".partial-999999999-removed-3", hash + ".partial-999999998-1"})
+    fs::create_directories(dir / name / "files");
+  const fs::path live = dir / (other + ".partial-" + std::to_string(::getppid()) + "-0");
+  fs::create_directories(live);
+  worker::SceneCache cache(dir.string(), fetch_from(fake));
+  for (const fs::directory_entry& e : fs::directory_iterator(dir))
+    if (e.path() != live) {
+      EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos) << e.path();
+    }
+  EXPECT_TRUE(fs::exists(live));
+}
+
+// A fetch onto a disk without room for the scene failed midway ("cannot write"), the cache
+// never making room. It removes scenes no worker holds first (any idle time), and where the
+// scene still would not fit it is refused before a byte is written, naming the sizes.
+TEST_F(SceneCacheTest, AFetchMakesRoomOnAFullDiskOrSaysWhatItNeeds) {
+  std::string other;
+  const v1::SceneBundle second = bundle_of(testing::source_path("scenes/cornell-spheres.gltf"), &other);
+  fake.scenes[other] = second;
+  { worker::SceneCache(dir.string(), fetch_from(fake)).prepare(scene_task(hash)); }
+  ASSERT_TRUE(fs::exists(dir / hash / ".main"));
+  worker::SceneCache cache(dir.string(), fetch_from(fake));
+  cache.free_disk_bytes = [&]() -> std::optional<uint64_t> {  // room only once the first scene is gone
+    return fs::exists(dir / hash) ? uint64_t(0) : uint64_t(1) << 40;
+  };
+  ASSERT_NE(cache.prepare(scene_task(other)), nullptr);
+  EXPECT_FALSE(fs::exists(dir / hash));
+  EXPECT_TRUE(fs::exists(dir / other / ".main"));
+  // No room at all, the one scene there held: refused, nothing written.
+  worker::SceneCache full(dir.string(), fetch_from(fake));
+  full.free_disk_bytes = []() -> std::optional<uint64_t> { return uint64_t(0); };
+  try {
+    full.prepare(scene_task(hash));
+    ADD_FAILURE();
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("scene cache " + dir.string() + ": scene " + hash + " takes "),
+              std::string::npos)
+        << e.what();
+    EXPECT_NE(std::string(e.what()).find("MiB free with every scene no worker holds removed"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_TRUE(fs::exists(dir / other / ".main"));  // (held by `cache`)
+  for (const fs::directory_entry& e : fs::directory_iterator(dir))
+    EXPECT_EQ(e.path().filename().string().find(".partial"), std::string::npos) << e.path();
+}
+
 TEST_F(SceneCacheTest, BytesThatDoNotHashToTheSceneAreRefusedAndLeaveNothing) {
   fake.damage_scenes = true;
   const std::string why = refusal<WireError>();
