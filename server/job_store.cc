@@ -420,7 +420,8 @@ std::optional<double> SqliteJobStore::read_checkpoint(const std::string& id, Fra
 }
 
 void SqliteJobStore::discard_partial_writes(const std::string& id) const {
-  for (const char* tmp : {"checkpoint.tmp", "image.exr.tmp"}) {
+  // (The noisy image a denoised one is made from, too: only ever a step to it.)
+  for (const char* tmp : {"checkpoint.tmp", "image.exr.tmp", "image.noisy.exr", "image.noisy.exr.tmp"}) {
     std::error_code ec;
     fs::remove(fs::path(dir_) / "jobs" / id / tmp, ec);
   }

@@ -104,6 +104,7 @@ Recovery::Ended Recovery::load_ended(const StoredJob& row, const JobStore& store
   double elapsed = 0;
   for (size_t i = 0; i < s.frames.size(); ++i) {  // a frame that started has a checkpoint
     std::shared_ptr<Job> job = SequenceScheduler::make_frame(s, i);
+    store.discard_partial_writes(job->id());  // (a frame whose first checkpoint a crash cut short too)
     std::optional<double> cp;
     try {
       if (!(cp = store.read_checkpoint(job->id(), job->plan, false))) continue;
@@ -113,7 +114,6 @@ Recovery::Ended Recovery::load_ended(const StoredJob& row, const JobStore& store
       spdlog::warn("job {}: {}; taken as never rendered", job->id(), ex.what());
       continue;
     }
-    store.discard_partial_writes(job->id());
     const bool done = job->plan.done();
     JobLifecycle::restore(*job, done ? v1::JobStatus::DONE : v1::JobStatus::CANCELLED);
     job->submitted = now;
@@ -236,6 +236,7 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
       // disk does not hold every pass (written again below). Every done frame's film was
       // read, and held until its image was written again: a long sequence's restart took
       // a film per finished frame at once.
+      p_.store.discard_partial_writes(id);  // (a frame whose first checkpoint a crash cut short too)
       const auto read = [&](bool film) {
         job = SequenceScheduler::make_frame(s, i);
         return cp = p_.store.read_checkpoint(id, job->plan, film, &job->splats);
@@ -256,7 +257,6 @@ void Recovery::restore_sequence(const StoredJob& row, double now, Effects& fx) {
       all_done = false;
       continue;
     }
-    p_.store.discard_partial_writes(id);
     Job& j = p_.jobs.add(job);
     s.jobs[i] = job;
     ++s.frames_started;

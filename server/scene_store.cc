@@ -189,7 +189,10 @@ void SceneStore::remove_unused(const std::set<std::string>& referenced) {
   std::lock_guard<std::mutex> lock(mu_);
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(dir_, ec)) {
-    const std::string name = entry.path().filename().string();
+    std::string name = entry.path().filename().string();
+    // (A scene kept whole by a coordinator before protocol 5 is HASH.bundle: a job that
+    // names it may need it again, a requeue of an ended one; it was removed.)
+    if (name.size() > 7 && name.compare(name.size() - 7, 7, ".bundle") == 0) name.resize(name.size() - 7);
     if (scenes_.count(name) || referenced.count(name)) continue;
     std::error_code rm;
     fs::remove_all(entry.path(), rm);

@@ -338,3 +338,30 @@ TEST_F(SequenceTest, BadFrameListsAreRefusedNamingTheProblem) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: a restart swept half-written files only of frames whose checkpoint it
+// found (a crash cutting a frame's first checkpoint short left a film's worth of
+// checkpoint.tmp until the job was deleted), and never a denoised image's noisy step.
+TEST_F(SequenceTest, ARestartSweepsHalfWrittenFilesOfEveryFrame) {
+  const std::string id = c->submit(sequence({1, 2, 3}));
+  c.reset();
+  std::vector<std::string> strays;
+  for (const int f : {1, 2, 3}) {
+    const std::string folder = dir + "/jobs/" + Sequence::frame_id(id, f);
+    fs::create_directories(folder);
+    for (const char* name : {"checkpoint.tmp", "image.noisy.exr", "image.noisy.exr.tmp"}) {
+      strays.push_back(folder + "/" + name);
+      std::ofstream(strays.back()) << "half";
+    }
+  }
+  c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t));
+  for (const std::string& p : strays) EXPECT_FALSE(fs::exists(p)) << p;
+  drain(worker());
+  EXPECT_TRUE(frame_is_local(id, 2));
+}
+
+}  // namespace
+}  // namespace tessera

@@ -438,6 +438,13 @@ TEST_F(SceneStoreTest, ARestartRestoresScenesFromDisk) {
     std::ofstream out(dir / "scenes" / (hash + ".bundle"), std::ios::binary);
     old.SerializeToOstream(&out);
   }
+  {
+    // Found by audit: a start's clean-up removed an old-format bundle though a job named it
+    // (an ended one, which a requeue would need): the name is HASH.bundle.
+    SceneStore started((dir / "scenes").string());
+    started.remove_unused({hash});
+    EXPECT_TRUE(fs::exists(dir / "scenes" / (hash + ".bundle")));
+  }
   SceneStore upgraded((dir / "scenes").string());
   EXPECT_EQ(upgraded.restore(hash), bundle_bytes(whole()));
   upgraded.remove_unused({});
