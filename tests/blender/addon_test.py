@@ -106,10 +106,18 @@ try:
     # 4. PNG, and a format the farm does not write.
     scene.render.image_settings.file_format = "PNG"
     scene.render.filepath = os.path.join(tmp, "png", "p_####")
+    size = (scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage)
+    # Wider than the coordinator's 1280-pixel preview, which it was (a 1920-wide render came
+    # back 960 wide).
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 1300, 4, 100
     bpy.ops.tessera.render_on_farm()
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = size
     png = scene.render.frame_path(frame=scene.frame_current)
     with open(png, "rb") as f:
-        check(f.read(8) == b"\x89PNG\r\n\x1a\n", f"PNG output at {png}")
+        head = f.read(24)
+    check(head[:8] == b"\x89PNG\r\n\x1a\n", f"PNG output at {png}")
+    check(struct.unpack(">II", head[16:24]) == (1300, 4), f"the PNG at full size ({struct.unpack('>II', head[16:24])})")
+    check(not os.path.exists(png + ".farm.exr"), "the EXR it was made from is gone")
     scene.render.image_settings.file_format = "JPEG"
     scene.render.filepath = os.path.join(tmp, "jpg", "j_####")
     bpy.ops.tessera.render_on_farm()

@@ -253,6 +253,26 @@ class Units(unittest.TestCase):
             with self.assertRaisesRegex(ValueError, why):
                 tessera.parse_frames(bad)
 
+    def test_values_the_cli_refuses_are_refused_naming_them(self):
+        from tessera import settings
+        # Found by audit: 2.7 samples became 2, True became 1, fps=0 rendered at 24, a window
+        # outside the image and a seed past 64 bits raised protobuf's "Value out of range".
+        for kw, why in ((dict(samples=2.9), "samples: must be a whole number"),
+                        (dict(samples=True), "samples: must be a whole number"),
+                        (dict(adaptive=(2.7, 0.05)), "adaptive batch: must be a whole number"),
+                        (dict(fps=0), "fps: must be > 0"),
+                        (dict(resolution=(16.9, 12)), "resolution: must be a whole number"),
+                        (dict(resolution=(16, 12), window=(0, 10, 4, 4)), "window: .* is not a cell of the 16 x 12"),
+                        (dict(seed=-1), "seed: -1 is beyond"), (dict(seed=2 ** 64), "seed: .* is beyond"),
+                        (dict(frame=2 ** 40), "frame: .* is beyond"), (dict(aov=["albedo", 3]), "aov: .* names")):
+            with self.assertRaisesRegex(ValueError, why):
+                settings.to_proto("x.dae", **kw)
+        self.assertEqual(settings.to_proto("x.dae", samples=4.0, seed=2 ** 64 - 1)[0].spp, 4)
+        self.assertEqual(settings.to_proto("x.dae", turntable=0)[0].camera_path, "")  # as --turntable 0
+        for bad in ([1.9, 2.2], 5):
+            with self.assertRaises(ValueError):
+                tessera.parse_frames(bad)
+
     def test_frame_paths_as_the_cli_writes_them(self):
         self.assertEqual(tessera.frame_path("out/shot.####.exr", 7), "out/shot.0007.exr")
         self.assertEqual(tessera.frame_path("a#b.##.png", 123), "a#b.123.png")

@@ -21,7 +21,10 @@ DROPPED_INPUTS = {
     "Sheen": "sheen (not exported by Blender 3.4)",
     "Clearcoat": "clearcoat (KHR_materials_clearcoat: exported, rendered by the farm)",
 }
-FORMATS = {"OPEN_EXR": ".exr", "OPEN_EXR_MULTILAYER": ".exr", "PNG": ".png"}
+# What the farm writes as it is. A PNG is the farm's EXR saved by Blender as the other
+# formats are: the Python client's .png is the coordinator's preview, at most 1280 wide (a
+# 1920-wide render came back 960 wide).
+FORMATS = {"OPEN_EXR": ".exr", "OPEN_EXR_MULTILAYER": ".exr"}
 
 
 def _input_used(node, name):
@@ -93,7 +96,7 @@ def export_notes(scene):
                          "only those are sent")
         if "MAPPING" in types:
             notes.append("the world's Mapping node is not sent: the environment keeps its default orientation")
-    if scene.render.image_settings.file_format not in FORMATS:
+    if scene.render.image_settings.file_format not in FORMATS and scene.render.image_settings.file_format != "PNG":
         notes.append(f"output format {scene.render.image_settings.file_format}: the farm writes OpenEXR, converted "
                      "by Blender to the scene's format")
     return notes

@@ -44,6 +44,7 @@ def _default_name(scene):
 
 
 def _read_token(path):
+    path = os.path.expanduser(path)  # (the package's own example: token_file="~/.tessera/token")
     try:
         with open(path) as f:
             token = f.read().strip()
@@ -68,6 +69,7 @@ class Farm:
         if token is None:
             token_file = token_file or os.environ.get("TESSERA_TOKEN_FILE")
             token = _read_token(token_file) if token_file else os.environ.get("TESSERA_TOKEN", "").strip()
+        token = token.strip() if token else token  # (as $TESSERA_TOKEN and a file's: "abc\n" was refused by gRPC)
         self._metadata = (("authorization", "Bearer " + token),) if token else ()
         tls_ca = tls_ca or os.environ.get("TESSERA_TLS_CA")
         self.tls = bool(tls_ca)

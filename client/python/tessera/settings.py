@@ -27,6 +27,7 @@ Unknown keywords raise TypeError naming them; values the coordinator refuses com
 a TesseraError carrying its message (it checks every setting, as `tessera render` does).
 """
 import json
+import numbers
 import os
 import re
 
@@ -75,6 +76,8 @@ def aov_bits(value):
     if not value:
         return 0
     names = value.split(",") if isinstance(value, str) else list(value)
+    if not all(isinstance(n, str) for n in names):
+        raise ValueError(f"aov: {value!r} is not a list of AOV names")
     bits = 0
     for name in (n.strip() for n in names):
         if name == "all":
@@ -87,6 +90,20 @@ def aov_bits(value):
             raise ValueError(f"aov: '{name}' is not an AOV (alpha, albedo, normal, depth, id, halves, all or denoising)")
     return bits
 
+def whole(name, value, lo=-(1 << 31), hi=(1 << 31) - 1):
+    """`value` as an int where it is a whole number within [lo, hi] (the proto field's
+    range); a ValueError naming `name` otherwise. 2.7 samples became 2, True became 1, and
+    a number past the field's range raised protobuf's own "Value out of range"."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name}: must be a whole number (got {value!r})")
+    if isinstance(value, float) and not value.is_integer():
+        raise ValueError(f"{name}: must be a whole number (got {value!r})")
+    n = int(value)
+    if n < lo or n > hi:
+        raise ValueError(f"{name}: {n} is beyond {lo}..{hi}")
+    return n
+
+
 MAX_FRAMES = 100000  # core/render/frames.h's kMaxFrames
 MAX_FRAME = 1000000  # RenderSettings::kMaxFrame
 
@@ -96,7 +113,10 @@ def parse_frames(spec):
     mix ("1-10,20,30-40x5"), in the order given; or an iterable of ints. Raises ValueError
     naming the part that is wrong."""
     if not isinstance(spec, str):
-        frames = [int(f) for f in spec]
+        try:
+            frames = [whole("frames", f) for f in spec]
+        except TypeError:
+            raise ValueError(f"frames: {spec!r} is not \"A-B\", \"1,5,9\" nor a list of frames") from None
     else:
         frames = []
         for part in spec.split(","):
@@ -137,7 +157,7 @@ def _camera_path_json(value, turntable):
         else:
             with open(value) as f:
                 path = json.load(f)
-    if turntable is not None:
+    if turntable is not None and float(turntable) != 0:  # (0: none, as --turntable 0)
         # As the CLI: frame 0 faces as the still, whatever the frames (one rendered again
         # alone is the sequence's).
         path["turntable"] = {"frames": float(turntable), "start": 0.0}
@@ -153,18 +173,20 @@ def to_proto(scene, frames=None, **kwargs):
                         f"(known: {', '.join(sorted(DEFAULTS))})")
     s = dict(DEFAULTS, **kwargs)
     p = pb.RenderSettings()
-    p.spp = int(s["samples"])
-    p.light_samples = int(s["light_samples"])
-    p.max_depth = int(s["max_depth"])
+    p.spp = whole("samples", s["samples"])
+    p.light_samples = whole("light_samples", s["light_samples"])
+    p.max_depth = whole("max_depth", s["max_depth"])
     p.adaptive_batch, p.adaptive_tolerance = 32, 0.05
     if s["adaptive"] is not None:
         batch, tolerance = s["adaptive"]
         p.adaptive = True
-        p.adaptive_batch = int(batch)
+        p.adaptive_batch = whole("adaptive batch", batch)
         p.adaptive_tolerance = float(tolerance)
-    p.seed = int(s["seed"])
+    p.seed = whole("seed", s["seed"], 0, (1 << 64) - 1)
     if s["frame"] is not None:
-        p.frame = int(s["frame"])
+        p.frame = whole("frame", s["frame"])
+    if not float(s["fps"]) > 0:  # (the message reads 0 as "not set": 24 was rendered)
+        raise ValueError(f"fps: must be > 0 (got {s['fps']!r})")
     p.fps = float(s["fps"])
     p.camera_path = _camera_path_json(s["camera_path"], s["turntable"])
     p.animation = str(s["animation"])
@@ -175,9 +197,9 @@ def to_proto(scene, frames=None, **kwargs):
         p.environment_strength = float(s["env_strength"])
     p.environment_rotation = float(s["env_rotate"])
     p.exposure = float(s["exposure"])
-    p.pass_spp = int(s["pass_spp"])
+    p.pass_spp = whole("pass_spp", s["pass_spp"])
     width, height = s["resolution"]
-    p.width, p.height = int(width), int(height)
+    p.width, p.height = whole("resolution", width, 0), whole("resolution", height, 0)
     p.lens_radius = float(s["lens_radius"])
     p.focal_distance = float(s["focal_distance"])
     camera = s["camera"]
@@ -188,11 +210,11 @@ def to_proto(scene, frames=None, **kwargs):
         else pb.RenderSettings.CS184
     if s["window"] is not None:
         # CS184's -p x y w h: lower-left pixel, y counted from the bottom.
-        x, y, w, h = (int(v) for v in s["window"])
-        if w < 1 or h < 1 or y < 0:
-            raise ValueError(f"window: ({x}, {y}, {w}, {h}) is not a cell of the image")
+        x, y, w, h = (whole("window", v) for v in s["window"])
+        if w < 1 or h < 1 or x < 0 or y < 0 or x + w > p.width or y + h > p.height:
+            raise ValueError(f"window: ({x}, {y}, {w}, {h}) is not a cell of the {p.width} x {p.height} image")
         p.window.x, p.window.y, p.window.w, p.window.h = x, p.height - (y + h), w, h
-    p.tile_size = int(s["tile"])
+    p.tile_size = whole("tile", s["tile"])
     p.noise_target = float(s["noise_target"])
     p.no_nee = bool(s["no_nee"])
     p.no_mis = bool(s["no_mis"])
