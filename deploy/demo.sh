@@ -11,5 +11,9 @@ source deploy/local_farm.sh  # a coordinator and two workers on 127.0.0.1: RUN, 
 echo "coordinator on $GRPC; status page: http://$HTTP/"
 
 mkdir -p out
-"$BIN/tessera" submit scenes/cornell-spheres.dae -s 128 -m 16 --coordinator "$GRPC" --wait \
+# -s 128 -m 16 unless the arguments give their own (CLI11 refuses a flag given twice).
+defaults=()
+[[ " $* " == *" -s "* ]] || defaults+=(-s 128)
+[[ " $* " == *" -m "* ]] || defaults+=(-m 16)
+"$BIN/tessera" submit scenes/cornell-spheres.dae "${defaults[@]}" --coordinator "$GRPC" --wait \
   -f out/cornell-spheres.exr -f out/cornell-spheres.png "$@"

@@ -31,9 +31,10 @@ TESSERA_FUZZ_SEEDS="$corpus/result" "$B/bin/fuzz_result"
 for t in $targets; do
   echo "fuzz: fuzz_$t for ${secs}s"
   ASAN_OPTIONS=detect_leaks=0 "$B/bin/fuzz_$t" "$corpus/$t" "tests/fuzz/regressions/$t" \
-    -max_total_time="$secs" -timeout=10 -rss_limit_mb=4096 -print_final_stats=1 "$@" 2>"$B/fuzz_$t.log" || {
+    -max_total_time="$secs" -timeout=10 -rss_limit_mb=4096 -print_final_stats=1 \
+    -artifact_prefix="$B/" "$@" 2>"$B/fuzz_$t.log" || {  # (crash-* files in build-fuzz/, not the checkout's root)
     tail -50 "$B/fuzz_$t.log"
-    echo "fuzz: fuzz_$t found a problem: the input is in the crash-* file named above; keep it in" \
+    echo "fuzz: fuzz_$t found a problem: the input is in the $B/crash-* file named above; keep it in" \
       "tests/fuzz/regressions/$t/ once fixed"
     exit 1
   }

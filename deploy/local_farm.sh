@@ -8,6 +8,9 @@ RUN=$(mktemp -d)
 pids=()
 local_farm_stop() {
   for p in "${pids[@]}"; do kill -TERM "$p" 2>/dev/null || true; done
+  # And what the script was running in the foreground (a `tessera submit --wait` went on
+  # reconnecting for 5 minutes to the coordinator stopped here).
+  pkill -TERM -P $$ 2>/dev/null || true
   wait 2>/dev/null || true
   rm -rf "$RUN"
 }

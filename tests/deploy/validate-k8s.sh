@@ -18,6 +18,15 @@ if [ ! -d "$work/node_modules/kubernetes-models" ]; then
   fi
 fi
 node "$work/validate_k8s.mjs" "$src/../../deploy/k8s"
+# A pod that runs as a user other than root and mounts a secret others may not read
+# (defaultMode 0440, ...0) reads it through its group alone: it needs fsGroup (the workers
+# lacked it and could not read their enrol token: every pod crash-looped).
+for f in "$src"/../../deploy/k8s/base/*.yaml; do
+  if grep -q 'runAsUser:' "$f" && grep -qE 'defaultMode: 0[0-7][0-7]0' "$f" && ! grep -q 'fsGroup:' "$f"; then
+    echo "FAIL: $f runs as a user and mounts a secret only its group may read, without fsGroup"
+    exit 1
+  fi
+done
 # The check itself: a misspelt field and a wrong type must each be found.
 bad=$(mktemp -d)
 trap 'rm -rf "$bad"' EXIT
