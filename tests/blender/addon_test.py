@@ -126,6 +126,19 @@ try:
         check(f.read(3) == b"\xff\xd8\xff", f"JPEG output converted by Blender at {jpg}")
     check(not os.path.exists(jpg + ".farm.exr"), "the EXR it was made from is gone")
 
+    # Depth of field on a focus object off the centre: its distance along the optical axis,
+    # as Cycles measures it (the straight line put it out of focus).
+    from mathutils import Vector
+    cam = scene.camera
+    focus = bpy.data.objects.new("Focus", None)
+    scene.collection.objects.link(focus)
+    focus.location = cam.matrix_world @ Vector((1.5, 0.0, -4.0))
+    cam.data.dof.use_dof, cam.data.dof.focus_object = True, focus
+    bpy.context.view_layer.update()
+    got = export.camera_settings(scene)["focal_distance"]
+    check(abs(got - 4.0) < 1e-4, f"a focus object's distance along the optical axis ({got}, 4 wanted)")
+    cam.data.dof.use_dof, cam.data.dof.focus_object = False, None
+
     # 5. Notes and errors.
     mat = bpy.data.materials.new("Skin")
     mat.use_nodes = True

@@ -6,6 +6,7 @@ import math
 import os
 
 import bpy
+from mathutils import Vector
 
 # Shader nodes glTF (and so the farm) can express: Blender's exporter reads these.
 EXPRESSIBLE = {
@@ -165,7 +166,11 @@ def camera_settings(scene):
         return {}
     dof = cam.data.dof
     if dof.focus_object is not None:
-        distance = (dof.focus_object.matrix_world.translation - cam.matrix_world.translation).length
+        # Along the optical axis, as Cycles measures it (blender_camera_focal_distance) and as
+        # -d is: the straight-line distance put an object off the centre out of focus.
+        view = cam.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0))
+        to = dof.focus_object.matrix_world.translation - cam.matrix_world.translation
+        distance = abs(to.dot(view.normalized()))
     else:
         distance = dof.focus_distance
     radius = cam.data.lens / 1000.0 / (2.0 * dof.aperture_fstop)  # focal length / f-number = aperture diameter
