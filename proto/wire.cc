@@ -60,6 +60,7 @@ v1::RenderSettings to_proto(const RenderSettings& s) {
   p.set_aovs(s.aovs);
   p.set_denoise(s.denoise);
   p.set_light_tracer(uint32_t(s.light_tracer));
+  if (s.splat_exponent) p.set_splat_exponent(uint32_t(*s.splat_exponent));
   return p;
 }
 
@@ -104,6 +105,11 @@ RenderSettings from_proto(const v1::RenderSettings& p) {
   if (p.light_tracer() > uint32_t(RenderSettings::LightTracer::kAuto))
     throw WireError("render settings: light_tracer " + std::to_string(p.light_tracer()) + " is not 0, 1 or 2");
   s.light_tracer = RenderSettings::LightTracer(p.light_tracer());
+  // (Absent: 0, as every job before it; a worker never computes its own.)
+  if (p.splat_exponent() > uint32_t(kMaxSplatExponent))
+    throw WireError("render settings: splat_exponent " + std::to_string(p.splat_exponent()) + " is past " +
+                    std::to_string(kMaxSplatExponent));
+  s.splat_exponent = int(p.splat_exponent());
   try {
     if (!p.camera_path().empty())
       s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(p.camera_path()));

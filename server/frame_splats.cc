@@ -8,10 +8,11 @@ FrameSplats::FrameSplats(const RenderSettings& s, uint32_t tiles)
     : window_(s.effective_window()),
       image_pixels_(int64_t(s.camera.width) * s.camera.height),
       halves_(s.halves()),
+      exponent_(s.splat_exponent.value_or(0)),
       frontier_(tiles, 0) {}
 
 void FrameSplats::make_film() {
-  if (!film_) film_ = std::make_unique<SplatFilm>(window_, image_pixels_, halves_);
+  if (!film_) film_ = std::make_unique<SplatFilm>(window_, image_pixels_, halves_, exponent_);
 }
 
 void FrameSplats::add(uint32_t tile, uint32_t pass, std::vector<SplatRecord> records) {

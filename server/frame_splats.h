@@ -64,6 +64,7 @@ class FrameSplats {
   Rect window_;
   int64_t image_pixels_;
   bool halves_;
+  int exponent_;  // the job's splat_exponent
   std::unique_ptr<SplatFilm> film_;
   std::vector<uint32_t> frontier_;
   bool frozen_ = false;

@@ -1,5 +1,6 @@
 #include "server/submission.h"
 
+#include "core/render/splats.h"
 #include "core/render/tile_renderer.h"
 #include "core/scene/scene_error.h"
 #include "core/util/log.h"
@@ -24,6 +25,9 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
       if (a.settings.light_tracer != RenderSettings::LightTracer::kOff)
         settings.light_tracer = TileRenderer::traces_light_paths(scene, a.settings) ? RenderSettings::LightTracer::kOn
                                                                                     : RenderSettings::LightTracer::kOff;
+      // As tessera render computes it from the scene: every task and the image's fold use this one.
+      settings.splat_exponent =
+          splat_exponent_for(scene.lights, int64_t(a.settings.camera.width) * a.settings.camera.height);
     };
     if (req.upload_id().empty())
       meta.scene_hash = scenes.add(req.main_file(), req.files(), check);

@@ -62,6 +62,7 @@ LightTracer::LightTracer(const Scene& scene, const Accel& accel, const LightSet&
       max_depth_(s.max_depth),
       width_(s.camera.width),
       height_(s.camera.height),
+      splat_gain_(std::ldexp(1.0f, -s.splat_exponent.value_or(0))),
       targets_(scene) {
   double total = 0;
   std::vector<double> power(lights.size());
@@ -198,7 +199,7 @@ void LightTracer::connect(const SurfacePoint& sp, const Material& m, const Frame
   if (accel_.occluded(shadow)) return;
   // The camera counts film rows from the bottom; the image's row 0 is the top.
   const int px = std::min(int(cc.fx), width_ - 1), py = height_ - 1 - std::min(int(cc.fy), height_ - 1);
-  if (splats.add(px, py, value, odd)) ++counters.splats;
+  if (splats.add(px, py, value * splat_gain_, odd)) ++counters.splats;
 }
 
 }  // namespace tessera

@@ -103,6 +103,7 @@ class LightTracer {
   Camera camera_;  // (a copy: the renderer that owns this may be moved)
   int max_depth_;
   int width_, height_;
+  float splat_gain_;              // 2^-splat_exponent: splats enter their sums scaled by it
   std::vector<float> cdf_, pmf_;  // lights picked by emitted power
   std::vector<uint8_t> traced_;
   DeltaTargets targets_;  // where light paths go first

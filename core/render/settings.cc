@@ -38,6 +38,8 @@ void RenderSettings::validate() const {
   require(light_tracer != LightTracer::kOn || (!adaptive && noise_target <= 0), "--light-tracer",
           "on needs every pixel's samples (light paths land anywhere on the frame): not with -a or --noise-target");
   require(pass_spp >= 1 && pass_spp <= kMaxSpp, "--pass-spp", range(1, kMaxSpp));
+  require(!splat_exponent || (*splat_exponent >= 0 && *splat_exponent <= 100), "--light-tracer",
+          "splat exponent " + std::to_string(splat_exponent.value_or(0)) + " is not in 0..100");
   require(tile_size >= 1 && tile_size <= kMaxTileSize, "--tile", range(1, kMaxTileSize));
   require(!frame || (*frame >= -kMaxFrame && *frame <= kMaxFrame), "--frame", range(-kMaxFrame, kMaxFrame));
   if (environment)

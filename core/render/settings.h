@@ -54,6 +54,10 @@ struct RenderSettings {
   // --frame N: the frame of a sequence this is. Its random numbers depend on it too, so
   // that the frames of a sequence are independent and each is the same image whether
   // rendered alone or with the others. A still (none) keeps the seed as it is.
+  // Splats enter their fixed-point sums scaled by 2^-this (core/render/splats.h,
+  // splat_exponent_for): unset, tessera render computes it from the scene; a farm job's is
+  // set at submit, from the coordinator's copy of the scene, and travels with its tasks.
+  std::optional<int> splat_exponent;
   static constexpr int kMaxFrame = 1000000;
   // -b and -d, as a camera path's keys bound them (the scene's coordinates' range).
   static constexpr float kMaxLensRadius = 1e12f, kMaxFocalDistance = 1e12f;

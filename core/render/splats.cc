@@ -29,6 +29,21 @@ int64_t round_nonnegative(double x) {
 
 }  // namespace
 
+int splat_exponent_for(const std::vector<Light>& lights, int64_t image_pixels) {
+  // Splats are about 1e-3 to 1e-1 of the light's radiance at 480x360 (172,800 pixels) and
+  // scale with the pixel count; 2^14 of headroom below kMaxSplatValue (2^20) is kept.
+  double brightest = 0;
+  for (const Light& l : lights)
+    if (l.kind != Light::Kind::kDirectional && l.kind != Light::Kind::kAmbient && l.kind != Light::Kind::kEnvironment &&
+        l.color.is_finite())
+      brightest = std::max(brightest, double(l.color.max()));
+  const double reach = brightest * std::max(1.0, double(image_pixels) / 172800.0);
+  if (!(reach > 0x1p14)) return 0;
+  int e = 0;
+  const double m = std::frexp(reach, &e);  // reach = m 2^e, m in [1/2, 1)
+  return std::min(kMaxSplatExponent, (m == 0.5 ? e - 1 : e) - 14);
+}
+
 bool splat_units(Rgb value, int64_t out[4]) {
   if (!(value.is_finite() && std::min(value.r, std::min(value.g, value.b)) >= 0 &&
         value.max() <= SplatSink::kMaxSplatValue))
@@ -141,10 +156,11 @@ void SplatFilm::fold(PixelSums* pixels, const SplatSums* splats, size_t n, doubl
   }
 }
 
-SplatFilm::SplatFilm(Rect window, int64_t image_pixels, bool halves)
+SplatFilm::SplatFilm(Rect window, int64_t image_pixels, bool halves, int exponent)
     : window_(window),
       image_pixels_(image_pixels),
       halves_(halves),
+      gain_(std::ldexp(1.0, exponent)),
       sums_(size_t(window.area()) * 4 * (halves ? 2 : 1)) {}
 
 void SplatFilm::add_to(size_t index, const int64_t v[4]) {
@@ -206,7 +222,7 @@ uint64_t SplatFilm::dropped() const {
 
 double SplatFilm::scale(bool odd) const {
   const uint64_t n = odd ? odd_paths() : paths();
-  return n ? double(image_pixels_) / double(n) : 0;
+  return n ? double(image_pixels_) / double(n) * gain_ : 0;
 }
 
 SplatSums SplatFilm::sums_at(size_t k) const {

@@ -21,6 +21,7 @@
 #include "core/math/rect.h"
 #include "core/math/vec.h"
 #include "core/render/film.h"
+#include "core/scene/scene.h"
 #include "core/util/mutex.h"
 
 namespace tessera {
@@ -51,6 +52,15 @@ class SplatSink {
   // One light path traced (whether or not it splatted), for the plane(s) it belongs to.
   virtual void count_path(bool odd) = 0;
 };
+
+// The power of two a frame's splats are scaled down by before they enter their fixed-point
+// sums (RenderSettings::splat_exponent): 0 for everyday scenes (the same bits as before it),
+// more where the brightest light a light path starts at would make splats pass
+// kMaxSplatValue (a rect light of radiance 1.2e8 lost every caustic splat: 7% dark).
+// Integer arithmetic on the lights' colours and the image's pixel count (frexp, no libm):
+// the coordinator, its workers and tessera render compute the same.
+int splat_exponent_for(const std::vector<Light>& lights, int64_t image_pixels);
+inline constexpr int kMaxSplatExponent = 100;
 
 // A splat's value in fixed-point units (r, g, b, squared luminance); false (nothing set)
 // when it is dropped: not finite, negative, or a channel over kMaxSplatValue.
@@ -100,7 +110,9 @@ class SplatFilm {
  public:
   // A frame's splats: `window` the pixels rendered (image coordinates), `image_pixels` the
   // camera film's width x height (the estimate's scale), with a second plane for halves.
-  SplatFilm(Rect window, int64_t image_pixels, bool halves);
+  // `exponent`: the frame's splat_exponent (its splats entered their sums scaled by 2^-it:
+  // scale() gives them back).
+  SplatFilm(Rect window, int64_t image_pixels, bool halves, int exponent = 0);
   const Rect& window() const { return window_; }
   bool halves() const { return halves_; }
 
@@ -137,6 +149,7 @@ class SplatFilm {
   Rect window_;
   int64_t image_pixels_;
   bool halves_;
+  double gain_ = 1;  // 2^exponent
   mutable Mutex mu_;
   std::vector<int64_t> sums_ TESSERA_GUARDED_BY(mu_);  // per plane, per pixel: r, g, b, lum2
   uint64_t paths_[2] TESSERA_GUARDED_BY(mu_) = {0, 0};

@@ -96,6 +96,9 @@ void TileRenderer::check_animation(const Scene& scene, const RenderSettings& set
 }
 
 void TileRenderer::set_up_frame(const TileRenderer* share) {
+  if (!settings_.splat_exponent)  // (tessera render's; a farm job's comes set with its tasks)
+    settings_.splat_exponent =
+        splat_exponent_for(rest_->lights, int64_t(settings_.camera.width) * settings_.camera.height);
   const RenderSettings s = settings_.at_frame();
   check_animation(*rest_, settings_);
   if (rest_->animation && settings_.frame) {
@@ -168,7 +171,8 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
 
 std::unique_ptr<SplatFilm> TileRenderer::make_splat_film() const {
   return std::make_unique<SplatFilm>(settings_.effective_window(),
-                                     int64_t(settings_.camera.width) * settings_.camera.height, settings_.halves());
+                                     int64_t(settings_.camera.width) * settings_.camera.height, settings_.halves(),
+                                     settings_.splat_exponent.value_or(0));
 }
 
 std::vector<PixelSums> TileRenderer::render(const Rect& rect, uint32_t s0, uint32_t s1, const uint8_t* active,

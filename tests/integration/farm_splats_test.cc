@@ -73,3 +73,30 @@ TEST_F(Farm, SplatsSurviveACoordinatorKilledMidJob) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// A light of radiance 1.2e8: its splats enter their sums scaled down by 2^splat_exponent
+// (they passed the 2^20 cap and were dropped: 7% dark). The coordinator sets the exponent
+// at submit from its copy of the scene, the workers use it, its fold scales them back: the
+// farm's image is still tessera render's, bit for bit.
+TEST_F(Farm, ABrightLightsSplatsMakeTheLocalImage) {
+  std::string text = slurp(kScene);
+  for (size_t at; (at = text.find("12 12 12")) != std::string::npos;) text.replace(at, 8, "1.2e8 1.2e8 1.2e8");
+  const std::string scene = (dir / "bright.dae").string();
+  std::ofstream(scene) << text;
+  const std::string local = (dir / "local.exr").string(), out = (dir / "farm.exr").string();
+  const CommandResult l = run("render " + scene + " " + kSplatFlags + " -f " + local, dir);
+  ASSERT_EQ(l.code, 0) << l.err;
+  EXPECT_EQ(l.err.find("dropped"), std::string::npos) << l.err;
+  start_coordinator();
+  start_worker();
+  start_worker(2);
+  const CommandResult r = submit_wait(scene, kSplatFlags, out);
+  ASSERT_EQ(r.code, 0) << r.err;
+  expect_same_pixels(local, out);
+}
+
+}  // namespace
+}  // namespace tessera
