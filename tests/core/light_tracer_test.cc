@@ -17,6 +17,7 @@
 #include "core/render/integrator.h"
 #include "core/sampling/sampler.h"
 #include "core/scene/load.h"
+#include "tests/core/caustic_scene.h"
 #include "tests/core/chi2.h"
 #include "tests/core/render_helpers.h"
 #include "tests/core/test_paths.h"
@@ -28,130 +29,7 @@ using testing::chi2_directions;
 using testing::film_estimate;
 using testing::render;
 using LT = RenderSettings::LightTracer;
-
-Material diffuse(float albedo) {
-  Material m;
-  m.kind = Material::Kind::kDiffuse;
-  m.reflectance = Rgb(albedo);
-  return m;
-}
-Material glass() {
-  Material m;
-  m.kind = Material::Kind::kGlass;
-  m.reflectance = Rgb(1.0f);
-  m.transmittance = Rgb(1.0f);
-  m.ior = 1.5f;
-  return m;
-}
-Material mirror() {
-  Material m;
-  m.kind = Material::Kind::kMirror;
-  m.reflectance = Rgb(1.0f);
-  return m;
-}
-
-// A diffuse floor (y = 0, [-2, 2]^2) under a sphere of `caster` (centre (0, 0.6, 0),
-// radius 0.5; none when `caster_present` is false), lit by a rect light at y = 2.2 or
-// a physical point light (1 / d^2) at `point_at`, seen from above at an angle.
-// `lift`: the whole scene moved up by it (its light at y = 2.2 + lift); `lamp`: the rect
-// light's side; `power`: its radiance times this.
-Scene caustic_scene(Material caster, bool caster_present = true, std::optional<Vec3> point_at = std::nullopt,
-                    float lift = 0, float lamp = 0.8f, float power = 1) {
-  Scene s;
-  s.materials.push_back(diffuse(0.8f));
-  s.materials.push_back(caster);
-  Mesh floor;
-  floor.name = "floor";
-  floor.positions = {{-2, 0, -2}, {2, 0, -2}, {2, 0, 2}, {-2, 0, 2}};
-  floor.indices = {0, 2, 1, 0, 3, 2};
-  floor.material = 0;
-  s.meshes.push_back(floor);
-  if (caster_present) s.spheres.push_back(Sphere{"caster", {0, 0.6f, 0}, 0.5f, 1, -1});
-  Light l;
-  if (point_at) {
-    l.kind = Light::Kind::kPoint;
-    l.position = *point_at;
-    l.color = Rgb(4.0f);
-    l.att_constant = 0;
-    l.att_quadratic = 1;
-  } else {
-    l.kind = Light::Kind::kRect;
-    l.name = "lamp";
-    l.position = {0.2f, 2.2f, 0.1f};
-    l.edge_x = {lamp, 0, 0};  // large enough that the path tracer alone converges in a test's time
-    l.edge_y = {0, 0, lamp};
-    l.normal = {0, -1, 0};
-    l.area = lamp * lamp;
-    l.color = Rgb(6.0f * 0.64f / l.area * power);
-  }
-  s.lights.push_back(l);
-  s.camera.present = true;
-  s.camera.eye = {0, 2.6f, 2.6f};
-  s.camera.forward = normalize(Vec3{0, -2.6f, -2.6f});
-  s.camera.up = {0, 1, 0};
-  s.camera.xfov_deg = 50;
-  s.camera.aspect_ratio = 4.0 / 3.0;
-  for (Mesh& m : s.meshes)
-    for (Vec3& p : m.positions) p.y += lift;
-  for (Sphere& sp : s.spheres) sp.center.y += lift;
-  s.lights[0].position.y += lift;
-  s.camera.eye.y += lift;
-  s.finalize();
-  return s;
-}
-
-RenderSettings caustic_settings(LT mode, int spp) {
-  RenderSettings s;
-  s.camera.framing = Framing::kFile;
-  s.camera.width = 32;
-  s.camera.height = 24;
-  s.spp = spp;
-  s.max_depth = 8;
-  s.light_tracer = mode;
-  return s;
-}
-
-bool same_sums(const std::vector<PixelSums>& a, const std::vector<PixelSums>& b) {
-  if (a.size() != b.size()) return false;
-  for (size_t i = 0; i < a.size(); ++i)  // field by field: PixelSums has padding
-    if (std::memcmp(&a[i].r, &b[i].r, 4 * sizeof(double)) != 0 || a[i].n != b[i].n) return false;
-  return true;
-}
-bool same_bits(const Film& a, const Film& b) {
-  return same_sums(a.pixels(), b.pixels()) && same_sums(a.odd(), b.odd());
-}
-
-// Mean luminance over the pixels of a block, with its standard error (from the film's own
-// variance estimate: the path tracer's samples and, folded in, the splats').
-testing::Estimate block(const Film& f, int x0, int y0, int w, int h) {
-  testing::Estimate e;
-  double var = 0;
-  for (int y = y0; y < y0 + h; ++y)
-    for (int x = x0; x < x0 + w; ++x) {
-      e.mean += f.at(x, y).lum_sum() / f.at(x, y).n;
-      var += f.at(x, y).mean_variance();
-    }
-  e.mean /= w * h;
-  e.stderr_ = std::sqrt(var) / (w * h);
-  return e;
-}
-
-void expect_agree(const testing::Estimate& a, const testing::Estimate& b, const char* what) {
-  const double sigma = std::sqrt(a.stderr_ * a.stderr_ + b.stderr_ * b.stderr_);
-  EXPECT_LT(std::fabs(a.mean - b.mean), 4.5 * sigma + 1e-4)
-      << what << ": " << a.mean << " +- " << a.stderr_ << " against " << b.mean << " +- " << b.stderr_;
-}
-
-// Two renders of a caustic scene (32x24) estimate the same image: over the frame and in
-// each 8x8 block.
-void expect_same_image(const Film& a, const Film& b) {
-  expect_agree(film_estimate(a), film_estimate(b), "frame");
-  for (int by = 0; by < 24; by += 8)
-    for (int bx = 0; bx < 32; bx += 8) {
-      SCOPED_TRACE("block at " + std::to_string(bx) + ", " + std::to_string(by));
-      expect_agree(block(a, bx, by, 8, 8), block(b, bx, by, 8, 8), "block");
-    }
-}
+using namespace testing::caustics;
 
 TEST(DeltaTargets, DirectionsFollowTheirDensity) {
   Scene s = caustic_scene(glass());
@@ -171,31 +49,6 @@ TEST(DeltaTargets, DirectionsFollowTheirDensity) {
         [&](Vec3 w) { return double(targets.pdf(from, w)); }, 400000, 20, 40, 48);
     EXPECT_GT(r.p_value, 1e-3) << r.describe();
   }
-}
-
-// Found by audit: for a target seen from more than about 700 radii the cosine test of its
-// cone rounded (1 - omc to 1) and counted another target's density for directions far
-// outside its cone, at random: a distant light's light tracing was 2.9% dark with two.
-TEST(DeltaTargets, ANarrowConeCountsOnlyDirectionsInsideIt) {
-  Scene s = caustic_scene(glass());
-  s.spheres.push_back(Sphere{"second", {0.3f, 1.7f, 3.1f}, 0.5f, 1, -1});
-  const DeltaTargets targets(s);
-  ASSERT_EQ(targets.targets().size(), 2u);
-  // Directions toward the first target alone, from afar (each cone some 1e-5 rad across, the
-  // targets 3e-5 rad apart): the density is the first cone's, the same for every one.
-  int mixed = 0;
-  for (const Vec3 from : {Vec3{1e5f, 0.6f, 0}, Vec3{7.3e4f, 1234.5f, -2345.6f}, Vec3{-3.3e4f, 2.5e4f, 1.1e4f}}) {
-    std::set<float> densities;
-    for (int i = 0; i < 4096; ++i) {
-      Sampler sm(3, 0, uint32_t(i));
-      const float u = sm.next_1d() * 0.5f;  // (picks the first target)
-      float pdf = 0;
-      targets.sample(from, u, sm.next_2d(), &pdf);
-      densities.insert(pdf);
-    }
-    mixed += densities.size() != 1;
-  }
-  EXPECT_EQ(mixed, 0);
 }
 
 TEST(DeltaTargets, BoundEveryDeltaShapeAndNothingElse) {
@@ -306,34 +159,6 @@ TEST(LightTracer, AgreesWithThePathTracerAlone) {
                    (lens ? ", thin lens" : ""));
       expect_same_image(a.film, b.film);
     }
-}
-
-// Found by audit: a rect light in a plane through the origin started its light paths a
-// denormal off its own triangles, which Embree's plane test hit at t = 0: no light path left
-// it, and `auto` rendered the caustics' share of the image black (27% darker). The light's
-// points take the surface points' underflow floor.
-TEST(LightTracer, ALightInAPlaneThroughTheOriginSendsItsLightPaths) {
-  const Scene scene = caustic_scene(glass(), true, std::nullopt, -2.2f, 0.6f);  // (|Ng| 0.36: below 1/2)
-  ASSERT_EQ(scene.lights[0].position.y, 0.f);
-  const RenderResult a = render(scene, caustic_settings(LT::kOff, 1024)),
-                     b = render(scene, caustic_settings(LT::kOn, 128));
-  EXPECT_GT(b.stats.rays.splats, 1000u);
-  expect_same_image(a.film, b.film);
-}
-
-// Found by audit: a splat's channel is capped at 2^20 in its fixed-point sums, and a light of
-// radiance 1.2e8 lost every caustic splat (7% dark, said only in the summary line). Its
-// splats now enter the sums scaled down by a power of two from the brightest light
-// (splat_exponent_for), and the image's fold scales them back.
-TEST(LightTracer, ALightOfRadiance1e8KeepsItsCaustic) {
-  const Scene scene = caustic_scene(glass(), true, std::nullopt, 0, 0.8f, 2e7f);
-  EXPECT_EQ(splat_exponent_for(caustic_scene(glass()).lights, 32 * 24), 0);  // everyday scenes: as before
-  EXPECT_GT(splat_exponent_for(scene.lights, 32 * 24), 0);
-  const RenderResult a = render(scene, caustic_settings(LT::kOff, 1024)),
-                     b = render(scene, caustic_settings(LT::kOn, 128));
-  EXPECT_EQ(b.dropped_splats, 0u);
-  EXPECT_GT(b.stats.rays.splats, 1000u);
-  expect_same_image(a.film, b.film);
 }
 
 // Paths seen through a mirror or glass split at their first smooth vertex
