@@ -46,7 +46,7 @@ start_worker() {
     addr=$(sed -n 's/^listening on //p' "$RUN/p$n.out")
   fi
   "$BIN/tessera-worker" --coordinator "$addr" --threads "$threads" --cache "$RUN/cache$n" \
-    ${EXTRA_WORKER_FLAGS:-} 2>"$RUN/w$n.err" &
+    ${EXTRA_WORKER_FLAGS:-} >/dev/null 2>"$RUN/w$n.err" &
   pids+=($!)
 }
 
@@ -93,8 +93,13 @@ for row in $ROWS; do
   base_row=0/0; [[ $row == *+* ]] && base_row=0/0+0/0
   times=(); bases=(); ratios=()
   for _ in $(seq "$REPEAT"); do
-    read -r b _ _ < <(run_row "$base_row")
-    read -r t up down < <(run_row "$row")
+    # (In this shell, not a process substitution: a row that fails ends the script, and the
+    # EXIT trap stops what it started; in a subshell its processes outlived it and the
+    # read waited on their output for ever.)
+    run_row "$base_row" >"$RUN/row.out"
+    read -r b _ _ <"$RUN/row.out"
+    run_row "$row" >"$RUN/row.out"
+    read -r t up down <"$RUN/row.out"
     times+=("$t"); bases+=("$b"); ratios+=("$(awk "BEGIN {print $t / $b}")")
   done
   label=$(echo "$row" | sed -e 's#0/0#loopback#g' -e 's#/\([0-9]*\)# ms / \1#g' -e 's#+# + #')
