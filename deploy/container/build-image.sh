@@ -19,15 +19,23 @@ for b in "${bins[@]}"; do
   strip --strip-unneeded "$rootfs/usr/bin/$b" 2>/dev/null || true
 done
 # Every library the executables load, at the path the loader finds it (symlinks resolved).
-for lib in $(for b in "${bins[@]}"; do ldd "$build/bin/$b"; done | grep -oE '/[^ ]+\.so[^ ]*' | sort -u); do
+# (Paths read whole, spaces and all: "name => PATH (0x...)" or "PATH (0x...)".)
+while IFS= read -r lib; do
   mkdir -p "$rootfs$(dirname "$lib")"
   cp -L "$lib" "$rootfs$lib"
-done
+done < <(for b in "${bins[@]}"; do ldd "$build/bin/$b"; done |
+  sed -n -e 's/^.* => \(\/.*\) (0x[0-9a-f]*)$/\1/p' -e 's/^[[:space:]]*\(\/.*\) (0x[0-9a-f]*)$/\1/p' | sort -u)
 printf 'root:x:0:0:root:/:/sbin/nologin\ntessera:x:65532:65532:tessera:/tmp:/sbin/nologin\n' >"$rootfs/etc/passwd"
 printf 'root:x:0:\ntessera:x:65532:\n' >"$rootfs/etc/group"
 printf 'hosts: files dns\n' >"$rootfs/etc/nsswitch.conf"
 printf '127.0.0.1 localhost\n::1 localhost\n' >"$rootfs/etc/hosts"
-chown 65532:65532 "$rootfs/var/lib/tessera"
+# The data folder is the image user's. Rootless podman maps that uid in its user namespace
+# (a plain chown needs root: a non-root build stopped here).
+if [ "$(id -u)" = 0 ]; then
+  chown 65532:65532 "$rootfs/var/lib/tessera"
+else
+  podman unshare chown 65532:65532 "$rootfs/var/lib/tessera"
+fi
 cp "$root/scenes/cornell-spheres.dae" "$rootfs/usr/share/tessera/scenes/"
 cp "$here/Containerfile" "$ctx/"
 podman build --quiet --tag "$tag" "$ctx" >/dev/null
