@@ -196,11 +196,16 @@ class Job:
         up to the farm's reconnect_seconds."""
         frames = {}
         gone_since, backoff = None, 0.25
+        last = None  # the last message yielded, as bytes: the same one again is not a change
         while True:
             try:
                 first = True
                 for s in self.farm._stream("WatchJob", pb.JobId(id=self.id)):
                     gone_since, backoff = None, 0.25
+                    raw = s.SerializeToString(deterministic=True)
+                    if raw == last and not s.frames_changed_only:
+                        continue
+                    last = raw
                     status = JobStatus.from_proto(s)
                     if first or not s.frames_changed_only:
                         frames = {f.frame: f for f in status.frames}
