@@ -197,6 +197,21 @@ class Plain(unittest.TestCase):
         self.assertEqual(e.exception.code, "NOT_FOUND")
         self.assertIn(job.id, e.exception.message)
 
+    def test_a_scene_that_changes_while_it_is_sent_is_named(self):
+        # Found by audit: the bundle's own error, raised inside the stream gRPC reads, came
+        # back as gRPC's "Exception iterating requests!".
+        from unittest import mock
+        from tessera.bundle import Bundle, SceneError
+
+        original = Bundle.chunks
+
+        def changing(bundle):
+            yield next(original(bundle))  # the manifest
+            raise SceneError("scene.dae: changed while it was sent")
+        with mock.patch.object(Bundle, "chunks", changing):
+            with self.assertRaisesRegex(tessera.TesseraError, "scene.dae: changed while it was sent"):
+                self.farm.submit(SPHERES, **SMALL)
+
     def test_errors_name_the_problem(self):
         with self.assertRaisesRegex(TypeError, "unknown render setting: sampels"):
             self.farm.submit(SPHERES, sampels=4)

@@ -55,6 +55,16 @@ def _read_token(path):
     return token
 
 
+def _kept_errors(stream, raised):
+    """`stream`'s items; an exception it raises is kept in `raised` (gRPC swallows those of a
+    request iterator and fails the call with "Exception iterating requests!")."""
+    try:
+        yield from stream
+    except Exception as e:  # noqa: BLE001 (re-raised by the caller, named)
+        raised.append(e)
+        raise
+
+
 class Farm:
     """A coordinator. `address` defaults to $TESSERA_COORDINATOR, else 127.0.0.1:7878; the
     token is `token`, else read from `token_file`, $TESSERA_TOKEN_FILE, or $TESSERA_TOKEN;
@@ -127,14 +137,18 @@ class Farm:
             raise TesseraError(str(e)) from None
         if env:  # workers find it in the bundle, relative to the main file
             proto_settings.environment_map = bundle.files[-1][0]
+        raised = []
         try:
             # As the CLI allows: 120 s and a second a MiB (600 s flat failed a 1 GiB scene on a
             # link under 1.7 MiB/s).
             deadline = max(self.timeout, 120 + sum(bundle.sizes) / (1 << 20))
-            upload = self._stub.UploadScene(bundle.chunks(), timeout=deadline, metadata=self._metadata)
+            upload = self._stub.UploadScene(_kept_errors(bundle.chunks(), raised), timeout=deadline,
+                                            metadata=self._metadata)
         except SceneError as e:
             raise TesseraError(str(e)) from None
         except grpc.RpcError as e:
+            if raised:  # the stream's own error, which gRPC reports as "Exception iterating requests!"
+                raise TesseraError(str(raised[0])) from None
             raise rpc_error(e, self.tls) from None
         req = pb.SubmitJobRequest(version=PROTOCOL_VERSION, settings=proto_settings, priority=int(priority),
                                   name=name if name is not None else _default_name(scene), upload_id=upload.upload_id,
