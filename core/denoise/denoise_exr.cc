@@ -64,11 +64,12 @@ bool check_channels(const std::vector<std::string>& present, const std::string& 
   return again;
 }
 
-DenoiseBuffers buffers_of(const Planes& planes, int width, int rows, int first_row, bool again) {
+DenoiseBuffers buffers_of(const Planes& planes, int width, int rows, int first_row, int first_column, bool again) {
   DenoiseBuffers in;
   in.width = width;
   in.height = rows;
   in.first_row = first_row;
+  in.first_column = first_column;
   in.color = again ? interleave(planes, kNoisyChannels[0], kNoisyChannels[1], kNoisyChannels[2])
                    : interleave(planes, "R", "G", "B");
   in.even = interleave(planes, "even.R", "even.G", "even.B");
@@ -207,7 +208,8 @@ DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_pat
       const auto t0 = std::chrono::steady_clock::now();
       std::vector<float> rgb;
       try {
-        rgb = denoise(buffers_of(planes, width, r1 - r0, r0, again), options);
+        // (Its messages name pixels as the image has them: the data window's origin added.)
+        rgb = denoise(buffers_of(planes, width, r1 - r0, dw.min.y + r0, dw.min.x, again), options);
       } catch (const std::invalid_argument& e) {
         throw std::runtime_error(in_path + ": cannot denoise: " + e.what());
       }

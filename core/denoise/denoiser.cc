@@ -29,7 +29,8 @@ static_assert(kDenoiseReach ==
 
 [[noreturn]] void refuse(const std::string& what) { throw std::invalid_argument("denoise: " + what); }
 
-void check_plane(const char* name, const std::vector<float>& v, int channels, int w, int h, int first_row) {
+void check_plane(const char* name, const std::vector<float>& v, int channels, int w, int h, int first_row,
+                 int first_column) {
   const size_t expected = size_t(channels) * size_t(w) * size_t(h);
   if (v.size() != expected)
     refuse("the '" + std::string(name) + "' buffer has " + std::to_string(v.size()) + " values, " +
@@ -39,7 +40,8 @@ void check_plane(const char* name, const std::vector<float>& v, int channels, in
     if (!std::isfinite(v[i])) {
       const size_t pixel = i / size_t(channels);
       refuse("the '" + std::string(name) + "' buffer has a non-finite value (" + std::to_string(v[i]) + ") at pixel (" +
-             std::to_string(pixel % size_t(w)) + ", " + std::to_string(pixel / size_t(w) + size_t(first_row)) + ")");
+             std::to_string(int64_t(pixel % size_t(w)) + first_column) + ", " +
+             std::to_string(int64_t(pixel / size_t(w)) + first_row) + ")");
     }
 }
 
@@ -48,12 +50,12 @@ void validate(const DenoiseBuffers& in) {
     refuse("the image is " + std::to_string(in.width) + " x " + std::to_string(in.height) +
            " pixels; both sides must be at least 1");
   const int w = in.width, h = in.height;
-  check_plane("color", in.color, 3, w, h, in.first_row);
-  check_plane("even", in.even, 3, w, h, in.first_row);
-  check_plane("odd", in.odd, 3, w, h, in.first_row);
-  check_plane("albedo", in.albedo, 3, w, h, in.first_row);
-  check_plane("normal", in.normal, 3, w, h, in.first_row);
-  check_plane("depth", in.depth, 1, w, h, in.first_row);
+  check_plane("color", in.color, 3, w, h, in.first_row, in.first_column);
+  check_plane("even", in.even, 3, w, h, in.first_row, in.first_column);
+  check_plane("odd", in.odd, 3, w, h, in.first_row, in.first_column);
+  check_plane("albedo", in.albedo, 3, w, h, in.first_row, in.first_column);
+  check_plane("normal", in.normal, 3, w, h, in.first_row, in.first_column);
+  check_plane("depth", in.depth, 1, w, h, in.first_row, in.first_column);
 }
 
 // Channel `channel` of an image of `channels` floats a pixel, times `scale`, onto the grid;

@@ -62,6 +62,7 @@ namespace tessera {
 struct DenoiseBuffers {
   int width = 0, height = 0;
   int first_row = 0;             // the image row the buffers' row 0 is (a band of a larger image; for messages)
+  int first_column = 0;          // and its column (an EXR's data window's left edge; for messages)
   std::vector<float> color;      // RGB: the mean of all of each pixel's samples (what the noisy image shows)
   std::vector<float> even, odd;  // RGB: means of each pixel's even- and odd-numbered samples (independent halves)
   std::vector<float> albedo;     // RGB: first-hit albedo in [0, 1], averaged over the pixel (0: background)

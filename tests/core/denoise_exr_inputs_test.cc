@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <random>
 
@@ -132,6 +133,22 @@ TEST_F(DenoiseExrInputs, TheOutputKeepsTheInputsWindowsAttributesAndIntegerChann
   got.readPixels(5, 28);
   EXPECT_EQ(noisy_g, planes["G"]);  // the noisy image where it was
   EXPECT_EQ(id, ids);               // 16777217: not rounded through a float
+}
+
+// A non-finite value is named at its pixel in the image: the data window's origin added (it
+// was named relative to the window).
+TEST_F(DenoiseExrInputs, ANonFiniteValueIsNamedAtItsPixelInTheImage) {
+  const std::string in = (dir / "nan.exr").string();
+  Imf::Header header(Imath::Box2i({0, 0}, {63, 47}), Imath::Box2i({10, 5}, {41, 28}));
+  fill(header);
+  planes["even.G"][size_t(7 - 5) * 32 + (12 - 10)] = std::numeric_limits<float>::quiet_NaN();
+  {
+    Imf::OutputFile file(in.c_str(), header);
+    file.setFrameBuffer(frame(header));
+    file.writePixels(24);
+  }
+  const std::string why = refusal(in, (dir / "out.exr").string());
+  EXPECT_NE(why.find("'even' buffer has a non-finite value (nan) at pixel (12, 7)"), std::string::npos) << why;
 }
 
 TEST_F(DenoiseExrInputs, AFileOfSeveralPartsIsRefusedNamingThem) {
