@@ -71,8 +71,8 @@ DataFolderLock::DataFolderLock(const std::string& dir) {
   }
   // Who holds it, for the next one's message.
   const std::string pid = std::to_string(::getpid());
-  if (::ftruncate(fd_, 0) == 0 && ::pwrite(fd_, pid.data(), pid.size(), 0) < 0) {
-  }  // (only a message's detail: nothing to do if it cannot be written)
+  if (::ftruncate(fd_, 0) == 0)
+    (void)!::pwrite(fd_, pid.data(), pid.size(), 0);  // (only a message's detail: nothing to do if it fails)
 }
 
 DataFolderLock::~DataFolderLock() {

@@ -283,8 +283,8 @@ void SceneCache::fetch(const std::string& hash) {
       if (!chunk.has_manifest() || chunk.manifest().scene_hash() != hash)
         throw WireError(what + ": the coordinator sent no manifest of it");
       if (!rx) {
-        make_room(hash, check_manifest(chunk.manifest()));
-        rx = std::make_unique<SceneReceiver>(part.string(), chunk.manifest(), what);
+        rx = std::make_unique<SceneReceiver>(part.string(), chunk.manifest(), what);  // (its folder, no byte yet)
+        make_room(hash, rx->bytes());
       } else if (chunk.manifest().SerializeAsString() != rx->manifest().SerializeAsString())
         throw WireError(what + ": its manifest changed between two fetches");
     });

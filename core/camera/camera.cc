@@ -121,8 +121,10 @@ Camera::Camera(const Scene& scene, const CameraSettings& s, const Bounds* object
   const bool view = ortho_h_ > 0 ? ortho_h_ <= kRange && ortho_w_ > 0 && ortho_w_ <= kRange
                                  : std::isfinite(tan_h_) && std::isfinite(tan_v_) && tan_h_ > 0 && tan_v_ > 0;
   // The lens too: its rays start up to its radius off the eye, and aim through the focal plane.
-  const bool lens = std::isfinite(lens_radius_) && lens_radius_ <= 1e12f && std::isfinite(focal_distance_) &&
-                    (lens_radius_ <= 0 || (focal_distance_ > 0 && focal_distance_ <= 1e12f));
+  // (Bounded as a camera path's keys and -b / -d are: the scene's coordinates' range.)
+  constexpr float kLensRange = float(Scene::kMaxCoordinate);
+  const bool lens = std::isfinite(lens_radius_) && lens_radius_ <= kLensRange && std::isfinite(focal_distance_) &&
+                    (lens_radius_ <= 0 || (focal_distance_ > 0 && focal_distance_ <= kLensRange));
   if (!is_finite(eye_) || !(max_component(abs(eye_)) <= kRange) || !is_finite(x_) || !is_finite(y_) || !is_finite(z_) ||
       !view || !lens)
     throw SettingsError("--camera", "the camera is degenerate: eye " + short_vec(eye_) + ", looking along " +

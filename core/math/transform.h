@@ -18,6 +18,7 @@ struct Dvec3 {
 
 inline Dvec3 operator-(Dvec3 a, Dvec3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
 inline double dlength(Dvec3 a) { return std::sqrt(a.x * a.x + a.y * a.y + a.z * a.z); }
+inline Dvec3 dcross(Dvec3 a, Dvec3 b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
 // v made unit length: normalize(v.to_float()) where float holds its squared length well
 // (the bits every scene had); in double where it may not (a length past about 1e19
 // overflows the square, making the result zero; under about 1e-19 it underflows, making it

@@ -60,7 +60,7 @@ struct RenderSettings {
   std::optional<int> splat_exponent;
   static constexpr int kMaxFrame = 1000000;
   // -b and -d, as a camera path's keys bound them (the scene's coordinates' range).
-  static constexpr float kMaxLensRadius = 1e12f, kMaxFocalDistance = 1e12f;
+  static constexpr float kMaxLensRadius = float(Scene::kMaxCoordinate), kMaxFocalDistance = kMaxLensRadius;
   std::optional<int> frame;
   // The seed the sampler uses: `seed`, mixed with the frame number when there is one.
   uint64_t sample_seed() const;

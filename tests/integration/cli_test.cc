@@ -303,16 +303,21 @@ TEST_F(Cli, FramesGoIntoFoldersNamedByTheirNumber) {
   EXPECT_TRUE(fs::exists(dir / "frames" / "0002" / "a.png"));
 }
 
-// tessera_compare names what it lacks (it said "map::at") and compares only pixels finite
-// in both images (a NaN in the reference gave null figures and exit 0).
-TEST_F(Cli, CompareNamesAMissingChannelAndSkipsNonFinitePixelsOfEither) {
-  const std::string a = (dir / "a.exr").string(), y = (dir / "y.exr").string(), nan = (dir / "nan.exr").string();
+// Two images of two pixels, (1, 1, 1) and (2, 2, 2); the second's last red is NaN.
+void write_two_pixels(const std::string& a, const std::string& nan) {
   tessera::Film film(tessera::Rect{0, 0, 2, 1});
   film.at(0, 0) = tessera::PixelSums{1, 1, 1, 0, 1};
   film.at(1, 0) = tessera::PixelSums{2, 2, 2, 0, 1};
   tessera::write_exr(a, film, {});
   film.at(1, 0) = tessera::PixelSums{NAN, 2, 2, 0, 1};
   tessera::write_exr(nan, film, {});
+}
+
+// tessera_compare names what it lacks (it said "map::at") and compares only pixels finite
+// in both images (a NaN in the reference gave null figures and exit 0).
+TEST_F(Cli, CompareNamesAMissingChannelAndSkipsNonFinitePixelsOfEither) {
+  const std::string a = (dir / "a.exr").string(), y = (dir / "y.exr").string(), nan = (dir / "nan.exr").string();
+  write_two_pixels(a, nan);
   {  // grey: Y alone
     float grey[2] = {1, 2};
     Imf::Header header(2, 1);
@@ -340,12 +345,7 @@ TEST_F(Cli, CompareNamesAMissingChannelAndSkipsNonFinitePixelsOfEither) {
 TEST_F(Cli, CompareRegionsSkipNonFinitePixelsAndRefuseWhatIsNotInTheImage) {
   const std::string a = (dir / "a.exr").string(), nan = (dir / "nan.exr").string();
   const std::string moved = (dir / "moved.exr").string(), regions = (dir / "regions.json").string();
-  tessera::Film film(tessera::Rect{0, 0, 2, 1});
-  film.at(0, 0) = tessera::PixelSums{1, 1, 1, 0, 1};
-  film.at(1, 0) = tessera::PixelSums{2, 2, 2, 0, 1};
-  tessera::write_exr(a, film, {});
-  film.at(1, 0) = tessera::PixelSums{NAN, 2, 2, 0, 1};
-  tessera::write_exr(nan, film, {});
+  write_two_pixels(a, nan);
   {
     float v[2] = {1, 2};
     Imf::Header header(Imath::Box2i({0, 0}, {200, 100}), Imath::Box2i({100, 50}, {101, 50}));

@@ -353,9 +353,11 @@ TEST_F(CoordinatorTest, EachWorkersMetricsSeriesIsLabelledUniquely) {
   const std::string text = prometheus_text(*c);
   std::set<std::string> series;
   std::istringstream lines(text);
-  for (std::string line; std::getline(lines, line);)
-    if (line.rfind("tessera_worker_tasks_total{", 0) == 0)
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind("tessera_worker_tasks_total{", 0) == 0) {
       EXPECT_TRUE(series.insert(line.substr(0, line.find('}'))).second) << line;
+    }
+  }
   EXPECT_EQ(series.size(), 4u) << text;
   EXPECT_TRUE(series.count("tessera_worker_tasks_total{worker=\"a\",host=\"h\"")) << text;
 }

@@ -141,33 +141,29 @@ TEST_F(CoordinatorTest, AnUnreadableCheckpointOrManifestStopsTheStartNamingIt) {
   c.reset();
   const fs::path checkpoint = dir + "/jobs/" + id + "/checkpoint";
   ASSERT_TRUE(fs::exists(checkpoint));
-  fs::rename(checkpoint, checkpoint.string() + ".kept");
-  fs::create_symlink(checkpoint, checkpoint);
-  try {
-    c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t));
-    ADD_FAILURE();
-  } catch (const DataFolderError& e) {
-    EXPECT_NE(std::string(e.what()).find(checkpoint.string() + ": cannot read the checkpoint: Too many levels"),
-              std::string::npos)
-        << e.what();
-  }
-  fs::remove(checkpoint);
-  fs::rename(checkpoint.string() + ".kept", checkpoint);
+  // The start's refusal, with `file` a link to itself (and back as it was after).
+  const auto refused_start = [&](const fs::path& file) -> std::string {
+    fs::rename(file, file.string() + ".kept");
+    fs::create_symlink(file, file);
+    std::string why = "(started)";
+    try {
+      c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t));
+    } catch (const DataFolderError& e) {
+      why = e.what();
+    }
+    c.reset();  // (one that started holds the data folder)
+    fs::remove(file);
+    fs::rename(file.string() + ".kept", file);
+    return why;
+  };
+  std::string why = refused_start(checkpoint);
+  EXPECT_NE(why.find(checkpoint.string() + ": cannot read the checkpoint: Too many levels"), std::string::npos) << why;
   fs::path manifest;
   for (const auto& e : fs::directory_iterator(dir + "/scenes"))
     if (fs::exists(e.path() / "manifest")) manifest = e.path() / "manifest";
   ASSERT_FALSE(manifest.empty());
-  fs::rename(manifest, manifest.string() + ".kept");
-  fs::create_symlink(manifest, manifest);
-  try {
-    c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t));
-    ADD_FAILURE();
-  } catch (const DataFolderError& e) {
-    EXPECT_NE(std::string(e.what()).find(manifest.string() + ": cannot read the scene's manifest"), std::string::npos)
-        << e.what();
-  }
-  fs::remove(manifest);
-  fs::rename(manifest.string() + ".kept", manifest);
+  why = refused_start(manifest);
+  EXPECT_NE(why.find(manifest.string() + ": cannot read the scene's manifest"), std::string::npos) << why;
   c = std::make_unique<Coordinator>(options(), std::make_unique<FakeClock>(&t));  // mended: it goes on
   EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::RUNNING);
   EXPECT_GT(c->status(id, false).samples_done(), 0u);

@@ -273,8 +273,7 @@ class ColladaLoader {
       l.area = length(c);
       Vec3 n = c / l.area;
       if (!(l.area > 1e-18f && l.area < 1e18f)) {  // where float's squares overflow or underflow: in double
-        const Dvec3 ex = w.vector(-1, 0, 0), ey = w.vector(0, 1, 0);
-        const Dvec3 cd{ex.y * ey.z - ex.z * ey.y, ex.z * ey.x - ex.x * ey.z, ex.x * ey.y - ex.y * ey.x};
+        const Dvec3 cd = dcross(w.vector(-1, 0, 0), w.vector(0, 1, 0));
         l.area = float(dlength(cd));  // (a light 1e11 across was refused as of "zero area")
         n = unit(cd);
       }
