@@ -327,9 +327,11 @@ std::shared_ptr<const PreparedRenderer> SceneCache::prepare(const v1::Task& task
   auto p = std::make_shared<PreparedRenderer>();
   const RenderSettings settings = from_proto(task.settings());
   // The frames of a sequence share one acceleration structure: a renderer built for any
-  // frame of the same (scene, settings) lends its own to the next frame's.
+  // frame of the same (scene, settings) lends its own to the next frame's. (Each frame's
+  // tasks carry only that frame's camera: CameraPath::for_frame.)
   v1::RenderSettings base = task.settings();
   base.clear_frame();
+  base.clear_camera_path();
   const std::string base_key = task.scene_hash() + base.SerializeAsString();
   std::shared_ptr<const PreparedRenderer> sibling;
   for (const auto& [k, q] : prepared_)

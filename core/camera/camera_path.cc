@@ -54,15 +54,15 @@ std::optional<double> channel(const std::vector<CameraPath::Key>& keys, double f
 }
 
 template <typename Get>
-std::optional<Vec3> point_channel(const std::vector<CameraPath::Key>& keys, double frame, Get get) {
-  Vec3 out;
+std::optional<CameraPath::Point> point_channel(const std::vector<CameraPath::Key>& keys, double frame, Get get) {
+  CameraPath::Point out;
   for (int i = 0; i < 3; ++i) {
     const std::optional<double> v = channel(keys, frame, [&](const CameraPath::Key& k) -> std::optional<double> {
       const std::optional<CameraPath::Point> p = get(k);
       return p ? std::optional<double>((*p)[i]) : std::nullopt;
     });
     if (!v) return std::nullopt;
-    out[i] = float(*v);
+    out[i] = *v;
   }
   return out;
 }
@@ -101,20 +101,32 @@ double monotone_cubic(const std::vector<double>& xs, const std::vector<double>& 
          (t3 - t2) * h * m[k + 1];
 }
 
+CameraPath::Key CameraPath::key_at(double frame) const {
+  Key k;
+  k.frame = frame;
+  k.eye = point_channel(keys, frame, [](const Key& key) { return key.eye; });
+  k.target = point_channel(keys, frame, [](const Key& key) { return key.target; });
+  k.up = point_channel(keys, frame, [](const Key& key) { return key.up; });
+  k.fov = channel(keys, frame, [](const Key& key) { return key.fov; });
+  k.lens_radius = channel(keys, frame, [](const Key& key) { return key.lens_radius; });
+  k.focal_distance = channel(keys, frame, [](const Key& key) { return key.focal_distance; });
+  for (const Key& key : keys)  // steps: the last key at or before the frame, else the first
+    if (key.max_depth && (!k.max_depth || key.frame <= frame)) k.max_depth = key.max_depth;
+  return k;
+}
+
 CameraPath::At CameraPath::at(double frame) const {
+  const Key k = key_at(frame);
   At a;
-  a.eye = point_channel(keys, frame, [](const Key& k) { return k.eye; });
-  a.target = point_channel(keys, frame, [](const Key& k) { return k.target; });
-  a.up = point_channel(keys, frame, [](const Key& k) { return k.up; });
-  auto scalar = [&](auto get) -> std::optional<float> {
-    const std::optional<double> v = channel(keys, frame, get);
-    return v ? std::optional<float>(float(*v)) : std::nullopt;
-  };
-  a.fov = scalar([](const Key& k) { return k.fov; });
-  a.lens_radius = scalar([](const Key& k) { return k.lens_radius; });
-  a.focal_distance = scalar([](const Key& k) { return k.focal_distance; });
-  for (const Key& k : keys)  // steps: the last key at or before the frame, else the first
-    if (k.max_depth && (!a.max_depth || k.frame <= frame)) a.max_depth = k.max_depth;
+  const auto point = [](const std::optional<Point>& p) { return p ? std::optional<Vec3>(vec(*p)) : std::nullopt; };
+  const auto scalar = [](const std::optional<double>& v) { return v ? std::optional<float>(float(*v)) : std::nullopt; };
+  a.eye = point(k.eye);
+  a.target = point(k.target);
+  a.up = point(k.up);
+  a.fov = scalar(k.fov);
+  a.lens_radius = scalar(k.lens_radius);
+  a.focal_distance = scalar(k.focal_distance);
+  a.max_depth = k.max_depth;
   if (turntable) {
     a.orbit = true;
     a.orbit_angle = float(2 * M_PI * std::fmod((frame - turntable->start) / turntable->frames, 1.0));
@@ -122,6 +134,13 @@ CameraPath::At CameraPath::at(double frame) const {
     if (turntable->center) a.orbit_center = vec(*turntable->center);
   }
   return a;
+}
+
+CameraPath CameraPath::for_frame(double frame) const {
+  CameraPath p;
+  if (!keys.empty()) p.keys.push_back(key_at(frame));
+  p.turntable = turntable;
+  return p;
 }
 
 CameraPath CameraPath::parse(const std::string& text) {

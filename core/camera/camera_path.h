@@ -57,6 +57,12 @@ struct CameraPath {
     std::optional<Vec3> orbit_center;
   };
   At at(double frame) const;
+  // The channels' values at `frame`, before at() rounds them to floats: a key there.
+  Key key_at(double frame) const;
+  // What one frame takes from the path: a key at `frame` holding key_at(frame), and the
+  // turntable. Its at(frame) is this path's, bit for bit. A frame's job carries this, not
+  // the whole path (its every task would carry up to 1 MiB of keys).
+  CameraPath for_frame(double frame) const;
 
   // Parses and checks the JSON text; throws SettingsError("--camera-path", ...) naming the
   // key and field at fault.

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 
 #include "core/camera/camera.h"
 #include "core/render/settings.h"
@@ -222,6 +223,49 @@ TEST(CameraPath, APathThatWrittenOutPassesTheBoundIsRefusedHereToo) {
   } catch (const SettingsError& e) {
     EXPECT_NE(std::string(e.what()).find("written out as a job carries it, it takes"), std::string::npos) << e.what();
   }
+}
+
+}  // namespace
+}  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// A frame's job carries only what that frame takes from the path (CameraPath::for_frame),
+// written out and read back as the wire does: the frame's values must be the whole path's
+// bit for bit, at keys, between them, before the first and after the last, turntable too.
+TEST(CameraPath, WhatAFrameTakesFromThePathIsThePathAtThatFrameBitForBit) {
+  const CameraPath path = CameraPath::parse(R"({"keys": [
+      {"frame": 1, "eye": [0.1, 1.3, 4.7], "target": [0, 1, 0], "fov": 39.7, "lens_radius": 0.013},
+      {"frame": 4, "eye": [1.7, 1.1, 3.9], "focal_distance": 3.3, "max_depth": 5},
+      {"frame": 9, "eye": [-2.3, 0.7, 2.1], "up": [0.1, 1, 0], "fov": 61.3, "max_depth": 9},
+      {"frame": 13, "target": [0.3, 0.9, -0.2], "lens_radius": 0.071, "focal_distance": 5.9}],
+    "turntable": {"frames": 37, "start": 2, "axis": [0, 1, 0.2]}})");
+  const auto same = [](const std::optional<Vec3>& a, const std::optional<Vec3>& b) {
+    return a.has_value() == b.has_value() &&
+           (!a || (std::memcmp(&a->x, &b->x, 4) == 0 && std::memcmp(&a->y, &b->y, 4) == 0 &&
+                   std::memcmp(&a->z, &b->z, 4) == 0));
+  };
+  const auto same_f = [](const std::optional<float>& a, const std::optional<float>& b) {
+    return a.has_value() == b.has_value() && (!a || std::memcmp(&*a, &*b, 4) == 0);
+  };
+  for (int frame = -3; frame <= 20; ++frame) {
+    const CameraPath one = CameraPath::parse(path.for_frame(frame).to_json());
+    ASSERT_EQ(one.keys.size(), 1u);
+    const CameraPath::At a = path.at(frame), b = one.at(frame);
+    EXPECT_TRUE(same(a.eye, b.eye) && same(a.target, b.target) && same(a.up, b.up)) << frame;
+    EXPECT_TRUE(same_f(a.fov, b.fov) && same_f(a.lens_radius, b.lens_radius) &&
+                same_f(a.focal_distance, b.focal_distance))
+        << frame;
+    EXPECT_EQ(a.max_depth, b.max_depth) << frame;
+    EXPECT_EQ(a.orbit, b.orbit);
+    EXPECT_EQ(std::memcmp(&a.orbit_angle, &b.orbit_angle, 4), 0) << frame;
+    EXPECT_TRUE(same(a.orbit_axis, b.orbit_axis));
+  }
+  // A turntable alone stays as it is: no key appears.
+  const CameraPath orbit = CameraPath::parse(R"({"turntable": {"frames": 12}})");
+  EXPECT_TRUE(orbit.for_frame(5).keys.empty());
+  EXPECT_EQ(orbit.for_frame(5).to_json(), orbit.to_json());
 }
 
 }  // namespace
