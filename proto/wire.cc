@@ -427,6 +427,12 @@ std::string encode_splats(const std::vector<SplatRecord>& records) {
   return compress_planes(z);
 }
 
+uint64_t splats_declared_bytes(const std::string& compressed) {
+  const unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
+  if (declared == ZSTD_CONTENTSIZE_ERROR || declared == ZSTD_CONTENTSIZE_UNKNOWN) return 0;
+  return std::min<uint64_t>(declared, kMaxSplatBytes);
+}
+
 std::vector<SplatRecord> decode_splats(const std::string& compressed, const SplatLimits& lim) {
   // The largest honest size, checked before anything is allocated: a few bytes of zstd
   // can declare gigabytes.

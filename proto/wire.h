@@ -119,5 +119,8 @@ struct SplatLimits {
 // each entry's index above the previous one's, its sums no more than its record's paths
 // could add (kMaxSplatValue per splat), odd-plane entries and paths only with two planes.
 std::vector<SplatRecord> decode_splats(const std::string& compressed, const SplatLimits& limits);
+// The bytes a result's splats would take decoded, as their zstd frame declares them, at most
+// the most any result may carry (decode_splats refuses more); 0 where none is declared.
+uint64_t splats_declared_bytes(const std::string& compressed);
 
 }  // namespace tessera

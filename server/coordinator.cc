@@ -437,8 +437,14 @@ std::vector<v1::ResultAck> Coordinator::submit_results(const std::vector<const v
     MutexLock lock(mu_);
     batch = intake_.screen(results);
   }
-  ResultIntake::decode(batch);  // the slow part, outside the lock
-  locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { intake_.merge(batch, clock_->now(), fx); });
+  // A slice at a time (bounded decoded bytes: ResultIntake::kDecodedBytesPerSlice), each
+  // decoded outside the lock (the slow part), merged under it, then freed.
+  for (size_t first = 0, last; first < batch.incoming.size(); first = last) {
+    last = ResultIntake::slice_end(batch, first);
+    ResultIntake::decode(batch, first, last);
+    locked([&](Effects& fx) TESSERA_REQUIRES(mu_) { intake_.merge(batch, first, last, clock_->now(), fx); });
+    ResultIntake::free_decoded(batch, first, last);
+  }
   for (const auto& [i, lease] : batch.checks) batch.acks[i] = check_result(*results[i], lease);
   return std::move(batch.acks);
 }

@@ -252,11 +252,13 @@ grpc::Status WorkerService::Register(grpc::ServerContext* ctx, const v1::Registe
 grpc::Status WorkerService::GetTask(grpc::ServerContext* ctx, const v1::GetTaskRequest* req, v1::GetTaskResponse* out) {
   // Long poll: an idle worker waits here (up to a second) and gets a new job's first task
   // the moment it is submitted, instead of sleeping through a retry interval.
-  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal&) {
+  return as(__func__, auth_, ctx, Action::kWork, [&](const Principal& who) {
     c_.check_worker(req->worker_id(), req->worker_secret());
     // Each poll holds a thread up to a second: counted per registered worker (its secret
-    // checked), so one cannot hold a thread per call and workers sharing a host are apart.
+    // checked), so one cannot hold a thread per call, and per caller, so registering more
+    // workers does not give more (a worker polls once at a time: a host's many fit).
     const StreamSlots::Slot slot = polls_.take("worker " + std::to_string(req->worker_id()));
+    const StreamSlots::Slot peer_slot = peer_polls_.take(worker_stream_peer(who, *ctx));
     const auto since = std::chrono::steady_clock::now(), until = since + std::chrono::seconds(1);
     while (true) {
       *out = c_.get_task(req->worker_id(), req->max_tasks(), req->max_samples(), req->max_passes());

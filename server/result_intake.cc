@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <set>
+#include <utility>
 
 #include "core/render/light_tracer.h"
 
@@ -82,7 +84,13 @@ ResultIntake::Batch ResultIntake::screen(const std::vector<const v1::TaskResult*
   Batch b;
   b.results = results;
   b.acks.resize(results.size());
+  std::set<std::pair<uint64_t, uint64_t>> seen;  // a task's result twice in one batch: the first only
   for (size_t i = 0; i < results.size(); ++i) {
+    if (!seen.emplace(results[i]->task_id(), results[i]->worker_id()).second) {
+      ++p_.counters.results_duplicate;
+      b.acks[i].set_duplicate(true);
+      continue;
+    }
     std::optional<Lease> lease = wanted(*results[i], b.acks[i]);
     if (!lease) continue;
     if (lease->check) {
@@ -107,8 +115,39 @@ ResultIntake::Batch ResultIntake::screen(const std::vector<const v1::TaskResult*
   return b;
 }
 
-void ResultIntake::decode(Batch& b) {
-  for (Incoming& in : b.incoming) try {
+uint64_t ResultIntake::decoded_bytes(const Batch& b, const Incoming& in) {
+  const v1::TaskResult& r = *b.results[in.index];
+  uint64_t bytes = uint64_t(in.pixels) * in.planes * sizeof(PixelSums);
+  if (in.aovs_wanted) bytes += uint64_t(in.pixels) * sizeof(AovSums);
+  // Splats as declared (decode_splats refuses more than the task allows before allocating).
+  if (!r.splats_zstd().empty()) bytes += splats_declared_bytes(r.splats_zstd());
+  return bytes;
+}
+
+size_t ResultIntake::slice_end(const Batch& b, size_t first) {
+  size_t last = first;
+  uint64_t bytes = 0;
+  while (last < b.incoming.size()) {
+    const uint64_t more = decoded_bytes(b, b.incoming[last]);
+    if (last > first && bytes + more > kDecodedBytesPerSlice) break;
+    bytes += more;
+    ++last;
+  }
+  return last;
+}
+
+void ResultIntake::free_decoded(Batch& b, size_t first, size_t last) {
+  for (size_t k = first; k < last; ++k) {
+    Incoming& in = b.incoming[k];
+    in.sums.reset();
+    std::vector<AovSums>().swap(in.aovs);
+    std::vector<SplatRecord>().swap(in.splats);
+  }
+}
+
+void ResultIntake::decode(Batch& b, size_t first, size_t last) {
+  for (size_t k = first; k < last; ++k) try {
+      Incoming& in = b.incoming[k];
       const v1::TaskResult& r = *b.results[in.index];
       if (in.aovs_wanted)
         in.aovs = decode_aovs(r.aovs_zstd(), in.pixels, in.pass_len);
@@ -117,11 +156,11 @@ void ResultIntake::decode(Batch& b) {
       in.splats = result_splats(r, in.light_tracer, in.splat_limits);
       in.sums = FramePlan::check(result_sums(r, in.pixels * in.planes), in.pass_len, in.planes);
     } catch (const SplatsOverCap&) {  // counted as rejected by merge(), which shortens the job's runs
-      in.sums.reset();
-      in.splats_over_cap = true;
+      b.incoming[k].sums.reset();
+      b.incoming[k].splats_over_cap = true;
     } catch (const WireError& e) {  // counted as rejected by merge(), which fails the task
-      in.sums.reset();
-      in.refused = e.what();
+      b.incoming[k].sums.reset();
+      b.incoming[k].refused = e.what();
     }
 }
 
@@ -148,8 +187,9 @@ void ResultIntake::refuse(const v1::TaskResult& result, const std::string& why, 
   p_.lifecycle.task_failed(*job, *w, refusal(why), now, fx);
 }
 
-void ResultIntake::merge(Batch& b, double now, Effects& fx) {
-  for (Incoming& in : b.incoming) {
+void ResultIntake::merge(Batch& b, size_t first, size_t last, double now, Effects& fx) {
+  for (size_t k = first; k < last; ++k) {
+    Incoming& in = b.incoming[k];
     if (!in.sums) {
       ++p_.counters.results_rejected;
       // A run too long is shortened; a single pass past the cap is refused like any other.

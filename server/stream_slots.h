@@ -16,8 +16,10 @@ namespace tessera {
 
 class StreamSlots {
  public:
-  // `what`: the streams counted, for the error ("job watches, image downloads").
-  StreamSlots(size_t per_peer, std::string what) : per_peer_(per_peer), what_(std::move(what)) {}
+  // `what`: the streams counted, for the error ("job watches, image downloads"); `flag`:
+  // what sets per_peer, for the error too.
+  StreamSlots(size_t per_peer, std::string what, std::string flag = "--max-streams-per-peer")
+      : per_peer_(per_peer), what_(std::move(what)), flag_(std::move(flag)) {}
 
   // A stream's place, given back when it is destroyed.
   class Slot {
@@ -38,7 +40,7 @@ class StreamSlots {
     size_t& n = held_[peer];
     if (n >= per_peer_)
       throw RequestError(RequestError::Code::kResourceExhausted, std::to_string(per_peer_) + " open streams (" + what_ +
-                                                                     ") per caller at most (--max-streams-per-peer)");
+                                                                     ") per caller at most (" + flag_ + ")");
     ++n;
     return Slot(this, peer);
   }
@@ -51,6 +53,7 @@ class StreamSlots {
   }
   const size_t per_peer_;
   const std::string what_;
+  const std::string flag_;
   std::mutex mu_;
   std::map<std::string, size_t> held_;
 };

@@ -222,3 +222,49 @@ TEST_F(Access, AWorkersLongPollsAreBoundedPerWorker) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: the bound above is per registered worker, so one caller registering 40
+// workers held 2,580 server threads in polls (registrations are cheap). The polls of all a
+// caller's workers (its address, or its token and address) are bounded too: with
+// --max-streams-per-peer 1, six workers' polls at once under one token, four answered.
+TEST_F(Access, TheLongPollsOfACallersWorkersAreBoundedTogether) {
+  start_coordinator({"--max-streams-per-peer", "1"});
+  auto workers = v1::TesseraWorker::NewStub(grpc::CreateChannel(grpc_addr, grpc::InsecureChannelCredentials()));
+  std::vector<v1::GetTaskRequest> polls(6);
+  for (v1::GetTaskRequest& poll : polls) {
+    v1::RegisterResponse w;
+    ASSERT_TRUE(workers->Register(call(kWorker).get(), registration(), &w).ok());
+    poll.set_worker_id(w.worker_id());
+    poll.set_worker_secret(w.worker_secret());
+  }
+  int ok = 0, refused = 0;
+  for (int attempt = 0; attempt < 5 && refused != 2; ++attempt) {
+    std::atomic<int> got_ok{0}, got_refused{0};
+    std::vector<std::thread> polling;
+    for (const v1::GetTaskRequest& poll : polls)
+      polling.emplace_back([&] {
+        v1::GetTaskResponse none;
+        const grpc::Status st = workers->GetTask(call(kWorker).get(), poll, &none);
+        if (st.ok()) {
+          ++got_ok;
+        } else {
+          ++got_refused;
+          EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+          EXPECT_NE(st.error_message().find(
+                        "(task requests of all its workers) per caller at most (4 x --max-streams-per-peer)"),
+                    std::string::npos)
+              << st.error_message();
+        }
+      });
+    for (std::thread& t : polling) t.join();
+    ok = got_ok, refused = got_refused;
+  }
+  EXPECT_EQ(refused, 2);
+  EXPECT_EQ(ok, 4);
+}
+
+}  // namespace
+}  // namespace tessera

@@ -226,8 +226,12 @@ class PartsTest : public ::testing::Test {
     std::vector<const v1::TaskResult*> batch;
     for (const v1::TaskResult& r : results) batch.push_back(&r);
     ResultIntake::Batch b = intake.screen(batch);
-    ResultIntake::decode(b);
-    intake.merge(b, now, fx);
+    for (size_t first = 0, last; first < b.incoming.size(); first = last) {  // as Coordinator::submit_results
+      last = ResultIntake::slice_end(b, first);
+      ResultIntake::decode(b, first, last);
+      intake.merge(b, first, last, now, fx);
+      ResultIntake::free_decoded(b, first, last);
+    }
     return b.acks;
   }
   v1::ResultAck submit(const v1::TaskResult& r) { return submit(std::vector<v1::TaskResult>{r})[0]; }
