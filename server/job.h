@@ -84,6 +84,9 @@ struct Job {
   // pass), to render again if the worker is found lying; checks not yet decided (the job
   // ends only when none is left).
   std::map<uint64_t, std::vector<uint32_t>> merged_by;
+  // Tiles of a CANCELLED or FAILED job that hold a worker's results who was quarantined
+  // after the job ended: a requeue renders them again (JobControl::finish_requeue).
+  std::set<uint32_t> tainted;
   uint32_t pending_checks = 0;
   double submitted = 0, started = 0, finished_at = 0;  // the coordinator's Clock
   double started_at = 0, ended_at = 0;                 // wall clock, for users (0: not known)

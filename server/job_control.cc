@@ -189,7 +189,17 @@ void JobControl::finish_requeue(Requeue& q, double now, Effects& fx) {
   }
   for (size_t i = 0; i < q.fresh.size(); ++i) {
     Job& j = *q.fresh[i];
-    j.submitted = q.ended[i]->submitted;
+    const Job& old = *q.ended[i];
+    // Who merged what stays known (a worker caught later has its tiles rendered again), and
+    // tiles of a worker caught while the job had ended are rendered again now (its
+    // checkpoint holds them: a requeue finished DONE with a liar's results, unflagged).
+    for (const auto& [worker, tiles] : old.merged_by)
+      j.merged_by[worker].insert(j.merged_by[worker].end(), tiles.begin(), tiles.end());
+    if (!old.tainted.empty()) {
+      if (j.splats.any()) j.splats.reset();  // (every tile is tainted then)
+      for (uint32_t t : old.tainted) j.plan.reset_tile(t);
+    }
+    j.submitted = old.submitted;
     j.meta.scene_bytes = q.scene_bytes;
     jobs_.replace(q.fresh[i]);
     if (q.sequence) q.sequence->jobs[j.frame_index] = q.fresh[i];

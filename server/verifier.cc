@@ -217,10 +217,21 @@ void Verifier::quarantine(uint64_t worker, const std::string& why, double now, E
       for (const auto& [check, c] : checks_.all())
         if (c.job == id && tiles.count(c.tile)) moot.push_back(check);
       for (uint64_t check : moot) drop(check, false, now);
-    } else if (job->state() == v1::JobStatus::DONE) {
+    } else {
       // Its splats (a frame tracing light paths) landed anywhere: every tile holds them.
       const bool splats = job->plan.settings().light_tracer != RenderSettings::LightTracer::kOff;
-      flag_ended(*job, ended_flag(splats ? job->plan.tile_count() : uint32_t(tiles.size()), name, false), fx);
+      const uint32_t held = splats ? job->plan.tile_count() : uint32_t(tiles.size());
+      if (job->state() == v1::JobStatus::DONE) {
+        flag_ended(*job, ended_flag(held, name, false), fx);
+      } else {  // CANCELLED or FAILED: a requeue renders those tiles again (it kept them before)
+        for (uint32_t t = 0; t < job->plan.tile_count(); ++t)
+          if (splats || tiles.count(t)) job->tainted.insert(t);
+        flag_ended(*job,
+                   std::to_string(held) + " tiles hold results of worker " + name +
+                       ", quarantined after the job ended (its results differed from the same tasks rendered "
+                       "elsewhere): a requeue renders them again",
+                   fx);
+      }
       flagged.insert(job->sequence.empty() ? id : job->sequence);
     }
   }

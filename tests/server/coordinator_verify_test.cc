@@ -305,3 +305,53 @@ TEST_F(VerifyTest, NoChecksWithOneWorkerOrAZeroFraction) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: a liar caught while a job it merged into was CANCELLED left its results
+// in the job (only live jobs were reset, only DONE ones flagged), and a requeue finished
+// the job DONE with them, unflagged. Now the job is flagged and its requeue renders those
+// tiles again: the image is the honest one, bit for bit.
+TEST_F(VerifyTest, ALiarCaughtWhileAJobWasCancelledIsRenderedAgainWhenItIsRequeued) {
+  start(0.5);
+  const RenderSettings s = job_settings();
+  RenderSettings other = s;
+  other.seed = 17;
+  const uint64_t honest = worker_as("honest"), liar = worker_as("liar");
+  const std::string id = c->submit(request(s));
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(step(liar, true));  // lies merged, then the job is cancelled
+  c->cancel(id);
+  ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::CANCELLED);
+  c->submit(request(other));
+  run(honest, liar, true);  // caught on the other job
+  ASSERT_EQ(c->counters().workers_quarantined, 1u);
+  const std::string flag = c->status(id, false).error();
+  EXPECT_NE(flag.find("a requeue renders them again"), std::string::npos) << flag;
+  c->requeue(id);
+  run(honest, liar, false);
+  ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
+// ... and one requeued before the liar is caught: the requeued job still knows who merged
+// what, so its tiles are rendered again when it is.
+TEST_F(VerifyTest, ALiarCaughtAfterARequeueHasItsTilesRenderedAgain) {
+  start(0.5);
+  const RenderSettings s = job_settings();
+  RenderSettings other = s;
+  other.seed = 17;
+  const uint64_t honest = worker_as("honest"), liar = worker_as("liar");
+  const std::string id = c->submit(request(s));
+  for (int k = 0; k < 3; ++k) ASSERT_TRUE(step(liar, true));
+  c->cancel(id);
+  c->requeue(id);
+  c->submit(request(other));
+  run(honest, liar, true);
+  ASSERT_EQ(c->counters().workers_quarantined, 1u);
+  ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
+  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+}
+
+}  // namespace
+}  // namespace tessera
