@@ -115,7 +115,7 @@ DielectricF dielectric_f(const Material& m, float f) {
 BsdfLobes pbr_lobes(const Material& m, Vec3 wo) {
   const PbrWeights w = pbr_weights(m);
   const float c = std::fabs(wo.z);
-  // A component of weight 0 adds +0 (its Fresnel is finite, ior in [1, 10)): skipped.
+  // A component of weight 0 adds +0 (its Fresnel is finite, ior in [1, 1e4]): skipped.
   const DielectricF fc = w.coat > 0 ? dielectric_f(m, fresnel_dielectric(c, m.ior)) : DielectricF{};
   const DielectricF fg = w.glass > 0 ? dielectric_f(m, glass_fresnel(m, wo.z)) : DielectricF{};
   const float base = m.reflectance.luminance();

@@ -1,5 +1,8 @@
 // The glTF loader: what it makes of valid files (tests/core/gltf_refusals_test.cc has the
 // hostile ones).
+#include <algorithm>
+
+#include "core/bsdf/fresnel.h"
 #include "tests/core/gltf_fixture.h"
 
 namespace tessera {
@@ -236,7 +239,12 @@ TEST_F(Gltf, MaterialValuesOutOfTheirRangeAreRefusedByName) {
                "materials[0]: metallicFactor 1.500000 is outside [0, 1]");
   expect_error(with({{"pbrMetallicRoughness", {{"baseColorFactor", {1, -2, 0, 1}}}}}),
                "baseColorFactor component -2.000000 is out of range");
-  expect_error(with({{"extensions", {{"KHR_materials_ior", {{"ior", 0.5}}}}}}), "ior 0.500000 out of range [1, 10)");
+  expect_error(with({{"extensions", {{"KHR_materials_ior", {{"ior", 0.5}}}}}}),
+               "ior 0.500000 is neither 0 nor a finite number >= 1");
+  expect_error(
+      with({{"extensions",
+             {{"KHR_materials_ior", {{"ior", 12}}}, {"KHR_materials_transmission", {{"transmissionFactor", 1}}}}}}),
+      "ior 12.000000 out of range [1, 10) for a material that transmits light");
   expect_error(with({{"extensions", {{"KHR_materials_transmission", {{"transmissionFactor", "all"}}}}}}),
                "KHR_materials_transmission.transmissionFactor is not a number");
   expect_error(with({{"extensions", {{"KHR_materials_volume", {{"attenuationDistance", 0}}}}}}),
@@ -245,6 +253,26 @@ TEST_F(Gltf, MaterialValuesOutOfTheirRangeAreRefusedByName) {
                "thicknessFactor is negative");
   expect_error(with({{"extensions", {{"KHR_materials_emissive_strength", {{"emissiveStrength", -3}}}}}}),
                "emissiveStrength is negative");
+}
+
+// Found by audit: the extension allows ior 0 (F0 = 1) and any ior >= 1, and converters from
+// specular-glossiness write 0 or 1000; such files were refused whole. An opaque material
+// takes them (past 1e4, or 0, as 1e4: F0 0.9996, said); its reflectance is then nearly 1.
+TEST_F(Gltf, OpaqueMaterialsTakeAnyIorTheExtensionAllows) {
+  for (const double ior : {0.0, 12.0, 1000.0, 1e6}) {
+    Doc d;
+    d.j["materials"][0] = {{"extensions", {{"KHR_materials_ior", {{"ior", ior}}}}}};
+    const Scene s = load(d);
+    const Material& m = s.materials[s.meshes[0].material];
+    EXPECT_FLOAT_EQ(m.ior, float(ior == 0 ? 1e4 : std::min(ior, 1e4))) << ior;
+    const bool said = std::any_of(s.warnings.begin(), s.warnings.end(), [](const std::string& w) {
+      return w.find("is taken as 10000") != std::string::npos;
+    });
+    EXPECT_EQ(said, ior == 0 || ior > 1e4) << ior;
+    const float f0 = fresnel_dielectric(1.0f, m.ior), grazing = fresnel_dielectric(0.01f, m.ior);
+    EXPECT_TRUE(std::isfinite(f0) && std::isfinite(grazing)) << ior;
+    if (ior != 12) EXPECT_GT(f0, 0.996f) << ior;
+  }
 }
 
 // A 2x1 PNG: red, then blue (sRGB 255 -> linear 1).

@@ -175,10 +175,22 @@ uint32_t GltfMaterials::material(int index) {
     m.transmission =
         float(unit_factor(ctx_, ext_number(ctx_, ex, "KHR_materials_transmission", "transmissionFactor", 0, el), el,
                           "transmissionFactor"));
+    // The extension allows any ior >= 1, and 0 (F0 = 1): specular-glossiness converters
+    // write 0 or 1000 for "F0 from the specular colour" (KHR_materials_specular). A
+    // refracting material's ior must be in [1, 10); an opaque one's only sets its Fresnel,
+    // which past kMaxOpaqueIor (F0 0.9996) is taken as that, said.
+    constexpr double kMaxOpaqueIor = 1e4;
     const double ior = ext_number(ctx_, ex, "KHR_materials_ior", "ior", 1.5, el);
-    if (!(ior >= 1 && ior < 10))
-      ctx_.fail(el, "KHR_materials_ior ior " + std::to_string(ior) + " out of range [1, 10)");
-    m.ior = float(ior);
+    if (!(ior == 0 || (ior >= 1 && std::isfinite(ior))))
+      ctx_.fail(el, "KHR_materials_ior ior " + std::to_string(ior) + " is neither 0 nor a finite number >= 1");
+    if ((ior == 0 || ior >= 10) && m.transmission > 0)
+      ctx_.fail(el, "KHR_materials_ior ior " + std::to_string(ior) +
+                        " out of range [1, 10) for a material that transmits light (transmissionFactor " +
+                        std::to_string(m.transmission) + ")");
+    if (ior == 0 || ior > kMaxOpaqueIor)
+      ctx_.warn_once(el + ": KHR_materials_ior ior " + std::to_string(ior) +
+                     " is taken as 10000 (F0 0.9996; ior 0 means F0 1)");
+    m.ior = float(ior == 0 ? kMaxOpaqueIor : std::min(ior, kMaxOpaqueIor));
     read_volume(ctx_, ex, el, m);
     read_specular(ex, el, m);
     read_clearcoat(ex, el, m);
