@@ -242,7 +242,7 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
         m.tangents[i] = {w.unit_vector(t4[4 * i], t4[4 * i + 1], t4[4 * i + 2]),
                          (t4[4 * i + 3] < 0) != (w.det3() < 0) ? -1.0f : 1.0f};
     }
-    if (n.empty()) m.compute_normals();
+    if (n.empty() && !m.flat) m.compute_normals();  // (a flat mesh's stay zero)
   }
   for (const SceneAnimation::LightBinding& b : a.lights) {
     if (!moved[b.node]) continue;

@@ -230,7 +230,10 @@ void Scene::finalize() {
   add_emitter(meshes, Light::Kind::kMesh);
   add_emitter(spheres, Light::Kind::kSphere);
   for (Mesh& mesh : meshes)
-    if (!mesh.file_normals) mesh.compute_normals();
+    if (mesh.flat)
+      mesh.normals.assign(mesh.positions.size(), Vec3{});
+    else if (!mesh.file_normals)
+      mesh.compute_normals();
 }
 
 namespace {

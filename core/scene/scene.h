@@ -143,6 +143,10 @@ struct Mesh {
   // normal map's frame is the triangle's own: apply_normal_map).
   std::vector<Tangent> tangents;
   bool file_normals = false;  // `normals` came from the file: keep them
+  // Flat shaded: its triangles' own normals shade it (`normals` all zero: the surface point
+  // takes the geometric normal). glTF's rule for a primitive without NORMAL (spec 3.7.2.1);
+  // a COLLADA mesh without normals gets vertex normals instead (compute_normals).
+  bool flat = false;
   // Placed only by Scene::instances: its positions and normals are in its object space,
   // and it is in the world nowhere else.
   bool instanced = false;

@@ -116,6 +116,31 @@ TEST_F(Gltf, SpecularAndClearcoatExtensionsAreRead) {
   expect_error(d, "KHR_materials_clearcoat.clearcoatFactor");
 }
 
+// Found by audit: a coat-only normal map ignored the file's TANGENTs (read only for the
+// base's normal map: the coat tilted the wrong way), and an extension's texture reading
+// TEXCOORD_1 on a mesh without it was not said (the base's four were).
+TEST_F(Gltf, ACoatsNormalMapReadsTheTangentsAndEveryTexturesCoordinateSetIsChecked) {
+  Doc d;
+  d.blob.resize(88);
+  put<float>(d.blob, {1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 1});  // tangents, 48 bytes at 88
+  d.j["accessors"].push_back({{"bufferView", 4}, {"componentType", 5126}, {"count", 3}, {"type", "VEC4"}});
+  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", 88}, {"byteLength", 48}});
+  d.j["buffers"][0]["byteLength"] = 136;
+  d.j["meshes"][0]["primitives"][0]["attributes"]["TANGENT"] = 4;
+  d.j["images"] = {{{"uri", white_alpha_png_uri()}}};
+  d.j["textures"] = {{{"source", 0}}};
+  d.j["materials"][0]["extensions"]["KHR_materials_clearcoat"] = {
+      {"clearcoatFactor", 1},
+      {"clearcoatNormalTexture", {{"index", 0}}},
+      {"clearcoatTexture", {{"index", 0}, {"texCoord", 1}}}};
+  d.j["extensionsUsed"] = {"KHR_materials_clearcoat"};
+  const Scene s = load(d);
+  EXPECT_EQ(s.meshes[0].tangents.size(), 3u);
+  bool said = false;
+  for (const std::string& w : s.warnings) said |= w.find("reads TEXCOORD_1, which it lacks") != std::string::npos;
+  EXPECT_TRUE(said);
+}
+
 // Issue 29: KHR_materials_sheen's colour (x its sRGB texture) and roughness (x its
 // texture's alpha) are read without a warning; out of range refused by name.
 TEST_F(Gltf, SheenExtensionIsRead) {

@@ -87,6 +87,8 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
         m.normals[i] = nt.unit_vector(q.x, q.y, q.z);
       }
       m.file_normals = true;
+    } else {
+      m.flat = true;  // "client implementations MUST calculate flat normals" (3.7.2.1)
     }
     if (prim.indices >= 0) {
       m.indices = read_accessor_indices(ctx, prim.indices, nv, el + " indices");
@@ -134,14 +136,18 @@ std::vector<GltfPrimitive> read_gltf_mesh(GltfContext& ctx, GltfMaterials& mater
     }
     m.material = materials.material(prim.material);
     const Material& mat = ctx.scene.materials[m.material];
-    for (const TextureRef* t : {&mat.texture, &mat.metal_rough_texture, &mat.normal_texture, &mat.emissive_texture})
+    for (const TextureRef* t :
+         {&mat.texture, &mat.metal_rough_texture, &mat.normal_texture, &mat.emissive_texture, &mat.transmission_texture,
+          &mat.specular_texture, &mat.specular_color_texture, &mat.clearcoat_texture, &mat.clearcoat_roughness_texture,
+          &mat.clearcoat_normal_texture, &mat.sheen_color_texture, &mat.sheen_roughness_texture})
       if (t->active() && t->set == 1 && m.uvs1.empty())
         ctx.warn_once(el + ": its material reads TEXCOORD_1, which it lacks; TEXCOORD_0 is used");
-    // TANGENT, object space: only where a normal map reads it (a skinned mesh's joints
-    // would have to carry it too: it takes the triangle's frame).
+    // TANGENT, object space: only where a normal map reads it, the base's or the coat's (a
+    // skinned mesh's joints would have to carry it too: it takes the triangle's frame), and
+    // not without NORMAL ("the provided tangents MUST be ignored", 3.7.2.1).
     std::vector<float> t4;
-    if (auto tan = prim.attributes.find("TANGENT");
-        tan != prim.attributes.end() && mat.normal_texture.active() && !g.skin) {
+    const bool mapped = mat.normal_texture.active() || mat.clearcoat_normal_texture.active();
+    if (auto tan = prim.attributes.find("TANGENT"); tan != prim.attributes.end() && mapped && !g.skin && !m.flat) {
       t4 = read_accessor_floats(ctx, tan->second, 4, el + " TANGENT");
       if (t4.size() / 4 != nv) ctx.fail(el, "TANGENT count differs from POSITION count");
       // A direction (transformed as an edge is); the bitangent's sign turns with a mirror.
