@@ -42,7 +42,7 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
   // Staged beside the first EXR output (renamed into its place: one folder, one file
   // system), else beside the first output; removed whatever happens.
   const auto first_exr = std::find_if(paths.begin(), paths.end(), is_exr_path);
-  const std::string download = (first_exr != paths.end() ? *first_exr : paths[0]) + ".download.exr";
+  const std::string download = temporary_path(first_exr != paths.end() ? *first_exr : paths[0], ".download.exr");
   struct Staged {
     const std::string& path;
     ~Staged() {

@@ -5,12 +5,14 @@
 #include "client/denoise_command.h"
 #include "client/farm_commands.h"
 #include "client/render_command.h"
+#include "core/io/files.h"
 #include "core/io/interrupt_cleanup.h"
 #include "core/scene/scene_error.h"
 #include "core/util/cli.h"
 
 int main(int argc, char** argv) {
   tessera::install_interrupt_cleanup();  // Ctrl-C leaves no half-written download or output
+  tessera::use_unique_temporaries();     // two commands writing one output keep apart
   CLI::App app{"Tessera: a path-tracing render farm"};
   app.require_subcommand(1);
   std::string cmdline = "tessera";

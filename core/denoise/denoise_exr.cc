@@ -94,7 +94,7 @@ Imf::Slice slice(std::vector<float>& plane, int width, long long first_row, long
 }  // namespace
 
 DenoiseReport denoise_exr(const std::string& in_path, const std::string& out_path, const DenoiseOptions& options) {
-  const std::string tmp = out_path + ".tmp";
+  const std::string tmp = temporary_path(out_path);
   {
     // The output is written to OUT.tmp first: were that the input, the input would be
     // truncated before it was read, then removed as the failed output's.

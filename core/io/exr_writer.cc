@@ -16,7 +16,7 @@ namespace tessera {
 ExrWriter::ExrWriter(std::string path, int width, int height, const ImageMetadata& metadata, bool compress,
                      uint32_t aovs)
     : path_(std::move(path)),
-      tmp_(path_ + ".tmp"),
+      tmp_(temporary_path(path_)),
       width_(width),
       height_(height),
       aovs_(aovs),

@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
@@ -31,7 +32,17 @@ void sync_folder_of(const std::string& path) {
 }
 }  // namespace
 
-AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), tmp_(path_ + ".tmp") {
+namespace {
+std::atomic<bool> unique_temporaries{false};
+}  // namespace
+
+void use_unique_temporaries(bool on) { unique_temporaries = on; }
+
+std::string temporary_path(const std::string& path, const char* suffix) {
+  return unique_temporaries ? path + "." + std::to_string(::getpid()) + suffix : path + suffix;
+}
+
+AtomicFile::AtomicFile(std::string path) : path_(std::move(path)), tmp_(temporary_path(path_)) {
   fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd_ < 0) fail("write");
 }

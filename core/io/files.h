@@ -12,6 +12,15 @@ namespace tessera {
 // Throws std::runtime_error naming the path.
 std::string read_file_bytes(const std::string& path);
 
+// The temporary a file is written to before it is renamed into place: PATH + suffix, or,
+// once this process called use_unique_temporaries(), PATH.PID + suffix. The tessera
+// command does: two of them writing one output (two fetches, two renders with the same -f)
+// shared one temporary, each truncating and writing into the other's, and one of them said
+// it had succeeded with the other's image. (A coordinator's folder has one writer, and its
+// restart sweeps the fixed names: it keeps them.)
+std::string temporary_path(const std::string& path, const char* suffix = ".tmp");
+void use_unique_temporaries(bool on = true);
+
 struct AtomicWrite {
   // fsync the file before the rename and its folder after: the new bytes survive a power
   // cut, not only a killed process (film checkpoints).
@@ -19,7 +28,7 @@ struct AtomicWrite {
   // Runs between the temporary file being complete and its rename (a test seam).
   std::function<void()> before_rename;
 };
-// Writes to PATH.tmp and renames it into place: a reader sees the old file or the new one,
+// Writes to PATH.tmp (temporary_path) and renames it into place: a reader sees the old file or the new one,
 // never half of one. Throws std::runtime_error naming the path.
 void write_file_atomic(const std::string& path, const std::string& bytes, const AtomicWrite& how = {});
 
