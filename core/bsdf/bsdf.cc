@@ -560,4 +560,11 @@ bool bsdf_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1, V
   return false;
 }
 
+float delta_adjoint_factor(const Material& m, Vec3 wo, Vec3 wi) {
+  if (m.kind != Material::Kind::kPbr || m.clearcoat <= 0) return 1;
+  const CoatFrame c(m);
+  const float through_wo = 1 - coat_fresnel(m, c.in(wo));
+  return through_wo > 0 ? (1 - coat_fresnel(m, c.in(wi))) / through_wo : 0;
+}
+
 }  // namespace tessera

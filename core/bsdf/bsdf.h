@@ -44,5 +44,11 @@ Rgb bsdf_eval_pdf(const Material& m, const BsdfLobes& lobes, Vec3 wo, Vec3 wi, f
 // surface, a direction below the surface).
 bool bsdf_sample(const Material& m, Vec3 wo, float u1, Vec2 u2, BsdfSample* out);
 bool bsdf_sample(const Material& m, const BsdfLobes& lobes, Vec3 wo, float u1, Vec2 u2, BsdfSample* out);
+// What turns a delta sample's weight from wo (bsdf_sample's: the surface seen from wo) into
+// the adjoint's, for light arriving along wo and leaving along wi (a light path's, seen from
+// wi): 1 but under KHR_materials_clearcoat, whose layer passes (1 - Fc) with Fc taken at
+// the viewing direction only, which is not reciprocal: (1 - Fc(wi)) / (1 - Fc(wo)). (Exactly
+// 1 for the coat's own mirror lobe.) Radiance's 1 / eta^2 is the caller's.
+float delta_adjoint_factor(const Material& m, Vec3 wo, Vec3 wi);
 
 }  // namespace tessera

@@ -154,7 +154,10 @@ void LightTracer::trace(uint64_t seed, uint64_t pixel_id, uint32_t sample, Splat
     if (!dielectric && dot(wi, ng) <= 0) return;
     // The adjoint BSDF's weight: a delta lobe's without the radiance's 1/eta^2; a smooth
     // lobe's from f(wi, wo) (the camera side first, as the path tracer evaluates it).
+    // (A clearcoat's Fresnel is taken at the viewing direction: a delta lobe under it is
+    // weighed by it at wi, the camera side, not at wo: delta_adjoint_factor.)
     Rgb w = bs.delta ? bs.weight * (bs.etap * bs.etap) : bsdf_eval(m, bs.wi, wo) * (std::fabs(bs.wi.z) / bs.pdf);
+    if (bs.delta && m.clearcoat > 0) w *= delta_adjoint_factor(m, wo, bs.wi);
     const float denom = std::fabs(dot(w_prev, ng)) * std::fabs(bs.wi.z);
     if (!(denom > 0)) return;
     w *= std::fabs(wo.z) * std::fabs(dot(wi, ng)) / denom;  // shading normals' correction
