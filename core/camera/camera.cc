@@ -76,6 +76,7 @@ Camera::Camera(const Scene& scene, const CameraSettings& s, const Bounds* object
     tan_h_ = float(ty * s.width / s.height);
     tmin_ = c.znear;
     tmax_ = c.zfar;
+    clips_ = tmin_ > 0 || tmax_ < 1e30f;
     if (c.ortho_half_height) {
       ortho_h_ = float(*c.ortho_half_height);
       ortho_w_ = ortho_h_ * float(s.width) / float(s.height);
@@ -151,6 +152,11 @@ Ray Camera::generate(float fx, float fy, Vec2 u_lens) const {
     r.o = eye_;
     r.d = d / len;
     r.tmax = tmax_;
+    if (clips_) {  // the planes at depth tmin_ and tmax_: along a ray of cosine 1 / |dc|
+      const float per_depth = length(dc);
+      r.tmin = tmin_ * per_depth;
+      r.tmax = tmax_ * per_depth;
+    }
     return r;
   }
   const Vec2 disk = square_to_concentric_disk(u_lens);
@@ -160,6 +166,11 @@ Ray Camera::generate(float fx, float fy, Vec2 u_lens) const {
   r.o = eye_ + x_ * lens.x + y_ * lens.y;
   r.d = normalize(x_ * d.x + y_ * d.y + z_ * d.z);
   r.tmax = tmax_;
+  if (clips_) {  // d's depth is the focal distance
+    const float per_depth = length(d) / focal_distance_;
+    r.tmin = tmin_ * per_depth;
+    r.tmax = tmax_ * per_depth;
+  }
   return r;
 }
 
@@ -186,14 +197,16 @@ bool Camera::connect(Vec3 p, Vec2 u_lens, CameraConnection* out) const {
   if (!(fx >= 0 && fx < 1 / inv_w_ && fy >= 0 && fy < 1 / inv_h_)) return false;
   const Vec3 to_p = pc - lens_c;
   const float dist = length(to_p);
-  if (!(dist > 0) || dist < tmin_ || dist > tmax_) return false;
-  const float cos_t = -to_p.z / dist;
+  const float depth = -to_p.z;  // (the lens point is in the plane z = 0)
+  if (!(dist > 0) || depth < tmin_ || depth > tmax_) return false;
+  const float cos_t = depth / dist;
   const float area = 4 * tan_h_ * tan_v_;
   out->fx = fx;
   out->fy = fy;
   out->lens = eye_ + x_ * lens_c.x + y_ * lens_c.y;
   out->wi = normalize(out->lens - p);
   out->dist = dist;
+  out->near = clips_ ? tmin_ / cos_t : 0;
   out->weight = 1 / (area * cos_t * cos_t * cos_t * dist * dist);
   return std::isfinite(out->weight);
 }

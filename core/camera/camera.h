@@ -42,6 +42,9 @@ struct CameraConnection {
   Vec3 lens;             // the point on the lens (the eye for a pinhole)
   Vec3 wi;               // unit, from the seen point toward `lens`
   float dist = 0;        // from the seen point to `lens`
+  // Along the connection, from `lens` to the near clip plane (0 without one): camera rays
+  // start there, so what lies nearer is not seen and blocks nothing.
+  float near = 0;
   // We / pdf: the importance of the ray (lens -> point) over the density of choosing the
   // lens point, per unit area at the point, without the point's own cosine:
   // 1 / (A cos^3 theta dist^2), A the film's area at unit distance, theta the ray's angle
@@ -70,8 +73,6 @@ class Camera {
   Vec3 forward() const { return -z_; }
   float tan_half_hfov() const { return tan_h_; }
   float tan_half_vfov() const { return tan_v_; }
-  // The near clip: camera rays start this far from the lens (a file camera's znear; 0 else).
-  float near_clip() const { return tmin_; }
 
  private:
   Vec3 eye_, x_, y_, z_;  // camera-to-world basis; the camera looks along -z_
@@ -79,7 +80,11 @@ class Camera {
   float ortho_w_ = 0, ortho_h_ = 0;  // an orthographic camera's half width and height (0: perspective)
   float inv_w_ = 0, inv_h_ = 0;
   float lens_radius_ = 0, focal_distance_ = 1;
+  // A file camera's clip planes, as depths along the optical axis (glTF's znear and zfar:
+  // planes, as the spec's projection matrices and Blender's clip_start and clip_end have
+  // them); a ray's limits are these over its cosine to the axis. None: 0 and 1e30.
   float tmin_ = 0, tmax_ = 1e30f;
+  bool clips_ = false;
 };
 
 }  // namespace tessera

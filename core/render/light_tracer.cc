@@ -197,7 +197,7 @@ void LightTracer::connect(const SurfacePoint& sp, const Material& m, const Frame
   shadow.tmin = 0;
   // Short of the near clip, as the camera's own rays start past it: what lies nearer the
   // lens (a wall the camera sits in) is not seen, and does not block the connection.
-  shadow.tmax = (length(cc.lens - shadow.o) - camera_.near_clip()) * (1 - 1e-5f);
+  shadow.tmax = (length(cc.lens - shadow.o) - cc.near) * (1 - 1e-5f);
   ++counters.shadow_rays;
   if (accel_.occluded(shadow)) return;
   // The camera counts film rows from the bottom; the image's row 0 is the top.

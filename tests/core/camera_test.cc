@@ -143,3 +143,46 @@ TEST(Camera, ALensOrFocalDistanceRaysCannotCarryIsRefused) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: a perspective file camera clipped at znear and zfar along each ray, not
+// at planes, so a wall at depth 4.5 with zfar 5 showed at the image's centre and vanished
+// at its corners (90 degree view: the corner rays reach depth 5 at 5 / cos). glTF's
+// projection matrices (and Blender's clip_start and clip_end, which it maps them to) clip at
+// planes: a ray's limits are the depths over its cosine to the axis, pinhole and thin lens,
+// and Camera::connect clips the light tracer's connections the same way.
+TEST(Camera, AFileCamerasClipDistancesArePlanes) {
+  Scene s;
+  s.camera.present = true;
+  s.camera.eye = {0, 0, 0};
+  s.camera.forward = {0, 0, -1};
+  s.camera.up = {0, 1, 0};
+  s.camera.xfov_deg = 90;
+  s.camera.aspect_ratio = 1;
+  s.camera.znear = 0.5f;
+  s.camera.zfar = 5;
+  CameraSettings c;
+  c.framing = Framing::kFile;
+  c.width = c.height = 100;
+  for (const float lens : {0.0f, 0.1f}) {
+    c.lens_radius = lens;
+    c.focal_distance = 3;
+    const Camera cam(s, c);
+    for (const auto& [fx, fy] : {std::pair{50.0f, 50.0f}, {0.5f, 0.5f}, {99.5f, 50.0f}}) {
+      const Ray r = cam.generate(fx, fy, {0.3f, 0.7f});
+      const float cos_axis = -r.d.z;
+      EXPECT_NEAR(r.tmin * cos_axis, 0.5f, 1e-5f) << fx << " " << fy << " lens " << lens;
+      EXPECT_NEAR(r.tmax * cos_axis, 5.0f, 1e-4f) << fx << " " << fy << " lens " << lens;
+    }
+    // A point at depth 4.5 near a corner is seen; one at depth 5.5 straight ahead is not.
+    CameraConnection cc;
+    EXPECT_TRUE(cam.connect(Vec3{-4.2f, -4.2f, -4.5f}, {0.3f, 0.7f}, &cc)) << lens;
+    EXPECT_NEAR(cc.near * (4.5f / cc.dist), 0.5f, 1e-4f);  // the near plane along the connection
+    EXPECT_FALSE(cam.connect(Vec3{0, 0, -5.5f}, {0.3f, 0.7f}, &cc)) << lens;
+  }
+}
+
+}  // namespace
+}  // namespace tessera
