@@ -139,6 +139,7 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
       part->moving.assign(rest_->meshes.size(), false);
       for (const SceneAnimation::MeshBinding& b : rest_->animation->meshes) part->moving[b.mesh] = true;
       part->accel = std::make_shared<const Accel>(*rest_, part->moving);
+      part->rest_bounds = rest_->object_bounds();
       static_part_ = part;
     }
     accel_ = std::make_shared<const Accel>(*scene_, static_part_->accel, static_part_->moving);
@@ -157,7 +158,7 @@ void TileRenderer::set_up_frame(const TileRenderer* share) {
       lights_ = std::make_shared<const LightSet>(*scene_, extra);
   }
   accel_scene_ = scene_;
-  camera_.emplace(*scene_, s.camera);
+  camera_.emplace(*scene_, s.camera, posed_ ? &static_part_->rest_bounds : nullptr);
   integrator_.emplace(*scene_, *accel_, *lights_, s);
   light_tracer_.reset();
   light_decision_ = tessera::light_tracing_decision(*scene_, *lights_, *camera_, s);

@@ -94,6 +94,7 @@ class TileRenderer {
   // Whether this frame traces light paths for its caustics (light_tracer.h), and why.
   bool light_tracing() const { return light_tracer_.has_value(); }
   const LightTracingDecision& light_tracing_decision() const { return light_decision_; }
+  const Camera& camera() const { return *camera_; }
   // A frame's splat film for these settings (light_tracing() only).
   std::unique_ptr<SplatFilm> make_splat_film() const;
 
@@ -114,6 +115,10 @@ class TileRenderer {
   struct StaticPart {
     std::vector<bool> moving;  // per mesh
     std::shared_ptr<const Accel> accel;
+    // The rest pose's object bounds: what CS184 framing and a turntable's centre take in
+    // every frame (as TileRenderer::check_settings does), not each frame's posed objects
+    // (the camera drifted and zoomed with whatever moved).
+    Bounds rest_bounds;
   };
   std::shared_ptr<const StaticPart> static_part_;
   RenderSettings settings_;

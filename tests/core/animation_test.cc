@@ -7,6 +7,7 @@
 #include "core/accel/accel.h"
 #include "core/render/tile_renderer.h"
 #include "core/scene/load.h"
+#include "tests/core/gltf_fixture.h"
 #include "tests/core/test_paths.h"
 
 namespace tessera {
@@ -74,6 +75,53 @@ TEST(Animation, InstancingTheStaticPartGivesTheImageOfAFullBuild) {
     ASSERT_EQ(x[i].b, y[i].b) << i;
   }
   EXPECT_EQ(a.rays.rays, b.rays.rays);
+}
+
+}  // namespace
+}  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: CS184 framing and a turntable took each frame's posed objects, so the
+// camera drifted and zoomed with whatever moved (a static quad slid across the image from
+// frame to frame), while the sequence's check took the rest pose's. Both take the rest
+// pose's bounds: a triangle moving 5 units leaves the camera where it was.
+TEST(Animation, Cs184FramingAndATurntableTakeTheRestPosesBounds) {
+  Doc d;
+  const size_t at = d.blob.size();
+  put<float>(d.blob, {0, 1, 0, 0, 0, 5, 0, 0});  // times 0, 1; translations (0,0,0), (5,0,0)
+  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at}, {"byteLength", 8}});
+  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at + 8}, {"byteLength", 24}});
+  d.j["accessors"].push_back({{"bufferView", 4}, {"componentType", 5126}, {"count", 2}, {"type", "SCALAR"}});
+  d.j["accessors"].push_back({{"bufferView", 5}, {"componentType", 5126}, {"count", 2}, {"type", "VEC3"}});
+  d.j["buffers"][0]["byteLength"] = d.blob.size();
+  const json channel = {{"sampler", 0}, {"target", {{"node", 0}, {"path", "translation"}}}};
+  const json sampler = {{"input", 4}, {"output", 5}};
+  d.j["animations"] = json::array({{{"channels", json::array({channel})}, {"samplers", json::array({sampler})}}});
+  d.embed();
+  const fs::path file = fs::temp_directory_path() / ("tessera_rest_bounds_" + std::to_string(::getpid()) + ".gltf");
+  std::ofstream(file) << d.j.dump();
+  const Scene scene = load_scene(file.string());
+  fs::remove(file);
+  ASSERT_TRUE(scene.animation);
+  for (const bool turntable : {false, true}) {
+    RenderSettings s;
+    s.camera.width = 16;
+    s.camera.height = 12;
+    s.camera.framing = turntable ? Framing::kFile : Framing::kCs184;
+    if (turntable)
+      s.camera.path = std::make_shared<const CameraPath>(CameraPath::parse(R"({"turntable": {"frames": 24}})"));
+    std::vector<Vec3> eyes;
+    for (const int frame : {0, 24}) {  // 24 fps: the rest pose, then 5 units along x
+      s.frame = frame;
+      const TileRenderer r(scene, s);
+      eyes.push_back(r.camera().eye());
+    }
+    EXPECT_EQ(eyes[0].x, eyes[1].x) << turntable;  // (a whole turn apart: the same place)
+    EXPECT_EQ(eyes[0].y, eyes[1].y) << turntable;
+    EXPECT_EQ(eyes[0].z, eyes[1].z) << turntable;
+  }
 }
 
 }  // namespace
