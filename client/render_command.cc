@@ -1,11 +1,13 @@
 #include "client/render_command.h"
 
+#include <fmt/format.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -46,6 +48,19 @@ class ProgressPrinter {
   ProgressBar bar_;
 };
 
+// Writes every output it can: one that cannot be written (a folder in its place, a full
+// disk) does not lose the others, which were dropped after the first failure; the failures
+// are thrown together after.
+void write_each(const std::vector<std::string>& outputs, const std::function<void(const std::string&)>& write) {
+  std::string failed;
+  for (const std::string& out : outputs) try {
+      write(out);
+    } catch (const std::exception& e) {
+      failed += (failed.empty() ? "" : "; ") + std::string(e.what());
+    }
+  if (!failed.empty()) throw std::runtime_error(failed);
+}
+
 // --denoise: the noisy EXR is written first (the first .exr asked for, else a temporary
 // beside the first output) and denoised in place, as the coordinator does a farm job's:
 // one path, so the same bits. The other outputs are made from the denoised file.
@@ -58,14 +73,18 @@ double write_denoised(const RenderResult& r, const ImageMetadata& meta, const Re
   options.threads = threads;
   const DenoiseReport d = denoise_exr(exr, exr, options);
   std::optional<std::string> png;
-  for (const std::string& out : outputs) {
-    if (out == exr) continue;
-    if (is_exr_path(out)) {
-      write_file_atomic(out, read_file_bytes(exr));
-      continue;
-    }
-    if (!png) png = full_png(exr);  // (the colour alone: not the AOV layers and the noisy copy)
-    write_file_atomic(out, *png);
+  std::vector<std::string> rest;
+  for (const std::string& out : outputs)
+    if (out != exr) rest.push_back(out);
+  try {
+    write_each(rest, [&](const std::string& out) {
+      if (is_exr_path(out)) return write_file_atomic(out, read_file_bytes(exr));
+      if (!png) png = full_png(exr);  // (the colour alone: not the AOV layers and the noisy copy)
+      write_file_atomic(out, *png);
+    });
+  } catch (const std::exception&) {
+    if (first_exr == outputs.end()) std::remove(exr.c_str());
+    throw;
   }
   if (first_exr == outputs.end()) std::remove(exr.c_str());
   return d.seconds;
@@ -84,7 +103,7 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
                      {"nan_samples", std::to_string(r.stats.nan_samples)}};
   if (s.frame) {
     meta["frame"] = std::to_string(*s.frame);
-    meta["time"] = std::to_string(s.time());  // seconds: frame / fps
+    meta["time"] = fmt::format("{}", s.time());  // (shortest exact: to_string kept 6 decimals)  // seconds: frame / fps
   }
   if (s.exposure != 0) meta[kExposureAttribute] = exposure_text(s.exposure);
   if (s.aovs) meta["aovs"] = aov_names(s.aovs);
@@ -92,7 +111,7 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
   if (s.denoise)
     denoise_seconds = write_denoised(r, meta, s, outputs, a.threads);
   else
-    for (const std::string& out : outputs) write_image(out, r.film, meta, &r.aovs, s.aovs);
+    write_each(outputs, [&](const std::string& out) { write_image(out, r.film, meta, &r.aovs, s.aovs); });
 
   const uint64_t rays = r.stats.rays.rays + r.stats.rays.shadow_rays;
   const double sps = r.stats.samples / std::max(r.seconds, 1e-9), rps = rays / std::max(r.seconds, 1e-9);

@@ -1,5 +1,7 @@
 #include "server/snapshotter.h"
 
+#include <fmt/format.h>
+
 #include <chrono>
 
 #include "core/util/log.h"
@@ -75,7 +77,7 @@ SnapshotPlan Snapshotter::next(Job& j, double now) const {
   if (j.started > 0) p.meta["render_seconds"] = std::to_string(p.elapsed);
   if (st.frame) {
     p.meta["frame"] = std::to_string(*st.frame);
-    p.meta["time"] = std::to_string(st.time());  // seconds: frame / fps
+    p.meta["time"] = fmt::format("{}", st.time());  // (shortest exact)  // seconds: frame / fps
   }
   if (st.exposure != 0) p.meta[kExposureAttribute] = exposure_text(st.exposure);  // (PNGs made of it take it)
   // The image of an ended DONE job (denoised where asked): a restart leaves it be

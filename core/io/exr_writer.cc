@@ -7,6 +7,7 @@
 #include <OpenEXR/ImfStringAttribute.h>
 
 #include <cstdio>
+#include <limits>
 #include <stdexcept>
 
 #include "core/io/files.h"
@@ -60,7 +61,9 @@ void ExrWriter::write_rows(const PixelSums* sums, int rows, const AovSums* aov, 
     g_[i] = m.g;
     b_[i] = m.b;
     spp_[i] = float(p.n);
-    var_[i] = float(p.mean_variance());
+    // (float's largest where the variance passes it: an emitter near the 1e20 bound squares
+    // past float; +inf read as a value, not an overflow)
+    var_[i] = float(std::min(p.mean_variance(), double(std::numeric_limits<float>::max())));
   }
   Imf::FrameBuffer fb;
   const Imath::V2i origin(0, next_row_);  // these rows' place in the image

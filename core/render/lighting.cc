@@ -78,7 +78,8 @@ void print_scene_notes(const Scene& scene, const RenderSettings& s, std::FILE* t
   // An unlit scene's warning (its first) says what the default environment does: moot
   // when the user gave an environment.
   const bool lit_by_flags = s.environment || !s.environment_map.empty();
-  for (size_t i = scene.unlit && lit_by_flags ? 1 : 0; i < scene.warnings.size(); ++i)
+  // ... and wrong without the default environment (--no-default-env): the lighting line says so.
+  for (size_t i = scene.unlit && (lit_by_flags || !s.default_environment) ? 1 : 0; i < scene.warnings.size(); ++i)
     std::fprintf(to, "tessera: warning: %s\n", scene.warnings[i].c_str());
   std::fprintf(to, "tessera: lighting: %s\n", describe_lighting(scene, s).c_str());
 }

@@ -57,7 +57,7 @@ void RenderSettings::validate() const {
   require(std::isfinite(exposure) && std::fabs(exposure) <= kMaxExposure, "--exposure",
           "must be a finite EV in -64..64");
   require(animation.size() <= kMaxAnimationName, "--animation", "a name of at most 256 bytes");
-  require(std::isfinite(fps) && fps > 0 && fps <= kMaxFps, "--fps", "must be > 0 and at most 1e6");
+  require(std::isfinite(fps) && fps >= kMinFps && fps <= kMaxFps, "--fps", "must be between 1e-6 and 1e6");
   require(std::isfinite(noise_target) && noise_target >= 0 && noise_target <= kMaxNoiseTarget, "--noise-target",
           "must be in 0..1e9");
   require(camera.width >= 1 && camera.width <= kMaxImageSide && camera.height >= 1 && camera.height <= kMaxImageSide,

@@ -65,7 +65,7 @@ struct RenderSettings {
   // The seed the sampler uses: `seed`, mixed with the frame number when there is one.
   uint64_t sample_seed() const;
   // --fps: frames per second: a frame's time (for animation) is frame / fps seconds.
-  static constexpr double kMaxFps = 1e6;
+  static constexpr double kMaxFps = 1e6, kMinFps = 1e-6;  // (a frame time below 2^31 / 1e-6 s stays finite)
   double fps = 24;
   double time() const { return frame ? double(*frame) / fps : 0.0; }
   // --animation: which of a glTF file's animations frames follow, by name or index (empty:

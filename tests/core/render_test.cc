@@ -3,9 +3,13 @@
 
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <limits>
 #include <set>
 
+#include "core/io/image_io.h"
 #include "core/render/local_renderer.h"
+#include "core/scene/image_read.h"
 #include "core/scene/load.h"
 #include "tests/core/render_helpers.h"
 #include "tests/core/test_paths.h"
@@ -352,6 +356,29 @@ TEST(Estimators, WithoutNeeAndWithoutMisTheMeanIsUnchanged) {
   const testing::Estimate no_nee = testing::film_estimate(testing::render(scene, s).film);
   EXPECT_NEAR(no_mis.mean, full.mean, 5 * std::hypot(no_mis.stderr_, full.stderr_));
   EXPECT_NEAR(no_nee.mean, full.mean, 5 * std::hypot(no_nee.stderr_, full.stderr_));
+}
+
+}  // namespace
+}  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: the variance channel was the double's variance rounded to float, +inf for
+// an emitter near the 1e20 bound (its squared luminance passes float). It is float's
+// largest there; the colour is untouched.
+TEST(ExrOutput, AVarianceFloatCannotHoldIsItsLargest) {
+  Film film(Rect{0, 0, 2, 1});
+  film.at(0, 0) = PixelSums{9e19, 9e19, 9e19, 2 * 8.1e39, 2};
+  film.at(1, 0) = PixelSums{0.5, 0.5, 0.5, 0.25, 2};
+  const std::string path =
+      (std::filesystem::temp_directory_path() / ("tessera_var_" + std::to_string(::getpid()) + ".exr")).string();
+  write_exr(path, film, {});
+  const ExrImage img = read_exr(path);
+  std::filesystem::remove(path);
+  EXPECT_EQ(img.channels.at("variance")[0], std::numeric_limits<float>::max());
+  EXPECT_TRUE(std::isfinite(img.channels.at("variance")[1]));
+  EXPECT_FLOAT_EQ(img.channels.at("R")[0], 4.5e19f);
 }
 
 }  // namespace

@@ -382,3 +382,35 @@ TEST_F(Cli, CompareRegionsSkipNonFinitePixelsAndRefuseWhatIsNotInTheImage) {
 }
 
 }  // namespace
+
+namespace {
+
+// Found by audit: an output that could not be written (a folder in its place) lost the
+// outputs after it, the render thrown away; each is now written if it can be, the failures
+// said together. A frame's time is written exactly (--fps 700000 kept 6 decimals:
+// "0.000001", 30% off), and an fps whose frame times are not finite is refused; the
+// warning of an unlit glTF scene no longer says a default environment lights it under
+// --no-default-env.
+TEST_F(Cli, EveryOutputThatCanBeWrittenIsAndAFramesTimeIsExact) {
+  fs::create_directories(dir / "taken.png");
+  const std::string kept = (dir / "kept.exr").string();
+  CommandResult r =
+      run("render " + scene + " -s 1 -r 16 12 -m 1 -q -f " + (dir / "taken.png").string() + " -f " + kept);
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.err.find("taken.png"), std::string::npos) << r.err;
+  EXPECT_TRUE(fs::exists(kept));
+  const std::string timed = (dir / "timed.exr").string();
+  r = run("render " + scene + " -s 1 -r 8 6 -m 1 -q --fps 700000 --frame 1 -f " + timed);
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_EQ(tessera::read_exr(timed).metadata.at("tessera/time"), "1.4285714285714286e-06");
+  r = run("render " + scene + " -s 1 -r 8 6 -q --fps 5e-324 --frame 1 -f " + timed);
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.err.find("--fps"), std::string::npos) << r.err;
+  const std::string unlit = std::string(TESSERA_SOURCE_DIR) + "/scenes/skinned-bar.gltf";  // (no light)
+  r = run("render " + unlit + " -s 1 -r 8 6 -m 1 --no-default-env -f " + (dir / "unlit.exr").string());
+  EXPECT_EQ(r.err.find("neutral default environment"), std::string::npos) << r.err;
+  r = run("render " + unlit + " -s 1 -r 8 6 -m 1 -f " + (dir / "unlit.exr").string());  // (said where it is so)
+  EXPECT_NE(r.err.find("neutral default environment"), std::string::npos) << r.err;
+}
+
+}  // namespace

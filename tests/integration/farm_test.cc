@@ -1,5 +1,7 @@
 // The render farm as a user runs it: a real coordinator and workers on 127.0.0.1, driven
 // through the tessera CLI; every image equal to tessera render's, bit for bit.
+#include <fmt/format.h>
+
 #include "tests/integration/farm_fixture.h"
 
 namespace tessera {
@@ -79,7 +81,7 @@ TEST_F(Farm, ASequenceThroughAFarmLosingAWorkerGivesEveryFrameOfTesseraRender) {
     std::snprintf(name, sizeof name, "farm.%04d.exr", n);
     expect_same_pixels(local_frame(n), (dir / name).string());
     EXPECT_EQ(read_exr((dir / name).string()).metadata.at("tessera/frame"), std::to_string(n));
-    EXPECT_EQ(read_exr((dir / name).string()).metadata.at("tessera/time"), std::to_string(n / 24.0));
+    EXPECT_EQ(read_exr((dir / name).string()).metadata.at("tessera/time"), fmt::format("{}", n / 24.0));
   }
   const nlohmann::json seq = get_json("/api/jobs/" + id);  // the live page's view of it
   ASSERT_EQ(seq.at("frames").size(), 4u) << seq;
