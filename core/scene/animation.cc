@@ -147,13 +147,19 @@ void place_camera(CameraDesc& d, const Mat4& w) {
   d.cs184_dir = -d.forward;
 }
 
-void place_light(Light& l, const Mat4& w) {
+Mat4 orientation_of(bool trs, const std::array<double, 4>& rotation, const Mat4& matrix) {
+  return trs ? trs_matrix({0, 0, 0}, rotation, {1, 1, 1}) : matrix;
+}
+
+void place_light(Light& l, const Mat4& w, const Mat4& orientation) {
+  Vec3 aim = unit(w.vector(0, 0, -1));
+  if (aim == Vec3{}) aim = unit(orientation.vector(0, 0, -1));  // scaled to zero: its rotation's
   if (l.kind == Light::Kind::kDirectional) {
-    l.direction = -unit(w.vector(0, 0, -1));
+    l.direction = -aim;
     return;
   }
   l.position = w.point(0, 0, 0).to_float();
-  if (l.kind == Light::Kind::kSpot) l.direction = unit(w.vector(0, 0, -1));
+  if (l.kind == Light::Kind::kSpot) l.direction = aim;
 }
 
 bool placed(const Light& l) {
@@ -165,7 +171,7 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
   const SceneAnimation& a = *rest.animation;
   const SceneAnimation::Clip& clip = a.clips.at(clip_index);
   // Each node entry's local transform at this time, then its world transform.
-  std::vector<Mat4> world(a.nodes.size());
+  std::vector<Mat4> world(a.nodes.size()), orientation(a.nodes.size());
   std::vector<bool> moved(a.nodes.size(), false);
   // The clip's transform channels by node, and each animated node's local transform once
   // however often the node graph visits it (each entry scanned every channel: a graph of a
@@ -177,6 +183,7 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
   for (size_t i = 0; i < a.nodes.size(); ++i) {
     const SceneAnimation::Node& node = a.nodes[i];
     Mat4 local = node.matrix;
+    std::array<double, 4> rotation = node.rotation;
     bool animated = false;
     if (const auto channels = by_node.find(node.gltf_node); node.trs && channels != by_node.end()) {
       animated = true;
@@ -193,9 +200,13 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
         at->second = trs_matrix(t, r, s);
       }
       local = at->second;
+      for (const SceneAnimation::Channel* c : channels->second)
+        if (c->path == SceneAnimation::Path::kRotation) rotation = sample_channel(*c, time);
     }
     const int32_t p = node.parent;
     world[i] = p >= 0 ? world[size_t(p)] * local : local;
+    const Mat4 turn = orientation_of(node.trs, rotation, node.matrix);
+    orientation[i] = p >= 0 ? orientation[size_t(p)] * turn : turn;
     moved[i] = animated || (p >= 0 && moved[size_t(p)]);
   }
   Scene s = rest;
@@ -248,9 +259,9 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
     if (!moved[b.node]) continue;
     const Mat4& w = world[b.node];
     Light& l = s.lights[b.light];
-    place_light(l, w);
+    place_light(l, w, orientation[b.node]);
     check(l.position, "light '" + l.name + "'");
-    if (!placed(l))  // (a light scaled to zero to hide it: its direction is none)
+    if (!placed(l))  // (a degenerate matrix of a node the file gave as one)
       throw SceneError(rest.source, "animations[" + std::to_string(clip_index) + "]",
                        "at " + std::to_string(time) + " s light '" + l.name +
                            "' has no direction: its node's transform is degenerate");

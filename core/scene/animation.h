@@ -87,7 +87,12 @@ std::vector<double> sample_weights(const SceneAnimation::Channel& c, double time
 // direction) and a punctual light (position, and direction for spot and directional):
 // the loader places them, and so does every pose.
 void place_camera(CameraDesc& d, const Mat4& world);
-void place_light(Light& l, const Mat4& world);
+// `orientation`: the node's world transform without its scales (its rotations and matrices
+// alone): a spot or directional light's direction where a scale of zero (how a light is
+// often hidden, and glTF says scale does not affect a light) leaves `world` none.
+void place_light(Light& l, const Mat4& world, const Mat4& orientation);
+// A node's local transform for `orientation`: its rotation (TRS), or its matrix.
+Mat4 orientation_of(bool trs, const std::array<double, 4>& rotation, const Mat4& matrix);
 // Whether place_light gave the light a finite position and, for spot and directional, a
 // direction (a degenerate transform gives none).
 bool placed(const Light& l);

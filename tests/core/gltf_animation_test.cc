@@ -139,3 +139,38 @@ TEST_F(GltfAnimation, HostileAnimationDataIsRefusedNamingTheElement) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: a spot or directional light scaled to zero (a common way to hide one;
+// glTF says scale does not affect a light) had no direction: a file whose light rests at
+// scale 0 was refused, and one animated to 0 failed its sequence midway. Its direction is
+// its node's rotation then. Node 2 holds a spot light (turned 90 degrees about x: aimed at
+// +y) under node 3, which the clip scales from 1 to 0 (or 0 to 1).
+TEST_F(GltfAnimation, ALightScaledToZeroKeepsItsRotationsDirection) {
+  for (const bool from_zero : {false, true}) {
+    Doc d = animated("scale", "LINEAR", {0, 1},
+                     from_zero ? std::vector<float>{0, 0, 0, 1, 1, 1} : std::vector<float>{1, 1, 1, 0, 0, 0});
+    d.j["animations"][0]["channels"][0]["target"]["node"] = 3;
+    d.j["extensionsUsed"] = {"KHR_lights_punctual"};
+    d.j["extensions"]["KHR_lights_punctual"]["lights"] = {
+        {{"type", "spot"}, {"intensity", 68.3}, {"spot", {{"innerConeAngle", 0.2}, {"outerConeAngle", 0.4}}}}};
+    const double h = std::sqrt(0.5);
+    d.j["nodes"].push_back({{"rotation", {h, 0, 0, h}}, {"extensions", {{"KHR_lights_punctual", {{"light", 0}}}}}});
+    d.j["nodes"].push_back(
+        {{"children", {2}}, {"translation", {0, 1, 0}}, {"scale", from_zero ? json{0, 0, 0} : json{1, 1, 1}}});
+    d.j["scenes"][0]["nodes"] = {0, 1, 3};
+    const Scene s = load(d);
+    ASSERT_EQ(s.lights.size(), 1u);
+    for (const double time : {0.0, 0.5, 1.0}) {
+      const Vec3 aim = pose_scene(s, 0, time).lights[0].direction;
+      EXPECT_NEAR(aim.x, 0, 1e-6) << time;
+      EXPECT_NEAR(aim.y, 1, 1e-6) << time;
+      EXPECT_NEAR(aim.z, 0, 1e-6) << time;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace tessera

@@ -20,7 +20,7 @@ std::optional<int> gltf_node_light(const GltfContext& ctx, const tinygltf::Node&
   return it->second.Get("light").GetNumberAsInt();
 }
 
-void add_gltf_light(GltfContext& ctx, int index, const Mat4& w, const std::string& node_el) {
+void add_gltf_light(GltfContext& ctx, int index, const Mat4& w, const Mat4& orientation, const std::string& node_el) {
   if (index < 0 || size_t(index) >= ctx.model.lights.size())
     ctx.fail(node_el, "light " + std::to_string(index) + " does not exist");
   const tinygltf::Light& g = ctx.model.lights[size_t(index)];
@@ -51,7 +51,7 @@ void add_gltf_light(GltfContext& ctx, int index, const Mat4& w, const std::strin
   } else {
     ctx.fail(el, "unknown light type '" + g.type + "'");
   }
-  place_light(l, w);
+  place_light(l, w, orientation);
   if (!placed(l)) ctx.fail(node_el, "light transform is degenerate");
   ctx.scene.lights.push_back(l);
 }

@@ -15,7 +15,8 @@ std::optional<int> gltf_node_light(const GltfContext& ctx, const tinygltf::Node&
 
 // KHR_lights_punctual's lights[index] placed by `world`, appended to the scene's lights:
 // photometric units divided by 683 lm/W.
-void add_gltf_light(GltfContext& ctx, int index, const Mat4& world, const std::string& node_el);
+void add_gltf_light(GltfContext& ctx, int index, const Mat4& world, const Mat4& orientation,
+                    const std::string& node_el);  // orientation: place_light's
 
 // cameras[index] placed by `world` as the scene's camera, unless an earlier node's camera
 // is already (the first in the scene's node order wins); it must exist either way.

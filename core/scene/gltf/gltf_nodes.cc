@@ -82,7 +82,8 @@ class NodeWalk {
       : ctx_(ctx), materials_(materials), animation_(animation) {}
 
   // `parent_entry`: the parent's entry in the animation's hierarchy (-1: none).
-  void visit(int index, const Mat4& parent, int32_t parent_entry) {
+  // `parent_orientation`: the parent's world transform without its scales (place_light).
+  void visit(int index, const Mat4& parent, const Mat4& parent_orientation, int32_t parent_entry) {
     throw_if_cancelled();
     const std::string el = "nodes[" + std::to_string(index) + "]";
     // check_gltf_budget went over this graph first: every node exists, no cycle, no deeper
@@ -90,6 +91,7 @@ class NodeWalk {
     const tinygltf::Node& n = ctx_.model.nodes[size_t(index)];
     const Mat4 local = gltf_local_matrix(ctx_, n, el);
     const Mat4 world = parent * local;
+    const Mat4 orientation = parent_orientation * orientation_of(n.matrix.empty(), gltf_trs(ctx_, n, el).r, local);
     int32_t entry = -1;
     if (animation_.recording()) {  // the hierarchy, for posing frames of an animation
       SceneAnimation::Node e;
@@ -154,10 +156,10 @@ class NodeWalk {
       if (animation_.recording() && first) animation_.set_camera(entry);
     }
     if (const std::optional<int> light = gltf_node_light(ctx_, n, el)) {
-      add_gltf_light(ctx_, *light, world, el);
+      add_gltf_light(ctx_, *light, world, orientation, el);
       if (animation_.recording()) animation_.add_light(uint32_t(ctx_.scene.lights.size() - 1), entry);
     }
-    for (int c : n.children) visit(c, world, entry);
+    for (int c : n.children) visit(c, world, orientation, entry);
   }
 
   // Each instance a copy of the mesh in world space (one copy without the extension).
@@ -212,7 +214,7 @@ void add_gltf_nodes(GltfContext& ctx, GltfMaterials& materials, GltfAnimationBui
   const std::vector<int> roots = scene_roots(ctx);
   check_gltf_budget(ctx, roots);  // before anything is expanded
   NodeWalk walk(ctx, materials, animation);
-  for (int r : roots) walk.visit(r, Mat4(), -1);
+  for (int r : roots) walk.visit(r, Mat4(), Mat4(), -1);
   if (walk.skinned_.empty()) return;
   const std::vector<Mat4> rest = gltf_rest_worlds(ctx);
   for (const NodeWalk::Skinned& k : walk.skinned_) {
