@@ -485,5 +485,20 @@ TEST_F(Gltf, OptionalUnsupportedExtensionIsAWarningOnce) {
   EXPECT_GE(n, 1);
 }
 
+// Found by audit: an extension an object uses but extensionsUsed does not list (the spec
+// requires it to; such files exist) was ignored without a word.
+TEST_F(Gltf, AnUnlistedUnsupportedExtensionIsAWarningToo) {
+  Doc d;
+  d.j["materials"][0]["extensions"] = {{"KHR_materials_iridescence", {{"iridescenceFactor", 1}}},
+                                       {"KHR_materials_emissive_strength", {{"emissiveStrength", 1}}}};
+  d.j["nodes"][0]["extensions"] = {{"EXT_made_up", json::object()}};
+  const Scene s = load(d);
+  std::string all;
+  for (const auto& w : s.warnings) all += w + "\n";
+  EXPECT_NE(all.find("'KHR_materials_iridescence' is used but not in extensionsUsed"), std::string::npos) << all;
+  EXPECT_NE(all.find("'EXT_made_up' is used but not in extensionsUsed"), std::string::npos) << all;
+  EXPECT_EQ(all.find("KHR_materials_emissive_strength"), std::string::npos) << all;  // supported
+}
+
 }  // namespace
 }  // namespace tessera

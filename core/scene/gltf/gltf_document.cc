@@ -276,6 +276,32 @@ void parse_gltf_model(GltfDocument doc, GltfContext& ctx) {
     else if (!gltf_extension_supported(ext))
       ctx.scene.warnings.push_back(ctx.path + ": optional extension '" + ext + "' is not supported; ignored");
   }
+  // Extensions objects use that extensionsUsed does not list (the spec requires it to, but
+  // such files exist): not ignored silently either.
+  const std::set<std::string> listed(ctx.model.extensionsUsed.begin(), ctx.model.extensionsUsed.end());
+  std::set<std::string> unlisted;
+  const auto look = [&](const tinygltf::ExtensionMap& m) {
+    for (const auto& [name, value] : m)
+      if (!listed.count(name) && !gltf_extension_supported(name) && !gltf_undecodable_format(name))
+        unlisted.insert(name);
+  };
+  look(ctx.model.extensions);
+  for (const tinygltf::Material& m : ctx.model.materials) {
+    look(m.extensions);
+    for (const tinygltf::TextureInfo* t : {&m.pbrMetallicRoughness.baseColorTexture,
+                                           &m.pbrMetallicRoughness.metallicRoughnessTexture, &m.emissiveTexture})
+      look(t->extensions);
+    look(m.normalTexture.extensions);
+    look(m.occlusionTexture.extensions);
+  }
+  for (const tinygltf::Texture& t : ctx.model.textures) look(t.extensions);
+  for (const tinygltf::Node& n : ctx.model.nodes) look(n.extensions);
+  for (const tinygltf::Mesh& m : ctx.model.meshes)
+    for (const tinygltf::Primitive& p : m.primitives) look(p.extensions);
+  for (const tinygltf::Camera& c : ctx.model.cameras) look(c.extensions);
+  for (const std::string& name : unlisted)
+    ctx.scene.warnings.push_back(ctx.path + ": extension '" + name +
+                                 "' is used but not in extensionsUsed, and is not supported; ignored");
 }
 
 }  // namespace tessera
