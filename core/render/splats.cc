@@ -161,10 +161,16 @@ SplatFilm::SplatFilm(Rect window, int64_t image_pixels, bool halves, int exponen
       image_pixels_(image_pixels),
       halves_(halves),
       gain_(std::ldexp(1.0, exponent)),
-      sums_(size_t(window.area()) * 4 * (halves ? 2 : 1)) {}
+      chunks_((size_t(window.area()) * (halves ? 2 : 1) + kChunkPixels - 1) / kChunkPixels) {}
+
+int64_t* SplatFilm::writable(size_t k) {
+  std::unique_ptr<int64_t[]>& chunk = chunks_[k / kChunkPixels];
+  if (!chunk) chunk = std::make_unique<int64_t[]>(kChunkPixels * 4);  // (zeroed)
+  return &chunk[(k % kChunkPixels) * 4];
+}
 
 void SplatFilm::add_to(size_t index, const int64_t v[4]) {
-  int64_t* sums = &sums_[index * 4];
+  int64_t* sums = writable(index);
   for (int c = 0; c < 4; ++c) sums[c] = saturating_sum(sums[c], v[c]);
 }
 
@@ -178,7 +184,7 @@ void SplatFilm::add_record(const SplatRecord& record, uint64_t dropped) {
 
 void SplatFilm::clear() {
   MutexLock lock(mu_);
-  std::fill(sums_.begin(), sums_.end(), 0);
+  for (std::unique_ptr<int64_t[]>& chunk : chunks_) chunk.reset();
   paths_[0] = paths_[1] = 0;
   dropped_ = 0;
 }
@@ -193,8 +199,12 @@ void SplatFilm::set_rows(int y0, int rows, bool odd, const SplatSums* sums) {
   MutexLock lock(mu_);
   const size_t at = (odd ? size_t(window_.area()) : 0) + size_t(y0) * size_t(window_.w);
   for (size_t i = 0; i < size_t(rows) * size_t(window_.w); ++i) {
-    for (int c = 0; c < 3; ++c) sums_[(at + i) * 4 + c] = sums[i].rgb[c];
-    sums_[(at + i) * 4 + 3] = sums[i].lum2;
+    const SplatSums& v = sums[i];
+    const bool zero = v.rgb[0] == 0 && v.rgb[1] == 0 && v.rgb[2] == 0 && v.lum2 == 0;
+    if (zero && !chunks_[(at + i) / kChunkPixels]) continue;  // (no chunk: zero already)
+    int64_t* out = writable(at + i);
+    for (int c = 0; c < 3; ++c) out[c] = v.rgb[c];
+    out[3] = v.lum2;
   }
 }
 
@@ -215,6 +225,13 @@ uint64_t SplatFilm::odd_paths() const {
   return paths_[1];
 }
 
+uint64_t SplatFilm::bytes() const {
+  MutexLock lock(mu_);
+  uint64_t n = 0;
+  for (const std::unique_ptr<int64_t[]>& chunk : chunks_) n += chunk ? kChunkPixels * 4 * sizeof(int64_t) : 0;
+  return n;
+}
+
 uint64_t SplatFilm::dropped() const {
   MutexLock lock(mu_);
   return dropped_;
@@ -227,8 +244,11 @@ double SplatFilm::scale(bool odd) const {
 
 SplatSums SplatFilm::sums_at(size_t k) const {
   SplatSums s;
-  for (int c = 0; c < 3; ++c) s.rgb[c] = sums_[k * 4 + c];
-  s.lum2 = sums_[k * 4 + 3];
+  const std::unique_ptr<int64_t[]>& chunk = chunks_[k / kChunkPixels];
+  if (!chunk) return s;
+  const int64_t* sums = &chunk[(k % kChunkPixels) * 4];
+  for (int c = 0; c < 3; ++c) s.rgb[c] = sums[c];
+  s.lum2 = sums[3];
   return s;
 }
 

@@ -111,3 +111,44 @@ TEST(LightTracer, AgreesWithThePathTracerThroughAClearCoatedPrism) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: a frame's splat film was two full planes of int64 sums made at the
+// first record, 1.06 GB for an 8K frame even when no splat landed (the coordinator's
+// memory for such a frame 2.64 GB against its film's 1.33 GB). Its sums are chunks made at
+// their first splat; the sums read back are the same.
+TEST(SplatFilm, ItsSumsTakeMemoryOnlyWhereSplatsLanded) {
+  SplatFilm film(Rect{0, 0, 7680, 4320}, int64_t(7680) * 4320, true);
+  EXPECT_EQ(film.bytes(), 0u);
+  SplatRecord record;
+  record.paths = 10;
+  SplatEntry e;
+  e.index = uint32_t(7680 * 2000 + 4000);
+  e.v[0] = 5, e.v[1] = 6, e.v[2] = 7, e.v[3] = 8;
+  record.entries.push_back(e);
+  film.add_record(record);
+  film.add_record(record);
+  EXPECT_EQ(film.bytes(), (uint64_t(1) << 14) * 32);  // one chunk
+  const SplatSums at = film.at(4000, 2000);
+  EXPECT_EQ(at.rgb[0], 10);
+  EXPECT_EQ(at.lum2, 16);
+  EXPECT_EQ(film.at(0, 0).rgb[0], 0);
+  EXPECT_EQ(film.at(4000, 2000, true).rgb[0], 0);  // the odd plane
+  std::vector<SplatSums> row;
+  film.copy_rows(2000, 1, false, &row);
+  EXPECT_EQ(row[4000].rgb[2], 14);
+  // Rows set back (a checkpoint): zero rows make no chunk.
+  SplatFilm restored(Rect{0, 0, 7680, 4320}, int64_t(7680) * 4320, true);
+  std::vector<SplatSums> zeros(7680);
+  restored.set_rows(100, 1, true, zeros.data());
+  EXPECT_EQ(restored.bytes(), 0u);
+  restored.set_rows(2000, 1, false, row.data());
+  EXPECT_EQ(restored.at(4000, 2000).rgb[2], 14);
+  film.clear();
+  EXPECT_EQ(film.bytes(), 0u);
+}
+
+}  // namespace
+}  // namespace tessera
