@@ -174,3 +174,24 @@ TEST_F(GltfAnimation, ALightScaledToZeroKeepsItsRotationsDirection) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: an animated node's single EXT_mesh_gpu_instancing instance lost its
+// transform in every posed frame (only several instances were baked into the mesh's object
+// space): the triangle at x + 2 at rest sat at x + 0 in frame 0.
+TEST_F(GltfAnimation, AnAnimatedNodesSingleInstanceKeepsItsTransform) {
+  Doc d = animated("translation", "LINEAR", {0, 1}, {0, 0, 0, 0, 1, 0});
+  const int shift = add_floats(d, {2, 0, 0}, "VEC3");
+  d.j["nodes"][0]["extensions"] = {{"EXT_mesh_gpu_instancing", {{"attributes", {{"TRANSLATION", shift}}}}}};
+  d.j["extensionsUsed"] = {"EXT_mesh_gpu_instancing"};
+  const Scene s = load(d);
+  EXPECT_FLOAT_EQ(s.meshes[0].positions[1].x, 3);  // the rest pose: (1, 0, 0) + (2, 0, 0)
+  EXPECT_FLOAT_EQ(vertex1(s, 0).x, 3);
+  EXPECT_FLOAT_EQ(vertex1(s, 1).x, 3);
+  EXPECT_FLOAT_EQ(vertex1(s, 1).y, 1);
+}
+
+}  // namespace
+}  // namespace tessera

@@ -174,7 +174,14 @@ class NodeWalk {
             ctx_.fail(el, "EXT_mesh_gpu_instancing: " + std::to_string(instances.size()) +
                               " instances make more than the 50 M triangle limit (an animated or skinned "
                               "node's instances are copies)");
-          // An animated node moves its instances as one: their object space includes the instance's own transform.
+        }
+        bool identity = true;
+        for (int r = 0; r < 4; ++r)
+          for (int c = 0; c < 4; ++c) identity = identity && inst(r, c) == (r == c ? 1.0 : 0.0);
+        if (!identity) {  // the extension's instance (one, or each of several)
+          // An animated node moves its instances as one: their object space includes the
+          // instance's own transform (a single instance's too: it was left out, and every
+          // posed frame lost it), and so do its morph targets' displacements.
           for (size_t i = 0; i + 2 < p.positions.size(); i += 3) {
             const Dvec3 q = inst.point(p.positions[i], p.positions[i + 1], p.positions[i + 2]);
             p.positions[i] = float(q.x), p.positions[i + 1] = float(q.y), p.positions[i + 2] = float(q.z);
@@ -183,6 +190,14 @@ class NodeWalk {
           for (size_t i = 0; i + 2 < p.normals.size(); i += 3) {
             const Dvec3 q = nt.vector(p.normals[i], p.normals[i + 1], p.normals[i + 2]);
             p.normals[i] = float(q.x), p.normals[i + 1] = float(q.y), p.normals[i + 2] = float(q.z);
+          }
+          if (p.morph) {
+            auto morph = std::make_shared<MorphTargets>(*p.morph);
+            for (std::vector<Vec3>& target : morph->positions)
+              for (Vec3& d : target) d = inst.vector(d.x, d.y, d.z).to_float();
+            for (std::vector<Vec3>& target : morph->normals)
+              for (Vec3& d : target) d = nt.vector(d.x, d.y, d.z).to_float();
+            p.morph = std::move(morph);
           }
         }
         if (animation_.recording()) animation_.add_mesh(id, entry, p);
