@@ -103,7 +103,7 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
                      {"nan_samples", std::to_string(r.stats.nan_samples)}};
   if (s.frame) {
     meta["frame"] = std::to_string(*s.frame);
-    meta["time"] = fmt::format("{}", s.time());  // (shortest exact: to_string kept 6 decimals)  // seconds: frame / fps
+    meta["time"] = fmt::format("{}", s.time());  // seconds: frame / fps, shortest exact
   }
   if (s.exposure != 0) meta[kExposureAttribute] = exposure_text(s.exposure);
   if (s.aovs) meta["aovs"] = aov_names(s.aovs);

@@ -4,6 +4,7 @@
 
 #include <chrono>
 
+#include "core/render/aov.h"
 #include "core/util/log.h"
 #include "server/checkpoint.h"
 
@@ -77,9 +78,10 @@ SnapshotPlan Snapshotter::next(Job& j, double now) const {
   if (j.started > 0) p.meta["render_seconds"] = std::to_string(p.elapsed);
   if (st.frame) {
     p.meta["frame"] = std::to_string(*st.frame);
-    p.meta["time"] = fmt::format("{}", st.time());  // (shortest exact)  // seconds: frame / fps
+    p.meta["time"] = fmt::format("{}", st.time());  // seconds: frame / fps, shortest exact
   }
   if (st.exposure != 0) p.meta[kExposureAttribute] = exposure_text(st.exposure);  // (PNGs made of it take it)
+  if (st.aovs) p.meta["aovs"] = aov_names(st.aovs);                               // (as tessera render's)
   // The image of an ended DONE job (denoised where asked): a restart leaves it be
   // (Recovery::Parts::image_passes). An image with every pass merged can be written before
   // (the job waits on its checks), not denoised.

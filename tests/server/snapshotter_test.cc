@@ -419,3 +419,22 @@ TEST(WithoutDir, TheDataFolderIsNamedDataEverywhereInAMessage) {
 
 }  // namespace
 }  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: a farm EXR with AOV layers did not say which (tessera render's has
+// tessera/aovs; tessera denoise and tools read it). Now it does, the same text.
+TEST_F(SnapshotterTest, AnImageWithAovLayersNamesThem) {
+  RenderSettings s = testing::small_settings();
+  s.aovs = kAovAlbedo | kAovNormal;
+  const std::shared_ptr<Job> job = add_still(s);
+  ASSERT_TRUE(snapshotter.request(*job, true, false));
+  EXPECT_EQ(snapshotter.next(*job, now).meta.at("aovs"), aov_names(s.aovs));
+  const std::shared_ptr<Job> plain = add_still();
+  ASSERT_TRUE(snapshotter.request(*plain, true, false));
+  EXPECT_EQ(snapshotter.next(*plain, now).meta.count("aovs"), 0u);
+}
+
+}  // namespace
+}  // namespace tessera
