@@ -58,19 +58,32 @@ std::shared_ptr<const EnvironmentMap> TileRenderer::load_environment(const Scene
 void TileRenderer::check_settings(const Scene& scene, const RenderSettings& settings, const std::vector<int>& frames) {
   (void)load_environment(scene, settings);
   check_animation(scene, settings);
-  if (!settings.camera.path || frames.empty()) {
+  // An animated file camera: each frame's pose (the camera node's transform alone).
+  const bool animated_camera =
+      scene.animation && scene.animation->camera_node >= 0 && settings.camera.framing == Framing::kFile;
+  if ((!settings.camera.path && !animated_camera) || frames.empty()) {
     (void)Camera(scene, settings.at_frame().camera);  // a file camera the framing needs but cannot use
     return;
   }
-  // Each frame's camera, where the path puts it (only frame 0 was checked: a sequence whose
-  // path crossed its target failed midway, on the farm a task at a time for good).
+  // Each frame's camera, where the path and the animation put it (only frame 0 was checked:
+  // a sequence whose path crossed its target failed midway, on the farm a task at a time
+  // for good; a path's target the animated camera reached, likewise).
   const Bounds objects = scene.object_bounds();
-  const char* flag = settings.camera.path->keys.empty() ? "--turntable" : "--camera-path";
+  const char* flag = !settings.camera.path                ? "--frames"
+                     : settings.camera.path->keys.empty() ? "--turntable"
+                                                          : "--camera-path";
+  const size_t clip = animated_camera ? scene.animation->find_clip(settings.animation) : 0;
+  Scene posed;  // (the camera reads its scene's camera alone, given the objects' bounds)
   RenderSettings s = settings;
   for (const int frame : frames) {
     s.frame = frame;
     try {
-      (void)Camera(scene, s.at_frame().camera, &objects);
+      if (animated_camera) {
+        posed.camera = pose_camera(scene, clip, s.time());
+        (void)Camera(posed, s.at_frame().camera, &objects);
+      } else {
+        (void)Camera(scene, s.at_frame().camera, &objects);
+      }
     } catch (const SettingsError& e) {
       throw SettingsError(
           flag, "at frame " + std::to_string(frame) + ": " + std::string(e.what()).substr(e.flag().size() + 2));

@@ -167,12 +167,19 @@ bool placed(const Light& l) {
   return is_finite(l.position) && is_finite(l.direction) && !(aimed && l.direction == Vec3{});
 }
 
-Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
-  const SceneAnimation& a = *rest.animation;
-  const SceneAnimation::Clip& clip = a.clips.at(clip_index);
-  // Each node entry's local transform at this time, then its world transform.
-  std::vector<Mat4> world(a.nodes.size()), orientation(a.nodes.size());
-  std::vector<bool> moved(a.nodes.size(), false);
+namespace {
+
+// Each node entry's world transform at `time`, without its scales (place_light), and
+// whether the clip moves it.
+struct NodeTransforms {
+  std::vector<Mat4> world, orientation;
+  std::vector<bool> moved;
+};
+NodeTransforms node_transforms(const SceneAnimation& a, const SceneAnimation::Clip& clip, double time) {
+  NodeTransforms n;
+  n.world.resize(a.nodes.size());
+  n.orientation.resize(a.nodes.size());
+  n.moved.assign(a.nodes.size(), false);
   // The clip's transform channels by node, and each animated node's local transform once
   // however often the node graph visits it (each entry scanned every channel: a graph of a
   // million entries took seconds a frame).
@@ -204,11 +211,32 @@ Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
         if (c->path == SceneAnimation::Path::kRotation) rotation = sample_channel(*c, time);
     }
     const int32_t p = node.parent;
-    world[i] = p >= 0 ? world[size_t(p)] * local : local;
+    n.world[i] = p >= 0 ? n.world[size_t(p)] * local : local;
     const Mat4 turn = orientation_of(node.trs, rotation, node.matrix);
-    orientation[i] = p >= 0 ? orientation[size_t(p)] * turn : turn;
-    moved[i] = animated || (p >= 0 && moved[size_t(p)]);
+    n.orientation[i] = p >= 0 ? n.orientation[size_t(p)] * turn : turn;
+    n.moved[i] = animated || (p >= 0 && n.moved[size_t(p)]);
   }
+  return n;
+}
+
+}  // namespace
+
+CameraDesc pose_camera(const Scene& rest, size_t clip_index, double time) {
+  CameraDesc d = rest.camera;
+  const SceneAnimation& a = *rest.animation;
+  if (a.camera_node < 0) return d;
+  const NodeTransforms n = node_transforms(a, a.clips.at(clip_index), time);
+  if (n.moved[size_t(a.camera_node)]) place_camera(d, n.world[size_t(a.camera_node)]);
+  return d;
+}
+
+Scene pose_scene(const Scene& rest, size_t clip_index, double time) {
+  const SceneAnimation& a = *rest.animation;
+  const SceneAnimation::Clip& clip = a.clips.at(clip_index);
+  const NodeTransforms n = node_transforms(a, clip, time);
+  const std::vector<Mat4>& world = n.world;
+  const std::vector<Mat4>& orientation = n.orientation;
+  const std::vector<bool>& moved = n.moved;
   Scene s = rest;
   s.animation = rest.animation;
   auto check = [&](Vec3 v, const std::string& what) {

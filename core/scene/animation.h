@@ -104,5 +104,8 @@ Mat4 trs_matrix(const std::array<double, 3>& t, const std::array<double, 4>& r, 
 // mesh, light and camera under a node the clip moves is transformed again. Throws
 // SceneError when a pose puts geometry beyond the range the ray tracer handles.
 Scene pose_scene(const Scene& rest, size_t clip, double time);
+// The file's camera alone at `time` (pose_scene's, without posing anything else): what a
+// sequence's check of every frame's camera takes.
+CameraDesc pose_camera(const Scene& rest, size_t clip, double time);
 
 }  // namespace tessera

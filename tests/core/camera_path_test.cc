@@ -11,6 +11,7 @@
 #include "core/render/settings.h"
 #include "core/render/tile_renderer.h"
 #include "core/scene/load.h"
+#include "tests/core/gltf_fixture.h"
 #include "tests/core/test_paths.h"
 
 namespace tessera {
@@ -266,6 +267,46 @@ TEST(CameraPath, WhatAFrameTakesFromThePathIsThePathAtThatFrameBitForBit) {
   const CameraPath orbit = CameraPath::parse(R"({"turntable": {"frames": 12}})");
   EXPECT_TRUE(orbit.for_frame(5).keys.empty());
   EXPECT_EQ(orbit.for_frame(5).to_json(), orbit.to_json());
+}
+
+}  // namespace
+}  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Found by audit: a camera path over an animated file camera was checked against the rest
+// pose's camera only, so a path target the animated camera reached failed that frame in
+// the middle of the sequence (frames written, then "degenerate"). Each frame's camera is
+// posed for the check: refused before anything renders, naming the frame.
+TEST(CameraPath, AnAnimatedCameraIsCheckedWhereEachFramePosesIt) {
+  Doc d;
+  const size_t at = d.blob.size();
+  put<float>(d.blob, {0, 1, 0.25f, 0.25f, 3, 0, 0, 0});  // the camera from (0.25, 0.25, 3) to the origin
+  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at}, {"byteLength", 8}});
+  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at + 8}, {"byteLength", 24}});
+  d.j["accessors"].push_back({{"bufferView", 4}, {"componentType", 5126}, {"count", 2}, {"type", "SCALAR"}});
+  d.j["accessors"].push_back({{"bufferView", 5}, {"componentType", 5126}, {"count", 2}, {"type", "VEC3"}});
+  d.j["buffers"][0]["byteLength"] = d.blob.size();
+  const json channel = {{"sampler", 0}, {"target", {{"node", 1}, {"path", "translation"}}}};
+  const json sampler = {{"input", 4}, {"output", 5}};
+  d.j["animations"] = json::array({{{"channels", json::array({channel})}, {"samplers", json::array({sampler})}}});
+  d.embed();
+  const fs::path file = fs::temp_directory_path() / ("tessera_cam_anim_" + std::to_string(::getpid()) + ".gltf");
+  std::ofstream(file) << d.j.dump();
+  const Scene scene = load_scene(file.string());
+  fs::remove(file);
+  RenderSettings s;
+  s.camera.framing = Framing::kFile;
+  s.camera.path =
+      std::make_shared<const CameraPath>(CameraPath::parse(R"({"keys": [{"frame": 0, "target": [0, 0, 0]}]})"));
+  EXPECT_NO_THROW(TileRenderer::check_settings(scene, s, {0, 12}));
+  try {
+    TileRenderer::check_settings(scene, s, {0, 12, 24});  // at 24 fps, frame 24 puts the eye on the target
+    ADD_FAILURE();
+  } catch (const SettingsError& e) {
+    EXPECT_NE(std::string(e.what()).find("at frame 24"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
