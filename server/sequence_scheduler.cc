@@ -7,8 +7,7 @@ std::shared_ptr<Job> SequenceScheduler::make_frame(const Sequence& s, size_t ind
   settings.frame = s.frames[index];
   // Its tasks carry only what this frame takes from a camera path (the whole path is the
   // sequence's, up to 1 MiB: every task of every frame carried it).
-  if (settings.camera.path)
-    settings.camera.path = std::make_shared<const CameraPath>(settings.camera.path->for_frame(*settings.frame));
+  settings.keep_frames_camera_only();
   JobMeta meta = s.meta;
   meta.id = s.frame_job_id(index);
   meta.name = s.meta.name + " frame " + std::to_string(s.frames[index]);

@@ -49,17 +49,14 @@ Submission prepare_submission(const v1::SubmitJobRequest& req, const Admission& 
   meta.priority = req.priority();
   meta.scene_bytes = a.scene_bytes;
   meta.submitted_at = store.wall();
+  // A still's tasks carry only what its frame takes from a camera path, as a sequence's
+  // frames do (SequenceScheduler::make_frame); the sequence keeps the whole path.
+  if (a.frames.empty()) settings.keep_frames_camera_only();
+  meta.settings = to_proto(settings);
   Submission sub;
   if (a.frames.empty()) {
-    // A still's tasks carry only what its frame takes from a camera path (as a sequence's
-    // frames do, SequenceScheduler::make_frame).
-    if (settings.camera.path)
-      settings.camera.path =
-          std::make_shared<const CameraPath>(settings.camera.path->for_frame(settings.frame.value_or(0)));
-    meta.settings = to_proto(settings);
     sub.job = std::make_shared<Job>(meta, settings);
   } else {
-    meta.settings = to_proto(settings);
     sub.sequence = std::make_shared<Sequence>(meta, settings, a.frames);
     sub.sequence->prepared = SequenceScheduler::make_frame(*sub.sequence, 0);
   }

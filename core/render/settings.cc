@@ -97,6 +97,10 @@ RenderSettings RenderSettings::at_frame() const {
   return s;
 }
 
+void RenderSettings::keep_frames_camera_only() {
+  if (camera.path) camera.path = std::make_shared<const CameraPath>(camera.path->for_frame(frame.value_or(0)));
+}
+
 std::vector<std::pair<uint32_t, uint32_t>> RenderSettings::passes() const {
   std::vector<std::pair<uint32_t, uint32_t>> out;
   const uint32_t total = uint32_t(std::max(spp, 0));

@@ -129,6 +129,9 @@ struct RenderSettings {
   // The settings a frame is rendered with: with a camera path (camera.path), its values at
   // this frame (0 for a still) in camera.pose, lens radius, focal distance and max depth.
   RenderSettings at_frame() const;
+  // The camera path cut to what this frame (0 for a still) takes from it
+  // (CameraPath::for_frame): what a farm job's tasks carry, the frame's bits the same.
+  void keep_frames_camera_only();
   // With the half-buffers (kAovHalves) a tile's sums are two planes, every sample's then
   // the odd-numbered samples' (film.h); else one.
   bool halves() const { return (aovs & kAovHalves) != 0; }

@@ -89,18 +89,19 @@ class NodeWalk {
     // check_gltf_budget went over this graph first: every node exists, no cycle, no deeper
     // than kMaxGltfNodeDepth.
     const tinygltf::Node& n = ctx_.model.nodes[size_t(index)];
-    const Mat4 local = gltf_local_matrix(ctx_, n, el);
+    const bool trs = n.matrix.empty();
+    const GltfTrs x = trs ? gltf_trs(ctx_, n, el) : GltfTrs{};  // (read once: the matrix, the pose, the orientation)
+    const Mat4 local = trs ? trs_matrix(x.t, x.r, x.s) : gltf_local_matrix(ctx_, n, el);
     const Mat4 world = parent * local;
-    const Mat4 orientation = parent_orientation * orientation_of(n.matrix.empty(), gltf_trs(ctx_, n, el).r, local);
+    const Mat4 orientation = parent_orientation * orientation_of(trs, x.r, local);
     int32_t entry = -1;
     if (animation_.recording()) {  // the hierarchy, for posing frames of an animation
       SceneAnimation::Node e;
       e.gltf_node = uint32_t(index);
       e.parent = parent_entry;
-      e.trs = n.matrix.empty();
+      e.trs = trs;
       e.matrix = local;
       if (e.trs) {
-        const GltfTrs x = gltf_trs(ctx_, n, el);
         e.translation = x.t;
         e.rotation = x.r;
         e.scale = x.s;
