@@ -88,22 +88,8 @@ namespace {
 // frame to frame), while the sequence's check took the rest pose's. Both take the rest
 // pose's bounds: a triangle moving 5 units leaves the camera where it was.
 TEST(Animation, Cs184FramingAndATurntableTakeTheRestPosesBounds) {
-  Doc d;
-  const size_t at = d.blob.size();
-  put<float>(d.blob, {0, 1, 0, 0, 0, 5, 0, 0});  // times 0, 1; translations (0,0,0), (5,0,0)
-  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at}, {"byteLength", 8}});
-  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at + 8}, {"byteLength", 24}});
-  d.j["accessors"].push_back({{"bufferView", 4}, {"componentType", 5126}, {"count", 2}, {"type", "SCALAR"}});
-  d.j["accessors"].push_back({{"bufferView", 5}, {"componentType", 5126}, {"count", 2}, {"type", "VEC3"}});
-  d.j["buffers"][0]["byteLength"] = d.blob.size();
-  const json channel = {{"sampler", 0}, {"target", {{"node", 0}, {"path", "translation"}}}};
-  const json sampler = {{"input", 4}, {"output", 5}};
-  d.j["animations"] = json::array({{{"channels", json::array({channel})}, {"samplers", json::array({sampler})}}});
-  d.embed();
-  const fs::path file = fs::temp_directory_path() / ("tessera_rest_bounds_" + std::to_string(::getpid()) + ".gltf");
-  std::ofstream(file) << d.j.dump();
-  const Scene scene = load_scene(file.string());
-  fs::remove(file);
+  // The triangle moves from where it rests to 5 units along x.
+  const Scene scene = load_gltf_doc(animated("translation", "LINEAR", {0, 1}, {0, 0, 0, 5, 0, 0}));
   ASSERT_TRUE(scene.animation);
   for (const bool turntable : {false, true}) {
     RenderSettings s;

@@ -280,22 +280,8 @@ namespace {
 // the middle of the sequence (frames written, then "degenerate"). Each frame's camera is
 // posed for the check: refused before anything renders, naming the frame.
 TEST(CameraPath, AnAnimatedCameraIsCheckedWhereEachFramePosesIt) {
-  Doc d;
-  const size_t at = d.blob.size();
-  put<float>(d.blob, {0, 1, 0.25f, 0.25f, 3, 0, 0, 0});  // the camera from (0.25, 0.25, 3) to the origin
-  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at}, {"byteLength", 8}});
-  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", at + 8}, {"byteLength", 24}});
-  d.j["accessors"].push_back({{"bufferView", 4}, {"componentType", 5126}, {"count", 2}, {"type", "SCALAR"}});
-  d.j["accessors"].push_back({{"bufferView", 5}, {"componentType", 5126}, {"count", 2}, {"type", "VEC3"}});
-  d.j["buffers"][0]["byteLength"] = d.blob.size();
-  const json channel = {{"sampler", 0}, {"target", {{"node", 1}, {"path", "translation"}}}};
-  const json sampler = {{"input", 4}, {"output", 5}};
-  d.j["animations"] = json::array({{{"channels", json::array({channel})}, {"samplers", json::array({sampler})}}});
-  d.embed();
-  const fs::path file = fs::temp_directory_path() / ("tessera_cam_anim_" + std::to_string(::getpid()) + ".gltf");
-  std::ofstream(file) << d.j.dump();
-  const Scene scene = load_scene(file.string());
-  fs::remove(file);
+  // The camera (node 1) moves from (0.25, 0.25, 3) to the origin.
+  const Scene scene = load_gltf_doc(animated("translation", "LINEAR", {0, 1}, {0.25f, 0.25f, 3, 0, 0, 0}, 1));
   RenderSettings s;
   s.camera.framing = Framing::kFile;
   s.camera.path =

@@ -95,6 +95,43 @@ struct Doc {
   void embed() { j["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64(blob); }
 };
 
+// Appends floats as an accessor of `type` (SCALAR, VEC3, VEC4); returns its index.
+inline int add_floats(Doc& d, const std::vector<float>& v, const std::string& type) {
+  const size_t offset = d.blob.size();
+  for (float f : v) put<float>(d.blob, {f});
+  const int comps = type == "SCALAR" ? 1 : type == "VEC3" ? 3 : 4;
+  d.j["bufferViews"].push_back({{"buffer", 0}, {"byteOffset", offset}, {"byteLength", v.size() * 4}});
+  d.j["accessors"].push_back({{"bufferView", d.j["bufferViews"].size() - 1},
+                              {"componentType", 5126},
+                              {"count", v.size() / size_t(comps)},
+                              {"type", type}});
+  d.j["buffers"][0]["byteLength"] = d.blob.size();
+  return int(d.j["accessors"].size() - 1);
+}
+
+// The triangle's node (0) animated on one path by one sampler (`node`: another node).
+inline Doc animated(const std::string& path, const std::string& interpolation, const std::vector<float>& times,
+                    const std::vector<float>& values, int node = 0) {
+  Doc d;
+  const int in = add_floats(d, times, "SCALAR");
+  const int out = add_floats(d, values, path == "rotation" ? "VEC4" : "VEC3");
+  const json channel = {{"sampler", 0}, {"target", {{"node", node}, {"path", path}}}};
+  const json sampler = {{"input", in}, {"output", out}, {"interpolation", interpolation}};
+  d.j["animations"] =
+      json::array({{{"name", "move"}, {"channels", json::array({channel})}, {"samplers", json::array({sampler})}}});
+  return d;
+}
+
+// `d` written to a temporary file and loaded (tests outside the Gltf fixture).
+inline Scene load_gltf_doc(Doc d) {
+  d.embed();
+  const fs::path file = fs::temp_directory_path() / ("tessera_doc_" + std::to_string(::getpid()) + ".gltf");
+  std::ofstream(file) << d.j.dump();
+  Scene scene = load_scene(file.string());
+  fs::remove(file);
+  return scene;
+}
+
 // A .glb of `json` (padded with spaces) and `bin` (padded with zeros unless `pad_bin` is
 // false, to make a broken one).
 inline std::string glb_file(std::string json, std::string bin, bool pad_bin = true) {

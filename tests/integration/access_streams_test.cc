@@ -175,6 +175,34 @@ TEST_F(Access, SceneDownloadsAreBoundedPerWorker) {
   EXPECT_TRUE(whole);
 }
 
+// `polls` sent at once under kWorker's token (no job: each waits its second): how many were
+// answered and how many refused, each refusal RESOURCE_EXHAUSTED naming `refusal`. Sent
+// again, up to five times, until `refusals` are, should the machine stall a poll past its
+// second.
+std::pair<int, int> polls_at_once(v1::TesseraWorker::Stub& workers, const std::vector<v1::GetTaskRequest>& polls,
+                                  const std::string& refusal, int refusals) {
+  int ok = 0, refused = 0;
+  for (int attempt = 0; attempt < 5 && refused != refusals; ++attempt) {
+    std::atomic<int> got_ok{0}, got_refused{0};
+    std::vector<std::thread> polling;
+    for (const v1::GetTaskRequest& poll : polls)
+      polling.emplace_back([&] {
+        v1::GetTaskResponse none;
+        const grpc::Status st = workers.GetTask(call(kWorker).get(), poll, &none);
+        if (st.ok()) {
+          ++got_ok;
+        } else {
+          ++got_refused;
+          EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+          EXPECT_NE(st.error_message().find(refusal), std::string::npos) << st.error_message();
+        }
+      });
+    for (std::thread& t : polling) t.join();
+    ok = got_ok, refused = got_refused;
+  }
+  return {ok, refused};
+}
+
 // Found by review: a worker's long polls (GetTask waits up to a second for work) were
 // counted nowhere, so one worker could hold a server thread per call. At most
 // --max-streams-per-peer at once per registered worker (its secret checked first); the next
@@ -188,27 +216,8 @@ TEST_F(Access, AWorkersLongPollsAreBoundedPerWorker) {
   v1::GetTaskRequest poll;
   poll.set_worker_id(w.worker_id());
   poll.set_worker_secret(w.worker_secret());
-  int ok = 0, refused = 0;
-  for (int attempt = 0; attempt < 5 && refused == 0; ++attempt) {
-    std::atomic<int> got_ok{0}, got_refused{0};
-    std::vector<std::thread> polling;
-    for (int i = 0; i < 3; ++i)
-      polling.emplace_back([&] {
-        v1::GetTaskResponse none;
-        const grpc::Status st = workers->GetTask(call(kWorker).get(), poll, &none);
-        if (st.ok()) {
-          ++got_ok;
-        } else {
-          ++got_refused;
-          EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
-          EXPECT_NE(st.error_message().find("(task requests) per caller at most (--max-streams-per-peer)"),
-                    std::string::npos)
-              << st.error_message();
-        }
-      });
-    for (std::thread& t : polling) t.join();
-    ok = got_ok, refused = got_refused;
-  }
+  const auto [ok, refused] = polls_at_once(*workers, std::vector<v1::GetTaskRequest>(3, poll),
+                                           "(task requests) per caller at most (--max-streams-per-peer)", 1);
   EXPECT_EQ(refused, 1);
   EXPECT_EQ(ok, 2);
   // Another worker has its own room.
@@ -240,28 +249,8 @@ TEST_F(Access, TheLongPollsOfACallersWorkersAreBoundedTogether) {
     poll.set_worker_id(w.worker_id());
     poll.set_worker_secret(w.worker_secret());
   }
-  int ok = 0, refused = 0;
-  for (int attempt = 0; attempt < 5 && refused != 2; ++attempt) {
-    std::atomic<int> got_ok{0}, got_refused{0};
-    std::vector<std::thread> polling;
-    for (const v1::GetTaskRequest& poll : polls)
-      polling.emplace_back([&] {
-        v1::GetTaskResponse none;
-        const grpc::Status st = workers->GetTask(call(kWorker).get(), poll, &none);
-        if (st.ok()) {
-          ++got_ok;
-        } else {
-          ++got_refused;
-          EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
-          EXPECT_NE(st.error_message().find(
-                        "(task requests of all its workers) per caller at most (4 x --max-streams-per-peer)"),
-                    std::string::npos)
-              << st.error_message();
-        }
-      });
-    for (std::thread& t : polling) t.join();
-    ok = got_ok, refused = got_refused;
-  }
+  const auto [ok, refused] = polls_at_once(
+      *workers, polls, "(task requests of all its workers) per caller at most (4 x --max-streams-per-peer)", 2);
   EXPECT_EQ(refused, 2);
   EXPECT_EQ(ok, 4);
 }

@@ -38,6 +38,21 @@ class VerifyTest : public CoordinatorTest {
     return !h || h->quarantined;
   }
   std::map<std::string, std::string> credential;
+  // A job of job_settings() a lying worker merges three lies into, then CANCELLED (and
+  // `requeued` at once, or not), and another job (seed 17) the liar will be caught on.
+  std::string cancelled_with_lies(uint64_t* honest, uint64_t* liar, bool requeued) {
+    start(0.5);
+    RenderSettings other = job_settings();
+    other.seed = 17;
+    *honest = worker_as("honest"), *liar = worker_as("liar");
+    const std::string id = c->submit(request(job_settings()));
+    for (int k = 0; k < 3; ++k) EXPECT_TRUE(step(*liar, true));
+    c->cancel(id);
+    EXPECT_EQ(c->status(id, false).state(), v1::JobStatus::CANCELLED);
+    if (requeued) c->requeue(id);
+    c->submit(request(other));
+    return id;
+  }
   // One task for worker w, rendered (and falsified if `lying`) and returned; false if it
   // got none or is refused.
   bool step(uint64_t w, bool lying) {
@@ -314,16 +329,8 @@ namespace {
 // the job DONE with them, unflagged. Now the job is flagged and its requeue renders those
 // tiles again: the image is the honest one, bit for bit.
 TEST_F(VerifyTest, ALiarCaughtWhileAJobWasCancelledIsRenderedAgainWhenItIsRequeued) {
-  start(0.5);
-  const RenderSettings s = job_settings();
-  RenderSettings other = s;
-  other.seed = 17;
-  const uint64_t honest = worker_as("honest"), liar = worker_as("liar");
-  const std::string id = c->submit(request(s));
-  for (int k = 0; k < 3; ++k) ASSERT_TRUE(step(liar, true));  // lies merged, then the job is cancelled
-  c->cancel(id);
-  ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::CANCELLED);
-  c->submit(request(other));
+  uint64_t honest = 0, liar = 0;
+  const std::string id = cancelled_with_lies(&honest, &liar, false);
   run(honest, liar, true);  // caught on the other job
   ASSERT_EQ(c->counters().workers_quarantined, 1u);
   const std::string flag = c->status(id, false).error();
@@ -331,26 +338,18 @@ TEST_F(VerifyTest, ALiarCaughtWhileAJobWasCancelledIsRenderedAgainWhenItIsRequeu
   c->requeue(id);
   run(honest, liar, false);
   ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
-  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+  EXPECT_TRUE(same_film_as_exr(local(job_settings()), read_exr(image_path(id, "image.exr"))));
 }
 
 // ... and one requeued before the liar is caught: the requeued job still knows who merged
 // what, so its tiles are rendered again when it is.
 TEST_F(VerifyTest, ALiarCaughtAfterARequeueHasItsTilesRenderedAgain) {
-  start(0.5);
-  const RenderSettings s = job_settings();
-  RenderSettings other = s;
-  other.seed = 17;
-  const uint64_t honest = worker_as("honest"), liar = worker_as("liar");
-  const std::string id = c->submit(request(s));
-  for (int k = 0; k < 3; ++k) ASSERT_TRUE(step(liar, true));
-  c->cancel(id);
-  c->requeue(id);
-  c->submit(request(other));
+  uint64_t honest = 0, liar = 0;
+  const std::string id = cancelled_with_lies(&honest, &liar, true);
   run(honest, liar, true);
   ASSERT_EQ(c->counters().workers_quarantined, 1u);
   ASSERT_EQ(c->status(id, false).state(), v1::JobStatus::DONE);
-  EXPECT_TRUE(same_film_as_exr(local(s), read_exr(image_path(id, "image.exr"))));
+  EXPECT_TRUE(same_film_as_exr(local(job_settings()), read_exr(image_path(id, "image.exr"))));
 }
 
 }  // namespace
