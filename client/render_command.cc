@@ -68,7 +68,7 @@ double write_denoised(const RenderResult& r, const ImageMetadata& meta, const Re
                       const std::vector<std::string>& outputs, int threads) {
   const auto first_exr = std::find_if(outputs.begin(), outputs.end(), is_exr_path);
   const std::string exr = first_exr != outputs.end() ? *first_exr : outputs.front() + ".noisy.exr";
-  write_image(exr, r.film, meta, &r.aovs, s.aovs);
+  write_image(exr, r.film, meta, &r.aovs, s.aovs, s.image_rect());
   DenoiseOptions options;
   options.threads = threads;
   const DenoiseReport d = denoise_exr(exr, exr, options);
@@ -111,7 +111,8 @@ int render_frame(const RenderArgs& a, TileRenderer& renderer, RenderSettings s,
   if (s.denoise)
     denoise_seconds = write_denoised(r, meta, s, outputs, a.threads);
   else
-    write_each(outputs, [&](const std::string& out) { write_image(out, r.film, meta, &r.aovs, s.aovs); });
+    write_each(outputs,
+               [&](const std::string& out) { write_image(out, r.film, meta, &r.aovs, s.aovs, s.image_rect()); });
 
   const uint64_t rays = r.stats.rays.rays + r.stats.rays.shadow_rays;
   const double sps = r.stats.samples / std::max(r.seconds, 1e-9), rps = rays / std::max(r.seconds, 1e-9);

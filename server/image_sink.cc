@@ -24,20 +24,14 @@ std::string DiskImageSink::path(const std::string& job, const char* file) const 
   return (fs::path(dir_) / job / file).string();
 }
 
-void ImageSink::write(const std::string& job, const Film& film, const ImageMetadata& meta) {
-  std::unique_ptr<Writer> w = begin(job, film.width(), film.height(), meta, {});
-  if (film.height() > 0) w->write_rows(film.pixels().data(), film.height(), nullptr, nullptr);
-  w->commit();
-}
-
 namespace {
 class DiskWriter : public ImageSink::Writer {
  public:
   // `path`: where the image goes; with `denoised` there, the noisy one is written to
   // noisy_path first.
-  DiskWriter(std::string path, std::string noisy_path, int width, int height, const ImageMetadata& meta,
+  DiskWriter(std::string path, std::string noisy_path, const Rect& window, const Rect& frame, const ImageMetadata& meta,
              ImageLayers layers, std::function<void()> done)
-      : exr_(layers.denoise ? noisy_path : path, width, height, meta, true, layers.aovs),
+      : exr_(layers.denoise ? noisy_path : path, window, frame, meta, true, layers.aovs),
         path_(std::move(path)),
         noisy_path_(std::move(noisy_path)),
         denoise_(layers.denoise),
@@ -81,16 +75,17 @@ class FilmWriter : public ImageSink::Writer {
 };
 }  // namespace
 
-std::unique_ptr<ImageSink::Writer> DiskImageSink::begin(const std::string& job, int width, int height,
+std::unique_ptr<ImageSink::Writer> DiskImageSink::begin(const std::string& job, const Rect& window, const Rect& frame,
                                                         const ImageMetadata& meta, ImageLayers layers) {
   fs::create_directories(fs::path(dir_) / job);
-  return std::make_unique<DiskWriter>(path(job, "image.exr"), path(job, "image.noisy.exr"), width, height, meta, layers,
+  return std::make_unique<DiskWriter>(path(job, "image.exr"), path(job, "image.noisy.exr"), window, frame, meta, layers,
                                       [this, job] { forget_preview(job); });
 }
 
-std::unique_ptr<ImageSink::Writer> MemoryImageSink::begin(const std::string& job, int width, int height,
+std::unique_ptr<ImageSink::Writer> MemoryImageSink::begin(const std::string& job, const Rect& window, const Rect&,
                                                           const ImageMetadata& meta, ImageLayers) {
-  return std::make_unique<FilmWriter>(width, height, [this, job, meta](const Film& f) { write(job, f, meta); });
+  // (the window's pixels at (0, 0), as the tests' films are)
+  return std::make_unique<FilmWriter>(window.w, window.h, [this, job, meta](const Film& f) { write(job, f, meta); });
 }
 
 void DiskImageSink::forget_preview(const std::string& job) {

@@ -35,10 +35,10 @@ class ImageSink {
   virtual ~ImageSink() = default;
   // Slow (encoding, disk): the coordinator calls it, and the writer, without holding its
   // lock. Throws std::runtime_error on failure.
-  virtual std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta,
-                                        ImageLayers layers) = 0;
-  // The whole film at once.
-  void write(const std::string& job, const Film& film, const ImageMetadata& meta);
+  // The image's pixels are `window` of the whole image `frame` (image coordinates, row 0
+  // at the top): a -p job's crop keeps its place (ExrWriter).
+  virtual std::unique_ptr<Writer> begin(const std::string& job, const Rect& window, const Rect& frame,
+                                        const ImageMetadata& meta, ImageLayers layers) = 0;
   // The last image written, to stream: read from one open file (a newer write replaces the
   // file by rename, so a reader keeps the version it opened), with its size and a version
   // naming that file.
@@ -81,8 +81,8 @@ class DiskImageSink : public ImageSink {
   explicit DiskImageSink(std::string dir) : dir_(std::move(dir)) {}
   // A denoised image is written noisy beside it first (image.noisy.exr), then denoised
   // into place: a reader sees the last image or the denoised one, never the noisy one.
-  std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta,
-                                ImageLayers layers) override;
+  std::unique_ptr<Writer> begin(const std::string& job, const Rect& window, const Rect& frame,
+                                const ImageMetadata& meta, ImageLayers layers) override;
   std::string exr(const std::string& job) const override;
   std::string png(const std::string& job) const override;
   std::unique_ptr<Reader> open(const std::string& job) const override;
@@ -109,8 +109,8 @@ class DiskImageSink : public ImageSink {
 class MemoryImageSink : public ImageSink {
  public:
   // Collects the rows; commit() hands the film to write(film).
-  std::unique_ptr<Writer> begin(const std::string& job, int width, int height, const ImageMetadata& meta,
-                                ImageLayers layers) override;
+  std::unique_ptr<Writer> begin(const std::string& job, const Rect& window, const Rect& frame,
+                                const ImageMetadata& meta, ImageLayers layers) override;
   // Keeps the film (tests override it to fail).
   virtual void write(const std::string& job, const Film& film, const ImageMetadata& meta);
   std::string exr(const std::string&) const override { return {}; }

@@ -190,7 +190,7 @@ SnapshotOutcome SnapshotWriter::write(Job& job, const SnapshotPlan& plan,
   if (plan.image) try {
       // A --denoise job's final image is denoised (its previews are not).
       const RenderSettings& s = job.plan.settings();
-      image = sink_.begin(job.id(), w.w, w.h, plan.meta,
+      image = sink_.begin(job.id(), w, s.image_rect(), plan.meta,
                           {s.aovs, s.denoise && plan.ended && plan.state == v1::JobStatus::DONE});
     } catch (const std::exception& e) {
       failed("image", e, &out.image, &out.image_why);

@@ -14,17 +14,24 @@
 
 namespace tessera {
 
-ExrWriter::ExrWriter(std::string path, int width, int height, const ImageMetadata& metadata, bool compress,
-                     uint32_t aovs)
+namespace {
+
+Imath::Box2i box(const Rect& r) { return Imath::Box2i({r.x, r.y}, {r.x + r.w - 1, r.y + r.h - 1}); }
+
+}  // namespace
+
+ExrWriter::ExrWriter(std::string path, const Rect& window, const Rect& frame, const ImageMetadata& metadata,
+                     bool compress, uint32_t aovs)
     : path_(std::move(path)),
       tmp_(temporary_path(path_)),
-      width_(width),
-      height_(height),
+      window_(window),
+      width_(window.w),
+      height_(window.h),
       aovs_(aovs),
       aov_names_(aov_channels(aovs)),
       aov_(aov_names_.size()),
       half_(aovs & kAovHalves ? 6 : 0) {
-  Imf::Header header(width, height);
+  Imf::Header header(box(frame), box(window));
   header.compression() = compress ? Imf::ZIP_COMPRESSION : Imf::NO_COMPRESSION;
   for (const auto& [key, value] : metadata) header.insert("tessera/" + key, Imf::StringAttribute(value));
   for (const char* name : {"R", "G", "B", "spp", "variance"}) header.channels().insert(name, Imf::Channel(Imf::FLOAT));
@@ -66,7 +73,7 @@ void ExrWriter::write_rows(const PixelSums* sums, int rows, const AovSums* aov, 
     var_[i] = float(std::min(p.mean_variance(), double(std::numeric_limits<float>::max())));
   }
   Imf::FrameBuffer fb;
-  const Imath::V2i origin(0, next_row_);  // these rows' place in the image
+  const Imath::V2i origin(window_.x, window_.y + next_row_);  // these rows' place in the image
   const std::pair<const char*, std::vector<float>*> channels[] = {
       {"R", &r_}, {"G", &g_}, {"B", &b_}, {"spp", &spp_}, {"variance", &var_}};
   for (const auto& [name, data] : channels)

@@ -23,11 +23,13 @@ using ImageMetadata = std::map<std::string, std::string>;
 class ExrWriter {
  public:
   // Writes to PATH.tmp; commit() renames it into place. Throws std::runtime_error naming
-  // the path.
+  // the path. The file's pixels are `window` (image coordinates, row 0 at the top) of the
+  // image `frame`: its data window and display window (a crop, -p, keeps its place in the
+  // frame for a compositor; a whole image has window == frame).
   // `aovs` (aov.h's bits) adds their channels (aov_channels), each row's from write_rows'
   // `aov` sums; with kAovHalves, the half-buffers' (kHalfChannels) from its `odd` sums.
-  ExrWriter(std::string path, int width, int height, const ImageMetadata& metadata, bool compress = true,
-            uint32_t aovs = 0);
+  ExrWriter(std::string path, const Rect& window, const Rect& frame, const ImageMetadata& metadata,
+            bool compress = true, uint32_t aovs = 0);
   ~ExrWriter();  // removes the temporary file unless committed
   ExrWriter(const ExrWriter&) = delete;
   ExrWriter& operator=(const ExrWriter&) = delete;
@@ -42,6 +44,7 @@ class ExrWriter {
  private:
   std::string path_, tmp_;
   RemoveOnInterrupt cleanup_{tmp_};
+  Rect window_;
   int width_, height_, next_row_ = 0;
   std::unique_ptr<Imf::OutputFile> file_;
   std::vector<float> r_, g_, b_, spp_, var_;

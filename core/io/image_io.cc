@@ -31,9 +31,10 @@ uint8_t srgb_byte(float v) {
 }
 
 void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata, bool fast, const AovFilm* aovs,
-               uint32_t aov_bits) {
+               uint32_t aov_bits, const Rect& frame) {
   const bool with_aovs = aovs && !aovs->empty() && aov_bits;
-  ExrWriter out(path, film.width(), film.height(), metadata, !fast, with_aovs ? aov_bits : 0);
+  ExrWriter out(path, film.window(), frame.area() > 0 ? frame : film.window(), metadata, !fast,
+                with_aovs ? aov_bits : 0);
   if (film.height() > 0)
     out.write_rows(film.pixels().data(), film.height(), with_aovs ? aovs->pixels().data() : nullptr,
                    with_aovs && film.halves() ? film.odd().data() : nullptr);
@@ -105,8 +106,8 @@ std::string encode_png(const ExrImage& img) {
 bool is_exr_path(const std::string& path) { return ends_with(path, ".exr"); }
 
 void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata, const AovFilm* aovs,
-                 uint32_t aov_bits) {
-  if (ends_with(path, ".exr")) return write_exr(path, film, metadata, false, aovs, aov_bits);
+                 uint32_t aov_bits, const Rect& frame) {
+  if (ends_with(path, ".exr")) return write_exr(path, film, metadata, false, aovs, aov_bits, frame);
   if (ends_with(path, ".png")) return write_png(path, film, false, exposure_scale(metadata));
   throw std::runtime_error(path + ": unknown image format (use .exr or .png)");
 }

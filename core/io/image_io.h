@@ -18,8 +18,10 @@ using ImageMetadata = std::map<std::string, std::string>;
 // Throws std::runtime_error naming the path on failure. `fast` trades file size for
 // speed (no EXR compression, light PNG compression): for frequent progressive images.
 // With `aovs` (not empty, the film's window), their channels too (settings' --aov bits).
+// `frame`: the whole image the film's window is part of (-p), the EXR's display window;
+// empty where the film is the whole image.
 void write_exr(const std::string& path, const Film& film, const ImageMetadata& metadata, bool fast = false,
-               const AovFilm* aovs = nullptr, uint32_t aov_bits = 0);
+               const AovFilm* aovs = nullptr, uint32_t aov_bits = 0, const Rect& frame = {});
 // `scale` multiplies the linear values before the sRGB transfer (an exposure: 2^EV).
 void write_png(const std::string& path, const Film& film, bool fast = false, float scale = 1);
 // The PNG file's bytes for linear RGB planes of w x h (row 0 at the top).
@@ -32,8 +34,9 @@ std::string encode_png(const ExrImage& image);
 bool is_exr_path(const std::string& path);
 // Picks the format from the extension (.exr or .png); throws on anything else. A PNG takes
 // its exposure from the metadata (exposure_scale), as every PNG made from the EXR does.
+// An EXR is placed in `frame` as write_exr's; a PNG holds the film's pixels alone.
 void write_image(const std::string& path, const Film& film, const ImageMetadata& metadata,
-                 const AovFilm* aovs = nullptr, uint32_t aov_bits = 0);
+                 const AovFilm* aovs = nullptr, uint32_t aov_bits = 0, const Rect& frame = {});
 
 // The metadata key that carries --exposure (the file's attribute: "tessera/exposure", as
 // the writer prefixes every key and read_exr reads it), and the scale 2^EV it asks for (1

@@ -136,7 +136,9 @@ struct RenderSettings {
   // the odd-numbered samples' (film.h); else one.
   bool halves() const { return (aovs & kAovHalves) != 0; }
   uint32_t sum_planes() const { return halves() ? 2 : 1; }
-  Rect effective_window() const { return window.area() > 0 ? window : Rect{0, 0, camera.width, camera.height}; }
+  Rect effective_window() const { return window.area() > 0 ? window : image_rect(); }
+  // The whole image (-r), which a window (-p) is part of: an EXR's display window.
+  Rect image_rect() const { return Rect{0, 0, camera.width, camera.height}; }
   // Tiles the frame is cut into (FramePlan cuts them).
   int64_t tile_count() const;
   // The sample-index ranges of the passes. Films are merged pass by pass in this order.

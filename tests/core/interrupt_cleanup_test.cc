@@ -47,7 +47,7 @@ TEST_F(InterruptCleanupTest, AnExrBeingWrittenIsRemoved) {
   EXPECT_EXIT(
       {
         install_interrupt_cleanup();
-        ExrWriter w(path, 8, 4, {}, true, 0);
+        ExrWriter w(path, Rect{0, 0, 8, 4}, Rect{0, 0, 8, 4}, {}, true, 0);
         if (!fs::exists(path + ".tmp")) std::_Exit(3);
         std::raise(SIGINT);
       },

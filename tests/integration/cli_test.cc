@@ -2,6 +2,7 @@
 #include <OpenEXR/ImfChannelList.h>
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <gtest/gtest.h>
 #include <sys/wait.h>
@@ -183,13 +184,32 @@ TEST_F(Cli, ABrokenEnvironmentMapIsRefusedNamingTheFile) {
   EXPECT_FALSE(fs::exists(dir / "e.exr"));
 }
 
-TEST_F(Cli, CellRenderingWritesOnlyTheCell) {
-  const std::string exr = (dir / "cell.exr").string();
-  const CommandResult r = run("render " + scene + " -s 2 -r 64 48 -p 8 4 16 12 -q -f " + exr);
+// The cell's pixels alone, in their place in the frame: the EXR's data window is the cell
+// (-p counts rows from the bottom, EXR from the top: rows 48 - (4 + 12) = 32 to 43) and its
+// display window the whole 64 x 48 image, as a compositor expects of a crop. The PNG (no
+// such windows) holds the cell.
+TEST_F(Cli, CellRenderingWritesOnlyTheCellInItsPlace) {
+  const std::string exr = (dir / "cell.exr").string(), png = (dir / "cell.png").string();
+  const CommandResult r = run("render " + scene + " -s 2 -r 64 48 -p 8 4 16 12 -q -f " + exr + " -f " + png);
   ASSERT_EQ(r.code, 0) << r.err;
   const tessera::ExrImage img = tessera::read_exr(exr);
   EXPECT_EQ(img.width, 16);
   EXPECT_EQ(img.height, 12);
+  const Imf::InputFile file(exr.c_str());
+  EXPECT_EQ(file.header().dataWindow(), Imath::Box2i({8, 32}, {23, 43}));
+  EXPECT_EQ(file.header().displayWindow(), Imath::Box2i({0, 0}, {63, 47}));
+  const std::string bytes = tessera::read_file_bytes(png);  // the IHDR's width and height (big-endian)
+  ASSERT_GE(bytes.size(), 24u);
+  const auto be32 = [&](size_t at) {
+    return (uint32_t(uint8_t(bytes[at])) << 24) | (uint32_t(uint8_t(bytes[at + 1])) << 16) |
+           (uint32_t(uint8_t(bytes[at + 2])) << 8) | uint8_t(bytes[at + 3]);
+  };
+  EXPECT_EQ(be32(16), 16u);
+  EXPECT_EQ(be32(20), 12u);
+  // The same render with --denoise keeps the place (the denoiser keeps an input's windows).
+  const std::string denoised = (dir / "cell-denoised.exr").string();
+  ASSERT_EQ(run("render " + scene + " -s 2 -r 64 48 -p 8 4 16 12 -q --denoise -f " + denoised).code, 0);
+  EXPECT_EQ(Imf::InputFile(denoised.c_str()).header().dataWindow(), Imath::Box2i({8, 32}, {23, 43}));
 }
 
 TEST_F(Cli, MalformedSceneGivesOneLineNamingTheFileAndExitsNonZero) {

@@ -35,6 +35,8 @@ inline void expect_same_pixels(const std::string& a_path, const std::string& b_p
   const ExrImage a = read_exr(a_path), b = read_exr(b_path);
   ASSERT_EQ(a.width, b.width);
   ASSERT_EQ(a.height, b.height);
+  EXPECT_EQ(a.x0, b.x0);  // (a crop's place in its frame: the data window)
+  EXPECT_EQ(a.y0, b.y0);
   for (const char* ch : {"R", "G", "B", "spp", "variance"}) ASSERT_TRUE(a.channels.count(ch)) << ch;
   ASSERT_EQ(a.channels.size(), b.channels.size());
   for (const auto& [ch, x] : a.channels) {

@@ -50,7 +50,8 @@ TEST_F(Farm, PassesAcrossLightPathBlocksMakeTheLocalImage) {
   const std::string out = (dir / "farm.exr").string();
   const CommandResult r = submit_wait(kScene, flags, out);
   ASSERT_EQ(r.code, 0) << r.err;
-  expect_same_pixels(local, out);
+  expect_same_pixels(local, out);   // (their data windows too)
+  EXPECT_EQ(read_exr(out).x0, 47);  // the column in its place in the frame
 }
 
 TEST_F(Farm, SplatsSurviveACoordinatorKilledMidJob) {
