@@ -8,7 +8,7 @@ PACKAGES=(
   libembree-dev libopenexr-dev libimath-dev libpugixml-dev libtinygltf-dev
   libgrpc++-dev libprotobuf-dev protobuf-compiler protobuf-compiler-grpc
   libcli11-dev libspdlog-dev libfmt-dev nlohmann-json3-dev libcpp-httplib-dev
-  libzstd-dev libxxhash-dev libstb-dev libsqlite3-dev libmeshoptimizer-dev libdraco-dev libwebp-dev
+  libzstd-dev libxxhash-dev libstb-dev libpng-dev libsqlite3-dev libmeshoptimizer-dev libdraco-dev libwebp-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-numpy python3-matplotlib
   iproute2 libssl-dev openssl

@@ -1,14 +1,12 @@
 #include "core/io/image_io.h"
 
-#include <stb/stb_image_write.h>
-
 #include <cmath>
 #include <cstdio>
-#include <mutex>
 #include <stdexcept>
 
 #include "core/io/exr_writer.h"
 #include "core/io/files.h"
+#include "core/io/png_encoder.h"
 #include "core/math/float_math.h"
 
 namespace tessera {
@@ -42,22 +40,9 @@ void write_exr(const std::string& path, const Film& film, const ImageMetadata& m
 }
 
 std::string encode_png(int w, int h, const float* r, const float* g, const float* b, bool fast, float scale) {
-  std::vector<uint8_t> rgb(size_t(w) * h * 3);
-  for (size_t i = 0; i < size_t(w) * h; ++i) {
-    rgb[3 * i] = srgb_byte(r[i] * scale);
-    rgb[3 * i + 1] = srgb_byte(g[i] * scale);
-    rgb[3 * i + 2] = srgb_byte(b[i] * scale);
-  }
-  std::string out;
-  auto append = [](void* context, void* data, int size) {
-    static_cast<std::string*>(context)->append(static_cast<const char*>(data), size_t(size));
-  };
-  // stb's compression level is a global: set and use it under one lock.
-  static std::mutex stb_mu;
-  std::lock_guard<std::mutex> lock(stb_mu);
-  stbi_write_png_compression_level = fast ? 1 : 8;
-  if (!stbi_write_png_to_func(append, &out, w, h, 3, rgb.data(), w * 3)) throw std::runtime_error("cannot encode PNG");
-  return out;
+  PngEncoder png(w, h, fast);
+  for (size_t y = 0; y < size_t(h); ++y) png.write_row(r + y * w, g + y * w, b + y * w, scale);
+  return png.finish();
 }
 
 float exposure_scale(const ImageMetadata& metadata) {
@@ -81,17 +66,21 @@ std::string exposure_text(float ev) {
 }
 
 void write_png(const std::string& path, const Film& film, bool fast, float scale) {
-  const size_t n = size_t(film.width()) * film.height();
-  std::vector<float> r(n), g(n), b(n);
-  for (size_t i = 0; i < n; ++i) {
-    const Rgb m = film.pixels()[i].mean();
-    r[i] = m.r;
-    g[i] = m.g;
-    b[i] = m.b;
-  }
+  const size_t w = size_t(film.width());
+  std::vector<float> r(w), g(w), b(w);  // a row's means at a time
   std::string bytes;
   try {
-    bytes = encode_png(film.width(), film.height(), r.data(), g.data(), b.data(), fast, scale);
+    PngEncoder png(film.width(), film.height(), fast);
+    for (int y = 0; y < film.height(); ++y) {
+      for (size_t x = 0; x < w; ++x) {
+        const Rgb m = film.pixels()[size_t(y) * w + x].mean();
+        r[x] = m.r;
+        g[x] = m.g;
+        b[x] = m.b;
+      }
+      png.write_row(r.data(), g.data(), b.data(), scale);
+    }
+    bytes = png.finish();
   } catch (const std::runtime_error& e) {
     throw std::runtime_error(path + ": " + e.what());
   }

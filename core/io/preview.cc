@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/io/image_io.h"
+#include "core/io/png_encoder.h"
 
 namespace tessera {
 
@@ -27,7 +28,29 @@ void check_window(const Imath::Box2i& dw) {
                              ", is no image Tessera writes (a damaged header?)");
 }
 
-// max_width 0: full size, at encode_png's slower, smaller compression (not the preview's).
+// The exposure the EXR's render asked for, if any, as PNGs take it.
+float file_exposure(const Imf::InputFile& in) {
+  ImageMetadata meta;
+  if (const auto* a = in.header().findTypedAttribute<Imf::StringAttribute>(kExposureFileAttribute))
+    meta[kExposureAttribute] = a->value();
+  return exposure_scale(meta);
+}
+
+// Reads rows y0 .. y0 + rows - 1 of R, G, B into planes of `w` a row.
+void read_rows(Imf::InputFile& in, const Imath::Box2i& dw, int y0, int rows, std::vector<float>* r,
+               std::vector<float>* g, std::vector<float>* b) {
+  const int w = dw.max.x - dw.min.x + 1;
+  Imf::FrameBuffer fb;
+  const Imath::V2i origin(dw.min.x, y0);
+  for (auto [name, data] : {std::pair{"R", r}, std::pair{"G", g}, std::pair{"B", b}})
+    fb.insert(name,
+              Imf::Slice::Make(Imf::FLOAT, data->data(), origin, w, rows, sizeof(float), sizeof(float) * size_t(w)));
+  in.setFrameBuffer(fb);
+  in.readPixels(y0, y0 + rows - 1);
+}
+
+// max_width 0: full size, at encode_png's slower, smaller compression (not the preview's),
+// read and encoded a band of rows at a time: an 8K image costs a band and the file.
 std::string png_of(const std::string& exr_path, int max_width) {
   try {
     Imf::InputFile in(exr_path.c_str());
@@ -35,26 +58,24 @@ std::string png_of(const std::string& exr_path, int max_width) {
     check_window(dw);
     const int w = dw.max.x - dw.min.x + 1, h = dw.max.y - dw.min.y + 1;
     const int k = max_width <= 0 ? 1 : std::max(1, (w + max_width - 1) / max_width);  // the box's side
+    if (k == 1) {
+      constexpr int kBand = 64;
+      PngEncoder png(w, h, max_width > 0);
+      const float scale = file_exposure(in);
+      std::vector<float> r(size_t(w) * size_t(std::min(kBand, h))), g(r.size()), b(r.size());
+      for (int y0 = dw.min.y; y0 <= dw.max.y; y0 += kBand) {
+        const int rows = std::min(kBand, dw.max.y + 1 - y0);
+        read_rows(in, dw, y0, rows, &r, &g, &b);
+        for (size_t y = 0; y < size_t(rows); ++y) png.write_row(&r[y * w], &g[y * w], &b[y * w], scale);
+      }
+      return png.finish();
+    }
     const int pw = (w + k - 1) / k, ph = (h + k - 1) / k;
     std::vector<float> pr(size_t(pw) * ph), pg(pr.size()), pb(pr.size());
-    std::vector<float> r(k > 1 ? size_t(w) * k : 0), g(r.size()), b(r.size());
-    if (k == 1) {  // full size: straight into the planes
-      Imf::FrameBuffer fb;
-      for (auto [name, data] : {std::pair{"R", &pr}, std::pair{"G", &pg}, std::pair{"B", &pb}})
-        fb.insert(name,
-                  Imf::Slice::Make(Imf::FLOAT, data->data(), dw.min, w, h, sizeof(float), sizeof(float) * size_t(w)));
-      in.setFrameBuffer(fb);
-      in.readPixels(dw.min.y, dw.max.y);
-    }
-    for (int py = 0; k > 1 && py < ph; ++py) {
+    std::vector<float> r(size_t(w) * k), g(r.size()), b(r.size());
+    for (int py = 0; py < ph; ++py) {
       const int y0 = dw.min.y + py * k, rows = std::min(k, dw.max.y + 1 - y0);
-      Imf::FrameBuffer fb;
-      const Imath::V2i origin(dw.min.x, y0);
-      for (auto [name, data] : {std::pair{"R", &r}, std::pair{"G", &g}, std::pair{"B", &b}})
-        fb.insert(name, Imf::Slice::Make(Imf::FLOAT, data->data(), origin, w, rows, sizeof(float),
-                                         sizeof(float) * size_t(w)));
-      in.setFrameBuffer(fb);
-      in.readPixels(y0, y0 + rows - 1);
+      read_rows(in, dw, y0, rows, &r, &g, &b);
       for (int px = 0; px < pw; ++px) {
         const int x0 = px * k, cols = std::min(k, w - x0);
         double sr = 0, sg = 0, sb = 0;
@@ -72,10 +93,7 @@ std::string png_of(const std::string& exr_path, int max_width) {
         pb[o] = float(sb / n);
       }
     }
-    ImageMetadata meta;  // (the exposure the render asked for, if any)
-    if (const auto* a = in.header().findTypedAttribute<Imf::StringAttribute>(kExposureFileAttribute))
-      meta[kExposureAttribute] = a->value();
-    return encode_png(pw, ph, pr.data(), pg.data(), pb.data(), max_width > 0, exposure_scale(meta));
+    return encode_png(pw, ph, pr.data(), pg.data(), pb.data(), true, file_exposure(in));
   } catch (const std::exception& e) {
     throw std::runtime_error(exr_path + (max_width > 0 ? ": cannot make a preview: " : ": cannot make a PNG: ") +
                              e.what());

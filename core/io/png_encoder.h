@@ -1,0 +1,35 @@
+// An 8-bit sRGB PNG written a row at a time (libpng): an image of any size costs one row of
+// bytes besides its compressed file, where a whole-image writer wanted the image three
+// times over (an 8K PNG made from its EXR took 614 MB). Every PNG Tessera writes comes
+// from here, so the same pixels give the same bytes whichever path made them.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace tessera {
+
+class PngEncoder {
+ public:
+  // `fast`: zlib's fastest level (progressive previews), else its default. Throws
+  // std::runtime_error for a size PNG cannot hold.
+  PngEncoder(int width, int height, bool fast);
+  ~PngEncoder();
+  PngEncoder(const PngEncoder&) = delete;
+  PngEncoder& operator=(const PngEncoder&) = delete;
+
+  // The next row, top first: linear R, G, B (width values each), each times `scale` and
+  // through the sRGB transfer (srgb_byte).
+  void write_row(const float* r, const float* g, const float* b, float scale);
+  // After every row: the file's bytes.
+  std::string finish();
+
+  struct State;  // (libpng's callbacks reach it)
+
+ private:
+  std::unique_ptr<State> state_;
+};
+
+}  // namespace tessera

@@ -1,0 +1,91 @@
+// Every PNG Tessera writes goes through PngEncoder (libpng, a row at a time): the pixels a
+// decoder reads back are srgb_byte of the values, a film's PNG and the PNG made from its
+// EXR (a farm's download, a crop in its data window, bands of rows) are the same bytes, and
+// misuse is an error, not a broken file.
+#include "core/io/png_encoder.h"
+
+#include <gtest/gtest.h>
+#include <stb/stb_image.h>
+
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/io/files.h"
+#include "core/io/image_io.h"
+#include "core/io/preview.h"
+
+namespace tessera {
+namespace {
+
+namespace fs = std::filesystem;
+
+// The decoded RGB bytes (stb_image), with the size.
+std::vector<uint8_t> decode(const std::string& png, int* w, int* h) {
+  int n = 0;
+  std::unique_ptr<uint8_t, void (*)(void*)> data(
+      stbi_load_from_memory(reinterpret_cast<const uint8_t*>(png.data()), int(png.size()), w, h, &n, 3),
+      stbi_image_free);
+  if (!data) return {};
+  return std::vector<uint8_t>(data.get(), data.get() + size_t(*w) * size_t(*h) * 3);
+}
+
+TEST(PngEncoder, DecodesToTheSrgbBytesOfTheValues) {
+  const int w = 37, h = 23;
+  std::vector<float> r(size_t(w) * h), g(r.size()), b(r.size());
+  for (size_t i = 0; i < r.size(); ++i) {
+    r[i] = float(i % 97) / 50;         // past 1 too (clamped)
+    g[i] = float(i % 13) / 13 - 0.1f;  // below 0 too
+    b[i] = i % 7 ? 0.25f : NAN;        // NaN: black
+  }
+  for (const bool fast : {false, true})
+    for (const float scale : {1.0f, 4.0f}) {
+      const std::string png = encode_png(w, h, r.data(), g.data(), b.data(), fast, scale);
+      int dw = 0, dh = 0;
+      const std::vector<uint8_t> px = decode(png, &dw, &dh);
+      ASSERT_EQ(dw, w);
+      ASSERT_EQ(dh, h);
+      for (size_t i = 0; i < r.size(); ++i) {
+        ASSERT_EQ(px[3 * i], srgb_byte(r[i] * scale)) << i;
+        ASSERT_EQ(px[3 * i + 1], srgb_byte(g[i] * scale)) << i;
+        ASSERT_EQ(px[3 * i + 2], srgb_byte(b[i] * scale)) << i;
+      }
+    }
+}
+
+// tessera render's PNG of a film and the PNG made from the film's EXR (full_png, as a farm
+// download makes it: bands of 64 rows, here 150 rows of a crop placed at (5, 7)) are the
+// same bytes.
+TEST(PngEncoder, AFilmsPngAndThePngOfItsExrAreTheSameBytes) {
+  const fs::path dir = fs::temp_directory_path() / ("png_encoder_test_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  Film film(Rect{5, 7, 41, 150});
+  for (int y = 0; y < film.height(); ++y)
+    for (int x = 0; x < film.width(); ++x)
+      film.at(x, y) = PixelSums{0.01 * x * (y % 5), 0.003 * y, 0.5, 0, uint32_t(1 + (x + y) % 3)};
+  const ImageMetadata meta{{kExposureAttribute, exposure_text(1)}};
+  const std::string exr = (dir / "a.exr").string(), png = (dir / "a.png").string();
+  write_image(exr, film, meta, nullptr, 0, Rect{0, 0, 64, 200});
+  write_image(png, film, meta);
+  EXPECT_EQ(full_png(exr), read_file_bytes(png));
+  int w = 0, h = 0;
+  EXPECT_EQ(decode(read_file_bytes(png), &w, &h).size(), size_t(41) * 150 * 3);
+  fs::remove_all(dir);
+}
+
+TEST(PngEncoder, MisuseIsAnError) {
+  EXPECT_THROW(PngEncoder(0, 4, false), std::runtime_error);
+  EXPECT_THROW(PngEncoder(4, -1, false), std::runtime_error);
+  const float row[2] = {0.5f, 0.5f};
+  PngEncoder short_of_rows(2, 2, false);
+  short_of_rows.write_row(row, row, row, 1);
+  EXPECT_THROW(short_of_rows.finish(), std::runtime_error);
+  PngEncoder too_many(2, 1, true);
+  too_many.write_row(row, row, row, 1);
+  EXPECT_THROW(too_many.write_row(row, row, row, 1), std::runtime_error);
+  EXPECT_NE(too_many.finish().size(), 0u);
+}
+
+}  // namespace
+}  // namespace tessera
