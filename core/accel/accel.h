@@ -33,9 +33,11 @@ struct AccelOptions {
   // and AVX-512 kernels fuse multiplies and adds, so their hits differ from the SSE and AVX
   // kernels' in the last bits, and from each other's: an image would depend on the CPU that
   // rendered it (and a farm of mixed machines would not give tessera render's bits). The
-  // SSE2, SSE4.2 and AVX kernels agree (accel_isa_test.cc), so capped at AVX every x86-64
-  // machine computes the same image. On an AVX2 machine the cap costs nothing measurable
-  // (docs/performance.md).
+  // SSE2, SSE4.2 and AVX kernels agree (accel_isa_test.cc). A triangle hit's t and
+  // barycentrics are computed again by Accel itself (IEEE operations alone: Embree's come
+  // from an approximate reciprocal whose last bits differ between Intel's and AMD's CPUs),
+  // so only Embree's choice of triangle and its occlusion answers reach the image. On an
+  // AVX2 machine the cap costs nothing measurable (docs/performance.md).
   const char* max_isa = "avx";
 };
 

@@ -142,7 +142,50 @@ RTCRay to_rtc(const Ray& ray) {
 
 }  // namespace
 
+namespace {
+
+// A triangle hit's t and barycentrics computed again, by IEEE operations alone (Moeller and
+// Trumbore in float, each operation rounded once: -ffp-contract=off), from the triangle
+// Embree found. Embree's own come from an approximate reciprocal (rcpps and one Newton
+// step) whose last bits differ between Intel's and AMD's CPUs, so the same ray gave another
+// hit point on each, and an image depended on the vendor of the CPU that rendered it (on
+// an Intel CPU every golden but the one without next-event estimation failed: its sums do
+// not depend on where exactly a path lands). Only the choice of triangle is left to Embree;
+// the barycentrics are kept inside the triangle (a grazing hit's may round past an edge).
+// For an instance's hit the triangle is placed in the world first, as make_surface_point
+// places it.
+void recompute_triangle_hit(const Scene& scene, const Ray& ray, Hit* hit) {
+  const Mesh& m = scene.meshes[hit->shape];
+  const uint32_t* idx = &m.indices[3 * size_t(hit->prim)];
+  Vec3 p0 = m.positions[idx[0]], p1 = m.positions[idx[1]], p2 = m.positions[idx[2]];
+  if (hit->instance >= 0) {
+    const Instance& in = scene.instances[size_t(hit->instance)];
+    p0 = in.point(p0), p1 = in.point(p1), p2 = in.point(p2);
+  }
+  const Vec3 e1 = p1 - p0, e2 = p2 - p0;
+  const Vec3 pv = cross(ray.d, e2);
+  const float det = dot(e1, pv);
+  if (!(std::fabs(det) > 0) || !std::isfinite(det)) return;  // (edge-on or degenerate: Embree's stands)
+  const Vec3 tv = ray.o - p0, qv = cross(tv, e1);
+  float u = dot(tv, pv) / det, v = dot(ray.d, qv) / det;
+  const float t = dot(e2, qv) / det;
+  if (!std::isfinite(u) || !std::isfinite(v) || !(t >= ray.tmin) || !(t <= ray.tmax)) return;
+  u = std::max(u, 0.0f);
+  v = std::max(v, 0.0f);
+  if (u + v > 1) {
+    const float s = u + v;
+    u = u / s;
+    v = std::min(v / s, 1 - u);
+  }
+  hit->t = t;
+  hit->u = u;
+  hit->v = v;
+}
+
+}  // namespace
+
 struct Accel::Impl {
+  const Scene* scene_data = nullptr;  // the scene whose meshes hits name (recompute_triangle_hit)
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
   unsigned sphere_geom = RTC_INVALID_GEOMETRY_ID;
@@ -259,6 +302,7 @@ Accel::Accel(const Scene& scene, AccelOptions options) : Accel(scene, std::vecto
 
 Accel::Accel(const Scene& scene, const std::vector<bool>& skip, AccelOptions options)
     : impl_(std::make_unique<Impl>()) {
+  impl_->scene_data = &scene;
   impl_->robust = options.robust;
   RTCDevice d = new_device(options);
   impl_->new_scene(d);
@@ -274,6 +318,7 @@ Accel::Accel(const Scene& scene, std::shared_ptr<const Accel> fixed, const std::
     : impl_(std::make_unique<Impl>()) {
   if (!scene.instances.empty())  // (the loaders copy instances in animated scenes)
     throw std::logic_error("an animated scene's pose cannot hold instanced meshes");
+  impl_->scene_data = &scene;              // (its static meshes are the fixed part's, where they were)
   impl_->new_scene(fixed->impl_->device);  // an instance must live on its scene's device
   impl_->fixed = fixed;
   impl_->fixed_sphere_geom = fixed->impl_->sphere_geom;
@@ -314,6 +359,7 @@ bool Accel::intersect(const Ray& ray, Hit* hit) const {
   hit->instance = rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID && rh.hit.instID[0] >= impl_->instance_base
                       ? int32_t(rh.hit.instID[0] - impl_->instance_base)
                       : -1;
+  if (!hit->is_sphere) recompute_triangle_hit(*impl_->scene_data, ray, hit);
   return true;
 }
 
