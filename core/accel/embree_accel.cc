@@ -108,6 +108,31 @@ float ray_number(const float (&ray_words)[6], uint32_t mesh, uint32_t prim) {
   return float(h >> 40) * 0x1p-24f;
 }
 
+// Where the line o + t d meets triangle p0 p1 p2 (Moeller and Trumbore in float, each
+// operation rounded once: the same bits on every CPU), its barycentrics kept inside the
+// triangle (a grazing hit's may round past an edge). False where the line is parallel to
+// the triangle, the triangle degenerate, or a value not finite.
+bool triangle_hit(Vec3 p0, Vec3 p1, Vec3 p2, Vec3 o, Vec3 d, float* t, float* u, float* v) {
+  const Vec3 e1 = p1 - p0, e2 = p2 - p0;
+  const Vec3 pv = cross(d, e2);
+  const float det = dot(e1, pv);
+  if (!(std::fabs(det) > 0) || !std::isfinite(det)) return false;
+  const Vec3 tv = o - p0, qv = cross(tv, e1);
+  float a = dot(tv, pv) / det, b = dot(d, qv) / det;
+  *t = dot(e2, qv) / det;
+  if (!std::isfinite(a) || !std::isfinite(b) || !std::isfinite(*t)) return false;
+  a = std::max(a, 0.0f);
+  b = std::max(b, 0.0f);
+  if (a + b > 1) {
+    const float s = a + b;
+    a = a / s;
+    b = std::min(b / s, 1 - a);
+  }
+  *u = a;
+  *v = b;
+  return true;
+}
+
 void alpha_filter(const RTCFilterFunctionNArguments* args) {
   for (unsigned i = 0; i < args->N; ++i) {
     if (!args->valid[i]) continue;
@@ -117,9 +142,14 @@ void alpha_filter(const RTCFilterFunctionNArguments* args) {
                             RTCRayN_dir_y(args->ray, args->N, i), RTCRayN_dir_z(args->ray, args->N, i)};
     const uint32_t prim = RTCHitN_primID(args->hit, args->N, i);
     const float u = ray_number(words, d->mesh, prim);
-    if (!d->scene->covered(d->scene->meshes[d->mesh], prim, RTCHitN_u(args->hit, args->N, i),
-                           RTCHitN_v(args->hit, args->N, i), u))
-      args->valid[i] = 0;
+    // The texel from barycentrics of our own (recompute_triangle_hit says why), in the
+    // space Embree hands the ray in (an instance's object space: the mesh's own).
+    const Mesh& mesh = d->scene->meshes[d->mesh];
+    const uint32_t* idx = &mesh.indices[3 * size_t(prim)];
+    float t, b1 = RTCHitN_u(args->hit, args->N, i), b2 = RTCHitN_v(args->hit, args->N, i);
+    triangle_hit(mesh.positions[idx[0]], mesh.positions[idx[1]], mesh.positions[idx[2]],
+                 Vec3{words[0], words[1], words[2]}, Vec3{words[3], words[4], words[5]}, &t, &b1, &b2);
+    if (!d->scene->covered(mesh, prim, b1, b2, u)) args->valid[i] = 0;
   }
 }
 
@@ -162,21 +192,9 @@ void recompute_triangle_hit(const Scene& scene, const Ray& ray, Hit* hit) {
     const Instance& in = scene.instances[size_t(hit->instance)];
     p0 = in.point(p0), p1 = in.point(p1), p2 = in.point(p2);
   }
-  const Vec3 e1 = p1 - p0, e2 = p2 - p0;
-  const Vec3 pv = cross(ray.d, e2);
-  const float det = dot(e1, pv);
-  if (!(std::fabs(det) > 0) || !std::isfinite(det)) return;  // (edge-on or degenerate: Embree's stands)
-  const Vec3 tv = ray.o - p0, qv = cross(tv, e1);
-  float u = dot(tv, pv) / det, v = dot(ray.d, qv) / det;
-  const float t = dot(e2, qv) / det;
-  if (!std::isfinite(u) || !std::isfinite(v) || !(t >= ray.tmin) || !(t <= ray.tmax)) return;
-  u = std::max(u, 0.0f);
-  v = std::max(v, 0.0f);
-  if (u + v > 1) {
-    const float s = u + v;
-    u = u / s;
-    v = std::min(v / s, 1 - u);
-  }
+  float t, u, v;
+  if (!triangle_hit(p0, p1, p2, ray.o, ray.d, &t, &u, &v) || !(t >= ray.tmin) || !(t <= ray.tmax))
+    return;  // (edge-on or degenerate: Embree's stands)
   hit->t = t;
   hit->u = u;
   hit->v = v;
