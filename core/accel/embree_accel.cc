@@ -1,5 +1,6 @@
 #include <embree3/rtcore.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <deque>
@@ -193,9 +194,8 @@ void recompute_triangle_hit(const Scene& scene, const Ray& ray, Hit* hit) {
     p0 = in.point(p0), p1 = in.point(p1), p2 = in.point(p2);
   }
   float t, u, v;
-  if (!triangle_hit(p0, p1, p2, ray.o, ray.d, &t, &u, &v) || !(t >= ray.tmin) || !(t <= ray.tmax))
-    return;  // (edge-on or degenerate: Embree's stands)
-  hit->t = t;
+  if (!triangle_hit(p0, p1, p2, ray.o, ray.d, &t, &u, &v)) return;  // (edge-on or degenerate: Embree's stands)
+  hit->t = std::clamp(t, ray.tmin, ray.tmax);  // (Embree found it in the ray's range; ours may round past an end)
   hit->u = u;
   hit->v = v;
 }
