@@ -109,20 +109,26 @@ ImageDownload download_image(const v1::FetchImageRequest& request, const std::ve
   part.reset();
   // Each output: the EXR as it came (the download itself goes into the first EXR's place),
   // a PNG made from it here, from its R, G and B alone.
-  std::string at = download;  // where the EXR is
-  std::optional<std::string> png;
+  // Files are copied a piece at a time and the PNG written as it is encoded: an 8K image
+  // never whole in memory.
+  std::string at = download;       // where the EXR is
+  std::optional<std::string> png;  // the first PNG written
   for (const std::string& p : paths) {
     if (is_exr_path(p)) {
       std::error_code ec;
       if (at == download && (fs::rename(download, p, ec), !ec)) {
         at = p;
       } else {
-        write_file_atomic(p, read_file_bytes(at));
+        copy_file_atomic(at, p);
       }
       continue;
     }
-    if (!png) png = full_png(at);
-    write_file_atomic(p, *png);
+    if (png) {
+      copy_file_atomic(*png, p);
+    } else {
+      write_full_png(at, p);
+      png = p;
+    }
   }
   return got;
 }

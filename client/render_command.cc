@@ -78,9 +78,11 @@ double write_denoised(const RenderResult& r, const ImageMetadata& meta, const Re
     if (out != exr) rest.push_back(out);
   try {
     write_each(rest, [&](const std::string& out) {
-      if (is_exr_path(out)) return write_file_atomic(out, read_file_bytes(exr));
-      if (!png) png = full_png(exr);  // (the colour alone: not the AOV layers and the noisy copy)
-      write_file_atomic(out, *png);
+      if (is_exr_path(out)) return copy_file_atomic(exr, out);
+      // (the colour alone: not the AOV layers and the noisy copy; written as it is encoded)
+      if (png) return copy_file_atomic(*png, out);
+      write_full_png(exr, out);
+      png = out;
     });
   } catch (const std::exception&) {
     if (first_exr == outputs.end()) std::remove(exr.c_str());

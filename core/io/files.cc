@@ -5,11 +5,14 @@
 
 #include <atomic>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <sstream>
 #include <stdexcept>
+#include <vector>
 
 namespace tessera {
 
@@ -70,6 +73,17 @@ void AtomicFile::append(const char* data, size_t n) {
     at += size_t(k);
   }
   size_ += n;
+}
+
+void copy_file_atomic(const std::string& from, const std::string& to) {
+  std::FILE* in = std::fopen(from.c_str(), "rb");
+  if (!in) throw std::runtime_error(from + ": cannot read: " + std::strerror(errno));
+  std::unique_ptr<std::FILE, int (*)(std::FILE*)> closer(in, std::fclose);
+  AtomicFile out(to);
+  std::vector<char> buf(size_t(1) << 20);
+  for (size_t n; (n = std::fread(buf.data(), 1, buf.size(), in)) > 0;) out.append(buf.data(), n);
+  if (std::ferror(in)) throw std::runtime_error(from + ": cannot read: " + std::strerror(errno));
+  out.commit();
 }
 
 void AtomicFile::commit(const AtomicWrite& how) {

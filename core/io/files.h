@@ -55,6 +55,10 @@ class AtomicFile {
   uint64_t size_ = 0;
 };
 
+// Copies `from` to `to` as write_file_atomic writes, a piece at a time (an 8K EXR with its
+// layers is never whole in memory). Throws std::runtime_error naming the path at fault.
+void copy_file_atomic(const std::string& from, const std::string& to);
+
 // Renames `tmp` to `path`, then (durable) syncs the folder. Throws naming `path`.
 void commit_file(const std::string& tmp, const std::string& path, const AtomicWrite& how = {});
 

@@ -16,6 +16,7 @@ struct PngEncoder::State {
   png_structp png = nullptr;
   png_infop info = nullptr;
   std::string out;
+  PngEncoder::Sink sink;
   char error[256] = "";
   bool failed = false;  // the write callback could not grow `out`
   int width = 0, height = 0, rows = 0;
@@ -35,11 +36,18 @@ void on_warning(png_structp, png_const_charp) {}
 void on_write(png_structp png, png_bytep data, png_size_t size) {
   auto* s = static_cast<PngEncoder::State*>(png_get_io_ptr(png));
   try {
-    s->out.append(reinterpret_cast<const char*>(data), size);
+    if (s->sink)
+      s->sink(reinterpret_cast<const char*>(data), size);
+    else
+      s->out.append(reinterpret_cast<const char*>(data), size);
+  } catch (const std::exception& e) {
+    std::snprintf(s->error, sizeof s->error, "%s", e.what());
+    s->failed = true;
   } catch (...) {
+    std::snprintf(s->error, sizeof s->error, "%s", "its bytes could not be kept");
     s->failed = true;
   }
-  if (s->failed) png_error(png, "out of memory for the encoded PNG");
+  if (s->failed) png_longjmp(png, 1);  // (the message is the sink's)
 }
 
 void on_flush(png_structp) {}
@@ -73,8 +81,9 @@ bool end(PngEncoder::State* s) {
 
 }  // namespace
 
-PngEncoder::PngEncoder(int width, int height, bool fast) : state_(std::make_unique<State>()) {
+PngEncoder::PngEncoder(int width, int height, bool fast, Sink sink) : state_(std::make_unique<State>()) {
   State& s = *state_;
+  s.sink = std::move(sink);
   // PNG's limit is 2^31 - 1 a side; libpng's default user limit is 10^6.
   if (width < 1 || height < 1 || width > 1000000 || height > 1000000)
     throw std::runtime_error("cannot encode PNG: " + std::to_string(width) + " x " + std::to_string(height) +

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "core/io/files.h"
 #include "core/io/image_io.h"
 #include "core/io/png_encoder.h"
 
@@ -51,7 +52,8 @@ void read_rows(Imf::InputFile& in, const Imath::Box2i& dw, int y0, int rows, std
 
 // max_width 0: full size, at encode_png's slower, smaller compression (not the preview's),
 // read and encoded a band of rows at a time: an 8K image costs a band and the file.
-std::string png_of(const std::string& exr_path, int max_width) {
+// With a `sink`, the full-size PNG's bytes go there as they are made (and none are returned).
+std::string png_of(const std::string& exr_path, int max_width, const PngEncoder::Sink& sink = {}) {
   try {
     Imf::InputFile in(exr_path.c_str());
     const Imath::Box2i dw = in.header().dataWindow();
@@ -60,7 +62,7 @@ std::string png_of(const std::string& exr_path, int max_width) {
     const int k = max_width <= 0 ? 1 : std::max(1, (w + max_width - 1) / max_width);  // the box's side
     if (k == 1) {
       constexpr int kBand = 64;
-      PngEncoder png(w, h, max_width > 0);
+      PngEncoder png(w, h, max_width > 0, sink);
       const float scale = file_exposure(in);
       std::vector<float> r(size_t(w) * size_t(std::min(kBand, h))), g(r.size()), b(r.size());
       for (int y0 = dw.min.y; y0 <= dw.max.y; y0 += kBand) {
@@ -105,6 +107,12 @@ std::string png_of(const std::string& exr_path, int max_width) {
 std::string preview_png(const std::string& exr_path, int max_width) { return png_of(exr_path, std::max(1, max_width)); }
 
 std::string full_png(const std::string& exr_path) { return png_of(exr_path, 0); }
+
+void write_full_png(const std::string& exr_path, const std::string& png_path) {
+  AtomicFile out(png_path);
+  png_of(exr_path, 0, [&](const char* data, size_t n) { out.append(data, n); });
+  out.commit();
+}
 
 bool exr_intact(const std::string& exr_path, std::string* why) {
   try {

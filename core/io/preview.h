@@ -15,6 +15,9 @@ std::string preview_png(const std::string& exr_path, int max_width = 1280);
 // image read whole gives it (the same bytes), reading the three channels only, a row at a
 // time: a farm download's PNG (the EXR's other layers, AOVs or a noisy copy, never loaded).
 std::string full_png(const std::string& exr_path);
+// The same written to `png_path` as it is encoded (atomically: the old file or the whole
+// new one), so that the PNG is never whole in memory either.
+void write_full_png(const std::string& exr_path, const std::string& png_path);
 
 // Whether the EXR at `exr_path` decodes whole: every block read (a truncated file, a
 // damaged block or a checksum that fails stops it), a band of rows at a time. `why` gets

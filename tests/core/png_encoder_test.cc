@@ -74,6 +74,40 @@ TEST(PngEncoder, AFilmsPngAndThePngOfItsExrAreTheSameBytes) {
   fs::remove_all(dir);
 }
 
+// The PNG written to a file as it is encoded is full_png's bytes; a file that cannot be
+// written is an error naming it, and leaves nothing. copy_file_atomic copies a file of
+// several of its pieces bit for bit.
+TEST(PngEncoder, APngWrittenAsItIsEncodedIsFullPngsBytes) {
+  const fs::path dir = fs::temp_directory_path() / ("png_stream_test_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  Film film(Rect{0, 0, 300, 200});
+  for (int y = 0; y < film.height(); ++y)
+    for (int x = 0; x < film.width(); ++x)
+      film.at(x, y) = PixelSums{double((x * 7919 + y * 104729) % 1000) / 999, 0.25, double(y) / 200, 0, 1};
+  const std::string exr = (dir / "a.exr").string(), png = (dir / "a.png").string();
+  write_exr(exr, film, {});
+  write_full_png(exr, png);
+  EXPECT_EQ(read_file_bytes(png), full_png(exr));
+  const std::string nowhere = (dir / "missing" / "b.png").string();
+  try {
+    write_full_png(exr, nowhere);
+    ADD_FAILURE() << "a PNG written into a missing folder";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find(nowhere), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir / "missing"));
+  // A copy of more than one piece (1 MiB each).
+  const std::string big = (dir / "big.bin").string(), copy = (dir / "copy.bin").string();
+  std::string bytes(2500000, '\0');
+  for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = char(i * 2654435761u >> 24);
+  write_file_atomic(big, bytes);
+  copy_file_atomic(big, copy);
+  EXPECT_EQ(read_file_bytes(copy), bytes);
+  EXPECT_THROW(copy_file_atomic((dir / "none").string(), (dir / "c.bin").string()), std::runtime_error);
+  EXPECT_FALSE(fs::exists(dir / "c.bin"));
+  fs::remove_all(dir);
+}
+
 TEST(PngEncoder, MisuseIsAnError) {
   EXPECT_THROW(PngEncoder(0, 4, false), std::runtime_error);
   EXPECT_THROW(PngEncoder(4, -1, false), std::runtime_error);
