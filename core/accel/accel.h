@@ -39,6 +39,9 @@ struct AccelOptions {
   // so only Embree's choice of triangle and its occlusion answers reach the image. On an
   // AVX2 machine the cap costs nothing measurable (docs/performance.md).
   const char* max_isa = "avx";
+  // A triangle hit's t and barycentrics computed again by IEEE operations (above); off,
+  // Embree's as they come: tessera_bench's raw rays, which measure Embree alone.
+  bool own_hits = true;
 };
 
 class Accel {

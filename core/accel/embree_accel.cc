@@ -210,6 +210,7 @@ struct Accel::Impl {
   SphereData sphere_data{};
   std::string error;
   bool robust = true;
+  bool own_hits = true;                // AccelOptions::own_hits
   std::deque<AlphaData> alpha_data;    // (stable addresses: Embree keeps pointers)
   std::shared_ptr<const Accel> fixed;  // a pose's static part (its device is this one's)
   unsigned fixed_sphere_geom = RTC_INVALID_GEOMETRY_ID;
@@ -322,6 +323,7 @@ Accel::Accel(const Scene& scene, const std::vector<bool>& skip, AccelOptions opt
     : impl_(std::make_unique<Impl>()) {
   impl_->scene_data = &scene;
   impl_->robust = options.robust;
+  impl_->own_hits = options.own_hits;
   RTCDevice d = new_device(options);
   impl_->new_scene(d);
   rtcReleaseDevice(d);  // the Impl holds it
@@ -377,7 +379,7 @@ bool Accel::intersect(const Ray& ray, Hit* hit) const {
   hit->instance = rh.hit.instID[0] != RTC_INVALID_GEOMETRY_ID && rh.hit.instID[0] >= impl_->instance_base
                       ? int32_t(rh.hit.instID[0] - impl_->instance_base)
                       : -1;
-  if (!hit->is_sphere) recompute_triangle_hit(*impl_->scene_data, ray, hit);
+  if (!hit->is_sphere && impl_->own_hits) recompute_triangle_hit(*impl_->scene_data, ray, hit);
   return true;
 }
 
