@@ -18,7 +18,6 @@ struct PngEncoder::State {
   std::string out;
   PngEncoder::Sink sink;
   char error[256] = "";
-  bool failed = false;  // the write callback could not grow `out`
   int width = 0, height = 0, rows = 0;
   std::vector<uint8_t> row;
 };
@@ -35,6 +34,7 @@ void on_warning(png_structp, png_const_charp) {}
 
 void on_write(png_structp png, png_bytep data, png_size_t size) {
   auto* s = static_cast<PngEncoder::State*>(png_get_io_ptr(png));
+  bool failed = false;  // (set in a handler, jumped from after it: no longjmp out of a catch)
   try {
     if (s->sink)
       s->sink(reinterpret_cast<const char*>(data), size);
@@ -42,12 +42,12 @@ void on_write(png_structp png, png_bytep data, png_size_t size) {
       s->out.append(reinterpret_cast<const char*>(data), size);
   } catch (const std::exception& e) {
     std::snprintf(s->error, sizeof s->error, "%s", e.what());
-    s->failed = true;
+    failed = true;
   } catch (...) {
     std::snprintf(s->error, sizeof s->error, "%s", "its bytes could not be kept");
-    s->failed = true;
+    failed = true;
   }
-  if (s->failed) png_longjmp(png, 1);  // (the message is the sink's)
+  if (failed) png_longjmp(png, 1);  // (the message is the sink's)
 }
 
 void on_flush(png_structp) {}

@@ -31,6 +31,23 @@ std::vector<uint8_t> decode(const std::string& png, int* w, int* h) {
   return std::vector<uint8_t>(data.get(), data.get() + size_t(*w) * size_t(*h) * 3);
 }
 
+// A scratch folder per test, removed after it (failed or not), and films to write there.
+class PngFiles : public ::testing::Test {
+ protected:
+  void SetUp() override { fs::create_directories(dir); }
+  void TearDown() override { fs::remove_all(dir); }
+  std::string path(const char* name) const { return (dir / name).string(); }
+  // A film of `window` whose pixel (x, y) holds sums(x, y).
+  template <typename F>
+  static Film film_of(Rect window, F sums) {
+    Film film(window);
+    for (int y = 0; y < film.height(); ++y)
+      for (int x = 0; x < film.width(); ++x) film.at(x, y) = sums(x, y);
+    return film;
+  }
+  const fs::path dir = fs::temp_directory_path() / ("png_encoder_test_" + std::to_string(::getpid()));
+};
+
 TEST(PngEncoder, DecodesToTheSrgbBytesOfTheValues) {
   const int w = 37, h = 23;
   std::vector<float> r(size_t(w) * h), g(r.size()), b(r.size());
@@ -57,38 +74,31 @@ TEST(PngEncoder, DecodesToTheSrgbBytesOfTheValues) {
 // tessera render's PNG of a film and the PNG made from the film's EXR (full_png, as a farm
 // download makes it: bands of 64 rows, here 150 rows of a crop placed at (5, 7)) are the
 // same bytes.
-TEST(PngEncoder, AFilmsPngAndThePngOfItsExrAreTheSameBytes) {
-  const fs::path dir = fs::temp_directory_path() / ("png_encoder_test_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  Film film(Rect{5, 7, 41, 150});
-  for (int y = 0; y < film.height(); ++y)
-    for (int x = 0; x < film.width(); ++x)
-      film.at(x, y) = PixelSums{0.01 * x * (y % 5), 0.003 * y, 0.5, 0, uint32_t(1 + (x + y) % 3)};
+TEST_F(PngFiles, AFilmsPngAndThePngOfItsExrAreTheSameBytes) {
+  const Film film = film_of(Rect{5, 7, 41, 150}, [](int x, int y) {
+    return PixelSums{0.01 * x * (y % 5), 0.003 * y, 0.5, 0, uint32_t(1 + (x + y) % 3)};
+  });
   const ImageMetadata meta{{kExposureAttribute, exposure_text(1)}};
-  const std::string exr = (dir / "a.exr").string(), png = (dir / "a.png").string();
+  const std::string exr = path("a.exr"), png = path("a.png");
   write_image(exr, film, meta, nullptr, 0, Rect{0, 0, 64, 200});
   write_image(png, film, meta);
   EXPECT_EQ(full_png(exr), read_file_bytes(png));
   int w = 0, h = 0;
   EXPECT_EQ(decode(read_file_bytes(png), &w, &h).size(), size_t(41) * 150 * 3);
-  fs::remove_all(dir);
 }
 
 // The PNG written to a file as it is encoded is full_png's bytes; a file that cannot be
 // written is an error naming it, and leaves nothing. copy_file_atomic copies a file of
 // several of its pieces bit for bit.
-TEST(PngEncoder, APngWrittenAsItIsEncodedIsFullPngsBytes) {
-  const fs::path dir = fs::temp_directory_path() / ("png_stream_test_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
-  Film film(Rect{0, 0, 300, 200});
-  for (int y = 0; y < film.height(); ++y)
-    for (int x = 0; x < film.width(); ++x)
-      film.at(x, y) = PixelSums{double((x * 7919 + y * 104729) % 1000) / 999, 0.25, double(y) / 200, 0, 1};
-  const std::string exr = (dir / "a.exr").string(), png = (dir / "a.png").string();
+TEST_F(PngFiles, APngWrittenAsItIsEncodedIsFullPngsBytes) {
+  const Film film = film_of(Rect{0, 0, 300, 200}, [](int x, int y) {
+    return PixelSums{double((x * 7919 + y * 104729) % 1000) / 999, 0.25, double(y) / 200, 0, 1};
+  });
+  const std::string exr = path("a.exr"), png = path("a.png");
   write_exr(exr, film, {});
   write_full_png(exr, png);
   EXPECT_EQ(read_file_bytes(png), full_png(exr));
-  const std::string nowhere = (dir / "missing" / "b.png").string();
+  const std::string nowhere = path("missing/b.png");
   try {
     write_full_png(exr, nowhere);
     ADD_FAILURE() << "a PNG written into a missing folder";
@@ -97,15 +107,14 @@ TEST(PngEncoder, APngWrittenAsItIsEncodedIsFullPngsBytes) {
   }
   EXPECT_FALSE(fs::exists(dir / "missing"));
   // A copy of more than one piece (1 MiB each).
-  const std::string big = (dir / "big.bin").string(), copy = (dir / "copy.bin").string();
+  const std::string big = path("big.bin"), copy = path("copy.bin");
   std::string bytes(2500000, '\0');
   for (size_t i = 0; i < bytes.size(); ++i) bytes[i] = char(i * 2654435761u >> 24);
   write_file_atomic(big, bytes);
   copy_file_atomic(big, copy);
   EXPECT_EQ(read_file_bytes(copy), bytes);
-  EXPECT_THROW(copy_file_atomic((dir / "none").string(), (dir / "c.bin").string()), std::runtime_error);
+  EXPECT_THROW(copy_file_atomic(path("none"), path("c.bin")), std::runtime_error);
   EXPECT_FALSE(fs::exists(dir / "c.bin"));
-  fs::remove_all(dir);
 }
 
 TEST(PngEncoder, MisuseIsAnError) {
@@ -119,6 +128,13 @@ TEST(PngEncoder, MisuseIsAnError) {
   too_many.write_row(row, row, row, 1);
   EXPECT_THROW(too_many.write_row(row, row, row, 1), std::runtime_error);
   EXPECT_NE(too_many.finish().size(), 0u);
+  // A sink that cannot take the bytes (a full disk): the encoder's error is its message.
+  try {
+    PngEncoder failing(2, 1, false, [](const char*, size_t) { throw std::runtime_error("out.png: disk full"); });
+    ADD_FAILURE() << "the header went to a failing sink";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("out.png: disk full"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
